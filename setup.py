@@ -1,0 +1,73 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Packaging for colcon (ament_python) and for pip on a machine without ROS."""
+
+from glob import glob
+import os
+
+from setuptools import find_packages, setup
+
+package_name = 'mpc_local_planner'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    package_data={package_name: ['py.typed']},
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        (os.path.join('share', package_name, 'config'), glob('config/*.yaml')),
+        (os.path.join('share', package_name, 'config', 'worlds'), glob('config/worlds/*.yaml')),
+    ],
+    install_requires=[
+        'numpy',
+        'casadi>=3.6',
+        'ompl>=2.0',
+        'rosbags>=0.10',
+        'matplotlib',
+        'pyyaml',
+    ],
+    extras_require={
+        # The ROS 2 Jazzy Python wheels on PyPI, for machines without a ROS install.
+        'wheels': [
+            'ros-rclpy[fastrtps]==7.1.6',
+            'ros-geometry-msgs==5.3.6',
+            'ros-nav-msgs==5.3.6',
+            'ros-std-msgs==5.3.6',
+            'ros-visualization-msgs==5.3.6',
+            'ros-diagnostic-msgs==5.3.6',
+            'ros-rosgraph-msgs==2.0.3',
+        ],
+        'test': ['pytest', 'hypothesis', 'ruff'],
+    },
+    python_requires='>=3.10',
+    zip_safe=True,
+    maintainer='mpc_local_planner developers',
+    maintainer_email='maintainers@mpc-local-planner.invalid',
+    description='MPC local planner for a unicycle robot following an RRT* path (ROS 2 Jazzy).',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'global_planner = mpc_local_planner.global_planner_node:main',
+            'mpc_controller = mpc_local_planner.mpc_controller_node:main',
+            'unicycle_simulator = mpc_local_planner.unicycle_simulator_node:main',
+            'bag_recorder = mpc_local_planner.bag_recorder_node:main',
+            'closed_loop = mpc_local_planner.closed_loop:main',
+            'analyze_bag = mpc_local_planner.analyze_bag:main',
+            'mpc_bench = mpc_local_planner.bench:main',
+        ],
+    },
+)
