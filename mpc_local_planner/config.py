@@ -1,0 +1,138 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""MPC settings as a frozen dataclass, with one validator shared by code and ROS parameters.
+
+The node's on-set-parameters callback and the library both call validate_mpc_config, so a
+value refused at run time is refused for the same reason as in a script.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+import math
+from typing import Any
+
+__all__ = ['MpcConfig', 'STRUCTURAL_FIELDS', 'validate_mpc_config']
+
+SOLVERS = ('ipopt', 'sqp_qpoases', 'fatrop')
+
+
+@dataclass(frozen=True)
+class MpcConfig:
+    """Settings of the MPC (the paper's Section IV values by default).
+
+    Attributes:
+        horizon: prediction steps N.
+        step: sampling time h in seconds.
+        weight_position: stage-cost weight of (dx)^p and (dy)^p.
+        weight_heading: stage-cost weight of (dtheta)^p.
+        weight_v: stage-cost weight of v^p.
+        weight_omega: stage-cost weight of omega^p.
+        offset_weight: V_o(1 - s) = offset_weight (1 - s)^2.
+        cost_exponent: p, 4 in the paper: with 2 the unicycle violates Assumption 3.
+        robot_radius: obstacles are inflated by it (a circular footprint).
+        collision_margin: extra inflation so that the continuous motion between two samples
+            stays clear; None means v_max h / 2 (half the longest step, see design.md).
+        farkas_margin: the Farkas constraint asks (A p - b)^T mu >= this (metres).
+        obstacle_slots: obstacles the solver holds at once (grows, with a rebuild, when
+            more are within reach).
+        faces_per_obstacle: half-planes per obstacle slot (larger polygons are refused).
+        solver: NLP backend, one of SOLVERS.
+        max_iterations: solver iteration limit per solve.
+        tolerance: solver and verification tolerance.
+
+    """
+
+    horizon: int = 10
+    step: float = 0.2
+    weight_position: float = 1.0
+    weight_heading: float = 0.1
+    weight_v: float = 1.0
+    weight_omega: float = 1.0
+    offset_weight: float = 1000.0
+    cost_exponent: int = 4
+    robot_radius: float = 0.0
+    collision_margin: float | None = None
+    farkas_margin: float = 1e-4
+    obstacle_slots: int = 4
+    faces_per_obstacle: int = 8
+    solver: str = 'ipopt'
+    max_iterations: int = 200
+    tolerance: float = 1e-8
+    solver_options: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
+
+    def __post_init__(self) -> None:
+        problems = validate_mpc_config(self)
+        if problems:
+            msg = 'invalid MPC configuration: ' + '; '.join(problems)
+            raise ValueError(msg)
+
+    def inflation(self, v_max: float) -> float:
+        """Return the distance obstacles are grown by: robot radius plus collision margin."""
+        margin = v_max * self.step / 2 if self.collision_margin is None else self.collision_margin
+        return self.robot_radius + margin
+
+    def weights(self) -> list[float]:
+        """Return the weight vector the solver reads as a parameter."""
+        return [self.weight_position, self.weight_heading, self.weight_v, self.weight_omega,
+                self.offset_weight]
+
+    def with_changes(self, **changes: Any) -> MpcConfig:
+        """Return a copy with some fields changed (validated again)."""
+        return replace(self, **changes)
+
+
+# Fields whose change alters the NLP's shape: changing them rebuilds the solver.
+STRUCTURAL_FIELDS = frozenset(
+    {'horizon', 'step', 'cost_exponent', 'farkas_margin', 'obstacle_slots',
+     'faces_per_obstacle', 'solver', 'max_iterations', 'tolerance', 'solver_options'}
+)
+
+
+def validate_mpc_config(config: MpcConfig) -> list[str]:
+    """Return the reasons config is invalid (empty when it is valid)."""
+    problems: list[str] = []
+    for f in fields(config):
+        value = getattr(config, f.name)
+        if isinstance(value, float) and not math.isfinite(value):
+            problems.append(f'{f.name} must be finite, got {value}')
+    if not (isinstance(config.horizon, int) and config.horizon >= 1):
+        problems.append(f'horizon must be an integer >= 1, got {config.horizon!r}')
+    if not config.step > 0:
+        problems.append(f'step must be > 0, got {config.step}')
+    for name in ('weight_position', 'weight_heading', 'weight_v', 'weight_omega'):
+        if not getattr(config, name) >= 0:
+            problems.append(f'{name} must be >= 0, got {getattr(config, name)}')
+    if not config.offset_weight > 0:
+        problems.append(f'offset_weight must be > 0, got {config.offset_weight}')
+    if config.cost_exponent not in (2, 4):
+        problems.append(f'cost_exponent must be 2 or 4, got {config.cost_exponent}')
+    if not config.robot_radius >= 0:
+        problems.append(f'robot_radius must be >= 0, got {config.robot_radius}')
+    if config.collision_margin is not None and not config.collision_margin >= 0:
+        problems.append(f'collision_margin must be >= 0, got {config.collision_margin}')
+    if not config.farkas_margin > 0:
+        problems.append(f'farkas_margin must be > 0, got {config.farkas_margin}')
+    if not config.obstacle_slots >= 0:
+        problems.append(f'obstacle_slots must be >= 0, got {config.obstacle_slots}')
+    if not config.faces_per_obstacle >= 3:
+        problems.append(f'faces_per_obstacle must be >= 3, got {config.faces_per_obstacle}')
+    if config.solver not in SOLVERS:
+        problems.append(f'solver must be one of {SOLVERS}, got {config.solver!r}')
+    if not config.max_iterations >= 1:
+        problems.append(f'max_iterations must be >= 1, got {config.max_iterations}')
+    if not config.tolerance > 0:
+        problems.append(f'tolerance must be > 0, got {config.tolerance}')
+    return problems

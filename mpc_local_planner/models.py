@@ -1,0 +1,223 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Robot models: the dynamics written once, as CasADi Functions.
+
+The MPC's equality constraints and the simulator both call the same RK4 Function, so there
+is no second copy of the equations (the habit of do-mpc). A model also knows its steady
+states: the paper's g_p maps a path configuration to the steady state (x_s, u_s) the
+prediction must end in, and that map is a property of the robot, not of the MPC.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+__all__ = ['KinematicBicycle', 'RobotModel', 'Unicycle', 'rk4']
+
+Symbolic = Any  # a CasADi SX/MX expression or a NumPy array
+
+
+def rk4(rhs: ca.Function, x: Symbolic, u: Symbolic, h: float) -> Symbolic:
+    """Integrate dx/dt = rhs(x, u) over one step h with constant u (classical RK4)."""
+    k1 = rhs(x, u)
+    k2 = rhs(x + h / 2 * k1, u)
+    k3 = rhs(x + h / 2 * k2, u)
+    k4 = rhs(x + h * k3, u)
+    return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+class RobotModel(ABC):
+    """What the MPC needs of a robot: dynamics, input bounds, the pose map g and g_p.
+
+    A state's first three components are the pose (x, y, theta) in this package; other
+    models may add states after them (a bicycle's steering angle, a velocity).
+    """
+
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+
+    @property
+    def nx(self) -> int:
+        """Number of states."""
+        return len(self.state_names)
+
+    @property
+    def nu(self) -> int:
+        """Number of inputs."""
+        return len(self.input_names)
+
+    @property
+    @abstractmethod
+    def u_min(self) -> np.ndarray:
+        """Lower input bounds."""
+
+    @property
+    @abstractmethod
+    def u_max(self) -> np.ndarray:
+        """Upper input bounds."""
+
+    @abstractmethod
+    def rhs(self, x: Symbolic, u: Symbolic) -> Symbolic:
+        """Continuous dynamics dx/dt as a CasADi expression."""
+
+    @abstractmethod
+    def steady_state(self, pose: Symbolic) -> tuple[Symbolic, Symbolic]:
+        """Return (x_s, u_s): the steady state whose pose is pose (the paper's g_p)."""
+
+    @property
+    def x_min(self) -> np.ndarray:
+        """Lower state bounds (unbounded unless a model says otherwise)."""
+        return np.full(self.nx, -np.inf)
+
+    @property
+    def x_max(self) -> np.ndarray:
+        """Upper state bounds."""
+        return np.full(self.nx, np.inf)
+
+    @property
+    def angle_index(self) -> int:
+        """Index of the heading in the state, the one component that wraps at +-pi."""
+        return 2
+
+    def rhs_function(self) -> ca.Function:
+        """Return the continuous dynamics as a CasADi Function f(x, u)."""
+        x = ca.SX.sym('x', self.nx)
+        u = ca.SX.sym('u', self.nu)
+        return ca.Function('f', [x, u], [self.rhs(x, u)], ['x', 'u'], ['dx'])
+
+    def discrete(self, h: float) -> ca.Function:
+        """Return the RK4 discretisation at step h as a CasADi Function F(x, u) -> x_next."""
+        return _discrete(self, float(h))
+
+    def saturate(self, u: np.ndarray) -> np.ndarray:
+        """Clip an input to the bounds (what real motor drivers do)."""
+        return np.clip(np.asarray(u, dtype=float), self.u_min, self.u_max)
+
+    def step(self, x: np.ndarray, u: np.ndarray, h: float) -> np.ndarray:
+        """Advance the state by h with the input saturated: the simulator's make_step."""
+        u_applied = self.saturate(u)
+        return np.asarray(self.discrete(h)(x, u_applied), dtype=float).reshape(-1)
+
+    def pose(self, x: np.ndarray) -> np.ndarray:
+        """Return g(x): the configuration (x, y, theta) of a state."""
+        return np.asarray(x, dtype=float)[:3]
+
+
+@lru_cache(maxsize=64)
+def _discrete(model: RobotModel, h: float) -> ca.Function:
+    x = ca.SX.sym('x', model.nx)
+    u = ca.SX.sym('u', model.nu)
+    x_next = rk4(model.rhs_function(), x, u, h)
+    return ca.Function('F', [x, u], [x_next], ['x', 'u'], ['x_next'])
+
+
+@dataclass(frozen=True)
+class Unicycle(RobotModel):
+    """Differential-drive robot: x = [p_x, p_y, theta], u = [v, omega] (the paper's model).
+
+    Defaults are the paper's Turtlebot 4 bounds. Every pose is a steady state with u = 0,
+    so g_p(s) = p(s) and u_s = 0.
+    """
+
+    v_max: float = 0.31
+    omega_max: float = 1.9
+    v_min: float | None = None  # None: -v_max (the paper drives backwards too)
+
+    state_names = ('x', 'y', 'theta')
+    input_names = ('v', 'omega')
+
+    def __post_init__(self) -> None:
+        if not (self.v_max > 0 and self.omega_max > 0):
+            msg = f'v_max and omega_max must be > 0, got {self.v_max}, {self.omega_max}'
+            raise ValueError(msg)
+        if self.v_min is not None and not self.v_min < self.v_max:
+            msg = f'v_min must be < v_max, got {self.v_min} >= {self.v_max}'
+            raise ValueError(msg)
+
+    @property
+    def u_min(self) -> np.ndarray:
+        """Lower input bounds [v_min, -omega_max]."""
+        v_min = -self.v_max if self.v_min is None else self.v_min
+        return np.array([v_min, -self.omega_max])
+
+    @property
+    def u_max(self) -> np.ndarray:
+        """Upper input bounds [v_max, omega_max]."""
+        return np.array([self.v_max, self.omega_max])
+
+    def rhs(self, x: Symbolic, u: Symbolic) -> Symbolic:
+        """Unicycle kinematics [v cos(theta), v sin(theta), omega]."""
+        return ca.vertcat(u[0] * ca.cos(x[2]), u[0] * ca.sin(x[2]), u[1])
+
+    def steady_state(self, pose: Symbolic) -> tuple[Symbolic, Symbolic]:
+        """Stand still at the pose."""
+        return pose, ca.DM.zeros(2)
+
+
+@dataclass(frozen=True)
+class KinematicBicycle(RobotModel):
+    """Kinematic bicycle with the steering angle as a state: x = [p_x, p_y, theta, delta].
+
+    Inputs are speed and steering rate, u = [v, delta_dot]. Steady states stand still with
+    any steering angle; g_p picks delta = 0, which makes the map unique (Assumption 1.3).
+    It is here to show that the MPC takes another model without change.
+    """
+
+    wheelbase: float = 0.3
+    v_max: float = 0.5
+    steer_max: float = 0.6
+    steer_rate_max: float = 1.0
+
+    state_names = ('x', 'y', 'theta', 'delta')
+    input_names = ('v', 'delta_dot')
+
+    @property
+    def u_min(self) -> np.ndarray:
+        """Lower input bounds."""
+        return np.array([-self.v_max, -self.steer_rate_max])
+
+    @property
+    def u_max(self) -> np.ndarray:
+        """Upper input bounds."""
+        return np.array([self.v_max, self.steer_rate_max])
+
+    @property
+    def x_min(self) -> np.ndarray:
+        """Lower state bounds (only the steering angle is bounded)."""
+        return np.array([-np.inf, -np.inf, -np.inf, -self.steer_max])
+
+    @property
+    def x_max(self) -> np.ndarray:
+        """Upper state bounds."""
+        return np.array([np.inf, np.inf, np.inf, self.steer_max])
+
+    def rhs(self, x: Symbolic, u: Symbolic) -> Symbolic:
+        """Rear-axle kinematic bicycle."""
+        return ca.vertcat(
+            u[0] * ca.cos(x[2]),
+            u[0] * ca.sin(x[2]),
+            u[0] * ca.tan(x[3]) / self.wheelbase,
+            u[1],
+        )
+
+    def steady_state(self, pose: Symbolic) -> tuple[Symbolic, Symbolic]:
+        """Stand still at the pose with straight wheels."""
+        return ca.vertcat(pose, 0), ca.DM.zeros(2)

@@ -1,0 +1,206 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Convex polygonal obstacles in H-representation {p : A p <= b}.
+
+The MPC needs obstacles as linear inequalities (Farkas' lemma turns "outside" into a
+linear condition on a multiplier vector); the planner and the checks need point queries.
+Rows of A are kept at unit norm so that A p - b is the signed distance of p to each face's
+line: inflation and margins are then in metres.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from typing import Iterable, Sequence
+
+import numpy as np
+
+__all__ = [
+    'ConvexPolygon',
+    'convex_hull',
+    'inflate_all',
+    'min_clearance',
+    'point_in_any',
+]
+
+
+def convex_hull(points: np.ndarray) -> np.ndarray:
+    """Return the convex hull of 2-D points, counter-clockwise, without repeated points.
+
+    Andrew's monotone chain: a dozen lines, and it keeps SciPy out of the dependencies.
+    """
+    pts = np.unique(np.asarray(points, dtype=float).reshape(-1, 2), axis=0)
+    if len(pts) < 3:
+        msg = f'a polygon needs at least 3 distinct vertices, got {len(pts)}'
+        raise ValueError(msg)
+
+    def cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+        return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
+
+    lower: list[np.ndarray] = []
+    for p in pts:
+        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 1e-12:
+            lower.pop()
+        lower.append(p)
+    upper: list[np.ndarray] = []
+    for p in pts[::-1]:
+        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 1e-12:
+            upper.pop()
+        upper.append(p)
+    hull = np.array(lower[:-1] + upper[:-1])
+    if len(hull) < 3:
+        msg = 'the vertices are collinear: a polygon needs a non-empty interior'
+        raise ValueError(msg)
+    return hull
+
+
+@dataclass(frozen=True)
+class ConvexPolygon:
+    """A convex polygon {p : A p <= b} with unit-norm rows of A, and its vertices.
+
+    Attributes:
+        A: (m, 2) outward unit normals, one per face.
+        b: (m,) offsets, so that A p - b is the signed distance to each face's line.
+        vertices: (m, 2) counter-clockwise vertices (for plots and clearance queries).
+
+    """
+
+    A: np.ndarray
+    b: np.ndarray
+    vertices: np.ndarray
+
+    @classmethod
+    def from_vertices(cls, vertices: Sequence[Sequence[float]] | np.ndarray) -> ConvexPolygon:
+        """Build the polygon from its vertices (any order; the convex hull is taken)."""
+        hull = convex_hull(np.asarray(vertices, dtype=float))
+        if not np.all(np.isfinite(hull)):
+            msg = 'polygon vertices must be finite'
+            raise ValueError(msg)
+        edges = np.roll(hull, -1, axis=0) - hull
+        normals = np.column_stack([edges[:, 1], -edges[:, 0]])  # outward for CCW order
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        offsets = np.einsum('ij,ij->i', normals, hull)
+        return cls(A=normals, b=offsets, vertices=hull)
+
+    @classmethod
+    def from_box(cls, xmin: float, ymin: float, xmax: float, ymax: float) -> ConvexPolygon:
+        """Build an axis-aligned box from its lower-left and upper-right corners."""
+        if not (xmax > xmin and ymax > ymin):
+            msg = f'box needs xmin < xmax and ymin < ymax, got {(xmin, ymin, xmax, ymax)}'
+            raise ValueError(msg)
+        return cls.from_vertices([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])
+
+    @classmethod
+    def from_circle(
+        cls, cx: float, cy: float, radius: float, *, sides: int = 8
+    ) -> ConvexPolygon:
+        """Build the regular polygon *circumscribed* about a circle.
+
+        Circumscribed, not inscribed: the polygon contains the whole disk, so keeping out of
+        the polygon keeps out of the disk (a conservative approximation, worst excess
+        radius * (1 / cos(pi / sides) - 1) at the polygon's corners).
+        """
+        if radius <= 0 or sides < 3:
+            msg = f'circle needs radius > 0 and sides >= 3, got radius={radius}, sides={sides}'
+            raise ValueError(msg)
+        outer = radius / math.cos(math.pi / sides)
+        angles = np.arange(sides) * 2.0 * math.pi / sides + math.pi / sides
+        pts = np.column_stack([cx + outer * np.cos(angles), cy + outer * np.sin(angles)])
+        return cls.from_vertices(pts)
+
+    @property
+    def num_faces(self) -> int:
+        """Number of half-planes (the size of the Farkas multiplier vector)."""
+        return int(self.A.shape[0])
+
+    @property
+    def centroid(self) -> np.ndarray:
+        """Mean of the vertices: a cheap centre for selecting nearby obstacles."""
+        return self.vertices.mean(axis=0)
+
+    @property
+    def bounding_radius(self) -> float:
+        """Largest distance from the centroid to a vertex."""
+        return float(np.max(np.linalg.norm(self.vertices - self.centroid, axis=1)))
+
+    def inflate(self, distance: float) -> ConvexPolygon:
+        """Shift every face outwards by distance (metres).
+
+        The result contains the Minkowski sum of the polygon and a disk of that radius (its
+        corners reach further than the rounded sum would): a conservative inflation.
+        """
+        if distance < 0:
+            msg = f'inflation distance must be >= 0, got {distance}'
+            raise ValueError(msg)
+        if distance == 0:
+            return self
+        b = self.b + distance
+        n = self.num_faces
+        vertices = np.empty_like(self.vertices)
+        # vertex i lies on faces i-1 and i (face i runs from vertex i to vertex i+1)
+        for i in range(n):
+            rows = np.vstack([self.A[i - 1], self.A[i]])
+            vertices[i] = np.linalg.solve(rows, np.array([b[i - 1], b[i]]))
+        return ConvexPolygon(A=self.A, b=b, vertices=vertices)
+
+    def signed_distance_lower_bound(self, points: np.ndarray) -> np.ndarray:
+        """Return max_i (a_i p - b_i) per point: > 0 outside, <= 0 inside.
+
+        Outside it is a lower bound on the Euclidean distance (exact near faces); inside it is
+        minus the depth. This is the quantity the Farkas constraint bounds from below.
+        """
+        pts = np.atleast_2d(np.asarray(points, dtype=float))
+        return np.max(pts @ self.A.T - self.b, axis=1)
+
+    def contains(self, points: np.ndarray, *, margin: float = 0.0) -> np.ndarray:
+        """Say, per point, whether it lies in the polygon grown by margin (boundary included)."""
+        return self.signed_distance_lower_bound(points) <= margin
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """Return the Euclidean distance of each point to the polygon (0 inside)."""
+        pts = np.atleast_2d(np.asarray(points, dtype=float))
+        starts = self.vertices
+        ends = np.roll(self.vertices, -1, axis=0)
+        seg = ends - starts
+        rel = pts[:, None, :] - starts[None, :, :]
+        t = np.clip(np.einsum('pij,ij->pi', rel, seg) / np.einsum('ij,ij->i', seg, seg), 0, 1)
+        nearest = starts[None] + t[..., None] * seg[None]
+        dist = np.min(np.linalg.norm(pts[:, None, :] - nearest, axis=2), axis=1)
+        return np.where(self.contains(pts), 0.0, dist)
+
+
+def inflate_all(obstacles: Iterable[ConvexPolygon], distance: float) -> list[ConvexPolygon]:
+    """Inflate every obstacle by the same distance."""
+    return [obstacle.inflate(distance) for obstacle in obstacles]
+
+
+def point_in_any(
+    obstacles: Sequence[ConvexPolygon], points: np.ndarray, *, margin: float = 0.0
+) -> np.ndarray:
+    """Say, per point, whether it lies in any obstacle grown by margin."""
+    pts = np.atleast_2d(np.asarray(points, dtype=float))
+    inside = np.zeros(len(pts), dtype=bool)
+    for obstacle in obstacles:
+        inside |= obstacle.contains(pts, margin=margin)
+    return inside
+
+
+def min_clearance(obstacles: Sequence[ConvexPolygon], points: np.ndarray) -> float:
+    """Return the smallest Euclidean distance from any point to any obstacle (inf if none)."""
+    pts = np.atleast_2d(np.asarray(points, dtype=float))
+    if not obstacles or len(pts) == 0:
+        return math.inf
+    return float(min(np.min(obstacle.distance(pts)) for obstacle in obstacles))

@@ -1,0 +1,373 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Reference paths p(s), s in [0, 1], evaluable in NumPy and as CasADi expressions.
+
+The MPC optimises the path progress s_k, so the path must be a symbolic function of s; and
+a new plan must not rebuild the solver, so a path's shape enters as a parameter vector of
+fixed size (its *family* and capacity decide the solver's structure, its values do not).
+
+Waypoint paths (what a nav_msgs/Path carries) have corners. The paper's Assumption 1.4 asks
+for a Lipschitz g_p, so each corner becomes a turn-in-place segment: the position stays,
+the heading rotates. The pose is then piecewise linear in s, continuous, with the heading
+unwrapped, and s is proportional to length plus turn_length per radian turned.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+import math
+from typing import Any, Callable
+
+import casadi as ca
+import numpy as np
+
+__all__ = [
+    'AnalyticPath',
+    'ReferencePath',
+    'WaypointPath',
+    'analytic_path',
+    'paper_sinusoid',
+    'simplify_polyline',
+    'wrap_angle',
+]
+
+Symbolic = Any
+PROJECTION_SAMPLES = 2001
+
+
+def wrap_angle(angle: np.ndarray | float) -> np.ndarray | float:
+    """Wrap an angle to [-pi, pi)."""
+    return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi
+
+
+class ReferencePath(ABC):
+    """A continuous path s in [0, 1] -> pose (x, y, theta) with an unwrapped heading."""
+
+    @property
+    @abstractmethod
+    def family(self) -> str:
+        """Key of the symbolic structure: paths of one family share a built solver."""
+
+    @property
+    @abstractmethod
+    def num_params(self) -> int:
+        """Length of the parameter vector that symbolic() reads."""
+
+    @abstractmethod
+    def parameters(self) -> np.ndarray:
+        """Return the values of the parameter vector for this path."""
+
+    @abstractmethod
+    def symbolic(self, s: Symbolic, params: Symbolic) -> Symbolic:
+        """Return p(s) as a 3-vector CasADi expression, the shape read from params."""
+
+    @abstractmethod
+    def pose(self, s: np.ndarray | float) -> np.ndarray:
+        """Return p(s) numerically: (3,) for a scalar s, (n, 3) for an array."""
+
+    def sample(self, count: int = PROJECTION_SAMPLES) -> tuple[np.ndarray, np.ndarray]:
+        """Return (s, poses) at count evenly spaced values of s."""
+        s = np.linspace(0.0, 1.0, count)
+        return s, self.pose(s)
+
+    @property
+    def start(self) -> np.ndarray:
+        """p(0), the robot's configuration when the path was planned."""
+        return self.pose(0.0)
+
+    @property
+    def goal(self) -> np.ndarray:
+        """p(1), the target configuration."""
+        return self.pose(1.0)
+
+    def length(self) -> float:
+        """Return the length of the path's position trace in metres."""
+        _, poses = self.sample()
+        return float(np.sum(np.linalg.norm(np.diff(poses[:, :2], axis=0), axis=1)))
+
+    def lipschitz_estimate(self) -> float:
+        """Estimate the Lipschitz constant of g_p from finite differences (Assumption 1.4)."""
+        s, poses = self.sample()
+        return float(np.max(np.linalg.norm(np.diff(poses, axis=0), axis=1) / np.diff(s)))
+
+    def project(
+        self,
+        pose: np.ndarray,
+        *,
+        s_min: float = 0.0,
+        s_max: float = 1.0,
+        heading_weight: float = 0.1,
+    ) -> float:
+        """Return the s in [s_min, s_max] whose pose is nearest to pose.
+
+        Distance is squared position error plus heading_weight times the squared wrapped
+        heading error, so that at a turn-in-place corner the matching heading is chosen.
+        """
+        pose = np.asarray(pose, dtype=float)
+        s, poses = self.sample()
+        mask = (s >= s_min - 1e-12) & (s <= s_max + 1e-12)
+        if not np.any(mask):
+            mask[np.argmin(np.abs(s - s_min))] = True
+        s, poses = s[mask], poses[mask]
+        err = np.sum((poses[:, :2] - pose[:2]) ** 2, axis=1)
+        err = err + heading_weight * wrap_angle(poses[:, 2] - pose[2]) ** 2
+        return float(s[int(np.argmin(err))])
+
+
+class AnalyticPath(ReferencePath):
+    """A path given by a closed-form expression in s (no parameters)."""
+
+    def __init__(self, name: str, expression: Callable[[Symbolic], Symbolic]) -> None:
+        self._name = name
+        self._expression = expression
+        s = ca.SX.sym('s')
+        self._function = ca.Function(name, [s], [ca.vec(expression(s))])
+
+    @property
+    def family(self) -> str:
+        """One family per analytic path."""
+        return f'analytic:{self._name}'
+
+    @property
+    def name(self) -> str:
+        """The path's name, as world files refer to it."""
+        return self._name
+
+    @property
+    def num_params(self) -> int:
+        """No parameters: the expression is fixed."""
+        return 0
+
+    def parameters(self) -> np.ndarray:
+        """Return an empty vector."""
+        return np.zeros(0)
+
+    def symbolic(self, s: Symbolic, params: Symbolic) -> Symbolic:
+        """Return the expression itself."""
+        return self._function(s)
+
+    def pose(self, s: np.ndarray | float) -> np.ndarray:
+        """Evaluate the expression numerically."""
+        s_arr = np.atleast_1d(np.asarray(s, dtype=float))
+        values = np.asarray(self._function.map(len(s_arr))(s_arr.reshape(1, -1))).T
+        return values[0] if np.ndim(s) == 0 else values
+
+
+def paper_sinusoid() -> AnalyticPath:
+    """The paper's example path p(s) = [2.5 s, 1.1 sin(pi s), atan(1.1 pi cos(pi s) / 2.5)]."""
+    return AnalyticPath(
+        'paper_sinusoid',
+        lambda s: ca.vertcat(
+            2.5 * s, 1.1 * ca.sin(ca.pi * s), ca.atan(1.1 * ca.pi * ca.cos(ca.pi * s) / 2.5)
+        ),
+    )
+
+
+ANALYTIC_PATHS: dict[str, Callable[[], AnalyticPath]] = {'paper_sinusoid': paper_sinusoid}
+
+
+def analytic_path(name: str) -> AnalyticPath:
+    """Return the named analytic path (world files name them)."""
+    try:
+        return ANALYTIC_PATHS[name]()
+    except KeyError:
+        msg = f'unknown analytic path {name!r}; known: {sorted(ANALYTIC_PATHS)}'
+        raise ValueError(msg) from None
+
+
+class WaypointPath(ReferencePath):
+    """A polyline with turn-in-place corners, parametrised by length plus turning.
+
+    Symbolically p(s) = p_0 + sum_i k_i clip(s - s_i, 0, w_i): one ramp per segment, so the
+    solver's structure depends only on the capacity (the maximum number of segments), and
+    unused segments are padded with w_i = 0.
+    """
+
+    PARAMS_PER_SEGMENT = 5  # s_i, w_i, k_x, k_y, k_theta
+
+    def __init__(
+        self,
+        waypoints: np.ndarray,
+        *,
+        start_heading: float | None = None,
+        goal_heading: float | None = None,
+        turn_length: float = 0.25,
+        capacity: int = 64,
+    ) -> None:
+        """Build the path.
+
+        Args:
+            waypoints: (M, 2) positions; consecutive duplicates are dropped.
+            start_heading: the robot's heading at the start; the path first turns in place
+                from it to the first segment's direction (None: no initial turn).
+            goal_heading: heading at the goal; the path ends turning in place to it.
+            turn_length: metres of path parameter per radian turned in place (> 0), so
+                that g_p stays Lipschitz at corners.
+            capacity: maximum number of segments (straight and turning) the solver holds.
+
+        Raises:
+            ValueError: on non-finite input, fewer than two distinct points, or more
+                segments than capacity.
+
+        """
+        pts = np.asarray(waypoints, dtype=float)
+        if pts.ndim != 2 or pts.shape[1] != 2:
+            msg = f'waypoints must have shape (M, 2), got {pts.shape}'
+            raise ValueError(msg)
+        if not np.all(np.isfinite(pts)):
+            msg = 'waypoints contain NaN or inf'
+            raise ValueError(msg)
+        for heading in (start_heading, goal_heading):
+            if heading is not None and not math.isfinite(heading):
+                msg = 'start and goal headings must be finite'
+                raise ValueError(msg)
+        if turn_length <= 0:
+            msg = f'turn_length must be > 0, got {turn_length}'
+            raise ValueError(msg)
+        keep = np.concatenate([[True], np.linalg.norm(np.diff(pts, axis=0), axis=1) > 1e-6])
+        pts = pts[keep]
+        if len(pts) < 2:
+            msg = 'a path needs at least two distinct waypoints'
+            raise ValueError(msg)
+        self._turn_length = float(turn_length)
+        self._capacity = int(capacity)
+        self._knots = self._knot_poses(pts, start_heading, goal_heading)
+        if len(self._knots) - 1 > self._capacity:
+            msg = (
+                f'path has {len(self._knots) - 1} segments, more than the capacity '
+                f'{self._capacity}; simplify it (simplify_polyline) or raise the capacity'
+            )
+            raise ValueError(msg)
+        weights = np.array([1.0, 1.0, self._turn_length])
+        lengths = np.linalg.norm(np.diff(self._knots, axis=0) * weights, axis=1)
+        self._s_knots = np.concatenate([[0.0], np.cumsum(lengths)]) / np.sum(lengths)
+        self._waypoints = pts
+
+    @staticmethod
+    def _knot_poses(
+        pts: np.ndarray, start_heading: float | None, goal_heading: float | None
+    ) -> np.ndarray:
+        directions = np.arctan2(np.diff(pts[:, 1]), np.diff(pts[:, 0]))
+        knots: list[list[float]] = []
+        heading = directions[0] if start_heading is None else float(start_heading)
+        knots.append([pts[0, 0], pts[0, 1], heading])
+        for i, direction in enumerate(directions):
+            new_heading = heading + float(wrap_angle(direction - heading))
+            if abs(new_heading - heading) > 1e-9:
+                knots.append([pts[i, 0], pts[i, 1], new_heading])
+            heading = new_heading
+            knots.append([pts[i + 1, 0], pts[i + 1, 1], heading])
+        if goal_heading is not None:
+            new_heading = heading + float(wrap_angle(goal_heading - heading))
+            if abs(new_heading - heading) > 1e-9:
+                knots.append([pts[-1, 0], pts[-1, 1], new_heading])
+        return np.array(knots)
+
+    @classmethod
+    def from_poses(cls, poses: np.ndarray, **kwargs: Any) -> WaypointPath:
+        """Build from (M, 3) poses: positions plus the first and last headings."""
+        poses = np.asarray(poses, dtype=float)
+        if poses.ndim != 2 or poses.shape[1] != 3:
+            msg = f'poses must have shape (M, 3), got {poses.shape}'
+            raise ValueError(msg)
+        kwargs.setdefault('start_heading', float(poses[0, 2]))
+        kwargs.setdefault('goal_heading', float(poses[-1, 2]))
+        return cls(poses[:, :2], **kwargs)
+
+    @property
+    def family(self) -> str:
+        """All waypoint paths of one capacity share a solver."""
+        return f'waypoints:{self._capacity}'
+
+    @property
+    def capacity(self) -> int:
+        """Maximum number of segments."""
+        return self._capacity
+
+    @property
+    def knots(self) -> np.ndarray:
+        """(K, 3) poses at the segment ends, heading unwrapped."""
+        return self._knots.copy()
+
+    @property
+    def waypoints(self) -> np.ndarray:
+        """(M, 2) the distinct input positions."""
+        return self._waypoints.copy()
+
+    @property
+    def num_params(self) -> int:
+        """3 for p_0 plus 5 per segment slot."""
+        return 3 + self.PARAMS_PER_SEGMENT * self._capacity
+
+    def parameters(self) -> np.ndarray:
+        """Pack p_0 and (s_i, w_i, k_i) per segment, padded with empty segments at s = 1."""
+        seg = np.zeros((self._capacity, self.PARAMS_PER_SEGMENT))
+        seg[:, 0] = 1.0
+        widths = np.diff(self._s_knots)
+        count = len(widths)
+        seg[:count, 0] = self._s_knots[:-1]
+        seg[:count, 1] = widths
+        seg[:count, 2:] = np.diff(self._knots, axis=0) / widths[:, None]
+        return np.concatenate([self._knots[0], seg.reshape(-1)])
+
+    def symbolic(self, s: Symbolic, params: Symbolic) -> Symbolic:
+        """Sum of clipped ramps, one per segment slot."""
+        p = params[0:3]
+        for i in range(self._capacity):
+            base = 3 + self.PARAMS_PER_SEGMENT * i
+            s_i, w_i = params[base], params[base + 1]
+            ramp = ca.fmin(ca.fmax(s - s_i, 0), w_i)
+            p = p + ramp * params[base + 2:base + 5]
+        return p
+
+    def pose(self, s: np.ndarray | float) -> np.ndarray:
+        """Interpolate the knots linearly in s."""
+        s_arr = np.clip(np.atleast_1d(np.asarray(s, dtype=float)), 0.0, 1.0)
+        values = np.column_stack([np.interp(s_arr, self._s_knots, self._knots[:, j])
+                                  for j in range(3)])
+        return values[0] if np.ndim(s) == 0 else values
+
+
+def simplify_polyline(points: np.ndarray, tolerance: float) -> np.ndarray:
+    """Drop points within tolerance of the line through their neighbours (Ramer-Douglas-Peucker).
+
+    Iterative, vectorised per segment: a 100,000-pose nav_msgs/Path simplifies in
+    milliseconds instead of overflowing the recursion limit.
+    """
+    pts = np.asarray(points, dtype=float)
+    if len(pts) < 3:
+        return pts.copy()
+    keep = np.zeros(len(pts), dtype=bool)
+    keep[0] = keep[-1] = True
+    stack = [(0, len(pts) - 1)]
+    while stack:
+        first, last = stack.pop()
+        if last - first < 2:
+            continue
+        a, b = pts[first], pts[last]
+        inner = pts[first + 1:last]
+        ab = b - a
+        norm = np.linalg.norm(ab)
+        if norm < 1e-12:
+            dist = np.linalg.norm(inner - a, axis=1)
+        else:
+            dist = np.abs(ab[0] * (inner[:, 1] - a[1]) - ab[1] * (inner[:, 0] - a[0])) / norm
+        index = int(np.argmax(dist))
+        if dist[index] > tolerance:
+            split = first + 1 + index
+            keep[split] = True
+            stack.append((first, split))
+            stack.append((split, last))
+    return pts[keep]
