@@ -437,6 +437,36 @@ class _MpcBase:
             worst = max(worst, float(np.max(depth, initial=0.0)))
         return float(worst)
 
+    def _run_solver(
+        self, w0: np.ndarray, params: np.ndarray, selected: list[ConvexPolygon]
+    ) -> tuple[bool, np.ndarray, float, str, int, float]:
+        """Solve from w0; return (verified, w, value, status, iterations, seconds)."""
+        start = time.perf_counter()
+        result = self._solver(x0=w0, p=params, lbx=self._lbw, ubx=self._ubw,
+                              lbg=self._lbg, ubg=self._ubg)
+        seconds = time.perf_counter() - start
+        stats = self._solver.stats()
+        status = str(stats.get('return_status', 'unknown'))
+        iterations = int(stats.get('iter_count', 0))
+        w_opt = np.asarray(result['x']).reshape(-1)
+        solved = bool(stats.get('success', False)) and bool(np.all(np.isfinite(w_opt)))
+        solved = solved and self._violation(w_opt, params, selected) <= FEASIBILITY_TOLERANCE
+        value = float(result['f']) if solved else math.inf
+        return solved, w_opt, value, status, iterations, seconds
+
+    def _guided_guess(self, x0: np.ndarray, selected: list[ConvexPolygon]) -> _Plan:
+        """An infeasible but informative start: drive forward at half speed."""
+        n = self._config.horizon
+        u = np.zeros((n, self._model.nu))
+        u[:, 0] = 0.5 * self._model.u_max[0]
+        x = self._rollout(x0, u)
+        s0 = self._initial_s(x0)
+        s = self._path.project(x[-1, :3], s_min=s0) if self.uses_path and self._path else s0
+        terminal = self._terminal_state(s, x0)
+        if terminal is not None:
+            x[-1] = terminal
+        return _Plan(x=x, u=u, s=s, mu=self._multipliers(x, selected), value=math.inf)
+
     def _check_ready(self) -> None:
         if self.uses_path and self._path is None:
             msg = 'no reference path: call set_path() first'
@@ -471,23 +501,21 @@ class _MpcBase:
         candidate_ok = self._violation(w_candidate, params, selected) <= FEASIBILITY_TOLERANCE
         candidate_value = float(self._cost_fn(w_candidate, params)) if candidate_ok else math.inf
 
-        start = time.perf_counter()
-        result = self._solver(x0=w_candidate, p=params, lbx=self._lbw, ubx=self._ubw,
-                              lbg=self._lbg, ubg=self._ubg)
-        solve_time = time.perf_counter() - start
-        stats = self._solver.stats()
-        status = str(stats.get('return_status', 'unknown'))
-        iterations = int(stats.get('iter_count', 0))
-        w_opt = np.asarray(result['x']).reshape(-1)
-        solved = bool(stats.get('success', False)) and np.all(np.isfinite(w_opt))
-        solved = solved and self._violation(w_opt, params, selected) <= FEASIBILITY_TOLERANCE
-        value = float(result['f']) if solved else math.inf
+        solved, w_opt, value, status, iterations, solve_time = self._run_solver(
+            w_candidate, params, selected)
+        if not solved and self._plan is None:
+            # "stay put" zeroes every derivative of the quartic cost, and IPOPT may stall
+            # there; a second start rolled out along the path usually converges
+            retry = self._run_solver(self._pack(self._guided_guess(x0, selected)), params,
+                                     selected)
+            solved, w_opt, value, status, iterations = retry[:5]
+            solve_time += retry[5]
 
         if solved and value <= candidate_value + LYAPUNOV_TOLERANCE * (1 + abs(candidate_value)):
             x_p, u_p, s_p, mu_p = self._unpack(w_opt)
             plan, source = _Plan(x=x_p, u=u_p, s=s_p, mu=mu_p, value=value), 'solver'
             self._failures = 0
-        elif candidate_ok and self._plan is not None:
+        elif candidate_ok:
             candidate.value = candidate_value
             plan, source = candidate, 'candidate'
             if not solved:
