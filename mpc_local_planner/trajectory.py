@@ -1,0 +1,53 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The trajectory.csv format shared by the experiments, closed_loop and analyze_bag.
+
+One row per control step, the columns of design.md section 3; NaN where a value does not
+exist (s for the tracking baseline). One reader and one writer keep the three producers and
+every consumer in agreement.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ['TRAJECTORY_COLUMNS', 'read_trajectory_csv', 'write_trajectory_csv']
+
+TRAJECTORY_COLUMNS = ('t', 'x', 'y', 'theta', 'v', 'omega', 's', 'V_N', 'solve_ms')
+
+
+def write_trajectory_csv(path: str | Path, rows: np.ndarray) -> None:
+    """Write rows (n, 9) with a header row."""
+    data = np.asarray(rows, dtype=float).reshape(-1, len(TRAJECTORY_COLUMNS))
+    np.savetxt(path, data, delimiter=',', header=','.join(TRAJECTORY_COLUMNS), comments='',
+               fmt='%.9g')
+
+
+def read_trajectory_csv(path: str | Path) -> np.ndarray:
+    """Read a trajectory.csv back into an (n, 9) array.
+
+    Raises:
+        ValueError: if the header is not the expected one.
+
+    """
+    with open(path, encoding='utf-8') as stream:
+        header = stream.readline().strip()
+    if header != ','.join(TRAJECTORY_COLUMNS):
+        msg = f'{path}: expected header {",".join(TRAJECTORY_COLUMNS)!r}, got {header!r}'
+        raise ValueError(msg)
+    data = np.loadtxt(path, delimiter=',', skiprows=1, ndmin=2)
+    return data.reshape(-1, len(TRAJECTORY_COLUMNS))
