@@ -1,0 +1,48 @@
+"""Unit tests of convex obstacles in H-representation."""
+
+import numpy as np
+import pytest
+
+from mpc_local_planner.obstacles import ConvexPolygon, min_clearance, point_in_any
+
+
+def test_box_h_representation_has_unit_outward_normals() -> None:
+    box = ConvexPolygon.from_box(1, -1, 1.5, 1)
+    np.testing.assert_allclose(np.linalg.norm(box.A, axis=1), 1.0)
+    assert box.contains(np.array([[1.2, 0.0]]))[0]
+    assert not box.contains(np.array([[0.9, 0.0]]))[0]
+    np.testing.assert_allclose(box.signed_distance_lower_bound(np.array([[0.8, 0.0]])), [0.2])
+
+
+def test_inflation_moves_every_face_out_by_the_distance() -> None:
+    box = ConvexPolygon.from_box(0, 0, 1, 1).inflate(0.1)
+    assert box.contains(np.array([[-0.09, 0.5]]))[0]
+    assert not box.contains(np.array([[-0.11, 0.5]]))[0]
+    np.testing.assert_allclose(box.vertices.min(axis=0), [-0.1, -0.1])
+
+
+def test_circumscribed_polygon_contains_the_whole_circle() -> None:
+    polygon = ConvexPolygon.from_circle(1.0, 2.0, 0.5, sides=8)
+    angles = np.linspace(0, 2 * np.pi, 361)
+    rim = np.column_stack([1.0 + 0.5 * np.cos(angles), 2.0 + 0.5 * np.sin(angles)])
+    assert np.all(polygon.contains(rim, margin=1e-12))
+
+
+def test_vertices_in_any_order_give_the_convex_hull() -> None:
+    polygon = ConvexPolygon.from_vertices([[1, 1], [0, 0], [1, 0], [0, 1], [0.5, 0.5]])
+    assert polygon.num_faces == 4
+
+
+def test_degenerate_polygons_are_refused() -> None:
+    with pytest.raises(ValueError, match='collinear'):
+        ConvexPolygon.from_vertices([[0, 0], [1, 1], [2, 2]])
+    with pytest.raises(ValueError, match='xmin < xmax'):
+        ConvexPolygon.from_box(1, 0, 0, 1)
+
+
+def test_distance_and_clearance_queries() -> None:
+    boxes = [ConvexPolygon.from_box(0, 0, 1, 1), ConvexPolygon.from_box(3, 0, 4, 1)]
+    np.testing.assert_allclose(boxes[0].distance(np.array([[2.0, 0.5], [0.5, 0.5]])), [1.0, 0])
+    assert min_clearance(boxes, np.array([[2.0, 0.5]])) == pytest.approx(1.0)
+    np.testing.assert_array_equal(point_in_any(boxes, np.array([[3.5, 0.5], [2, 2]])),
+                                  [True, False])
