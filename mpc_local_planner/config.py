@@ -26,7 +26,7 @@ from typing import Any
 
 __all__ = ['MpcConfig', 'STRUCTURAL_FIELDS', 'validate_mpc_config']
 
-SOLVERS = ('ipopt', 'sqp_qpoases', 'fatrop')
+SOLVERS = ('ipopt', 'fatrop', 'sqp_qrqp', 'sqp_qpoases', 'sqp_osqp')
 
 
 @dataclass(frozen=True)
@@ -46,12 +46,17 @@ class MpcConfig:
         collision_margin: extra inflation so that the continuous motion between two samples
             stays clear; None means v_max h / 2 (half the longest step, see design.md).
         farkas_margin: the Farkas constraint asks (A p - b)^T mu >= this (metres).
-        obstacle_slots: obstacles the solver holds at once (grows, with a rebuild, when
-            more are within reach).
+        obstacle_slots: with adaptive_slots False, obstacles the solver holds at once (grows,
+            with a rebuild, when more are within reach); with adaptive_slots, the count
+            prepare() builds in advance.
         faces_per_obstacle: half-planes per obstacle slot (larger polygons are refused).
         solver: NLP backend, one of SOLVERS.
         max_iterations: solver iteration limit per solve.
         tolerance: solver and verification tolerance.
+        adaptive_slots: build the NLP for the obstacles actually within reach (a small cache
+            of NLPs keyed by their count and face count) instead of fixed, padded slots.
+        compile: compile the NLP's functions to C with the system compiler (cached on disk).
+        solver_options: extra options passed to casadi.nlpsol (override the defaults).
 
     """
 
@@ -71,6 +76,8 @@ class MpcConfig:
     solver: str = 'ipopt'
     max_iterations: int = 200
     tolerance: float = 1e-8
+    adaptive_slots: bool = True
+    compile: bool = False
     solver_options: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -97,7 +104,8 @@ class MpcConfig:
 # Fields whose change alters the NLP's shape: changing them rebuilds the solver.
 STRUCTURAL_FIELDS = frozenset(
     {'horizon', 'step', 'cost_exponent', 'farkas_margin', 'obstacle_slots',
-     'faces_per_obstacle', 'solver', 'max_iterations', 'tolerance', 'solver_options'}
+     'faces_per_obstacle', 'solver', 'max_iterations', 'tolerance', 'solver_options',
+     'adaptive_slots', 'compile'}
 )
 
 

@@ -30,8 +30,15 @@ verified feasible and cheaper. So V_N is non-increasing by construction, not by 
 
 from __future__ import annotations
 
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
+import hashlib
+import logging
 import math
+import os
+from pathlib import Path
+import subprocess
+import tempfile
 import time
 from typing import NamedTuple, Sequence
 
@@ -43,7 +50,9 @@ from .models import RobotModel
 from .obstacles import ConvexPolygon
 from .paths import ReferencePath, wrap_angle
 
-__all__ = ['MpcSolution', 'PathReferenceMPC', 'TrackingMPC']
+__all__ = ['MpcSolution', 'PathReferenceMPC', 'TrackingMPC', 'compile_cache_dir']
+
+_LOG = logging.getLogger(__name__)
 
 # Constraint-violation bound for accepting a solution or a candidate (metres, rad, m/s).
 FEASIBILITY_TOLERANCE = 1e-5
@@ -96,6 +105,182 @@ class _Plan:
     value: float
 
 
+# NLPs kept per MPC, keyed by (obstacle slots, faces): building one takes tens of ms.
+MAX_CACHED_NLPS = 8
+
+
+@dataclass
+class _Nlp:
+    """One built NLP (for a given number of obstacle slots) and its index layout."""
+
+    solver: ca.Function
+    backend: str
+    slots: int
+    faces: int
+    lbw: np.ndarray
+    ubw: np.ndarray
+    lbg: np.ndarray
+    ubg: np.ndarray
+    cost_fn: ca.Function
+    g_fn: ca.Function
+    ix: np.ndarray  # (N+1, nx) indices of the states in w
+    ir: np.ndarray  # (N+1, nr) indices of the reference copies
+    iu: np.ndarray  # (N, nu) indices of the inputs
+    imu: np.ndarray  # (N, slots * faces) indices of the multipliers of steps 1..N
+    build_time_s: float
+    plugin: str = ''
+    options: dict | None = None
+    compiled: bool = False
+    pending: Future | None = None  # a compilation running in the background
+
+
+def _ipopt_options(config: MpcConfig) -> dict:
+    return {
+        'ipopt.print_level': 0,
+        'ipopt.sb': 'yes',
+        'ipopt.max_iter': config.max_iterations,
+        'ipopt.tol': config.tolerance,
+        'ipopt.acceptable_tol': 1e-6,
+        # the initial guess is the proof's candidate, feasible by construction: keep the
+        # interior-point iterates near it instead of pushing them off the bounds
+        'ipopt.bound_push': 1e-8,
+        'ipopt.bound_frac': 1e-8,
+        'ipopt.mu_init': 1e-4,
+    }
+
+
+def _fatrop_options(config: MpcConfig, structure: dict) -> dict:
+    return {
+        'structure_detection': 'manual',
+        'N': structure['N'],
+        'nx': structure['nx'],
+        'nu': structure['nu'],
+        'ng': structure['ng'],
+        # fatrop's bound_push/bound_frac defaults (1e-2) are kept: IPOPT's warm-start settings
+        # above make fatrop stall when an obstacle enters the horizon; mu_init 1e-2 (not 0.1)
+        # keeps the first step (everything at rest, every quartic derivative zero) short
+        'fatrop': {
+            'print_level': 0,
+            'mu_init': 1e-2,
+            'max_iter': config.max_iterations,
+            'tol': config.tolerance,
+        },
+    }
+
+
+def _sqp_options(config: MpcConfig, qpsol: str) -> dict:
+    qp_options: dict = {'error_on_fail': False}
+    if qpsol == 'qpoases':
+        qp_options.update({'printLevel': 'none', 'sparse': True})
+    elif qpsol == 'qrqp':
+        qp_options.update({'print_iter': False, 'print_header': False, 'print_info': False})
+    return {
+        'qpsol': qpsol,
+        'qpsol_options': qp_options,
+        'max_iter': config.max_iterations,
+        'tol_pr': config.tolerance,
+        'tol_du': 1e-6,
+        'print_header': False,
+        'print_iteration': False,
+        'print_status': False,
+        'convexify_strategy': 'regularize',
+    }
+
+
+def backend_options(config: MpcConfig, structure: dict) -> tuple[str, dict]:
+    """Return (nlpsol plugin, options) for config.solver."""
+    common = {'print_time': False, 'error_on_fail': False}
+    name = config.solver
+    if name == 'ipopt':
+        plugin, options = 'ipopt', _ipopt_options(config)
+    elif name == 'fatrop':
+        plugin, options = 'fatrop', _fatrop_options(config, structure)
+    elif name.startswith('sqp_'):
+        plugin, options = 'sqpmethod', _sqp_options(config, name[4:])
+    else:
+        msg = f'unknown solver {name!r}'
+        raise ValueError(msg)
+    options.update(common)
+    options.update(config.solver_options)
+    return plugin, options
+
+
+# C compiler and flags for config.compile; CC overrides the compiler as usual.
+COMPILE_FLAGS = ('-O2', '-fPIC', '-shared')
+_COMPILER_POOL = ThreadPoolExecutor(max_workers=1, thread_name_prefix='mpc_compile')
+
+
+def compile_cache_dir() -> Path:
+    """Return where compiled NLPs are kept ($MPC_LOCAL_PLANNER_CACHE or ~/.cache/...)."""
+    env = os.environ.get('MPC_LOCAL_PLANNER_CACHE')
+    if env:
+        return Path(env)
+    base = os.environ.get('XDG_CACHE_HOME') or str(Path.home() / '.cache')
+    return Path(base) / 'mpc_local_planner'
+
+
+def _nlp_source(problem: dict, solver: ca.Function) -> str:
+    """Return C code of the NLP functions the solver plugin evaluates (and the oracle)."""
+    generator = ca.CodeGenerator('mpc_nlp.c', {'with_header': False})
+    generator.add(ca.Function('nlp', [problem['x'], problem['p']],
+                              [problem['f'], problem['g']], ['x', 'p'], ['f', 'g']))
+    for name in solver.get_function():
+        generator.add(solver.get_function(name))
+    return generator.dump()
+
+
+def _library_path(source: str) -> Path:
+    compiler = os.environ.get('CC', 'gcc')
+    key = hashlib.sha256('\n'.join(
+        [ca.__version__, compiler, *COMPILE_FLAGS, source]).encode()).hexdigest()[:24]
+    return compile_cache_dir() / f'mpc_nlp_{key}.so'
+
+
+def _compile(source: str, library: Path) -> Path:
+    """Compile source into library (atomically: a half-written file is never loaded)."""
+    library.parent.mkdir(parents=True, exist_ok=True)
+    compiler = os.environ.get('CC', 'gcc')
+    with tempfile.TemporaryDirectory(dir=library.parent) as tmp:
+        c_file = Path(tmp) / 'mpc_nlp.c'
+        c_file.write_text(source)
+        out = Path(tmp) / library.name
+        result = subprocess.run([compiler, *COMPILE_FLAGS, str(c_file), '-o', str(out), '-lm'],
+                                capture_output=True, text=True, timeout=600, check=False)
+        if result.returncode != 0:
+            msg = f'{compiler} failed ({result.returncode}): {result.stderr.strip()[:500]}'
+            raise RuntimeError(msg)
+        os.replace(out, library)
+    return library
+
+
+def _start_compilation(nlp: _Nlp, problem: dict) -> None:
+    """Use a cached compiled library now, or compile one in the background."""
+    try:
+        source = _nlp_source(problem, nlp.solver)
+        library = _library_path(source)
+        if library.exists():
+            nlp.solver = ca.nlpsol('mpc', nlp.plugin, str(library), nlp.options)
+            nlp.compiled = True
+            return
+        nlp.pending = _COMPILER_POOL.submit(_compile, source, library)
+    except Exception as err:  # noqa: BLE001 - any failure falls back to the interpreter
+        _LOG.warning('compiling the MPC NLP failed, using the interpreted functions: %s', err)
+
+
+def _finish_compilation(nlp: _Nlp, *, wait: bool = False) -> None:
+    """Swap in the compiled solver once its background compilation is done."""
+    future = nlp.pending
+    if future is None or not (wait or future.done()):
+        return
+    nlp.pending = None
+    try:
+        library = future.result()
+        nlp.solver = ca.nlpsol('mpc', nlp.plugin, str(library), nlp.options)
+        nlp.compiled = True
+    except Exception as err:  # noqa: BLE001 - any failure falls back to the interpreter
+        _LOG.warning('compiling the MPC NLP failed, using the interpreted functions: %s', err)
+
+
 class _MpcBase:
     """Shared OCP machinery; subclasses choose the terminal condition and offset cost."""
 
@@ -117,8 +302,11 @@ class _MpcBase:
         self._path = path
         self._target = None if target is None else np.asarray(target, dtype=float)
         self._slots = self._config.obstacle_slots
-        self._solver: ca.Function | None = None
+        self._nlps: dict[tuple[int, int], _Nlp] = {}
         self._structure_key: tuple | None = None
+        self._last_nlp: _Nlp | None = None
+        self._last_build_time = 0.0
+        self._stage_fn = self._stage_function()
         self.set_obstacles(obstacles)
         self.reset()
 
@@ -148,7 +336,7 @@ class _MpcBase:
         old = self._config
         self._config = config
         if any(getattr(old, name) != getattr(config, name) for name in STRUCTURAL_FIELDS):
-            self._solver = None
+            self._nlps.clear()
             self._slots = max(self._slots, config.obstacle_slots)
             self.reset()
         if old.inflation(self._model.u_max[0]) != config.inflation(self._model.u_max[0]):
@@ -187,92 +375,207 @@ class _MpcBase:
     def _structure(self) -> tuple:
         c = self._config
         family = self._path.family if (self.uses_path and self._path) else 'target'
-        return (c.horizon, c.step, c.cost_exponent, c.farkas_margin, self._slots,
-                c.faces_per_obstacle, c.solver, c.max_iterations, c.tolerance,
-                tuple(sorted(c.solver_options.items())), family)
+        return (c.horizon, c.step, c.cost_exponent, c.farkas_margin, c.faces_per_obstacle,
+                c.solver, c.max_iterations, c.tolerance, c.compile,
+                tuple(sorted((k, repr(v)) for k, v in c.solver_options.items())), family,
+                self._num_path_params())
+
+    def _slot_shape(self, selected: list[ConvexPolygon]) -> tuple[int, int]:
+        """Return (slots, faces) of the NLP that holds the selected obstacles."""
+        c = self._config
+        if not c.adaptive_slots:
+            return max(self._slots, len(selected)), c.faces_per_obstacle
+        if not selected:
+            return 0, 0
+        # faces rounded up to a multiple of 4 so that boxes and octagons share few builds
+        faces = max(o.num_faces for o in selected)
+        faces = min(c.faces_per_obstacle, 4 * math.ceil(faces / 4)) if faces > 4 else faces
+        return len(selected), max(faces, 3)
+
+    def _nlp_for(self, slots: int, faces: int) -> _Nlp:
+        """Return the NLP for this obstacle shape, built (or fetched from the cache) now."""
+        key = self._structure()
+        if key != self._structure_key:
+            self._nlps.clear()
+            self._structure_key = key
+        nlp = self._nlps.get((slots, faces))
+        if nlp is None:
+            if len(self._nlps) >= MAX_CACHED_NLPS:
+                self._nlps.pop(next(iter(self._nlps)))
+            nlp = self._build(slots, faces)
+            self._nlps[(slots, faces)] = nlp
+        return nlp
 
     def _ensure_built(self) -> None:
-        key = self._structure()
-        if self._solver is None or key != self._structure_key:
-            self._build()
-            self._structure_key = key
+        """Build the NLP for the configured slots now (e.g. before the first control step)."""
+        self._nlp_for(*self._slot_shape(self._inflated[:self._config.obstacle_slots]))
+
+    def prepare(self, max_obstacles: int | None = None) -> None:
+        """Build the NLPs for 0..max_obstacles obstacles in reach, so no control step waits.
+
+        Args:
+            max_obstacles: the largest count to prepare (config.obstacle_slots by default).
+
+        """
+        count = self._config.obstacle_slots if max_obstacles is None else max_obstacles
+        for k in range(count + 1):
+            self._nlp_for(*self._slot_shape(self._inflated[:k] if self._inflated else []))
+
+    def _reference_dim(self) -> int:
+        """Size of the reference variable r carried along the horizon (s, or x_s)."""
+        raise NotImplementedError
+
+    def _reference_state(self, r: ca.SX, p_path: ca.SX) -> ca.SX:
+        """Return the artificial steady state x_s(r)."""
+        raise NotImplementedError
 
     def _terminal(
-        self, x_n: ca.SX, s: ca.SX, p_path: ca.SX, weights: ca.SX
+        self, x_n: ca.SX, r: ca.SX, p_path: ca.SX, weights: ca.SX
     ) -> tuple[ca.SX, ca.SX]:
         """Return (terminal equality residual, offset cost without its weight)."""
+        raise NotImplementedError
+
+    def _reference_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def _reference_value(self, plan: _Plan) -> np.ndarray:
         raise NotImplementedError
 
     def _num_path_params(self) -> int:
         raise NotImplementedError
 
-    def _build(self) -> None:
+    def _build(self, slots: int, faces: int) -> _Nlp:
+        """Build the NLP in the stage-wise order structure-exploiting solvers need.
+
+        Variables: z_0, u_0, z_1, u_1, mu_1, ..., z_{N-1}, u_{N-1}, mu_{N-1}, z_N, mu_N with
+        z_k = (x_k, r_k): the reference r (s, or the artificial steady state) is copied
+        along the horizon (r_{k+1} = r_k) so that each stage cost l(x_k - x_s(r_k), ...)
+        only touches its own stage. Constraints, per stage k: the gap-closing
+        z_{k+1} = (F(x_k, u_k), r_k), then the stage's own constraints (x_0 = x0 at k = 0,
+        the Farkas rows of x_k at k >= 1, the terminal condition at k = N).
+        """
         c = self._config
         m = self._model
         n, nx, nu = c.horizon, m.nx, m.nu
-        faces, slots = c.faces_per_obstacle, self._slots
+        nr = self._reference_dim()
+        nz = nx + nr
+        nm = faces * slots
         F = m.discrete(c.step)
 
-        # decision variables
-        X = ca.SX.sym('X', nx, n + 1)
-        U = ca.SX.sym('U', nu, n)
-        s = ca.SX.sym('s')
-        mu = ca.SX.sym('mu', faces, slots * n)
-
-        # parameters: x0, weights, obstacles (A rows then b), path
         x0 = ca.SX.sym('x0', nx)
         weights = ca.SX.sym('w', 5)
         obs = ca.SX.sym('obs', 3 * faces * slots)
-        n_path = self._num_path_params()
-        p_path = ca.SX.sym('path', n_path)
+        p_path = ca.SX.sym('path', self._num_path_params())
 
-        # objective: stage cost towards the terminal (artificial) steady state
-        x_s = X[:, n]
-        terminal_residual, offset = self._terminal(x_s, s, p_path, weights)
+        Z = [ca.SX.sym(f'z{k}', nz) for k in range(n + 1)]
+        U = [ca.SX.sym(f'u{k}', nu) for k in range(n)]
+        MU = [None] + [ca.SX.sym(f'mu{k}', nm) for k in range(1, n + 1)]
+        order: list[ca.SX] = []
+        for k in range(n + 1):
+            order.append(Z[k])
+            if k < n:
+                order.append(U[k])
+            if k >= 1:
+                order.append(MU[k])
+        w = ca.vertcat(*order)
+        index = np.arange(w.numel())
+        layout: dict[str, list[np.ndarray]] = {'x': [], 'r': [], 'u': [], 'mu': []}
+        offset = 0
+        for k in range(n + 1):
+            layout['x'].append(index[offset:offset + nx])
+            layout['r'].append(index[offset + nx:offset + nz])
+            offset += nz
+            if k < n:
+                layout['u'].append(index[offset:offset + nu])
+                offset += nu
+            if k >= 1:
+                layout['mu'].append(index[offset:offset + nm])
+                offset += nm
+
         stage = self._stage_function()
-        cost = sum(stage(X[:, i], U[:, i], x_s, weights) for i in range(n))
-        cost = cost + weights[4] * offset
-
-        # constraints, each block with its bounds
-        g, lbg, ubg = [], [], []
-
-        def add(expr: ca.SX, lower: float | np.ndarray, upper: float | np.ndarray) -> None:
-            size = expr.numel()
-            g.append(ca.vec(expr))
-            lbg.append(np.broadcast_to(lower, (size,)).astype(float))
-            ubg.append(np.broadcast_to(upper, (size,)).astype(float))
-
-        add(X[:, 0] - x0, 0.0, 0.0)
-        for i in range(n):
-            add(X[:, i + 1] - F(X[:, i], U[:, i]), 0.0, 0.0)
-        # drop entries that are identically zero (a free steady state): an empty Jacobian
-        # row makes the KKT system singular and IPOPT wanders off
-        residual = [terminal_residual[i] for i in range(terminal_residual.numel())
-                    if not terminal_residual[i].is_zero()]
-        if residual:
-            add(ca.vertcat(*residual), 0.0, 0.0)
+        self._stage_fn = stage
+        A_list, b_list = [], []
         for j in range(slots):
             base = 3 * faces * j
-            A = ca.reshape(obs[base:base + 2 * faces], faces, 2)
-            b = obs[base + 2 * faces:base + 3 * faces]
-            for i in range(n):
-                col = j * n + i
-                p = X[0:2, i + 1]
-                add(ca.dot(ca.mtimes(A, p) - b, mu[:, col]), c.farkas_margin, ca.inf)
-                add(ca.sum1(mu[:, col]), 1.0, 1.0)
+            A_list.append(ca.reshape(obs[base:base + 2 * faces], faces, 2))
+            b_list.append(obs[base + 2 * faces:base + 3 * faces])
 
-        w = ca.veccat(X, U, s, mu)
+        g, lbg, ubg = [], [], []
+        ng_stage = []
+
+        def add(expr: ca.SX, lower: float, upper: float) -> int:
+            size = expr.numel()
+            g.append(ca.vec(expr))
+            lbg.append(np.full(size, lower, dtype=float))
+            ubg.append(np.full(size, upper, dtype=float))
+            return size
+
+        cost = 0
+        for k in range(n + 1):
+            x_k, r_k = Z[k][:nx], Z[k][nx:]
+            if k < n:
+                cost = cost + stage(x_k, U[k], self._reference_state(r_k, p_path), weights)
+                add(Z[k + 1] - ca.vertcat(F(x_k, U[k]), r_k), 0.0, 0.0)
+            rows = 0
+            if k == 0:
+                rows += add(x_k - x0, 0.0, 0.0)
+            else:
+                for j in range(slots):
+                    mu = MU[k][j * faces:(j + 1) * faces]
+                    p = x_k[0:2]
+                    rows += add(ca.dot(ca.mtimes(A_list[j], p) - b_list[j], mu),
+                                c.farkas_margin, ca.inf)
+                    rows += add(ca.sum1(mu), 1.0, 1.0)
+            if k == n:
+                residual, offset_cost = self._terminal(x_k, r_k, p_path, weights)
+                # drop entries that are identically zero (a free steady state): an empty
+                # Jacobian row makes the KKT system singular and the solver wanders off
+                kept = [residual[i] for i in range(residual.numel())
+                        if not residual[i].is_zero()]
+                if kept:
+                    rows += add(ca.vertcat(*kept), 0.0, 0.0)
+                cost = cost + weights[4] * offset_cost
+            ng_stage.append(rows)
+
+        g_all = ca.vertcat(*g)
         params = ca.vertcat(x0, weights, obs, p_path)
-        self._lbw, self._ubw = self._variable_bounds(n, faces * slots * n)
-        self._lbg = np.concatenate(lbg)
-        self._ubg = np.concatenate(ubg)
-        nlp = {'x': w, 'p': params, 'f': cost, 'g': ca.vertcat(*g)}
-        self._solver = ca.nlpsol('mpc', c.solver if c.solver == 'ipopt' else 'ipopt', nlp,
-                                 self._solver_options())
-        self._cost_fn = ca.Function('cost', [w, params], [cost])
-        self._g_fn = ca.Function('g', [w, params], [ca.vertcat(*g)])
-        self._stage_fn = stage
-        self._sizes = (nx, nu, n, faces, slots)
+        lbr, ubr = self._reference_bounds()
+        lbw, ubw = np.zeros(w.numel()), np.zeros(w.numel())
+        for k in range(n + 1):
+            lbw[layout['x'][k]], ubw[layout['x'][k]] = m.x_min, m.x_max
+            lbw[layout['r'][k]], ubw[layout['r'][k]] = lbr, ubr
+            if k < n:
+                lbw[layout['u'][k]], ubw[layout['u'][k]] = m.u_min, m.u_max
+            if k >= 1:
+                lbw[layout['mu'][k - 1]], ubw[layout['mu'][k - 1]] = 0.0, np.inf
+        structure = {
+            'N': n,
+            'nx': [nz] * (n + 1),
+            'nu': [nu] + [nu + nm] * (n - 1) + [nm] if n > 1 else [nu, nm],
+            'ng': ng_stage,
+        }
+        problem = {'x': w, 'p': params, 'f': cost, 'g': g_all}
+        start = time.perf_counter()
+        plugin, options = backend_options(c, structure)
+        built = _Nlp(
+            solver=ca.nlpsol('mpc', plugin, problem, options), backend=c.solver,
+            slots=slots, faces=faces,
+            lbw=lbw, ubw=ubw, lbg=np.concatenate(lbg), ubg=np.concatenate(ubg),
+            cost_fn=ca.Function('cost', [w, params], [cost]),
+            g_fn=ca.Function('g', [w, params], [g_all]),
+            ix=np.array(layout['x']), ir=np.array(layout['r']), iu=np.array(layout['u']),
+            imu=np.array(layout['mu']).reshape(n, nm), build_time_s=0.0,
+            plugin=plugin, options=options,
+        )
+        if c.compile:
+            _start_compilation(built, problem)
+        built.build_time_s = time.perf_counter() - start
+        return built
+
+    def wait_compiled(self) -> None:
+        """Block until the background compilations of the built NLPs are done (or failed)."""
+        for nlp in self._nlps.values():
+            _finish_compilation(nlp, wait=True)
 
     def _stage_function(self) -> ca.Function:
         """Return l(x - x_s, u - u_s) as a Function of (x, u, x_s, weights)."""
@@ -285,47 +588,36 @@ class _MpcBase:
         cost = ca.dot(state_w, (x - x_s) ** q) + ca.dot(input_w, (u - u_s) ** q)
         return ca.Function('stage', [x, u, x_s, weights], [cost])
 
-    def _solver_options(self) -> dict:
-        c = self._config
-        options = {
-            'print_time': False,
-            'ipopt.print_level': 0,
-            'ipopt.sb': 'yes',
-            'ipopt.max_iter': c.max_iterations,
-            'ipopt.tol': c.tolerance,
-            'ipopt.acceptable_tol': 1e-6,
-            # the initial guess is the proof's candidate, feasible by construction: keep
-            # the interior-point iterates near it instead of pushing them off the bounds
-            'ipopt.bound_push': 1e-8,
-            'ipopt.bound_frac': 1e-8,
-            'ipopt.mu_init': 1e-4,
-        }
-        options.update(c.solver_options)
-        return options
-
-    def _variable_bounds(self, n: int, n_mu: int) -> tuple[np.ndarray, np.ndarray]:
-        m = self._model
-        lbx = np.tile(m.x_min, n + 1)
-        ubx = np.tile(m.x_max, n + 1)
-        lbu = np.tile(m.u_min, n)
-        ubu = np.tile(m.u_max, n)
-        lbs, ubs = (0.0, 1.0) if self.uses_path else (0.0, 0.0)
-        lb = np.concatenate([lbx, lbu, [lbs], np.zeros(n_mu)])
-        ub = np.concatenate([ubx, ubu, [ubs], np.full(n_mu, np.inf)])
-        return lb, ub
-
     # ----------------------------------------------------------------- packing
-    def _pack(self, plan: _Plan) -> np.ndarray:
-        return np.concatenate([plan.x.reshape(-1), plan.u.reshape(-1), [plan.s], plan.mu])
+    def _pack(self, plan: _Plan, nlp: _Nlp) -> np.ndarray:
+        w = np.zeros(nlp.lbw.shape[0])
+        w[nlp.ix] = plan.x
+        w[nlp.ir] = self._reference_value(plan)
+        w[nlp.iu] = plan.u
+        w[nlp.imu] = plan.mu.reshape(nlp.imu.shape)
+        return w
 
-    def _unpack(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
-        nx, nu, n, _, _ = self._sizes
-        k = nx * (n + 1)
-        x = w[:k].reshape(n + 1, nx)
-        u = w[k:k + nu * n].reshape(n, nu)
-        s = float(w[k + nu * n])
-        mu = w[k + nu * n + 1:]
+    def _unpack(
+        self, w: np.ndarray, nlp: _Nlp
+    ) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+        x = w[nlp.ix]
+        u = w[nlp.iu]
+        s = float(w[nlp.ir[-1, 0]]) if self.uses_path else 0.0
+        mu = w[nlp.imu].reshape(-1)
         return x, u, s, mu
+
+    @property
+    def last_build_time_s(self) -> float:
+        """Seconds spent building the NLP used by the last solve (0 if it was cached)."""
+        return self._last_build_time
+
+    @property
+    def backend(self) -> str:
+        """The NLP backend of the last solve: config.solver, '+compiled' once compiled."""
+        nlp = self._last_nlp
+        if nlp is None:
+            return self._config.solver
+        return nlp.backend + ('+compiled' if nlp.compiled else '')
 
     def _selected_obstacles(self, x0: np.ndarray) -> list[ConvexPolygon]:
         """Return the inflated obstacles the horizon can reach, nearest first."""
@@ -339,8 +631,8 @@ class _MpcBase:
         nearby.sort(key=lambda item: item[0])
         return [obstacle for _, obstacle in nearby]
 
-    def _obstacle_params(self, selected: list[ConvexPolygon]) -> np.ndarray:
-        faces, slots = self._config.faces_per_obstacle, self._slots
+    def _obstacle_params(self, selected: list[ConvexPolygon], nlp: _Nlp) -> np.ndarray:
+        faces, slots = nlp.faces, nlp.slots
         values = []
         for j in range(slots):
             if j < len(selected):
@@ -356,17 +648,20 @@ class _MpcBase:
             values.append(np.concatenate([A.reshape(-1, order='F'), b]))
         return np.concatenate(values) if values else np.zeros(0)
 
-    def _multipliers(self, x: np.ndarray, selected: list[ConvexPolygon]) -> np.ndarray:
+    def _multipliers(self, x: np.ndarray, selected: list[ConvexPolygon],
+                     nlp: _Nlp) -> np.ndarray:
         """Put each multiplier on the most separating face: a feasible mu for clear points."""
-        nx, nu, n, faces, slots = self._sizes
-        mu = np.zeros((slots * n, faces))
+        n, faces, slots = x.shape[0] - 1, nlp.faces, nlp.slots
+        mu = np.zeros((n, slots, faces))
         for j in range(slots):
-            for i in range(n):
-                if j < len(selected):
-                    face = int(np.argmax(selected[j].A @ x[i + 1, :2] - selected[j].b))
-                else:
-                    face = 0
-                mu[j * n + i, face] = 1.0
+            if j < len(selected):
+                # the padded rows repeat the last face (see _obstacle_params)
+                faces_j = min(selected[j].num_faces, faces)
+                face = np.argmax(x[1:, :2] @ selected[j].A[:faces_j].T - selected[j].b[:faces_j],
+                                 axis=1)
+            else:
+                face = np.zeros(n, dtype=int)
+            mu[np.arange(n), j, face] = 1.0
         return mu.reshape(-1)
 
     def _weights(self) -> np.ndarray:
@@ -398,7 +693,7 @@ class _MpcBase:
             xs.append(np.asarray(F(xs[-1], u_i)).reshape(-1))
         return np.array(xs)
 
-    def _candidate(self, x0: np.ndarray, selected: list[ConvexPolygon]) -> _Plan:
+    def _candidate(self, x0: np.ndarray, selected: list[ConvexPolygon], nlp: _Nlp) -> _Plan:
         """The proof's candidate: shift the last plan and append the terminal steady state."""
         n = self._config.horizon
         if self._plan is None:
@@ -414,47 +709,47 @@ class _MpcBase:
             u = np.vstack([prev.u[1:], np.asarray(u_s, dtype=float).reshape(1, -1)])
             x = self._rollout(x0, u)
             plan = _Plan(x=x, u=u, s=prev.s, mu=np.zeros(0), value=math.inf)
-        plan.mu = self._multipliers(plan.x, selected)
+        plan.mu = self._multipliers(plan.x, selected, nlp)
         return plan
 
     def _terminal_state(self, s: float, x0: np.ndarray) -> np.ndarray | None:
         raise NotImplementedError
 
     def _violation(self, w: np.ndarray, params: np.ndarray,
-                   selected: list[ConvexPolygon]) -> float:
+                   selected: list[ConvexPolygon], nlp: _Nlp) -> float:
         """Return the largest constraint violation, collisions checked geometrically.
 
         The geometric check does not trust the multipliers: whatever the solver did with
         them, every predicted position l = 1..N must clear every selected obstacle.
         """
-        g = np.asarray(self._g_fn(w, params)).reshape(-1)
-        viol = np.maximum(self._lbg - g, 0) + np.maximum(g - self._ubg, 0)
-        viol_w = np.maximum(self._lbw - w, 0) + np.maximum(w - self._ubw, 0)
+        g = np.asarray(nlp.g_fn(w, params)).reshape(-1)
+        viol = np.maximum(nlp.lbg - g, 0) + np.maximum(g - nlp.ubg, 0)
+        viol_w = np.maximum(nlp.lbw - w, 0) + np.maximum(w - nlp.ubw, 0)
         worst = max(np.max(viol, initial=0.0), np.max(viol_w, initial=0.0))
-        positions = self._unpack(w)[0][1:, :2]
+        positions = w[nlp.ix[1:, :2]]
         for obstacle in selected:
             depth = self._config.farkas_margin - obstacle.signed_distance_lower_bound(positions)
             worst = max(worst, float(np.max(depth, initial=0.0)))
         return float(worst)
 
     def _run_solver(
-        self, w0: np.ndarray, params: np.ndarray, selected: list[ConvexPolygon]
+        self, nlp: _Nlp, w0: np.ndarray, params: np.ndarray, selected: list[ConvexPolygon]
     ) -> tuple[bool, np.ndarray, float, str, int, float]:
         """Solve from w0; return (verified, w, value, status, iterations, seconds)."""
         start = time.perf_counter()
-        result = self._solver(x0=w0, p=params, lbx=self._lbw, ubx=self._ubw,
-                              lbg=self._lbg, ubg=self._ubg)
+        result = nlp.solver(x0=w0, p=params, lbx=nlp.lbw, ubx=nlp.ubw, lbg=nlp.lbg,
+                            ubg=nlp.ubg)
         seconds = time.perf_counter() - start
-        stats = self._solver.stats()
+        stats = nlp.solver.stats()
         status = str(stats.get('return_status', 'unknown'))
         iterations = int(stats.get('iter_count', 0))
         w_opt = np.asarray(result['x']).reshape(-1)
         solved = bool(stats.get('success', False)) and bool(np.all(np.isfinite(w_opt)))
-        solved = solved and self._violation(w_opt, params, selected) <= FEASIBILITY_TOLERANCE
+        solved = solved and self._violation(w_opt, params, selected, nlp) <= FEASIBILITY_TOLERANCE
         value = float(result['f']) if solved else math.inf
         return solved, w_opt, value, status, iterations, seconds
 
-    def _guided_guess(self, x0: np.ndarray, selected: list[ConvexPolygon]) -> _Plan:
+    def _guided_guess(self, x0: np.ndarray, selected: list[ConvexPolygon], nlp: _Nlp) -> _Plan:
         """An infeasible but informative start: drive forward at half speed."""
         n = self._config.horizon
         u = np.zeros((n, self._model.nu))
@@ -465,7 +760,7 @@ class _MpcBase:
         terminal = self._terminal_state(s, x0)
         if terminal is not None:
             x[-1] = terminal
-        return _Plan(x=x, u=u, s=s, mu=self._multipliers(x, selected), value=math.inf)
+        return _Plan(x=x, u=u, s=s, mu=self._multipliers(x, selected, nlp), value=math.inf)
 
     def _check_ready(self) -> None:
         if self.uses_path and self._path is None:
@@ -490,29 +785,34 @@ class _MpcBase:
         self._check_ready()
         x0 = self._unwrap(x)
         selected = self._selected_obstacles(x0)
-        if len(selected) > self._slots:
+        if not self._config.adaptive_slots and len(selected) > self._slots:
             self._slots = len(selected)  # grow: rebuilt below, between two control steps
-        self._ensure_built()
-        params = np.concatenate([x0, self._weights(), self._obstacle_params(selected),
+        cached = len(self._nlps)
+        nlp = self._nlp_for(*self._slot_shape(selected))
+        _finish_compilation(nlp)
+        self._last_build_time = nlp.build_time_s if len(self._nlps) != cached else 0.0
+        self._last_nlp = nlp
+        params = np.concatenate([x0, self._weights(), self._obstacle_params(selected, nlp),
                                  self._path_params()])
 
-        candidate = self._candidate(x0, selected)
-        w_candidate = self._pack(candidate)
-        candidate_ok = self._violation(w_candidate, params, selected) <= FEASIBILITY_TOLERANCE
-        candidate_value = float(self._cost_fn(w_candidate, params)) if candidate_ok else math.inf
+        candidate = self._candidate(x0, selected, nlp)
+        w_candidate = self._pack(candidate, nlp)
+        candidate_ok = (self._violation(w_candidate, params, selected, nlp)
+                        <= FEASIBILITY_TOLERANCE)
+        candidate_value = float(nlp.cost_fn(w_candidate, params)) if candidate_ok else math.inf
 
         solved, w_opt, value, status, iterations, solve_time = self._run_solver(
-            w_candidate, params, selected)
+            nlp, w_candidate, params, selected)
         if not solved and self._plan is None:
             # "stay put" zeroes every derivative of the quartic cost, and IPOPT may stall
             # there; a second start rolled out along the path usually converges
-            retry = self._run_solver(self._pack(self._guided_guess(x0, selected)), params,
-                                     selected)
+            guess = self._pack(self._guided_guess(x0, selected, nlp), nlp)
+            retry = self._run_solver(nlp, guess, params, selected)
             solved, w_opt, value, status, iterations = retry[:5]
             solve_time += retry[5]
 
         if solved and value <= candidate_value + LYAPUNOV_TOLERANCE * (1 + abs(candidate_value)):
-            x_p, u_p, s_p, mu_p = self._unpack(w_opt)
+            x_p, u_p, s_p, mu_p = self._unpack(w_opt, nlp)
             plan, source = _Plan(x=x_p, u=u_p, s=s_p, mu=mu_p, value=value), 'solver'
             self._failures = 0
         elif candidate_ok:
@@ -585,12 +885,24 @@ class PathReferenceMPC(_MpcBase):
         assert self._path is not None
         return self._path.parameters()
 
-    def _terminal(
-        self, x_n: ca.SX, s: ca.SX, p_path: ca.SX, weights: ca.SX
-    ) -> tuple[ca.SX, ca.SX]:
+    def _reference_dim(self) -> int:
+        return 1
+
+    def _reference_state(self, r: ca.SX, p_path: ca.SX) -> ca.SX:
         assert self._path is not None
-        x_s, _ = self._model.steady_state(self._path.symbolic(s, p_path))
-        return x_n - x_s, (1 - s) ** 2
+        x_s, _ = self._model.steady_state(self._path.symbolic(r[0], p_path))
+        return x_s
+
+    def _reference_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros(1), np.ones(1)
+
+    def _reference_value(self, plan: _Plan) -> np.ndarray:
+        return np.array([plan.s])
+
+    def _terminal(
+        self, x_n: ca.SX, r: ca.SX, p_path: ca.SX, weights: ca.SX
+    ) -> tuple[ca.SX, ca.SX]:
+        return x_n - self._reference_state(r, p_path), (1 - r[0]) ** 2
 
     def _initial_s(self, x0: np.ndarray) -> float:
         assert self._path is not None
@@ -620,12 +932,25 @@ class TrackingMPC(_MpcBase):
         assert self._target is not None
         return self._target[:3]
 
+    def _reference_dim(self) -> int:
+        return self._model.nx
+
+    def _reference_state(self, r: ca.SX, p_path: ca.SX) -> ca.SX:
+        return r
+
+    def _reference_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._model.x_min, self._model.x_max
+
+    def _reference_value(self, plan: _Plan) -> np.ndarray:
+        return plan.x[-1]
+
     def _terminal(
-        self, x_n: ca.SX, s: ca.SX, p_path: ca.SX, weights: ca.SX
+        self, x_n: ca.SX, r: ca.SX, p_path: ca.SX, weights: ca.SX
     ) -> tuple[ca.SX, ca.SX]:
-        x_s, _ = self._model.steady_state(x_n[:3])
-        err = x_n[:3] - p_path
-        return x_n - x_s, err[0] ** 2 + err[1] ** 2 + weights[1] * err[2] ** 2
+        x_s, _ = self._model.steady_state(r[:3])
+        err = r[:3] - p_path
+        return (ca.vertcat(x_n - r, r - x_s),
+                err[0] ** 2 + err[1] ** 2 + weights[1] * err[2] ** 2)
 
     def _initial_s(self, x0: np.ndarray) -> float:
         return 0.0
