@@ -1,0 +1,322 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The controller behind the mpc_controller node, without ROS.
+
+`MpcController` owns a `PathReferenceMPC`, the world's obstacles and the plan, and decides
+what to command at each control step: the MPC's first input, or zero with a reason (no plan,
+no or stale odometry, goal reached, solver stop, error). The node only converts messages and
+publishes, so everything that can go wrong is testable here without a DDS participant.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from pathlib import Path
+from typing import NamedTuple, Sequence
+
+import numpy as np
+
+from .config import MpcConfig
+from .models import Unicycle
+from .mpc import MpcSolution, PathReferenceMPC
+from .obstacles import ConvexPolygon
+from .paths import ReferencePath, simplify_polyline, WaypointPath, wrap_angle
+
+__all__ = [
+    'ControllerSettings',
+    'ControlOutput',
+    'MpcController',
+    'REASON_ERROR',
+    'REASON_GOAL',
+    'REASON_NO_ODOM',
+    'REASON_NO_PLAN',
+    'REASON_OK',
+    'REASON_STALE_ODOM',
+    'REASON_STOP',
+    'resolve_data_file',
+]
+
+PACKAGE_NAME = 'mpc_local_planner'
+
+REASON_OK = 'tracking'
+REASON_NO_PLAN = 'no plan yet'
+REASON_NO_ODOM = 'no odometry yet'
+REASON_STALE_ODOM = 'odometry is stale'
+REASON_GOAL = 'goal reached'
+REASON_STOP = 'no feasible input: stopping'
+REASON_ERROR = 'error'
+
+# Tolerances of the Ramer-Douglas-Peucker pass that makes a long plan fit the solver's
+# segment capacity, tried in order (metres).
+_SIMPLIFY_TOLERANCES = (0.0, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2)
+
+
+class ControlOutput(NamedTuple):
+    """What to command now, and why.
+
+    Attributes:
+        u: (2,) input (v, omega) within the model's bounds; zero unless reason is REASON_OK.
+        solution: the MPC's solution when it ran, else None.
+        reason: REASON_OK or why the command is zero (REASON_ERROR is followed by ': ...').
+
+    """
+
+    u: np.ndarray
+    solution: MpcSolution | None
+    reason: str
+
+
+@dataclass(frozen=True)
+class ControllerSettings:
+    """What the controller checks around the MPC.
+
+    Attributes:
+        goal_tolerance: position error to the plan's last pose that counts as arrival (m).
+        goal_heading_tolerance: heading error that counts as arrival (rad).
+        odom_timeout: odometry older than this (seconds of ROS time) is stale.
+        turn_length: metres of path parameter per radian turned in place at plan corners.
+        capacity: segments a waypoint plan may have (the solver's size; fixed so that
+            re-plans reuse the built solver).
+
+    """
+
+    goal_tolerance: float = 0.02
+    goal_heading_tolerance: float = 0.05
+    odom_timeout: float = 0.5
+    turn_length: float = 0.25
+    capacity: int = 64
+
+    def __post_init__(self) -> None:
+        """Refuse non-positive tolerances and capacities."""
+        for name in ('goal_tolerance', 'goal_heading_tolerance', 'odom_timeout',
+                     'turn_length'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                msg = f'{name} must be > 0 and finite, got {value}'
+                raise ValueError(msg)
+        if self.capacity < 3:
+            msg = f'capacity must be >= 3, got {self.capacity}'
+            raise ValueError(msg)
+
+
+class MpcController:
+    """The paper's MPC with the bookkeeping a robot needs around it.
+
+    Args:
+        model: the unicycle (its bounds are the command bounds).
+        config: MPC settings.
+        obstacles: the world's obstacles as described (the MPC inflates them).
+        settings: goal tolerances, odometry timeout and plan handling.
+
+    """
+
+    def __init__(self, model: Unicycle | None = None, config: MpcConfig | None = None, *,
+                 obstacles: Sequence[ConvexPolygon] = (),
+                 settings: ControllerSettings | None = None) -> None:
+        self._model = model or Unicycle()
+        self._config = config or MpcConfig()
+        self._obstacles = list(obstacles)
+        self.settings = settings or ControllerSettings()
+        self._mpc = PathReferenceMPC(self._model, self._config, obstacles=self._obstacles)
+        self._path: ReferencePath | None = None
+        self._solved_last_step = False
+
+    # ------------------------------------------------------------------ configuration
+    @property
+    def model(self) -> Unicycle:
+        """The robot model in force."""
+        return self._model
+
+    @property
+    def config(self) -> MpcConfig:
+        """The MPC settings in force."""
+        return self._config
+
+    @property
+    def path(self) -> ReferencePath | None:
+        """The reference path in force, or None."""
+        return self._path
+
+    @property
+    def mpc(self) -> PathReferenceMPC:
+        """The underlying MPC (for inspection)."""
+        return self._mpc
+
+    def update_config(self, config: MpcConfig) -> None:
+        """Use new MPC settings from the next solve on (a shape change rebuilds there)."""
+        self._config = config
+        self._mpc.update_config(config)
+
+    def set_model(self, model: Unicycle) -> None:
+        """Use new input bounds: the NLP is rebuilt at the next solve."""
+        self._model = model
+        self._mpc = PathReferenceMPC(model, self._config, obstacles=self._obstacles,
+                                     path=self._path)
+
+    def set_obstacles(self, obstacles: Sequence[ConvexPolygon]) -> None:
+        """Replace the obstacles (as described, not inflated)."""
+        self._mpc.set_obstacles(obstacles)
+        self._obstacles = list(obstacles)
+
+    def set_path(self, path: ReferencePath) -> None:
+        """Follow path (an analytic path, or a WaypointPath built elsewhere)."""
+        self._mpc.set_path(path)
+        self._path = path
+        self._solved_last_step = False
+
+    def set_plan(self, poses: np.ndarray) -> WaypointPath:
+        """Follow a global plan of (M, 3) poses (x, y, yaw), as a nav_msgs/Path carries.
+
+        The first and last headings become turn-in-place segments at the ends; a plan with
+        more corners than the solver's capacity is simplified (Ramer-Douglas-Peucker with
+        growing tolerance) until it fits. The plan in force is kept if this one is refused.
+
+        Returns:
+            The path now followed.
+
+        Raises:
+            ValueError: if poses is not (M, 3) finite numbers with two distinct positions.
+
+        """
+        arr = np.asarray(poses, dtype=float)
+        if arr.ndim != 2 or arr.shape[1] != 3:
+            msg = f'invalid plan: poses must have shape (M, 3), got {arr.shape}'
+            raise ValueError(msg)
+        if len(arr) < 2:
+            msg = f'invalid plan: needs at least two poses, got {len(arr)}'
+            raise ValueError(msg)
+        if not np.all(np.isfinite(arr)):
+            msg = 'invalid plan: poses contain NaN or inf'
+            raise ValueError(msg)
+        points = arr[:, :2]
+        for tolerance in _SIMPLIFY_TOLERANCES:
+            simplified = simplify_polyline(points, tolerance) if tolerance > 0 else points
+            # straight segments + corners + the two end turns
+            if 2 * len(simplified) - 1 <= self.settings.capacity:
+                break
+        else:
+            msg = (f'invalid plan: {len(points)} poses do not fit {self.settings.capacity} '
+                   f'segments even simplified at {_SIMPLIFY_TOLERANCES[-1]} m')
+            raise ValueError(msg)
+        try:
+            path = WaypointPath(simplified, start_heading=float(arr[0, 2]),
+                                goal_heading=float(arr[-1, 2]),
+                                turn_length=self.settings.turn_length,
+                                capacity=self.settings.capacity)
+        except ValueError as err:
+            msg = f'invalid plan: {err}'
+            raise ValueError(msg) from None
+        self.set_path(path)
+        return path
+
+    def prepare(self) -> None:
+        """Build the NLPs a run will need now, so that no control step waits for a build.
+
+        Uses the MPC's prepare() when it has one (adaptive obstacle slots); else solves
+        nothing and the first control step builds.
+        """
+        prepare = getattr(self._mpc, 'prepare', None)
+        if prepare is None or self._path is None:
+            return
+        prepare(min(len(self._obstacles), self._config.obstacle_slots))
+
+    def clear_path(self) -> None:
+        """Forget the plan: the controller commands zero until a new one comes."""
+        self._path = None
+        self._mpc.reset()
+
+    # ------------------------------------------------------------------ control
+    def goal_error(self, state: np.ndarray) -> tuple[float, float]:
+        """Return (position, |heading|) error of state to the end of the path."""
+        if self._path is None:
+            return math.inf, math.inf
+        goal = self._path.goal
+        position = float(np.hypot(state[0] - goal[0], state[1] - goal[1]))
+        heading = abs(float(wrap_angle(state[2] - goal[2])))
+        return position, heading
+
+    def compute(self, state: np.ndarray | None, now: float, *,
+                state_time: float | None = None) -> ControlOutput:
+        """Return the command for the measured state at time now.
+
+        Never raises: anything unexpected becomes a zero command with REASON_ERROR.
+
+        Args:
+            state: (3,) measured (x, y, yaw), or None when no odometry has come.
+            now: the current time (seconds, the clock of state_time).
+            state_time: when state was measured; older than settings.odom_timeout is stale.
+
+        """
+        zero = np.zeros(2)
+        if self._path is None:
+            return self._idle(zero, REASON_NO_PLAN)
+        if state is None:
+            return self._idle(zero, REASON_NO_ODOM)
+        if state_time is not None and now - state_time > self.settings.odom_timeout:
+            return self._idle(zero, REASON_STALE_ODOM)
+        try:
+            x = np.asarray(state, dtype=float).reshape(-1)
+            position, heading = self.goal_error(x)
+            if (position <= self.settings.goal_tolerance
+                    and heading <= self.settings.goal_heading_tolerance):
+                return self._idle(zero, REASON_GOAL)
+            solution = self._mpc.solve(x)
+        except Exception as err:  # noqa: BLE001 (a controller must not die: stop instead)
+            return self._idle(zero, f'{REASON_ERROR}: {type(err).__name__}: {err}')
+        self._solved_last_step = True
+        if solution.source == 'stop':
+            return ControlOutput(zero, solution, REASON_STOP)
+        u = np.clip(np.asarray(solution.u0, dtype=float), self._model.u_min, self._model.u_max)
+        return ControlOutput(u, solution, REASON_OK)
+
+    def _idle(self, zero: np.ndarray, reason: str) -> ControlOutput:
+        # The shifted warm start assumes its first input was applied: after a step without
+        # one, start the MPC over (s restarts at the projection).
+        if self._solved_last_step:
+            self._mpc.reset()
+            self._solved_last_step = False
+        return ControlOutput(zero, None, reason)
+
+
+def resolve_data_file(name: str | Path) -> Path:
+    """Find a file named by a parameter.
+
+    Tried in order: the name as given (absolute or relative to the working directory), then
+    the package's config/ and config/worlds/ (installed share/ via ament_index when there is
+    one, else the source tree).
+
+    Raises:
+        FileNotFoundError: if no candidate exists (the message lists them).
+
+    """
+    path = Path(name).expanduser()
+    candidates = [path]
+    if not path.is_absolute():
+        roots: list[Path] = []
+        try:
+            from ament_index_python.packages import get_package_share_directory
+
+            roots.append(Path(get_package_share_directory(PACKAGE_NAME)) / 'config')
+        except Exception:  # noqa: BLE001,S110 (no ament index, or the package is not in it)
+            pass
+        roots.append(Path(__file__).resolve().parent.parent / 'config')
+        for root in roots:
+            candidates += [root / path, root / 'worlds' / path]
+    for candidate in candidates:
+        if candidate.is_file():
+            return candidate.resolve()
+    msg = f'{name}: not found; looked at ' + ', '.join(str(c) for c in candidates)
+    raise FileNotFoundError(msg)

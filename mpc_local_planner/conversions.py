@@ -1,0 +1,268 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Messages <-> NumPy: planar poses, quaternions, paths, odometry and velocity commands.
+
+Everything here is a pure function of its arguments (no node, no clock), so the tests need
+no rclpy context. Planar means: z = 0, roll = pitch = 0, yaw = rotation about +z (REP-103).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Sequence
+
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Pose, PoseStamped, Quaternion, Twist
+from nav_msgs.msg import Odometry, Path
+import numpy as np
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+)
+from rclpy.executors import Executor
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+__all__ = [
+    'CMD_VEL_QOS',
+    'DIAGNOSTICS_QOS',
+    'GOAL_QOS',
+    'LOCAL_PLAN_QOS',
+    'ODOM_QOS',
+    'PLAN_QOS',
+    'describe',
+    'drain_executor',
+    'odometry_to_state',
+    'path_to_poses',
+    'pose_to_array',
+    'poses_to_path',
+    'quaternion_to_yaw',
+    'seconds_to_stamp',
+    'stamp_to_seconds',
+    'state_to_odometry',
+    'twist_from_u',
+    'u_from_twist',
+    'yaw_to_quaternion',
+]
+
+# Topic QoS of design.md section 3 (shared by publishers, subscribers and the recorder).
+PLAN_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                      history=HistoryPolicy.KEEP_LAST)
+ODOM_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
+CMD_VEL_QOS = ODOM_QOS
+LOCAL_PLAN_QOS = ODOM_QOS
+DIAGNOSTICS_QOS = ODOM_QOS
+GOAL_QOS = ODOM_QOS
+
+# A quaternion shorter than this carries no orientation (an unset message is all zeros).
+MIN_QUATERNION_NORM = 1e-9
+
+
+def yaw_to_quaternion(yaw: float) -> Quaternion:
+    """Return the unit quaternion of a rotation by yaw about +z.
+
+    Raises:
+        ValueError: if yaw is not finite.
+
+    """
+    yaw = float(yaw)
+    if not math.isfinite(yaw):
+        msg = f'yaw must be finite, got {yaw}'
+        raise ValueError(msg)
+    return Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
+
+
+def quaternion_to_yaw(q: Quaternion) -> float:
+    """Return the yaw in [-pi, pi] of a quaternion (normalised first).
+
+    Raises:
+        ValueError: if the quaternion has (almost) zero norm or non-finite components, as
+            an unset ``orientation`` has.
+
+    """
+    values = np.array([q.x, q.y, q.z, q.w], dtype=float)
+    norm = float(np.linalg.norm(values))
+    if not np.all(np.isfinite(values)) or norm < MIN_QUATERNION_NORM:
+        msg = f'quaternion ({q.x}, {q.y}, {q.z}, {q.w}) has no orientation (zero norm or NaN)'
+        raise ValueError(msg)
+    x, y, z, w = values / norm
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def pose_to_array(pose: Pose) -> np.ndarray:
+    """Return (x, y, yaw) of a pose.
+
+    Raises:
+        ValueError: on a zero-norm orientation or a non-finite position.
+
+    """
+    xy = (float(pose.position.x), float(pose.position.y))
+    if not all(map(math.isfinite, xy)):
+        msg = f'pose position must be finite, got {xy}'
+        raise ValueError(msg)
+    return np.array([xy[0], xy[1], quaternion_to_yaw(pose.orientation)])
+
+
+def stamp_to_seconds(stamp: Time) -> float:
+    """Return a builtin_interfaces/Time in seconds."""
+    return float(stamp.sec) + 1e-9 * float(stamp.nanosec)
+
+
+def seconds_to_stamp(seconds: float) -> Time:
+    """Return seconds as a builtin_interfaces/Time (seconds >= 0)."""
+    nanoseconds = int(round(float(seconds) * 1e9))
+    if nanoseconds < 0:
+        msg = f'a stamp must be >= 0 s, got {seconds}'
+        raise ValueError(msg)
+    return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
+
+
+def path_to_poses(path: Path) -> np.ndarray:
+    """Return the (M, 3) poses (x, y, yaw) of a nav_msgs/Path.
+
+    Raises:
+        ValueError: if a pose has a zero-norm orientation or a non-finite position.
+
+    """
+    if not path.poses:
+        return np.zeros((0, 3))
+    return np.array([pose_to_array(p.pose) for p in path.poses])
+
+
+def poses_to_path(poses: np.ndarray | Sequence[Sequence[float]], *, frame_id: str = 'map',
+                  stamp: Time | None = None) -> Path:
+    """Return a nav_msgs/Path of (M, 3) poses (x, y, yaw); the stamp goes on every pose.
+
+    Raises:
+        ValueError: if poses is not (M, 3) finite numbers.
+
+    """
+    arr = np.asarray(poses, dtype=float)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        msg = f'poses must have shape (M, 3), got {arr.shape}'
+        raise ValueError(msg)
+    if not np.all(np.isfinite(arr)):
+        msg = 'poses contain NaN or inf'
+        raise ValueError(msg)
+    msg_path = Path()
+    msg_path.header.frame_id = frame_id
+    if stamp is not None:
+        msg_path.header.stamp = stamp
+    for x, y, yaw in arr:
+        pose = PoseStamped()
+        pose.header = msg_path.header
+        pose.pose.position.x = float(x)
+        pose.pose.position.y = float(y)
+        pose.pose.orientation = yaw_to_quaternion(yaw)
+        msg_path.poses.append(pose)
+    return msg_path
+
+
+def odometry_to_state(odom: Odometry) -> np.ndarray:
+    """Return the unicycle state (x, y, yaw) of an odometry message.
+
+    Raises:
+        ValueError: on a zero-norm orientation or a non-finite position.
+
+    """
+    return pose_to_array(odom.pose.pose)
+
+
+def state_to_odometry(state: np.ndarray, u: np.ndarray, *, stamp: Time,
+                      frame_id: str = 'odom', child_frame_id: str = 'base_link') -> Odometry:
+    """Return an Odometry for the state (x, y, yaw) moving with u = (v, omega).
+
+    The twist is in the child frame, as nav_msgs/Odometry specifies: v along +x.
+    """
+    odom = Odometry()
+    odom.header.stamp = stamp
+    odom.header.frame_id = frame_id
+    odom.child_frame_id = child_frame_id
+    odom.pose.pose.position.x = float(state[0])
+    odom.pose.pose.position.y = float(state[1])
+    odom.pose.pose.orientation = yaw_to_quaternion(float(state[2]))
+    odom.twist.twist = twist_from_u(u)
+    return odom
+
+
+def twist_from_u(u: np.ndarray | Sequence[float]) -> Twist:
+    """Return the Twist of u = (v, omega): linear.x = v, angular.z = omega."""
+    twist = Twist()
+    twist.linear.x = float(u[0])
+    twist.angular.z = float(u[1])
+    return twist
+
+
+def u_from_twist(twist: Twist) -> np.ndarray:
+    """Return u = (v, omega) of a Twist; NaN and inf become 0 (a safe command).
+
+    The other four components are ignored: a unicycle cannot follow them.
+    """
+    u = np.array([twist.linear.x, twist.angular.z], dtype=float)
+    u[~np.isfinite(u)] = 0.0
+    return u
+
+
+def describe(description: str, *, float_range: tuple[float, float] | None = None,
+             int_range: tuple[int, int] | None = None, read_only: bool = False,
+             dynamic_typing: bool = False) -> ParameterDescriptor:
+    """Return a ParameterDescriptor with an optional range (rclpy enforces it on set).
+
+    Args:
+        description: what the parameter does, its unit, and when a change takes effect.
+        float_range: inclusive (from, to) for a double parameter.
+        int_range: inclusive (from, to) for an integer parameter.
+        read_only: refuse every change after the declaration.
+        dynamic_typing: allow the type to change (e.g. an optional array given as []).
+
+    """
+    descriptor = ParameterDescriptor(description=description, read_only=read_only,
+                                     dynamic_typing=dynamic_typing)
+    if float_range is not None:
+        descriptor.type = ParameterType.PARAMETER_DOUBLE
+        descriptor.floating_point_range = [
+            FloatingPointRange(from_value=float(float_range[0]), to_value=float(float_range[1]),
+                               step=0.0)]
+    if int_range is not None:
+        descriptor.type = ParameterType.PARAMETER_INTEGER
+        descriptor.integer_range = [
+            IntegerRange(from_value=int(int_range[0]), to_value=int(int_range[1]), step=0)]
+    return descriptor
+
+
+def drain_executor(executor: Executor, timeout_sec: float = 5.0) -> bool:
+    """Wait for the callbacks a MultiThreadedExecutor has in flight, after its shutdown().
+
+    rclpy 7.1 (Jazzy) does not join the MultiThreadedExecutor's thread pool on shutdown, so
+    destroying nodes right after it races with callbacks still running (a solve, say); they
+    then fail with "cannot use Destroyable" and Python warns that the exception was never
+    retrieved. Call this between ``executor.shutdown()`` and ``destroy_node()``.
+
+    Returns:
+        True if every callback finished within timeout_sec.
+
+    """
+    futures = list(getattr(executor, '_futures', ()))
+    deadline = time.monotonic() + timeout_sec
+    while any(not f.done() for f in futures) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    for future in futures:
+        if future.done():
+            future.exception()  # retrieved: logged by the callback itself if it matters
+    return all(f.done() for f in futures)

@@ -1,0 +1,411 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""mpc_controller: the paper's MPC every `step` seconds of ROS time on odom and plan.
+
+Subscribes ``odom`` and ``plan`` (reliable, transient_local), publishes ``cmd_vel``,
+``local_plan`` (the prediction) and ``mpc/diagnostics``. All decisions live in
+`MpcController`; this node converts messages, keeps the latest inputs and publishes.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Twist
+from nav_msgs.msg import Odometry, Path
+import numpy as np
+from rcl_interfaces.msg import SetParametersResult
+import rclpy
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from .config import MpcConfig
+from .controller import (
+    ControllerSettings,
+    ControlOutput,
+    MpcController,
+    REASON_GOAL,
+    REASON_OK,
+    resolve_data_file,
+)
+from .conversions import (
+    CMD_VEL_QOS,
+    describe,
+    DIAGNOSTICS_QOS,
+    drain_executor,
+    LOCAL_PLAN_QOS,
+    ODOM_QOS,
+    odometry_to_state,
+    path_to_poses,
+    PLAN_QOS,
+    poses_to_path,
+    seconds_to_stamp,
+    stamp_to_seconds,
+    twist_from_u,
+)
+from .models import Unicycle
+from .obstacles import ConvexPolygon
+from .paths import analytic_path
+from .worlds import load_world
+
+__all__ = ['DEFAULTS', 'MpcControllerNode', 'build_settings', 'main']
+
+# Parameter defaults: the paper's values (config/mpc_controller.yaml mirrors them).
+DEFAULTS: dict[str, Any] = {
+    'horizon': 10,
+    'step': 0.2,
+    'v_max': 0.31,
+    'omega_max': 1.9,
+    'weights.position': 1.0,
+    'weights.heading': 0.1,
+    'weights.v': 1.0,
+    'weights.omega': 1.0,
+    'offset_weight': 1000.0,
+    'robot_radius': 0.0,
+    'collision_margin': -1.0,
+    'world_file': 'worlds/paper_obstacle.yaml',
+    'analytic_path': '',
+    'solver': 'ipopt',
+    'max_iterations': 200,
+    'goal_tolerance': 0.02,
+    'goal_heading_tolerance': 0.05,
+    'odom_timeout': 0.5,
+    'frame_id': 'map',
+}
+
+_MPC_FIELDS = {
+    'horizon': 'horizon', 'step': 'step', 'weights.position': 'weight_position',
+    'weights.heading': 'weight_heading', 'weights.v': 'weight_v', 'weights.omega': 'weight_omega',
+    'offset_weight': 'offset_weight', 'solver': 'solver', 'max_iterations': 'max_iterations',
+}
+_SETTINGS_FIELDS = ('goal_tolerance', 'goal_heading_tolerance', 'odom_timeout')
+
+
+def load_obstacles(world_file: str) -> tuple[list[ConvexPolygon], float]:
+    """Return the obstacles and robot radius of a world file ('' = no obstacles)."""
+    if not world_file:
+        return [], 0.0
+    world = load_world(resolve_data_file(world_file))
+    return list(world.obstacles), float(world.robot_radius)
+
+
+def build_settings(values: dict[str, Any], *, world_radius: float = 0.0
+                   ) -> tuple[MpcConfig, Unicycle, ControllerSettings]:
+    """Turn parameter values into the controller's settings.
+
+    The robot radius in force is the larger of the parameter and the world's.
+
+    Raises:
+        ValueError: with every reason the values are invalid (validate_mpc_config's rules,
+            the model's and the controller's).
+
+    """
+    mpc_kwargs = {field: values[name] for name, field in _MPC_FIELDS.items()}
+    mpc_kwargs['horizon'] = int(mpc_kwargs['horizon'])
+    mpc_kwargs['max_iterations'] = int(mpc_kwargs['max_iterations'])
+    for key in ('step', 'weight_position', 'weight_heading', 'weight_v', 'weight_omega',
+                'offset_weight'):
+        mpc_kwargs[key] = float(mpc_kwargs[key])
+    margin = float(values['collision_margin'])
+    mpc_kwargs['collision_margin'] = None if margin < 0 else margin
+    mpc_kwargs['robot_radius'] = max(float(values['robot_radius']), world_radius)
+    config = MpcConfig(**mpc_kwargs)  # raises ValueError with validate_mpc_config's reasons
+    model = Unicycle(v_max=float(values['v_max']), omega_max=float(values['omega_max']))
+    settings = ControllerSettings(**{k: float(values[k]) for k in _SETTINGS_FIELDS})
+    return config, model, settings
+
+
+class MpcControllerNode(Node):
+    """Run the MPC on the latest odom and plan; publish cmd_vel, local_plan, diagnostics."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('mpc_controller', **kwargs)
+        self._lock = threading.RLock()
+        self._world_cache: dict[str, tuple[list[ConvexPolygon], float]] = {}
+        self.add_on_set_parameters_callback(self.parameters_callback)
+        self._declare_parameters()
+        self.add_post_set_parameters_callback(self.post_parameters_callback)
+
+        values = self._values()
+        obstacles, radius = self._load_world(values['world_file'])
+        config, model, settings = build_settings(values, world_radius=radius)
+        self.controller = MpcController(model, config, obstacles=obstacles, settings=settings)
+        if values['analytic_path']:
+            self.controller.set_path(analytic_path(values['analytic_path']))
+            self._prepare()
+
+        self._state: np.ndarray | None = None
+        self._state_time: float | None = None
+        self._last_reason = ''
+        self._last_step_time: float | None = None
+        self.last_output: ControlOutput | None = None
+        self.goal_reached = False
+
+        self._inputs_group = MutuallyExclusiveCallbackGroup()
+        self._timer_group = MutuallyExclusiveCallbackGroup()
+        self._cmd_pub = self.create_publisher(Twist, 'cmd_vel', CMD_VEL_QOS)
+        self._local_plan_pub = self.create_publisher(Path, 'local_plan', LOCAL_PLAN_QOS)
+        self._diag_pub = self.create_publisher(DiagnosticArray, 'mpc/diagnostics',
+                                               DIAGNOSTICS_QOS)
+        self._odom_sub = self.create_subscription(
+            Odometry, 'odom', self.odom_callback, ODOM_QOS, callback_group=self._inputs_group)
+        self._plan_sub = self.create_subscription(
+            Path, 'plan', self.plan_callback, PLAN_QOS, callback_group=self._inputs_group)
+        self._timer = None
+        self._make_timer()
+
+    # ------------------------------------------------------------------ parameters
+    def _declare_parameters(self) -> None:
+        weight = (0.0, 1e6)
+        shape = 'changes the NLP shape: rebuilt before the next solve'
+        specs = {
+            'horizon': describe(f'prediction steps N; {shape}', int_range=(1, 200)),
+            'step': describe(f'sampling time h (s of ROS time) and control period; {shape}',
+                             float_range=(0.01, 5.0)),
+            'v_max': describe('speed bound |v| (m/s); rebuilds the NLP before the next solve',
+                              float_range=(0.001, 10.0)),
+            'omega_max': describe('turn-rate bound |omega| (rad/s); rebuilds the NLP',
+                                  float_range=(0.001, 50.0)),
+            'weights.position': describe('stage weight of dx^4 and dy^4; next solve',
+                                         float_range=weight),
+            'weights.heading': describe('stage weight of dtheta^4; next solve',
+                                        float_range=weight),
+            'weights.v': describe('stage weight of v^4; next solve', float_range=weight),
+            'weights.omega': describe('stage weight of omega^4; next solve',
+                                      float_range=weight),
+            'offset_weight': describe('offset cost weight of (1 - s)^2; next solve',
+                                      float_range=(1e-6, 1e9)),
+            'robot_radius': describe('obstacle inflation (m); the larger of this and the '
+                                     "world's is used", float_range=(0.0, 10.0)),
+            'collision_margin': describe('extra inflation (m) against corner cutting between '
+                                         'samples; -1 = v_max step / 2',
+                                         float_range=(-1.0, 10.0)),
+            'world_file': describe('world YAML/JSON with the obstacles (a path, or a name in '
+                                   "the package's config/ or config/worlds/); '' = none"),
+            'analytic_path': describe("follow this analytic path (e.g. 'paper_sinusoid') "
+                                      "instead of the plan topic; '' = use plan"),
+            'solver': describe('NLP solver (ipopt)'),
+            'max_iterations': describe(f'solver iterations per solve; {shape}',
+                                       int_range=(1, 100000)),
+            'goal_tolerance': describe('distance to the end of the plan that counts as '
+                                       'arrived (m): then cmd_vel is zero',
+                                       float_range=(1e-4, 10.0)),
+            'goal_heading_tolerance': describe('heading error that counts as arrived (rad)',
+                                               float_range=(1e-4, math.pi)),
+            'odom_timeout': describe('odometry older than this (s) is stale: cmd_vel is zero',
+                                     float_range=(0.001, 3600.0)),
+            'frame_id': describe('frame of local_plan'),
+        }
+        for name, descriptor in specs.items():
+            self.declare_parameter(name, DEFAULTS[name], descriptor)
+
+    def _values(self, overrides: list[Parameter] = ()) -> dict[str, Any]:
+        values = dict(DEFAULTS)
+        for name in DEFAULTS:
+            if self.has_parameter(name):
+                values[name] = self.get_parameter(name).value
+        for parameter in overrides:
+            values[parameter.name] = parameter.value
+        return values
+
+    def _load_world(self, world_file: str) -> tuple[list[ConvexPolygon], float]:
+        if world_file not in self._world_cache:
+            self._world_cache[world_file] = load_obstacles(world_file)
+        return self._world_cache[world_file]
+
+    def parameters_callback(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Accept the new values only if the whole configuration stays valid."""
+        try:
+            values = self._values(parameters)
+            _, radius = self._load_world(str(values['world_file']))
+            build_settings(values, world_radius=radius)
+            if values['analytic_path']:
+                analytic_path(str(values['analytic_path']))
+        except (ValueError, FileNotFoundError, TypeError, KeyError) as err:
+            return SetParametersResult(successful=False, reason=str(err))
+        return SetParametersResult(successful=True)
+
+    def post_parameters_callback(self, parameters: list[Parameter]) -> None:
+        """Apply accepted changes; the MPC picks them up at its next solve."""
+        names = {p.name for p in parameters}
+        values = self._values()
+        obstacles, radius = self._load_world(values['world_file'])
+        config, model, settings = build_settings(values, world_radius=radius)
+        with self._lock:  # never between two halves of a solve
+            if 'world_file' in names:
+                self.controller.set_obstacles(obstacles)
+            self.controller.update_config(config)
+            if model != self.controller.model:
+                self.controller.set_model(model)
+            self.controller.settings = settings
+            if 'analytic_path' in names and values['analytic_path']:
+                self.controller.set_path(analytic_path(values['analytic_path']))
+        if 'step' in names:
+            self._make_timer()
+        self.get_logger().info(f'parameters changed: {sorted(names)}')
+
+    def _make_timer(self) -> None:
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+        step = float(self.get_parameter('step').value)
+        self._timer = self.create_timer(step, self.timer_callback,
+                                        callback_group=self._timer_group)
+
+    # ------------------------------------------------------------------ callbacks
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def odom_callback(self, msg: Odometry) -> None:
+        """Keep the latest state and when it was measured."""
+        try:
+            state = odometry_to_state(msg)
+        except ValueError as err:
+            self.get_logger().warning(f'ignoring odometry: {err}', throttle_duration_sec=1.0)
+            return
+        stamp = stamp_to_seconds(msg.header.stamp)
+        self._state, self._state_time = state, (stamp if stamp > 0 else self._now())
+
+    def plan_callback(self, msg: Path) -> None:
+        """Follow a new global plan (s restarts at the robot's projection onto it)."""
+        if self.get_parameter('analytic_path').value:
+            self.get_logger().info('following the analytic path: plan ignored', once=True)
+            return
+        try:
+            poses = path_to_poses(msg)
+            with self._lock:
+                path = self.controller.set_plan(poses)
+                self._prepare()
+        except ValueError as err:
+            self.get_logger().error(f'plan refused, keeping the previous one: {err}')
+            return
+        self.goal_reached = False
+        self.get_logger().info(f'new plan: {len(poses)} poses, {path.length():.2f} m')
+
+    def _prepare(self) -> None:
+        try:
+            self.controller.prepare()
+        except Exception as err:  # noqa: BLE001 (the first solve builds instead)
+            self.get_logger().warning(f'could not prepare the NLPs: {err}')
+
+    def timer_callback(self) -> None:
+        """Solve, then publish cmd_vel, local_plan and diagnostics; zero on any failure."""
+        now = self._now()
+        step = float(self.get_parameter('step').value)
+        if self._last_step_time is not None and 0 <= now - self._last_step_time < 0.5 * step:
+            return  # a timer fired twice for one instant (ROS-time timers can): one step
+        self._last_step_time = now
+        try:
+            with self._lock:
+                output = self.controller.compute(self._state, now, state_time=self._state_time)
+        except Exception as err:  # noqa: BLE001 (compute never raises; belt and braces)
+            output = ControlOutput(np.zeros(2), None, f'error: {err}')
+        self.last_output = output
+        self._cmd_pub.publish(twist_from_u(output.u))
+        try:
+            if output.solution is not None:
+                stamp = seconds_to_stamp(max(now, 0.0))
+                self._local_plan_pub.publish(poses_to_path(
+                    output.solution.x_pred[:, :3],
+                    frame_id=str(self.get_parameter('frame_id').value), stamp=stamp))
+            self._diag_pub.publish(self._diagnostics(output, now))
+        except Exception as err:  # noqa: BLE001
+            self.get_logger().warning(f'could not publish: {err}', throttle_duration_sec=1.0)
+        self._log_reason(output.reason)
+
+    def _log_reason(self, reason: str) -> None:
+        if reason == self._last_reason:
+            return
+        self._last_reason = reason
+        self.goal_reached = reason == REASON_GOAL
+        if reason.startswith('error'):
+            self.get_logger().error(reason, throttle_duration_sec=1.0)
+        elif reason == REASON_GOAL:
+            state = self._state if self._state is not None else np.full(3, np.nan)
+            position, heading = self.controller.goal_error(state)
+            self.get_logger().info(f'goal reached: {position:.3f} m, {heading:.3f} rad off')
+        else:
+            self.get_logger().info(reason)
+
+    def _diagnostics(self, output: ControlOutput, now: float) -> DiagnosticArray:
+        sol = output.solution
+        state = self._state if self._state is not None else np.full(3, np.nan)
+        status = DiagnosticStatus()
+        status.name = f'{self.get_name()}: MPC'
+        status.hardware_id = self.get_fully_qualified_name()
+        status.message = output.reason
+        if output.reason in (REASON_OK, REASON_GOAL) and (sol is None or sol.success):
+            status.level = DiagnosticStatus.OK
+        elif output.reason.startswith('error') or (sol is not None and sol.source == 'stop'):
+            status.level = DiagnosticStatus.ERROR
+        else:
+            status.level = DiagnosticStatus.WARN
+        values = {
+            's_k': sol.s if sol else math.nan,
+            'V_N': sol.value if sol else math.nan,
+            'solve_ms': 1e3 * sol.solve_time_s if sol else math.nan,
+            'status': sol.status if sol else '',
+            'source': sol.source if sol else '',
+            'failures': sol.failures if sol else 0,
+            'lyapunov_ok': '' if sol is None or sol.lyapunov_ok is None else sol.lyapunov_ok,
+            'iterations': sol.iterations if sol else 0,
+            'reason': output.reason,
+            'goal_reached': output.reason == REASON_GOAL,
+            'state_time': self._state_time if self._state_time is not None else math.nan,
+            'x': state[0], 'y': state[1], 'theta': state[2],
+            'v': output.u[0], 'omega': output.u[1],
+        }
+        status.values = [KeyValue(key=k, value=_format(v)) for k, v in values.items()]
+        array = DiagnosticArray()
+        array.header.stamp = seconds_to_stamp(max(now, 0.0))
+        array.status = [status]
+        return array
+
+
+def _format(value: Any) -> str:
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, (float, np.floating)):
+        return repr(float(value))
+    return str(value)
+
+
+def main(args: list[str] | None = None) -> None:
+    """Run the controller until Ctrl-C."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = MpcControllerNode()
+        executor = MultiThreadedExecutor(num_threads=2)
+        executor.add_node(node)
+        try:
+            executor.spin()
+        finally:
+            executor.shutdown()
+            drain_executor(executor)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()
