@@ -106,7 +106,7 @@ class _Plan:
 
 
 # NLPs kept per MPC, keyed by (obstacle slots, faces): building one takes tens of ms.
-MAX_CACHED_NLPS = 8
+MAX_CACHED_NLPS = 32
 
 
 @dataclass
@@ -168,25 +168,6 @@ def _fatrop_options(config: MpcConfig, structure: dict) -> dict:
     }
 
 
-def _sqp_options(config: MpcConfig, qpsol: str) -> dict:
-    qp_options: dict = {'error_on_fail': False}
-    if qpsol == 'qpoases':
-        qp_options.update({'printLevel': 'none', 'sparse': True})
-    elif qpsol == 'qrqp':
-        qp_options.update({'print_iter': False, 'print_header': False, 'print_info': False})
-    return {
-        'qpsol': qpsol,
-        'qpsol_options': qp_options,
-        'max_iter': config.max_iterations,
-        'tol_pr': config.tolerance,
-        'tol_du': 1e-6,
-        'print_header': False,
-        'print_iteration': False,
-        'print_status': False,
-        'convexify_strategy': 'regularize',
-    }
-
-
 def backend_options(config: MpcConfig, structure: dict) -> tuple[str, dict]:
     """Return (nlpsol plugin, options) for config.solver."""
     common = {'print_time': False, 'error_on_fail': False}
@@ -195,8 +176,6 @@ def backend_options(config: MpcConfig, structure: dict) -> tuple[str, dict]:
         plugin, options = 'ipopt', _ipopt_options(config)
     elif name == 'fatrop':
         plugin, options = 'fatrop', _fatrop_options(config, structure)
-    elif name.startswith('sqp_'):
-        plugin, options = 'sqpmethod', _sqp_options(config, name[4:])
     else:
         msg = f'unknown solver {name!r}'
         raise ValueError(msg)
