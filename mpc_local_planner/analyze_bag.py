@@ -38,16 +38,13 @@ from rosbags.typesys import get_typestore, Stores
 
 __all__ = ['BagRun', 'analyze', 'main', 'read_run']
 
-# Controller reasons that mean "not driving yet": rows before the first real step are dropped.
-_WAITING = ('no plan yet', 'no odometry yet')
-
 
 class BagRun(NamedTuple):
     """What a closed-loop bag holds, as arrays.
 
     Attributes:
         rows: (n, 9) trajectory rows t, x, y, theta, v, omega, s, V_N, solve_ms; t starts
-            at 0 at the first control step with a plan.
+            at 0 at the first control step that solved the MPC (waiting steps are dropped).
         plan: (M, 3) the last global plan, or None.
         predictions: the local plans (each (N+1, 3)) in order.
         lyapunov_ok: per row, the controller's V_N decrease check (None when not checked).
@@ -136,7 +133,7 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
     if diags and 'x' in diags[0][1]:
         started = False
         for t, values in diags:
-            started = started or values.get('reason', '') not in _WAITING
+            started = started or values.get('source', '') != ''  # the first MPC step
             if not started:
                 continue
             rows.append([t] + [_number(values, k) for k in

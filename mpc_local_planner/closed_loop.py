@@ -57,7 +57,7 @@ DEFAULT_WORLD = 'worlds/paper_obstacle.yaml'
 # Simulated seconds allowed when the world sets no time_limit.
 DEFAULT_TIME_LIMIT = 60.0
 # Wall seconds a child process gets to exit after SIGINT before it is killed.
-CHILD_EXIT_TIMEOUT = 10.0
+CHILD_EXIT_TIMEOUT = 5.0
 
 MODULES = {
     'global_planner': 'mpc_local_planner.global_planner_node',

@@ -32,7 +32,7 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -49,7 +49,6 @@ from .conversions import (
     CMD_VEL_QOS,
     describe,
     DIAGNOSTICS_QOS,
-    drain_executor,
     LOCAL_PLAN_QOS,
     ODOM_QOS,
     odometry_to_state,
@@ -306,16 +305,18 @@ class MpcControllerNode(Node):
 
     def timer_callback(self) -> None:
         """Solve, then publish cmd_vel, local_plan and diagnostics; zero on any failure."""
-        now = self._now()
-        step = float(self.get_parameter('step').value)
-        if self._last_step_time is not None and 0 <= now - self._last_step_time < 0.5 * step:
-            return  # a timer fired twice for one instant (ROS-time timers can): one step
-        self._last_step_time = now
-        try:
-            with self._lock:
-                output = self.controller.compute(self._state, now, state_time=self._state_time)
-        except Exception as err:  # noqa: BLE001 (compute never raises; belt and braces)
-            output = ControlOutput(np.zeros(2), None, f'error: {err}')
+        with self._lock:  # a plan being set (and its NLPs built) finishes first
+            now = self._now()
+            step = float(self.get_parameter('step').value)
+            if (self._last_step_time is not None
+                    and 0 <= now - self._last_step_time < 0.5 * step):
+                return  # a timer fired twice for one instant (ROS-time timers can): one step
+            self._last_step_time = now
+            try:
+                output = self.controller.compute(self._state, now,
+                                                 state_time=self._state_time)
+            except Exception as err:  # noqa: BLE001 (compute never raises; belt and braces)
+                output = ControlOutput(np.zeros(2), None, f'error: {err}')
         self.last_output = output
         self._cmd_pub.publish(twist_from_u(output.u))
         try:
@@ -392,13 +393,7 @@ def main(args: list[str] | None = None) -> None:
     node = None
     try:
         node = MpcControllerNode()
-        executor = MultiThreadedExecutor(num_threads=2)
-        executor.add_node(node)
-        try:
-            executor.spin()
-        finally:
-            executor.shutdown()
-            drain_executor(executor)
+        rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
