@@ -310,7 +310,7 @@ def bench_dds(steps: int = 100) -> dict[str, Any]:
                 continue
             received, u = got['cmd']
             solve_ms = float(got['diag'].get('solve_ms', 'nan'))
-            if k >= 5:  # the first steps build the NLPs
+            if k >= 5 and math.isfinite(solve_ms):  # first steps build; at the goal, no solve
                 latency.append(1e3 * (received - sent))
                 solve.append(solve_ms)
                 beyond.append(1e3 * (received - sent) - solve_ms)
