@@ -246,3 +246,35 @@ def test_planner_refuses_a_malformed_goal(ros) -> None:  # noqa: ANN001
     result = planner.set_parameters([Parameter('goal', value=[1.0, 2.0])])[0]
     assert not result.successful
     assert 'goal must be [x, y, theta]' in result.reason
+
+
+@pytest.mark.parametrize(('name', 'node_class'), [
+    ('mpc_controller', MpcControllerNode),
+    ('global_planner', GlobalPlannerNode),
+    ('unicycle_simulator', UnicycleSimulatorNode),
+])
+def test_shipped_params_files_load_and_hold_the_paper_values(name, node_class) -> None:  # noqa: ANN001
+    import rclpy
+    from rclpy.context import Context
+
+    from mpc_local_planner.controller import resolve_data_file
+
+    context = Context()
+    rclpy.init(args=['node', '--ros-args', '--params-file',
+                     str(resolve_data_file(f'{name}.yaml'))], context=context)
+    node = None
+    try:
+        node = node_class(context=context)
+        if name == 'mpc_controller':
+            assert node.get_parameter('horizon').value == 10
+            assert node.get_parameter('weights.heading').value == 0.1
+            assert node.get_parameter('offset_weight').value == 1000.0
+        elif name == 'global_planner':
+            assert node.get_parameter('iterations').value == 1000
+            np.testing.assert_allclose(node.get_parameter('goal').value, WORLD.goal)
+        else:
+            np.testing.assert_allclose(node.get_parameter('initial_pose').value, WORLD.start)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
