@@ -30,7 +30,7 @@ verified feasible and cheaper. So V_N is non-increasing by construction, not by 
 
 from __future__ import annotations
 
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 from dataclasses import dataclass
 import hashlib
 import logging
@@ -39,6 +39,7 @@ import os
 from pathlib import Path
 import subprocess
 import tempfile
+import threading
 import time
 from typing import NamedTuple, Sequence
 
@@ -186,7 +187,28 @@ def backend_options(config: MpcConfig, structure: dict) -> tuple[str, dict]:
 
 # C compiler and flags for config.compile; CC overrides the compiler as usual.
 COMPILE_FLAGS = ('-O2', '-fPIC', '-shared')
-_COMPILER_POOL = ThreadPoolExecutor(max_workers=1, thread_name_prefix='mpc_compile')
+# One compilation at a time (the machine may have two cores and a control loop to run).
+_COMPILE_LOCK = threading.Lock()
+
+
+def _submit_compilation(source: str, library: Path) -> Future:
+    """Compile in a daemon thread: a node stopped with Ctrl-C must not wait for gcc.
+
+    A ThreadPoolExecutor's workers are joined at interpreter exit, which kept a stopped
+    controller alive for the whole compilation; a daemon thread is simply dropped (the
+    library is renamed into place atomically, so an interrupted build leaves no bad file).
+    """
+    future: Future = Future()
+
+    def work() -> None:
+        with _COMPILE_LOCK:
+            try:
+                future.set_result(_compile(source, library))
+            except BaseException as err:  # noqa: BLE001 - handed to the waiting solver
+                future.set_exception(err)
+
+    threading.Thread(target=work, name='mpc_compile', daemon=True).start()
+    return future
 
 
 def compile_cache_dir() -> Path:
@@ -241,7 +263,7 @@ def _start_compilation(nlp: _Nlp, problem: dict) -> None:
             nlp.solver = ca.nlpsol('mpc', nlp.plugin, str(library), nlp.options)
             nlp.compiled = True
             return
-        nlp.pending = _COMPILER_POOL.submit(_compile, source, library)
+        nlp.pending = _submit_compilation(source, library)
     except Exception as err:  # noqa: BLE001 - any failure falls back to the interpreter
         _LOG.warning('compiling the MPC NLP failed, using the interpreted functions: %s', err)
 

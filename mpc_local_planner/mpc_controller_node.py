@@ -36,7 +36,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from .config import MpcConfig
+from .config import MpcConfig, SOLVERS
 from .controller import (
     ControllerSettings,
     ControlOutput,
@@ -81,7 +81,7 @@ DEFAULTS: dict[str, Any] = {
     'collision_margin': -1.0,
     'world_file': 'worlds/paper_obstacle.yaml',
     'analytic_path': '',
-    'solver': 'ipopt',
+    'solver': MpcConfig().solver,  # the fastest verified backend (see mpc_bench)
     'max_iterations': 200,
     'goal_tolerance': 0.02,
     'goal_heading_tolerance': 0.05,
@@ -200,7 +200,7 @@ class MpcControllerNode(Node):
                                    "the package's config/ or config/worlds/); '' = none"),
             'analytic_path': describe("follow this analytic path (e.g. 'paper_sinusoid') "
                                       "instead of the plan topic; '' = use plan"),
-            'solver': describe('NLP solver (ipopt)'),
+            'solver': describe(f'NLP solver, one of {SOLVERS}'),
             'max_iterations': describe(f'solver iterations per solve; {shape}',
                                        int_range=(1, 100000)),
             'goal_tolerance': describe('distance to the end of the plan that counts as '
