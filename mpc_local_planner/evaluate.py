@@ -154,7 +154,8 @@ def assumption_1(
     if waypoints is None or len(waypoints) < 2:
         return False
     grown = [o.inflate(inflation) for o in obstacles]
-    return not any(segment_collides(grown, a, b) for a, b in zip(waypoints[:-1], waypoints[1:]))
+    return not any(segment_collides(grown, waypoints[i], waypoints[i + 1])
+                   for i in range(len(waypoints) - 1))
 
 
 def shortcut(waypoints: np.ndarray, obstacles: Sequence[ConvexPolygon]) -> np.ndarray:
@@ -318,16 +319,39 @@ def _clearance_fn(scenario: Scenario) -> Callable[[np.ndarray], np.ndarray]:
     return polygons
 
 
+# Per worker process: one MPC per (controller, bounds), reused across worlds so the NLPs it
+# builds (one per obstacle count in reach) are built once, not once per run.
+_MPC_CACHE: dict[tuple, PathReferenceMPC | TrackingMPC] = {}
+# Obstacles handed to the MPC each step: those whose bounding circle lies within the MPC's
+# reach plus this slack (the MPC then selects those within reach itself). Keeps the MPC's
+# per-step selection loop short in BARN worlds with hundreds of cylinders.
+PRESELECT_SLACK = 0.5
+
+
+class _Preselect:
+    """Vectorised pre-selection of the obstacles near the robot."""
+
+    def __init__(self, obstacles: Sequence[ConvexPolygon], reach: float) -> None:
+        self._obstacles = list(obstacles)
+        self._centres = np.array([o.centroid for o in obstacles]).reshape(-1, 2)
+        self._radii = np.array([o.bounding_radius for o in obstacles])
+        self._reach = reach + PRESELECT_SLACK
+        self._last: tuple[int, ...] | None = None
+
+    def near(self, p: np.ndarray) -> list[ConvexPolygon] | None:
+        """Return the nearby obstacles, or None when they are the same as last time."""
+        d = np.linalg.norm(self._centres - p[None, :2], axis=1) - self._radii
+        chosen = tuple(np.flatnonzero(d <= self._reach).tolist())
+        if chosen == self._last:
+            return None
+        self._last = chosen
+        return [self._obstacles[i] for i in chosen]
+
+
 def _controller(task: Task, scenario: Scenario, model: Unicycle,
                 config: MpcConfig) -> Callable[[np.ndarray], tuple]:
     """Return x -> (u, s, value, solve_ms, ok) for the task's controller."""
-    if task.controller == 'tracking':
-        mpc = TrackingMPC(model, config, obstacles=scenario.obstacles, target=scenario.goal)
-    elif task.controller == 'proposed':
-        path = WaypointPath(scenario.waypoints, start_heading=float(scenario.start[2]),
-                            goal_heading=float(scenario.goal[2]), capacity=PATH_CAPACITY)
-        mpc = PathReferenceMPC(model, config, obstacles=scenario.obstacles, path=path)
-    elif task.controller == 'pure_pursuit':
+    if task.controller == 'pure_pursuit':
         follower = PurePursuit(scenario.waypoints, PurePursuitConfig(
             v_max=model.v_max, omega_max=model.omega_max,
             goal_tolerance=min(0.03, scenario.goal_tolerance / 2)))
@@ -338,11 +362,29 @@ def _controller(task: Task, scenario: Scenario, model: Unicycle,
             return u, follower.progress / max(follower.length, 1e-9), math.nan, \
                 (time.perf_counter() - t0) * 1e3, True
         return pursue
-    else:
+    if task.controller not in ('proposed', 'tracking'):
         msg = f'unknown controller {task.controller!r}'
         raise ValueError(msg)
+    key = (task.controller, model.v_max, model.omega_max)
+    mpc = _MPC_CACHE.get(key)
+    if task.controller == 'tracking':
+        if mpc is None:
+            mpc = _MPC_CACHE[key] = TrackingMPC(model, config, target=scenario.goal)
+        mpc.set_target(scenario.goal)
+    else:
+        path = WaypointPath(scenario.waypoints, start_heading=float(scenario.start[2]),
+                            goal_heading=float(scenario.goal[2]), capacity=PATH_CAPACITY)
+        if mpc is None:
+            mpc = _MPC_CACHE[key] = PathReferenceMPC(model, config, path=path)
+        mpc.set_path(path)
+    mpc.set_obstacles([])
+    mpc.reset()
+    preselect = _Preselect(scenario.obstacles, model.v_max * config.step * config.horizon)
 
     def solve(x: np.ndarray) -> tuple:
+        near = preselect.near(x)
+        if near is not None:
+            mpc.set_obstacles(near)
         solution = mpc.solve(x)
         return solution.u0, solution.s, solution.value, solution.solve_time_s * 1e3, \
             solution.success
