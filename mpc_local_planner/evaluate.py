@@ -544,6 +544,55 @@ def summarize(rows: list[dict[str, Any]], *, suite: str, title: str = '') -> str
     return '\n'.join(lines) + '\n'
 
 
+def plot_barn_runs(out: Path, barn_dir: Path, worlds: Sequence[int]) -> Path:
+    """Draw the saved BARN runs of some worlds (cylinders, RRT* path, trajectories) in a PNG.
+
+    Reads ``OUT/trajectories`` (written with --save-trajectories) and ``OUT/runs.csv``.
+    """
+    import json
+
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    from .trajectory import read_trajectory_csv
+
+    folder = out / 'trajectories'
+    rows = {(int(r['world']), r['controller']): r for r in _read_rows(out / 'runs.csv')}
+    fig, axes = plt.subplots(1, len(worlds), figsize=(3.2 * len(worlds), 7.5), squeeze=False)
+    for ax, world in zip(axes[0], worlds, strict=True):
+        data = json.loads((barn_dir / f'world_{world:03d}.json').read_text(encoding='utf-8'))
+        radius = float(data['cylinder_radius'])
+        for cx, cy in data['cylinders']:
+            ax.add_patch(plt.Circle((cx, cy), radius, color='0.3'))
+        path_file = folder / f'path_{world:03d}.csv'
+        if path_file.is_file():
+            path = np.loadtxt(path_file, delimiter=',', skiprows=1, ndmin=2)
+            ax.plot(path[:, 0], path[:, 1], 'k--', lw=0.8, label='RRT* path')
+        for name, colour in (('proposed', 'tab:blue'), ('tracking', 'tab:red'),
+                             ('pure_pursuit', 'tab:orange')):
+            run = folder / f'{name}_{world:03d}.csv'
+            if not run.is_file():
+                continue
+            traj = np.asarray(read_trajectory_csv(run))
+            row = rows.get((world, name), {})
+            ok = 'ok' if _true(row.get('success')) else 'fail'
+            ax.plot(traj[:, 1], traj[:, 2], color=colour, lw=1.5, label=f'{name} ({ok})')
+        start, goal = data['start'], data['goal']
+        ax.plot(start[0], start[1], 'go')
+        ax.add_patch(plt.Circle(goal, float(data.get('goal_tolerance', 1.0)), fill=False,
+                                color='g', ls=':'))
+        ax.set_aspect('equal')
+        ax.set_title(f'BARN world {world}')
+        ax.legend(fontsize=6, loc='lower right')
+    fig.tight_layout()
+    target = out / 'barn_runs.png'
+    fig.savefig(target, dpi=120)
+    plt.close(fig)
+    return target
+
+
 def _parse_worlds(text: str) -> list[int]:
     worlds: list[int] = []
     for part in text.split(','):
@@ -577,7 +626,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--jobs', type=int, default=1)
     parser.add_argument('--save-trajectories', action='store_true',
                         help='write each run as trajectory CSV under OUT/trajectories')
+    parser.add_argument('--plot', default='',
+                        help='BARN: only draw these worlds (e.g. 0,10,50) from an earlier '
+                        'run with --save-trajectories in OUT, then exit')
     args = parser.parse_args(argv)
+    if args.plot:
+        print(plot_barn_runs(args.out, args.barn_dir, _parse_worlds(args.plot)))
+        return 0
 
     controllers = [c.strip() for c in args.controllers.split(',') if c.strip()]
     unknown = sorted(set(controllers) - set(CONTROLLERS))

@@ -21,7 +21,13 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.evaluate import (
-    assumption_1, barn_score, CSV_COLUMNS, main, random_world, shortcut)
+    assumption_1,
+    barn_score,
+    CSV_COLUMNS,
+    main,
+    random_world,
+    shortcut,
+)
 from mpc_local_planner.obstacles import ConvexPolygon
 
 BARN_DIR = Path(__file__).resolve().parent / 'data' / 'barn'
@@ -73,7 +79,7 @@ def test_random_worlds_are_reproducible_and_block_the_straight_line() -> None:
 def test_barn_world_from_the_test_data(tmp_path) -> None:
     assert main(['--suite', 'barn', '--worlds', '0', '--barn-dir', str(BARN_DIR),
                  '--controllers', 'proposed,pure_pursuit', '--out', str(tmp_path),
-                 '--jobs', '1']) == 0
+                 '--jobs', '1', '--save-trajectories']) == 0
     rows = _rows(tmp_path)
     assert [r['controller'] for r in rows] == ['proposed', 'pure_pursuit']
     proposed = rows[0]
@@ -82,6 +88,9 @@ def test_barn_world_from_the_test_data(tmp_path) -> None:
     assert float(proposed['final_distance']) <= 1.0
     assert 0 < float(proposed['barn_score']) <= 0.5
     assert 'mean BARN score' in (tmp_path / 'summary.md').read_text()
+    assert main(['--suite', 'barn', '--barn-dir', str(BARN_DIR), '--out', str(tmp_path),
+                 '--plot', '0']) == 0
+    assert (tmp_path / 'barn_runs.png').stat().st_size > 10_000
 
 
 def test_barn_score_follows_the_challenge_formula() -> None:
