@@ -113,6 +113,7 @@ class Task:
     omega_max: float = 1.9
     barn_dir: str = ''
     trajectory_dir: str = ''
+    merge: bool = False
 
 
 @dataclass
@@ -262,14 +263,24 @@ def _length(waypoints: np.ndarray) -> float:
     return float(np.sum(np.linalg.norm(np.diff(waypoints, axis=0), axis=1)))
 
 
-def barn_world(path: Path, *, seed: int, margin: float) -> Scenario:
-    """Load a BARN world, plan its reference path and check Assumption 1."""
+def barn_world(path: Path, *, seed: int, margin: float, merge: bool = False) -> Scenario:
+    """Load a BARN world, plan its reference path and check Assumption 1.
+
+    With merge, rows of touching cylinders become thin rectangles (obstacle_merging) for the
+    planner and the MPC; contact is still measured from the exact cylinders.
+    """
+    import dataclasses
     import json
 
+    from .obstacle_merging import merge_cylinders
     from .worlds import load_barn_world
 
     world = load_barn_world(path, robot_radius=ROBOT_RADIUS)
     data = json.loads(Path(path).read_text(encoding='utf-8'))
+    if merge:
+        merged = merge_cylinders(np.asarray(data['cylinders'], dtype=float).reshape(-1, 2),
+                                 float(data['cylinder_radius']))
+        world = dataclasses.replace(world, obstacles=tuple(merged))
     index = int(''.join(ch for ch in path.stem if ch.isdigit()) or 0)
     waypoints, clearance, note = _plan(world.obstacles, world.bounds, world.start, world.goal,
                                        seed=seed + index, margin=margin,
@@ -294,7 +305,7 @@ def _scenario(task: Task, margin: float) -> Scenario:
     if task.suite == 'random':
         return random_world(task.world, task.seed, margin=margin)
     return barn_world(Path(task.barn_dir) / f'world_{task.world:03d}.json', seed=task.seed,
-                      margin=margin)
+                      margin=margin, merge=task.merge)
 
 
 def _clearance_fn(scenario: Scenario) -> Callable[[np.ndarray], np.ndarray]:
@@ -626,6 +637,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--jobs', type=int, default=1)
     parser.add_argument('--save-trajectories', action='store_true',
                         help='write each run as trajectory CSV under OUT/trajectories')
+    parser.add_argument('--merge', action='store_true',
+                        help='BARN: merge rows of touching cylinders into rectangles')
     parser.add_argument('--plot', default='',
                         help='BARN: only draw these worlds (e.g. 0,10,50) from an earlier '
                         'run with --save-trajectories in OUT, then exit')
@@ -650,14 +663,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     trajectories = str(args.out / 'trajectories') if args.save_trajectories else ''
     tasks = [Task(args.suite, w, c, args.seed, args.v_max, args.omega_max, barn_dir,
-                  trajectories) for w in worlds for c in controllers]
+                  trajectories, args.merge) for w in worlds for c in controllers]
     for var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
         os.environ[var] = '1'
 
     csv_path = args.out / 'runs.csv'
     summary_path = args.out / 'summary.md'
     title = (f'{args.suite} (seed {args.seed}, v_max {args.v_max:g} m/s, '
-             f'omega_max {args.omega_max:g} rad/s)')
+             f'omega_max {args.omega_max:g} rad/s{", merged walls" if args.merge else ""})')
     rows: list[dict[str, Any]] = []
     started = time.monotonic()
     with open(csv_path, 'w', newline='') as stream:
