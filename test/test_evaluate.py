@@ -110,3 +110,23 @@ def test_assumption_1_and_shortcut_are_exact() -> None:
     short = shortcut(np.array([[0.0, 0.0], [1.0, 2.0], [2.0, 2.0], [3.0, 0.0]]),
                      [box.inflate(0.2)])
     assert len(short) == 3
+
+
+def test_merged_walls_contain_every_cylinder_with_fewer_obstacles() -> None:
+    import json
+
+    from mpc_local_planner.obstacle_merging import merge_cylinders
+
+    data = json.loads((BARN_DIR / 'world_000.json').read_text())
+    centres = np.array(data['cylinders'], dtype=float)
+    radius = float(data['cylinder_radius'])
+    merged = merge_cylinders(centres, radius)
+    assert len(merged) < len(centres) / 2
+    assert max(p.num_faces for p in merged) <= 8
+    angles = np.linspace(0.0, 2.0 * np.pi, 32, endpoint=False)
+    rim = 0.9999 * radius * np.column_stack([np.cos(angles), np.sin(angles)])
+    points = (centres[:, None, :] + rim[None]).reshape(-1, 2)
+    covered = np.zeros(len(points), dtype=bool)
+    for polygon in merged:
+        covered |= polygon.contains(points)
+    assert covered.all()
