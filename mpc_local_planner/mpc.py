@@ -133,6 +133,7 @@ class _Nlp:
     options: dict | None = None
     compiled: bool = False
     pending: Future | None = None  # a compilation running in the background
+    fallback: ca.Function | None = None  # IPOPT on the same NLP, when the backend fails
 
 
 def _ipopt_options(config: MpcConfig) -> dict:
@@ -568,6 +569,12 @@ class _MpcBase:
             imu=np.array(layout['mu']).reshape(n, nm), build_time_s=0.0,
             plugin=plugin, options=options,
         )
+        if c.solver != 'ipopt':
+            # a structure-exploiting backend is fast but less robust far from its warm
+            # start (seen: fatrop failing near the box's corner under timing jitter);
+            # IPOPT, the reference, gets the same problem before the controller gives up
+            fb_plugin, fb_options = backend_options(c.with_changes(solver='ipopt'), structure)
+            built.fallback = ca.nlpsol('mpc_fallback', fb_plugin, problem, fb_options)
         if c.compile:
             _start_compilation(built, problem)
         built.build_time_s = time.perf_counter() - start
@@ -734,14 +741,15 @@ class _MpcBase:
         return float(worst)
 
     def _run_solver(
-        self, nlp: _Nlp, w0: np.ndarray, params: np.ndarray, selected: list[ConvexPolygon]
+        self, nlp: _Nlp, w0: np.ndarray, params: np.ndarray, selected: list[ConvexPolygon],
+        solver: ca.Function | None = None,
     ) -> tuple[bool, np.ndarray, float, str, int, float]:
         """Solve from w0; return (verified, w, value, status, iterations, seconds)."""
+        solver = nlp.solver if solver is None else solver
         start = time.perf_counter()
-        result = nlp.solver(x0=w0, p=params, lbx=nlp.lbw, ubx=nlp.ubw, lbg=nlp.lbg,
-                            ubg=nlp.ubg)
+        result = solver(x0=w0, p=params, lbx=nlp.lbw, ubx=nlp.ubw, lbg=nlp.lbg, ubg=nlp.ubg)
         seconds = time.perf_counter() - start
-        stats = nlp.solver.stats()
+        stats = solver.stats()
         status = str(stats.get('return_status', 'unknown'))
         iterations = int(stats.get('iter_count', 0))
         w_opt = np.asarray(result['x']).reshape(-1)
@@ -749,6 +757,12 @@ class _MpcBase:
         solved = solved and self._violation(w_opt, params, selected, nlp) <= FEASIBILITY_TOLERANCE
         value = float(result['f']) if solved else math.inf
         return solved, w_opt, value, status, iterations, seconds
+
+    def _collision_free(self, x: np.ndarray, selected: list[ConvexPolygon]) -> bool:
+        """Say whether the positions x[1:] clear every selected (inflated) obstacle."""
+        positions = x[1:, :2]
+        margin = self._config.farkas_margin
+        return all(np.all(o.signed_distance_lower_bound(positions) >= margin) for o in selected)
 
     def _guided_guess(self, x0: np.ndarray, selected: list[ConvexPolygon], nlp: _Nlp) -> _Plan:
         """An infeasible but informative start: drive forward at half speed."""
@@ -811,6 +825,17 @@ class _MpcBase:
             retry = self._run_solver(nlp, guess, params, selected)
             solved, w_opt, value, status, iterations = retry[:5]
             solve_time += retry[5]
+        if not solved and nlp.fallback is not None:
+            starts = [w_candidate]
+            if self._plan is None:
+                starts.append(self._pack(self._guided_guess(x0, selected, nlp), nlp))
+            for w_start in starts:
+                retry = self._run_solver(nlp, w_start, params, selected, nlp.fallback)
+                solve_time += retry[5]
+                if retry[0]:
+                    solved, w_opt, value, status, iterations = retry[:5]
+                    status = f'{status} (IPOPT fallback)'
+                    break
 
         if solved and value <= candidate_value + LYAPUNOV_TOLERANCE * (1 + abs(candidate_value)):
             x_p, u_p, s_p, mu_p = self._unpack(w_opt, nlp)
@@ -824,6 +849,15 @@ class _MpcBase:
                 status = f'{status} (applied the shifted candidate)'
             else:
                 status = f'{status} (candidate cheaper than solver solution)'
+        elif self._plan is not None and self._collision_free(candidate.x, selected):
+            # measured state off the prediction (timing jitter, model mismatch): the shifted
+            # inputs no longer end exactly on the path, but they were verified one step ago
+            # and their rollout from the measured state is still clear; the shift runs out
+            # after N steps (all u_s), which stops the robot
+            self._failures += 1
+            candidate.value = float(nlp.cost_fn(w_candidate, params))
+            plan, source = candidate, 'candidate'
+            status = f'{status} (applied the shifted candidate; off the prediction)'
         else:
             self._failures += 1
             return self._stop(x0, status, solve_time, iterations)

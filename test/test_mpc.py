@@ -103,3 +103,23 @@ def test_invalid_settings_are_refused_with_reasons() -> None:
         MpcConfig(step=-0.1)
     with pytest.raises(ValueError, match='weight_v must be >= 0'):
         MpcConfig(weight_v=-1.0)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_default_backend_reaches_the_target_when_the_sampling_time_jitters(seed) -> None:
+    # a real loop never applies the input for exactly h: the measured state leaves the
+    # prediction, the shifted candidate no longer ends on the path, and the fast backend
+    # must not be the only thing between the robot and a permanent stop
+    path = paper_sinusoid()
+    model = Unicycle()
+    controller = PathReferenceMPC(model, MpcConfig(), obstacles=[BOX], path=path)
+    rng = np.random.default_rng(seed)
+    x = path.start.copy()
+    stops = 0
+    for _ in range(150):
+        solution = controller.solve(x)
+        stops += solution.source == 'stop'
+        assert not BOX.contains(x[None, :2])[0]
+        x = model.step(x, solution.u0, 0.2 * (1 + 0.1 * rng.uniform(-1, 1)))
+    assert np.linalg.norm(x[:2] - path.goal[:2]) < 0.05
+    assert stops == 0
