@@ -14,7 +14,7 @@
 
 """closed_loop: planner, controller, simulator and recorder over DDS, to the goal.
 
-By default the four nodes share one process and a MultiThreadedExecutor; with
+By default the four nodes share one process and a SingleThreadedExecutor; with
 ``--separate-processes`` the planner, the controller and the simulator run as three OS
 processes (``python -m mpc_local_planner.<module> --ros-args -p ...``, so no ros2cli is
 needed) and this process records and watches. The simulator drives ``/clock`` at ``--rtf``
@@ -42,7 +42,7 @@ from typing import Any, Sequence
 from diagnostic_msgs.msg import DiagnosticArray
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -185,7 +185,11 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
     rclpy.init(args=['--ros-args', *ros_args] if ros_args else None, context=context)
     nodes: list[Node] = []
     children: list[subprocess.Popen] = []
-    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    # one thread: with rclpy 7.1 a MultiThreadedExecutor spun with spin_once piles up
+    # pending callback futures faster than 2 cores drain them, and the loop collapses
+    # (seen at rtf 4: 7 control steps in 40 s wall); the simulator advances simulated
+    # time per tick, so a solve that blocks the thread only slows the loop, never skews it
+    executor = SingleThreadedExecutor(context=context)
     start = time.monotonic()
     stop_reason = 'timeout'
     sim_time = math.nan

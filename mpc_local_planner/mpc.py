@@ -41,7 +41,7 @@ import subprocess
 import tempfile
 import threading
 import time
-from typing import NamedTuple, Sequence
+from typing import Callable, NamedTuple, Sequence
 
 import casadi as ca
 import numpy as np
@@ -134,6 +134,13 @@ class _Nlp:
     compiled: bool = False
     pending: Future | None = None  # a compilation running in the background
     fallback: ca.Function | None = None  # IPOPT on the same NLP, when the backend fails
+    fallback_factory: Callable[[], ca.Function] | None = None
+
+    def fallback_solver(self) -> ca.Function | None:
+        """Return the IPOPT fallback, building it the first time it is needed."""
+        if self.fallback is None and self.fallback_factory is not None:
+            self.fallback = self.fallback_factory()
+        return self.fallback
 
 
 def _ipopt_options(config: MpcConfig) -> dict:
@@ -572,9 +579,11 @@ class _MpcBase:
         if c.solver != 'ipopt':
             # a structure-exploiting backend is fast but less robust far from its warm
             # start (seen: fatrop failing near the box's corner under timing jitter);
-            # IPOPT, the reference, gets the same problem before the controller gives up
+            # IPOPT, the reference, gets the same problem before the controller gives up.
+            # Built on first use: building it with every NLP doubled the start-up time.
             fb_plugin, fb_options = backend_options(c.with_changes(solver='ipopt'), structure)
-            built.fallback = ca.nlpsol('mpc_fallback', fb_plugin, problem, fb_options)
+            built.fallback_factory = lambda: ca.nlpsol('mpc_fallback', fb_plugin, problem,
+                                                       fb_options)
         if c.compile:
             _start_compilation(built, problem)
         built.build_time_s = time.perf_counter() - start
@@ -825,12 +834,13 @@ class _MpcBase:
             retry = self._run_solver(nlp, guess, params, selected)
             solved, w_opt, value, status, iterations = retry[:5]
             solve_time += retry[5]
-        if not solved and nlp.fallback is not None:
+        fallback = None if solved else nlp.fallback_solver()
+        if fallback is not None:
             starts = [w_candidate]
             if self._plan is None:
                 starts.append(self._pack(self._guided_guess(x0, selected, nlp), nlp))
             for w_start in starts:
-                retry = self._run_solver(nlp, w_start, params, selected, nlp.fallback)
+                retry = self._run_solver(nlp, w_start, params, selected, fallback)
                 solve_time += retry[5]
                 if retry[0]:
                     solved, w_opt, value, status, iterations = retry[:5]
