@@ -27,11 +27,10 @@ import numpy as np
 
 from .obstacles import ConvexPolygon
 from .paths import wrap_angle
-from .trajectory import TRAJECTORY_COLUMNS
+from .trajectory import TRAJECTORY_INDEX as COL
 
 __all__ = ['compute_metrics', 'reached_mask']
 
-COL = {name: i for i, name in enumerate(TRAJECTORY_COLUMNS)}
 
 
 def reached_mask(

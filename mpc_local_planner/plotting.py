@@ -28,12 +28,11 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Polygon
 import numpy as np
 
-from .trajectory import TRAJECTORY_COLUMNS
+from .trajectory import TRAJECTORY_INDEX as COL
 from .worlds import World
 
 __all__ = ['draw_world', 'plot_runs']
 
-COL = {name: i for i, name in enumerate(TRAJECTORY_COLUMNS)}
 RUN_COLOURS = ('tab:blue', 'tab:red', 'tab:green', 'tab:purple', 'tab:orange', 'tab:brown',
                'tab:pink', 'tab:olive', 'tab:cyan')
 

@@ -25,9 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ['TRAJECTORY_COLUMNS', 'read_trajectory_csv', 'write_trajectory_csv']
+__all__ = ['TRAJECTORY_COLUMNS', 'TRAJECTORY_INDEX', 'read_trajectory_csv',
+           'write_trajectory_csv']
 
 TRAJECTORY_COLUMNS = ('t', 'x', 'y', 'theta', 'v', 'omega', 's', 'V_N', 'solve_ms')
+# Column index by name, for the readers of rows.
+TRAJECTORY_INDEX = {name: i for i, name in enumerate(TRAJECTORY_COLUMNS)}
 
 
 def write_trajectory_csv(path: str | Path, rows: np.ndarray) -> None:
