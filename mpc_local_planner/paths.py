@@ -38,6 +38,7 @@ __all__ = [
     'ReferencePath',
     'WaypointPath',
     'analytic_path',
+    'distinct_waypoints',
     'paper_sinusoid',
     'simplify_polyline',
     'wrap_angle',
@@ -222,24 +223,13 @@ class WaypointPath(ReferencePath):
                 segments than capacity.
 
         """
-        pts = np.asarray(waypoints, dtype=float)
-        if pts.ndim != 2 or pts.shape[1] != 2:
-            msg = f'waypoints must have shape (M, 2), got {pts.shape}'
-            raise ValueError(msg)
-        if not np.all(np.isfinite(pts)):
-            msg = 'waypoints contain NaN or inf'
-            raise ValueError(msg)
+        pts = distinct_waypoints(waypoints, tolerance=1e-6)
         for heading in (start_heading, goal_heading):
             if heading is not None and not math.isfinite(heading):
                 msg = 'start and goal headings must be finite'
                 raise ValueError(msg)
         if turn_length <= 0:
             msg = f'turn_length must be > 0, got {turn_length}'
-            raise ValueError(msg)
-        keep = np.concatenate([[True], np.linalg.norm(np.diff(pts, axis=0), axis=1) > 1e-6])
-        pts = pts[keep]
-        if len(pts) < 2:
-            msg = 'a path needs at least two distinct waypoints'
             raise ValueError(msg)
         self._turn_length = float(turn_length)
         self._capacity = int(capacity)
@@ -338,6 +328,29 @@ class WaypointPath(ReferencePath):
         values = np.column_stack([np.interp(s_arr, self._s_knots, self._knots[:, j])
                                   for j in range(3)])
         return values[0] if np.ndim(s) == 0 else values
+
+
+def distinct_waypoints(waypoints: np.ndarray, *, tolerance: float) -> np.ndarray:
+    """Return (M, 2) waypoints without consecutive repeats (closer than tolerance).
+
+    Raises:
+        ValueError: if the shape is not (M, 2), a value is not finite, or fewer than two
+            distinct points remain.
+
+    """
+    pts = np.asarray(waypoints, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        msg = f'waypoints must have shape (M, 2), got {pts.shape}'
+        raise ValueError(msg)
+    if not np.all(np.isfinite(pts)):
+        msg = 'waypoints contain NaN or inf'
+        raise ValueError(msg)
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(pts, axis=0), axis=1) > tolerance])
+    pts = pts[keep]
+    if len(pts) < 2:
+        msg = 'a path needs at least two distinct waypoints'
+        raise ValueError(msg)
+    return pts
 
 
 def simplify_polyline(points: np.ndarray, tolerance: float) -> np.ndarray:

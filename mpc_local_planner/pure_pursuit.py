@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 
-from .paths import wrap_angle
+from .paths import distinct_waypoints, wrap_angle
 
 __all__ = ['PurePursuit', 'PurePursuitConfig']
 
@@ -74,15 +74,7 @@ class PurePursuit:
     """
 
     def __init__(self, waypoints: np.ndarray, config: PurePursuitConfig | None = None) -> None:
-        pts = np.asarray(waypoints, dtype=float)
-        if pts.ndim != 2 or pts.shape[1] != 2:
-            msg = f'waypoints must have shape (M, 2), got {pts.shape}'
-            raise ValueError(msg)
-        keep = np.concatenate([[True], np.linalg.norm(np.diff(pts, axis=0), axis=1) > 1e-9])
-        pts = pts[keep]
-        if len(pts) < 2:
-            msg = 'a path needs at least two distinct waypoints'
-            raise ValueError(msg)
+        pts = distinct_waypoints(waypoints, tolerance=1e-9)
         self.config = config or PurePursuitConfig()
         self._pts = pts
         seg = np.diff(pts, axis=0)
