@@ -415,10 +415,6 @@ class _MpcBase:
             self._nlps[(slots, faces)] = nlp
         return nlp
 
-    def _ensure_built(self) -> None:
-        """Build the NLP for the configured slots now (e.g. before the first control step)."""
-        self._nlp_for(*self._slot_shape(self._inflated[:self._config.obstacle_slots]))
-
     def prepare(self, max_obstacles: int | None = None) -> None:
         """Build the NLPs for 0..max_obstacles obstacles in reach, so no control step waits.
 
