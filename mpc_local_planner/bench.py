@@ -161,7 +161,7 @@ def closed_loop(solver: str, horizon: int, obstacles: list[ConvexPolygon], *,
     warmup: dict[str, Any] = {}
     for run in range(runs):
         x = path.start.copy()
-        solve_ms, step_ms, iterations, in_reach = [], [], [], []
+        solve_ms, step_ms, iterations, in_reach, active = [], [], [], [], []
         length, failures, lyapunov_bad, collision = 0.0, 0, 0, False
         reached = False
         for _ in range(max_steps):
@@ -174,7 +174,8 @@ def closed_loop(solver: str, horizon: int, obstacles: list[ConvexPolygon], *,
                 u, seconds, its = sol.u0, sol.solve_time_s, sol.iterations
                 failures += sol.source != 'solver'
                 lyapunov_bad += sol.lyapunov_ok is False
-                in_reach.append(len(controller._selected_obstacles(x)))
+                in_reach.append(sol.obstacles_in_reach)
+                active.append(sol.obstacles_active)
             step_ms.append(1e3 * (time.perf_counter() - start))
             solve_ms.append(1e3 * seconds)
             iterations.append(its)
@@ -198,6 +199,8 @@ def closed_loop(solver: str, horizon: int, obstacles: list[ConvexPolygon], *,
         'iterations_max': int(np.max(iterations)),
         'in_reach_max': int(max(in_reach, default=len(obstacles))),
         'in_reach_median': float(np.median(in_reach)) if in_reach else float(len(obstacles)),
+        'active_max': int(max(active, default=len(obstacles))),
+        'active_median': float(np.median(active)) if active else float(len(obstacles)),
         'reached': reached, 'path_length': length, 'collision': collision,
         'failures': failures, 'lyapunov_violations': lyapunov_bad,
         'first_run': warmup,

@@ -56,6 +56,9 @@ class MpcConfig:
         solver: NLP backend, one of SOLVERS.
         max_iterations: solver iteration limit per solve.
         tolerance: solver and verification tolerance.
+        activation_distance: obstacles within this distance of the candidate trajectory get
+            Farkas multipliers in the NLP; the others within reach are checked and added
+            when a solution comes within half of it (None: 2 v_max h).
         adaptive_slots: build the NLP for the obstacles actually within reach (a small cache
             of NLPs keyed by their count and face count) instead of fixed, padded slots.
         compile: compile the NLP's functions to C with the system compiler ($CC or gcc), in
@@ -81,6 +84,7 @@ class MpcConfig:
     solver: str = 'fatrop'
     max_iterations: int = 200
     tolerance: float = 1e-8
+    activation_distance: float | None = None
     adaptive_slots: bool = True
     compile: bool = True
     solver_options: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
@@ -140,6 +144,8 @@ def validate_mpc_config(config: MpcConfig) -> list[str]:
         problems.append(f'farkas_margin must be > 0, got {config.farkas_margin}')
     if not config.obstacle_slots >= 0:
         problems.append(f'obstacle_slots must be >= 0, got {config.obstacle_slots}')
+    if config.activation_distance is not None and not config.activation_distance >= 0:
+        problems.append(f'activation_distance must be >= 0, got {config.activation_distance}')
     if not config.faces_per_obstacle >= 3:
         problems.append(f'faces_per_obstacle must be >= 3, got {config.faces_per_obstacle}')
     if config.solver not in SOLVERS:

@@ -26,6 +26,13 @@ k+1 with a candidate: the previous solution shifted by one step, with the termin
 state appended. A local NLP solver may return something worse than that candidate, or fail;
 this module therefore always builds the candidate, and applies whichever of the two is
 verified feasible and cheaper. So V_N is non-increasing by construction, not by luck.
+
+Obstacles enter the NLP lazily (constraint generation): every obstacle the horizon can reach
+is checked geometrically, but only those near the candidate trajectory get Farkas
+multipliers. If the solution comes too close to one left out, it is added and the NLP solved
+again. A solution of the smaller problem that clears every reachable obstacle is optimal
+for the full one too (the full feasible set is a subset), so nothing is given up but
+variables that could not have been active.
 """
 
 from __future__ import annotations
@@ -48,7 +55,7 @@ import numpy as np
 
 from .config import MpcConfig, STRUCTURAL_FIELDS
 from .models import RobotModel
-from .obstacles import ConvexPolygon
+from .obstacles import ConvexPolygon, ObstacleSet
 from .paths import ReferencePath, wrap_angle
 
 __all__ = ['MpcSolution', 'PathReferenceMPC', 'TrackingMPC', 'compile_cache_dir']
@@ -78,6 +85,8 @@ class MpcSolution(NamedTuple):
         lyapunov_ok: V_N(x_k) <= V_N(x_{k-1}) - l(x_{k-1}, u_{k-1}) + tolerance, or None at
             the first step after a reset.
         failures: consecutive steps without a verified solver solution.
+        obstacles_in_reach: obstacles the horizon can reach (all checked geometrically).
+        obstacles_active: those the NLP held as Farkas constraints (see solve()).
 
     """
 
@@ -93,6 +102,8 @@ class MpcSolution(NamedTuple):
     source: str
     lyapunov_ok: bool | None
     failures: int
+    obstacles_in_reach: int = 0
+    obstacles_active: int = 0
 
 
 @dataclass
@@ -108,6 +119,8 @@ class _Plan:
 
 # NLPs kept per MPC, keyed by (obstacle slots, faces): building one takes tens of ms.
 MAX_CACHED_NLPS = 32
+# Re-solves with more obstacles when a solution came too close to one left out of the NLP.
+MAX_ACTIVATION_ROUNDS = 3
 
 
 @dataclass
@@ -315,6 +328,7 @@ class _MpcBase:
         self._structure_key: tuple | None = None
         self._last_nlp: _Nlp | None = None
         self._last_build_time = 0.0
+        self._rollouts: dict[tuple[float, int], ca.Function] = {}
         self._stage_fn = self._stage_function()
         self.set_obstacles(obstacles)
         self.reset()
@@ -362,6 +376,7 @@ class _MpcBase:
         self._raw_obstacles = list(obstacles)
         inflation = self._config.inflation(float(self._model.u_max[0]))
         self._inflated = [o.inflate(inflation) for o in self._raw_obstacles]
+        self._obstacle_set = ObstacleSet(self._inflated)
 
     def set_path(self, path: ReferencePath) -> None:
         """Use a new reference path; s restarts at the robot's projection onto it."""
@@ -632,17 +647,27 @@ class _MpcBase:
             return self._config.solver
         return nlp.backend + ('+compiled' if nlp.compiled else '')
 
-    def _selected_obstacles(self, x0: np.ndarray) -> list[ConvexPolygon]:
+    def _speed_bound(self) -> float:
+        return float(np.max(np.abs(self._model.u_max[:1])))
+
+    def _reachable(self, x0: np.ndarray) -> ObstacleSet:
         """Return the inflated obstacles the horizon can reach, nearest first."""
         c = self._config
-        reach = float(np.max(np.abs(self._model.u_max[:1]))) * c.step * c.horizon + 1e-3
-        nearby = []
-        for obstacle in self._inflated:
-            d = float(obstacle.distance(x0[:2])[0])
-            if d <= reach:
-                nearby.append((d, obstacle))
-        nearby.sort(key=lambda item: item[0])
-        return [obstacle for _, obstacle in nearby]
+        reach = self._speed_bound() * c.step * c.horizon + 1e-3
+        chosen, _ = self._obstacle_set.near(x0[None, :2], reach)
+        return ObstacleSet([self._inflated[i] for i in chosen])
+
+    def _activation_distance(self) -> float:
+        c = self._config
+        if c.activation_distance is not None:
+            return c.activation_distance
+        return 2.0 * self._speed_bound() * c.step
+
+    def _near_trajectory(self, x: np.ndarray, reachable: ObstacleSet,
+                         distance: float) -> list[ConvexPolygon]:
+        """Return the reachable obstacles within distance of the positions x, nearest first."""
+        chosen, _ = reachable.near(x[:, :2], distance)
+        return [reachable.obstacles[i] for i in chosen]
 
     def _obstacle_params(self, selected: list[ConvexPolygon], nlp: _Nlp) -> np.ndarray:
         faces, slots = nlp.faces, nlp.slots
@@ -700,14 +725,20 @@ class _MpcBase:
         return x
 
     def _rollout(self, x0: np.ndarray, u: np.ndarray) -> np.ndarray:
-        F = self._model.discrete(self._config.step)
-        xs = [x0]
-        for u_i in u:
-            xs.append(np.asarray(F(xs[-1], u_i)).reshape(-1))
-        return np.array(xs)
+        """Simulate the model from x0 under u, in one call of a mapaccum'ed step."""
+        key = (self._config.step, len(u))
+        rollout = self._rollouts.get(key)
+        if rollout is None:
+            step = self._model.discrete(self._config.step)
+            rollout = self._rollouts[key] = step.mapaccum('rollout', len(u))
+        xs = np.asarray(rollout(x0, np.asarray(u, dtype=float).T)).T
+        return np.vstack([x0, xs])
 
-    def _candidate(self, x0: np.ndarray, selected: list[ConvexPolygon], nlp: _Nlp) -> _Plan:
-        """The proof's candidate: shift the last plan and append the terminal steady state."""
+    def _candidate(self, x0: np.ndarray) -> _Plan:
+        """The proof's candidate: shift the last plan and append the terminal steady state.
+
+        Its multipliers depend on the NLP (obstacles held): see _multipliers.
+        """
         n = self._config.horizon
         if self._plan is None:
             s0 = self._initial_s(x0)
@@ -722,31 +753,32 @@ class _MpcBase:
             u = np.vstack([prev.u[1:], np.asarray(u_s, dtype=float).reshape(1, -1)])
             x = self._rollout(x0, u)
             plan = _Plan(x=x, u=u, s=prev.s, mu=np.zeros(0), value=math.inf)
-        plan.mu = self._multipliers(plan.x, selected, nlp)
         return plan
 
     def _terminal_state(self, s: float, x0: np.ndarray) -> np.ndarray | None:
         raise NotImplementedError
 
-    def _violation(self, w: np.ndarray, params: np.ndarray,
-                   selected: list[ConvexPolygon], nlp: _Nlp) -> float:
+    def _violation(self, w: np.ndarray, params: np.ndarray, obstacles: ObstacleSet,
+                   nlp: _Nlp) -> float:
         """Return the largest constraint violation, collisions checked geometrically.
 
         The geometric check does not trust the multipliers: whatever the solver did with
-        them, every predicted position l = 1..N must clear every selected obstacle.
+        them, every predicted position l = 1..N must clear every given obstacle (those of the
+        NLP, or every reachable one).
         """
         g = np.asarray(nlp.g_fn(w, params)).reshape(-1)
         viol = np.maximum(nlp.lbg - g, 0) + np.maximum(g - nlp.ubg, 0)
         viol_w = np.maximum(nlp.lbw - w, 0) + np.maximum(w - nlp.ubw, 0)
         worst = max(np.max(viol, initial=0.0), np.max(viol_w, initial=0.0))
-        positions = w[nlp.ix[1:, :2]]
-        for obstacle in selected:
-            depth = self._config.farkas_margin - obstacle.signed_distance_lower_bound(positions)
-            worst = max(worst, float(np.max(depth, initial=0.0)))
-        return float(worst)
+        return max(float(worst), self._penetration(w[nlp.ix[1:, :2]], obstacles))
+
+    def _penetration(self, positions: np.ndarray, obstacles: ObstacleSet) -> float:
+        """Return how far the positions fall short of the Farkas margin (0 when all clear)."""
+        depth = self._config.farkas_margin - obstacles.signed_distance_lower_bound(positions)
+        return float(np.max(depth, initial=0.0))
 
     def _run_solver(
-        self, nlp: _Nlp, w0: np.ndarray, params: np.ndarray, selected: list[ConvexPolygon],
+        self, nlp: _Nlp, w0: np.ndarray, params: np.ndarray, active: ObstacleSet,
         solver: ca.Function | None = None,
     ) -> tuple[bool, np.ndarray, float, str, int, float]:
         """Solve from w0; return (verified, w, value, status, iterations, seconds)."""
@@ -759,17 +791,45 @@ class _MpcBase:
         iterations = int(stats.get('iter_count', 0))
         w_opt = np.asarray(result['x']).reshape(-1)
         solved = bool(stats.get('success', False)) and bool(np.all(np.isfinite(w_opt)))
-        solved = solved and self._violation(w_opt, params, selected, nlp) <= FEASIBILITY_TOLERANCE
+        solved = solved and self._violation(w_opt, params, active, nlp) <= FEASIBILITY_TOLERANCE
         value = float(result['f']) if solved else math.inf
         return solved, w_opt, value, status, iterations, seconds
 
-    def _collision_free(self, x: np.ndarray, selected: list[ConvexPolygon]) -> bool:
-        """Say whether the positions x[1:] clear every selected (inflated) obstacle."""
-        positions = x[1:, :2]
-        margin = self._config.farkas_margin
-        return all(np.all(o.signed_distance_lower_bound(positions) >= margin) for o in selected)
+    def _optimise(self, nlp: _Nlp, w_candidate: np.ndarray, params: np.ndarray,
+                  x0: np.ndarray, active: list[ConvexPolygon]
+                  ) -> tuple[bool, np.ndarray, float, str, int, float]:
+        """Solve from the candidate; on failure retry from other starts and with IPOPT."""
+        active_set = ObstacleSet(active)
+        solved, w_opt, value, status, iterations, solve_time = self._run_solver(
+            nlp, w_candidate, params, active_set)
+        if not solved and self._plan is None:
+            # "stay put" zeroes every derivative of the quartic cost, and IPOPT may stall
+            # there; a second start rolled out along the path usually converges
+            guess = self._pack(self._guided_guess(x0, active, nlp), nlp)
+            retry = self._run_solver(nlp, guess, params, active_set)
+            solved, w_opt, value, status = retry[:4]
+            iterations += retry[4]
+            solve_time += retry[5]
+        fallback = None if solved else nlp.fallback_solver()
+        if fallback is not None:
+            starts = [w_candidate]
+            if self._plan is None:
+                starts.append(self._pack(self._guided_guess(x0, active, nlp), nlp))
+            for w_start in starts:
+                retry = self._run_solver(nlp, w_start, params, active_set, fallback)
+                iterations += retry[4]
+                solve_time += retry[5]
+                if retry[0]:
+                    solved, w_opt, value, status = retry[:4]
+                    status = f'{status} (IPOPT fallback)'
+                    break
+        return solved, w_opt, value, status, iterations, solve_time
 
-    def _guided_guess(self, x0: np.ndarray, selected: list[ConvexPolygon], nlp: _Nlp) -> _Plan:
+    def _collision_free(self, x: np.ndarray, obstacles: ObstacleSet) -> bool:
+        """Say whether the positions x[1:] clear every given (inflated) obstacle."""
+        return self._penetration(x[1:, :2], obstacles) <= 0.0
+
+    def _guided_guess(self, x0: np.ndarray, active: list[ConvexPolygon], nlp: _Nlp) -> _Plan:
         """An infeasible but informative start: drive forward at half speed."""
         n = self._config.horizon
         u = np.zeros((n, self._model.nu))
@@ -780,7 +840,7 @@ class _MpcBase:
         terminal = self._terminal_state(s, x0)
         if terminal is not None:
             x[-1] = terminal
-        return _Plan(x=x, u=u, s=s, mu=self._multipliers(x, selected, nlp), value=math.inf)
+        return _Plan(x=x, u=u, s=s, mu=self._multipliers(x, active, nlp), value=math.inf)
 
     def _check_ready(self) -> None:
         if self.uses_path and self._path is None:
@@ -789,6 +849,21 @@ class _MpcBase:
         if not self.uses_path and self._target is None:
             msg = 'no target: call set_target() first'
             raise RuntimeError(msg)
+
+    def _prepare_nlp(self, active: list[ConvexPolygon], x0: np.ndarray
+                     ) -> tuple[_Nlp, np.ndarray]:
+        """Return the NLP holding the active obstacles and its parameter vector."""
+        if not self._config.adaptive_slots and len(active) > self._slots:
+            self._slots = len(active)  # grow: rebuilt below, between two control steps
+        cached = len(self._nlps)
+        nlp = self._nlp_for(*self._slot_shape(active))
+        _finish_compilation(nlp)
+        if len(self._nlps) != cached:
+            self._last_build_time += nlp.build_time_s
+        self._last_nlp = nlp
+        params = np.concatenate([x0, self._weights(), self._obstacle_params(active, nlp),
+                                 self._path_params()])
+        return nlp, params
 
     def solve(self, x: np.ndarray) -> MpcSolution:
         """Compute the input for the measured state x.
@@ -804,44 +879,37 @@ class _MpcBase:
             raise ValueError(msg)
         self._check_ready()
         x0 = self._unwrap(x)
-        selected = self._selected_obstacles(x0)
-        if not self._config.adaptive_slots and len(selected) > self._slots:
-            self._slots = len(selected)  # grow: rebuilt below, between two control steps
-        cached = len(self._nlps)
-        nlp = self._nlp_for(*self._slot_shape(selected))
-        _finish_compilation(nlp)
-        self._last_build_time = nlp.build_time_s if len(self._nlps) != cached else 0.0
-        self._last_nlp = nlp
-        params = np.concatenate([x0, self._weights(), self._obstacle_params(selected, nlp),
-                                 self._path_params()])
-
-        candidate = self._candidate(x0, selected, nlp)
-        w_candidate = self._pack(candidate, nlp)
-        candidate_ok = (self._violation(w_candidate, params, selected, nlp)
-                        <= FEASIBILITY_TOLERANCE)
-        candidate_value = float(nlp.cost_fn(w_candidate, params)) if candidate_ok else math.inf
-
-        solved, w_opt, value, status, iterations, solve_time = self._run_solver(
-            nlp, w_candidate, params, selected)
-        if not solved and self._plan is None:
-            # "stay put" zeroes every derivative of the quartic cost, and IPOPT may stall
-            # there; a second start rolled out along the path usually converges
-            guess = self._pack(self._guided_guess(x0, selected, nlp), nlp)
-            retry = self._run_solver(nlp, guess, params, selected)
-            solved, w_opt, value, status, iterations = retry[:5]
-            solve_time += retry[5]
-        fallback = None if solved else nlp.fallback_solver()
-        if fallback is not None:
-            starts = [w_candidate]
-            if self._plan is None:
-                starts.append(self._pack(self._guided_guess(x0, selected, nlp), nlp))
-            for w_start in starts:
-                retry = self._run_solver(nlp, w_start, params, selected, fallback)
-                solve_time += retry[5]
-                if retry[0]:
-                    solved, w_opt, value, status, iterations = retry[:5]
-                    status = f'{status} (IPOPT fallback)'
-                    break
+        reachable = self._reachable(x0)
+        candidate = self._candidate(x0)
+        activation = self._activation_distance()
+        active = self._near_trajectory(candidate.x, reachable, activation)
+        self._last_build_time = 0.0
+        solve_time, iterations = 0.0, 0
+        for round_ in range(MAX_ACTIVATION_ROUNDS + 1):
+            nlp, params = self._prepare_nlp(active, x0)
+            candidate.mu = self._multipliers(candidate.x, active, nlp)
+            w_candidate = self._pack(candidate, nlp)
+            # the candidate must clear every reachable obstacle, not only the active ones
+            candidate_ok = (self._violation(w_candidate, params, reachable, nlp)
+                            <= FEASIBILITY_TOLERANCE)
+            candidate_value = (float(nlp.cost_fn(w_candidate, params)) if candidate_ok
+                               else math.inf)
+            solved, w_opt, value, status, its, seconds = self._optimise(
+                nlp, w_candidate, params, x0, active)
+            solve_time += seconds
+            iterations += its
+            if not solved:
+                break
+            # constraint generation: obstacles the solution came near join the NLP
+            missed = [o for o in self._near_trajectory(w_opt[nlp.ix], reachable, activation / 2)
+                      if not any(o is a for a in active)]
+            if not missed:
+                break
+            if round_ == MAX_ACTIVATION_ROUNDS:
+                if self._penetration(w_opt[nlp.ix[1:, :2]], reachable) > FEASIBILITY_TOLERANCE:
+                    solved, status = False, f'{status} (hits an obstacle left out of the NLP)'
+                break
+            active = active + missed
 
         if solved and value <= candidate_value + LYAPUNOV_TOLERANCE * (1 + abs(candidate_value)):
             x_p, u_p, s_p, mu_p = self._unpack(w_opt, nlp)
@@ -855,7 +923,7 @@ class _MpcBase:
                 status = f'{status} (applied the shifted candidate)'
             else:
                 status = f'{status} (candidate cheaper than solver solution)'
-        elif self._plan is not None and self._collision_free(candidate.x, selected):
+        elif self._plan is not None and self._collision_free(candidate.x, reachable):
             # measured state off the prediction (timing jitter, model mismatch): the shifted
             # inputs no longer end exactly on the path, but they were verified one step ago
             # and their rollout from the measured state is still clear; the shift runs out
@@ -866,7 +934,7 @@ class _MpcBase:
             status = f'{status} (applied the shifted candidate; off the prediction)'
         else:
             self._failures += 1
-            return self._stop(x0, status, solve_time, iterations)
+            return self._stop(x0, status, solve_time, iterations, len(reachable), len(active))
 
         lyapunov_ok = None
         if self._previous_value is not None:
@@ -882,11 +950,12 @@ class _MpcBase:
             s=plan.s if self.uses_path else math.nan, value=plan.value,
             success=source == 'solver', status=status, solve_time_s=solve_time,
             iterations=iterations, source=source, lyapunov_ok=lyapunov_ok,
-            failures=self._failures,
+            failures=self._failures, obstacles_in_reach=len(reachable),
+            obstacles_active=len(active),
         )
 
-    def _stop(self, x0: np.ndarray, status: str, solve_time: float,
-              iterations: int) -> MpcSolution:
+    def _stop(self, x0: np.ndarray, status: str, solve_time: float, iterations: int,
+              in_reach: int = 0, active: int = 0) -> MpcSolution:
         """No verified plan: command the steady-state input (stand still) and start over."""
         n = self._config.horizon
         _, u_s = self._model.steady_state(x0[:3])
@@ -899,6 +968,7 @@ class _MpcBase:
             s=math.nan, value=math.nan, success=False,
             status=f'{status} (no feasible candidate: stopping)', solve_time_s=solve_time,
             iterations=iterations, source='stop', lyapunov_ok=None, failures=failures,
+            obstacles_in_reach=in_reach, obstacles_active=active,
         )
 
     def _path_params(self) -> np.ndarray:

@@ -30,6 +30,7 @@ import numpy as np
 
 __all__ = [
     'ConvexPolygon',
+    'ObstacleSet',
     'convex_hull',
     'inflate_all',
     'min_clearance',
@@ -180,6 +181,48 @@ class ConvexPolygon:
         nearest = starts[None] + t[..., None] * seg[None]
         dist = np.min(np.linalg.norm(pts[:, None, :] - nearest, axis=2), axis=1)
         return np.where(self.contains(pts), 0.0, dist)
+
+
+class ObstacleSet:
+    """Many polygons as padded arrays, so one NumPy expression queries all of them.
+
+    A BARN world has hundreds of obstacles and the controller asks, every step, which of them
+    a prediction can reach; a Python loop over ConvexPolygon methods cost about a millisecond
+    per step at 20 obstacles. Faces are padded by repeating a polygon's last face, which
+    leaves max_i (a_i p - b_i) unchanged.
+    """
+
+    def __init__(self, obstacles: Sequence[ConvexPolygon]) -> None:
+        self.obstacles: list[ConvexPolygon] = list(obstacles)
+        faces = max((o.num_faces for o in self.obstacles), default=1)
+        count = len(self.obstacles)
+        self._A = np.zeros((count, faces, 2))
+        self._b = np.full((count, faces), -np.inf)
+        for i, o in enumerate(self.obstacles):
+            rows = np.minimum(np.arange(faces), o.num_faces - 1)
+            self._A[i], self._b[i] = o.A[rows], o.b[rows]
+
+    def __len__(self) -> int:
+        return len(self.obstacles)
+
+    def signed_distance_lower_bound(self, points: np.ndarray) -> np.ndarray:
+        """Return max_i (a_i p - b_i) as (points, obstacles): > 0 outside, <= the distance."""
+        pts = np.atleast_2d(np.asarray(points, dtype=float))
+        if not self.obstacles:
+            return np.zeros((len(pts), 0))
+        return np.max(np.einsum('mfk,pk->pmf', self._A, pts) - self._b[None], axis=2)
+
+    def near(self, points: np.ndarray, distance: float) -> tuple[np.ndarray, np.ndarray]:
+        """Return (indices, bounds) of the obstacles some point may be within distance of.
+
+        Conservative: the signed-distance lower bound never exceeds the Euclidean distance,
+        so no obstacle within distance is left out (a few beyond it, near corners, may be in).
+        Sorted by the bound, nearest first.
+        """
+        bound = np.min(self.signed_distance_lower_bound(points), axis=0, initial=np.inf)
+        chosen = np.flatnonzero(bound <= distance)
+        order = np.argsort(bound[chosen], kind='stable')
+        return chosen[order], bound[chosen[order]]
 
 
 def inflate_all(obstacles: Iterable[ConvexPolygon], distance: float) -> list[ConvexPolygon]:

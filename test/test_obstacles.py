@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from mpc_local_planner.obstacles import ConvexPolygon, min_clearance, point_in_any
+from mpc_local_planner.obstacles import ConvexPolygon, min_clearance, ObstacleSet, point_in_any
 
 
 def test_box_h_representation_has_unit_outward_normals() -> None:
@@ -46,3 +46,26 @@ def test_distance_and_clearance_queries() -> None:
     assert min_clearance(boxes, np.array([[2.0, 0.5]])) == pytest.approx(1.0)
     np.testing.assert_array_equal(point_in_any(boxes, np.array([[3.5, 0.5], [2, 2]])),
                                   [True, False])
+
+
+def test_obstacle_set_queries_match_the_polygons_one_by_one() -> None:
+    rng = np.random.default_rng(3)
+    polygons = [ConvexPolygon.from_box(0, 0, 1, 1), ConvexPolygon.from_circle(3, 1, 0.4),
+                ConvexPolygon.from_vertices([[5, 0], [6, 0], [5.5, 1]])]
+    points = rng.uniform(-1, 7, size=(50, 2))
+    bounds = ObstacleSet(polygons).signed_distance_lower_bound(points)
+    for j, polygon in enumerate(polygons):
+        np.testing.assert_allclose(bounds[:, j], polygon.signed_distance_lower_bound(points))
+
+
+def test_obstacle_set_near_never_misses_an_obstacle_within_the_distance() -> None:
+    rng = np.random.default_rng(4)
+    polygons = [ConvexPolygon.from_circle(*rng.uniform(-5, 5, 2), rng.uniform(0.1, 0.5))
+                for _ in range(60)]
+    obstacles = ObstacleSet(polygons)
+    for point in rng.uniform(-5, 5, size=(40, 2)):
+        chosen, bounds = obstacles.near(point[None], 1.0)
+        exact = {j for j, o in enumerate(polygons) if o.distance(point)[0] <= 1.0}
+        assert exact <= set(chosen.tolist())
+        assert np.all(np.diff(bounds) >= 0)  # nearest first
+    assert len(ObstacleSet([]).near(np.zeros((1, 2)), 1.0)[0]) == 0
