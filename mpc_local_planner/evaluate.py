@@ -333,30 +333,6 @@ def _clearance_fn(scenario: Scenario) -> Callable[[np.ndarray], np.ndarray]:
 # Per worker process: one MPC per (controller, bounds), reused across worlds so the NLPs it
 # builds (one per obstacle count in reach) are built once, not once per run.
 _MPC_CACHE: dict[tuple, PathReferenceMPC | TrackingMPC] = {}
-# Obstacles handed to the MPC each step: those whose bounding circle lies within the MPC's
-# reach plus this slack (the MPC then selects those within reach itself). Keeps the MPC's
-# per-step selection loop short in BARN worlds with hundreds of cylinders.
-PRESELECT_SLACK = 0.5
-
-
-class _Preselect:
-    """Vectorised pre-selection of the obstacles near the robot."""
-
-    def __init__(self, obstacles: Sequence[ConvexPolygon], reach: float) -> None:
-        self._obstacles = list(obstacles)
-        self._centres = np.array([o.centroid for o in obstacles]).reshape(-1, 2)
-        self._radii = np.array([o.bounding_radius for o in obstacles])
-        self._reach = reach + PRESELECT_SLACK
-        self._last: tuple[int, ...] | None = None
-
-    def near(self, p: np.ndarray) -> list[ConvexPolygon] | None:
-        """Return the nearby obstacles, or None when they are the same as last time."""
-        d = np.linalg.norm(self._centres - p[None, :2], axis=1) - self._radii
-        chosen = tuple(np.flatnonzero(d <= self._reach).tolist())
-        if chosen == self._last:
-            return None
-        self._last = chosen
-        return [self._obstacles[i] for i in chosen]
 
 
 def _controller(task: Task, scenario: Scenario, model: Unicycle,
@@ -388,14 +364,12 @@ def _controller(task: Task, scenario: Scenario, model: Unicycle,
         if mpc is None:
             mpc = _MPC_CACHE[key] = PathReferenceMPC(model, config, path=path)
         mpc.set_path(path)
-    mpc.set_obstacles([])
+    # every obstacle: the MPC checks those within reach and gives multipliers to those near
+    # its candidate trajectory (constraint generation, see mpc.py)
+    mpc.set_obstacles(scenario.obstacles)
     mpc.reset()
-    preselect = _Preselect(scenario.obstacles, model.v_max * config.step * config.horizon)
 
     def solve(x: np.ndarray) -> tuple:
-        near = preselect.near(x)
-        if near is not None:
-            mpc.set_obstacles(near)
         solution = mpc.solve(x)
         return solution.u0, solution.s, solution.value, solution.solve_time_s * 1e3, \
             solution.success
