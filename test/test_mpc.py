@@ -125,26 +125,24 @@ def test_default_backend_reaches_the_target_when_the_sampling_time_jitters(seed)
     assert stops == 0
 
 
-def test_obstacles_left_out_of_the_nlp_are_added_when_the_solution_comes_near() -> None:
-    """Constraint generation: with no obstacle active up front, the box still is avoided."""
+def _paper_run(config: MpcConfig, label: str):
     path = paper_sinusoid()
     model = Unicycle()
-    lazy = PathReferenceMPC(model, MpcConfig(activation_distance=0.0), obstacles=[BOX],
-                            path=path)
-    run = run_closed_loop(lazy, model, path.start, goal=path.goal, obstacles=[BOX],
-                          label='lazy', max_time=40.0)
+    controller = PathReferenceMPC(model, config, obstacles=[BOX], path=path)
+    return run_closed_loop(controller, model, path.start, goal=path.goal, obstacles=[BOX],
+                           label=label, max_time=40.0)
+
+
+def test_obstacles_left_out_of_the_nlp_are_added_when_the_solution_comes_near() -> None:
+    """Constraint generation: with no obstacle active up front, the box still is avoided."""
+    run = _paper_run(MpcConfig(activation_distance=0.0), 'lazy')
     assert run.metrics['reached']
     assert run.metrics['min_clearance'] > 0.0
     assert run.metrics['lyapunov_violations'] == 0
 
 
 def test_lazy_obstacles_give_the_closed_loop_of_all_obstacles_in_the_nlp(proposed_run) -> None:
-    path = paper_sinusoid()
-    model = Unicycle()
-    eager = PathReferenceMPC(model, MpcConfig(activation_distance=10.0), obstacles=[BOX],
-                             path=path)
-    run = run_closed_loop(eager, model, path.start, goal=path.goal, obstacles=[BOX],
-                          label='eager', max_time=40.0)
+    run = _paper_run(MpcConfig(activation_distance=10.0), 'eager')
     assert run.metrics['reached']
     assert run.metrics['path_length'] == pytest.approx(
         proposed_run.metrics['path_length'], rel=1e-3)
