@@ -12,11 +12,19 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Exceptions of the package, one per role, so callers can catch exactly what they handle."""
+"""Exceptions of the package, one per role, and the throttle the nodes report problems with.
+
+The exceptions let callers catch exactly what they handle. `ProblemThrottle` decides when a
+node logs a recurring input problem again: one clear error when the problem starts, then at
+most one per period while it lasts, and again at once after the input was valid in between.
+"""
 
 from __future__ import annotations
 
-__all__ = ['PlanningError', 'SolverError', 'WorldError']
+import time
+from typing import Callable
+
+__all__ = ['PlanningError', 'ProblemThrottle', 'SolverError', 'WorldError']
 
 
 class PlanningError(Exception):
@@ -33,3 +41,37 @@ class WorldError(ValueError):
     A ValueError subclass: a bad world file is a bad value, and callers that already catch
     ValueError keep working.
     """
+
+
+class ProblemThrottle:
+    """Say when to log a problem on an input channel ('odom', 'plan', ...).
+
+    rclpy's own ``throttle_duration_sec`` keys on the call site and never resets, so a
+    second bad episode right after a good message would go unreported; this one resets when
+    the channel is valid again. The clock is a steady one by default (a log throttle has no
+    business following simulated time).
+
+    Args:
+        period: seconds between two reports of a problem that persists.
+        clock: returns seconds; time.monotonic by default.
+
+    """
+
+    def __init__(self, period: float = 2.0, *,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.period = float(period)
+        self._clock = clock
+        self._last: dict[str, float] = {}
+
+    def report(self, channel: str) -> bool:
+        """Note a problem on channel; return True if it should be logged now."""
+        now = self._clock()
+        last = self._last.get(channel)
+        if last is not None and now - last < self.period:
+            return False
+        self._last[channel] = now
+        return True
+
+    def resolve(self, channel: str) -> bool:
+        """Note that channel is valid again; return True if it had a problem."""
+        return self._last.pop(channel, None) is not None

@@ -17,11 +17,18 @@
 Subscribes ``odom`` and ``plan`` (reliable, transient_local), publishes ``cmd_vel``,
 ``local_plan`` (the prediction) and ``mpc/diagnostics``. All decisions live in
 `MpcController`; this node converts messages, keeps the latest inputs and publishes.
+
+Refused input (odometry with NaN, inf or a zero quaternion; a plan that is empty, too short,
+too long, not finite, in another frame or through an obstacle) makes the command zero until
+valid input comes, with one error per problem in the log (throttled) and the problem in
+the diagnostics. Invalid parameters are refused with a reason; at start, the process exits
+with code 2 and the reason on stderr.
 """
 
 from __future__ import annotations
 
 import math
+import sys
 import threading
 from typing import Any
 
@@ -32,9 +39,11 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message
 
 from .config import MpcConfig, SOLVERS
 from .controller import (
@@ -42,7 +51,11 @@ from .controller import (
     ControlOutput,
     MpcController,
     REASON_GOAL,
+    REASON_INVALID_ODOM,
+    REASON_INVALID_PLAN,
     REASON_OK,
+    REASON_STALE_ODOM,
+    REASON_STOP,
     resolve_data_file,
 )
 from .conversions import (
@@ -52,6 +65,7 @@ from .conversions import (
     LOCAL_PLAN_QOS,
     ODOM_QOS,
     odometry_to_state,
+    path_pose_count,
     path_to_poses,
     PLAN_QOS,
     poses_to_path,
@@ -59,12 +73,18 @@ from .conversions import (
     stamp_to_seconds,
     twist_from_u,
 )
+from .errors import ProblemThrottle
 from .models import Unicycle
 from .obstacles import ConvexPolygon
 from .paths import analytic_path
 from .worlds import load_world
 
-__all__ = ['DEFAULTS', 'MpcControllerNode', 'build_settings', 'main']
+__all__ = ['DEFAULTS', 'EXIT_INVALID_PARAMETERS', 'MpcControllerNode', 'build_settings', 'main']
+
+# Exit code of main() when the node refuses to start (invalid parameters or world file).
+EXIT_INVALID_PARAMETERS = 2
+# Seconds between two error logs of an input problem that persists.
+ERROR_THROTTLE_S = 2.0
 
 # Parameter defaults: the paper's values (config/mpc_controller.yaml mirrors them).
 DEFAULTS: dict[str, Any] = {
@@ -86,6 +106,7 @@ DEFAULTS: dict[str, Any] = {
     'goal_tolerance': 0.02,
     'goal_heading_tolerance': 0.05,
     'odom_timeout': 0.5,
+    'max_plan_poses': 10_000,
     'frame_id': 'map',
 }
 
@@ -127,8 +148,22 @@ def build_settings(values: dict[str, Any], *, world_radius: float = 0.0
     mpc_kwargs['robot_radius'] = max(float(values['robot_radius']), world_radius)
     config = MpcConfig(**mpc_kwargs)  # raises ValueError with validate_mpc_config's reasons
     model = Unicycle(v_max=float(values['v_max']), omega_max=float(values['omega_max']))
-    settings = ControllerSettings(**{k: float(values[k]) for k in _SETTINGS_FIELDS})
+    settings = ControllerSettings(**{k: float(values[k]) for k in _SETTINGS_FIELDS},
+                                  max_plan_poses=int(values['max_plan_poses']))
     return config, model, settings
+
+
+def check_obstacles(obstacles: list[ConvexPolygon], config: MpcConfig) -> None:
+    """Raise ValueError if an obstacle has more faces than the NLP's slots hold.
+
+    The MPC would raise the same from set_obstacles, but in the post-set callback, where
+    the change can no longer be refused.
+    """
+    for index, obstacle in enumerate(obstacles):
+        if obstacle.num_faces > config.faces_per_obstacle:
+            msg = (f'obstacle {index} has {obstacle.num_faces} faces, more than '
+                   f'faces_per_obstacle ({config.faces_per_obstacle})')
+            raise ValueError(msg)
 
 
 class MpcControllerNode(Node):
@@ -152,6 +187,11 @@ class MpcControllerNode(Node):
 
         self._state: np.ndarray | None = None
         self._state_time: float | None = None
+        # what is wrong with the latest odometry / plan (None when valid): the command is
+        # zero while either is set, and the diagnostics carry it as the reason
+        self._odom_problem: str | None = None
+        self._plan_problem: str | None = None
+        self._problems = ProblemThrottle(ERROR_THROTTLE_S)
         self._last_reason = ''
         self._last_step_time: float | None = None
         self.last_output: ControlOutput | None = None
@@ -165,8 +205,10 @@ class MpcControllerNode(Node):
                                                DIAGNOSTICS_QOS)
         self._odom_sub = self.create_subscription(
             Odometry, 'odom', self.odom_callback, ODOM_QOS, callback_group=self._inputs_group)
+        # raw: the size of a plan is checked before rclpy spends ~15 us per pose on it
         self._plan_sub = self.create_subscription(
-            Path, 'plan', self.plan_callback, PLAN_QOS, callback_group=self._inputs_group)
+            Path, 'plan', self.plan_callback, PLAN_QOS, callback_group=self._inputs_group,
+            raw=True)
         self._timer = None
         self._make_timer()
 
@@ -210,7 +252,9 @@ class MpcControllerNode(Node):
                                                float_range=(1e-4, math.pi)),
             'odom_timeout': describe('odometry older than this (s) is stale: cmd_vel is zero',
                                      float_range=(0.001, 3600.0)),
-            'frame_id': describe('frame of local_plan'),
+            'max_plan_poses': describe('a plan with more poses is refused (cmd_vel is zero '
+                                       'until a valid plan comes)', int_range=(2, 10_000_000)),
+            'frame_id': describe('frame of local_plan, and the frame a plan must be in'),
         }
         for name, descriptor in specs.items():
             self.declare_parameter(name, DEFAULTS[name], descriptor)
@@ -233,31 +277,38 @@ class MpcControllerNode(Node):
         """Accept the new values only if the whole configuration stays valid."""
         try:
             values = self._values(parameters)
-            _, radius = self._load_world(str(values['world_file']))
-            build_settings(values, world_radius=radius)
+            obstacles, radius = self._load_world(str(values['world_file']))
+            config, _, _ = build_settings(values, world_radius=radius)
+            check_obstacles(obstacles, config)
             if values['analytic_path']:
                 analytic_path(str(values['analytic_path']))
-        except (ValueError, FileNotFoundError, TypeError, KeyError) as err:
-            return SetParametersResult(successful=False, reason=str(err))
+        except Exception as err:  # noqa: BLE001 (whatever the cause, refuse with a reason)
+            reason = str(err) or type(err).__name__
+            return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
 
     def post_parameters_callback(self, parameters: list[Parameter]) -> None:
         """Apply accepted changes; the MPC picks them up at its next solve."""
         names = {p.name for p in parameters}
-        values = self._values()
-        obstacles, radius = self._load_world(values['world_file'])
-        config, model, settings = build_settings(values, world_radius=radius)
-        with self._lock:  # never between two halves of a solve
-            if 'world_file' in names:
-                self.controller.set_obstacles(obstacles)
-            self.controller.update_config(config)
-            if model != self.controller.model:
-                self.controller.set_model(model)
-            self.controller.settings = settings
-            if 'analytic_path' in names and values['analytic_path']:
-                self.controller.set_path(analytic_path(values['analytic_path']))
-        if 'step' in names:
-            self._make_timer()
+        try:
+            values = self._values()
+            obstacles, radius = self._load_world(values['world_file'])
+            config, model, settings = build_settings(values, world_radius=radius)
+            with self._lock:  # never between two halves of a solve
+                if 'world_file' in names:
+                    self.controller.set_obstacles(obstacles)
+                self.controller.update_config(config)
+                if model != self.controller.model:
+                    self.controller.set_model(model)
+                self.controller.settings = settings
+                if 'analytic_path' in names and values['analytic_path']:
+                    self.controller.set_path(analytic_path(values['analytic_path']))
+                    self._plan_problem = None  # the plan topic is ignored from now on
+            if 'step' in names:
+                self._make_timer()
+        except Exception as err:  # noqa: BLE001 (validated above: a bug, but keep running)
+            self.get_logger().error(f'could not apply {sorted(names)}: {err}')
+            return
         self.get_logger().info(f'parameters changed: {sorted(names)}')
 
     def _make_timer(self) -> None:
@@ -272,30 +323,87 @@ class MpcControllerNode(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def odom_callback(self, msg: Odometry) -> None:
-        """Keep the latest state and when it was measured."""
+        """Keep the latest state and when it was measured; a bad one stops the robot.
+
+        The measurement time is the stamp, but never later than the arrival: a stamp from
+        the future must not keep the state fresh after the odometry stops.
+        """
+        receipt = self._now()
         try:
-            state = odometry_to_state(msg)
-        except ValueError as err:
-            self.get_logger().warning(f'ignoring odometry: {err}', throttle_duration_sec=1.0)
+            state = self.controller.check_state(odometry_to_state(msg))
+        except Exception as err:  # noqa: BLE001 (ValueError, or a message gone wrong)
+            self._state, self._state_time = None, None
+            self._odom_problem = f'{REASON_INVALID_ODOM}: {err}'
+            if self._problems.report('odom'):
+                self.get_logger().error(
+                    f'{self._odom_problem}; cmd_vel is zero until valid odometry comes')
             return
         stamp = stamp_to_seconds(msg.header.stamp)
-        self._state, self._state_time = state, (stamp if stamp > 0 else self._now())
+        self._state = state
+        self._state_time = min(stamp, receipt) if stamp > 0 else receipt
+        self._odom_problem = None
+        if self._problems.resolve('odom'):
+            self.get_logger().info('odometry is valid again')
 
-    def plan_callback(self, msg: Path) -> None:
-        """Follow a new global plan (s restarts at the robot's projection onto it)."""
+    def plan_callback(self, msg: Path | bytes) -> None:
+        """Follow a new global plan (s restarts at the robot's projection onto it).
+
+        A refused plan also drops the plan in force: whoever sent it wanted the robot to do
+        something else, so the robot stops until a valid plan comes.
+
+        Args:
+            msg: the plan, or its CDR bytes as the raw subscription delivers them.
+
+        """
         if self.get_parameter('analytic_path').value:
             self.get_logger().info('following the analytic path: plan ignored', once=True)
             return
         try:
-            poses = path_to_poses(msg)
+            plan = self._read_plan(msg)
+            poses = path_to_poses(plan)
             with self._lock:
                 path = self.controller.set_plan(poses)
                 self._prepare()
-        except ValueError as err:
-            self.get_logger().error(f'plan refused, keeping the previous one: {err}')
+        except Exception as err:  # noqa: BLE001 (ValueError mostly; never leave a callback)
+            problem = str(err)
+            if not problem.startswith(REASON_INVALID_PLAN):
+                problem = f'{REASON_INVALID_PLAN}: {problem or type(err).__name__}'
+            with self._lock:
+                self.controller.clear_path()
+                self._plan_problem = problem
+            if self._problems.report('plan'):
+                self.get_logger().error(f'{problem}; cmd_vel is zero until a valid plan comes')
             return
+        self._plan_problem = None
+        self._problems.resolve('plan')
         self.goal_reached = False
         self.get_logger().info(f'new plan: {len(poses)} poses, {path.length():.2f} m')
+
+    def _read_plan(self, msg: Path | bytes) -> Path:
+        """Return the plan message after the checks that need no conversion of its poses.
+
+        Raises:
+            ValueError: 'invalid plan: ...' if it has too many poses or the wrong frame.
+
+        """
+        limit = self.controller.settings.max_plan_poses
+        if isinstance(msg, (bytes, bytearray)):
+            count = path_pose_count(bytes(msg))
+            if count is None or count <= limit:
+                msg = deserialize_message(bytes(msg), Path)
+                count = len(msg.poses)
+        else:
+            count = len(msg.poses)
+        if count > limit:
+            problem = f'{REASON_INVALID_PLAN}: {count} poses, more than max_plan_poses ({limit})'
+            raise ValueError(problem)
+        assert isinstance(msg, Path)
+        frame = str(self.get_parameter('frame_id').value)
+        if msg.header.frame_id != frame:
+            problem = (f'{REASON_INVALID_PLAN}: frame {msg.header.frame_id!r} is not '
+                       f'{frame!r} (this node does not transform plans)')
+            raise ValueError(problem)
+        return msg
 
     def _prepare(self) -> None:
         try:
@@ -312,9 +420,13 @@ class MpcControllerNode(Node):
                     and 0 <= now - self._last_step_time < 0.5 * step):
                 return  # a timer fired twice for one instant (ROS-time timers can): one step
             self._last_step_time = now
+            problem = self._odom_problem or self._plan_problem
             try:
-                output = self.controller.compute(self._state, now,
-                                                 state_time=self._state_time)
+                if problem is not None:
+                    output = self.controller.stop(problem)
+                else:
+                    output = self.controller.compute(self._state, now,
+                                                     state_time=self._state_time)
             except Exception as err:  # noqa: BLE001 (compute never raises; belt and braces)
                 output = ControlOutput(np.zeros(2), None, f'error: {err}')
         self.last_output = output
@@ -335,8 +447,15 @@ class MpcControllerNode(Node):
             return
         self._last_reason = reason
         self.goal_reached = reason == REASON_GOAL
+        if reason.startswith((REASON_INVALID_ODOM, REASON_INVALID_PLAN)):
+            return  # logged (throttled) where the input was refused
         if reason.startswith('error'):
-            self.get_logger().error(reason, throttle_duration_sec=1.0)
+            if self._problems.report('error'):
+                self.get_logger().error(reason)
+        elif reason in (REASON_STALE_ODOM, REASON_STOP):
+            self.get_logger().warning(
+                f'{reason}: cmd_vel is zero (solver failures so far: '
+                f'{self.controller.solver_failures})')
         elif reason == REASON_GOAL:
             state = self._state if self._state is not None else np.full(3, np.nan)
             position, heading = self.controller.goal_error(state)
@@ -353,7 +472,8 @@ class MpcControllerNode(Node):
         status.message = output.reason
         if output.reason in (REASON_OK, REASON_GOAL) and (sol is None or sol.success):
             status.level = DiagnosticStatus.OK
-        elif output.reason.startswith('error') or (sol is not None and sol.source == 'stop'):
+        elif (output.reason.startswith(('error', REASON_INVALID_ODOM, REASON_INVALID_PLAN))
+              or output.reason == REASON_STOP):
             status.level = DiagnosticStatus.ERROR
         else:
             status.level = DiagnosticStatus.WARN
@@ -364,6 +484,7 @@ class MpcControllerNode(Node):
             'status': sol.status if sol else '',
             'source': sol.source if sol else '',
             'failures': sol.failures if sol else 0,
+            'failures_total': self.controller.solver_failures,
             'lyapunov_ok': '' if sol is None or sol.lyapunov_ok is None else sol.lyapunov_ok,
             'iterations': sol.iterations if sol else 0,
             'reason': output.reason,
@@ -387,12 +508,22 @@ def _format(value: Any) -> str:
     return str(value)
 
 
-def main(args: list[str] | None = None) -> None:
-    """Run the controller until Ctrl-C."""
+def main(args: list[str] | None = None) -> int:
+    """Run the controller until Ctrl-C.
+
+    Returns:
+        0, or EXIT_INVALID_PARAMETERS if the parameters (or the world file they name) are
+        invalid: the reason goes to stderr in one line instead of a traceback.
+
+    """
     rclpy.init(args=args)
     node = None
     try:
-        node = MpcControllerNode()
+        try:
+            node = MpcControllerNode()
+        except (ParameterException, ValueError, TypeError, OSError) as err:
+            print(f'mpc_controller: refusing to start: {err}', file=sys.stderr, flush=True)
+            return EXIT_INVALID_PARAMETERS
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -400,7 +531,8 @@ def main(args: list[str] | None = None) -> None:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -19,11 +19,16 @@ With ``publish_clock`` the node is the clock: each tick of a steady wall timer, 
 ``clock`` and ``odom`` stamped with that time. Nodes with ``use_sim_time`` then run at
 ``real_time_factor`` times real time, and a slow tick slows the simulation down instead of
 making it jump. Without it, the node integrates in ROS time (wall or an external clock).
+
+A cmd_vel older than ``cmd_timeout`` (a controller that died or hangs) is replaced by zero,
+and so is one with NaN or inf in linear.x or angular.z (its sender is broken: no part of it
+is trusted); the saturation bounds every command that is integrated.
 """
 
 from __future__ import annotations
 
 import math
+import sys
 from typing import Any
 
 from geometry_msgs.msg import Twist
@@ -32,6 +37,7 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -45,9 +51,13 @@ from .conversions import (
     state_to_odometry,
     u_from_twist,
 )
+from .errors import ProblemThrottle
 from .models import Unicycle
 
 __all__ = ['UnicycleSimulatorNode', 'main', 'validate_simulator_parameters']
+
+# Exit code of main() when the parameters are invalid.
+EXIT_INVALID_PARAMETERS = 2
 
 # At most this many integration steps catch up a late tick (real-time mode).
 MAX_CATCH_UP_STEPS = 10
@@ -78,6 +88,7 @@ class UnicycleSimulatorNode(Node):
         self._sim_time = 0.0
         self._last_cmd_time: float | None = None
         self._last_tick: float | None = None
+        self._problems = ProblemThrottle(2.0)
         self._odom_pub = self.create_publisher(Odometry, 'odom', ODOM_QOS)
         self._clock_pub = self.create_publisher(ClockMsg, 'clock', 10)
         self._cmd_sub = self.create_subscription(Twist, 'cmd_vel', self.cmd_vel_callback,
@@ -112,7 +123,10 @@ class UnicycleSimulatorNode(Node):
     def parameters_callback(self, parameters: list[Parameter]) -> SetParametersResult:
         """Refuse an initial_pose that is not three finite numbers."""
         values = {p.name: p.value for p in parameters}
-        reason = validate_simulator_parameters(values)
+        try:
+            reason = validate_simulator_parameters(values)
+        except (TypeError, ValueError) as err:
+            reason = f'initial_pose must be [x, y, theta] (3 finite numbers): {err}'
         if reason is not None:
             return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
@@ -158,8 +172,17 @@ class UnicycleSimulatorNode(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def cmd_vel_callback(self, msg: Twist) -> None:
-        """Take the new command (saturated when integrated)."""
-        self._u = u_from_twist(msg)
+        """Take the new command (saturated when integrated); a non-finite one means stop."""
+        raw = (msg.linear.x, msg.angular.z)
+        if not all(math.isfinite(value) for value in raw):
+            self._u = np.zeros(2)
+            if self._problems.report('cmd_vel'):
+                self.get_logger().error(
+                    f'invalid cmd_vel: linear.x = {raw[0]}, angular.z = {raw[1]}; stopping')
+        else:
+            self._u = u_from_twist(msg)
+            if self._problems.resolve('cmd_vel'):
+                self.get_logger().info('cmd_vel is valid again')
         self._last_cmd_time = self._now()
 
     def timer_callback(self) -> None:
@@ -200,12 +223,16 @@ class UnicycleSimulatorNode(Node):
                                     throttle_duration_sec=1.0)
 
 
-def main(args: list[str] | None = None) -> None:
-    """Run the simulator until Ctrl-C."""
+def main(args: list[str] | None = None) -> int:
+    """Run the simulator until Ctrl-C; return EXIT_INVALID_PARAMETERS on invalid parameters."""
     rclpy.init(args=args)
     node = None
     try:
-        node = UnicycleSimulatorNode()
+        try:
+            node = UnicycleSimulatorNode()
+        except (ParameterException, ValueError, TypeError) as err:
+            print(f'unicycle_simulator: refusing to start: {err}', file=sys.stderr, flush=True)
+            return EXIT_INVALID_PARAMETERS
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -213,7 +240,8 @@ def main(args: list[str] | None = None) -> None:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

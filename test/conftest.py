@@ -18,6 +18,10 @@ The environment is set at import time because DDS reads it when the first contex
 initialised; pytest imports conftest.py before any test module, hence before rclpy.
 Keeping discovery on localhost and using a domain id derived from the pid keeps parallel
 test sessions (and other machines) from seeing each other's nodes.
+
+Fixtures: ``ros`` (a fresh context and executor per test; ``ros.probe()`` adds a `Probe` that
+publishes inputs and records outputs, diagnostics and /rosout) and ``ros_module`` (the same,
+per module).
 """
 
 from __future__ import annotations
@@ -35,7 +39,33 @@ os.environ['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 100)
 import time  # noqa: E402
 from typing import Callable, Iterator  # noqa: E402
 
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import PoseStamped, Twist  # noqa: E402
+from nav_msgs.msg import Odometry, Path  # noqa: E402
+import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from rcl_interfaces.msg import Log  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.serialization import deserialize_message  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+
+from mpc_local_planner.conversions import (  # noqa: E402
+    CMD_VEL_QOS,
+    DIAGNOSTICS_QOS,
+    GOAL_QOS,
+    LOCAL_PLAN_QOS,
+    ODOM_QOS,
+    PLAN_QOS,
+    seconds_to_stamp,
+    stamp_to_seconds,
+    state_to_odometry,
+)
+
+# /rosout as rclpy publishes it (Jazzy): reliable, transient_local, depth 1000.
+ROSOUT_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class RosHarness:
@@ -64,6 +94,10 @@ class RosHarness:
             self.executor.spin_once(timeout_sec=0.05)
         return condition()
 
+    def probe(self, *, use_sim_time: bool = False) -> Probe:
+        """Create a Probe in this context and spin it with the others."""
+        return self.add(Probe(self.context, use_sim_time=use_sim_time))
+
     def close(self) -> None:
         """Tear down in rclpy's order: executor, nodes, context."""
         import rclpy
@@ -82,3 +116,72 @@ def ros() -> Iterator[RosHarness]:
         yield harness
     finally:
         harness.close()
+
+
+@pytest.fixture(scope='module')
+def ros_module() -> Iterator[RosHarness]:
+    """Like ros, shared by a module's tests (hypothesis runs many examples on one node)."""
+    harness = RosHarness()
+    try:
+        yield harness
+    finally:
+        harness.close()
+
+
+class Probe(Node):
+    """A test node: publishes what the nodes listen to and keeps what they say.
+
+    Plans are kept as CDR bytes and deserialised on access (``plans``): a test that sends
+    100,000 poses should not spend seconds decoding its own message. Every node's log lines
+    come from /rosout (``logs``), and ``publish_clock`` lets a test own simulated time.
+    """
+
+    def __init__(self, context, *, use_sim_time: bool = False) -> None:  # noqa: ANN001
+        super().__init__('probe', context=context, parameter_overrides=[
+            Parameter('use_sim_time', value=use_sim_time)])
+        self.cmd_pub = self.create_publisher(Twist, 'cmd_vel', CMD_VEL_QOS)
+        self.odom_pub = self.create_publisher(Odometry, 'odom', ODOM_QOS)
+        self.plan_pub = self.create_publisher(Path, 'plan', PLAN_QOS)
+        self.goal_pub = self.create_publisher(PoseStamped, 'goal_pose', GOAL_QOS)
+        self.clock_pub = self.create_publisher(Clock, '/clock', 10)
+        self.odoms: list[Odometry] = []
+        self.cmds: list[Twist] = []
+        self.raw_plans: list[bytes] = []
+        self.local_plans: list[Path] = []
+        self.diagnostics: list[dict] = []
+        self.logs: list[Log] = []
+        self.create_subscription(Odometry, 'odom', self.odoms.append, ODOM_QOS)
+        self.create_subscription(Twist, 'cmd_vel', self.cmds.append, CMD_VEL_QOS)
+        self.create_subscription(Path, 'plan', self.raw_plans.append, PLAN_QOS, raw=True)
+        self.create_subscription(Path, 'local_plan', self.local_plans.append, LOCAL_PLAN_QOS)
+        self.create_subscription(DiagnosticArray, 'mpc/diagnostics', self._diagnostics,
+                                 DIAGNOSTICS_QOS)
+        self.create_subscription(Log, '/rosout', self.logs.append, ROSOUT_QOS)
+
+    @property
+    def plans(self) -> list[Path]:
+        """The plans received, deserialised."""
+        return [deserialize_message(raw, Path) for raw in self.raw_plans]
+
+    def _diagnostics(self, msg: DiagnosticArray) -> None:
+        status = msg.status[0]
+        values: dict = {kv.key: kv.value for kv in status.values}
+        values['message'] = status.message
+        values['level'] = int.from_bytes(status.level, 'little')
+        values['stamp'] = stamp_to_seconds(msg.header.stamp)
+        self.diagnostics.append(values)
+
+    def publish_odom(self, state, stamp: float | None = None) -> None:  # noqa: ANN001
+        """Publish odometry of state (x, y, yaw), stamped now or at stamp (seconds)."""
+        when = self.get_clock().now().to_msg() if stamp is None else seconds_to_stamp(stamp)
+        self.odom_pub.publish(state_to_odometry(np.asarray(state, dtype=float), np.zeros(2),
+                                                stamp=when))
+
+    def publish_clock(self, seconds: float) -> None:
+        """Publish simulated time (seconds)."""
+        self.clock_pub.publish(Clock(clock=seconds_to_stamp(seconds)))
+
+    def log_lines(self, node: str, level: int | None = None) -> list[str]:
+        """Return what node logged (at level, e.g. Log.ERROR, if given), in order."""
+        return [entry.msg for entry in self.logs
+                if entry.name == node and (level is None or entry.level == level)]

@@ -1,0 +1,335 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Bad input, stale data and solver failure end in a safe stop, and the nodes recover.
+
+Every test spins the real nodes in their own context. Where timing matters the test owns
+simulated time (it publishes /clock), so the assertions are about ROS time and do not depend
+on how loaded the machine is.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import time
+from typing import Callable
+
+from geometry_msgs.msg import PoseStamped, Twist
+from nav_msgs.msg import Odometry, Path
+import numpy as np
+import pytest
+from rcl_interfaces.msg import Log
+from rclpy.parameter import Parameter
+
+from mpc_local_planner.controller import REASON_OK, REASON_STALE_ODOM
+from mpc_local_planner.conversions import (
+    poses_to_path,
+    seconds_to_stamp,
+    state_to_odometry,
+    u_from_twist,
+    yaw_to_quaternion,
+)
+from mpc_local_planner.models import Unicycle
+from mpc_local_planner.mpc_controller_node import ERROR_THROTTLE_S, MpcControllerNode
+from mpc_local_planner.unicycle_simulator_node import UnicycleSimulatorNode
+from mpc_local_planner.worlds import paper_world
+
+WORLD = paper_world()
+# A plan around the paper's box (above it), headings as the planner sends them.
+PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
+                 [2.5, 0.0, WORLD.goal[2]]])
+U_MAX = Unicycle().u_max
+STEP = 0.2  # the controller's default control period (s)
+ODOM_TIMEOUT = 0.5  # the controller's default odom_timeout (s)
+
+
+# ----------------------------------------------------------------------------- helpers
+class SimClock:
+    """Simulated time owned by the test: each tick publishes odometry (if set), then /clock.
+
+    Args:
+        ros: the harness whose executor is spun between ticks.
+        probe: the Probe that publishes.
+        dt: simulated seconds per tick.
+
+    """
+
+    def __init__(self, ros, probe, dt: float = 0.05) -> None:  # noqa: ANN001
+        self.ros, self.probe, self.dt = ros, probe, dt
+        self.t = 1.0  # 0 is "no time yet" for a node with use_sim_time
+        self.odom: np.ndarray | Odometry | None = None
+        self.last_odom_stamp: float | None = None
+
+    def tick(self) -> None:
+        """Advance time by dt, publish, and let every node react."""
+        self.t += self.dt
+        if isinstance(self.odom, Odometry):
+            msg = copy.deepcopy(self.odom)
+            msg.header.stamp = seconds_to_stamp(self.t)
+            self.probe.odom_pub.publish(msg)
+        elif self.odom is not None:
+            self.probe.publish_odom(self.odom, stamp=self.t)
+        if self.odom is not None:
+            self.last_odom_stamp = self.t
+        self.probe.publish_clock(self.t)
+        for _ in range(6):
+            self.ros.executor.spin_once(timeout_sec=0.002)
+
+    def run_until(self, condition: Callable[[], bool], timeout: float = 30.0) -> bool:
+        """Tick until condition() holds or timeout wall seconds pass; return condition()."""
+        deadline = time.monotonic() + timeout
+        while not condition() and time.monotonic() < deadline:
+            self.tick()
+        return condition()
+
+
+def check_commands(probe) -> np.ndarray:  # noqa: ANN001
+    """Assert every cmd_vel so far is finite and within the unicycle's bounds; return them."""
+    commands = np.array([u_from_twist(c) for c in probe.cmds]).reshape(-1, 2)
+    raw = np.array([[c.linear.x, c.angular.z] for c in probe.cmds]).reshape(-1, 2)
+    assert np.all(np.isfinite(raw))
+    assert np.all(np.abs(raw) <= U_MAX + 1e-12)
+    return commands
+
+
+def applied(diag: dict) -> np.ndarray:
+    """The (v, omega) a control step published, from its diagnostics."""
+    return np.array([float(diag['v']), float(diag['omega'])])
+
+
+def tracking(probe, after: int = 0) -> bool:  # noqa: ANN001
+    """Say whether a step after the first `after` diagnostics drove on a solver solution."""
+    return any(d['message'] == REASON_OK and d['source'] == 'solver' and applied(d)[0] > 0.01
+               for d in probe.diagnostics[after:])
+
+
+def errors(probe, node: str, text: str) -> list[str]:  # noqa: ANN001
+    """Error lines node logged that contain text."""
+    return [line for line in probe.log_lines(node, Log.ERROR) if text in line]
+
+
+def start_controller(ros, **params) -> tuple[MpcControllerNode, object, SimClock]:  # noqa: ANN001, ANN003
+    """A controller in simulated time with a probe that owns the clock; tracking PLAN."""
+    overrides = [Parameter('use_sim_time', value=True)]
+    overrides += [Parameter(k, value=v) for k, v in params.items()]
+    node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=overrides))
+    probe = ros.probe(use_sim_time=True)
+    clock = SimClock(ros, probe)
+    assert ros.spin_until(lambda: probe.plan_pub.get_subscription_count() > 0
+                          and probe.odom_pub.get_subscription_count() > 0)
+    if not params.get('analytic_path'):
+        probe.plan_pub.publish(poses_to_path(PLAN))
+    clock.odom = WORLD.start.copy()
+    assert clock.run_until(lambda: tracking(probe))
+    return node, probe, clock
+
+
+# ----------------------------------------------------------------------------- 1. bad input
+def odometry_with(**changes: float) -> Odometry:
+    """Odometry at the start pose with some fields replaced (e.g. x=nan, qw=0)."""
+    msg = state_to_odometry(WORLD.start, np.zeros(2), stamp=seconds_to_stamp(0.0))
+    position, q = msg.pose.pose.position, msg.pose.pose.orientation
+    for name, value in changes.items():
+        if name in ('x', 'y'):
+            setattr(position, name, value)
+        else:
+            setattr(q, name[1], value)  # qx, qy, qz, qw
+    return msg
+
+
+def path_message(poses: np.ndarray, frame_id: str = 'map') -> Path:
+    """A nav_msgs/Path of (M, 3) poses, NaN allowed (poses_to_path refuses NaN)."""
+    msg = Path()
+    msg.header.frame_id = frame_id
+    for x, y, yaw in np.asarray(poses, dtype=float).reshape(-1, 3):
+        pose = PoseStamped()
+        pose.header.frame_id = frame_id
+        pose.pose.position.x, pose.pose.position.y = float(x), float(y)
+        pose.pose.orientation = yaw_to_quaternion(yaw if math.isfinite(yaw) else 0.0)
+        msg.poses.append(pose)
+    return msg
+
+
+def dense_plan(count: int) -> Path:
+    t = np.linspace(0.0, 1.0, count)
+    poses = np.column_stack([2.5 * t, 1.3 * np.sin(np.pi * t), np.zeros(count)])
+    return poses_to_path(poses)
+
+
+BAD_ODOMETRY = {
+    'nan position': (odometry_with(x=math.nan), 'position must be finite'),
+    'inf position': (odometry_with(y=math.inf), 'position must be finite'),
+    'zero-norm quaternion': (odometry_with(qx=0.0, qy=0.0, qz=0.0, qw=0.0), 'no orientation'),
+    'nan quaternion': (odometry_with(qw=math.nan), 'no orientation'),
+    'position 1e9 m away': (odometry_with(x=1e9), 'more than 1e+06 m'),
+}
+
+BAD_PLANS = {
+    'empty': (lambda: path_message(np.zeros((0, 3))), 'needs at least two poses, got 0'),
+    'one pose': (lambda: path_message(PLAN[:1]), 'needs at least two poses, got 1'),
+    'nan': (lambda: path_message(np.vstack([PLAN[:2], [[math.nan, 1.0, 0.0]], PLAN[2:]])),
+            'position must be finite'),
+    'one point repeated': (lambda: path_message(np.tile(PLAN[1], (5, 1))), 'two distinct'),
+    'through the obstacle': (lambda: path_message(np.array([WORLD.start, WORLD.goal])),
+                             'passes through obstacle 0'),
+    'frame odom': (lambda: path_message(PLAN, frame_id='odom'), "frame 'odom' is not 'map'"),
+    '100,000 poses': (lambda: dense_plan(100_000),
+                      '100000 poses, more than max_plan_poses (10000)'),
+}
+
+
+def check_refusal(ros, probe, clock, prefix: str, text: str,  # noqa: ANN001
+                  restore: Callable[[], None]) -> None:
+    """The command goes to zero with the problem as the reason; one error; then recovery."""
+    first = len(probe.diagnostics)
+    began = time.monotonic()
+
+    def refused() -> list[dict]:
+        return [d for d in probe.diagnostics[first:]
+                if d['message'].startswith(prefix) and text in d['message']]
+
+    # a few refused steps, and the error line from /rosout
+    assert clock.run_until(lambda: len(refused()) >= 3
+                           and errors(probe, 'mpc_controller', text)), probe.diagnostics[-3:]
+    for diag in refused():
+        np.testing.assert_array_equal(applied(diag), [0.0, 0.0])
+        assert diag['level'] == 2  # DiagnosticStatus.ERROR
+    # every step after the first refused one commands zero until the input is fixed
+    index = probe.diagnostics.index(refused()[0])
+    assert all(not applied(d).any() for d in probe.diagnostics[index:])
+    lines = errors(probe, 'mpc_controller', text)
+    assert 1 <= len(lines) <= 1 + (time.monotonic() - began) / ERROR_THROTTLE_S, lines
+    assert 'zero' in lines[0]
+
+    restore()
+    after = len(probe.diagnostics)
+    assert clock.run_until(lambda: tracking(probe, after)), probe.diagnostics[-3:]
+    check_commands(probe)
+
+
+@pytest.mark.parametrize('case', list(BAD_ODOMETRY))
+def test_bad_odometry_stops_the_robot_with_one_error_and_it_resumes(ros, case: str) -> None:  # noqa: ANN001
+    _, probe, clock = start_controller(ros)
+    message, text = BAD_ODOMETRY[case]
+    clock.odom = message
+
+    def restore() -> None:
+        clock.odom = WORLD.start.copy()
+
+    check_refusal(ros, probe, clock, 'invalid odometry', text, restore)
+    assert any('odometry is valid again' in line
+               for line in probe.log_lines('mpc_controller', Log.INFO))
+
+
+@pytest.mark.parametrize('case', list(BAD_PLANS))
+def test_a_bad_plan_stops_the_robot_with_one_error_and_a_valid_one_resumes(ros, case: str) -> None:  # noqa: ANN001
+    _, probe, clock = start_controller(ros)
+    make, text = BAD_PLANS[case]
+    probe.plan_pub.publish(make())
+    check_refusal(ros, probe, clock, 'invalid plan', text,
+                  lambda: probe.plan_pub.publish(poses_to_path(PLAN)))
+
+
+def test_a_plan_with_repeated_points_is_followed_without_them(ros) -> None:  # noqa: ANN001
+    _, probe, clock = start_controller(ros)
+    repeated = np.repeat(PLAN, 3, axis=0)  # every waypoint three times
+    after = len(probe.diagnostics)
+    probe.plan_pub.publish(poses_to_path(repeated))
+    assert clock.run_until(
+        lambda: any('new plan: 12 poses' in line
+                    for line in probe.log_lines('mpc_controller', Log.INFO)))
+    assert clock.run_until(lambda: tracking(probe, after))
+    assert not errors(probe, 'mpc_controller', 'invalid plan')
+    check_commands(probe)
+
+
+# ----------------------------------------------------------------------------- 2. stale data
+def test_stale_odometry_gives_zero_within_one_control_period_and_fresh_odometry_resumes(
+        ros) -> None:  # noqa: ANN001
+    _, probe, clock = start_controller(ros)
+    clock.odom = None  # the odometry stops
+    last = clock.last_odom_stamp
+    first = len(probe.diagnostics)
+
+    def stale() -> list[dict]:
+        return [d for d in probe.diagnostics[first:] if d['message'] == REASON_STALE_ODOM]
+
+    assert clock.run_until(lambda: bool(stale()))
+    # the first step later than odom_timeout after the last odometry commands zero
+    assert stale()[0]['stamp'] <= last + ODOM_TIMEOUT + STEP + 1e-6
+    np.testing.assert_array_equal(applied(stale()[0]), [0.0, 0.0])
+    index = probe.diagnostics.index(stale()[0])
+    # until then the robot was driven on odometry at most odom_timeout old
+    for diag in probe.diagnostics[first:index]:
+        assert diag['stamp'] - last <= ODOM_TIMEOUT + 1e-6
+    assert clock.run_until(lambda: len(stale()) >= 3)
+    assert all(not applied(d).any() for d in probe.diagnostics[index:])
+
+    clock.odom = WORLD.start.copy()
+    after = len(probe.diagnostics)
+    assert clock.run_until(lambda: tracking(probe, after))
+    check_commands(probe)
+
+
+def test_odometry_stamped_in_the_future_goes_stale_when_it_stops(ros) -> None:  # noqa: ANN001
+    _, probe, clock = start_controller(ros)
+    clock.odom = None
+    probe.publish_odom(WORLD.start, stamp=clock.t + 3600.0)  # a clock an hour ahead
+    stop = clock.t
+    first = len(probe.diagnostics)
+    assert clock.run_until(lambda: any(d['message'] == REASON_STALE_ODOM
+                                       for d in probe.diagnostics[first:]))
+    stale = next(d for d in probe.diagnostics[first:] if d['message'] == REASON_STALE_ODOM)
+    assert stale['stamp'] <= stop + ODOM_TIMEOUT + STEP + clock.dt + 1e-6
+
+
+def test_simulator_stops_the_robot_when_cmd_vel_stops_for_cmd_timeout(ros) -> None:  # noqa: ANN001
+    rate, timeout = 50.0, 0.5
+    ros.add(UnicycleSimulatorNode(context=ros.context, parameter_overrides=[
+        Parameter('publish_clock', value=True), Parameter('real_time_factor', value=5.0),
+        Parameter('rate', value=rate), Parameter('cmd_timeout', value=timeout)]))
+    probe = ros.probe()
+    assert ros.spin_until(lambda: probe.cmd_pub.get_subscription_count() > 0)
+    twist = Twist()
+    twist.linear.x, twist.angular.z = 0.2, 0.3
+    probe.cmd_pub.publish(twist)  # once: then the "controller" goes silent
+
+    def moving() -> list[Odometry]:
+        return [m for m in probe.odoms if m.twist.twist.linear.x != 0.0]
+
+    def stopped_after_moving() -> bool:
+        moved = moving()
+        return bool(moved) and probe.odoms[-1].twist.twist.linear.x == 0.0 and len(
+            probe.odoms) > probe.odoms.index(moved[-1]) + 10
+
+    assert ros.spin_until(stopped_after_moving, timeout=20.0)
+    moved = moving()
+    stamps = [m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in moved]
+    # it drove for cmd_timeout of simulated time (to a tick), then stood still
+    assert stamps[-1] - stamps[0] == pytest.approx(timeout, abs=2.0 / rate + 1e-9)
+    rest = probe.odoms[probe.odoms.index(moved[-1]) + 1:]
+    positions = np.array([[m.pose.pose.position.x, m.pose.pose.position.y] for m in rest])
+    np.testing.assert_array_equal(positions, positions[:1].repeat(len(positions), axis=0))
+
+    # a non-finite command stops it at the next tick, with an error, whatever the rest says
+    probe.cmd_pub.publish(twist)
+    assert ros.spin_until(lambda: probe.odoms[-1].twist.twist.linear.x != 0.0)
+    bad = Twist()
+    bad.linear.x, bad.angular.z = math.nan, 0.5
+    probe.cmd_pub.publish(bad)
+    count = len(probe.odoms)
+    assert ros.spin_until(lambda: len(probe.odoms) > count + 3
+                          and probe.odoms[-1].twist.twist.angular.z == 0.0)
+    assert ros.spin_until(lambda: errors(probe, 'unicycle_simulator', 'invalid cmd_vel'))
+    assert probe.odoms[-1].twist.twist.linear.x == 0.0
