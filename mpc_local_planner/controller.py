@@ -51,6 +51,7 @@ __all__ = [
     'ControlOutput',
     'MAX_COORDINATE',
     'MpcController',
+    'REASON_CANDIDATE',
     'REASON_ERROR',
     'REASON_GOAL',
     'REASON_INVALID_ODOM',
@@ -72,6 +73,9 @@ REASON_NO_ODOM = 'no odometry yet'
 REASON_STALE_ODOM = 'odometry is stale'
 REASON_GOAL = 'goal reached'
 REASON_STOP = 'no feasible input: stopping'
+# The input is the proof's shifted candidate, not a fresh solver solution (verified all the
+# same; it runs out after N steps).
+REASON_CANDIDATE = 'no verified solver solution: applying the shifted candidate'
 REASON_ERROR = 'error'
 # Prefixes of the reasons for refused input (followed by ': ' and the problem).
 REASON_INVALID_ODOM = 'invalid odometry'
@@ -93,7 +97,8 @@ class ControlOutput(NamedTuple):
     """What to command now, and why.
 
     Attributes:
-        u: (2,) input (v, omega) within the model's bounds; zero unless reason is REASON_OK.
+        u: (2,) input (v, omega) within the model's bounds; zero unless reason is REASON_OK
+            or REASON_CANDIDATE.
         solution: the MPC's solution when it ran, else None.
         reason: REASON_OK or why the command is zero (REASON_ERROR is followed by ': ...').
 
@@ -378,7 +383,7 @@ class MpcController:
             self._solver_failures += 1
         if solution.source == 'stop':
             return ControlOutput(zero, solution, REASON_STOP)
-        if solution.source != 'solver' and solution.failures > self._config.horizon:
+        if solution.source == 'candidate' and solution.failures > self._config.horizon:
             # the shifted candidate has run out (N shifts leave only steady-state inputs):
             # stop, and let the next step start over from the measured state
             self._mpc.reset()
@@ -390,7 +395,7 @@ class MpcController:
             self._solved_last_step = False
             return ControlOutput(zero, solution, f'{REASON_ERROR}: non-finite input {u}')
         u = np.clip(u, self._model.u_min, self._model.u_max)
-        return ControlOutput(u, solution, REASON_OK)
+        return ControlOutput(u, solution, REASON_OK if solution.success else REASON_CANDIDATE)
 
     def stop(self, reason: str) -> ControlOutput:
         """Return a zero command with reason (the node's verdict on refused input).

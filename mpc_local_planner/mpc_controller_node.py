@@ -50,6 +50,7 @@ from .controller import (
     ControllerSettings,
     ControlOutput,
     MpcController,
+    REASON_CANDIDATE,
     REASON_GOAL,
     REASON_INVALID_ODOM,
     REASON_INVALID_PLAN,
@@ -452,7 +453,7 @@ class MpcControllerNode(Node):
         if reason.startswith('error'):
             if self._problems.report('error'):
                 self.get_logger().error(reason)
-        elif reason in (REASON_STALE_ODOM, REASON_STOP):
+        elif reason in (REASON_STALE_ODOM, REASON_STOP, REASON_CANDIDATE):
             self.get_logger().warning(
                 f'{reason}: cmd_vel is zero (solver failures so far: '
                 f'{self.controller.solver_failures})')

@@ -32,7 +32,12 @@ import pytest
 from rcl_interfaces.msg import Log
 from rclpy.parameter import Parameter
 
-from mpc_local_planner.controller import REASON_OK, REASON_STALE_ODOM
+from mpc_local_planner.controller import (
+    REASON_CANDIDATE,
+    REASON_OK,
+    REASON_STALE_ODOM,
+    REASON_STOP,
+)
 from mpc_local_planner.conversions import (
     poses_to_path,
     seconds_to_stamp,
@@ -333,3 +338,87 @@ def test_simulator_stops_the_robot_when_cmd_vel_stops_for_cmd_timeout(ros) -> No
                           and probe.odoms[-1].twist.twist.angular.z == 0.0)
     assert ros.spin_until(lambda: errors(probe, 'unicycle_simulator', 'invalid cmd_vel'))
     assert probe.odoms[-1].twist.twist.linear.x == 0.0
+
+
+# ----------------------------------------------------------------------------- 3. solver failure
+def failing_solver(nlp, w0, params, selected, solver=None):  # noqa: ANN001, ANN201, ARG001
+    """Stand-in for PathReferenceMPC._run_solver: every NLP solve fails (IPOPT's too)."""
+    return False, np.asarray(w0, dtype=float), math.inf, 'injected failure', 0, 0.0
+
+
+def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_then_stop(
+        ros, monkeypatch) -> None:  # noqa: ANN001
+    horizon = 10
+    ros.add(UnicycleSimulatorNode(context=ros.context, parameter_overrides=[
+        Parameter('publish_clock', value=True), Parameter('real_time_factor', value=2.0),
+        Parameter('initial_pose', value=[float(v) for v in WORLD.start])]))
+    node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=[
+        Parameter('use_sim_time', value=True), Parameter('analytic_path', value='paper_sinusoid'),
+        Parameter('horizon', value=horizon)]))
+    probe = ros.probe(use_sim_time=True)
+
+    def driving_on_the_solver() -> bool:
+        out = node.last_output
+        solved = sum(d['source'] == 'solver' for d in probe.diagnostics)
+        return (solved >= 5 and out is not None and out.solution is not None
+                and out.solution.success and out.u[0] > 0.05)
+
+    assert ros.spin_until(driving_on_the_solver, timeout=60.0)
+    verified = node.last_output.solution  # the last plan the solver gave
+    patched_at = node.get_clock().now().nanoseconds * 1e-9
+    failures_before = node.controller.solver_failures
+    monkeypatch.setattr(node.controller.mpc, '_run_solver', failing_solver)
+
+    def after_patch() -> list[dict]:
+        return [d for d in probe.diagnostics if d['stamp'] > patched_at]
+
+    assert ros.spin_until(lambda: sum(d['message'] == REASON_STOP for d in after_patch()) >= 3,
+                          timeout=60.0), after_patch()[-3:]
+    steps = after_patch()
+    candidates = [d for d in steps if d['source'] == 'candidate' and applied(d).any()]
+    # the proof's candidate: the verified inputs shifted by one step per failure...
+    assert 1 <= len(candidates) <= horizon
+    for k, diag in enumerate(candidates, start=1):
+        assert diag['message'] == REASON_CANDIDATE
+        assert int(diag['failures']) == k
+        np.testing.assert_allclose(applied(diag), verified.u_pred[k], atol=1e-12)
+    # ...then it has run out: zero from the N-th failure on, the robot stops
+    stop = steps.index(next(d for d in steps if d['message'] == REASON_STOP))
+    assert int(steps[stop]['failures']) == horizon + 1
+    assert all(not applied(d).any() for d in steps[len(candidates):])
+    assert steps[stop]['level'] == 2
+    assert int(steps[-1]['failures_total']) >= failures_before + horizon + 1
+    assert ros.spin_until(lambda: abs(probe.odoms[-1].twist.twist.linear.x) < 1e-12
+                          and abs(probe.odoms[-1].twist.twist.angular.z) < 1e-12)
+    assert any(REASON_STOP in line for line in probe.log_lines('mpc_controller', Log.WARN))
+    check_commands(probe)
+
+    # the solver is back: the robot drives on
+    monkeypatch.undo()
+    resumed = len(probe.diagnostics)
+    assert ros.spin_until(lambda: tracking(probe, resumed), timeout=30.0)
+    check_commands(probe)
+
+
+def test_a_state_inside_the_obstacle_is_infeasible_the_robot_stops_and_resumes_outside(
+        ros) -> None:  # noqa: ANN001
+    node, probe, clock = start_controller(ros)
+    failures = node.controller.solver_failures
+    first = len(probe.diagnostics)
+    clock.odom = np.array([1.25, 0.0, 0.0])  # inside the box: no input keeps it clear
+
+    def stopped() -> list[dict]:
+        return [d for d in probe.diagnostics[first:] if d['message'] == REASON_STOP]
+
+    assert clock.run_until(lambda: len(stopped()) >= 2)
+    for diag in stopped():
+        np.testing.assert_array_equal(applied(diag), [0.0, 0.0])
+        assert diag['source'] == 'stop' and diag['level'] == 2
+        assert int(diag['failures']) >= 1
+    assert node.controller.solver_failures >= failures + 2
+    assert int(stopped()[-1]['failures_total']) > failures
+    check_commands(probe)
+
+    clock.odom = WORLD.start.copy()
+    after = len(probe.diagnostics)
+    assert clock.run_until(lambda: tracking(probe, after))
