@@ -19,11 +19,16 @@ The goal comes from the ``goal`` parameter ([x, y, theta]) or a PoseStamped on
 ``odom`` pose, around the world's obstacles inflated by robot_radius + clearance, and
 published on ``plan`` (reliable, transient_local: a late controller still gets it). With
 ``analytic_path`` set the node publishes that path, sampled, instead of planning.
+
+A goal it cannot plan to (inside an obstacle, out of bounds, not finite, in another frame),
+or a start in collision, is logged as an error and nothing is published: the plan in force
+stays, and the next valid goal is planned as usual.
 """
 
 from __future__ import annotations
 
 import math
+import sys
 from typing import Any
 
 from geometry_msgs.msg import PoseStamped
@@ -31,7 +36,7 @@ from nav_msgs.msg import Odometry, Path
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
-from rclpy.exceptions import ParameterUninitializedException
+from rclpy.exceptions import ParameterException, ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -52,6 +57,9 @@ from .planner import PlannerConfig, RrtStarPlanner
 from .worlds import load_world, World
 
 __all__ = ['GlobalPlannerNode', 'main', 'waypoints_to_poses']
+
+# Exit code of main() when the parameters (or the world file) are invalid.
+EXIT_INVALID_PARAMETERS = 2
 
 # Poses of a published analytic path (enough for RViz and for a polyline controller).
 ANALYTIC_SAMPLES = 101
@@ -141,8 +149,8 @@ class GlobalPlannerNode(Node):
             elif parameter.name == 'world_file':
                 try:
                     load_world(resolve_data_file(str(parameter.value)))
-                except (FileNotFoundError, ValueError) as err:
-                    reasons.append(str(err))
+                except Exception as err:  # noqa: BLE001 (any failure to load refuses it)
+                    reasons.append(str(err) or type(err).__name__)
             elif parameter.name == 'analytic_path' and parameter.value:
                 try:
                     analytic_path(str(parameter.value))
@@ -155,9 +163,13 @@ class GlobalPlannerNode(Node):
     def post_parameters_callback(self, parameters: list[Parameter]) -> None:
         """Rebuild the planner after a change; a new goal is planned at once."""
         names = {p.name for p in parameters}
-        if 'world_file' in names:
-            self._world = self._read_world()
-        self._planner = self._make_planner()
+        try:
+            if 'world_file' in names:
+                self._world = self._read_world()
+            self._planner = self._make_planner()
+        except Exception as err:  # noqa: BLE001 (validated above: a bug, but keep running)
+            self.get_logger().error(f'could not apply {sorted(names)}: {err}')
+            return
         if 'goal' in names:
             self._pending_goal = self._goal_parameter()
             self._try_plan()
@@ -200,10 +212,15 @@ class GlobalPlannerNode(Node):
 
     def goal_callback(self, msg: PoseStamped) -> None:
         """Plan to a goal sent as a PoseStamped (RViz's 2D Goal Pose)."""
+        frame = str(self.get_parameter('frame_id').value)
         try:
+            if msg.header.frame_id != frame:
+                problem = (f'frame {msg.header.frame_id!r} is not {frame!r} (this node does '
+                           'not transform goals)')
+                raise ValueError(problem)
             goal = pose_to_array(msg.pose)
         except ValueError as err:
-            self.get_logger().error(f'goal refused: {err}')
+            self.get_logger().error(f'goal refused, no plan published: {err}')
             return
         self._pending_goal = goal
         self._try_plan()
@@ -219,7 +236,8 @@ class GlobalPlannerNode(Node):
         try:
             waypoints = self._planner.plan(start, goal)
         except PlanningError as err:
-            self.get_logger().error(f'no plan to ({goal[0]:g}, {goal[1]:g}): {err}')
+            self.get_logger().error(
+                f'no plan to ({goal[0]:g}, {goal[1]:g}), none published: {err}')
             return
         except Exception as err:  # noqa: BLE001 (never let a callback kill the executor)
             self.get_logger().error(f'planner failed: {type(err).__name__}: {err}')
@@ -242,12 +260,16 @@ class GlobalPlannerNode(Node):
         self.get_logger().info(f'published a plan: {len(poses)} poses, {length:.2f} m')
 
 
-def main(args: list[str] | None = None) -> None:
-    """Run the planner until Ctrl-C."""
+def main(args: list[str] | None = None) -> int:
+    """Run the planner until Ctrl-C; return EXIT_INVALID_PARAMETERS on invalid parameters."""
     rclpy.init(args=args)
     node = None
     try:
-        node = GlobalPlannerNode()
+        try:
+            node = GlobalPlannerNode()
+        except (ParameterException, ValueError, TypeError, OSError) as err:
+            print(f'global_planner: refusing to start: {err}', file=sys.stderr, flush=True)
+            return EXIT_INVALID_PARAMETERS
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -255,7 +277,8 @@ def main(args: list[str] | None = None) -> None:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

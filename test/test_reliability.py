@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import copy
 import math
+import subprocess
+import sys
 import time
 from typing import Callable
 
@@ -32,6 +34,7 @@ import pytest
 from rcl_interfaces.msg import Log
 from rclpy.parameter import Parameter
 
+from mpc_local_planner.closed_loop import MODULES
 from mpc_local_planner.controller import (
     REASON_CANDIDATE,
     REASON_OK,
@@ -45,6 +48,7 @@ from mpc_local_planner.conversions import (
     u_from_twist,
     yaw_to_quaternion,
 )
+from mpc_local_planner.global_planner_node import GlobalPlannerNode
 from mpc_local_planner.models import Unicycle
 from mpc_local_planner.mpc_controller_node import ERROR_THROTTLE_S, MpcControllerNode
 from mpc_local_planner.unicycle_simulator_node import UnicycleSimulatorNode
@@ -422,3 +426,92 @@ def test_a_state_inside_the_obstacle_is_infeasible_the_robot_stops_and_resumes_o
     clock.odom = WORLD.start.copy()
     after = len(probe.diagnostics)
     assert clock.run_until(lambda: tracking(probe, after))
+
+
+# ----------------------------------------------------------------------------- 4. parameters
+MALFORMED_WORLD = 'bounds: [0, 1\n'  # not YAML
+# A decagon: more faces than the NLP's obstacle slots hold (faces_per_obstacle = 8).
+DECAGON_WORLD = """bounds: [-5, 5, -5, 5]
+obstacles:
+  - polygon: [{}]
+start: [-3.0, 0.0, 0.0]
+goal: [3.0, 0.0, 0.0]
+""".format(', '.join(f'[{math.cos(a):.6f}, {math.sin(a):.6f}]'
+                     for a in np.linspace(0, 2 * math.pi, 10, endpoint=False)))
+
+
+def test_invalid_parameters_refuse_to_start_with_a_reason_on_stderr_and_exit_code_2(
+        tmp_path) -> None:  # noqa: ANN001
+    malformed = tmp_path / 'malformed.yaml'
+    malformed.write_text(MALFORMED_WORLD)
+    cases = {
+        'horizon 0': ('mpc_controller', 'horizon:=0', 'horizon out of range'),
+        'step 0': ('mpc_controller', 'step:=0.0', 'step out of range'),
+        'step as an integer': ('mpc_controller', 'step:=0', "parameter 'step'"),
+        'negative weight': ('mpc_controller', 'weights.position:=-1.0',
+                            'weights.position out of range'),
+        'v_max 0': ('mpc_controller', 'v_max:=0.0', 'v_max out of range'),
+        'missing world': ('mpc_controller', 'world_file:=/no/such/world.yaml', 'not found'),
+        'malformed world': ('mpc_controller', f'world_file:={malformed}', 'not valid YAML'),
+        'planner, missing world': ('global_planner', 'world_file:=/no/such/world.yaml',
+                                   'not found'),
+        'planner, malformed world': ('global_planner', f'world_file:={malformed}',
+                                     'not valid YAML'),
+        'simulator, NaN pose': ('unicycle_simulator', 'initial_pose:=[.nan, 0.0, 0.0]',
+                                'initial_pose must be'),
+    }
+    processes = {}
+    try:
+        for case, (name, argument, _) in cases.items():
+            command = [sys.executable, '-m', MODULES[name], '--ros-args', '-p', argument]
+            processes[case] = subprocess.Popen(command, stdout=subprocess.PIPE,
+                                               stderr=subprocess.PIPE, text=True)
+        problems = []
+        for case, process in processes.items():
+            _, stderr = process.communicate(timeout=120)
+            name, _, reason = cases[case]
+            if (process.returncode != 2 or f'{name}: refusing to start' not in stderr
+                    or reason not in stderr or 'Traceback' in stderr):
+                problems.append(f'{case}: exit {process.returncode}, stderr {stderr!r}')
+        assert not problems, '\n'.join(problems)
+    finally:
+        for process in processes.values():
+            if process.poll() is None:
+                process.kill()
+                process.wait()
+
+
+def test_invalid_parameters_at_run_time_are_refused_with_a_reason_and_the_node_runs_on(
+        ros, tmp_path) -> None:  # noqa: ANN001
+    (tmp_path / 'malformed.yaml').write_text(MALFORMED_WORLD)
+    (tmp_path / 'decagon.yaml').write_text(DECAGON_WORLD)
+    node, probe, clock = start_controller(ros)
+    cases = [
+        ('horizon', 0, 'horizon out of range'),
+        ('step', 0.0, 'step out of range'),
+        ('weights.position', -1.0, 'weights.position out of range'),
+        ('v_max', 0.0, 'v_max out of range'),
+        ('offset_weight', 0.0, 'offset_weight out of range'),
+        ('odom_timeout', -1.0, 'odom_timeout out of range'),
+        ('max_plan_poses', 1, 'max_plan_poses out of range'),
+        ('solver', 'no_such_solver', 'solver must be one of'),
+        ('world_file', str(tmp_path / 'no_such.yaml'), 'not found'),
+        ('world_file', str(tmp_path / 'malformed.yaml'), 'not valid YAML'),
+        ('world_file', str(tmp_path / 'decagon.yaml'), 'more than faces_per_obstacle'),
+    ]
+    for name, value, reason in cases:
+        before = node.get_parameter(name).value
+        result = node.set_parameters([Parameter(name, value=value)])[0]
+        assert not result.successful, name
+        assert reason in result.reason, (name, result.reason)
+        assert node.get_parameter(name).value == before
+    after = len(probe.diagnostics)
+    assert clock.run_until(lambda: tracking(probe, after))
+
+    planner = ros.add(GlobalPlannerNode(context=ros.context))
+    result = planner.set_parameters([Parameter('world_file',
+                                               value=str(tmp_path / 'malformed.yaml'))])[0]
+    assert not result.successful and 'not valid YAML' in result.reason
+    simulator = ros.add(UnicycleSimulatorNode(context=ros.context))
+    result = simulator.set_parameters([Parameter('initial_pose', value=[math.nan, 0.0, 0.0])])[0]
+    assert not result.successful and 'initial_pose must be' in result.reason
