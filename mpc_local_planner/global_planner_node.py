@@ -200,6 +200,11 @@ class GlobalPlannerNode(Node):
         return np.array(goal, dtype=float)
 
     # ------------------------------------------------------------------ callbacks
+    @property
+    def robot_pose(self) -> np.ndarray | None:
+        """The latest valid odometry pose (x, y, yaw) plans start from, or None."""
+        return None if self._state is None else self._state.copy()
+
     def odom_callback(self, msg: Odometry) -> None:
         """Keep the robot's pose; plan a pending goal once the pose is known."""
         try:

@@ -36,12 +36,14 @@ from rclpy.parameter import Parameter
 
 from mpc_local_planner.closed_loop import MODULES
 from mpc_local_planner.controller import (
+    first_blocked_segment,
     REASON_CANDIDATE,
     REASON_OK,
     REASON_STALE_ODOM,
     REASON_STOP,
 )
 from mpc_local_planner.conversions import (
+    path_to_poses,
     poses_to_path,
     seconds_to_stamp,
     state_to_odometry,
@@ -515,3 +517,93 @@ def test_invalid_parameters_at_run_time_are_refused_with_a_reason_and_the_node_r
     simulator = ros.add(UnicycleSimulatorNode(context=ros.context))
     result = simulator.set_parameters([Parameter('initial_pose', value=[math.nan, 0.0, 0.0])])[0]
     assert not result.successful and 'initial_pose must be' in result.reason
+
+
+# ----------------------------------------------------------------------------- 5. planner
+def goal_message(x: float, y: float, yaw: float = 0.0, frame_id: str = 'map') -> PoseStamped:
+    goal = PoseStamped()
+    goal.header.frame_id = frame_id
+    goal.pose.position.x, goal.pose.position.y = x, y
+    goal.pose.orientation = yaw_to_quaternion(yaw)
+    return goal
+
+
+def start_planner(ros) -> tuple[GlobalPlannerNode, object]:  # noqa: ANN001
+    planner = ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
+        Parameter('world_file', value='paper_obstacle.yaml')]))
+    probe = ros.probe()
+    assert ros.spin_until(lambda: probe.goal_pub.get_subscription_count() > 0
+                          and probe.odom_pub.get_subscription_count() > 0)
+    return planner, probe
+
+
+def refuse_goal(ros, planner, probe, goal: PoseStamped, state: np.ndarray, text: str) -> None:  # noqa: ANN001
+    """Send goal with the robot at state: an error that says text, and no plan."""
+    plans = planner.plan_count
+    probe.goal_pub.publish(goal)
+
+    def refused() -> bool:
+        probe.publish_odom(state)
+        return bool(errors(probe, 'global_planner', text))
+
+    assert ros.spin_until(refused, timeout=20.0), probe.log_lines('global_planner')
+    assert 'no plan' in errors(probe, 'global_planner', text)[-1]
+    assert planner.plan_count == plans
+
+
+def plan_to(ros, planner, probe, goal: np.ndarray, state: np.ndarray) -> np.ndarray:  # noqa: ANN001
+    """Send a valid goal: the plan from state to goal, as published."""
+    plans = planner.plan_count
+    received = len(probe.raw_plans)
+
+    def located() -> bool:
+        probe.publish_odom(state)
+        pose = planner.robot_pose
+        return pose is not None and np.allclose(pose, state)
+
+    assert ros.spin_until(located)
+    probe.goal_pub.publish(goal_message(*goal))
+
+    def planned() -> bool:
+        probe.publish_odom(state)
+        return planner.plan_count > plans and len(probe.raw_plans) > received
+
+    assert ros.spin_until(planned, timeout=20.0)
+    assert planner.plan_count == plans + 1
+    poses = path_to_poses(probe.plans[-1])
+    np.testing.assert_allclose(poses[0], state, atol=1e-9)
+    np.testing.assert_allclose(poses[-1], goal, atol=1e-9)
+    return poses
+
+
+def test_planner_refuses_goals_it_cannot_reach_publishes_nothing_and_plans_the_next(
+        ros) -> None:  # noqa: ANN001
+    planner, probe = start_planner(ros)
+    start = np.array([0.1, -0.2, 0.3])
+    nan_goal = goal_message(0.0, 0.0)
+    nan_goal.pose.position.y = math.nan
+    no_orientation = goal_message(2.5, 1.5)
+    no_orientation.pose.orientation.w = 0.0
+    cases = [
+        (goal_message(1.25, 0.0), 'goal (1.25, 0) is in collision with obstacle 0'),
+        (goal_message(10.0, 0.0), 'goal (10, 0) is outside the bounds'),
+        (nan_goal, 'position must be finite'),
+        (no_orientation, 'no orientation'),
+        (goal_message(2.5, 1.5, frame_id='odom'), "frame 'odom' is not 'map'"),
+    ]
+    for goal, text in cases:
+        refuse_goal(ros, planner, probe, goal, start, text)
+    assert probe.raw_plans == []
+    plan_to(ros, planner, probe, np.array([2.5, 1.5, 1.0]), start)
+
+
+def test_planner_publishes_no_plan_from_a_start_in_collision_and_plans_once_clear(ros) -> None:  # noqa: ANN001
+    planner, probe = start_planner(ros)
+    goal = np.array([2.5, 0.0, 0.0])
+    refuse_goal(ros, planner, probe, goal_message(*goal), np.array([1.25, 0.5, 0.0]),
+                'start (1.25, 0.5) is in collision with obstacle 0')
+    assert probe.raw_plans == []
+    poses = plan_to(ros, planner, probe, goal, np.array(WORLD.start))
+    inflated = [o.inflate(0.99 * planner.get_parameter('clearance').value)
+                for o in WORLD.obstacles]
+    assert first_blocked_segment(inflated, poses[:, :2]) is None
