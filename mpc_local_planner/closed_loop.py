@@ -23,6 +23,12 @@ the goal reached, at the world's (or ``--time-limit``) simulated time limit, or 
 ``--timeout`` in wall seconds. Then the bag is analysed: ``--out`` receives ``bag/``,
 ``trajectory.csv``, ``metrics.json`` and ``trajectory.png``. Exit code 0 iff the target was
 reached without collision.
+
+With ``--respawn`` (separate processes only) a node process that exits is started again, as
+launch's ``respawn``, instead of ending the run: kill the controller mid-run and the
+simulator stops the robot after ``cmd_timeout``, then the new controller gets ``/plan``
+(transient_local) and drives on. A process that refuses its parameters (exit code 2) is not
+started again, and at most MAX_RESPAWNS restarts happen per run.
 """
 
 from __future__ import annotations
@@ -51,13 +57,18 @@ from .controller import resolve_data_file
 from .conversions import DIAGNOSTICS_QOS, drain_executor
 from .worlds import load_world, World
 
-__all__ = ['LoopOptions', 'LoopResult', 'main', 'node_parameters', 'run_closed_loop']
+__all__ = ['LoopOptions', 'LoopResult', 'main', 'node_command', 'node_parameters',
+           'run_closed_loop', 'spawn_node']
 
 DEFAULT_WORLD = 'worlds/paper_obstacle.yaml'
 # Simulated seconds allowed when the world sets no time_limit.
 DEFAULT_TIME_LIMIT = 60.0
 # Wall seconds a child process gets to exit after SIGINT before it is killed.
 CHILD_EXIT_TIMEOUT = 5.0
+# Restarts of node processes per run with --respawn (a crash loop ends the run instead).
+MAX_RESPAWNS = 10
+# The exit code of a node that refuses its parameters: restarting it cannot help.
+EXIT_INVALID_PARAMETERS = 2
 
 MODULES = {
     'global_planner': 'mpc_local_planner.global_planner_node',
@@ -77,6 +88,7 @@ class LoopOptions:
     timeout: float = 120.0
     time_limit: float | None = None
     separate_processes: bool = False
+    respawn: bool = False
     seed: int = 0
     extra_parameters: dict[str, dict[str, Any]] = field(default_factory=dict)
 
@@ -181,10 +193,15 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
     if bag.exists():
         shutil.rmtree(bag)
 
+    if options.respawn and not options.separate_processes:
+        msg = '--respawn needs --separate-processes'
+        raise ValueError(msg)
+
     context = Context()
     rclpy.init(args=['--ros-args', *ros_args] if ros_args else None, context=context)
     nodes: list[Node] = []
-    children: list[subprocess.Popen] = []
+    children: dict[str, subprocess.Popen] = {}
+    respawns: list[dict[str, Any]] = []
     # one thread: with rclpy 7.1 a MultiThreadedExecutor spun with spin_once piles up
     # pending callback futures faster than 2 cores drain them, and the loop collapses
     # (seen at rtf 4: 7 control steps in 40 s wall); the simulator advances simulated
@@ -218,13 +235,15 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
             if time.monotonic() > deadline:
                 stop_reason = f'wall-clock timeout ({options.timeout:g} s)'
                 break
-            dead = [c for c in children if c.poll() is not None]
-            if dead:
-                stop_reason = f'a node process exited (code {dead[0].returncode})'
+            dead = [name for name, c in children.items() if c.poll() is not None]
+            if dead and not _respawn(options, dead, children, params, out / 'logs', respawns,
+                                     sim_time):
+                name = dead[0]
+                stop_reason = f'{name} exited (code {children[name].returncode})'
                 break
     finally:
         wall_time = time.monotonic() - start
-        _stop_children(children)
+        _stop_children(list(children.values()))
         executor.shutdown()
         drain_executor(executor)
         for node in reversed(nodes):
@@ -233,6 +252,7 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
 
     run_info = {'stop_reason': stop_reason, 'wall_time': wall_time, 'sim_time': sim_time,
                 'separate_processes': options.separate_processes, 'rtf': options.rtf,
+                'respawns': respawns,
                 'path_source': options.path, 'world': str(world_file)}
     metrics = analyze(bag, out, world_file=world_file, extra=run_info,
                       title=f'{world.name}: {options.path} path, rtf {options.rtf:g}')
@@ -258,18 +278,50 @@ def _create_nodes(params: dict[str, dict[str, Any]], context: Context) -> list[N
     return [planner, controller, simulator]
 
 
-def _spawn(params: dict[str, dict[str, Any]], logs: Path) -> list[subprocess.Popen]:
-    logs.mkdir(parents=True, exist_ok=True)
-    children = []
-    for name in ('global_planner', 'mpc_controller', 'unicycle_simulator'):
-        command = [sys.executable, '-m', MODULES[name], '--ros-args']
-        for key, value in params[name].items():
-            command += ['-p', _ros_arg(key, value)]
-        log = open(logs / f'{name}.log', 'w', encoding='utf-8')  # noqa: SIM115
-        children.append(subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
-                                         env=dict(os.environ)))
-        log.close()  # the child holds its own descriptor
-    return children
+def node_command(name: str, parameters: dict[str, Any]) -> list[str]:
+    """Return the command that runs node name (a key of MODULES) with parameters.
+
+    ``python -m <module> --ros-args -p key:=value ...``: no ros2cli or colcon install needed.
+    """
+    command = [sys.executable, '-m', MODULES[name], '--ros-args']
+    for key, value in parameters.items():
+        command += ['-p', _ros_arg(key, value)]
+    return command
+
+
+def spawn_node(name: str, parameters: dict[str, Any], log: Path, *,
+               append: bool = False) -> subprocess.Popen:
+    """Start node name as a process; stdout and stderr go to log."""
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with open(log, 'a' if append else 'w', encoding='utf-8') as stream:
+        if append:
+            stream.write(f'--- {name} started again ---\n')
+            stream.flush()
+        # the child holds its own descriptor once started
+        return subprocess.Popen(node_command(name, parameters), stdout=stream,
+                                stderr=subprocess.STDOUT, env=dict(os.environ))
+
+
+def _spawn(params: dict[str, dict[str, Any]], logs: Path) -> dict[str, subprocess.Popen]:
+    return {name: spawn_node(name, params[name], logs / f'{name}.log')
+            for name in ('global_planner', 'mpc_controller', 'unicycle_simulator')}
+
+
+def _respawn(options: LoopOptions, dead: list[str], children: dict[str, subprocess.Popen],
+             params: dict[str, dict[str, Any]], logs: Path, respawns: list[dict[str, Any]],
+             sim_time: float) -> bool:
+    """Start the dead node processes again if --respawn allows; return False to end the run."""
+    if not options.respawn:
+        return False
+    for name in dead:
+        code = children[name].returncode
+        if code == EXIT_INVALID_PARAMETERS or len(respawns) >= MAX_RESPAWNS:
+            return False
+        respawns.append({'node': name, 'exit_code': code, 'sim_time': sim_time})
+        print(f'closed_loop: {name} exited (code {code}) at {sim_time:.1f} s simulated; '
+              'starting it again', file=sys.stderr, flush=True)
+        children[name] = spawn_node(name, params[name], logs / f'{name}.log', append=True)
+    return True
 
 
 def _stop_children(children: list[subprocess.Popen]) -> None:
@@ -306,10 +358,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--seed', type=int, default=0, help='RRT* seed')
     parser.add_argument('--separate-processes', action='store_true',
                         help='run planner, controller and simulator as separate processes')
+    parser.add_argument('--respawn', action='store_true',
+                        help='with --separate-processes: start a node process that exits '
+                             'again instead of ending the run (a restart drill)')
     args = parser.parse_args(argv)
     options = LoopOptions(world=args.world, out=args.out, path=args.path, rtf=args.rtf,
                           timeout=args.timeout, time_limit=args.time_limit, seed=args.seed,
-                          separate_processes=args.separate_processes)
+                          separate_processes=args.separate_processes, respawn=args.respawn)
     try:
         result = run_closed_loop(options, ros_args=ros_args)
     except (FileNotFoundError, ValueError) as err:

@@ -146,12 +146,13 @@ class Probe(Node):
         self.clock_pub = self.create_publisher(Clock, '/clock', 10)
         self.odoms: list[Odometry] = []
         self.cmds: list[Twist] = []
+        self.cmd_times: list[float] = []  # the probe's ROS time at each cmd_vel's arrival
         self.raw_plans: list[bytes] = []
         self.local_plans: list[Path] = []
         self.diagnostics: list[dict] = []
         self.logs: list[Log] = []
         self.create_subscription(Odometry, 'odom', self.odoms.append, ODOM_QOS)
-        self.create_subscription(Twist, 'cmd_vel', self.cmds.append, CMD_VEL_QOS)
+        self.create_subscription(Twist, 'cmd_vel', self._cmd_vel, CMD_VEL_QOS)
         self.create_subscription(Path, 'plan', self.raw_plans.append, PLAN_QOS, raw=True)
         self.create_subscription(Path, 'local_plan', self.local_plans.append, LOCAL_PLAN_QOS)
         self.create_subscription(DiagnosticArray, 'mpc/diagnostics', self._diagnostics,
@@ -162,6 +163,14 @@ class Probe(Node):
     def plans(self) -> list[Path]:
         """The plans received, deserialised."""
         return [deserialize_message(raw, Path) for raw in self.raw_plans]
+
+    def now(self) -> float:
+        """The probe's ROS time in seconds (simulated with use_sim_time)."""
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _cmd_vel(self, msg: Twist) -> None:
+        self.cmds.append(msg)
+        self.cmd_times.append(self.now())
 
     def _diagnostics(self, msg: DiagnosticArray) -> None:
         status = msg.status[0]

@@ -21,7 +21,11 @@ on how loaded the machine is.
 from __future__ import annotations
 
 import copy
+import glob
+import json
 import math
+import os
+import signal
 import subprocess
 import sys
 import time
@@ -607,3 +611,73 @@ def test_planner_publishes_no_plan_from_a_start_in_collision_and_plans_once_clea
     inflated = [o.inflate(0.99 * planner.get_parameter('clearance').value)
                 for o in WORLD.obstacles]
     assert first_blocked_segment(inflated, poses[:, :2]) is None
+
+
+# ----------------------------------------------------------------------------- 6. restart
+def child_processes(parent: int, module: str) -> list[int]:
+    """Pids of parent's children whose command line runs module (from /proc)."""
+    pids = []
+    for stat in glob.glob('/proc/[0-9]*/stat'):
+        try:
+            fields = open(stat, encoding='utf-8').read().rsplit(')', 1)[1].split()
+            pid = int(stat.split('/')[2])
+            cmdline = open(f'/proc/{pid}/cmdline', 'rb').read().decode(errors='replace')
+        except (OSError, IndexError, ValueError):
+            continue  # gone meanwhile
+        if int(fields[1]) == parent and module in cmdline:
+            pids.append(pid)
+    return pids
+
+
+def test_a_killed_controller_stops_the_robot_and_a_restarted_one_drives_to_the_target(
+        ros, tmp_path) -> None:  # noqa: ANN001
+    cmd_timeout, rate = 0.5, 50.0  # the simulator's defaults, as closed_loop runs it
+    loop = subprocess.Popen(
+        [sys.executable, '-m', 'mpc_local_planner.closed_loop', '--separate-processes',
+         '--respawn', '--path', 'rrt', '--rtf', '2', '--timeout', '90', '--out', str(tmp_path)],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        probe = ros.probe(use_sim_time=True)
+
+        def halfway() -> bool:
+            return bool(probe.odoms) and probe.odoms[-1].pose.pose.position.x > 1.0 and (
+                probe.odoms[-1].twist.twist.linear.x > 0.05)
+
+        assert ros.spin_until(halfway, timeout=60.0)
+        controllers = child_processes(loop.pid, MODULES['mpc_controller'])
+        assert len(controllers) == 1
+        os.kill(controllers[0], signal.SIGKILL)
+        killed_at = probe.now()
+        commands = len(probe.cmds)
+
+        # the simulator stops the robot cmd_timeout after the last command it got
+        def stopped() -> bool:
+            late = [m for m in probe.odoms if stamp(m) > killed_at]
+            return len(late) > 5 and all(m.twist.twist.linear.x == 0.0 for m in late[-5:])
+
+        assert ros.spin_until(stopped, timeout=30.0)
+        last_command = probe.cmd_times[commands - 1]
+        moving = [stamp(m) for m in probe.odoms if m.twist.twist.linear.x != 0.0
+                  and stamp(m) <= killed_at + 5.0]
+        assert moving[-1] <= last_command + cmd_timeout + 2.0 / rate + 0.1
+        assert moving[-1] >= killed_at  # it did coast on the last command
+
+        # closed_loop started a new controller: it gets /plan and drives to the target
+        output, _ = loop.communicate(timeout=90)
+    finally:
+        if loop.poll() is None:
+            loop.kill()
+            loop.wait()
+    assert loop.returncode == 0, output
+    metrics = json.loads((tmp_path / 'metrics.json').read_text())
+    assert metrics['reached'] and not metrics['collision'], metrics
+    assert [r['node'] for r in metrics['respawns']] == ['mpc_controller']
+    assert metrics['messages']['/plan'] == 1  # planned once: the new controller got that plan
+    positions = np.array([[m.pose.pose.position.x, m.pose.pose.position.y] for m in probe.odoms])
+    for obstacle in WORLD.obstacles:
+        assert not np.any(obstacle.contains(positions))
+    assert 'started again' in (tmp_path / 'logs' / 'mpc_controller.log').read_text()
+
+
+def stamp(msg: Odometry) -> float:
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
