@@ -99,11 +99,14 @@ def quaternion_to_yaw(q: Quaternion) -> float:
 
     """
     values = np.array([q.x, q.y, q.z, q.w], dtype=float)
-    norm = float(np.linalg.norm(values))
-    if not np.all(np.isfinite(values)) or norm < MIN_QUATERNION_NORM:
+    finite = bool(np.all(np.isfinite(values)))
+    scale = float(np.max(np.abs(values))) if finite else 0.0
+    # scaled first: the norm of components near 1e308 overflows, and 1/inf would give 0
+    norm = scale * float(np.linalg.norm(values / scale)) if scale > 0 else 0.0
+    if not finite or norm < MIN_QUATERNION_NORM:
         msg = f'quaternion ({q.x}, {q.y}, {q.z}, {q.w}) has no orientation (zero norm or NaN)'
         raise ValueError(msg)
-    x, y, z, w = values / norm
+    x, y, z, w = values / scale / (norm / scale)
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
@@ -127,12 +130,19 @@ def stamp_to_seconds(stamp: Time) -> float:
 
 
 def seconds_to_stamp(seconds: float) -> Time:
-    """Return seconds as a builtin_interfaces/Time (seconds >= 0)."""
-    nanoseconds = int(round(float(seconds) * 1e9))
-    if nanoseconds < 0:
-        msg = f'a stamp must be >= 0 s, got {seconds}'
+    """Return seconds as a builtin_interfaces/Time.
+
+    Raises:
+        ValueError: unless 0 <= seconds < 2**31 (Time.sec is an int32; NaN and inf too).
+
+    """
+    value = float(seconds)
+    if not 0.0 <= value < 2.0**31:
+        msg = f'a stamp must be >= 0 s and < 2**31 s, got {seconds}'
         raise ValueError(msg)
-    return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
+    nanoseconds = int(round(value * 1e9))
+    sec = min(nanoseconds // 1_000_000_000, 2**31 - 1)
+    return Time(sec=sec, nanosec=nanoseconds - sec * 1_000_000_000)
 
 
 def path_to_poses(path: Path) -> np.ndarray:
