@@ -351,7 +351,7 @@ def test_simulator_stops_the_robot_when_cmd_vel_stops_for_cmd_timeout(ros) -> No
 
 
 # ----------------------------------------------------------------------------- 3. solver failure
-def failing_solver(nlp, w0, params, selected, solver=None):  # noqa: ANN001, ANN201, ARG001
+def failing_solver(nlp, w0, params, active, solver=None):  # noqa: ANN001, ANN201, ARG001
     """Stand-in for PathReferenceMPC._run_solver: every NLP solve fails (IPOPT's too)."""
     return False, np.asarray(w0, dtype=float), math.inf, 'injected failure', 0, 0.0
 
