@@ -306,7 +306,9 @@ def test_odometry_stamped_in_the_future_goes_stale_when_it_stops(ros) -> None:  
     assert clock.run_until(lambda: any(d['message'] == REASON_STALE_ODOM
                                        for d in probe.diagnostics[first:]))
     stale = next(d for d in probe.diagnostics[first:] if d['message'] == REASON_STALE_ODOM)
-    assert stale['stamp'] <= stop + ODOM_TIMEOUT + STEP + clock.dt + 1e-6
+    # timed from its arrival (a few ticks after it was sent, on a loaded machine), not from
+    # its stamp an hour ahead
+    assert stale['stamp'] <= stop + ODOM_TIMEOUT + STEP + 1.0
 
 
 def test_simulator_stops_the_robot_when_cmd_vel_stops_for_cmd_timeout(ros) -> None:  # noqa: ANN001
@@ -629,6 +631,10 @@ def child_processes(parent: int, module: str) -> list[int]:
     return pids
 
 
+# Simulated seconds a probe's clock may lag the simulator's (rtf 2: 0.125 s of wall time).
+LAG = 0.25
+
+
 def test_a_killed_controller_stops_the_robot_and_a_restarted_one_drives_to_the_target(
         ros, tmp_path) -> None:  # noqa: ANN001
     cmd_timeout, rate = 0.5, 50.0  # the simulator's defaults, as closed_loop runs it
@@ -656,11 +662,17 @@ def test_a_killed_controller_stops_the_robot_and_a_restarted_one_drives_to_the_t
             return len(late) > 5 and all(m.twist.twist.linear.x == 0.0 for m in late[-5:])
 
         assert ros.spin_until(stopped, timeout=30.0)
-        last_command = probe.cmd_times[commands - 1]
-        moving = [stamp(m) for m in probe.odoms if m.twist.twist.linear.x != 0.0
-                  and stamp(m) <= killed_at + 5.0]
-        assert moving[-1] <= last_command + cmd_timeout + 2.0 / rate + 0.1
-        assert moving[-1] >= killed_at  # it did coast on the last command
+        late = [m for m in probe.odoms if stamp(m) > killed_at]
+        halted = stamp(next(m for m in late if m.twist.twist.linear.x == 0.0))
+        moving = [stamp(m) for m in late if m.twist.twist.linear.x != 0.0
+                  and stamp(m) < halted]
+        # the killed controller's commands: all arrived before the robot halted (a new
+        # controller needs seconds to start); the probe's clock lags the simulator's by
+        # the /clock delivery, LAG of simulated time at most
+        last_command = max(t for t in probe.cmd_times if t <= halted)
+        assert len(probe.cmd_times) >= commands
+        assert killed_at <= moving[-1]  # it coasted on the last command...
+        assert moving[-1] <= last_command + cmd_timeout + 2.0 / rate + LAG  # ...cmd_timeout
 
         # closed_loop started a new controller: it gets /plan and drives to the target
         output, _ = loop.communicate(timeout=90)
