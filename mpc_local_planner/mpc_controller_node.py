@@ -388,17 +388,18 @@ class MpcControllerNode(Node):
 
         """
         limit = self.controller.settings.max_plan_poses
+
+        def too_many(count: int) -> ValueError:
+            return ValueError(
+                f'{REASON_INVALID_PLAN}: {count} poses, more than max_plan_poses ({limit})')
+
         if isinstance(msg, (bytes, bytearray)):
             count = path_pose_count(bytes(msg))
-            if count is None or count <= limit:
-                msg = deserialize_message(bytes(msg), Path)
-                count = len(msg.poses)
-        else:
-            count = len(msg.poses)
-        if count > limit:
-            problem = f'{REASON_INVALID_PLAN}: {count} poses, more than max_plan_poses ({limit})'
-            raise ValueError(problem)
-        assert isinstance(msg, Path)
+            if count is not None and count > limit:
+                raise too_many(count)
+            msg = deserialize_message(bytes(msg), Path)
+        if len(msg.poses) > limit:
+            raise too_many(len(msg.poses))
         frame = str(self.get_parameter('frame_id').value)
         if msg.header.frame_id != frame:
             problem = (f'{REASON_INVALID_PLAN}: frame {msg.header.frame_id!r} is not '
