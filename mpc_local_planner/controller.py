@@ -74,8 +74,9 @@ REASON_STALE_ODOM = 'odometry is stale'
 REASON_GOAL = 'goal reached'
 REASON_STOP = 'no feasible input: stopping'
 # The input is the proof's shifted candidate, not a fresh solver solution (verified all the
-# same; it runs out after N steps).
-REASON_CANDIDATE = 'no verified solver solution: applying the shifted candidate'
+# same; it runs out after N steps). Mostly the solver failed; rarely it converged to a
+# solution costlier than the candidate.
+REASON_CANDIDATE = 'applying the shifted candidate: no cheaper verified solver solution'
 REASON_ERROR = 'error'
 # Prefixes of the reasons for refused input (followed by ': ' and the problem).
 REASON_INVALID_ODOM = 'invalid odometry'
@@ -194,10 +195,12 @@ class MpcController:
 
     @property
     def solver_failures(self) -> int:
-        """Control steps since construction without a verified solver solution.
+        """Control steps since construction whose input is not a fresh solver solution.
 
-        The MPC's own count (MpcSolution.failures) is of consecutive failures and restarts
-        at every success; this total is what an operator wants to see grow in diagnostics.
+        Counted as analyze_bag counts solver failures (source other than 'solver'), plus
+        solves that raised. The MPC's own count (MpcSolution.failures) is of consecutive
+        failures and restarts at every success; this total is what an operator wants to see
+        grow in the diagnostics.
         """
         return self._solver_failures
 
@@ -361,7 +364,7 @@ class MpcController:
             return self._idle(zero, REASON_NO_ODOM)
         if state_time is not None:
             age = now - state_time
-            # NaN compares false: "not fresh" makes a NaN age stale, not fresh; a state
+            # "not within" so that a NaN age (NaN compares false) counts as stale; a state
             # from the future by more than the timeout means the clock jumped back
             if not -self.settings.odom_timeout <= age <= self.settings.odom_timeout:
                 return self._idle(zero, REASON_STALE_ODOM)
