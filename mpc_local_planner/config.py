@@ -58,7 +58,7 @@ class MpcConfig:
         tolerance: solver and verification tolerance.
         activation_distance: obstacles within this distance of the candidate trajectory get
             Farkas multipliers in the NLP; the others within reach are checked and added
-            when a solution comes within half of it (None: 2 v_max h).
+            when a solution comes within half of it (None: v_max h / 2).
         adaptive_slots: build the NLP for the obstacles actually within reach (a small cache
             of NLPs keyed by their count and face count) instead of fixed, padded slots.
         compile: compile the NLP's functions to C with the system compiler ($CC or gcc), in
