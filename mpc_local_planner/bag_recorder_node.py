@@ -25,12 +25,11 @@ from __future__ import annotations
 
 from importlib import import_module
 from pathlib import Path
+import sys
 import threading
 from typing import Any
 
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -38,6 +37,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import get_typestore, Stores
 
 from .conversions import describe
+from .node_main import run_node
 
 __all__ = ['BagRecorderNode', 'DEFAULT_TOPICS', 'DEFAULT_TYPES', 'main', 'message_class']
 
@@ -164,20 +164,10 @@ class BagRecorderNode(Node):
         super().destroy_node()
 
 
-def main(args: list[str] | None = None) -> None:
-    """Record until Ctrl-C, then close the bag."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = BagRecorderNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+def main(args: list[str] | None = None) -> int:
+    """Run the node until Ctrl-C (exit code 2, with the reason, on invalid parameters)."""
+    return run_node(BagRecorderNode, 'bag_recorder', args)
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -55,6 +55,7 @@ from rclpy.parameter import Parameter
 from .analyze_bag import analyze, summary
 from .controller import resolve_data_file
 from .conversions import DIAGNOSTICS_QOS, drain_executor
+from .node_main import EXIT_INVALID_PARAMETERS
 from .worlds import load_world, World
 
 __all__ = ['LoopOptions', 'LoopResult', 'main', 'node_command', 'node_parameters',
@@ -67,8 +68,6 @@ DEFAULT_TIME_LIMIT = 60.0
 CHILD_EXIT_TIMEOUT = 5.0
 # Restarts of node processes per run with --respawn (a crash loop ends the run instead).
 MAX_RESPAWNS = 10
-# The exit code of a node that refuses its parameters: restarting it cannot help.
-EXIT_INVALID_PARAMETERS = 2
 
 MODULES = {
     'global_planner': 'mpc_local_planner.global_planner_node',

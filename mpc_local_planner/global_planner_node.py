@@ -35,9 +35,7 @@ from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry, Path
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
-from rclpy.exceptions import ParameterException, ParameterUninitializedException
-from rclpy.executors import ExternalShutdownException
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -52,14 +50,13 @@ from .conversions import (
     poses_to_path,
 )
 from .errors import PlanningError
+from .node_main import run_node
 from .paths import analytic_path
 from .planner import PlannerConfig, RrtStarPlanner
 from .worlds import load_world, World
 
 __all__ = ['GlobalPlannerNode', 'main', 'waypoints_to_poses']
 
-# Exit code of main() when the parameters (or the world file) are invalid.
-EXIT_INVALID_PARAMETERS = 2
 
 # Poses of a published analytic path (enough for RViz and for a polyline controller).
 ANALYTIC_SAMPLES = 101
@@ -266,23 +263,8 @@ class GlobalPlannerNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the planner until Ctrl-C; return EXIT_INVALID_PARAMETERS on invalid parameters."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        try:
-            node = GlobalPlannerNode()
-        except (ParameterException, ValueError, TypeError, OSError) as err:
-            print(f'global_planner: refusing to start: {err}', file=sys.stderr, flush=True)
-            return EXIT_INVALID_PARAMETERS
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    """Run the node until Ctrl-C (exit code 2, with the reason, on invalid parameters)."""
+    return run_node(GlobalPlannerNode, 'global_planner', args)
 
 
 if __name__ == '__main__':

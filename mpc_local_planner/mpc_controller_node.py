@@ -37,10 +37,7 @@ from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry, Path
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
@@ -76,14 +73,13 @@ from .conversions import (
 )
 from .errors import ProblemThrottle
 from .models import Unicycle
+from .node_main import EXIT_INVALID_PARAMETERS, run_node
 from .obstacles import ConvexPolygon
 from .paths import analytic_path
 from .worlds import load_world
 
 __all__ = ['DEFAULTS', 'EXIT_INVALID_PARAMETERS', 'MpcControllerNode', 'build_settings', 'main']
 
-# Exit code of main() when the node refuses to start (invalid parameters or world file).
-EXIT_INVALID_PARAMETERS = 2
 # Seconds between two error logs of an input problem that persists.
 ERROR_THROTTLE_S = 2.0
 
@@ -511,29 +507,8 @@ def _format(value: Any) -> str:
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the controller until Ctrl-C.
-
-    Returns:
-        0, or EXIT_INVALID_PARAMETERS if the parameters (or the world file they name) are
-        invalid: the reason goes to stderr in one line instead of a traceback.
-
-    """
-    rclpy.init(args=args)
-    node = None
-    try:
-        try:
-            node = MpcControllerNode()
-        except (ParameterException, ValueError, TypeError, OSError) as err:
-            print(f'mpc_controller: refusing to start: {err}', file=sys.stderr, flush=True)
-            return EXIT_INVALID_PARAMETERS
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    """Run the node until Ctrl-C (exit code 2, with the reason, on invalid parameters)."""
+    return run_node(MpcControllerNode, 'mpc_controller', args)
 
 
 if __name__ == '__main__':

@@ -35,10 +35,7 @@ from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -53,11 +50,10 @@ from .conversions import (
 )
 from .errors import ProblemThrottle
 from .models import Unicycle
+from .node_main import run_node
 
 __all__ = ['UnicycleSimulatorNode', 'main', 'validate_simulator_parameters']
 
-# Exit code of main() when the parameters are invalid.
-EXIT_INVALID_PARAMETERS = 2
 
 # At most this many integration steps catch up a late tick (real-time mode).
 MAX_CATCH_UP_STEPS = 10
@@ -224,23 +220,8 @@ class UnicycleSimulatorNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the simulator until Ctrl-C; return EXIT_INVALID_PARAMETERS on invalid parameters."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        try:
-            node = UnicycleSimulatorNode()
-        except (ParameterException, ValueError, TypeError) as err:
-            print(f'unicycle_simulator: refusing to start: {err}', file=sys.stderr, flush=True)
-            return EXIT_INVALID_PARAMETERS
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    """Run the node until Ctrl-C (exit code 2, with the reason, on invalid parameters)."""
+    return run_node(UnicycleSimulatorNode, 'unicycle_simulator', args)
 
 
 if __name__ == '__main__':
