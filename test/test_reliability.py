@@ -616,6 +616,25 @@ def test_planner_publishes_no_plan_from_a_start_in_collision_and_plans_once_clea
 
 
 # ----------------------------------------------------------------------------- 6. restart
+def end_process_group(process: subprocess.Popen) -> None:
+    """Stop a process started with start_new_session, and every node it started.
+
+    SIGKILL of closed_loop alone would leave its node processes running (seen once after a
+    failed assertion here): SIGINT lets it shut them down, then the group is killed.
+    """
+    if process.poll() is None:
+        os.killpg(process.pid, signal.SIGINT)
+        try:
+            process.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            pass
+    try:
+        os.killpg(process.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass  # the group is gone already
+    process.wait()
+
+
 def child_processes(parent: int, module: str) -> list[int]:
     """Pids of parent's children whose command line runs module (from /proc)."""
     pids = []
@@ -641,7 +660,8 @@ def test_a_killed_controller_stops_the_robot_and_a_restarted_one_drives_to_the_t
     loop = subprocess.Popen(
         [sys.executable, '-m', 'mpc_local_planner.closed_loop', '--separate-processes',
          '--respawn', '--path', 'rrt', '--rtf', '2', '--timeout', '90', '--out', str(tmp_path)],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        start_new_session=True)  # its own process group: the cleanup reaches the nodes too
     try:
         probe = ros.probe(use_sim_time=True)
 
@@ -650,8 +670,10 @@ def test_a_killed_controller_stops_the_robot_and_a_restarted_one_drives_to_the_t
                 probe.odoms[-1].twist.twist.linear.x > 0.05)
 
         assert ros.spin_until(halfway, timeout=60.0)
+        assert ros.spin_until(
+            lambda: len(child_processes(loop.pid, MODULES['mpc_controller'])) == 1,
+            timeout=10.0), child_processes(loop.pid, MODULES['mpc_controller'])
         controllers = child_processes(loop.pid, MODULES['mpc_controller'])
-        assert len(controllers) == 1
         os.kill(controllers[0], signal.SIGKILL)
         killed_at = probe.now()
         commands = len(probe.cmds)
@@ -677,9 +699,7 @@ def test_a_killed_controller_stops_the_robot_and_a_restarted_one_drives_to_the_t
         # closed_loop started a new controller: it gets /plan and drives to the target
         output, _ = loop.communicate(timeout=90)
     finally:
-        if loop.poll() is None:
-            loop.kill()
-            loop.wait()
+        end_process_group(loop)
     assert loop.returncode == 0, output
     metrics = json.loads((tmp_path / 'metrics.json').read_text())
     assert metrics['reached'] and not metrics['collision'], metrics
