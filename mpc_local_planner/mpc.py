@@ -660,7 +660,7 @@ class _MpcBase:
         c = self._config
         reach = self._speed_bound() * c.step * c.horizon + 1e-3
         chosen, _ = self._obstacle_set.near(x0[None, :2], reach)
-        return ObstacleSet([self._inflated[i] for i in chosen])
+        return self._obstacle_set.subset(chosen)
 
     def _activation_distance(self) -> float:
         c = self._config
@@ -810,6 +810,7 @@ class _MpcBase:
         active_set = ObstacleSet(active)
         solved, w_opt, value, status, iterations, solve_time = self._run_solver(
             nlp, w_candidate, params, active_set)
+        guess = None
         if not solved and self._plan is None:
             # "stay put" zeroes every derivative of the quartic cost, and IPOPT may stall
             # there; a second start rolled out along the path usually converges
@@ -820,9 +821,7 @@ class _MpcBase:
             solve_time += retry[5]
         fallback = None if solved else nlp.fallback_solver()
         if fallback is not None:
-            starts = [w_candidate]
-            if self._plan is None:
-                starts.append(self._pack(self._guided_guess(x0, active, nlp), nlp))
+            starts = [w_candidate] if guess is None else [w_candidate, guess]
             for w_start in starts:
                 retry = self._run_solver(nlp, w_start, params, active_set, fallback)
                 iterations += retry[4]

@@ -56,6 +56,9 @@ def test_obstacle_set_queries_match_the_polygons_one_by_one() -> None:
     bounds = ObstacleSet(polygons).signed_distance_lower_bound(points)
     for j, polygon in enumerate(polygons):
         np.testing.assert_allclose(bounds[:, j], polygon.signed_distance_lower_bound(points))
+    subset = ObstacleSet(polygons).subset(np.array([2, 0]))
+    assert subset.obstacles == [polygons[2], polygons[0]]
+    np.testing.assert_allclose(subset.signed_distance_lower_bound(points), bounds[:, [2, 0]])
 
 
 def test_obstacle_set_near_never_misses_an_obstacle_within_the_distance() -> None:
