@@ -25,7 +25,7 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={package_name: ['py.typed']},
+    package_data={package_name: ['py.typed', 'data/barn/*']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
@@ -61,13 +61,13 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'global_planner = mpc_local_planner.global_planner_node:main',
-            'mpc_controller = mpc_local_planner.mpc_controller_node:main',
-            'unicycle_simulator = mpc_local_planner.unicycle_simulator_node:main',
-            'bag_recorder = mpc_local_planner.bag_recorder_node:main',
-            'closed_loop = mpc_local_planner.closed_loop:main',
-            'analyze_bag = mpc_local_planner.analyze_bag:main',
-            'mpc_bench = mpc_local_planner.bench:main',
+            'global_planner = mpc_local_planner.ros.global_planner_node:main',
+            'mpc_controller = mpc_local_planner.ros.mpc_controller_node:main',
+            'unicycle_simulator = mpc_local_planner.ros.unicycle_simulator_node:main',
+            'bag_recorder = mpc_local_planner.ros.bag_recorder_node:main',
+            'closed_loop = mpc_local_planner.ros.closed_loop:main',
+            'analyze_bag = mpc_local_planner.evaluation.analyze_bag:main',
+            'mpc_bench = mpc_local_planner.evaluation.bench:main',
         ],
     },
 )

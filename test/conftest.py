@@ -51,7 +51,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E
 from rclpy.serialization import deserialize_message  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 
-from mpc_local_planner.conversions import (  # noqa: E402
+from mpc_local_planner.ros.conversions import (  # noqa: E402
     CMD_VEL_QOS,
     DIAGNOSTICS_QOS,
     GOAL_QOS,

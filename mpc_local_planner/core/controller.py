@@ -1,0 +1,451 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The controller behind the mpc_controller node, without ROS.
+
+`MpcController` owns a `PathReferenceMPC`, the world's obstacles and the plan, and decides
+what to command at each control step: the MPC's first input, or zero with a reason (no plan,
+no, stale or invalid odometry, invalid plan, goal reached, solver stop, error). The node only
+converts messages and publishes, so everything that can go wrong is testable here without a
+DDS participant.
+
+Safety rules kept here (see the README's "Safety behaviours"):
+- a plan is refused unless it is finite, within MAX_COORDINATE, has two distinct positions,
+  at most max_plan_poses poses, and clears the obstacles grown by the robot radius;
+- a state is refused unless it is finite and within MAX_COORDINATE;
+- odometry older than odom_timeout, or from the future by more than that (the clock jumped
+  back), is stale;
+- the proof's shifted candidate is applied for at most N consecutive solver failures: its
+  inputs run out after N shifts, and then the robot stops;
+- every command is finite and within the model's bounds, else it is zero.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from typing import NamedTuple, Sequence
+
+import numpy as np
+
+from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.mpc.step import MpcSolution, PathReferenceMPC
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.paths import ReferencePath, simplify_polyline, WaypointPath, wrap_angle
+
+__all__ = [
+    'ControllerSettings',
+    'ControlOutput',
+    'MAX_COORDINATE',
+    'MpcController',
+    'REASON_CANDIDATE',
+    'REASON_ERROR',
+    'REASON_GOAL',
+    'REASON_INVALID_ODOM',
+    'REASON_INVALID_PLAN',
+    'REASON_NO_ODOM',
+    'REASON_NO_PLAN',
+    'REASON_OK',
+    'REASON_STALE_ODOM',
+    'REASON_STOP',
+    'first_blocked_segment',
+]
+
+REASON_OK = 'tracking'
+REASON_NO_PLAN = 'no plan yet'
+REASON_NO_ODOM = 'no odometry yet'
+REASON_STALE_ODOM = 'odometry is stale'
+REASON_GOAL = 'goal reached'
+REASON_STOP = 'no feasible input: stopping'
+# The input is the proof's shifted candidate, not a fresh solver solution (verified all the
+# same; it runs out after N steps). Mostly the solver failed; rarely it converged to a
+# solution costlier than the candidate.
+REASON_CANDIDATE = 'applying the shifted candidate: no cheaper verified solver solution'
+REASON_ERROR = 'error'
+# Prefixes of the reasons for refused input (followed by ': ' and the problem).
+REASON_INVALID_ODOM = 'invalid odometry'
+REASON_INVALID_PLAN = 'invalid plan'
+
+# Positions beyond this (metres from the origin) are refused as garbage: a local planner has
+# no use for them, and the quartic cost of a coordinate near 1e77 overflows to inf.
+MAX_COORDINATE = 1e6
+# Obstacles are shrunk by this much for the plan check: a plan that only grazes the grown
+# obstacle (as RRT* plans at exactly the clearance do) is not refused.
+_GRAZE_TOLERANCE = 1e-9
+
+# Tolerances of the Ramer-Douglas-Peucker pass that makes a long plan fit the solver's
+# segment capacity, tried in order (metres).
+_SIMPLIFY_TOLERANCES = (0.0, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2)
+
+
+class ControlOutput(NamedTuple):
+    """What to command now, and why.
+
+    Attributes:
+        u: (2,) input (v, omega) within the model's bounds; zero unless reason is REASON_OK
+            or REASON_CANDIDATE.
+        solution: the MPC's solution when it ran, else None.
+        reason: REASON_OK or why the command is zero (REASON_ERROR is followed by ': ...').
+
+    """
+
+    u: np.ndarray
+    solution: MpcSolution | None
+    reason: str
+
+
+@dataclass(frozen=True)
+class ControllerSettings:
+    """What the controller checks around the MPC.
+
+    Attributes:
+        goal_tolerance: position error to the plan's last pose that counts as arrival (m).
+        goal_heading_tolerance: heading error that counts as arrival (rad).
+        odom_timeout: odometry older than this (seconds of ROS time) is stale.
+        turn_length: metres of path parameter per radian turned in place at plan corners.
+        capacity: segments a waypoint plan may have (the solver's size; fixed so that
+            re-plans reuse the built solver).
+        max_plan_poses: a plan with more poses is refused: converting and simplifying it
+            would hold up the control loop (10,000 poses at 5 cm is 500 m).
+
+    """
+
+    goal_tolerance: float = 0.02
+    goal_heading_tolerance: float = 0.05
+    odom_timeout: float = 0.5
+    turn_length: float = 0.25
+    capacity: int = 64
+    max_plan_poses: int = 10_000
+
+    def __post_init__(self) -> None:
+        """Refuse non-positive tolerances and capacities."""
+        for name in ('goal_tolerance', 'goal_heading_tolerance', 'odom_timeout',
+                     'turn_length'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                msg = f'{name} must be > 0 and finite, got {value}'
+                raise ValueError(msg)
+        if self.capacity < 3:
+            msg = f'capacity must be >= 3, got {self.capacity}'
+            raise ValueError(msg)
+        if self.max_plan_poses < 2:
+            msg = f'max_plan_poses must be >= 2, got {self.max_plan_poses}'
+            raise ValueError(msg)
+
+
+class MpcController:
+    """The paper's MPC with the bookkeeping a robot needs around it.
+
+    Args:
+        model: the unicycle (its bounds are the command bounds).
+        config: MPC settings.
+        obstacles: the world's obstacles as described (the MPC inflates them).
+        settings: goal tolerances, odometry timeout and plan handling.
+
+    """
+
+    def __init__(self, model: Unicycle | None = None, config: MpcConfig | None = None, *,
+                 obstacles: Sequence[ConvexPolygon] = (),
+                 settings: ControllerSettings | None = None) -> None:
+        self._model = model or Unicycle()
+        self._config = config or MpcConfig()
+        self._obstacles = list(obstacles)
+        self.settings = settings or ControllerSettings()
+        self._mpc = PathReferenceMPC(self._model, self._config, obstacles=self._obstacles)
+        self._path: ReferencePath | None = None
+        self._solved_last_step = False
+        self._solver_failures = 0
+
+    # ------------------------------------------------------------------ configuration
+    @property
+    def model(self) -> Unicycle:
+        """The robot model in force."""
+        return self._model
+
+    @property
+    def config(self) -> MpcConfig:
+        """The MPC settings in force."""
+        return self._config
+
+    @property
+    def path(self) -> ReferencePath | None:
+        """The reference path in force, or None."""
+        return self._path
+
+    @property
+    def mpc(self) -> PathReferenceMPC:
+        """The underlying MPC (for inspection)."""
+        return self._mpc
+
+    @property
+    def solver_failures(self) -> int:
+        """Control steps since construction whose input is not a fresh solver solution.
+
+        Counted as analyze_bag counts solver failures (source other than 'solver'), plus
+        solves that raised. The MPC's own count (MpcSolution.failures) is of consecutive
+        failures and restarts at every success; this total is what an operator wants to see
+        grow in the diagnostics.
+        """
+        return self._solver_failures
+
+    def update_config(self, config: MpcConfig) -> None:
+        """Use new MPC settings from the next solve on (a shape change rebuilds there)."""
+        self._config = config
+        self._mpc.update_config(config)
+
+    def set_model(self, model: Unicycle) -> None:
+        """Use new input bounds: the NLP is rebuilt at the next solve."""
+        self._model = model
+        self._mpc = PathReferenceMPC(model, self._config, obstacles=self._obstacles,
+                                     path=self._path)
+
+    def set_obstacles(self, obstacles: Sequence[ConvexPolygon]) -> None:
+        """Replace the obstacles (as described, not inflated)."""
+        self._mpc.set_obstacles(obstacles)
+        self._obstacles = list(obstacles)
+
+    def set_path(self, path: ReferencePath) -> None:
+        """Follow path (an analytic path, or a WaypointPath built elsewhere)."""
+        self._mpc.set_path(path)
+        self._path = path
+        self._solved_last_step = False
+
+    def set_plan(self, poses: np.ndarray) -> WaypointPath:
+        """Follow a global plan of (M, 3) poses (x, y, yaw), as a nav_msgs/Path carries.
+
+        The first and last headings become turn-in-place segments at the ends; a plan with
+        more corners than the solver's capacity is simplified (Ramer-Douglas-Peucker with
+        growing tolerance) until it fits. The plan in force is kept if this one is refused.
+
+        Returns:
+            The path now followed.
+
+        Raises:
+            ValueError: 'invalid plan: ...' if poses is not (M, 3) finite numbers within
+                MAX_COORDINATE with two distinct positions, has more than max_plan_poses
+                rows, or the path to follow passes through an obstacle grown by the robot
+                radius.
+
+        """
+        arr = np.asarray(poses, dtype=float)
+        if arr.ndim != 2 or arr.shape[1] != 3:
+            msg = f'{REASON_INVALID_PLAN}: poses must have shape (M, 3), got {arr.shape}'
+            raise ValueError(msg)
+        if len(arr) < 2:
+            msg = f'{REASON_INVALID_PLAN}: needs at least two poses, got {len(arr)}'
+            raise ValueError(msg)
+        if len(arr) > self.settings.max_plan_poses:
+            msg = (f'{REASON_INVALID_PLAN}: {len(arr)} poses, more than max_plan_poses '
+                   f'({self.settings.max_plan_poses})')
+            raise ValueError(msg)
+        if not np.all(np.isfinite(arr)):
+            msg = f'{REASON_INVALID_PLAN}: poses contain NaN or inf'
+            raise ValueError(msg)
+        if np.max(np.abs(arr[:, :2])) > MAX_COORDINATE:
+            msg = (f'{REASON_INVALID_PLAN}: a position is more than {MAX_COORDINATE:g} m from '
+                   'the origin')
+            raise ValueError(msg)
+        points = arr[:, :2]
+        for tolerance in _SIMPLIFY_TOLERANCES:
+            simplified = simplify_polyline(points, tolerance) if tolerance > 0 else points
+            # straight segments + corners + the two end turns
+            if 2 * len(simplified) - 1 <= self.settings.capacity:
+                break
+        else:
+            msg = (f'{REASON_INVALID_PLAN}: {len(points)} poses do not fit '
+                   f'{self.settings.capacity} segments even simplified at '
+                   f'{_SIMPLIFY_TOLERANCES[-1]} m')
+            raise ValueError(msg)
+        try:
+            path = WaypointPath(simplified, start_heading=float(arr[0, 2]),
+                                goal_heading=float(arr[-1, 2]),
+                                turn_length=self.settings.turn_length,
+                                capacity=self.settings.capacity)
+        except ValueError as err:
+            msg = f'{REASON_INVALID_PLAN}: {err}'
+            raise ValueError(msg) from None
+        self._check_clear(path)
+        self.set_path(path)
+        return path
+
+    def _check_clear(self, path: WaypointPath) -> None:
+        """Refuse a path to follow that passes through an obstacle grown by the robot radius.
+
+        The MPC would never enter the obstacle (its constraints forbid it) but would stall in
+        front of it: Assumption 1 of the paper fails, and the operator should hear why.
+        """
+        radius = self._config.robot_radius
+        grown = [o.inflate(radius) if radius > 0 else o for o in self._obstacles]
+        blocked = first_blocked_segment(grown, path.knots[:, :2])
+        if blocked is not None:
+            k, i = blocked
+            a, b = path.knots[i, :2], path.knots[i + 1, :2]
+            msg = (f'{REASON_INVALID_PLAN}: it passes through obstacle {k} (grown by the robot '
+                   f'radius {radius:g} m) between ({a[0]:.3f}, {a[1]:.3f}) and '
+                   f'({b[0]:.3f}, {b[1]:.3f})')
+            raise ValueError(msg)
+
+    def check_state(self, state: np.ndarray) -> np.ndarray:
+        """Return state as a float (3,) array if it is a usable measurement.
+
+        Raises:
+            ValueError: if it is not three finite numbers with a position within
+                MAX_COORDINATE of the origin.
+
+        """
+        x = np.asarray(state, dtype=float).reshape(-1)
+        if x.shape != (3,) or not np.all(np.isfinite(x)):
+            msg = f'the state must be three finite numbers (x, y, yaw), got {x}'
+            raise ValueError(msg)
+        if max(abs(x[0]), abs(x[1])) > MAX_COORDINATE:
+            msg = (f'the position ({x[0]:g}, {x[1]:g}) is more than {MAX_COORDINATE:g} m from '
+                   'the origin')
+            raise ValueError(msg)
+        return x
+
+    def prepare(self) -> None:
+        """Build the NLPs a run will need now, so that no control step waits for a build.
+
+        Uses the MPC's prepare() when it has one (adaptive obstacle slots); else solves
+        nothing and the first control step builds.
+        """
+        prepare = getattr(self._mpc, 'prepare', None)
+        if prepare is None or self._path is None:
+            return
+        prepare(min(len(self._obstacles), self._config.obstacle_slots))
+
+    def clear_path(self) -> None:
+        """Forget the plan: the controller commands zero until a new one comes."""
+        self._path = None
+        self._mpc.reset()
+
+    # ------------------------------------------------------------------ control
+    def goal_error(self, state: np.ndarray) -> tuple[float, float]:
+        """Return (position, |heading|) error of state to the end of the path."""
+        if self._path is None:
+            return math.inf, math.inf
+        goal = self._path.goal
+        position = float(np.hypot(state[0] - goal[0], state[1] - goal[1]))
+        heading = abs(float(wrap_angle(state[2] - goal[2])))
+        return position, heading
+
+    def compute(self, state: np.ndarray | None, now: float, *,
+                state_time: float | None = None) -> ControlOutput:
+        """Return the command for the measured state at time now.
+
+        Never raises: anything unexpected becomes a zero command with REASON_ERROR.
+
+        Args:
+            state: (3,) measured (x, y, yaw), or None when no odometry has come.
+            now: the current time (seconds, the clock of state_time).
+            state_time: when state was measured; older than settings.odom_timeout is stale.
+
+        """
+        zero = np.zeros(2)
+        if self._path is None:
+            return self._idle(zero, REASON_NO_PLAN)
+        if state is None:
+            return self._idle(zero, REASON_NO_ODOM)
+        if state_time is not None:
+            age = now - state_time
+            # "not within" so that a NaN age (NaN compares false) counts as stale; a state
+            # from the future by more than the timeout means the clock jumped back
+            if not -self.settings.odom_timeout <= age <= self.settings.odom_timeout:
+                return self._idle(zero, REASON_STALE_ODOM)
+        try:
+            x = self.check_state(state)
+        except ValueError as err:
+            return self._idle(zero, f'{REASON_ERROR}: {REASON_INVALID_ODOM}: {err}')
+        try:
+            position, heading = self.goal_error(x)
+            if (position <= self.settings.goal_tolerance
+                    and heading <= self.settings.goal_heading_tolerance):
+                return self._idle(zero, REASON_GOAL)
+            solution = self._mpc.solve(x)
+        except Exception as err:  # noqa: BLE001 (a controller must not die: stop instead)
+            self._solver_failures += 1
+            return self._idle(zero, f'{REASON_ERROR}: {type(err).__name__}: {err}')
+        self._solved_last_step = True
+        if not solution.success:
+            self._solver_failures += 1
+        if solution.source == 'stop':
+            return ControlOutput(zero, solution, REASON_STOP)
+        if solution.source == 'candidate' and solution.failures > self._config.horizon:
+            # the shifted candidate has run out (N shifts leave only steady-state inputs):
+            # stop, and let the next step start over from the measured state
+            self._mpc.reset()
+            self._solved_last_step = False
+            return ControlOutput(zero, solution, REASON_STOP)
+        u = np.asarray(solution.u0, dtype=float).reshape(-1)
+        if u.shape != (2,) or not np.all(np.isfinite(u)):
+            self._mpc.reset()
+            self._solved_last_step = False
+            return ControlOutput(zero, solution, f'{REASON_ERROR}: non-finite input {u}')
+        u = np.clip(u, self._model.u_min, self._model.u_max)
+        return ControlOutput(u, solution, REASON_OK if solution.success else REASON_CANDIDATE)
+
+    def stop(self, reason: str) -> ControlOutput:
+        """Return a zero command with reason (the node's verdict on refused input).
+
+        The warm start is dropped as after any step without an MPC input, so that the next
+        solve starts from the measured state instead of a shift of a plan never applied.
+        """
+        return self._idle(np.zeros(2), reason)
+
+    def _idle(self, zero: np.ndarray, reason: str) -> ControlOutput:
+        # The shifted warm start assumes its first input was applied: after a step without
+        # one, start the MPC over (s restarts at the projection).
+        if self._solved_last_step:
+            self._mpc.reset()
+            self._solved_last_step = False
+        return ControlOutput(zero, None, reason)
+
+
+def first_blocked_segment(obstacles: Sequence[ConvexPolygon], points: np.ndarray
+                          ) -> tuple[int, int] | None:
+    """Return (obstacle, segment) of the first polyline segment through an obstacle's interior.
+
+    Exact for convex polygons (Cyrus-Beck clipping, vectorised over the segments): the
+    segment a + t (b - a), t in [0, 1], meets {A p <= b} where every face bounds t from one
+    side. Obstacles are shrunk by a nanometre so that a segment along a face or through a
+    corner (a plan at exactly the clearance) is not counted.
+
+    Args:
+        obstacles: convex polygons, already grown as the caller needs.
+        points: (M, 2) polyline vertices; a zero-length segment is a point test.
+
+    Returns:
+        None if every segment is clear.
+
+    """
+    pts = np.asarray(points, dtype=float)
+    if len(pts) < 2:
+        return None
+    a, d = pts[:-1], np.diff(pts, axis=0)
+    for k, obstacle in enumerate(obstacles):
+        slack = (obstacle.b - _GRAZE_TOLERANCE)[None, :] - a @ obstacle.A.T  # (S, F)
+        rate = d @ obstacle.A.T  # face i allows rate t <= slack
+        parallel = np.abs(rate) < 1e-15
+        with np.errstate(divide='ignore', invalid='ignore'):
+            ratio = slack / rate
+        enter = np.where((rate < 0) & ~parallel, ratio, -np.inf)
+        leave = np.where((rate > 0) & ~parallel, ratio, np.inf)
+        outside = np.any(parallel & (slack < 0), axis=1)
+        t_enter = np.maximum(np.max(enter, axis=1), 0.0)
+        t_leave = np.minimum(np.min(leave, axis=1), 1.0)
+        hits = np.flatnonzero((t_enter <= t_leave) & ~outside)
+        if len(hits):
+            return k, int(hits[0])
+    return None

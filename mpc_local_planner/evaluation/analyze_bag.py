@@ -1,0 +1,255 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""analyze_bag: trajectory, metrics and plot of a closed-loop run, from its rosbag2.
+
+Reads ``/odom``, ``/cmd_vel``, ``/plan``, ``/local_plan`` and ``/mpc/diagnostics`` with the
+rosbags library (no ROS needed). One trajectory row per control step comes from the
+controller's diagnostics, which carry the measured state and the command; for a bag without
+those keys (another controller, or ``ros2 bag record`` of only odom and cmd_vel) the rows are
+rebuilt from odometry, with the command from its twist.
+
+Usage: ``analyze_bag BAG --out DIR [--world WORLD]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+import sys
+from typing import Any, NamedTuple, Sequence
+
+import numpy as np
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import get_typestore, Stores
+
+__all__ = ['BagRun', 'analyze', 'main', 'read_run']
+
+
+class BagRun(NamedTuple):
+    """What a closed-loop bag holds, as arrays.
+
+    Attributes:
+        rows: (n, 9) trajectory rows t, x, y, theta, v, omega, s, V_N, solve_ms; t starts
+            at 0 at the first control step that solved the MPC (waiting steps are dropped).
+        plan: (M, 3) the last global plan, or None.
+        predictions: the local plans (each (N+1, 3)) in order.
+        lyapunov_ok: per row, the controller's V_N decrease check (None when not checked).
+        solver_failures: control steps whose input did not come from a converged solve.
+        goal_reached: the controller reported the goal reached.
+        counts: messages per topic.
+
+    """
+
+    rows: np.ndarray
+    plan: np.ndarray | None
+    predictions: list[np.ndarray]
+    lyapunov_ok: list[bool | None]
+    solver_failures: int
+    goal_reached: bool
+    counts: dict[str, int]
+
+
+def _yaw(q: Any) -> float:
+    norm = math.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w)
+    if norm < 1e-9:
+        return math.nan
+    x, y, z, w = q.x / norm, q.y / norm, q.z / norm, q.w / norm
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def _stamp(header: Any) -> float:
+    return float(header.stamp.sec) + 1e-9 * float(header.stamp.nanosec)
+
+
+def _poses(path_msg: Any) -> np.ndarray:
+    return np.array([[p.pose.position.x, p.pose.position.y, _yaw(p.pose.orientation)]
+                     for p in path_msg.poses]).reshape(-1, 3)
+
+
+def _number(values: dict[str, str], key: str) -> float:
+    try:
+        return float(values[key])
+    except (KeyError, ValueError):
+        return math.nan
+
+
+def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str = '/cmd_vel',
+             plan_topic: str = '/plan', local_plan_topic: str = '/local_plan',
+             diagnostics_topic: str = '/mpc/diagnostics') -> BagRun:
+    """Read a closed-loop bag into arrays.
+
+    Raises:
+        FileNotFoundError: if the bag does not exist.
+        ValueError: if the bag has neither diagnostics nor odometry.
+
+    """
+    bag = Path(bag)
+    if not bag.exists():
+        msg = f'bag not found: {bag}'
+        raise FileNotFoundError(msg)
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    odom: list[tuple[float, float, float, float, float, float]] = []
+    diags: list[tuple[float, dict[str, str]]] = []
+    plan = None
+    predictions: list[np.ndarray] = []
+    counts: dict[str, int] = {}
+    with Reader(bag) as reader:
+        wanted = {odom_topic, cmd_vel_topic, plan_topic, local_plan_topic, diagnostics_topic}
+        connections = [c for c in reader.connections if c.topic in wanted]
+        for connection, _, data in reader.messages(connections=connections):
+            counts[connection.topic] = counts.get(connection.topic, 0) + 1
+            msg = typestore.deserialize_cdr(data, connection.msgtype)
+            if connection.topic == odom_topic:
+                p = msg.pose.pose
+                odom.append((_stamp(msg.header), p.position.x, p.position.y,
+                             _yaw(p.orientation), msg.twist.twist.linear.x,
+                             msg.twist.twist.angular.z))
+            elif connection.topic == plan_topic:
+                plan = _poses(msg)
+            elif connection.topic == local_plan_topic:
+                predictions.append(_poses(msg))
+            elif connection.topic == diagnostics_topic and msg.status:
+                values = {kv.key: kv.value for kv in msg.status[0].values}
+                diags.append((_stamp(msg.header), values))
+
+    lyapunov: list[bool | None] = []
+    failures = 0
+    goal_reached = False
+    rows: list[list[float]] = []
+    if diags and 'x' in diags[0][1]:
+        started = False
+        for t, values in diags:
+            started = started or values.get('source', '') != ''  # the first MPC step
+            if not started:
+                continue
+            rows.append([t] + [_number(values, k) for k in
+                               ('x', 'y', 'theta', 'v', 'omega', 's_k', 'V_N', 'solve_ms')])
+            check = values.get('lyapunov_ok', '')
+            lyapunov.append(None if check == '' else check == 'true')
+            if values.get('source', '') not in ('', 'solver'):
+                failures += 1
+            goal_reached = goal_reached or values.get('goal_reached') == 'true'
+    elif odom:
+        # a bag without our diagnostics: one row per odometry message, the command from
+        # the odometry's twist (what the base executes)
+        for t, x, y, theta, v, omega in odom:
+            rows.append([t, x, y, theta, v, omega, math.nan, math.nan, math.nan])
+    else:
+        msg = f'{bag}: no {diagnostics_topic} with states and no {odom_topic}: nothing to analyse'
+        raise ValueError(msg)
+    array = np.array(rows, dtype=float).reshape(-1, 9)
+    if len(array):
+        array[:, 0] -= array[0, 0]
+    return BagRun(rows=array, plan=plan, predictions=predictions, lyapunov_ok=lyapunov,
+                  solver_failures=failures, goal_reached=goal_reached, counts=counts)
+
+
+def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None = None,
+            title: str = '', position_tolerance: float = 0.05,
+            heading_tolerance: float = 0.1,
+            extra: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Write trajectory.csv, metrics.json and trajectory.png of a bag into out.
+
+    The goal is the last pose of the plan (else the world's goal); obstacles come from the
+    world file (default: the paper's scenario). extra is merged into the metrics.
+
+    Returns:
+        The metrics (also written to metrics.json).
+
+    """
+    from mpc_local_planner.evaluation.metrics import compute_metrics
+    from mpc_local_planner.evaluation.plotting import plot_runs
+    from mpc_local_planner.evaluation.trajectory import write_trajectory_csv
+    from mpc_local_planner.worlds.data_files import resolve_data_file
+    from mpc_local_planner.worlds.world import load_world
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    world = load_world(resolve_data_file(world_file or 'worlds/paper_obstacle.yaml'))
+    run = read_run(bag)
+    goal = run.plan[-1] if run.plan is not None and len(run.plan) else np.asarray(world.goal)
+    reference_length = None
+    if run.plan is not None and len(run.plan) > 1:
+        reference_length = float(np.sum(np.linalg.norm(np.diff(run.plan[:, :2], axis=0),
+                                                       axis=1)))
+    metrics = compute_metrics(
+        run.rows, goal=np.asarray(goal, dtype=float), obstacles=list(world.obstacles),
+        robot_radius=world.robot_radius, reference_length=reference_length,
+        solver_failures=run.solver_failures, lyapunov_ok=run.lyapunov_ok,
+        position_tolerance=position_tolerance, heading_tolerance=heading_tolerance)
+    metrics['controller_goal_reached'] = run.goal_reached
+    metrics['messages'] = run.counts
+    metrics.update(extra or {})
+    write_trajectory_csv(out / 'trajectory.csv', run.rows)
+    (out / 'metrics.json').write_text(json.dumps(metrics, indent=2, default=_json_default) + '\n',
+                                      encoding='utf-8')
+    step = max(1, len(run.predictions) // 8)
+    plot_runs(out / 'trajectory.png', world=world, reference=run.plan,
+              runs=[('mpc_controller', run.rows)], predictions=run.predictions[::step],
+              title=title or f'{Path(bag).name}')
+    return metrics
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return str(value)
+
+
+def summary(metrics: dict[str, Any]) -> str:
+    """Return a few lines for a terminal."""
+    def fmt(key: str, unit: str = '', digits: int = 3) -> str:
+        value = metrics.get(key)
+        if isinstance(value, float):
+            return f'{value:.{digits}f}{unit}'
+        return f'{value}{unit}'
+
+    return '\n'.join([
+        f"reached: {metrics.get('reached')}   collision: {metrics.get('collision')}",
+        f"final error: {fmt('final_position_error', ' m')}, "
+        f"{fmt('final_heading_error', ' rad')}",
+        f"time to target: {fmt('time_to_target', ' s', 1)}   path length: "
+        f"{fmt('path_length', ' m', 2)}   min clearance: {fmt('min_clearance', ' m')}",
+        f"solve time median/p95/max: {fmt('solve_ms_median', '', 1)}/"
+        f"{fmt('solve_ms_p95', '', 1)}/{fmt('solve_ms_max', ' ms', 1)}   "
+        f"V_N violations: {metrics.get('lyapunov_violations')}   "
+        f"solver failures: {metrics.get('solver_failures')}   steps: {metrics.get('steps')}",
+    ])
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Analyse a bag from the command line; return 0 iff the target was reached safely."""
+    parser = argparse.ArgumentParser(prog='analyze_bag', description=__doc__.splitlines()[0])
+    parser.add_argument('bag', help='rosbag2 directory (mcap or sqlite3)')
+    parser.add_argument('--out', required=True, help='directory for the outputs')
+    parser.add_argument('--world', default=None,
+                        help='world file with the obstacles (default: the paper scenario)')
+    args = parser.parse_args(argv)
+    try:
+        metrics = analyze(args.bag, args.out, world_file=args.world)
+    except (FileNotFoundError, ValueError) as err:
+        print(f'analyze_bag: {err}', file=sys.stderr)
+        return 2
+    print(summary(metrics))
+    print(f'outputs in {Path(args.out).resolve()}')
+    return 0 if metrics.get('reached') and not metrics.get('collision') else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,425 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""mpc_bench: solve times of the MPC backends against a naive Opti + IPOPT implementation.
+
+Every figure is measured in the run that prints it: the paper's obstacle scenario in closed
+loop (h = 0.2 s, Unicycle().step as the plant) for N in {10, 20, 40} and each backend, the
+same problem written naively (CasADi Opti, IPOPT with default options, no warm start), N = 10
+with 1, 5 and 20 obstacles, RRT* planning time for 1000 iterations, and (unless --skip-dds)
+the controller node's latency from /odom to /cmd_vel over DDS and its resident memory.
+
+Usage: ``python -m mpc_local_planner.evaluation.bench [--quick] [--skip-dds] [--out FILE]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import platform
+import sys
+import time
+from typing import Any, Sequence
+
+import casadi as ca
+import numpy as np
+
+from mpc_local_planner.core.config import MpcConfig, SOLVERS
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.mpc.step import PathReferenceMPC
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.paths import paper_sinusoid, ReferencePath
+
+__all__ = ['closed_loop', 'extra_obstacles', 'main', 'NaiveMpc', 'paper_obstacle']
+
+STEP = 0.2
+HORIZONS = (10, 20, 40)
+OBSTACLE_COUNTS = (1, 5, 20)
+# Stop a closed loop when the robot is this close to the target (and count it as reached).
+REACHED_POSITION = 0.02
+REACHED_HEADING = 0.05
+
+
+def paper_obstacle() -> ConvexPolygon:
+    """Return the paper's box (1, -1)-(1.5, 1)."""
+    return ConvexPolygon.from_box(1.0, -1.0, 1.5, 1.0)
+
+
+def extra_obstacles(count: int, path: ReferencePath) -> list[ConvexPolygon]:
+    """Return count small boxes beside the path, on the side away from the paper's box.
+
+    They sit 0.4 to 0.5 m from the path (the horizon reaches 0.62 m at N = 10), so each one
+    enters the problem at some time without blocking the way.
+    """
+    boxes = []
+    centre = np.array([1.25, 0.0])
+    for i, s in enumerate(np.linspace(0.03, 0.97, count)):
+        pose = path.pose(float(s))
+        normal = np.array([-math.sin(pose[2]), math.cos(pose[2])])
+        if normal @ (pose[:2] - centre) < 0:
+            normal = -normal
+        c = pose[:2] + (0.42 + 0.08 * (i % 2)) * normal
+        boxes.append(ConvexPolygon.from_box(c[0] - 0.05, c[1] - 0.05, c[0] + 0.05, c[1] + 0.05))
+    return boxes
+
+
+class NaiveMpc:
+    """The same OCP as a user would write it in an afternoon: Opti, IPOPT defaults, no warm start.
+
+    Decision variables X, U, s and a Farkas multiplier per obstacle, face and step; all
+    obstacles are always in the problem; each solve starts from Opti's default guess (zeros).
+    """
+
+    def __init__(self, model: Unicycle, config: MpcConfig, obstacles: Sequence[ConvexPolygon],
+                 path: ReferencePath) -> None:
+        n, h = config.horizon, config.step
+        inflation = config.inflation(float(model.u_max[0]))
+        opti = ca.Opti()
+        X = opti.variable(3, n + 1)
+        U = opti.variable(2, n)
+        s = opti.variable()
+        x0 = opti.parameter(3)
+        x_s = path.symbolic(s, [])
+        cost = 0
+        for i in range(n):
+            dx = X[:, i] - x_s
+            cost += (dx[0] ** 4 + dx[1] ** 4 + config.weight_heading * dx[2] ** 4
+                     + U[0, i] ** 4 + U[1, i] ** 4)
+        opti.minimize(cost + config.offset_weight * (1 - s) ** 2)
+        F = model.discrete(h)
+        opti.subject_to(X[:, 0] == x0)
+        for i in range(n):
+            opti.subject_to(X[:, i + 1] == F(X[:, i], U[:, i]))
+        opti.subject_to(X[:, n] == x_s)
+        for i in range(n):
+            opti.subject_to(opti.bounded(model.u_min, U[:, i], model.u_max))
+        opti.subject_to(opti.bounded(0, s, 1))
+        for obstacle in obstacles:
+            grown = obstacle.inflate(inflation)
+            mu = opti.variable(grown.num_faces, n)
+            opti.subject_to(ca.vec(mu) >= 0)
+            for i in range(n):
+                opti.subject_to(ca.sum1(mu[:, i]) == 1)
+                p = X[0:2, i + 1]
+                opti.subject_to(ca.dot(ca.mtimes(grown.A, p) - grown.b, mu[:, i])
+                                >= config.farkas_margin)
+        opti.solver('ipopt', {'print_time': False}, {'print_level': 0, 'sb': 'yes'})
+        self._opti, self._x0, self._U = opti, x0, U
+
+    def solve(self, x: np.ndarray) -> tuple[np.ndarray, float, int, bool]:
+        """Return (u0, solve seconds, iterations, success)."""
+        self._opti.set_value(self._x0, x)
+        start = time.perf_counter()
+        try:
+            sol = self._opti.solve()
+            ok = True
+            u = np.asarray(sol.value(self._U)).reshape(2, -1)[:, 0]
+        except RuntimeError:
+            ok = False
+            u = np.asarray(self._opti.debug.value(self._U)).reshape(2, -1)[:, 0]
+        seconds = time.perf_counter() - start
+        return u, seconds, int(self._opti.stats().get('iter_count', 0)), ok
+
+
+def _stats(values: list[float]) -> dict[str, float]:
+    a = np.asarray(values, dtype=float)
+    if a.size == 0:
+        return {'median': math.nan, 'p95': math.nan, 'max': math.nan}
+    return {'median': float(np.median(a)), 'p95': float(np.percentile(a, 95)),
+            'max': float(np.max(a))}
+
+
+def closed_loop(solver: str, horizon: int, obstacles: list[ConvexPolygon], *,
+                max_steps: int, compile_functions: bool = True) -> dict[str, Any]:
+    """Run the paper's scenario in closed loop and return timings and the outcome.
+
+    solver is a backend of MpcConfig.solver or 'naive'. For the package's backends, a first
+    closed loop builds (and compiles) the NLPs it meets; the timed one reuses them.
+    """
+    model, path = Unicycle(), paper_sinusoid()
+    goal = path.goal
+    if solver == 'naive':
+        config = MpcConfig(horizon=horizon, step=STEP)
+        controller: Any = NaiveMpc(model, config, obstacles, path)
+        runs = 1
+    else:
+        config = MpcConfig(horizon=horizon, step=STEP, solver=solver, compile=compile_functions)
+        controller = PathReferenceMPC(model, config, obstacles=obstacles, path=path)
+        runs = 2
+    warmup: dict[str, Any] = {}
+    for run in range(runs):
+        x = path.start.copy()
+        solve_ms, step_ms, iterations, in_reach, active = [], [], [], [], []
+        length, failures, lyapunov_bad, collision = 0.0, 0, 0, False
+        reached = False
+        for _ in range(max_steps):
+            start = time.perf_counter()
+            if solver == 'naive':
+                u, seconds, its, ok = controller.solve(x)
+                failures += not ok
+            else:
+                sol = controller.solve(x)
+                u, seconds, its = sol.u0, sol.solve_time_s, sol.iterations
+                failures += sol.source != 'solver'
+                lyapunov_bad += sol.lyapunov_ok is False
+                in_reach.append(sol.obstacles_in_reach)
+                active.append(sol.obstacles_active)
+            step_ms.append(1e3 * (time.perf_counter() - start))
+            solve_ms.append(1e3 * seconds)
+            iterations.append(its)
+            x_next = model.step(x, u, STEP)
+            length += float(np.hypot(*(x_next[:2] - x[:2])))
+            x = x_next
+            collision = collision or any(bool(o.contains(x[:2])[0]) for o in obstacles)
+            if (np.hypot(*(x[:2] - goal[:2])) < REACHED_POSITION
+                    and abs(x[2] - goal[2]) < REACHED_HEADING):
+                reached = True
+                break
+        if run == 0 and runs == 2:
+            warmup = {'step_ms': _stats(step_ms)}
+            controller.wait_compiled()
+            controller.reset()
+    return {
+        'solver': solver if solver == 'naive' or not compile_functions else f'{solver}+compiled',
+        'horizon': horizon, 'obstacles': len(obstacles), 'steps': len(solve_ms),
+        'solve_ms': _stats(solve_ms), 'step_ms': _stats(step_ms),
+        'iterations_median': float(np.median(iterations)),
+        'iterations_max': int(np.max(iterations)),
+        'in_reach_max': int(max(in_reach, default=len(obstacles))),
+        'in_reach_median': float(np.median(in_reach)) if in_reach else float(len(obstacles)),
+        'active_max': int(max(active, default=len(obstacles))),
+        'active_median': float(np.median(active)) if active else float(len(obstacles)),
+        'reached': reached, 'path_length': length, 'collision': collision,
+        'failures': failures, 'lyapunov_violations': lyapunov_bad,
+        'first_run': warmup,
+    }
+
+
+def bench_rrt(repeats: int) -> dict[str, Any]:
+    """Time RrtStarPlanner for 1000 iterations on config/worlds/rrt_cluttered.yaml."""
+    from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
+    from mpc_local_planner.worlds.data_files import resolve_data_file
+    from mpc_local_planner.worlds.world import load_world
+
+    world = load_world(resolve_data_file('worlds/rrt_cluttered.yaml'))
+    times = []
+    for seed in range(repeats):
+        planner = RrtStarPlanner(world.obstacles, world.bounds, config=PlannerConfig(
+            iterations=1000, seed=seed, robot_radius=float(world.robot_radius),
+            time_limit=60.0))
+        start = time.perf_counter()
+        planner.plan(world.start, world.goal)
+        times.append(1e3 * (time.perf_counter() - start))
+    return {'iterations': 1000, 'plans': repeats, 'plan_ms': _stats(times)}
+
+
+def _rss_mb(pid: int) -> float:
+    with open(f'/proc/{pid}/status', encoding='ascii') as f:
+        for line in f:
+            if line.startswith('VmRSS:'):
+                return float(line.split()[1]) / 1024.0
+    return math.nan
+
+
+def bench_dds(steps: int = 100) -> dict[str, Any]:
+    """Time the controller node, a separate process, over DDS with simulated time.
+
+    A probe node plays simulator and clock: it publishes ``odom`` (the state, stamped at
+    the current simulated time), then advances ``/clock`` by one step h, which fires the
+    controller's timer; it times from that clock message to the ``cmd_vel`` it causes, and
+    reads the solve time the controller reports on ``mpc/diagnostics``. Latency beyond the
+    solve = that interval minus the reported solve time (DDS both ways, executor wake-up,
+    the controller's Python around the solve). rclpy is imported here only.
+    """
+    import os
+    import subprocess
+
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import Twist
+    from nav_msgs.msg import Odometry
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rosgraph_msgs.msg import Clock
+
+    from mpc_local_planner.ros.conversions import ODOM_QOS, seconds_to_stamp, state_to_odometry
+
+    env = dict(os.environ)
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    env.setdefault('ROS_DOMAIN_ID', '43')
+    os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')})
+    cmd = [sys.executable, '-m', 'mpc_local_planner.ros.mpc_controller_node', '--ros-args',
+           '-p', 'use_sim_time:=true', '-p', 'analytic_path:=paper_sinusoid',
+           '-p', 'world_file:=worlds/paper_obstacle.yaml', '-p', f'solver:={MpcConfig().solver}',
+           '-p', f'step:={STEP}', '-p', 'odom_timeout:=1000.0']
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('mpc_bench_probe', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    got: dict[str, Any] = {'cmd': None, 'diag': None}
+
+    def cmd_callback(msg: Twist) -> None:
+        got['cmd'] = (time.perf_counter(), np.array([msg.linear.x, msg.angular.z]))
+
+    def diag_callback(msg: DiagnosticArray) -> None:
+        values = {kv.key: kv.value for st in msg.status for kv in st.values}
+        got['diag'] = values
+
+    clock_pub = node.create_publisher(Clock, '/clock', 10)
+    odom_pub = node.create_publisher(Odometry, 'odom', ODOM_QOS)
+    node.create_subscription(Twist, 'cmd_vel', cmd_callback, ODOM_QOS)
+    node.create_subscription(DiagnosticArray, 'mpc/diagnostics', diag_callback, ODOM_QOS)
+    model, path = Unicycle(), paper_sinusoid()
+    x, t_sim = path.start.copy(), 1.0
+    latency, beyond, solve, rss = [], [], [], math.nan
+    try:
+        deadline = time.monotonic() + 120.0
+        while time.monotonic() < deadline and (odom_pub.get_subscription_count() == 0
+                                               or clock_pub.get_subscription_count() == 0):
+            executor.spin_once(timeout_sec=0.1)
+            if proc.poll() is not None:
+                msg = f'controller exited: {proc.stderr.read()[-2000:]}'
+                raise RuntimeError(msg)
+        clock_pub.publish(Clock(clock=seconds_to_stamp(t_sim)))
+        executor.spin_once(timeout_sec=1.0)  # let the controller see the clock, then odom
+        for k in range(steps + 5):
+            odom_pub.publish(state_to_odometry(x, np.zeros(2), stamp=seconds_to_stamp(t_sim)))
+            end = time.perf_counter() + 0.02  # odom first: let it arrive before the clock
+            while time.perf_counter() < end:
+                executor.spin_once(timeout_sec=0.005)
+            got['cmd'], got['diag'] = None, None
+            t_sim += STEP
+            sent = time.perf_counter()
+            clock_pub.publish(Clock(clock=seconds_to_stamp(t_sim)))
+            end = sent + 5.0
+            while (got['cmd'] is None or got['diag'] is None) and time.perf_counter() < end:
+                executor.spin_once(timeout_sec=0.01)
+            if got['cmd'] is None or got['diag'] is None:
+                continue
+            received, u = got['cmd']
+            solve_ms = float(got['diag'].get('solve_ms', 'nan'))
+            if k >= 5 and math.isfinite(solve_ms):  # first steps build; at the goal, no solve
+                latency.append(1e3 * (received - sent))
+                solve.append(solve_ms)
+                beyond.append(1e3 * (received - sent) - solve_ms)
+            x = model.step(x, u, STEP)
+        rss = _rss_mb(proc.pid)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+        proc.terminate()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+    result = {'steps': len(latency), 'latency_ms': _stats(latency), 'solve_ms': _stats(solve),
+              'beyond_solve_ms': _stats(beyond), 'controller_rss_mb': rss}
+    result['summary'] = (
+        f"DDS (controller as its own process, sim time, {len(latency)} steps): clock->cmd_vel "
+        f"median {result['latency_ms']['median']:.2f} ms, p95 {result['latency_ms']['p95']:.2f}"
+        f" ms; reported solve median {result['solve_ms']['median']:.2f} ms; beyond the solve "
+        f"median {result['beyond_solve_ms']['median']:.2f} ms, p95 "
+        f"{result['beyond_solve_ms']['p95']:.2f} ms; controller RSS {rss:.0f} MB")
+    return result
+
+
+def _row(r: dict[str, Any], naive: dict[str, Any] | None) -> str:
+    s = r['solve_ms']
+    ratio = naive['solve_ms']['median'] / s['median'] if naive else math.nan
+    return (f"| {r['solver']:<16} | {r['horizon']:>3} | {r['obstacles']:>3} "
+            f"| {r['in_reach_max']:>5} | {r.get('active_max', r['in_reach_max']):>6} "
+            f"| {s['median']:8.3f} | {s['p95']:8.3f} | {s['max']:8.3f} "
+            f"| {r['iterations_median']:5.1f} | {r['step_ms']['median']:8.3f} "
+            f"| {ratio:6.1f} | {'yes' if r['reached'] else 'NO':>3} | {r['path_length']:6.3f} "
+            f"| {r['failures']:>3} |")
+
+
+HEADER = ('| backend          |   N | obs | reach | active | solve ms |  p95 ms  |  max ms  '
+          '|  its  | step ms  | x naive| hit | length | nsv |\n'
+          '|------------------|-----|-----|-------|--------|----------|----------|----------'
+          '|-------|----------|--------|-----|--------|-----|')
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the benchmark, print the table and write JSON."""
+    parser = argparse.ArgumentParser(prog='mpc_bench', description=__doc__.splitlines()[0])
+    parser.add_argument('--quick', action='store_true', help='fewer steps, N = 10 and 40 only')
+    parser.add_argument('--skip-dds', action='store_true', help='skip the ROS 2 measurement')
+    parser.add_argument('--out', default='bench.json', help='JSON output file')
+    parser.add_argument('--backends', nargs='*', default=list(SOLVERS),
+                        help='backends to time (default: all)')
+    args = parser.parse_args(argv)
+
+    max_steps = 60 if args.quick else 250
+    horizons = (10, 40) if args.quick else HORIZONS
+    results: dict[str, Any] = {
+        'machine': {'python': sys.version.split()[0], 'casadi': ca.__version__,
+                    'platform': platform.platform()},
+        'command': 'mpc_bench ' + ' '.join(sys.argv[1:] if argv is None else argv),
+        'horizons': [], 'obstacles': [],
+    }
+    paper = [paper_obstacle()]
+    variants = [(b, True) for b in args.backends] + [('ipopt', False)] * ('ipopt' in args.backends)
+    variants += [('fatrop', False)] * ('fatrop' in args.backends)
+    print(f'closed loop on the paper scenario, h = {STEP} s, medians over the steps; '
+          f'nsv = steps without a verified solver solution', flush=True)
+    print(HEADER, flush=True)
+    for n in horizons:
+        naive = closed_loop('naive', n, paper, max_steps=max_steps)
+        for backend, compiled in variants:
+            r = closed_loop(backend, n, paper, max_steps=max_steps, compile_functions=compiled)
+            r['ratio_to_naive'] = naive['solve_ms']['median'] / r['solve_ms']['median']
+            results['horizons'].append(r)
+            print(_row(r, naive), flush=True)
+        results['horizons'].append(naive)
+        print(_row(naive, naive), flush=True)
+    print("\nN = 10 with more obstacles (reach: most obstacles within the horizon's reach at "
+          'once, all checked; active: most held in the NLP at once)')
+    print(HEADER, flush=True)
+    path = paper_sinusoid()
+    for count in OBSTACLE_COUNTS:
+        obstacles = paper + extra_obstacles(count - 1, path)
+        naive = closed_loop('naive', 10, obstacles, max_steps=max_steps)
+        for backend, compiled in variants:
+            r = closed_loop(backend, 10, obstacles, max_steps=max_steps,
+                            compile_functions=compiled)
+            r['ratio_to_naive'] = naive['solve_ms']['median'] / r['solve_ms']['median']
+            results['obstacles'].append(r)
+            print(_row(r, naive), flush=True)
+        results['obstacles'].append(naive)
+        print(_row(naive, naive), flush=True)
+
+    rrt = bench_rrt(3 if args.quick else 10)
+    results['rrt'] = rrt
+    print(f"\nRRT* 1000 iterations on rrt_cluttered.yaml: median {rrt['plan_ms']['median']:.1f} ms"
+          f", p95 {rrt['plan_ms']['p95']:.1f} ms over {rrt['plans']} seeds", flush=True)
+
+    if not args.skip_dds:
+        dds = bench_dds(steps=30 if args.quick else 100)
+        results['dds'] = dds
+        print(dds['summary'], flush=True)
+
+    with open(args.out, 'w', encoding='utf-8') as f:
+        json.dump(results, f, indent=2)
+    print(f'\nwrote {args.out}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

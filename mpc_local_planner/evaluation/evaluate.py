@@ -1,0 +1,699 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Evidence at scale: the paper's MPC beside baselines on random worlds and BARN worlds.
+
+``python -m mpc_local_planner.evaluation.evaluate --suite {random,barn} --out DIR --jobs K``
+
+- random: ``--count`` worlds from ``--seed``: random convex obstacles between start (0, 0, 0)
+  and goal (6, 0, 0), the first one across the straight line; the reference path from RRT*
+  (seeded from the world). Each world records whether its path satisfies the paper's
+  Assumption 1 (every segment clear of the obstacles inflated as the MPC inflates them:
+  robot radius plus collision margin; start and goal clear). Success: within
+  RANDOM_GOAL_TOLERANCE of the goal position, with no collision, before the time limit.
+- barn: the BARN worlds ``--worlds`` (e.g. 0-99) from ``--barn-dir``: robot radius 0.2 m,
+  success as the challenge defines it (within the file's goal tolerance of the goal before
+  its time limit, no contact). Contact is measured from the exact cylinders (circles), not
+  the octagons the MPC and the planner use. Score: success * t_opt / clip(t, 2 t_opt,
+  8 t_opt), t_opt = barn_path_length / 2.
+
+Controllers: ``proposed`` (PathReferenceMPC on the RRT* WaypointPath), ``tracking`` (the
+TrackingMPC baseline, target only) and ``pure_pursuit`` (lookahead pure pursuit of the same
+polyline, no obstacle constraints). A run stops at success, at first contact, at the time
+limit, or after STALL_STEPS steps standing still.
+
+Writes ``runs.csv`` (one row per world x controller, appended as runs finish) and
+``summary.md`` (one table row per controller).
+"""
+
+from __future__ import annotations
+
+import argparse
+from concurrent.futures import as_completed, ProcessPoolExecutor
+import csv
+from dataclasses import dataclass
+import math
+import multiprocessing
+import os
+from pathlib import Path
+import sys
+import time
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit, PurePursuitConfig
+from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.mpc.step import PathReferenceMPC, TrackingMPC
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.paths import WaypointPath
+from mpc_local_planner.core.planner import (
+    PlannerConfig,
+    PlanningError,
+    RrtStarPlanner,
+    segment_collides,
+)
+from mpc_local_planner.evaluation.metrics import compute_metrics
+from mpc_local_planner.evaluation.trajectory import write_trajectory_csv
+from mpc_local_planner.worlds.data_files import BARN_DIR
+
+__all__ = [
+    'assumption_1',
+    'barn_score',
+    'CONTROLLERS',
+    'main',
+    'random_world',
+    'run_task',
+    'shortcut',
+    'summarize',
+    'Task',
+]
+
+CONTROLLERS = ('proposed', 'tracking', 'pure_pursuit')
+CSV_COLUMNS = (
+    'controller', 'world', 'success', 'collision', 'time', 'path_length', 'min_clearance',
+    'solve_ms_median', 'solve_ms_max', 'barn_score', 'assumption_1', 'reference_length',
+    'final_distance', 'steps', 'stop_reason', 'planner_clearance', 'solver_failures', 'v_max',
+)
+DEFAULT_BARN_DIR = BARN_DIR
+ROBOT_RADIUS = 0.2
+STALL_INPUT = 1e-4
+STALL_STEPS = 25
+# Random suite: the workspace, the start and goal, and success.
+RANDOM_BOUNDS = (-1.0, 7.0, -3.0, 3.0)
+RANDOM_START = np.array([0.0, 0.0, 0.0])
+RANDOM_GOAL = np.array([6.0, 0.0, 0.0])
+RANDOM_GOAL_TOLERANCE = 0.05
+RANDOM_ATTEMPTS = 50
+# The planner grows obstacles by robot radius + clearance; clearance beyond the MPC's own
+# collision margin gives the MPC room to cut corners. Tried in order until RRT* finds a path
+# (narrow BARN gaps need the smaller ones).
+CLEARANCE_EXTRA = (0.05, 0.02, 0.0)
+RRT_ITERATIONS = 3000
+RRT_TIME_LIMIT = 30.0
+BARN_RRT_RANGE = 0.5
+PATH_CAPACITY = 128
+
+
+@dataclass(frozen=True)
+class Task:
+    """One closed-loop run: a world and a controller."""
+
+    suite: str
+    world: int
+    controller: str
+    seed: int = 0
+    v_max: float = 0.31
+    omega_max: float = 1.9
+    barn_dir: str = ''
+    trajectory_dir: str = ''
+    merge: bool = False
+
+
+@dataclass
+class Scenario:
+    """What a run needs of its world: obstacles, start, goal, reference polyline, limits."""
+
+    name: str
+    obstacles: tuple[ConvexPolygon, ...]
+    start: np.ndarray
+    goal: np.ndarray
+    bounds: tuple[float, float, float, float]
+    waypoints: np.ndarray | None
+    planner_clearance: float | None
+    assumption_1: bool
+    goal_tolerance: float
+    time_limit: float
+    cylinders: np.ndarray | None = None
+    cylinder_radius: float = 0.0
+    barn_path_length: float | None = None
+    note: str = ''
+
+
+def barn_score(success: bool, time_s: float | None, barn_path_length: float) -> float:
+    """Return the BARN challenge's score of one run."""
+    if not success or time_s is None:
+        return 0.0
+    t_opt = barn_path_length / 2.0
+    return float(t_opt / np.clip(time_s, 2.0 * t_opt, 8.0 * t_opt))
+
+
+def assumption_1(
+    waypoints: np.ndarray | None, obstacles: Sequence[ConvexPolygon], inflation: float
+) -> bool:
+    """Say whether the polyline lies in the interior of the free space grown by inflation.
+
+    Every segment must miss every obstacle inflated by `inflation` (the MPC's robot radius
+    plus collision margin); the check is exact and counts grazing as touching.
+    """
+    if waypoints is None or len(waypoints) < 2:
+        return False
+    grown = [o.inflate(inflation) for o in obstacles]
+    return not any(segment_collides(grown, waypoints[i], waypoints[i + 1])
+                   for i in range(len(waypoints) - 1))
+
+
+def shortcut(waypoints: np.ndarray, obstacles: Sequence[ConvexPolygon]) -> np.ndarray:
+    """Greedy shortcut: from each kept point, jump to the furthest point in straight view.
+
+    `obstacles` are already inflated as the planner inflated them, so the result keeps the
+    planner's clearance (and Assumption 1 whenever the input satisfies it).
+    """
+    pts = np.asarray(waypoints, dtype=float)
+    kept = [0]
+    i = 0
+    while i < len(pts) - 1:
+        j = len(pts) - 1
+        while j > i + 1 and segment_collides(obstacles, pts[i], pts[j]):
+            j -= 1
+        kept.append(j)
+        i = j
+    return pts[kept]
+
+
+def _plan(
+    obstacles: Sequence[ConvexPolygon],
+    bounds: tuple[float, float, float, float],
+    start: np.ndarray,
+    goal: np.ndarray,
+    *,
+    seed: int,
+    margin: float,
+    rrt_range: float,
+) -> tuple[np.ndarray | None, float | None, str]:
+    """Plan with RRT*, trying the clearances of CLEARANCE_EXTRA beyond the MPC's margin."""
+    note = ''
+    for extra in CLEARANCE_EXTRA:
+        clearance = margin + extra
+        config = PlannerConfig(iterations=RRT_ITERATIONS, time_limit=RRT_TIME_LIMIT,
+                               seed=seed, range=rrt_range, robot_radius=ROBOT_RADIUS,
+                               clearance=clearance)
+        try:
+            waypoints = RrtStarPlanner(obstacles, bounds, config=config).plan(start, goal)
+        except PlanningError as err:
+            note = str(err)
+            continue
+        grown = [o.inflate(config.inflation) for o in obstacles]
+        return shortcut(waypoints, grown), clearance, ''
+    # Last resort: the robot radius alone (the path then violates Assumption 1).
+    config = PlannerConfig(iterations=RRT_ITERATIONS, time_limit=RRT_TIME_LIMIT, seed=seed,
+                           range=rrt_range, robot_radius=ROBOT_RADIUS, clearance=0.0)
+    try:
+        waypoints = RrtStarPlanner(obstacles, bounds, config=config).plan(start, goal)
+    except PlanningError as err:
+        return None, None, f'no path: {err}; {note}'
+    grown = [o.inflate(config.inflation) for o in obstacles]
+    return shortcut(waypoints, grown), 0.0, 'planned with robot radius only'
+
+
+def _random_polygon(rng: np.random.Generator, cx: float, cy: float) -> ConvexPolygon:
+    sides = int(rng.integers(3, 7))
+    angles = np.sort(rng.uniform(0.0, 2.0 * math.pi, sides))
+    radii = rng.uniform(0.25, 0.65, sides)
+    points = np.column_stack([cx + radii * np.cos(angles), cy + radii * np.sin(angles)])
+    return ConvexPolygon.from_vertices(points)
+
+
+def random_world(index: int, seed: int, *, margin: float) -> Scenario:
+    """Return random world `index` of the suite seeded by `seed` (reproducible).
+
+    Three to six random convex polygons (3 to 6 vertices, 0.25 to 0.65 m from their centre)
+    between start and goal; the first sits across the straight line. Draws are repeated until
+    start and goal are clear (by robot radius + margin + 0.3 m) and RRT* finds a path.
+    """
+    rng = np.random.default_rng([seed, index])
+    free = ROBOT_RADIUS + margin + 0.3
+    for attempt in range(RANDOM_ATTEMPTS):
+        count = int(rng.integers(3, 7))
+        obstacles = []
+        for i in range(count):
+            cx = float(rng.uniform(1.3, 4.7))
+            cy = float(rng.uniform(-0.3, 0.3) if i == 0 else rng.uniform(-2.0, 2.0))
+            obstacles.append(_random_polygon(rng, cx, cy))
+        ends = np.array([RANDOM_START[:2], RANDOM_GOAL[:2]])
+        if any(np.any(o.distance(ends) < free) for o in obstacles):
+            continue
+        plan_seed = int(rng.integers(0, 2**31 - 2))
+        waypoints, clearance, note = _plan(obstacles, RANDOM_BOUNDS, RANDOM_START, RANDOM_GOAL,
+                                           seed=plan_seed, margin=margin, rrt_range=0.0)
+        if waypoints is None:
+            continue
+        return Scenario(
+            name=f'random_{index:03d}', obstacles=tuple(obstacles), start=RANDOM_START.copy(),
+            goal=RANDOM_GOAL.copy(), bounds=RANDOM_BOUNDS, waypoints=waypoints,
+            planner_clearance=clearance,
+            assumption_1=assumption_1(waypoints, obstacles, ROBOT_RADIUS + margin),
+            goal_tolerance=RANDOM_GOAL_TOLERANCE,
+            time_limit=max(60.0, 4.0 * _length(waypoints) / RANDOM_V_REF),
+            note=note or (f'attempt {attempt}' if attempt else ''))
+    msg = f'random world {index} (seed {seed}): no plannable draw in {RANDOM_ATTEMPTS}'
+    raise RuntimeError(msg)
+
+
+RANDOM_V_REF = 0.31  # the time limit scales with the paper's speed, whatever --v-max says
+
+
+def _length(waypoints: np.ndarray) -> float:
+    return float(np.sum(np.linalg.norm(np.diff(waypoints, axis=0), axis=1)))
+
+
+def barn_world(path: Path, *, seed: int, margin: float, merge: bool = False) -> Scenario:
+    """Load a BARN world, plan its reference path and check Assumption 1.
+
+    With merge, rows of touching cylinders become thin rectangles (obstacle_merging) for the
+    planner and the MPC; contact is still measured from the exact cylinders.
+    """
+    import dataclasses
+    import json
+
+    from mpc_local_planner.worlds.merging import merge_cylinders
+    from mpc_local_planner.worlds.world import load_barn_world
+
+    world = load_barn_world(path, robot_radius=ROBOT_RADIUS)
+    data = json.loads(Path(path).read_text(encoding='utf-8'))
+    if merge:
+        merged = merge_cylinders(np.asarray(data['cylinders'], dtype=float).reshape(-1, 2),
+                                 float(data['cylinder_radius']))
+        world = dataclasses.replace(world, obstacles=tuple(merged))
+    index = int(''.join(ch for ch in path.stem if ch.isdigit()) or 0)
+    waypoints, clearance, note = _plan(world.obstacles, world.bounds, world.start, world.goal,
+                                       seed=seed + index, margin=margin,
+                                       rrt_range=BARN_RRT_RANGE)
+    inflated = [o.inflate(ROBOT_RADIUS + margin) for o in world.obstacles]
+    ends_clear = not any(bool(o.contains(np.array([p[:2] for p in (world.start, world.goal)]))
+                              .any()) for o in inflated)
+    ok = ends_clear and assumption_1(waypoints, world.obstacles, ROBOT_RADIUS + margin)
+    if not ends_clear:
+        note = (note + '; ' if note else '') + 'start or goal inside the MPC-inflated obstacles'
+    return Scenario(
+        name=path.stem, obstacles=world.obstacles, start=world.start, goal=world.goal,
+        bounds=world.bounds, waypoints=waypoints, planner_clearance=clearance, assumption_1=ok,
+        goal_tolerance=float(world.goal_tolerance or 1.0),
+        time_limit=float(world.time_limit or 100.0),
+        cylinders=np.asarray(data['cylinders'], dtype=float).reshape(-1, 2),
+        cylinder_radius=float(data['cylinder_radius']),
+        barn_path_length=float(data['barn_path_length']), note=note)
+
+
+def _scenario(task: Task, margin: float) -> Scenario:
+    if task.suite == 'random':
+        return random_world(task.world, task.seed, margin=margin)
+    return barn_world(Path(task.barn_dir) / f'world_{task.world:03d}.json', seed=task.seed,
+                      margin=margin, merge=task.merge)
+
+
+def _clearance_fn(scenario: Scenario) -> Callable[[np.ndarray], np.ndarray]:
+    """Return points (n, 2) -> clearance of the robot circle from the true obstacles."""
+    if scenario.cylinders is not None:
+        centres = scenario.cylinders
+        gap = scenario.cylinder_radius + ROBOT_RADIUS
+
+        def circles(points: np.ndarray) -> np.ndarray:
+            d = np.linalg.norm(points[:, None, :] - centres[None, :, :], axis=2)
+            return np.min(d, axis=1) - gap
+        return circles
+
+    obstacles = scenario.obstacles
+
+    def polygons(points: np.ndarray) -> np.ndarray:
+        dist = np.min(np.stack([o.distance(points) for o in obstacles]), axis=0)
+        inside = np.zeros(len(points), dtype=bool)
+        for o in obstacles:
+            inside |= o.contains(points)
+        return np.where(inside, -1.0, dist) - ROBOT_RADIUS
+    return polygons
+
+
+# Per worker process: one MPC per (controller, bounds), reused across worlds so the NLPs it
+# builds (one per obstacle count in reach) are built once, not once per run.
+_MPC_CACHE: dict[tuple, PathReferenceMPC | TrackingMPC] = {}
+
+
+def _controller(task: Task, scenario: Scenario, model: Unicycle,
+                config: MpcConfig) -> Callable[[np.ndarray], tuple]:
+    """Return x -> (u, s, value, solve_ms, ok) for the task's controller."""
+    if task.controller == 'pure_pursuit':
+        follower = PurePursuit(scenario.waypoints, PurePursuitConfig(
+            v_max=model.v_max, omega_max=model.omega_max,
+            goal_tolerance=min(0.03, scenario.goal_tolerance / 2)))
+
+        def pursue(x: np.ndarray) -> tuple:
+            t0 = time.perf_counter()
+            u = follower.command(x)
+            return u, follower.progress / max(follower.length, 1e-9), math.nan, \
+                (time.perf_counter() - t0) * 1e3, True
+        return pursue
+    if task.controller not in ('proposed', 'tracking'):
+        msg = f'unknown controller {task.controller!r}'
+        raise ValueError(msg)
+    key = (task.controller, model.v_max, model.omega_max)
+    mpc = _MPC_CACHE.get(key)
+    if task.controller == 'tracking':
+        if mpc is None:
+            mpc = _MPC_CACHE[key] = TrackingMPC(model, config, target=scenario.goal)
+        mpc.set_target(scenario.goal)
+    else:
+        path = WaypointPath(scenario.waypoints, start_heading=float(scenario.start[2]),
+                            goal_heading=float(scenario.goal[2]), capacity=PATH_CAPACITY)
+        if mpc is None:
+            mpc = _MPC_CACHE[key] = PathReferenceMPC(model, config, path=path)
+        mpc.set_path(path)
+    # every obstacle: the MPC checks those within reach and gives multipliers to those near
+    # its candidate trajectory (constraint generation, see mpc.py)
+    mpc.set_obstacles(scenario.obstacles)
+    mpc.reset()
+
+    def solve(x: np.ndarray) -> tuple:
+        solution = mpc.solve(x)
+        return solution.u0, solution.s, solution.value, solution.solve_time_s * 1e3, \
+            solution.success
+    return solve
+
+
+def _empty_row(task: Task, scenario: Scenario | None, reason: str) -> dict[str, Any]:
+    row = dict.fromkeys(CSV_COLUMNS, '')
+    row.update(controller=task.controller, world=task.world, success=False, collision=False,
+               stop_reason=reason, v_max=task.v_max)
+    if scenario is not None:
+        row.update(assumption_1=scenario.assumption_1,
+                   planner_clearance=scenario.planner_clearance)
+        if scenario.barn_path_length is not None:
+            row['barn_score'] = 0.0
+    return row
+
+
+def run_task(task: Task) -> dict[str, Any]:
+    """Run one world x controller in closed loop and return its runs.csv row."""
+    model = Unicycle(v_max=task.v_max, omega_max=task.omega_max)
+    config = MpcConfig().with_changes(robot_radius=ROBOT_RADIUS)
+    margin = config.inflation(model.v_max) - ROBOT_RADIUS
+    scenario = _scenario(task, margin)
+    if task.controller != 'tracking' and scenario.waypoints is None:
+        return _empty_row(task, scenario, 'no reference path: ' + scenario.note)
+    controller = _controller(task, scenario, model, config)
+    clearance = _clearance_fn(scenario)
+    h = config.step
+    x = np.asarray(scenario.start, dtype=float).copy()
+    goal = np.asarray(scenario.goal, dtype=float)
+    rows: list[list[float]] = []
+    failures = still = 0
+    reason = 'time limit'
+    success_time = None
+    collided = False
+    for k in range(int(math.ceil(scenario.time_limit / h)) + 1):
+        t = k * h
+        if clearance(x[None, :2])[0] <= 0.0:
+            collided = True
+        distance = math.hypot(x[0] - goal[0], x[1] - goal[1])
+        if collided or distance <= scenario.goal_tolerance:
+            rows.append([t, *x[:3], 0.0, 0.0, math.nan, math.nan, math.nan])
+            if collided:
+                reason = 'contact'
+            else:
+                reason, success_time = 'goal', t
+            break
+        u, s, value, solve_ms, ok = controller(x)
+        failures += 0 if ok else 1
+        rows.append([t, *x[:3], *np.asarray(u)[:2], s, value, solve_ms])
+        still = still + 1 if float(np.max(np.abs(u))) < STALL_INPUT else 0
+        if still >= STALL_STEPS:
+            reason = 'stalled'
+            break
+        x = model.step(x, np.asarray(u, dtype=float), h)
+    data = np.array(rows, dtype=float)
+    metrics = compute_metrics(data, goal=goal, obstacles=(), solver_failures=failures)
+    min_clear = float(np.min(clearance(data[:, 1:3])))
+    success = success_time is not None and not collided
+    ref_len = _length(scenario.waypoints) if scenario.waypoints is not None else None
+    if task.trajectory_dir:
+        folder = Path(task.trajectory_dir)
+        folder.mkdir(parents=True, exist_ok=True)
+        write_trajectory_csv(folder / f'{task.controller}_{task.world:03d}.csv', data)
+        if scenario.waypoints is not None:
+            np.savetxt(folder / f'path_{task.world:03d}.csv', scenario.waypoints,
+                       delimiter=',', header='x,y', comments='')
+    row = _empty_row(task, scenario, reason)
+    row.update(
+        success=success, collision=collided or min_clear <= 0.0,
+        time=success_time if success_time is not None else data[-1, 0],
+        path_length=metrics['path_length'], min_clearance=min_clear,
+        solve_ms_median=metrics['solve_ms_median'], solve_ms_max=metrics['solve_ms_max'],
+        reference_length=ref_len,
+        final_distance=math.hypot(data[-1, 1] - goal[0], data[-1, 2] - goal[1]),
+        steps=len(data), solver_failures=failures)
+    if scenario.barn_path_length is not None:
+        row['barn_score'] = barn_score(success, success_time, scenario.barn_path_length)
+    return row
+
+
+def _fmt(value: Any, digits: int = 2) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return '-'
+    if isinstance(value, float):
+        return f'{value:.{digits}f}'
+    return str(value)
+
+
+def _floats(rows: list[dict[str, Any]], key: str) -> np.ndarray:
+    values = []
+    for r in rows:
+        try:
+            values.append(float(r[key]))
+        except (TypeError, ValueError):
+            continue
+    values = np.array(values, dtype=float)
+    return values[np.isfinite(values)]
+
+
+def _true(value: Any) -> bool:
+    return str(value) in ('True', 'true', '1')
+
+
+def summarize(rows: list[dict[str, Any]], *, suite: str, title: str = '') -> str:
+    """Return the Markdown summary: one table row per controller."""
+    lines = [f'# {title or suite} suite', '']
+    worlds = sorted({int(r['world']) for r in rows})
+    a1 = {int(r['world']) for r in rows if _true(r['assumption_1'])}
+    lines.append(f'Worlds: {len(worlds)}; reference path satisfies Assumption 1 in '
+                 f'{len(a1 & set(worlds))} of them.')
+    lines.append('')
+    head = ['controller', 'runs', 'success', 'rate', 'collisions', 'success (Assumption 1)',
+            'median time [s]', 'median path [m]', 'median solve [ms]', 'p95 of medians [ms]',
+            'max solve [ms]']
+    if suite == 'barn':
+        head.append('mean BARN score')
+    lines += ['| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)]
+    order = [c for c in CONTROLLERS if any(r['controller'] == c for r in rows)]
+    for name in order:
+        mine = [r for r in rows if r['controller'] == name]
+        ok = [r for r in mine if _true(r['success'])]
+        mine_a1 = [r for r in mine if _true(r['assumption_1'])]
+        ok_a1 = [r for r in mine_a1 if _true(r['success'])]
+        times = _floats(ok, 'time')
+        paths = _floats(ok, 'path_length')
+        med = _floats(mine, 'solve_ms_median')
+        worst = _floats(mine, 'solve_ms_max')
+        cells = [
+            name, str(len(mine)), str(len(ok)), f'{len(ok) / max(1, len(mine)):.1%}',
+            str(sum(_true(r['collision']) for r in mine)), f'{len(ok_a1)}/{len(mine_a1)}',
+            _fmt(float(np.median(times)) if len(times) else None, 1),
+            _fmt(float(np.median(paths)) if len(paths) else None, 2),
+            _fmt(float(np.median(med)) if len(med) else None, 2),
+            _fmt(float(np.percentile(med, 95)) if len(med) else None, 2),
+            _fmt(float(np.max(worst)) if len(worst) else None, 1),
+        ]
+        if suite == 'barn':
+            scores = _floats(mine, 'barn_score')
+            cells.append(_fmt(float(np.mean(scores)) if len(scores) else None, 4))
+        lines.append('| ' + ' | '.join(cells) + ' |')
+    lines.append('')
+    reasons: dict[str, dict[str, int]] = {}
+    for r in rows:
+        key = str(r['stop_reason']).split(':')[0]
+        reasons.setdefault(r['controller'], {}).setdefault(key, 0)
+        reasons[r['controller']][key] += 1
+    lines.append('Stop reasons: ' + '; '.join(
+        f'{c}: ' + ', '.join(f'{k} {v}' for k, v in sorted(reasons[c].items()))
+        for c in order))
+    failed = sorted(int(r['world']) for r in rows
+                    if r['controller'] == 'proposed' and not _true(r['success']))
+    if failed:
+        lines.append('')
+        lines.append('Proposed MPC failed in worlds: ' + ', '.join(map(str, failed)))
+    return '\n'.join(lines) + '\n'
+
+
+def plot_barn_runs(out: Path, barn_dir: Path, worlds: Sequence[int]) -> Path:
+    """Draw the saved BARN runs of some worlds (cylinders, RRT* path, trajectories) in a PNG.
+
+    Reads ``OUT/trajectories`` (written with --save-trajectories) and ``OUT/runs.csv``.
+    """
+    import json
+
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    from mpc_local_planner.evaluation.trajectory import read_trajectory_csv
+
+    folder = out / 'trajectories'
+    rows = {(int(r['world']), r['controller']): r for r in _read_rows(out / 'runs.csv')}
+    fig, axes = plt.subplots(1, len(worlds), figsize=(3.2 * len(worlds), 7.5), squeeze=False)
+    for ax, world in zip(axes[0], worlds, strict=True):
+        data = json.loads((barn_dir / f'world_{world:03d}.json').read_text(encoding='utf-8'))
+        radius = float(data['cylinder_radius'])
+        for cx, cy in data['cylinders']:
+            ax.add_patch(plt.Circle((cx, cy), radius, color='0.3'))
+        path_file = folder / f'path_{world:03d}.csv'
+        if path_file.is_file():
+            path = np.loadtxt(path_file, delimiter=',', skiprows=1, ndmin=2)
+            ax.plot(path[:, 0], path[:, 1], 'k--', lw=0.8, label='RRT* path')
+        for name, colour in (('proposed', 'tab:blue'), ('tracking', 'tab:red'),
+                             ('pure_pursuit', 'tab:orange')):
+            run = folder / f'{name}_{world:03d}.csv'
+            if not run.is_file():
+                continue
+            traj = np.asarray(read_trajectory_csv(run))
+            row = rows.get((world, name), {})
+            ok = 'ok' if _true(row.get('success')) else 'fail'
+            ax.plot(traj[:, 1], traj[:, 2], color=colour, lw=1.5, label=f'{name} ({ok})')
+        start, goal = data['start'], data['goal']
+        ax.plot(start[0], start[1], 'go')
+        ax.add_patch(plt.Circle(goal, float(data.get('goal_tolerance', 1.0)), fill=False,
+                                color='g', ls=':'))
+        ax.set_aspect('equal')
+        ax.set_title(f'BARN world {world}')
+        ax.legend(fontsize=6, loc='lower right')
+    fig.tight_layout()
+    target = out / 'barn_runs.png'
+    fig.savefig(target, dpi=120)
+    plt.close(fig)
+    return target
+
+
+def _parse_worlds(text: str) -> list[int]:
+    worlds: list[int] = []
+    for part in text.split(','):
+        part = part.strip()
+        if '-' in part:
+            lo, hi = (int(v) for v in part.split('-', 1))
+            worlds.extend(range(lo, hi + 1))
+        elif part:
+            worlds.append(int(part))
+    return worlds
+
+
+def _read_rows(path: Path) -> list[dict[str, Any]]:
+    with open(path, newline='') as stream:
+        return list(csv.DictReader(stream))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the suite and write runs.csv and summary.md."""
+    parser = argparse.ArgumentParser(prog='python -m mpc_local_planner.evaluation.evaluate',
+                                     description=__doc__.split('\n\n')[0])
+    parser.add_argument('--suite', choices=('random', 'barn'), required=True)
+    parser.add_argument('--count', type=int, default=200, help='random worlds')
+    parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--worlds', default='0-99', help='BARN worlds, e.g. 0-99 or 3,7,10-12')
+    parser.add_argument('--barn-dir', type=Path, default=DEFAULT_BARN_DIR)
+    parser.add_argument('--controllers', default=','.join(CONTROLLERS))
+    parser.add_argument('--v-max', type=float, default=0.31)
+    parser.add_argument('--omega-max', type=float, default=1.9)
+    parser.add_argument('--out', type=Path, required=True)
+    parser.add_argument('--jobs', type=int, default=1)
+    parser.add_argument('--save-trajectories', action='store_true',
+                        help='write each run as trajectory CSV under OUT/trajectories')
+    parser.add_argument('--merge', action='store_true',
+                        help='BARN: merge rows of touching cylinders into rectangles')
+    parser.add_argument('--plot', default='',
+                        help='BARN: only draw these worlds (e.g. 0,10,50) from an earlier '
+                        'run with --save-trajectories in OUT, then exit')
+    args = parser.parse_args(argv)
+    if args.plot:
+        print(plot_barn_runs(args.out, args.barn_dir, _parse_worlds(args.plot)))
+        return 0
+
+    controllers = [c.strip() for c in args.controllers.split(',') if c.strip()]
+    unknown = sorted(set(controllers) - set(CONTROLLERS))
+    if unknown:
+        parser.error(f'unknown controllers {unknown}; choose from {CONTROLLERS}')
+    if args.suite == 'random':
+        worlds = list(range(args.count))
+        barn_dir = ''
+    else:
+        worlds = _parse_worlds(args.worlds)
+        barn_dir = str(args.barn_dir)
+        missing = [w for w in worlds if not (args.barn_dir / f'world_{w:03d}.json').is_file()]
+        if missing:
+            parser.error(f'BARN worlds not found in {args.barn_dir}: {missing[:10]}')
+    args.out.mkdir(parents=True, exist_ok=True)
+    trajectories = str(args.out / 'trajectories') if args.save_trajectories else ''
+    tasks = [Task(args.suite, w, c, args.seed, args.v_max, args.omega_max, barn_dir,
+                  trajectories, args.merge) for w in worlds for c in controllers]
+    for var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
+        os.environ[var] = '1'
+
+    csv_path = args.out / 'runs.csv'
+    summary_path = args.out / 'summary.md'
+    title = (f'{args.suite} (seed {args.seed}, v_max {args.v_max:g} m/s, '
+             f'omega_max {args.omega_max:g} rad/s{", merged walls" if args.merge else ""})')
+    rows: list[dict[str, Any]] = []
+    started = time.monotonic()
+    with open(csv_path, 'w', newline='') as stream:
+        writer = csv.DictWriter(stream, fieldnames=CSV_COLUMNS)
+        writer.writeheader()
+
+        def record(row: dict[str, Any]) -> None:
+            rows.append(row)
+            writer.writerow(row)
+            stream.flush()
+            elapsed = time.monotonic() - started
+            print(f"[{len(rows)}/{len(tasks)}] {elapsed:6.0f} s  {row['controller']:12s} "
+                  f"world {int(row['world']):3d}: "
+                  f"{'ok' if row['success'] else 'FAIL'} ({row['stop_reason']})",
+                  file=sys.stderr, flush=True)
+            if len(rows) % 10 == 0:
+                summary_path.write_text(summarize(rows, suite=args.suite, title=title))
+
+        if args.jobs <= 1:
+            for task in tasks:
+                record(run_task(task))
+        else:
+            context = multiprocessing.get_context('spawn')
+            with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context) as pool:
+                futures = {pool.submit(run_task, task): task for task in tasks}
+                for future in as_completed(futures):
+                    try:
+                        row = future.result()
+                    except Exception as err:  # noqa: BLE001 - one broken run, not the suite
+                        task = futures[future]
+                        row = _empty_row(task, None, f'error: {type(err).__name__}: {err}')
+                    record(row)
+    rows.sort(key=lambda r: (int(r['world']), CONTROLLERS.index(r['controller'])))
+    with open(csv_path, 'w', newline='') as stream:
+        writer = csv.DictWriter(stream, fieldnames=CSV_COLUMNS)
+        writer.writeheader()
+        writer.writerows(rows)
+    summary = summarize(rows, suite=args.suite, title=title)
+    summary_path.write_text(summary)
+    print(summary)
+    print(f'wrote {csv_path} and {summary_path}', file=sys.stderr)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

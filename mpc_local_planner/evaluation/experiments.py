@@ -1,0 +1,272 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The paper's three experiments as closed loops without ROS, with metrics and figures.
+
+``python -m mpc_local_planner.evaluation.experiments {obstacle,horizon,rrt,all} --out DIR``
+
+- obstacle: Fig. 1 of the paper: the path-reference MPC passes the box and reaches the
+  target; the tracking MPC (Limon et al. 2018) stops in front of it.
+- horizon: Fig. 2: straight, 90 degree turn, straight; N in {5, 10, 20} x h in {0.1, 0.2,
+  0.4}: a longer horizon N h cuts the corner more.
+- rrt: Fig. 3: an RRT* path after 1000 iterations, corners and all, followed by the MPC on a
+  shorter route, with no smoothing.
+
+Each run writes metrics.json and trajectory.csv (design.md section 3) in its own folder, and
+each experiment a PNG with all its runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, field
+import json
+import math
+from pathlib import Path
+import sys
+from typing import Any, Sequence
+
+import numpy as np
+
+from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.models import RobotModel, Unicycle
+from mpc_local_planner.core.mpc.step import PathReferenceMPC, TrackingMPC
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.paths import analytic_path, WaypointPath
+from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
+from mpc_local_planner.evaluation.metrics import compute_metrics, reached_mask
+from mpc_local_planner.evaluation.plotting import plot_runs
+from mpc_local_planner.evaluation.trajectory import write_trajectory_csv
+from mpc_local_planner.worlds.world import load_world, World
+
+__all__ = ['ClosedLoopResult', 'main', 'run_closed_loop', 'save_run']
+
+CONFIG_DIR = Path(__file__).resolve().parents[2] / 'config'
+WORLDS_DIR = CONFIG_DIR / 'worlds'
+# Stop a run once the robot is this close: tighter than the metrics' 0.05 m / 0.1 rad, so
+# the figures show convergence, not just arrival.
+STOP_POSITION_TOLERANCE = 0.01
+STOP_HEADING_TOLERANCE = 0.05
+# A run that commands |u| below this for STALL_STEPS steps has stopped for good.
+STALL_INPUT = 1e-4
+STALL_STEPS = 25
+PREDICTIONS_SHOWN = 6
+# RRT* extension length of the rrt experiment: short steps, as a planner that must answer
+# fast would use, leave the corners of the paper's Fig. 3 after 1000 iterations.
+RRT_RANGE = 0.3
+
+
+@dataclass
+class ClosedLoopResult:
+    """What a closed-loop run produced."""
+
+    label: str
+    rows: np.ndarray
+    predictions: list[np.ndarray]
+    lyapunov_ok: list[bool | None]
+    solver_failures: int
+    metrics: dict[str, Any] = field(default_factory=dict)
+
+
+def run_closed_loop(
+    controller: PathReferenceMPC | TrackingMPC,
+    model: RobotModel,
+    start: np.ndarray,
+    *,
+    goal: np.ndarray,
+    obstacles: Sequence[ConvexPolygon],
+    label: str,
+    max_time: float = 60.0,
+    robot_radius: float = 0.0,
+    reference_length: float | None = None,
+) -> ClosedLoopResult:
+    """Run controller and model in closed loop (the do-mpc make_step symmetry).
+
+    The loop ends at the goal (within STOP_* tolerances), after max_time, or when the robot
+    has stood still for STALL_STEPS steps away from the goal (the baseline's local minimum).
+    """
+    h = controller.config.step
+    x = np.asarray(start, dtype=float).copy()
+    rows, predictions, lyapunov = [], [], []
+    failures = 0
+    still = 0
+    steps = int(math.ceil(max_time / h))
+    for k in range(steps + 1):
+        solution = controller.solve(x)
+        u = solution.u0
+        failures += 0 if solution.success else 1
+        lyapunov.append(solution.lyapunov_ok)
+        rows.append([k * h, *x[:3], *u[:2], solution.s, solution.value,
+                     solution.solve_time_s * 1e3])
+        if k % max(1, steps // 40) == 0:
+            predictions.append(solution.x_pred[:, :3].copy())
+        done = reached_mask(np.array(rows[-1]), goal, position_tolerance=STOP_POSITION_TOLERANCE,
+                            heading_tolerance=STOP_HEADING_TOLERANCE)[0]
+        still = still + 1 if np.max(np.abs(u)) < STALL_INPUT else 0
+        if done or still >= STALL_STEPS or k == steps:
+            break
+        x = model.step(x, u, h)
+    data = np.array(rows)
+    shown = predictions[:: max(1, len(predictions) // PREDICTIONS_SHOWN)][:PREDICTIONS_SHOWN]
+    result = ClosedLoopResult(label=label, rows=data, predictions=shown, lyapunov_ok=lyapunov,
+                              solver_failures=failures)
+    result.metrics = compute_metrics(
+        data, goal=goal, obstacles=obstacles, robot_radius=robot_radius,
+        reference_length=reference_length, solver_failures=failures, lyapunov_ok=lyapunov)
+    result.metrics['label'] = label
+    result.metrics['horizon'] = controller.config.horizon
+    result.metrics['step'] = h
+    result.metrics['solver'] = controller.config.solver
+    return result
+
+
+def save_run(result: ClosedLoopResult, folder: Path) -> None:
+    """Write metrics.json and trajectory.csv of one run."""
+    folder.mkdir(parents=True, exist_ok=True)
+    write_trajectory_csv(folder / 'trajectory.csv', result.rows)
+    (folder / 'metrics.json').write_text(json.dumps(result.metrics, indent=2) + '\n')
+
+
+def _mpc_config(world: World, base: MpcConfig, **changes: Any) -> MpcConfig:
+    return base.with_changes(robot_radius=world.robot_radius, **changes)
+
+
+def obstacle_experiment(out: Path, base: MpcConfig) -> list[ClosedLoopResult]:
+    """Fig. 1: the proposed MPC and the tracking baseline on the paper's box."""
+    world = load_world(WORLDS_DIR / 'paper_obstacle.yaml')
+    path = analytic_path(world.path or 'paper_sinusoid')
+    model = Unicycle()
+    config = _mpc_config(world, base)
+    proposed = PathReferenceMPC(model, config, obstacles=world.obstacles, path=path)
+    baseline = TrackingMPC(model, config, obstacles=world.obstacles, target=world.goal)
+    results = []
+    for name, controller in (('proposed', proposed), ('tracking_baseline', baseline)):
+        result = run_closed_loop(controller, model, world.start, goal=world.goal,
+                                 obstacles=world.obstacles, label=name, max_time=60.0,
+                                 robot_radius=world.robot_radius,
+                                 reference_length=path.length())
+        result.metrics['max_x'] = float(np.max(result.rows[:, 1]))
+        save_run(result, out / name)
+        results.append(result)
+    _, reference = path.sample(400)
+    plot_runs(out / 'obstacle.png', world=world, reference=reference,
+              runs=[('path-reference MPC (proposed)', results[0].rows),
+                    ('tracking MPC (Limon et al. 2018)', results[1].rows)],
+              predictions=results[0].predictions,
+              title=f'Obstacle avoidance: N = {config.horizon}, h = {config.step:.1f} s')
+    return results
+
+
+def horizon_experiment(out: Path, base: MpcConfig,
+                       horizons: Sequence[int] = (5, 10, 20),
+                       steps: Sequence[float] = (0.1, 0.2, 0.4)) -> list[ClosedLoopResult]:
+    """Fig. 2: closed-loop path length against the horizon N h."""
+    world = load_world(WORLDS_DIR / 'corridor_turn.yaml')
+    path = WaypointPath(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]]),
+                        start_heading=float(world.start[2]), goal_heading=float(world.goal[2]))
+    model = Unicycle()
+    results = []
+    for n in horizons:
+        for h in steps:
+            controller = PathReferenceMPC(model, _mpc_config(world, base, horizon=n, step=h),
+                                          obstacles=world.obstacles, path=path)
+            result = run_closed_loop(controller, model, world.start, goal=world.goal,
+                                     obstacles=world.obstacles, label=f'N={n}, h={h:g}',
+                                     max_time=120.0, reference_length=path.length())
+            save_run(result, out / f'N{n}_h{h:g}')
+            results.append(result)
+    lines = ['| N | h [s] | N h [s] | reached | path length [m] | time to target [s] |',
+             '|---|---|---|---|---|---|']
+    for r in sorted(results, key=lambda r: (r.metrics['horizon'] * r.metrics['step'])):
+        m = r.metrics
+        ttt = '-' if m['time_to_target'] is None else f"{m['time_to_target']:.1f}"
+        lines.append(f"| {m['horizon']} | {m['step']:g} | {m['horizon'] * m['step']:.1f} | "
+                     f"{'yes' if m['reached'] else 'no'} | {m['path_length']:.3f} | {ttt} |")
+    lines.append(f'\nReference path length: {path.length():.3f} m')
+    (out / 'table.md').write_text('\n'.join(lines) + '\n')
+    plot_runs(out / 'horizon.png', world=world, reference=path.knots,
+              runs=[(r.label, r.rows) for r in results],
+              title='Longer horizon, shorter path (straight, 90 degree turn, straight)')
+    return results
+
+
+def rrt_experiment(out: Path, base: MpcConfig, *, seed: int = 0) -> list[ClosedLoopResult]:
+    """Fig. 3: the MPC on an unsmoothed RRT* path (1000 iterations)."""
+    world = load_world(WORLDS_DIR / 'rrt_cluttered.yaml')
+    planner = RrtStarPlanner(world.obstacles, world.bounds,
+                             config=PlannerConfig(iterations=1000, seed=seed, range=RRT_RANGE,
+                                                  robot_radius=world.robot_radius))
+    waypoints = planner.plan(world.start, world.goal)
+    path = WaypointPath(waypoints, start_heading=float(world.start[2]),
+                        goal_heading=float(world.goal[2]))
+    model = Unicycle()
+    controller = PathReferenceMPC(model, _mpc_config(world, base), obstacles=world.obstacles,
+                                  path=path)
+    result = run_closed_loop(controller, model, world.start, goal=world.goal,
+                             obstacles=world.obstacles, label='path-reference MPC',
+                             max_time=120.0, robot_radius=world.robot_radius,
+                             reference_length=path.length())
+    result.metrics['rrt_waypoints'] = int(len(waypoints))
+    result.metrics['rrt_seed'] = seed
+    save_run(result, out / 'proposed')
+    np.savetxt(out / 'rrt_waypoints.csv', waypoints, delimiter=',', header='x,y', comments='')
+    plot_runs(out / 'rrt.png', world=world, reference=None, runs=[(result.label, result.rows)],
+              predictions=result.predictions,
+              extra_paths=[(f'RRT* after 1000 iterations ({len(waypoints)} waypoints)',
+                            waypoints)],
+              title=f'RRT* reference ({path.length():.2f} m) and closed loop '
+              f"({result.metrics['path_length']:.2f} m)")
+    return [result]
+
+
+EXPERIMENTS = {'obstacle': obstacle_experiment, 'horizon': horizon_experiment,
+               'rrt': rrt_experiment}
+
+
+def _summary(name: str, results: Sequence[ClosedLoopResult]) -> str:
+    lines = []
+    for r in results:
+        m = r.metrics
+        lines.append(
+            f"{name:9s} {r.label:28s} reached={m['reached']!s:5s} collision={m['collision']!s:5s}"
+            f" err={m['final_position_error']:.3f} m/{m['final_heading_error']:.3f} rad"
+            f" length={m['path_length']:.2f} m (reference {m['reference_length']:.2f} m)"
+            f" solve median={m['solve_ms_median']:.1f} ms"
+            f" V_N violations={m['lyapunov_violations']} failures={m['solver_failures']}")
+    return '\n'.join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the chosen experiments and print a one-line summary per run."""
+    parser = argparse.ArgumentParser(prog='python -m mpc_local_planner.evaluation.experiments',
+                                     description=__doc__.split('\n\n')[0])
+    parser.add_argument('experiment', choices=[*EXPERIMENTS, 'all'])
+    parser.add_argument('--out', type=Path, default=Path('out/experiments'))
+    parser.add_argument('--solver', default=None, help='MPC backend (MpcConfig.solver)')
+    parser.add_argument('--seed', type=int, default=0, help='RRT* seed (rrt experiment)')
+    args = parser.parse_args(argv)
+    base = MpcConfig() if args.solver is None else MpcConfig(solver=args.solver)
+    names = list(EXPERIMENTS) if args.experiment == 'all' else [args.experiment]
+    for name in names:
+        folder = args.out / name
+        folder.mkdir(parents=True, exist_ok=True)
+        kwargs = {'seed': args.seed} if name == 'rrt' else {}
+        results = EXPERIMENTS[name](folder, base, **kwargs)
+        print(_summary(name, results))
+        print(f'{name}: wrote {folder}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,128 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Metrics of a closed-loop run, computed from its trajectory rows alone.
+
+Computing them from rows (not from live objects) lets the experiments, closed_loop and
+analyze_bag (which only has a bag) report the same numbers the same way.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Sequence
+
+import numpy as np
+
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.paths import wrap_angle
+from mpc_local_planner.evaluation.trajectory import TRAJECTORY_INDEX as COL
+
+__all__ = ['compute_metrics', 'reached_mask']
+
+
+
+def reached_mask(
+    rows: np.ndarray, goal: np.ndarray, *, position_tolerance: float, heading_tolerance: float
+) -> np.ndarray:
+    """Say, per row, whether the pose is within the tolerances of the goal."""
+    rows = np.atleast_2d(rows)
+    pos_err = np.hypot(rows[:, COL['x']] - goal[0], rows[:, COL['y']] - goal[1])
+    head_err = np.abs(wrap_angle(rows[:, COL['theta']] - goal[2]))
+    return (pos_err <= position_tolerance) & (head_err <= heading_tolerance)
+
+
+def _finite_stats(values: np.ndarray) -> tuple[float | None, float | None, float | None]:
+    """Return median, p95 and max of the finite values (None when there are none: JSON)."""
+    values = values[np.isfinite(values)]
+    if len(values) == 0:
+        return None, None, None
+    return (float(np.median(values)), float(np.percentile(values, 95)), float(np.max(values)))
+
+
+def compute_metrics(
+    rows: np.ndarray,
+    *,
+    goal: np.ndarray,
+    obstacles: Sequence[ConvexPolygon],
+    robot_radius: float = 0.0,
+    reference_length: float | None = None,
+    solver_failures: int = 0,
+    lyapunov_ok: Sequence[bool | None] = (),
+    position_tolerance: float = 0.05,
+    heading_tolerance: float = 0.1,
+) -> dict[str, Any]:
+    """Return the metrics of design.md section 3 as a JSON-serialisable dict.
+
+    Args:
+        rows: (n, 9) trajectory rows (t, x, y, theta, v, omega, s, V_N, solve_ms).
+        goal: target pose (x, y, theta).
+        obstacles: the obstacles as described (not inflated).
+        robot_radius: clearance is measured from the robot's circle, not its centre.
+        reference_length: length of the reference path, reported beside the run's own.
+        solver_failures: steps without a verified solver solution.
+        lyapunov_ok: per step, whether V_N decreased as the theorem says (None: no check).
+        position_tolerance: metres, for "reached".
+        heading_tolerance: radians, for "reached".
+
+    """
+    rows = np.atleast_2d(np.asarray(rows, dtype=float))
+    goal = np.asarray(goal, dtype=float)
+    if rows.size == 0:
+        return {'steps': 0, 'reached': False, 'collision': False}
+    xy = rows[:, [COL['x'], COL['y']]]
+    final = rows[-1]
+    final_pos_err = float(math.hypot(final[COL['x']] - goal[0], final[COL['y']] - goal[1]))
+    final_head_err = float(abs(wrap_angle(final[COL['theta']] - goal[2])))
+    reached_rows = reached_mask(rows, goal, position_tolerance=position_tolerance,
+                                heading_tolerance=heading_tolerance)
+    reached = bool(reached_rows[-1])
+    first = int(np.argmax(reached_rows)) if reached_rows.any() else None
+    time_to_target = float(rows[first, COL['t']] - rows[0, COL['t']]) if first is not None \
+        else None
+    end = (first + 1) if first is not None else len(rows)
+    path_length = float(np.sum(np.linalg.norm(np.diff(xy[:end], axis=0), axis=1)))
+    if obstacles:
+        distances = np.min(np.stack([o.distance(xy) for o in obstacles]), axis=0)
+        inside = np.zeros(len(xy), dtype=bool)
+        for o in obstacles:
+            inside |= o.contains(xy)
+        clearance = np.where(inside, -1.0, distances) - robot_radius
+        min_clearance = float(np.min(clearance))
+        collision = bool(np.any(inside) or min_clearance < 0)
+    else:
+        min_clearance, collision = math.inf, False
+    median, p95, worst = _finite_stats(rows[:, COL['solve_ms']])
+    checks = [flag for flag in lyapunov_ok if flag is not None]
+    violations = int(sum(1 for flag in checks if not flag))
+    return {
+        'steps': int(len(rows)),
+        'reached': reached,
+        'collision': collision,
+        'final_position_error': final_pos_err,
+        'final_heading_error': final_head_err,
+        'time_to_target': time_to_target,
+        'path_length': path_length,
+        'reference_length': reference_length,
+        'min_clearance': min_clearance if math.isfinite(min_clearance) else None,
+        'solve_ms_median': median,
+        'solve_ms_p95': p95,
+        'solve_ms_max': worst,
+        'lyapunov_checks': len(checks),
+        'lyapunov_violations': violations,
+        'lyapunov_nonincreasing': violations == 0,
+        'solver_failures': int(solver_failures),
+        'position_tolerance': position_tolerance,
+        'heading_tolerance': heading_tolerance,
+    }

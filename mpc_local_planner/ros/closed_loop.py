@@ -1,0 +1,381 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""closed_loop: planner, controller, simulator and recorder over DDS, to the goal.
+
+By default the four nodes share one process and a SingleThreadedExecutor; with
+``--separate-processes`` the planner, the controller and the simulator run as three OS
+processes (``python -m mpc_local_planner.<module> --ros-args -p ...``, so no ros2cli is
+needed) and this process records and watches. The simulator drives ``/clock`` at ``--rtf``
+times real time and every node uses sim time. The run stops when the controller reports
+the goal reached, at the world's (or ``--time-limit``) simulated time limit, or at the
+``--timeout`` in wall seconds. Then the bag is analysed: ``--out`` receives ``bag/``,
+``trajectory.csv``, ``metrics.json`` and ``trajectory.png``. Exit code 0 iff the target was
+reached without collision.
+
+With ``--respawn`` (separate processes only) a node process that exits is started again, as
+launch's ``respawn``, instead of ending the run: kill the controller mid-run and the
+simulator stops the robot after ``cmd_timeout``, then the new controller gets ``/plan``
+(transient_local) and drives on. A process that refuses its parameters (exit code 2) is not
+started again, and at most MAX_RESPAWNS restarts happen per run.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, field
+import math
+import os
+from pathlib import Path
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from typing import Any, Sequence
+
+from diagnostic_msgs.msg import DiagnosticArray
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from mpc_local_planner.evaluation.analyze_bag import analyze, summary
+from mpc_local_planner.ros.conversions import DIAGNOSTICS_QOS, drain_executor
+from mpc_local_planner.ros.node_main import EXIT_INVALID_PARAMETERS
+from mpc_local_planner.worlds.data_files import resolve_data_file
+from mpc_local_planner.worlds.world import load_world, World
+
+__all__ = ['LoopOptions', 'LoopResult', 'main', 'node_command', 'node_parameters',
+           'run_closed_loop', 'spawn_node']
+
+DEFAULT_WORLD = 'worlds/paper_obstacle.yaml'
+# Simulated seconds allowed when the world sets no time_limit.
+DEFAULT_TIME_LIMIT = 60.0
+# Wall seconds a child process gets to exit after SIGINT before it is killed.
+CHILD_EXIT_TIMEOUT = 5.0
+# Restarts of node processes per run with --respawn (a crash loop ends the run instead).
+MAX_RESPAWNS = 10
+
+MODULES = {
+    'global_planner': 'mpc_local_planner.ros.global_planner_node',
+    'mpc_controller': 'mpc_local_planner.ros.mpc_controller_node',
+    'unicycle_simulator': 'mpc_local_planner.ros.unicycle_simulator_node',
+}
+
+
+@dataclass
+class LoopOptions:
+    """What to run (the command-line options)."""
+
+    world: str = DEFAULT_WORLD
+    out: str = 'out/closed_loop'
+    path: str = 'analytic'
+    rtf: float = 4.0
+    timeout: float = 120.0
+    time_limit: float | None = None
+    separate_processes: bool = False
+    respawn: bool = False
+    seed: int = 0
+    extra_parameters: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
+@dataclass
+class LoopResult:
+    """How the run ended and what it produced."""
+
+    metrics: dict[str, Any]
+    stop_reason: str
+    wall_time: float
+    sim_time: float
+    out: Path
+    success: bool
+
+
+def node_parameters(options: LoopOptions, world_file: Path, world: World
+                    ) -> dict[str, dict[str, Any]]:
+    """Return each node's parameter values for a run (use_sim_time included)."""
+    analytic = world.path if options.path == 'analytic' else ''
+    if options.path == 'analytic' and not world.path:
+        msg = f'--path analytic: the world {world.name} names no analytic path (use --path rrt)'
+        raise ValueError(msg)
+    params: dict[str, dict[str, Any]] = {
+        'global_planner': {
+            'use_sim_time': True, 'world_file': str(world_file),
+            'goal': [float(v) for v in world.goal], 'seed': int(options.seed),
+            'analytic_path': analytic,
+        },
+        'mpc_controller': {
+            'use_sim_time': True, 'world_file': str(world_file), 'analytic_path': analytic,
+        },
+        'unicycle_simulator': {
+            'publish_clock': True, 'real_time_factor': float(options.rtf),
+            'initial_pose': [float(v) for v in world.start],
+        },
+    }
+    for name, extra in options.extra_parameters.items():
+        params.setdefault(name, {}).update(extra)
+    return params
+
+
+def _ros_arg(name: str, value: Any) -> str:
+    if isinstance(value, bool):
+        text = 'true' if value else 'false'
+    elif isinstance(value, (list, tuple)):
+        text = '[' + ','.join(repr(float(v)) if isinstance(v, float) else str(v)
+                              for v in value) + ']'
+    elif isinstance(value, float):
+        text = repr(value)
+    elif isinstance(value, str):
+        text = f"'{value}'" if value == '' else value
+    else:
+        text = str(value)
+    return f'{name}:={text}'
+
+
+class _Monitor(Node):
+    """Watch the controller's diagnostics for the goal (in sim time)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('closed_loop_monitor', **kwargs)
+        self.goal_reached = False
+        self.steps = 0
+        self.last_reason = ''
+        self._sub = self.create_subscription(DiagnosticArray, 'mpc/diagnostics',
+                                             self.diagnostics_callback, DIAGNOSTICS_QOS)
+
+    def diagnostics_callback(self, msg: DiagnosticArray) -> None:
+        """Note each control step and whether the controller is at the goal."""
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            self.steps += 1
+            self.last_reason = status.message
+            self.goal_reached = values.get('goal_reached') == 'true'
+
+    def sim_time(self) -> float:
+        """Return the current ROS (simulated) time in seconds."""
+        return self.get_clock().now().nanoseconds * 1e-9
+
+
+def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> LoopResult:
+    """Run the loop to the goal or a limit, then analyse its bag.
+
+    Raises:
+        FileNotFoundError: if the world file does not exist.
+        ValueError: on an invalid option (e.g. --path analytic on a world without one).
+
+    """
+    from mpc_local_planner.ros.bag_recorder_node import BagRecorderNode
+
+    world_file = resolve_data_file(options.world)
+    world = load_world(world_file)
+    if not options.rtf > 0:
+        msg = f'--rtf must be > 0, got {options.rtf}'
+        raise ValueError(msg)
+    params = node_parameters(options, world_file, world)
+    time_limit = options.time_limit or world.time_limit or DEFAULT_TIME_LIMIT
+    out = Path(options.out)
+    out.mkdir(parents=True, exist_ok=True)
+    bag = out / 'bag'
+    if bag.exists():
+        shutil.rmtree(bag)
+
+    if options.respawn and not options.separate_processes:
+        msg = '--respawn needs --separate-processes'
+        raise ValueError(msg)
+
+    context = Context()
+    rclpy.init(args=['--ros-args', *ros_args] if ros_args else None, context=context)
+    nodes: list[Node] = []
+    children: dict[str, subprocess.Popen] = {}
+    respawns: list[dict[str, Any]] = []
+    # one thread: with rclpy 7.1 a MultiThreadedExecutor spun with spin_once piles up
+    # pending callback futures faster than 2 cores drain them, and the loop collapses
+    # (seen at rtf 4: 7 control steps in 40 s wall); the simulator advances simulated
+    # time per tick, so a solve that blocks the thread only slows the loop, never skews it
+    executor = SingleThreadedExecutor(context=context)
+    start = time.monotonic()
+    stop_reason = 'timeout'
+    sim_time = math.nan
+    try:
+        sim = [Parameter('use_sim_time', value=True)]
+        recorder = BagRecorderNode(context=context, parameter_overrides=[
+            *sim, Parameter('output', value=str(bag))])
+        monitor = _Monitor(context=context, parameter_overrides=sim)
+        nodes += [recorder, monitor]
+        if options.separate_processes:
+            children = _spawn(params, out / 'logs')
+        else:
+            nodes += _create_nodes(params, context)
+        for node in nodes:
+            executor.add_node(node)
+        deadline = start + options.timeout
+        while True:
+            executor.spin_once(timeout_sec=0.05)
+            sim_time = monitor.sim_time()
+            if monitor.goal_reached:
+                stop_reason = 'goal reached'
+                break
+            if sim_time > time_limit:
+                stop_reason = f'simulated time limit ({time_limit:g} s)'
+                break
+            if time.monotonic() > deadline:
+                stop_reason = f'wall-clock timeout ({options.timeout:g} s)'
+                break
+            dead = [name for name, c in children.items() if c.poll() is not None]
+            if dead and not _respawn(options, dead, children, params, out / 'logs', respawns,
+                                     sim_time):
+                name = dead[0]
+                stop_reason = f'{name} exited (code {children[name].returncode})'
+                break
+    finally:
+        wall_time = time.monotonic() - start
+        _stop_children(list(children.values()))
+        executor.shutdown()
+        drain_executor(executor)
+        for node in reversed(nodes):
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+    run_info = {'stop_reason': stop_reason, 'wall_time': wall_time, 'sim_time': sim_time,
+                'separate_processes': options.separate_processes, 'rtf': options.rtf,
+                'respawns': respawns,
+                'path_source': options.path, 'world': str(world_file)}
+    metrics = analyze(bag, out, world_file=world_file, extra=run_info,
+                      title=f'{world.name}: {options.path} path, rtf {options.rtf:g}')
+    success = bool(metrics.get('reached')) and not metrics.get('collision')
+    return LoopResult(metrics=metrics, stop_reason=stop_reason, wall_time=wall_time,
+                      sim_time=sim_time, out=out, success=success)
+
+
+def _create_nodes(params: dict[str, dict[str, Any]], context: Context) -> list[Node]:
+    from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
+    from mpc_local_planner.ros.mpc_controller_node import MpcControllerNode
+    from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
+
+    def overrides(name: str) -> list[Parameter]:
+        return [Parameter(k, value=v) for k, v in params[name].items()]
+
+    # the simulator last: the clock starts once everyone listens
+    planner = GlobalPlannerNode(context=context, parameter_overrides=overrides('global_planner'))
+    controller = MpcControllerNode(context=context,
+                                   parameter_overrides=overrides('mpc_controller'))
+    simulator = UnicycleSimulatorNode(context=context,
+                                      parameter_overrides=overrides('unicycle_simulator'))
+    return [planner, controller, simulator]
+
+
+def node_command(name: str, parameters: dict[str, Any]) -> list[str]:
+    """Return the command that runs node name (a key of MODULES) with parameters.
+
+    ``python -m <module> --ros-args -p key:=value ...``: no ros2cli or colcon install needed.
+    """
+    command = [sys.executable, '-m', MODULES[name], '--ros-args']
+    for key, value in parameters.items():
+        command += ['-p', _ros_arg(key, value)]
+    return command
+
+
+def spawn_node(name: str, parameters: dict[str, Any], log: Path, *,
+               append: bool = False) -> subprocess.Popen:
+    """Start node name as a process; stdout and stderr go to log."""
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with open(log, 'a' if append else 'w', encoding='utf-8') as stream:
+        if append:
+            stream.write(f'--- {name} started again ---\n')
+            stream.flush()
+        # the child holds its own descriptor once started
+        return subprocess.Popen(node_command(name, parameters), stdout=stream,
+                                stderr=subprocess.STDOUT, env=dict(os.environ))
+
+
+def _spawn(params: dict[str, dict[str, Any]], logs: Path) -> dict[str, subprocess.Popen]:
+    return {name: spawn_node(name, params[name], logs / f'{name}.log')
+            for name in ('global_planner', 'mpc_controller', 'unicycle_simulator')}
+
+
+def _respawn(options: LoopOptions, dead: list[str], children: dict[str, subprocess.Popen],
+             params: dict[str, dict[str, Any]], logs: Path, respawns: list[dict[str, Any]],
+             sim_time: float) -> bool:
+    """Start the dead node processes again if --respawn allows; return False to end the run."""
+    if not options.respawn:
+        return False
+    for name in dead:
+        code = children[name].returncode
+        if code == EXIT_INVALID_PARAMETERS or len(respawns) >= MAX_RESPAWNS:
+            return False
+        respawns.append({'node': name, 'exit_code': code, 'sim_time': sim_time})
+        print(f'closed_loop: {name} exited (code {code}) at {sim_time:.1f} s simulated; '
+              'starting it again', file=sys.stderr, flush=True)
+        children[name] = spawn_node(name, params[name], logs / f'{name}.log', append=True)
+    return True
+
+
+def _stop_children(children: list[subprocess.Popen]) -> None:
+    for child in children:
+        if child.poll() is None:
+            child.send_signal(signal.SIGINT)
+    deadline = time.monotonic() + CHILD_EXIT_TIMEOUT
+    for child in children:
+        try:
+            child.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the closed loop from the command line; exit 0 iff the target was reached safely."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    ros_args: list[str] = []
+    if '--ros-args' in argv:
+        index = argv.index('--ros-args')
+        argv, ros_args = argv[:index], argv[index + 1:]
+    parser = argparse.ArgumentParser(prog='closed_loop', description=__doc__.splitlines()[0])
+    parser.add_argument('--world', default=DEFAULT_WORLD,
+                        help='world file (a path or a name in config/worlds/)')
+    parser.add_argument('--out', default='out/closed_loop', help='output directory')
+    parser.add_argument('--path', choices=('rrt', 'analytic'), default='analytic',
+                        help="reference: the world's analytic path or an RRT* plan")
+    parser.add_argument('--rtf', type=float, default=4.0,
+                        help='real-time factor of the simulated clock')
+    parser.add_argument('--timeout', type=float, default=120.0, help='wall-clock limit (s)')
+    parser.add_argument('--time-limit', type=float, default=None,
+                        help="simulated-time limit (s; default: the world's, else 60)")
+    parser.add_argument('--seed', type=int, default=0, help='RRT* seed')
+    parser.add_argument('--separate-processes', action='store_true',
+                        help='run planner, controller and simulator as separate processes')
+    parser.add_argument('--respawn', action='store_true',
+                        help='with --separate-processes: start a node process that exits '
+                             'again instead of ending the run (a restart drill)')
+    args = parser.parse_args(argv)
+    options = LoopOptions(world=args.world, out=args.out, path=args.path, rtf=args.rtf,
+                          timeout=args.timeout, time_limit=args.time_limit, seed=args.seed,
+                          separate_processes=args.separate_processes, respawn=args.respawn)
+    try:
+        result = run_closed_loop(options, ros_args=ros_args)
+    except (FileNotFoundError, ValueError) as err:
+        print(f'closed_loop: {err}', file=sys.stderr)
+        return 2
+    print(f'stopped: {result.stop_reason} after {result.wall_time:.1f} s wall, '
+          f'{result.sim_time:.1f} s simulated')
+    print(summary(result.metrics))
+    print(f'outputs in {result.out.resolve()}: bag/, trajectory.csv, metrics.json, '
+          'trajectory.png')
+    return 0 if result.success else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,515 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""mpc_controller: the paper's MPC every `step` seconds of ROS time on odom and plan.
+
+Subscribes ``odom`` and ``plan`` (reliable, transient_local), publishes ``cmd_vel``,
+``local_plan`` (the prediction) and ``mpc/diagnostics``. All decisions live in
+`MpcController`; this node converts messages, keeps the latest inputs and publishes.
+
+Refused input (odometry with NaN, inf or a zero quaternion; a plan that is empty, too short,
+too long, not finite, in another frame or through an obstacle) makes the command zero until
+valid input comes, with one error per problem in the log (throttled) and the problem in
+the diagnostics. Invalid parameters are refused with a reason; at start, the process exits
+with code 2 and the reason on stderr.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import threading
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Twist
+from nav_msgs.msg import Odometry, Path
+import numpy as np
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message
+
+from mpc_local_planner.core.config import MpcConfig, SOLVERS
+from mpc_local_planner.core.controller import (
+    ControllerSettings,
+    ControlOutput,
+    MpcController,
+    REASON_CANDIDATE,
+    REASON_GOAL,
+    REASON_INVALID_ODOM,
+    REASON_INVALID_PLAN,
+    REASON_OK,
+    REASON_STALE_ODOM,
+    REASON_STOP,
+)
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.paths import analytic_path
+from mpc_local_planner.ros.conversions import (
+    CMD_VEL_QOS,
+    describe,
+    DIAGNOSTICS_QOS,
+    LOCAL_PLAN_QOS,
+    ODOM_QOS,
+    odometry_to_state,
+    path_pose_count,
+    path_to_poses,
+    PLAN_QOS,
+    poses_to_path,
+    seconds_to_stamp,
+    stamp_to_seconds,
+    twist_from_u,
+)
+from mpc_local_planner.ros.node_main import EXIT_INVALID_PARAMETERS, run_node
+from mpc_local_planner.ros.throttle import ProblemThrottle
+from mpc_local_planner.worlds.data_files import resolve_data_file
+from mpc_local_planner.worlds.world import load_world
+
+__all__ = ['DEFAULTS', 'EXIT_INVALID_PARAMETERS', 'MpcControllerNode', 'build_settings', 'main']
+
+# Seconds between two error logs of an input problem that persists.
+ERROR_THROTTLE_S = 2.0
+
+# Parameter defaults: the paper's values (config/mpc_controller.yaml mirrors them).
+DEFAULTS: dict[str, Any] = {
+    'horizon': 10,
+    'step': 0.2,
+    'v_max': 0.31,
+    'omega_max': 1.9,
+    'weights.position': 1.0,
+    'weights.heading': 0.1,
+    'weights.v': 1.0,
+    'weights.omega': 1.0,
+    'offset_weight': 1000.0,
+    'robot_radius': 0.0,
+    'collision_margin': -1.0,
+    'world_file': 'worlds/paper_obstacle.yaml',
+    'analytic_path': '',
+    'solver': MpcConfig().solver,  # the fastest verified backend (see mpc_bench)
+    'max_iterations': 200,
+    'goal_tolerance': 0.02,
+    'goal_heading_tolerance': 0.05,
+    'odom_timeout': 0.5,
+    'max_plan_poses': 10_000,
+    'frame_id': 'map',
+}
+
+_MPC_FIELDS = {
+    'horizon': 'horizon', 'step': 'step', 'weights.position': 'weight_position',
+    'weights.heading': 'weight_heading', 'weights.v': 'weight_v', 'weights.omega': 'weight_omega',
+    'offset_weight': 'offset_weight', 'solver': 'solver', 'max_iterations': 'max_iterations',
+}
+_SETTINGS_FIELDS = ('goal_tolerance', 'goal_heading_tolerance', 'odom_timeout')
+
+
+def load_obstacles(world_file: str) -> tuple[list[ConvexPolygon], float]:
+    """Return the obstacles and robot radius of a world file ('' = no obstacles)."""
+    if not world_file:
+        return [], 0.0
+    world = load_world(resolve_data_file(world_file))
+    return list(world.obstacles), float(world.robot_radius)
+
+
+def build_settings(values: dict[str, Any], *, world_radius: float = 0.0
+                   ) -> tuple[MpcConfig, Unicycle, ControllerSettings]:
+    """Turn parameter values into the controller's settings.
+
+    The robot radius in force is the larger of the parameter and the world's.
+
+    Raises:
+        ValueError: with every reason the values are invalid (validate_mpc_config's rules,
+            the model's and the controller's).
+
+    """
+    mpc_kwargs = {field: values[name] for name, field in _MPC_FIELDS.items()}
+    mpc_kwargs['horizon'] = int(mpc_kwargs['horizon'])
+    mpc_kwargs['max_iterations'] = int(mpc_kwargs['max_iterations'])
+    for key in ('step', 'weight_position', 'weight_heading', 'weight_v', 'weight_omega',
+                'offset_weight'):
+        mpc_kwargs[key] = float(mpc_kwargs[key])
+    margin = float(values['collision_margin'])
+    mpc_kwargs['collision_margin'] = None if margin < 0 else margin
+    mpc_kwargs['robot_radius'] = max(float(values['robot_radius']), world_radius)
+    config = MpcConfig(**mpc_kwargs)  # raises ValueError with validate_mpc_config's reasons
+    model = Unicycle(v_max=float(values['v_max']), omega_max=float(values['omega_max']))
+    settings = ControllerSettings(**{k: float(values[k]) for k in _SETTINGS_FIELDS},
+                                  max_plan_poses=int(values['max_plan_poses']))
+    return config, model, settings
+
+
+def check_obstacles(obstacles: list[ConvexPolygon], config: MpcConfig) -> None:
+    """Raise ValueError if an obstacle has more faces than the NLP's slots hold.
+
+    The MPC would raise the same from set_obstacles, but in the post-set callback, where
+    the change can no longer be refused.
+    """
+    for index, obstacle in enumerate(obstacles):
+        if obstacle.num_faces > config.faces_per_obstacle:
+            msg = (f'obstacle {index} has {obstacle.num_faces} faces, more than '
+                   f'faces_per_obstacle ({config.faces_per_obstacle})')
+            raise ValueError(msg)
+
+
+class MpcControllerNode(Node):
+    """Run the MPC on the latest odom and plan; publish cmd_vel, local_plan, diagnostics."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('mpc_controller', **kwargs)
+        self._lock = threading.RLock()
+        self._world_cache: dict[str, tuple[list[ConvexPolygon], float]] = {}
+        self.add_on_set_parameters_callback(self.parameters_callback)
+        self._declare_parameters()
+        self.add_post_set_parameters_callback(self.post_parameters_callback)
+
+        values = self._values()
+        obstacles, radius = self._load_world(values['world_file'])
+        config, model, settings = build_settings(values, world_radius=radius)
+        self.controller = MpcController(model, config, obstacles=obstacles, settings=settings)
+        if values['analytic_path']:
+            self.controller.set_path(analytic_path(values['analytic_path']))
+            self._prepare()
+
+        self._state: np.ndarray | None = None
+        self._state_time: float | None = None
+        # what is wrong with the latest odometry / plan (None when valid): the command is
+        # zero while either is set, and the diagnostics carry it as the reason
+        self._odom_problem: str | None = None
+        self._plan_problem: str | None = None
+        self._problems = ProblemThrottle(ERROR_THROTTLE_S)
+        self._last_reason = ''
+        self._last_step_time: float | None = None
+        self.last_output: ControlOutput | None = None
+        self.goal_reached = False
+
+        self._inputs_group = MutuallyExclusiveCallbackGroup()
+        self._timer_group = MutuallyExclusiveCallbackGroup()
+        self._cmd_pub = self.create_publisher(Twist, 'cmd_vel', CMD_VEL_QOS)
+        self._local_plan_pub = self.create_publisher(Path, 'local_plan', LOCAL_PLAN_QOS)
+        self._diag_pub = self.create_publisher(DiagnosticArray, 'mpc/diagnostics',
+                                               DIAGNOSTICS_QOS)
+        self._odom_sub = self.create_subscription(
+            Odometry, 'odom', self.odom_callback, ODOM_QOS, callback_group=self._inputs_group)
+        # raw: the size of a plan is checked before rclpy spends ~15 us per pose on it
+        self._plan_sub = self.create_subscription(
+            Path, 'plan', self.plan_callback, PLAN_QOS, callback_group=self._inputs_group,
+            raw=True)
+        self._timer = None
+        self._make_timer()
+
+    # ------------------------------------------------------------------ parameters
+    def _declare_parameters(self) -> None:
+        weight = (0.0, 1e6)
+        shape = 'changes the NLP shape: rebuilt before the next solve'
+        specs = {
+            'horizon': describe(f'prediction steps N; {shape}', int_range=(1, 200)),
+            'step': describe(f'sampling time h (s of ROS time) and control period; {shape}',
+                             float_range=(0.01, 5.0)),
+            'v_max': describe('speed bound |v| (m/s); rebuilds the NLP before the next solve',
+                              float_range=(0.001, 10.0)),
+            'omega_max': describe('turn-rate bound |omega| (rad/s); rebuilds the NLP',
+                                  float_range=(0.001, 50.0)),
+            'weights.position': describe('stage weight of dx^4 and dy^4; next solve',
+                                         float_range=weight),
+            'weights.heading': describe('stage weight of dtheta^4; next solve',
+                                        float_range=weight),
+            'weights.v': describe('stage weight of v^4; next solve', float_range=weight),
+            'weights.omega': describe('stage weight of omega^4; next solve',
+                                      float_range=weight),
+            'offset_weight': describe('offset cost weight of (1 - s)^2; next solve',
+                                      float_range=(1e-6, 1e9)),
+            'robot_radius': describe('obstacle inflation (m); the larger of this and the '
+                                     "world's is used", float_range=(0.0, 10.0)),
+            'collision_margin': describe('extra inflation (m) against corner cutting between '
+                                         'samples; -1 = v_max step / 2',
+                                         float_range=(-1.0, 10.0)),
+            'world_file': describe('world YAML/JSON with the obstacles (a path, or a name in '
+                                   "the package's config/ or config/worlds/); '' = none"),
+            'analytic_path': describe("follow this analytic path (e.g. 'paper_sinusoid') "
+                                      "instead of the plan topic; '' = use plan"),
+            'solver': describe(f'NLP solver, one of {SOLVERS}'),
+            'max_iterations': describe(f'solver iterations per solve; {shape}',
+                                       int_range=(1, 100000)),
+            'goal_tolerance': describe('distance to the end of the plan that counts as '
+                                       'arrived (m): then cmd_vel is zero',
+                                       float_range=(1e-4, 10.0)),
+            'goal_heading_tolerance': describe('heading error that counts as arrived (rad)',
+                                               float_range=(1e-4, math.pi)),
+            'odom_timeout': describe('odometry older than this (s) is stale: cmd_vel is zero',
+                                     float_range=(0.001, 3600.0)),
+            'max_plan_poses': describe('a plan with more poses is refused (cmd_vel is zero '
+                                       'until a valid plan comes)', int_range=(2, 10_000_000)),
+            'frame_id': describe('frame of local_plan, and the frame a plan must be in'),
+        }
+        for name, descriptor in specs.items():
+            self.declare_parameter(name, DEFAULTS[name], descriptor)
+
+    def _values(self, overrides: list[Parameter] = ()) -> dict[str, Any]:
+        values = dict(DEFAULTS)
+        for name in DEFAULTS:
+            if self.has_parameter(name):
+                values[name] = self.get_parameter(name).value
+        for parameter in overrides:
+            values[parameter.name] = parameter.value
+        return values
+
+    def _load_world(self, world_file: str) -> tuple[list[ConvexPolygon], float]:
+        if world_file not in self._world_cache:
+            self._world_cache[world_file] = load_obstacles(world_file)
+        return self._world_cache[world_file]
+
+    def parameters_callback(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Accept the new values only if the whole configuration stays valid."""
+        try:
+            values = self._values(parameters)
+            obstacles, radius = self._load_world(str(values['world_file']))
+            config, _, _ = build_settings(values, world_radius=radius)
+            check_obstacles(obstacles, config)
+            if values['analytic_path']:
+                analytic_path(str(values['analytic_path']))
+        except Exception as err:  # noqa: BLE001 (whatever the cause, refuse with a reason)
+            reason = str(err) or type(err).__name__
+            return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def post_parameters_callback(self, parameters: list[Parameter]) -> None:
+        """Apply accepted changes; the MPC picks them up at its next solve."""
+        names = {p.name for p in parameters}
+        try:
+            values = self._values()
+            obstacles, radius = self._load_world(values['world_file'])
+            config, model, settings = build_settings(values, world_radius=radius)
+            with self._lock:  # never between two halves of a solve
+                if 'world_file' in names:
+                    self.controller.set_obstacles(obstacles)
+                self.controller.update_config(config)
+                if model != self.controller.model:
+                    self.controller.set_model(model)
+                self.controller.settings = settings
+                if 'analytic_path' in names and values['analytic_path']:
+                    self.controller.set_path(analytic_path(values['analytic_path']))
+                    self._plan_problem = None  # the plan topic is ignored from now on
+            if 'step' in names:
+                self._make_timer()
+        except Exception as err:  # noqa: BLE001 (validated above: a bug, but keep running)
+            self.get_logger().error(f'could not apply {sorted(names)}: {err}')
+            return
+        self.get_logger().info(f'parameters changed: {sorted(names)}')
+
+    def _make_timer(self) -> None:
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+        step = float(self.get_parameter('step').value)
+        self._timer = self.create_timer(step, self.timer_callback,
+                                        callback_group=self._timer_group)
+
+    # ------------------------------------------------------------------ callbacks
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def odom_callback(self, msg: Odometry) -> None:
+        """Keep the latest state and when it was measured; a bad one stops the robot.
+
+        The measurement time is the stamp, but never later than the arrival: a stamp from
+        the future must not keep the state fresh after the odometry stops.
+        """
+        receipt = self._now()
+        try:
+            state = self.controller.check_state(odometry_to_state(msg))
+        except Exception as err:  # noqa: BLE001 (ValueError, or a message gone wrong)
+            self._state, self._state_time = None, None
+            self._odom_problem = f'{REASON_INVALID_ODOM}: {err}'
+            if self._problems.report('odom'):
+                self.get_logger().error(
+                    f'{self._odom_problem}; cmd_vel is zero until valid odometry comes')
+            return
+        stamp = stamp_to_seconds(msg.header.stamp)
+        self._state = state
+        self._state_time = min(stamp, receipt) if stamp > 0 else receipt
+        self._odom_problem = None
+        if self._problems.resolve('odom'):
+            self.get_logger().info('odometry is valid again')
+
+    def plan_callback(self, msg: Path | bytes) -> None:
+        """Follow a new global plan (s restarts at the robot's projection onto it).
+
+        A refused plan also drops the plan in force: whoever sent it wanted the robot to do
+        something else, so the robot stops until a valid plan comes.
+
+        Args:
+            msg: the plan, or its CDR bytes as the raw subscription delivers them.
+
+        """
+        if self.get_parameter('analytic_path').value:
+            self.get_logger().info('following the analytic path: plan ignored', once=True)
+            return
+        try:
+            plan = self._read_plan(msg)
+            poses = path_to_poses(plan)
+            with self._lock:
+                path = self.controller.set_plan(poses)
+                self._prepare()
+        except Exception as err:  # noqa: BLE001 (ValueError mostly; never leave a callback)
+            problem = str(err)
+            if not problem.startswith(REASON_INVALID_PLAN):
+                problem = f'{REASON_INVALID_PLAN}: {problem or type(err).__name__}'
+            with self._lock:
+                self.controller.clear_path()
+                self._plan_problem = problem
+            if self._problems.report('plan'):
+                self.get_logger().error(f'{problem}; cmd_vel is zero until a valid plan comes')
+            return
+        self._plan_problem = None
+        self._problems.resolve('plan')
+        self.goal_reached = False
+        self.get_logger().info(f'new plan: {len(poses)} poses, {path.length():.2f} m')
+
+    def _read_plan(self, msg: Path | bytes) -> Path:
+        """Return the plan message after the checks that need no conversion of its poses.
+
+        Raises:
+            ValueError: 'invalid plan: ...' if it has too many poses or the wrong frame.
+
+        """
+        limit = self.controller.settings.max_plan_poses
+
+        def too_many(count: int) -> ValueError:
+            return ValueError(
+                f'{REASON_INVALID_PLAN}: {count} poses, more than max_plan_poses ({limit})')
+
+        if isinstance(msg, (bytes, bytearray)):
+            count = path_pose_count(bytes(msg))
+            if count is not None and count > limit:
+                raise too_many(count)
+            msg = deserialize_message(bytes(msg), Path)
+        if len(msg.poses) > limit:
+            raise too_many(len(msg.poses))
+        frame = str(self.get_parameter('frame_id').value)
+        if msg.header.frame_id != frame:
+            problem = (f'{REASON_INVALID_PLAN}: frame {msg.header.frame_id!r} is not '
+                       f'{frame!r} (this node does not transform plans)')
+            raise ValueError(problem)
+        return msg
+
+    def _prepare(self) -> None:
+        try:
+            self.controller.prepare()
+        except Exception as err:  # noqa: BLE001 (the first solve builds instead)
+            self.get_logger().warning(f'could not prepare the NLPs: {err}')
+
+    def timer_callback(self) -> None:
+        """Solve, then publish cmd_vel, local_plan and diagnostics; zero on any failure."""
+        with self._lock:  # a plan being set (and its NLPs built) finishes first
+            now = self._now()
+            step = float(self.get_parameter('step').value)
+            if (self._last_step_time is not None
+                    and 0 <= now - self._last_step_time < 0.5 * step):
+                return  # a timer fired twice for one instant (ROS-time timers can): one step
+            self._last_step_time = now
+            problem = self._odom_problem or self._plan_problem
+            try:
+                if problem is not None:
+                    output = self.controller.stop(problem)
+                else:
+                    output = self.controller.compute(self._state, now,
+                                                     state_time=self._state_time)
+            except Exception as err:  # noqa: BLE001 (compute never raises; belt and braces)
+                output = ControlOutput(np.zeros(2), None, f'error: {err}')
+        self.last_output = output
+        self._cmd_pub.publish(twist_from_u(output.u))
+        try:
+            if output.solution is not None:
+                stamp = seconds_to_stamp(max(now, 0.0))
+                self._local_plan_pub.publish(poses_to_path(
+                    output.solution.x_pred[:, :3],
+                    frame_id=str(self.get_parameter('frame_id').value), stamp=stamp))
+            self._diag_pub.publish(self._diagnostics(output, now))
+        except Exception as err:  # noqa: BLE001
+            self.get_logger().warning(f'could not publish: {err}', throttle_duration_sec=1.0)
+        self._log_reason(output.reason)
+
+    def _log_reason(self, reason: str) -> None:
+        if reason == self._last_reason:
+            return
+        self._last_reason = reason
+        self.goal_reached = reason == REASON_GOAL
+        if reason.startswith((REASON_INVALID_ODOM, REASON_INVALID_PLAN)):
+            return  # logged (throttled) where the input was refused
+        if reason.startswith('error'):
+            if self._problems.report('error'):
+                self.get_logger().error(reason)
+        elif reason in (REASON_STALE_ODOM, REASON_STOP, REASON_CANDIDATE):
+            self.get_logger().warning(
+                f'{reason}: cmd_vel is zero (solver failures so far: '
+                f'{self.controller.solver_failures})')
+        elif reason == REASON_GOAL:
+            state = self._state if self._state is not None else np.full(3, np.nan)
+            position, heading = self.controller.goal_error(state)
+            self.get_logger().info(f'goal reached: {position:.3f} m, {heading:.3f} rad off')
+        else:
+            self.get_logger().info(reason)
+
+    def _diagnostics(self, output: ControlOutput, now: float) -> DiagnosticArray:
+        sol = output.solution
+        state = self._state if self._state is not None else np.full(3, np.nan)
+        status = DiagnosticStatus()
+        status.name = f'{self.get_name()}: MPC'
+        status.hardware_id = self.get_fully_qualified_name()
+        status.message = output.reason
+        if output.reason in (REASON_OK, REASON_GOAL) and (sol is None or sol.success):
+            status.level = DiagnosticStatus.OK
+        elif (output.reason.startswith(('error', REASON_INVALID_ODOM, REASON_INVALID_PLAN))
+              or output.reason == REASON_STOP):
+            status.level = DiagnosticStatus.ERROR
+        else:
+            status.level = DiagnosticStatus.WARN
+        values = {
+            's_k': sol.s if sol else math.nan,
+            'V_N': sol.value if sol else math.nan,
+            'solve_ms': 1e3 * sol.solve_time_s if sol else math.nan,
+            'status': sol.status if sol else '',
+            'source': sol.source if sol else '',
+            'failures': sol.failures if sol else 0,
+            'failures_total': self.controller.solver_failures,
+            'lyapunov_ok': '' if sol is None or sol.lyapunov_ok is None else sol.lyapunov_ok,
+            'iterations': sol.iterations if sol else 0,
+            'reason': output.reason,
+            'goal_reached': output.reason == REASON_GOAL,
+            'state_time': self._state_time if self._state_time is not None else math.nan,
+            'x': state[0], 'y': state[1], 'theta': state[2],
+            'v': output.u[0], 'omega': output.u[1],
+        }
+        status.values = [KeyValue(key=k, value=_format(v)) for k, v in values.items()]
+        array = DiagnosticArray()
+        array.header.stamp = seconds_to_stamp(max(now, 0.0))
+        array.status = [status]
+        return array
+
+
+def _format(value: Any) -> str:
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, (float, np.floating)):
+        return repr(float(value))
+    return str(value)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the node until Ctrl-C (exit code 2, with the reason, on invalid parameters)."""
+    return run_node(MpcControllerNode, 'mpc_controller', args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,57 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""Log a problem on an input channel once, then at most every period while it lasts."""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+__all__ = ['ProblemThrottle']
+
+
+class ProblemThrottle:
+    """Say when to log a problem on an input channel ('odom', 'plan', ...).
+
+    rclpy's own ``throttle_duration_sec`` keys on the call site and never resets, so a
+    second bad episode right after a good message would go unreported; this one resets when
+    the channel is valid again. The clock is a steady one by default (a log throttle has no
+    business following simulated time).
+
+    Args:
+        period: seconds between two reports of a problem that persists.
+        clock: returns seconds; time.monotonic by default.
+
+    """
+
+    def __init__(self, period: float = 2.0, *,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.period = float(period)
+        self._clock = clock
+        self._last: dict[str, float] = {}
+
+    def report(self, channel: str) -> bool:
+        """Note a problem on channel; return True if it should be logged now."""
+        now = self._clock()
+        last = self._last.get(channel)
+        if last is not None and now - last < self.period:
+            return False
+        self._last[channel] = now
+        return True
+
+    def resolve(self, channel: str) -> bool:
+        """Note that channel is valid again; return True if it had a problem."""
+        return self._last.pop(channel, None) is not None

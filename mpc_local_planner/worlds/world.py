@@ -1,0 +1,381 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Worlds: the scenario a run happens in (bounds, obstacles, start, goal).
+
+Two formats feed the same `World` record so that the planner, the MPC, the nodes and the
+experiments never care where a scenario came from:
+
+- YAML (``config/worlds/*.yaml``), the package's own format: boxes, polygons and circles.
+- BARN JSON (Perille et al. 2020, as converted under ``data/barn``): cylinders of one radius,
+  approximated by circumscribed octagons so that avoiding the polygon avoids the cylinder.
+
+Everything is validated on load. A malformed world fails here, with the file and the field in
+the message, instead of as a NaN deep inside a solver.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import json
+import math
+from pathlib import Path
+from typing import Any, NoReturn
+
+import numpy as np
+import yaml
+
+from mpc_local_planner.core.errors import WorldError
+from mpc_local_planner.core.obstacles import ConvexPolygon
+
+__all__ = [
+    'BARN_MARGIN',
+    'World',
+    'load_barn_world',
+    'load_world',
+    'paper_world',
+    'world_from_dict',
+]
+
+#: Margin (metres) added around the cylinders, start and goal to make a BARN world's bounds.
+BARN_MARGIN = 1.0
+
+_YAML_KEYS = frozenset(
+    {
+        'bounds',
+        'obstacles',
+        'start',
+        'goal',
+        'robot_radius',
+        'path',
+        'goal_tolerance',
+        'time_limit',
+        'name',
+        'description',
+    }
+)
+_BARN_KEYS = ('cylinder_radius', 'cylinders', 'start', 'goal')
+
+# The paper's scenario; config/worlds/paper_obstacle.yaml holds the same numbers (a test checks).
+# The start and goal headings are those of p(s) = [2.5 s, 1.1 sin(pi s)] at s = 0 and s = 1, so
+# that the robot starts on the path's steady-state manifold (the MPC's initial guess is feasible).
+_PAPER_HEADING = math.atan(1.1 * math.pi / 2.5)
+_PAPER_WORLD = {
+    'bounds': [-0.5, 3.0, -1.5, 1.8],
+    'obstacles': [{'box': [1.0, -1.0, 1.5, 1.0]}],
+    'start': [0.0, 0.0, _PAPER_HEADING],
+    'goal': [2.5, 0.0, -_PAPER_HEADING],
+    'path': 'paper_sinusoid',
+    'robot_radius': 0.0,
+}
+
+
+@dataclass(frozen=True, eq=False)
+class World:
+    """A scenario: where the robot may go, what it must avoid, where it starts and ends.
+
+    ``eq=False`` because the fields hold NumPy arrays, whose ``==`` is element-wise; worlds
+    compare by identity. The arrays are read-only, in the spirit of ``frozen``.
+
+    Attributes:
+        name: Short name (the file's stem for loaded worlds).
+        bounds: (xmin, xmax, ymin, ymax) of the workspace, metres.
+        obstacles: The obstacles as described, NOT inflated: inflation depends on who asks
+            (the planner adds a clearance, the MPC a collision margin).
+        start: (3,) start pose x, y, theta.
+        goal: (3,) goal pose x, y, theta.
+        robot_radius: Radius of the disk that covers the robot, metres.
+        path: Name of an analytic reference path (e.g. ``'paper_sinusoid'``), or None when the
+            path comes from the global planner.
+        goal_tolerance: Distance to the goal that counts as arrival, when the world sets one.
+        time_limit: Time budget of a run in seconds, when the world sets one.
+
+    """
+
+    name: str
+    bounds: tuple[float, float, float, float]
+    obstacles: tuple[ConvexPolygon, ...]
+    start: np.ndarray
+    goal: np.ndarray
+    robot_radius: float = 0.0
+    path: str | None = None
+    goal_tolerance: float | None = None
+    time_limit: float | None = None
+
+    def inflated_obstacles(self, extra: float = 0.0) -> tuple[ConvexPolygon, ...]:
+        """Return the obstacles inflated by the robot radius plus extra (metres)."""
+        return tuple(obstacle.inflate(self.robot_radius + extra) for obstacle in self.obstacles)
+
+    def in_bounds(self, point: np.ndarray) -> bool:
+        """Say whether the (x, y) of point lies inside the bounds (boundary included)."""
+        xmin, xmax, ymin, ymax = self.bounds
+        return bool(xmin <= point[0] <= xmax and ymin <= point[1] <= ymax)
+
+
+def load_world(path: str | Path) -> World:
+    """Load a world file, choosing the format by suffix.
+
+    Args:
+        path: A ``.yaml``/``.yml`` file in the package's format or a ``.json`` BARN world.
+
+    Returns:
+        The validated world, named after the file's stem.
+
+    Raises:
+        FileNotFoundError: If the file does not exist.
+        WorldError: If the file is malformed or its suffix is unknown.
+
+    """
+    path = Path(path)
+    if not path.is_file():
+        msg = f'world file not found: {path}'
+        raise FileNotFoundError(msg)
+    suffix = path.suffix.lower()
+    if suffix == '.json':
+        return load_barn_world(path)
+    if suffix not in ('.yaml', '.yml'):
+        msg = f'{path}: unknown world format {suffix!r} (expected .yaml, .yml or .json)'
+        raise WorldError(msg)
+    try:
+        data = yaml.safe_load(path.read_text(encoding='utf-8'))
+    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        msg = f'{path}: not valid YAML: {err}'
+        raise WorldError(msg) from err
+    return world_from_dict(data, name=path.stem, source=str(path))
+
+
+def world_from_dict(data: Any, *, name: str, source: str | None = None) -> World:
+    """Build a world from the YAML format's mapping (see the module docstring).
+
+    Args:
+        data: The parsed mapping with ``bounds``, ``obstacles``, ``start``, ``goal`` and the
+            optional ``path``, ``robot_radius``, ``goal_tolerance``, ``time_limit``.
+        name: Name of the world.
+        source: Where the data came from, for error messages (defaults to the name).
+
+    Returns:
+        The validated world.
+
+    Raises:
+        WorldError: Naming the source and the field, if anything is missing or malformed.
+
+    """
+    where = source if source is not None else name
+    if not isinstance(data, dict):
+        _fail(where, f'a world must be a mapping, got {type(data).__name__}')
+    unknown = sorted(str(key) for key in set(data) - _YAML_KEYS)
+    if unknown:
+        _fail(where, f'unknown key(s) {unknown}; allowed: {sorted(_YAML_KEYS)}')
+    for key in ('bounds', 'start', 'goal'):
+        if key not in data:
+            _fail(where, f'missing required key {key!r}')
+
+    bounds = _bounds(data['bounds'], where)
+    obstacles = _obstacles(data.get('obstacles') or [], where)
+    start = _vector(data['start'], 3, 'start', where)
+    goal = _vector(data['goal'], 3, 'goal', where)
+    robot_radius = _number(data.get('robot_radius', 0.0), 'robot_radius', where, minimum=0.0)
+    path = data.get('path')
+    if path is not None and (not isinstance(path, str) or not path):
+        _fail(where, f'path must be the name of an analytic path, got {path!r}')
+    goal_tolerance = _optional_positive(data.get('goal_tolerance'), 'goal_tolerance', where)
+    time_limit = _optional_positive(data.get('time_limit'), 'time_limit', where)
+    return _make_world(
+        name=name,
+        where=where,
+        bounds=bounds,
+        obstacles=obstacles,
+        start=start,
+        goal=goal,
+        robot_radius=robot_radius,
+        path=path,
+        goal_tolerance=goal_tolerance,
+        time_limit=time_limit,
+    )
+
+
+def load_barn_world(path: str | Path, *, robot_radius: float = 0.2, sides: int = 8) -> World:
+    """Load a BARN world converted to JSON.
+
+    Cylinders become regular polygons circumscribed about them (conservative: outside the
+    polygon means outside the cylinder). The goal heading, absent from BARN, is the heading
+    from start to goal: BARN only scores reaching the goal position, and this choice makes the
+    straight-line steady state a sensible default. Bounds are the bounding box of the
+    cylinders, start and goal grown by `BARN_MARGIN`.
+
+    Args:
+        path: The ``world_NNN.json`` file.
+        robot_radius: Radius of the robot's covering disk (BARN's Jackal: about 0.2 to 0.33 m).
+        sides: Number of sides of the polygon that replaces each cylinder.
+
+    Returns:
+        The validated world, named after the file's stem, with the file's goal tolerance and
+        time limit.
+
+    Raises:
+        FileNotFoundError: If the file does not exist.
+        WorldError: If the file is malformed.
+
+    """
+    path = Path(path)
+    where = str(path)
+    if not path.is_file():
+        msg = f'world file not found: {path}'
+        raise FileNotFoundError(msg)
+    try:
+        data = json.loads(path.read_text(encoding='utf-8'))
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        msg = f'{where}: not valid JSON: {err}'
+        raise WorldError(msg) from err
+    if not isinstance(data, dict):
+        _fail(where, f'a BARN world must be a JSON object, got {type(data).__name__}')
+    for key in _BARN_KEYS:
+        if key not in data:
+            _fail(where, f'missing required key {key!r}')
+    if not isinstance(sides, int) or sides < 3:
+        _fail(where, f'sides must be an integer >= 3, got {sides!r}')
+    radius = _number(data['cylinder_radius'], 'cylinder_radius', where, minimum=0.0)
+    if radius == 0.0:
+        _fail(where, 'cylinder_radius must be > 0')
+    robot_radius = _number(robot_radius, 'robot_radius', where, minimum=0.0)
+    cylinders = data['cylinders']
+    if not isinstance(cylinders, list):
+        _fail(where, f'cylinders must be a list of [x, y], got {type(cylinders).__name__}')
+    centres = np.array(
+        [_vector(c, 2, f'cylinders[{i}]', where) for i, c in enumerate(cylinders)]
+    ).reshape(-1, 2)
+    start = _vector(data['start'], 3, 'start', where)
+    goal_xy = _vector(data['goal'], 2, 'goal', where)
+    heading = math.atan2(goal_xy[1] - start[1], goal_xy[0] - start[0])
+    goal = np.array([goal_xy[0], goal_xy[1], heading])
+
+    points = np.vstack([centres - radius, centres + radius, start[None, :2], goal_xy[None, :]])
+    lo = points.min(axis=0) - BARN_MARGIN
+    hi = points.max(axis=0) + BARN_MARGIN
+    bounds = (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
+    obstacles = tuple(
+        ConvexPolygon.from_circle(float(x), float(y), radius, sides=sides) for x, y in centres
+    )
+    return _make_world(
+        name=path.stem,
+        where=where,
+        bounds=bounds,
+        obstacles=obstacles,
+        start=start,
+        goal=goal,
+        robot_radius=robot_radius,
+        path=None,
+        goal_tolerance=_optional_positive(data.get('goal_tolerance'), 'goal_tolerance', where),
+        time_limit=_optional_positive(data.get('time_limit_s'), 'time_limit_s', where),
+    )
+
+
+def paper_world() -> World:
+    """Return the paper's scenario: one box between start and target on a sinusoidal path.
+
+    The same world as ``config/worlds/paper_obstacle.yaml``, built in code so that tests and
+    benchmarks need no installed data files.
+    """
+    return world_from_dict(_PAPER_WORLD, name='paper_obstacle', source='paper_world()')
+
+
+def _make_world(*, name: str, where: str, **fields: Any) -> World:
+    """Check the cross-field rules (start and goal inside the bounds and free), then build."""
+    world = World(name=name, **fields)
+    for label in ('start', 'goal'):
+        pose = getattr(world, label)
+        pose.setflags(write=False)
+        if not world.in_bounds(pose):
+            _fail(
+                where,
+                f'{label} ({pose[0]:g}, {pose[1]:g}) is outside the bounds {world.bounds}',
+            )
+        for index, obstacle in enumerate(world.obstacles):
+            if bool(obstacle.contains(pose[:2])[0]):
+                _fail(where, f'{label} ({pose[0]:g}, {pose[1]:g}) is inside obstacle {index}')
+    return world
+
+
+def _fail(where: str, problem: str) -> NoReturn:
+    """Raise the WorldError for a problem found in where (a file name or a world name)."""
+    msg = f'{where}: {problem}'
+    raise WorldError(msg)
+
+
+def _number(value: Any, what: str, where: str, *, minimum: float | None = None) -> float:
+    """Return value as a finite float, refusing bools, strings and None."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        _fail(where, f'{what} must be a number, got {value!r}')
+    number = float(value)
+    if not math.isfinite(number):
+        _fail(where, f'{what} must be finite, got {value!r}')
+    if minimum is not None and number < minimum:
+        _fail(where, f'{what} must be >= {minimum:g}, got {number:g}')
+    return number
+
+
+def _optional_positive(value: Any, what: str, where: str) -> float | None:
+    """Return None for a missing value, else a finite float > 0."""
+    if value is None:
+        return None
+    number = _number(value, what, where)
+    if number <= 0.0:
+        _fail(where, f'{what} must be > 0, got {number:g}')
+    return number
+
+
+def _vector(value: Any, length: int, what: str, where: str) -> np.ndarray:
+    """Return value as a finite float vector of the given length."""
+    if not isinstance(value, (list, tuple)) or len(value) != length:
+        _fail(where, f'{what} must be a list of {length} numbers, got {value!r}')
+    return np.array([_number(v, f'{what}[{i}]', where) for i, v in enumerate(value)])
+
+
+def _bounds(value: Any, where: str) -> tuple[float, float, float, float]:
+    """Return [xmin, xmax, ymin, ymax] as a tuple, checking that the box is not empty."""
+    xmin, xmax, ymin, ymax = (float(v) for v in _vector(value, 4, 'bounds', where))
+    if not (xmin < xmax and ymin < ymax):
+        _fail(where, f'bounds must be [xmin, xmax, ymin, ymax] with min < max, got {value!r}')
+    return (xmin, xmax, ymin, ymax)
+
+
+def _obstacles(value: Any, where: str) -> tuple[ConvexPolygon, ...]:
+    """Parse the obstacle list: each item is one of {box: ...}, {polygon: ...}, {circle: ...}."""
+    if not isinstance(value, list):
+        _fail(where, f'obstacles must be a list, got {type(value).__name__}')
+    obstacles = []
+    for index, item in enumerate(value):
+        what = f'obstacles[{index}]'
+        if not isinstance(item, dict) or len(item) != 1:
+            _fail(where, f'{what} must have exactly one key (box, polygon or circle): {item!r}')
+        kind, spec = next(iter(item.items()))
+        try:
+            if kind == 'box':
+                obstacles.append(ConvexPolygon.from_box(*_vector(spec, 4, what, where)))
+            elif kind == 'circle':
+                x, y, r = _vector(spec, 3, what, where)
+                obstacles.append(ConvexPolygon.from_circle(x, y, r))
+            elif kind == 'polygon':
+                if not isinstance(spec, list) or len(spec) < 3:
+                    _fail(where, f'{what}: a polygon needs a list of >= 3 [x, y], got {spec!r}')
+                vertices = [_vector(v, 2, f'{what}[{i}]', where) for i, v in enumerate(spec)]
+                obstacles.append(ConvexPolygon.from_vertices(vertices))
+            else:
+                _fail(where, f'{what}: unknown obstacle kind {kind!r} (box, polygon or circle)')
+        except WorldError:
+            raise
+        except ValueError as err:
+            msg = f'{where}: {what}: {err}'
+            raise WorldError(msg) from None
+    return tuple(obstacles)

@@ -1,0 +1,84 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Every MPC backend drives the paper's scenario like the IPOPT reference (no timing here)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mpc_local_planner.core.config import MpcConfig, SOLVERS
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.mpc.step import PathReferenceMPC
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.paths import paper_sinusoid
+
+STEPS = 150
+H = 0.2
+
+
+def run_paper_scenario(solver: str, *, compile_functions: bool) -> dict:
+    """Run the paper's obstacle scenario in closed loop; return what the tests check."""
+    model, path = Unicycle(), paper_sinusoid()
+    box = ConvexPolygon.from_box(1.0, -1.0, 1.5, 1.0)
+    mpc = PathReferenceMPC(model, MpcConfig(solver=solver, compile=compile_functions),
+                           obstacles=[box], path=path)
+    x = path.start.copy()
+    length, values, lyapunov, sources, positions = 0.0, [], [], [], [x[:2]]
+    for _ in range(STEPS):
+        sol = mpc.solve(x)
+        values.append(sol.value)
+        lyapunov.append(sol.lyapunov_ok)
+        sources.append(sol.source)
+        x_next = model.step(x, sol.u0, H)
+        length += float(np.hypot(*(x_next[:2] - x[:2])))
+        x = x_next
+        positions.append(x[:2])
+    return {'x': x, 'length': length, 'values': np.array(values), 'lyapunov': lyapunov,
+            'sources': sources, 'positions': np.array(positions), 'goal': path.goal,
+            'box': box, 'backend': mpc.backend}
+
+
+@pytest.fixture(scope='module')
+def reference() -> dict:
+    return run_paper_scenario('ipopt', compile_functions=False)
+
+
+@pytest.mark.parametrize('solver', SOLVERS)
+@pytest.mark.parametrize('compile_functions', [False, True])
+def test_backend_reaches_the_target_like_ipopt(solver: str, compile_functions: bool,
+                                               reference: dict) -> None:
+    run = run_paper_scenario(solver, compile_functions=compile_functions)
+    assert np.hypot(*(run['x'][:2] - run['goal'][:2])) < 0.02
+    assert abs(run['x'][2] - run['goal'][2]) < 0.05
+    assert not np.any(run['box'].contains(run['positions']))
+    assert all(ok is not False for ok in run['lyapunov'])
+    assert np.all(np.diff(run['values']) <= 1e-6 * (1 + np.abs(run['values'][:-1])))
+    assert 'stop' not in run['sources']
+    assert run['length'] == pytest.approx(reference['length'], rel=0.01)
+
+
+def test_compilation_failure_falls_back_to_the_interpreter(
+        monkeypatch: pytest.MonkeyPatch, tmp_path, caplog: pytest.LogCaptureFixture) -> None:
+    monkeypatch.setenv('MPC_LOCAL_PLANNER_CACHE', str(tmp_path))
+    monkeypatch.setenv('CC', 'no-such-compiler-mpc-local-planner')
+    model, path = Unicycle(), paper_sinusoid()
+    mpc = PathReferenceMPC(model, MpcConfig(horizon=5, compile=True), path=path)
+    sol = mpc.solve(path.start)
+    mpc.wait_compiled()
+    sol = mpc.solve(model.step(path.start, sol.u0, H))
+    assert sol.source == 'solver'
+    assert mpc.backend == 'fatrop'
+    assert 'compiling the MPC NLP failed' in caplog.text

@@ -1,0 +1,158 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""MpcController: the node's decisions without ROS (no plan, stale odometry, goal, errors)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.controller import (
+    ControllerSettings,
+    MpcController,
+    REASON_ERROR,
+    REASON_GOAL,
+    REASON_NO_ODOM,
+    REASON_NO_PLAN,
+    REASON_OK,
+    REASON_STALE_ODOM,
+)
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.paths import analytic_path, WaypointPath
+from mpc_local_planner.worlds.data_files import resolve_data_file
+from mpc_local_planner.worlds.world import load_world, paper_world
+
+WORLD = paper_world()
+# A plan around the paper's box (above it), headings as the planner sends them.
+PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
+                 [2.5, 0.0, WORLD.goal[2]]])
+
+
+@pytest.fixture(scope='module')
+def controller() -> MpcController:
+    return MpcController(Unicycle(), MpcConfig(), obstacles=WORLD.obstacles)
+
+
+def test_without_a_plan_the_command_is_zero_with_a_reason(controller: MpcController) -> None:
+    fresh = MpcController(obstacles=WORLD.obstacles)
+    out = fresh.compute(WORLD.start, 0.0)
+    assert out.reason == REASON_NO_PLAN
+    assert out.solution is None
+    np.testing.assert_array_equal(out.u, [0.0, 0.0])
+
+
+def test_without_odometry_the_command_is_zero(controller: MpcController) -> None:
+    controller.set_plan(PLAN)
+    out = controller.compute(None, 10.0)
+    assert out.reason == REASON_NO_ODOM
+    np.testing.assert_array_equal(out.u, [0.0, 0.0])
+
+
+def test_stale_odometry_gives_zero(controller: MpcController) -> None:
+    controller.set_plan(PLAN)
+    timeout = controller.settings.odom_timeout
+    out = controller.compute(WORLD.start, 10.0, state_time=10.0 - 2 * timeout)
+    assert out.reason == REASON_STALE_ODOM
+    np.testing.assert_array_equal(out.u, [0.0, 0.0])
+
+
+def test_a_plan_gives_a_bounded_command_and_a_prediction(controller: MpcController) -> None:
+    controller.set_plan(PLAN)
+    out = controller.compute(WORLD.start, 1.0, state_time=0.9)
+    assert out.reason == REASON_OK
+    assert out.solution is not None
+    model = controller.model
+    assert np.all(out.u >= model.u_min - 1e-12) and np.all(out.u <= model.u_max + 1e-12)
+    assert out.u[0] > 0.05  # it drives off
+    assert out.solution.x_pred.shape == (controller.config.horizon + 1, 3)
+
+
+def test_the_goal_reached_gives_zero(controller: MpcController) -> None:
+    controller.set_plan(PLAN)
+    near_goal = WORLD.goal + np.array([0.005, 0.0, 0.01])
+    out = controller.compute(near_goal, 0.0)
+    assert out.reason == REASON_GOAL
+    np.testing.assert_array_equal(out.u, [0.0, 0.0])
+    position, heading = controller.goal_error(near_goal)
+    assert position == pytest.approx(0.005) and heading == pytest.approx(0.01)
+
+
+def test_a_non_finite_state_gives_zero_with_an_error_reason(controller: MpcController) -> None:
+    controller.set_plan(PLAN)
+    out = controller.compute(np.array([0.0, np.nan, 0.0]), 0.0)
+    assert out.reason.startswith(REASON_ERROR)
+    np.testing.assert_array_equal(out.u, [0.0, 0.0])
+
+
+@pytest.mark.parametrize(('poses', 'match'), [
+    (np.zeros((3, 2)), 'shape'),
+    (np.zeros((1, 3)), 'at least two'),
+    (np.array([[0.0, 0.0, 0.0], [np.inf, 1.0, 0.0]]), 'NaN or inf'),
+    (np.zeros((4, 3)), 'two distinct'),
+])
+def test_bad_plans_are_refused_and_the_old_one_kept(controller: MpcController,
+                                                    poses: np.ndarray, match: str) -> None:
+    controller.set_plan(PLAN)
+    before = controller.path
+    with pytest.raises(ValueError, match=f'invalid plan: .*{match}'):
+        controller.set_plan(poses)
+    assert controller.path is before
+
+
+def test_a_dense_plan_is_simplified_to_fit_the_capacity() -> None:
+    controller = MpcController(settings=ControllerSettings(capacity=16))
+    t = np.linspace(0.0, 1.0, 2000)
+    poses = np.column_stack([2.5 * t, 1.1 * np.sin(np.pi * t), np.zeros_like(t)])
+    path = controller.set_plan(poses)
+    assert isinstance(path, WaypointPath)
+    assert len(path.knots) - 1 <= 16
+    np.testing.assert_allclose(path.start[:2], poses[0, :2])
+    np.testing.assert_allclose(path.goal[:2], poses[-1, :2])
+    # the simplified polyline stays near the dense one
+    _, sampled = path.sample(200)
+    gaps = np.min(np.linalg.norm(sampled[:, None, :2] - poses[None, :, :2], axis=2), axis=1)
+    assert np.max(gaps) < 0.1
+
+
+def test_a_new_horizon_takes_effect_at_the_next_solve(controller: MpcController) -> None:
+    controller.set_path(analytic_path('paper_sinusoid'))
+    controller.update_config(controller.config.with_changes(horizon=6))
+    out = controller.compute(WORLD.start, 0.0)
+    assert out.reason == REASON_OK
+    assert out.solution.x_pred.shape == (7, 3)
+    controller.update_config(controller.config.with_changes(horizon=10))
+
+
+def test_new_velocity_bounds_bound_the_command() -> None:
+    controller = MpcController(obstacles=WORLD.obstacles)
+    controller.set_path(analytic_path('paper_sinusoid'))
+    controller.set_model(Unicycle(v_max=0.1, omega_max=0.5))
+    out = controller.compute(WORLD.start, 0.0)
+    assert out.reason == REASON_OK
+    assert abs(out.u[0]) <= 0.1 + 1e-12 and abs(out.u[1]) <= 0.5 + 1e-12
+    assert out.u[0] > 0.05
+
+
+def test_settings_refuse_non_positive_tolerances() -> None:
+    with pytest.raises(ValueError, match='goal_tolerance'):
+        ControllerSettings(goal_tolerance=0.0)
+
+
+def test_world_files_resolve_by_name_and_missing_ones_raise() -> None:
+    path = resolve_data_file('paper_obstacle.yaml')
+    assert load_world(path).obstacles
+    assert resolve_data_file('worlds/corridor_turn.yaml').is_file()
+    with pytest.raises(FileNotFoundError, match='no_such_world.yaml: not found'):
+        resolve_data_file('no_such_world.yaml')

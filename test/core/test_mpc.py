@@ -1,0 +1,148 @@
+"""The paper's MPC and the baseline on the paper's scenario (no ROS)."""
+
+import numpy as np
+import pytest
+
+from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.mpc.step import PathReferenceMPC, TrackingMPC
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.paths import paper_sinusoid, WaypointPath
+from mpc_local_planner.evaluation.experiments import run_closed_loop
+
+BOX = ConvexPolygon.from_box(1.0, -1.0, 1.5, 1.0)
+
+
+@pytest.fixture(scope='module')
+def proposed_run():
+    path = paper_sinusoid()
+    model = Unicycle()
+    controller = PathReferenceMPC(model, MpcConfig(), obstacles=[BOX], path=path)
+    return run_closed_loop(controller, model, path.start, goal=path.goal, obstacles=[BOX],
+                           label='proposed', max_time=40.0)
+
+
+@pytest.fixture(scope='module')
+def baseline_run():
+    path = paper_sinusoid()
+    model = Unicycle()
+    controller = TrackingMPC(model, MpcConfig(), obstacles=[BOX], target=path.goal)
+    return run_closed_loop(controller, model, path.start, goal=path.goal, obstacles=[BOX],
+                           label='baseline', max_time=40.0)
+
+
+def test_proposed_mpc_reaches_the_target_around_the_box(proposed_run) -> None:
+    metrics = proposed_run.metrics
+    assert metrics['reached']
+    assert metrics['final_position_error'] <= 0.05
+    assert metrics['final_heading_error'] <= 0.1
+    assert np.max(proposed_run.rows[:, 1]) > 2.4
+
+
+def test_proposed_mpc_never_samples_a_position_inside_the_box(proposed_run) -> None:
+    assert not np.any(BOX.contains(proposed_run.rows[:, 1:3]))
+    assert proposed_run.metrics['min_clearance'] > 0.0
+
+
+def test_proposed_mpc_value_function_never_increases(proposed_run) -> None:
+    values = proposed_run.rows[:, 7]
+    assert np.all(np.diff(values) <= 1e-6 * (1 + np.abs(values[:-1])))
+    assert proposed_run.metrics['lyapunov_checks'] == len(values) - 1
+    assert proposed_run.metrics['lyapunov_violations'] == 0
+
+
+def test_proposed_mpc_path_progress_reaches_one(proposed_run) -> None:
+    assert proposed_run.rows[-1, 6] == pytest.approx(1.0, abs=1e-3)
+
+
+def test_every_applied_input_is_within_the_bounds(proposed_run, baseline_run) -> None:
+    for run in (proposed_run, baseline_run):
+        assert np.all(np.abs(run.rows[:, 4]) <= 0.31 + 1e-12)
+        assert np.all(np.abs(run.rows[:, 5]) <= 1.9 + 1e-12)
+
+
+def test_tracking_baseline_stops_in_front_of_the_box(baseline_run) -> None:
+    assert not baseline_run.metrics['reached']
+    assert np.max(baseline_run.rows[:, 1]) < 1.0
+    assert not np.any(BOX.contains(baseline_run.rows[:, 1:3]))
+    last_5_s = baseline_run.rows[baseline_run.rows[:, 0] >= baseline_run.rows[-1, 0] - 5.0]
+    assert baseline_run.rows[-1, 0] >= 10.0  # it had time, and stood still at the end
+    assert np.ptp(last_5_s[:, 1]) < 0.02 and np.ptp(last_5_s[:, 2]) < 0.02
+
+
+def test_solve_refuses_a_non_finite_state() -> None:
+    controller = PathReferenceMPC(Unicycle(), MpcConfig(), path=paper_sinusoid())
+    with pytest.raises(ValueError, match='finite'):
+        controller.solve(np.array([0.0, np.nan, 0.0]))
+
+
+def test_solve_without_a_path_says_so() -> None:
+    controller = PathReferenceMPC(Unicycle(), MpcConfig())
+    with pytest.raises(RuntimeError, match='path'):
+        controller.solve(np.zeros(3))
+
+
+def test_measured_heading_is_unwrapped_to_the_prediction() -> None:
+    path = WaypointPath(np.array([[0.0, 0.0], [2.0, 0.0]]), start_heading=np.pi - 0.05)
+    controller = PathReferenceMPC(Unicycle(), MpcConfig(), path=path)
+    first = controller.solve(np.array([0.0, 0.0, np.pi - 0.05]))
+    # the same pose reported on the other branch (-pi + ...) must give the same command
+    second_a = controller.solve(first.x_pred[1])
+    controller_b = PathReferenceMPC(Unicycle(), MpcConfig(), path=path)
+    controller_b.solve(np.array([0.0, 0.0, np.pi - 0.05]))
+    wrapped = first.x_pred[1].copy()
+    wrapped[2] -= 2 * np.pi
+    second_b = controller_b.solve(wrapped)
+    np.testing.assert_allclose(second_a.u0, second_b.u0, atol=1e-6)
+
+
+def test_invalid_settings_are_refused_with_reasons() -> None:
+    with pytest.raises(ValueError, match='horizon must be an integer >= 1'):
+        MpcConfig(horizon=0)
+    with pytest.raises(ValueError, match='step must be > 0'):
+        MpcConfig(step=-0.1)
+    with pytest.raises(ValueError, match='weight_v must be >= 0'):
+        MpcConfig(weight_v=-1.0)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_default_backend_reaches_the_target_when_the_sampling_time_jitters(seed) -> None:
+    # a real loop never applies the input for exactly h: the measured state leaves the
+    # prediction, the shifted candidate no longer ends on the path, and the fast backend
+    # must not be the only thing between the robot and a permanent stop
+    path = paper_sinusoid()
+    model = Unicycle()
+    controller = PathReferenceMPC(model, MpcConfig(), obstacles=[BOX], path=path)
+    rng = np.random.default_rng(seed)
+    x = path.start.copy()
+    stops = 0
+    for _ in range(150):
+        solution = controller.solve(x)
+        stops += solution.source == 'stop'
+        assert not BOX.contains(x[None, :2])[0]
+        x = model.step(x, solution.u0, 0.2 * (1 + 0.1 * rng.uniform(-1, 1)))
+    assert np.linalg.norm(x[:2] - path.goal[:2]) < 0.05
+    assert stops == 0
+
+
+def _paper_run(config: MpcConfig, label: str):
+    path = paper_sinusoid()
+    model = Unicycle()
+    controller = PathReferenceMPC(model, config, obstacles=[BOX], path=path)
+    return run_closed_loop(controller, model, path.start, goal=path.goal, obstacles=[BOX],
+                           label=label, max_time=40.0)
+
+
+def test_obstacles_left_out_of_the_nlp_are_added_when_the_solution_comes_near() -> None:
+    """Constraint generation: with no obstacle active up front, the box still is avoided."""
+    run = _paper_run(MpcConfig(activation_distance=0.0), 'lazy')
+    assert run.metrics['reached']
+    assert run.metrics['min_clearance'] > 0.0
+    assert run.metrics['lyapunov_violations'] == 0
+
+
+def test_lazy_obstacles_give_the_closed_loop_of_all_obstacles_in_the_nlp(proposed_run) -> None:
+    run = _paper_run(MpcConfig(activation_distance=10.0), 'eager')
+    assert run.metrics['reached']
+    assert run.metrics['path_length'] == pytest.approx(
+        proposed_run.metrics['path_length'], rel=1e-3)

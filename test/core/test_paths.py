@@ -1,0 +1,82 @@
+"""Unit tests of reference paths: continuity, Lipschitz bound, symbolic form, projection."""
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from mpc_local_planner.core.paths import paper_sinusoid, simplify_polyline, WaypointPath
+
+
+def _symbolic_values(path, s_values):
+    s = ca.SX.sym('s')
+    f = ca.Function('p', [s], [path.symbolic(s, ca.DM(path.parameters()))])
+    return np.array([np.asarray(f(v)).ravel() for v in s_values])
+
+
+def test_paper_path_starts_at_origin_and_ends_at_target() -> None:
+    path = paper_sinusoid()
+    np.testing.assert_allclose(path.start, [0.0, 0.0, np.arctan(1.1 * np.pi / 2.5)])
+    np.testing.assert_allclose(path.goal, [2.5, 0.0, np.arctan(-1.1 * np.pi / 2.5)], atol=1e-12)
+
+
+def test_paper_path_heading_is_the_tangent_direction() -> None:
+    path = paper_sinusoid()
+    s, poses = path.sample(2001)
+    tangent = np.arctan2(np.gradient(poses[:, 1], s), np.gradient(poses[:, 0], s))
+    np.testing.assert_allclose(poses[1:-1, 2], tangent[1:-1], atol=1e-5)
+
+
+def test_corner_becomes_a_turn_in_place_with_continuous_unwrapped_heading() -> None:
+    path = WaypointPath(np.array([[0, 0], [1, 0], [1, 1], [0, 1]]), start_heading=0.0)
+    s, poses = path.sample(4001)
+    steps = np.linalg.norm(np.diff(poses, axis=0), axis=1)
+    assert np.max(steps) < 1e-2  # no jump anywhere, heading included
+    assert poses[-1, 2] == pytest.approx(np.pi)  # unwrapped: two left turns, not -pi
+
+
+def test_waypoint_path_is_lipschitz_with_the_bound_its_knots_imply() -> None:
+    path = WaypointPath(np.array([[0, 0], [2, 0], [2, 2]]), start_heading=0.0,
+                        goal_heading=np.pi / 2, turn_length=0.25)
+    knots = path.knots
+    total = 4.0 + 0.25 * (np.pi / 2)
+    bound = total * max(1.0, 1 / 0.25)  # |dp/ds| <= L_total per metre or per turn_length
+    assert path.lipschitz_estimate() <= bound * (1 + 1e-9)
+    assert paper_sinusoid().lipschitz_estimate() < 6.0  # |p'(s)| <= 2.5 + 1.1 pi + heading
+    assert len(knots) == 4
+
+
+def test_waypoint_path_symbolic_form_equals_numeric_form() -> None:
+    path = WaypointPath(np.array([[0, 0], [1, 0.5], [2, -0.5], [3, 0]]), start_heading=1.0,
+                        goal_heading=-1.0, capacity=16)
+    s_values = np.linspace(0, 1, 57)
+    np.testing.assert_allclose(_symbolic_values(path, s_values), path.pose(s_values),
+                               atol=1e-12)
+
+
+def test_projection_finds_the_nearest_point_on_the_path() -> None:
+    path = paper_sinusoid()
+    s_true = 0.37
+    pose = path.pose(s_true)
+    assert path.project(pose) == pytest.approx(s_true, abs=1e-3)
+    assert path.project(pose, s_min=0.5) == pytest.approx(0.5, abs=1e-3)
+
+
+@pytest.mark.parametrize('waypoints, message', [
+    (np.array([[0.0, 0.0]]), 'at least two distinct'),
+    (np.array([[0.0, 0.0], [0.0, 0.0]]), 'at least two distinct'),
+    (np.array([[0.0, 0.0], [np.nan, 1.0]]), 'NaN or inf'),
+    (np.zeros((3, 3)), 'shape'),
+])
+def test_bad_waypoints_are_refused_with_a_reason(waypoints, message) -> None:
+    with pytest.raises(ValueError, match=message):
+        WaypointPath(waypoints)
+
+
+def test_too_many_segments_are_refused_and_simplification_fixes_it() -> None:
+    x = np.linspace(0, 10, 100_000)
+    points = np.column_stack([x, 0.001 * np.sin(x)])
+    with pytest.raises(ValueError, match='capacity'):
+        WaypointPath(points, capacity=64)
+    simple = simplify_polyline(points, 0.01)
+    assert len(simple) < 10
+    WaypointPath(simple, capacity=64)

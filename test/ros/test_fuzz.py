@@ -1,0 +1,299 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Property-based fuzzing: random, mostly malformed messages never crash or steer the robot.
+
+The conversions either return finite values or raise ValueError. The controller and the
+simulator nodes get random message sequences through their callbacks (called directly, the
+way the executor calls them; simulated time is set by the test) and every twist they
+publish, as the probe receives it over DDS, is finite and within the unicycle's bounds.
+Hypothesis is derandomized with a bounded number of examples: the same cases every run.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Iterator
+
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PoseStamped, Quaternion, Twist
+from hypothesis import given, HealthCheck, settings
+from hypothesis import strategies as st
+from nav_msgs.msg import Odometry, Path
+import numpy as np
+import pytest
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.serialization import serialize_message
+from rclpy.time import Time as RosTime
+
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.ros.conversions import (
+    odometry_to_state,
+    path_pose_count,
+    path_to_poses,
+    pose_to_array,
+    poses_to_path,
+    quaternion_to_yaw,
+    seconds_to_stamp,
+    stamp_to_seconds,
+    u_from_twist,
+    yaw_to_quaternion,
+)
+from mpc_local_planner.ros.mpc_controller_node import MpcControllerNode
+from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
+from mpc_local_planner.worlds.world import paper_world
+
+WORLD = paper_world()
+U_MAX = Unicycle().u_max
+FUZZ = settings(derandomize=True, deadline=None, max_examples=80, database=None,
+                suppress_health_check=[HealthCheck.too_slow])
+
+# ----------------------------------------------------------------------------- strategies
+SPECIAL = st.sampled_from([0.0, -0.0, math.nan, math.inf, -math.inf, 1e308, -1e308, 5e-324,
+                           1e-300, 1e6, 1e9])
+ANY_FLOAT = st.one_of(SPECIAL, st.floats(allow_nan=True, allow_infinity=True))
+NEAR = st.floats(min_value=-3.0, max_value=4.0)  # around the paper's scenario
+COORDINATE = st.one_of(NEAR, NEAR, NEAR, ANY_FLOAT)  # mostly plausible
+FRAME = st.one_of(st.just('map'), st.just('map'), st.sampled_from(['', 'odom', 'base_link']),
+                  st.text(max_size=20))
+
+
+@st.composite
+def quaternions(draw) -> Quaternion:  # noqa: ANN001
+    if draw(st.booleans()):
+        return yaw_to_quaternion(draw(st.floats(-10.0, 10.0)))
+    return Quaternion(x=draw(ANY_FLOAT), y=draw(ANY_FLOAT), z=draw(ANY_FLOAT),
+                      w=draw(ANY_FLOAT))
+
+
+@st.composite
+def stamps(draw) -> Time:  # noqa: ANN001
+    return Time(sec=draw(st.integers(-2**31, 2**31 - 1)),
+                nanosec=draw(st.integers(0, 2**32 - 1)))
+
+
+@st.composite
+def odometries(draw, stamp: Time | None = None) -> Odometry:  # noqa: ANN001
+    msg = Odometry()
+    msg.header.frame_id = draw(FRAME)
+    msg.header.stamp = stamp if stamp is not None else draw(stamps())
+    msg.pose.pose.position.x = draw(COORDINATE)
+    msg.pose.pose.position.y = draw(COORDINATE)
+    msg.pose.pose.position.z = draw(ANY_FLOAT)
+    msg.pose.pose.orientation = draw(quaternions())
+    msg.twist.twist.linear.x = draw(ANY_FLOAT)
+    return msg
+
+
+@st.composite
+def paths(draw, max_poses: int = 12) -> Path:  # noqa: ANN001
+    msg = Path()
+    msg.header.frame_id = draw(FRAME)
+    for _ in range(draw(st.integers(0, max_poses))):
+        pose = PoseStamped()
+        pose.header.frame_id = msg.header.frame_id
+        pose.pose.position.x = draw(COORDINATE)
+        pose.pose.position.y = draw(COORDINATE)
+        pose.pose.orientation = draw(quaternions())
+        msg.poses.append(pose)
+    return msg
+
+
+@st.composite
+def twists(draw) -> Twist:  # noqa: ANN001
+    msg = Twist()
+    msg.linear.x = draw(st.one_of(st.floats(-1.0, 1.0), ANY_FLOAT))
+    msg.angular.z = draw(st.one_of(st.floats(-3.0, 3.0), ANY_FLOAT))
+    msg.linear.y, msg.angular.x = draw(ANY_FLOAT), draw(ANY_FLOAT)
+    return msg
+
+
+# ----------------------------------------------------------------------------- conversions
+@FUZZ
+@given(q=quaternions())
+def test_quaternion_to_yaw_gives_a_finite_angle_or_value_error(q: Quaternion) -> None:
+    try:
+        yaw = quaternion_to_yaw(q)
+    except ValueError:
+        return
+    assert math.isfinite(yaw) and -math.pi <= yaw <= math.pi
+
+
+@FUZZ
+@given(msg=odometries())
+def test_odometry_to_state_gives_a_finite_state_or_value_error(msg: Odometry) -> None:
+    try:
+        state = odometry_to_state(msg)
+    except ValueError:
+        return
+    assert state.shape == (3,) and np.all(np.isfinite(state))
+    np.testing.assert_array_equal(pose_to_array(msg.pose.pose), state)
+
+
+@FUZZ
+@given(msg=paths())
+def test_path_to_poses_gives_finite_poses_or_value_error_and_the_cdr_count_is_exact(
+        msg: Path) -> None:
+    assert path_pose_count(serialize_message(msg)) == len(msg.poses)
+    try:
+        poses = path_to_poses(msg)
+    except ValueError:
+        return
+    assert poses.shape == (len(msg.poses), 3) and np.all(np.isfinite(poses))
+
+
+@FUZZ
+@given(data=st.binary(max_size=64))
+def test_path_pose_count_reads_garbage_without_raising(data: bytes) -> None:
+    count = path_pose_count(data)
+    assert count is None or 0 <= count < 2**32
+
+
+@FUZZ
+@given(poses=st.lists(st.tuples(ANY_FLOAT, ANY_FLOAT, ANY_FLOAT), max_size=6),
+       seconds=ANY_FLOAT)
+def test_poses_to_path_and_stamps_refuse_non_finite_values_with_value_error(
+        poses: list, seconds: float) -> None:  # noqa: ANN001
+    arr = np.array(poses, dtype=float).reshape(-1, 3)
+    try:
+        msg = poses_to_path(arr, stamp=seconds_to_stamp(seconds))
+    except ValueError:
+        assert not (np.all(np.isfinite(arr)) and 0 <= seconds < 2**31)
+        return
+    assert stamp_to_seconds(msg.header.stamp) == pytest.approx(seconds, abs=1e-6, rel=1e-12)
+    np.testing.assert_allclose(path_to_poses(msg)[:, :2], arr[:, :2])
+
+
+@FUZZ
+@given(twist=twists(), stamp=stamps())
+def test_twists_and_stamps_always_convert_to_finite_numbers(twist: Twist, stamp: Time) -> None:
+    assert np.all(np.isfinite(u_from_twist(twist)))
+    assert math.isfinite(stamp_to_seconds(stamp))
+
+
+# ----------------------------------------------------------------------------- nodes
+class Nodes:
+    """A controller and a simulator in simulated time set by the test, and a probe."""
+
+    def __init__(self, ros) -> None:  # noqa: ANN001
+        sim_time = [Parameter('use_sim_time', value=True)]
+        self.ros = ros
+        # neither node is spun: the test calls their callbacks, the executor the probe's
+        self.idle = SingleThreadedExecutor(context=ros.context)
+        self.controller = MpcControllerNode(context=ros.context, parameter_overrides=sim_time)
+        self.simulator = UnicycleSimulatorNode(context=ros.context,
+                                               parameter_overrides=sim_time)
+        for node in (self.controller, self.simulator):
+            self.idle.add_node(node)
+        self.probe = ros.probe()
+        self.t = 1.0
+        self.steps = 0
+        self.ticks = 0
+        assert ros.spin_until(lambda: self.controller.count_subscribers('cmd_vel') > 0
+                              and self.simulator.count_subscribers('odom') > 0)
+
+    def advance(self, seconds: float) -> None:
+        self.t += seconds
+        for node in (self.controller, self.simulator):
+            node.get_clock().set_ros_time_override(RosTime(nanoseconds=int(self.t * 1e9)))
+
+    def close(self) -> None:
+        self.idle.shutdown()
+        for node in (self.simulator, self.controller):
+            node.destroy_node()
+
+
+@pytest.fixture(scope='module')
+def nodes(ros_module) -> Iterator[Nodes]:  # noqa: ANN001
+    harness = Nodes(ros_module)
+    try:
+        yield harness
+    finally:
+        harness.close()
+
+
+def valid_plan() -> Path:
+    return poses_to_path(np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0],
+                                   [1.7, 1.3, -0.96], [2.5, 0.0, WORLD.goal[2]]]))
+
+
+# valid odometry near the plan (stamped up to 2 s late or 1 s early) and the valid plan come
+# often enough that the solver runs between the malformed messages
+GOOD_ODOM = st.tuples(st.just('good odom'), st.floats(-0.5, 2.5), st.floats(-0.5, 1.5),
+                      st.floats(-4.0, 4.0), st.floats(-2.0, 1.0))
+EVENTS = st.lists(st.one_of(
+    st.tuples(st.just('odom'), odometries()),
+    GOOD_ODOM, GOOD_ODOM, GOOD_ODOM,
+    st.tuples(st.sampled_from(['plan', 'plan bytes']), paths()),
+    st.tuples(st.just('garbage bytes'), st.binary(max_size=40)),
+    st.tuples(st.just('good plan')), st.tuples(st.just('good plan')),
+    st.tuples(st.just('tick')), st.tuples(st.just('tick')), st.tuples(st.just('tick')),
+), min_size=1, max_size=12)
+
+
+@FUZZ
+@given(events=EVENTS)
+def test_controller_callbacks_survive_random_messages_and_publish_bounded_twists(
+        nodes: Nodes, events: list) -> None:  # noqa: ANN001
+    node = nodes.controller
+    for event in events + [('tick',)]:
+        kind = event[0]
+        if kind == 'odom':
+            node.odom_callback(event[1])
+        elif kind == 'good odom':
+            msg = Odometry()
+            msg.header.frame_id = 'odom'
+            msg.header.stamp = seconds_to_stamp(max(nodes.t + event[4], 0.0))
+            msg.pose.pose.position.x, msg.pose.pose.position.y = event[1], event[2]
+            msg.pose.pose.orientation = yaw_to_quaternion(event[3])
+            node.odom_callback(msg)
+        elif kind == 'plan':
+            node.plan_callback(event[1])
+        elif kind == 'plan bytes':
+            node.plan_callback(serialize_message(event[1]))
+        elif kind == 'garbage bytes':
+            node.plan_callback(event[1])
+        elif kind == 'good plan':
+            node.plan_callback(serialize_message(valid_plan()))
+        else:
+            nodes.advance(0.2)
+            node.timer_callback()
+            nodes.steps += 1
+            u = node.last_output.u
+            assert np.all(np.isfinite(u)) and np.all(np.abs(u) <= U_MAX + 1e-12), u
+    # what went over DDS: every twist so far, finite and within the bounds
+    probe = nodes.probe
+    assert nodes.ros.spin_until(lambda: len(probe.cmds) >= nodes.steps, timeout=5.0)
+    raw = np.array([[c.linear.x, c.angular.z] for c in probe.cmds])
+    assert np.all(np.isfinite(raw)) and np.all(np.abs(raw) <= U_MAX + 1e-12)
+
+
+@FUZZ
+@given(commands=st.lists(twists(), min_size=1, max_size=6))
+def test_simulator_callbacks_survive_random_twists_and_stay_finite_and_saturated(
+        nodes: Nodes, commands: list[Twist]) -> None:
+    sim = nodes.simulator
+    for twist in commands:
+        sim.cmd_vel_callback(twist)
+        nodes.advance(0.02)
+        sim.timer_callback()
+        nodes.ticks += 1
+        assert np.all(np.isfinite(sim.state))
+    probe = nodes.probe
+    assert nodes.ros.spin_until(lambda: len(probe.odoms) >= nodes.ticks, timeout=5.0)
+    moving = np.array([u_from_twist(m.twist.twist) for m in probe.odoms])
+    raw = np.array([[m.twist.twist.linear.x, m.twist.twist.angular.z] for m in probe.odoms])
+    np.testing.assert_array_equal(moving, raw)  # nothing non-finite was published
+    assert np.all(np.abs(raw) <= U_MAX + 1e-12)
+    assert all(np.all(np.isfinite(odometry_to_state(m))) for m in probe.odoms)

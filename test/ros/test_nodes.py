@@ -1,0 +1,280 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Each node against test publishers and subscribers, in its own rclpy context."""
+
+from __future__ import annotations
+
+import math
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, Twist
+from nav_msgs.msg import Odometry, Path
+import numpy as np
+import pytest
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.planner import segment_collides
+from mpc_local_planner.ros.conversions import (
+    CMD_VEL_QOS,
+    DIAGNOSTICS_QOS,
+    LOCAL_PLAN_QOS,
+    ODOM_QOS,
+    odometry_to_state,
+    path_to_poses,
+    PLAN_QOS,
+    poses_to_path,
+    stamp_to_seconds,
+    state_to_odometry,
+    u_from_twist,
+    yaw_to_quaternion,
+)
+from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
+from mpc_local_planner.ros.mpc_controller_node import MpcControllerNode
+from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
+from mpc_local_planner.worlds.world import paper_world
+
+WORLD = paper_world()
+PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
+                 [2.5, 0.0, WORLD.goal[2]]])
+
+
+class Probe(Node):
+    """A test node: publishes what a node listens to and keeps what it says."""
+
+    def __init__(self, context) -> None:  # noqa: ANN001
+        super().__init__('probe', context=context)
+        self.cmd_pub = self.create_publisher(Twist, 'cmd_vel', CMD_VEL_QOS)
+        self.odom_pub = self.create_publisher(Odometry, 'odom', ODOM_QOS)
+        self.plan_pub = self.create_publisher(Path, 'plan', PLAN_QOS)
+        self.goal_pub = self.create_publisher(PoseStamped, 'goal_pose', 10)
+        self.odoms: list[Odometry] = []
+        self.cmds: list[Twist] = []
+        self.plans: list[Path] = []
+        self.local_plans: list[Path] = []
+        self.diagnostics: list[dict[str, str]] = []
+        self.create_subscription(Odometry, 'odom', self.odoms.append, ODOM_QOS)
+        self.create_subscription(Twist, 'cmd_vel', self.cmds.append, CMD_VEL_QOS)
+        self.create_subscription(Path, 'plan', self.plans.append, PLAN_QOS)
+        self.create_subscription(Path, 'local_plan', self.local_plans.append, LOCAL_PLAN_QOS)
+        self.create_subscription(DiagnosticArray, 'mpc/diagnostics', self._diag, DIAGNOSTICS_QOS)
+
+    def _diag(self, msg: DiagnosticArray) -> None:
+        values = {kv.key: kv.value for kv in msg.status[0].values}
+        values['message'] = msg.status[0].message
+        self.diagnostics.append(values)
+
+    def publish_odom(self, state: np.ndarray) -> None:
+        self.odom_pub.publish(state_to_odometry(state, np.zeros(2),
+                                                stamp=self.get_clock().now().to_msg()))
+
+
+def exact_arc(pose: np.ndarray, v: float, omega: float, t: float) -> np.ndarray:
+    x, y, th = pose
+    if abs(omega) < 1e-12:
+        return np.array([x + v * t * math.cos(th), y + v * t * math.sin(th), th])
+    return np.array([x + v / omega * (math.sin(th + omega * t) - math.sin(th)),
+                     y - v / omega * (math.cos(th + omega * t) - math.cos(th)),
+                     th + omega * t])
+
+
+# ----------------------------------------------------------------------------- simulator
+def run_simulator(ros, command: tuple[float, float], duration: float) -> list[Odometry]:  # noqa: ANN001
+    sim = ros.add(UnicycleSimulatorNode(context=ros.context, parameter_overrides=[
+        Parameter('publish_clock', value=True), Parameter('real_time_factor', value=10.0),
+        Parameter('rate', value=50.0), Parameter('cmd_timeout', value=0.0),
+        Parameter('initial_pose', value=[1.0, 2.0, 0.5])]))
+    probe = ros.add(Probe(ros.context))
+    assert ros.spin_until(lambda: probe.cmd_pub.get_subscription_count() > 0)
+    twist = Twist()
+    twist.linear.x, twist.angular.z = command
+    probe.cmd_pub.publish(twist)
+
+    def moving_for(span: float) -> bool:
+        moving = [m for m in probe.odoms if m.twist.twist.linear.x != 0.0]
+        return bool(moving) and (stamp_to_seconds(moving[-1].header.stamp)
+                                 - stamp_to_seconds(moving[0].header.stamp)) >= span
+
+    assert ros.spin_until(lambda: moving_for(duration), timeout=20.0)
+    assert sim.sim_time > duration
+    return [m for m in probe.odoms if m.twist.twist.linear.x != 0.0]
+
+
+def check_arc(odoms: list[Odometry], v: float, omega: float) -> None:
+    first, last = odoms[0], odoms[-1]
+    t = stamp_to_seconds(last.header.stamp) - stamp_to_seconds(first.header.stamp)
+    expected = exact_arc(odometry_to_state(first), v, omega, t)
+    got = odometry_to_state(last)
+    np.testing.assert_allclose(got[:2], expected[:2], atol=1e-6)
+    assert math.remainder(got[2] - expected[2], 2 * math.pi) == pytest.approx(0.0, abs=1e-6)
+    stamps = np.array([stamp_to_seconds(m.header.stamp) for m in odoms])
+    np.testing.assert_allclose(np.diff(stamps), 0.02, atol=1e-6)  # one tick of 1/rate each
+
+
+def test_simulator_integrates_a_constant_twist_as_the_unicycle_arc(ros) -> None:  # noqa: ANN001
+    odoms = run_simulator(ros, (0.2, 0.5), duration=1.0)
+    np.testing.assert_allclose(u_from_twist(odoms[-1].twist.twist), [0.2, 0.5])
+    check_arc(odoms, 0.2, 0.5)
+
+
+def test_simulator_saturates_the_command_at_the_bounds(ros) -> None:  # noqa: ANN001
+    odoms = run_simulator(ros, (1.0, -5.0), duration=0.5)
+    bounds = Unicycle().u_max
+    np.testing.assert_allclose(u_from_twist(odoms[-1].twist.twist), [bounds[0], -bounds[1]])
+    check_arc(odoms, bounds[0], -bounds[1])
+
+
+# ----------------------------------------------------------------------------- controller
+def make_controller(ros, **params) -> tuple[MpcControllerNode, Probe]:  # noqa: ANN001, ANN003
+    overrides = [Parameter(k, value=v) for k, v in params.items()]
+    controller = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=overrides))
+    probe = ros.add(Probe(ros.context))
+    return controller, probe
+
+
+def test_controller_without_a_plan_commands_zero_and_says_why(ros) -> None:  # noqa: ANN001
+    _, probe = make_controller(ros)
+    assert ros.spin_until(lambda: probe.odom_pub.get_subscription_count() > 0)
+    probe.publish_odom(WORLD.start)
+    assert ros.spin_until(lambda: any(d['message'] == 'no plan yet' for d in probe.diagnostics))
+    assert probe.cmds
+    assert all(c.linear.x == 0.0 and c.angular.z == 0.0 for c in probe.cmds)
+
+
+def test_controller_answers_odometry_and_a_plan_with_a_bounded_cmd_vel(ros) -> None:  # noqa: ANN001
+    _, probe = make_controller(ros)
+    assert ros.spin_until(lambda: probe.plan_pub.get_subscription_count() > 0)
+    probe.plan_pub.publish(poses_to_path(PLAN))
+
+    def driving() -> bool:
+        probe.publish_odom(WORLD.start)
+        return any(d.get('source') == 'solver' for d in probe.diagnostics)
+
+    assert ros.spin_until(driving, timeout=30.0)
+    assert ros.spin_until(lambda: len(probe.local_plans) > 0)
+    solved = next(d for d in probe.diagnostics if d.get('source') == 'solver')
+    assert 0.0 <= float(solved['s_k']) <= 1.0
+    assert float(solved['V_N']) > 0 and float(solved['solve_ms']) > 0
+    assert {'status', 'failures', 'lyapunov_ok'} <= solved.keys()
+    u_max = Unicycle().u_max
+    commands = np.array([u_from_twist(c) for c in probe.cmds])
+    assert np.all(np.abs(commands) <= u_max + 1e-9)
+    assert np.max(commands[:, 0]) > 0.05  # it drives towards the plan
+    prediction = path_to_poses(probe.local_plans[-1])
+    assert prediction.shape == (11, 3)
+    np.testing.assert_allclose(prediction[0, :2], WORLD.start[:2], atol=1e-6)
+
+
+def test_controller_applies_a_new_horizon_at_the_next_solve(ros) -> None:  # noqa: ANN001
+    controller, probe = make_controller(ros, analytic_path='paper_sinusoid')
+    result = controller.set_parameters([Parameter('horizon', value=5)])[0]
+    assert result.successful, result.reason
+
+    def short_prediction() -> bool:
+        probe.publish_odom(WORLD.start)
+        return any(len(p.poses) == 6 for p in probe.local_plans)
+
+    assert ros.spin_until(short_prediction, timeout=30.0)
+    assert all(len(p.poses) == 6 for p in probe.local_plans)
+
+
+@pytest.mark.parametrize(('name', 'value', 'reason'), [
+    ('solver', 'no_such_solver', 'solver must be one of'),
+    ('weights.v', -1.0, ''),  # outside the declared range
+    ('world_file', 'no_such_world.yaml', 'not found'),
+    ('analytic_path', 'no_such_path', 'unknown analytic path'),
+])
+def test_controller_refuses_invalid_parameters_with_a_reason(ros, name, value, reason) -> None:  # noqa: ANN001
+    controller, _ = make_controller(ros)
+    before = controller.get_parameter(name).value
+    result = controller.set_parameters([Parameter(name, value=value)])[0]
+    assert not result.successful
+    assert reason in result.reason
+    assert controller.get_parameter(name).value == before
+
+
+# ----------------------------------------------------------------------------- planner
+def test_planner_path_starts_at_odometry_ends_at_goal_and_is_collision_free(ros) -> None:  # noqa: ANN001
+    goal = [float(v) for v in WORLD.goal]
+    planner = ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
+        Parameter('goal', value=goal), Parameter('world_file', value='paper_obstacle.yaml')]))
+    probe = ros.add(Probe(ros.context))
+    start = np.array([0.1, -0.2, 0.3])
+
+    def planned() -> bool:
+        probe.publish_odom(start)
+        return len(probe.plans) > 0
+
+    assert ros.spin_until(planned, timeout=20.0)
+    poses = path_to_poses(probe.plans[-1])
+    assert probe.plans[-1].header.frame_id == 'map'
+    np.testing.assert_allclose(poses[0], start, atol=1e-9)
+    np.testing.assert_allclose(poses[-1], goal, atol=1e-9)
+    clearance = planner.get_parameter('clearance').value
+    inflated = [o.inflate(0.99 * clearance) for o in WORLD.obstacles]
+    for a, b in zip(poses[:-1], poses[1:], strict=True):
+        assert not segment_collides(inflated, a, b)
+
+    # RViz's 2D Goal Pose: a re-plan from the current odometry
+    new_goal = PoseStamped()
+    new_goal.header.frame_id = 'map'
+    new_goal.pose.position.x, new_goal.pose.position.y = 2.5, 1.5
+    new_goal.pose.orientation = yaw_to_quaternion(1.0)
+    probe.goal_pub.publish(new_goal)
+    assert ros.spin_until(lambda: len(probe.plans) > 1, timeout=20.0)
+    poses = path_to_poses(probe.plans[-1])
+    np.testing.assert_allclose(poses[-1], [2.5, 1.5, 1.0], atol=1e-9)
+    np.testing.assert_allclose(poses[0], start, atol=1e-9)
+    for a, b in zip(poses[:-1], poses[1:], strict=True):
+        assert not segment_collides(inflated, a, b)
+
+
+def test_planner_refuses_a_malformed_goal(ros) -> None:  # noqa: ANN001
+    planner = ros.add(GlobalPlannerNode(context=ros.context))
+    result = planner.set_parameters([Parameter('goal', value=[1.0, 2.0])])[0]
+    assert not result.successful
+    assert 'goal must be [x, y, theta]' in result.reason
+
+
+@pytest.mark.parametrize(('name', 'node_class'), [
+    ('mpc_controller', MpcControllerNode),
+    ('global_planner', GlobalPlannerNode),
+    ('unicycle_simulator', UnicycleSimulatorNode),
+])
+def test_shipped_params_files_load_and_hold_the_paper_values(name, node_class) -> None:  # noqa: ANN001
+    import rclpy
+    from rclpy.context import Context
+
+    from mpc_local_planner.worlds.data_files import resolve_data_file
+
+    context = Context()
+    rclpy.init(args=['node', '--ros-args', '--params-file',
+                     str(resolve_data_file(f'{name}.yaml'))], context=context)
+    node = None
+    try:
+        node = node_class(context=context)
+        if name == 'mpc_controller':
+            assert node.get_parameter('horizon').value == 10
+            assert node.get_parameter('weights.heading').value == 0.1
+            assert node.get_parameter('offset_weight').value == 1000.0
+        elif name == 'global_planner':
+            assert node.get_parameter('iterations').value == 1000
+            np.testing.assert_allclose(node.get_parameter('goal').value, WORLD.goal)
+        else:
+            np.testing.assert_allclose(node.get_parameter('initial_pose').value, WORLD.start)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)

@@ -1,0 +1,299 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Tests of world loading: the shipped worlds, BARN JSON, and every malformed input."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from mpc_local_planner.core.errors import WorldError
+from mpc_local_planner.core.obstacles import min_clearance
+from mpc_local_planner.worlds.data_files import BARN_DIR
+from mpc_local_planner.worlds.world import (
+    load_barn_world,
+    load_world,
+    paper_world,
+    World,
+    world_from_dict,
+)
+
+ROOT = Path(__file__).resolve().parents[2]
+WORLDS = ROOT / 'config' / 'worlds'
+BARN = BARN_DIR
+PAPER_HEADING = math.atan(1.1 * math.pi / 2.5)
+
+
+def valid_world() -> dict[str, Any]:
+    return {
+        'bounds': [0.0, 4.0, 0.0, 3.0],
+        'obstacles': [
+            {'box': [1.0, 1.0, 2.0, 2.0]},
+            {'polygon': [[2.5, 0.5], [3.0, 0.5], [2.75, 1.0]]},
+            {'circle': [3.0, 2.5, 0.2]},
+        ],
+        'start': [0.5, 0.5, 0.0],
+        'goal': [3.5, 1.5, 1.0],
+    }
+
+
+def write_yaml(tmp_path: Path, data: Any, name: str = 'world.yaml') -> Path:
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump(data), encoding='utf-8')
+    return path
+
+
+@pytest.mark.parametrize('name', ['paper_obstacle', 'corridor_turn', 'rrt_cluttered'])
+def test_every_shipped_world_loads_with_start_and_goal_in_free_space(name: str) -> None:
+    world = load_world(WORLDS / f'{name}.yaml')
+
+    assert world.name == name
+    assert world.start.shape == (3,) and world.goal.shape == (3,)
+    assert world.in_bounds(world.start) and world.in_bounds(world.goal)
+    inflated = world.inflated_obstacles()
+    assert min_clearance(inflated, world.start[:2]) > 0.0
+    assert min_clearance(inflated, world.goal[:2]) > 0.0
+
+
+def test_paper_world_matches_its_yaml_file_and_the_papers_numbers() -> None:
+    from_code = paper_world()
+    from_file = load_world(WORLDS / 'paper_obstacle.yaml')
+
+    for world in (from_code, from_file):
+        assert world.bounds == (-0.5, 3.0, -1.5, 1.8)
+        assert world.path == 'paper_sinusoid'
+        assert world.robot_radius == 0.0
+        np.testing.assert_allclose(world.start, [0.0, 0.0, PAPER_HEADING], atol=1e-12)
+        np.testing.assert_allclose(world.goal, [2.5, 0.0, -PAPER_HEADING], atol=1e-12)
+        assert len(world.obstacles) == 1
+        box = world.obstacles[0]
+        np.testing.assert_allclose(box.vertices.min(axis=0), [1.0, -1.0])
+        np.testing.assert_allclose(box.vertices.max(axis=0), [1.5, 1.0])
+    np.testing.assert_allclose(from_code.obstacles[0].A, from_file.obstacles[0].A)
+    np.testing.assert_allclose(from_code.obstacles[0].b, from_file.obstacles[0].b)
+
+
+def test_corridor_turn_world_is_empty_and_ends_heading_north() -> None:
+    world = load_world(WORLDS / 'corridor_turn.yaml')
+
+    assert world.obstacles == ()
+    np.testing.assert_allclose(world.start, [0.0, 0.0, 0.0])
+    np.testing.assert_allclose(world.goal, [2.0, 2.0, math.pi / 2])
+    assert world.bounds == (-1.0, 3.0, -1.0, 3.0)
+
+
+def test_rrt_cluttered_world_blocks_the_straight_line_but_leaves_half_metre_gaps() -> None:
+    world = load_world(WORLDS / 'rrt_cluttered.yaml')
+
+    assert 5 <= len(world.obstacles) <= 7
+    assert world.robot_radius == pytest.approx(0.1)
+    line = np.linspace(world.start[:2], world.goal[:2], 200)
+    assert min_clearance(world.obstacles, line) == 0.0
+    for i, first in enumerate(world.obstacles):
+        for second in world.obstacles[i + 1 :]:
+            gap = min(
+                min_clearance([first], second.vertices), min_clearance([second], first.vertices)
+            )
+            assert gap >= 0.5
+
+
+def test_yaml_world_parses_boxes_polygons_circles_and_optional_fields(tmp_path: Path) -> None:
+    data = valid_world() | {
+        'robot_radius': 0.15,
+        'path': 'paper_sinusoid',
+        'goal_tolerance': 0.05,
+        'time_limit': 30,
+    }
+    world = load_world(write_yaml(tmp_path, data, 'mixed.yml'))
+
+    assert isinstance(world, World)
+    assert world.name == 'mixed'
+    assert len(world.obstacles) == 3
+    assert world.obstacles[2].num_faces == 8  # circles become octagons
+    assert world.obstacles[2].contains(np.array([3.0, 2.69]))[0]  # circumscribed: disk inside
+    assert world.robot_radius == 0.15
+    assert world.goal_tolerance == 0.05 and world.time_limit == 30.0
+    assert world.path == 'paper_sinusoid'
+    assert not world.start.flags.writeable
+
+
+def test_world_from_dict_accepts_a_world_without_obstacles() -> None:
+    data = valid_world()
+    del data['obstacles']
+
+    world = world_from_dict(data, name='open')
+
+    assert world.obstacles == ()
+    assert world.path is None and world.goal_tolerance is None and world.time_limit is None
+
+
+def test_barn_world_becomes_octagons_with_heading_bounds_and_limits() -> None:
+    path = BARN / 'world_000.json'
+    raw = json.loads(path.read_text())
+    world = load_world(path)
+
+    assert world.name == 'world_000'
+    assert len(world.obstacles) == len(raw['cylinders'])
+    assert all(obstacle.num_faces == 8 for obstacle in world.obstacles)
+    np.testing.assert_allclose(world.start, raw['start'])
+    dx, dy = np.subtract(raw['goal'], raw['start'][:2])
+    np.testing.assert_allclose(world.goal, [*raw['goal'], math.atan2(dy, dx)])
+    assert world.goal_tolerance == raw['goal_tolerance']
+    assert world.time_limit == raw['time_limit_s']
+    assert world.robot_radius == 0.2
+    centres = np.array(raw['cylinders'])
+    r = raw['cylinder_radius']
+    points = np.vstack([centres - r, centres + r, [raw['start'][:2]], [raw['goal']]])
+    lo, hi = points.min(axis=0) - 1.0, points.max(axis=0) + 1.0
+    np.testing.assert_allclose(world.bounds, [lo[0], hi[0], lo[1], hi[1]])
+    # The octagon circumscribes each cylinder: points on the cylinder are inside it.
+    angles = np.linspace(0, 2 * np.pi, 50)
+    rim = centres[0] + r * np.column_stack([np.cos(angles), np.sin(angles)])
+    assert world.obstacles[0].contains(rim, margin=1e-12).all()
+
+
+def test_barn_loader_honours_robot_radius_and_sides() -> None:
+    world = load_barn_world(BARN / 'world_001.json', robot_radius=0.3, sides=12)
+
+    assert world.robot_radius == 0.3
+    assert all(obstacle.num_faces == 12 for obstacle in world.obstacles)
+
+
+def test_missing_world_file_raises_file_not_found(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError, match='nowhere.yaml'):
+        load_world(tmp_path / 'nowhere.yaml')
+    with pytest.raises(FileNotFoundError, match='nowhere.json'):
+        load_barn_world(tmp_path / 'nowhere.json')
+
+
+def test_unknown_suffix_raises_world_error(tmp_path: Path) -> None:
+    path = tmp_path / 'world.txt'
+    path.write_text('bounds: []')
+
+    with pytest.raises(WorldError, match=r'world\.txt.*unknown world format'):
+        load_world(path)
+
+
+def test_invalid_yaml_raises_world_error_naming_the_file(tmp_path: Path) -> None:
+    path = tmp_path / 'broken.yaml'
+    path.write_text('bounds: [0, 1\nstart: {')
+
+    with pytest.raises(WorldError, match=r'broken\.yaml.*not valid YAML'):
+        load_world(path)
+
+
+def mutate(**changes: Any) -> dict[str, Any]:
+    data = valid_world()
+    for key, value in changes.items():
+        if value is KeyError:
+            del data[key]
+        else:
+            data[key] = value
+    return data
+
+
+@pytest.mark.parametrize(
+    ('data', 'match'),
+    [
+        (['not', 'a', 'mapping'], 'must be a mapping'),
+        (mutate(bounds=KeyError), "missing required key 'bounds'"),
+        (mutate(start=KeyError), "missing required key 'start'"),
+        (mutate(goal=KeyError), "missing required key 'goal'"),
+        (mutate(obstacle=[]), r"unknown key\(s\) \['obstacle'\]"),
+        (mutate(bounds=[0.0, 4.0, 0.0]), 'bounds must be a list of 4 numbers'),
+        (mutate(bounds=[4.0, 0.0, 0.0, 3.0]), 'min < max'),
+        (mutate(bounds=[0.0, 4.0, 0.0, float('nan')]), r'bounds\[3\] must be finite'),
+        (mutate(start=[0.5, 0.5]), 'start must be a list of 3 numbers'),
+        (mutate(start=[0.5, 'x', 0.0]), r'start\[1\] must be a number'),
+        (mutate(start=[0.5, True, 0.0]), r'start\[1\] must be a number'),
+        (mutate(goal=[0.5, 0.5, float('inf')]), r'goal\[2\] must be finite'),
+        (mutate(start=[-1.0, 0.5, 0.0]), r'start \(-1, 0.5\) is outside the bounds'),
+        (mutate(goal=[3.5, 9.0, 0.0]), r'goal \(3.5, 9\) is outside the bounds'),
+        (mutate(goal=[1.5, 1.5, 0.0]), r'goal \(1.5, 1.5\) is inside obstacle 0'),
+        (mutate(obstacles={'box': [1, 1, 2, 2]}), 'obstacles must be a list'),
+        (mutate(obstacles=[{'cone': [1, 1, 1]}]), "unknown obstacle kind 'cone'"),
+        (mutate(obstacles=[{'box': [1, 1, 2, 2], 'circle': [1, 1, 1]}]), 'exactly one key'),
+        (mutate(obstacles=[{'box': [1, 1, 2]}]), r'obstacles\[0\] must be a list of 4'),
+        (mutate(obstacles=[{'box': [2, 2, 1, 1]}]), r'obstacles\[0\]: box needs xmin < xmax'),
+        (mutate(obstacles=[{'circle': [1, 1, -1]}]), r'obstacles\[0\]: circle needs radius'),
+        (mutate(obstacles=[{'polygon': [[1, 1], [2, 2]]}]), 'needs a list of >= 3'),
+        (mutate(obstacles=[{'polygon': [[1, 1], [2, 2], [3, 3]]}]), 'collinear'),
+        (mutate(obstacles=[{'polygon': [[1, 1], [2], [3, 1]]}]), r'obstacles\[0\]\[1\]'),
+        (mutate(robot_radius=-0.1), 'robot_radius must be >= 0'),
+        (mutate(robot_radius='wide'), 'robot_radius must be a number'),
+        (mutate(path=3), 'path must be the name of an analytic path'),
+        (mutate(goal_tolerance=0.0), 'goal_tolerance must be > 0'),
+        (mutate(time_limit=-5), 'time_limit must be > 0'),
+    ],
+)
+def test_malformed_yaml_world_raises_world_error_naming_file_and_problem(
+    tmp_path: Path, data: Any, match: str
+) -> None:
+    path = write_yaml(tmp_path, data, 'bad_world.yaml')
+
+    with pytest.raises(WorldError, match=match) as info:
+        load_world(path)
+
+    assert 'bad_world.yaml' in str(info.value)
+
+
+def test_world_error_is_a_value_error() -> None:
+    with pytest.raises(ValueError, match='inline'):
+        world_from_dict(mutate(start=KeyError), name='inline')
+
+
+def write_barn(tmp_path: Path, **changes: Any) -> Path:
+    data = json.loads((BARN / 'world_000.json').read_text())
+    for key, value in changes.items():
+        if value is KeyError:
+            del data[key]
+        else:
+            data[key] = value
+    path = tmp_path / 'barn_bad.json'
+    path.write_text(json.dumps(data))
+    return path
+
+
+@pytest.mark.parametrize(
+    ('changes', 'match'),
+    [
+        ({'cylinders': KeyError}, "missing required key 'cylinders'"),
+        ({'goal': KeyError}, "missing required key 'goal'"),
+        ({'cylinder_radius': 0}, 'cylinder_radius must be > 0'),
+        ({'cylinders': [[0.0, 1.0], [1.0]]}, r'cylinders\[1\] must be a list of 2'),
+        ({'start': [0.0, 0.0]}, 'start must be a list of 3'),
+        ({'goal': [0.0, 'far']}, r'goal\[1\] must be a number'),
+        ({'start': [-0.075, 0.075, 0.0]}, 'start .* is inside obstacle 0'),
+    ],
+)
+def test_malformed_barn_world_raises_world_error(
+    tmp_path: Path, changes: dict[str, Any], match: str
+) -> None:
+    with pytest.raises(WorldError, match=match):
+        load_world(write_barn(tmp_path, **changes))
+
+
+def test_barn_file_that_is_not_json_raises_world_error(tmp_path: Path) -> None:
+    path = tmp_path / 'garbage.json'
+    path.write_text('{"cylinders": [')
+
+    with pytest.raises(WorldError, match=r'garbage\.json.*not valid JSON'):
+        load_world(path)
