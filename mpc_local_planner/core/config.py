@@ -22,14 +22,41 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
-__all__ = ['MpcConfig', 'STRUCTURAL_FIELDS', 'validate_mpc_config']
+__all__ = ['CostWeights', 'MpcConfig', 'STRUCTURAL_FIELDS', 'validate_mpc_config']
 
 # 'fatrop' (structure-exploiting interior point) is the fastest that gives IPOPT's closed loop;
 # 'ipopt' is the reference. SQP (sqpmethod with qrqp/qpOASES/OSQP) was measured and dropped:
 # from rest, where every derivative of the quartic cost vanishes, it stops or stalls.
 SOLVERS = ('fatrop', 'ipopt')
+
+
+class CostWeights(NamedTuple):
+    """Weights of the stage cost l and of the offset cost V_o, in the solver's order.
+
+    The stage cost is l(x - x_s, u - u_s) = position ((dx)^p + (dy)^p) + heading (dtheta)^p
+    + v (v - v_s)^p + omega (omega - omega_s)^p; the offset cost is offset V_o(1 - s). The
+    formulation holds the same record with CasADi symbols: the solver's weight parameter.
+
+    Attributes:
+        position: weight of (dx)^p and (dy)^p.
+        heading: weight of (dtheta)^p (and of further states of richer models).
+        v: weight of the speed term.
+        omega: weight of the turn-rate term (and of further inputs).
+        offset: weight of the offset cost.
+
+    """
+
+    position: float
+    heading: float
+    v: float
+    omega: float
+    offset: float
+
+    def as_vector(self) -> list[float]:
+        """Return the weights in the order of the solver's weight parameter."""
+        return list(self)
 
 
 @dataclass(frozen=True)
@@ -47,7 +74,7 @@ class MpcConfig:
         cost_exponent: p, 4 in the paper: with 2 the unicycle violates Assumption 3.
         robot_radius: obstacles are inflated by it (a circular footprint).
         collision_margin: extra inflation so that the continuous motion between two samples
-            stays clear; None means v_max h / 2 (half the longest step, see design.md).
+            stays clear; None means v_max h / 2 (half the longest step).
         farkas_margin: the Farkas constraint asks (A p - b)^T mu >= this (metres).
         obstacle_slots: with adaptive_slots False, obstacles the solver holds at once (grows,
             with a rebuild, when more are within reach); with adaptive_slots, the count
@@ -100,10 +127,11 @@ class MpcConfig:
         margin = v_max * self.step / 2 if self.collision_margin is None else self.collision_margin
         return self.robot_radius + margin
 
-    def weights(self) -> list[float]:
-        """Return the weight vector the solver reads as a parameter."""
-        return [self.weight_position, self.weight_heading, self.weight_v, self.weight_omega,
-                self.offset_weight]
+    def cost_weights(self) -> CostWeights:
+        """Return the cost weights by name (the solver reads them as a parameter)."""
+        return CostWeights(position=self.weight_position, heading=self.weight_heading,
+                           v=self.weight_v, omega=self.weight_omega,
+                           offset=self.offset_weight)
 
     def with_changes(self, **changes: Any) -> MpcConfig:
         """Return a copy with some fields changed (validated again)."""

@@ -21,7 +21,7 @@ import pytest
 
 from mpc_local_planner.core.config import MpcConfig, SOLVERS
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.mpc.step import PathReferenceMPC
+from mpc_local_planner.core.mpc import PathReferenceMPC, PlanSource
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import paper_sinusoid
 
@@ -66,7 +66,7 @@ def test_backend_reaches_the_target_like_ipopt(solver: str, compile_functions: b
     assert not np.any(run['box'].contains(run['positions']))
     assert all(ok is not False for ok in run['lyapunov'])
     assert np.all(np.diff(run['values']) <= 1e-6 * (1 + np.abs(run['values'][:-1])))
-    assert 'stop' not in run['sources']
+    assert PlanSource.STOP not in run['sources']
     assert run['length'] == pytest.approx(reference['length'], rel=0.01)
 
 
@@ -79,6 +79,6 @@ def test_compilation_failure_falls_back_to_the_interpreter(
     sol = mpc.solve(path.start)
     mpc.wait_compiled()
     sol = mpc.solve(model.step(path.start, sol.u0, H))
-    assert sol.source == 'solver'
+    assert sol.source == PlanSource.SOLVER
     assert mpc.backend == 'fatrop'
     assert 'compiling the MPC NLP failed' in caplog.text

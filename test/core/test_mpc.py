@@ -3,9 +3,11 @@
 import numpy as np
 import pytest
 
+from mpc_local_planner.core.baselines import TrackingMPC
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.mpc.step import PathReferenceMPC, TrackingMPC
+from mpc_local_planner.core.mpc import PathReferenceMPC, PlanSource
+from mpc_local_planner.core.mpc.step import SolveAttempt
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import paper_sinusoid, WaypointPath
 from mpc_local_planner.evaluation.experiments import run_closed_loop
@@ -118,7 +120,7 @@ def test_default_backend_reaches_the_target_when_the_sampling_time_jitters(seed)
     stops = 0
     for _ in range(150):
         solution = controller.solve(x)
-        stops += solution.source == 'stop'
+        stops += solution.source == PlanSource.STOP
         assert not BOX.contains(x[None, :2])[0]
         x = model.step(x, solution.u0, 0.2 * (1 + 0.1 * rng.uniform(-1, 1)))
     assert np.linalg.norm(x[:2] - path.goal[:2]) < 0.05
@@ -146,3 +148,28 @@ def test_lazy_obstacles_give_the_closed_loop_of_all_obstacles_in_the_nlp(propose
     assert run.metrics['reached']
     assert run.metrics['path_length'] == pytest.approx(
         proposed_run.metrics['path_length'], rel=1e-3)
+
+
+def test_without_a_solver_the_shifted_candidate_is_applied_until_it_runs_out(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    path, model, horizon = paper_sinusoid(), Unicycle(), 6
+    controller = PathReferenceMPC(model, MpcConfig(horizon=horizon), obstacles=[BOX], path=path)
+    x = path.start.copy()
+    for _ in range(3):
+        verified = controller.solve(x)
+        x = model.step(x, verified.u0, 0.2)
+    assert verified.source == PlanSource.SOLVER
+
+    def failing_solver(nlp, w0, params, active, solver=None):  # the signature of _run_solver
+        return SolveAttempt(verified=False, w=np.asarray(w0, dtype=float), value=np.inf,
+                            status='injected failure', iterations=0, seconds=0.0)
+
+    monkeypatch.setattr(controller, '_run_solver', failing_solver)
+    for k in range(1, horizon + 2):
+        solution = controller.solve(x)
+        assert solution.source == PlanSource.CANDIDATE and not solution.solver_verified
+        assert solution.failures == k
+        assert 'applied the shifted candidate' in solution.status
+        expected = verified.u_pred[k] if k < horizon else np.zeros(2)
+        np.testing.assert_allclose(solution.u0, expected, atol=1e-12)
+        x = model.step(x, solution.u0, 0.2)

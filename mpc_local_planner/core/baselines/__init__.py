@@ -14,3 +14,8 @@
 
 
 """Controllers the paper's MPC is compared with."""
+
+from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit, PurePursuitConfig
+from mpc_local_planner.core.baselines.tracking_mpc import TrackingMPC
+
+__all__ = ['PurePursuit', 'PurePursuitConfig', 'TrackingMPC']

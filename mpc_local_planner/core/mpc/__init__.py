@@ -13,13 +13,28 @@
 # limitations under the License.
 
 
-"""The paper's MPC (problem (6)) and its guard."""
+"""The paper's MPC (problem (6)) and its guard.
 
+formulation.py is problem (6), backends.py runs it (solvers, compiled functions), step.py is
+one control step (the proof's candidate, verification, constraint generation, decision).
+"""
+
+from mpc_local_planner.core.mpc.backends import compile_cache_dir
 from mpc_local_planner.core.mpc.step import (
-    compile_cache_dir,
+    decide,
+    Decision,
+    MpcBase,
     MpcSolution,
     PathReferenceMPC,
-    TrackingMPC,
+    PlanSource,
 )
 
-__all__ = ['compile_cache_dir', 'MpcSolution', 'PathReferenceMPC', 'TrackingMPC']
+__all__ = [
+    'Decision',
+    'MpcBase',
+    'MpcSolution',
+    'PathReferenceMPC',
+    'PlanSource',
+    'compile_cache_dir',
+    'decide',
+]

@@ -1,0 +1,375 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Problem (6) of the paper with cost (5), written once as a CasADi NLP.
+
+This file is the paper's optimisation problem and nothing else: which solver runs it lives in
+backends.py, what is done with its answer in step.py. Each constraint below cites its line of
+problem (6) (`eq:mpcOpt`, lines (6a) to (6h)):
+
+    (6a)  min  J_N = sum_{l=0}^{N-1} l(x_l - x_s, u_l - u_s) + V_o(1 - s)        cost (5)
+    (6b)  x_0 = x(k)
+    (6c)  x_{l+1} = f(x_l, u_l),  l = 0..N-1
+    (6d)  x_s = x_N, u_s = u_N
+    (6e)  x_s = f(x_s, u_s)                       (a steady state: g_p gives one, with u_s = 0)
+    (6f)  g(x_s) = p(s),  s in [0, 1]             (together: x_N = g_p(s))
+    (6g)  (x_l, u_l) in Z                         (box bounds on states and inputs)
+    (6h)  B(x_l) and O_i disjoint, l = 1..N       via Farkas, (8): mu >= 0, sum(mu) = 1,
+                                                  (A p_l - b)^T mu >= farkas_margin
+
+The measured state, the weights, the obstacles and the path are solver *parameters*, so the
+NLP is built once per obstacle shape and a control step only fills in numbers.
+
+The terminal condition (6d)-(6f) and the offset cost are what the paper changes with respect
+to the tracking MPC of Limon et al.; they are a TerminalCondition: path_terminal() here is
+the paper's, the baseline's is in core/baselines/tracking_mpc.py.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, NamedTuple, Sequence
+
+import casadi as ca
+import numpy as np
+
+from mpc_local_planner.core.config import CostWeights, MpcConfig
+from mpc_local_planner.core.models import RobotModel
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.paths import ReferencePath
+
+__all__ = [
+    'Formulation', 'Layout', 'TerminalCondition', 'feasible_multipliers', 'formulate',
+    'obstacle_parameters', 'parameter_vector', 'path_terminal', 'stage_cost',
+    'symbolic_weights',
+]
+
+
+def symbolic_weights(vector: ca.SX) -> CostWeights:
+    """Return the weight parameter's entries by name (a CostWeights of CasADi symbols)."""
+    return CostWeights(*ca.vertsplit(vector))
+
+
+def stage_cost(model: RobotModel, exponent: int) -> ca.Function:
+    """Return the stage cost l(x - x_s, u - u_s) of (5) as a Function of (x, u, x_s, weights).
+
+    l = position ((dx)^p + (dy)^p) + heading (dtheta)^p + v (v - v_s)^p
+    + omega (omega - omega_s)^p, with p = exponent (4 in the paper: the fourth power makes
+    Assumption 3 hold for the unicycle, whose linearisation is not controllable).
+    Further states share the heading's weight, further inputs the turn rate's.
+    """
+    x, x_s = ca.SX.sym('x', model.nx), ca.SX.sym('x_s', model.nx)
+    u, w = ca.SX.sym('u', model.nu), ca.SX.sym('w', len(CostWeights._fields))
+    weights = symbolic_weights(w)
+    _, u_s = model.steady_state(x_s[:3])
+    state_w = ca.vertcat(weights.position, weights.position, weights.heading,
+                         *([weights.heading] * (model.nx - 3)))
+    input_w = ca.vertcat(weights.v, weights.omega, *([weights.omega] * (model.nu - 2)))
+    cost = ca.dot(state_w, (x - x_s) ** exponent) + ca.dot(input_w, (u - u_s) ** exponent)
+    return ca.Function('stage', [x, u, x_s, w], [cost])
+
+
+@dataclass(frozen=True)
+class TerminalCondition:
+    """How the prediction ends, (6d)-(6f), and what the offset cost measures.
+
+    The artificial steady state is parametrised by a reference variable r (the path progress
+    s in the paper) that is a decision variable, copied along the horizon.
+
+    Attributes:
+        family: key of the symbolic structure: NLPs are rebuilt when it changes.
+        dim: size of r.
+        num_params: size of the parameters it reads (the path's, or the target's).
+        lower: lower bound of r.
+        upper: upper bound of r.
+        steady_state: (r, params) -> the artificial steady state x_s(r).
+        condition: (x_N, r, params, weights) -> (residual that must be 0, offset cost without
+            its weight).
+
+    """
+
+    family: str
+    dim: int
+    num_params: int
+    lower: np.ndarray
+    upper: np.ndarray
+    steady_state: Callable[[ca.SX, ca.SX], ca.SX]
+    condition: Callable[[ca.SX, ca.SX, ca.SX, CostWeights], tuple[ca.SX, ca.SX]]
+
+
+def path_terminal(model: RobotModel, path: ReferencePath) -> TerminalCondition:
+    """Return the paper's terminal condition: x_N = g_p(s), u_N = 0, s in [0, 1].
+
+    The offset cost is V_o(1 - s) = (1 - s)^2 (weighted by weights.offset in formulate()).
+    """
+
+    def steady_state(r: ca.SX, params: ca.SX) -> ca.SX:
+        # (6e)-(6f): the steady state whose pose is the path's point p(s)
+        x_s, _ = model.steady_state(path.symbolic(r[0], params))
+        return x_s
+
+    def condition(x_n: ca.SX, r: ca.SX, params: ca.SX,
+                  weights: CostWeights) -> tuple[ca.SX, ca.SX]:
+        # (6d): x_N = x_s = g_p(s); V_o(1 - s) = (1 - s)^2
+        return x_n - steady_state(r, params), (1 - r[0]) ** 2
+
+    return TerminalCondition(family=path.family, dim=1, num_params=path.num_params,
+                             lower=np.zeros(1), upper=np.ones(1),
+                             steady_state=steady_state, condition=condition)
+
+
+class Layout(NamedTuple):
+    """Indices of each variable in the NLP's decision vector w."""
+
+    x: np.ndarray  # (N+1, nx) the states x_0..x_N
+    r: np.ndarray  # (N+1, nr) the copies of the reference r (s, or the steady state)
+    u: np.ndarray  # (N, nu) the inputs u_0..u_{N-1}
+    mu: np.ndarray  # (N, slots * faces) the Farkas multipliers of steps 1..N
+
+
+@dataclass(frozen=True)
+class Formulation:
+    """Problem (6) for a given number of obstacle slots, ready for casadi.nlpsol.
+
+    Attributes:
+        problem: nlpsol's {'x': w, 'p': parameters, 'f': J_N, 'g': constraints}.
+        structure: the stage sizes a structure-exploiting solver needs (fatrop's N, nx,
+            nu, ng).
+        slots: obstacles the NLP holds.
+        faces: half-planes per obstacle slot.
+        lbw: lower bounds of w.
+        ubw: upper bounds of w.
+        lbg: lower bounds of the constraints.
+        ubg: upper bounds of the constraints.
+        layout: where x, r, u and mu sit in w.
+        cost_fn: J_N as a Function of (w, parameters).
+        g_fn: the constraints as a Function of (w, parameters).
+
+    """
+
+    problem: dict[str, ca.SX]
+    structure: dict[str, int | list[int]]
+    slots: int
+    faces: int
+    lbw: np.ndarray
+    ubw: np.ndarray
+    lbg: np.ndarray
+    ubg: np.ndarray
+    layout: Layout
+    cost_fn: ca.Function
+    g_fn: ca.Function
+
+    def pack(self, x: np.ndarray, r: np.ndarray, u: np.ndarray, mu: np.ndarray) -> np.ndarray:
+        """Return the decision vector w holding states, reference, inputs and multipliers."""
+        w = np.zeros(self.lbw.shape[0])
+        w[self.layout.x] = x
+        w[self.layout.r] = r
+        w[self.layout.u] = u
+        w[self.layout.mu] = mu.reshape(self.layout.mu.shape)
+        return w
+
+
+def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
+              slots: int, faces: int) -> Formulation:
+    """Write problem (6) in the stage-wise order structure-exploiting solvers need.
+
+    Variables: z_0, u_0, z_1, u_1, mu_1, ..., z_{N-1}, u_{N-1}, mu_{N-1}, z_N, mu_N with
+    z_l = (x_l, r_l): the reference r is copied along the horizon (r_{l+1} = r_l) so that each
+    stage cost l(x_l - x_s(r_l), ...) only touches its own stage. Constraints, per stage l:
+    the gap-closing z_{l+1} = (f(x_l, u_l), r_l), then the stage's own constraints (x_0 = x(k)
+    at l = 0, the Farkas rows of x_l at l >= 1, the terminal condition at l = N).
+
+    Args:
+        model: the robot model (f, bounds Z, steady states).
+        config: horizon N, step h, cost exponent and Farkas margin.
+        terminal: the terminal condition and offset cost (path_terminal for the paper).
+        slots: obstacles the NLP holds.
+        faces: half-planes per obstacle.
+
+    Returns:
+        The NLP, its bounds and the layout of its decision vector.
+
+    """
+    n, nx, nu = config.horizon, model.nx, model.nu
+    nr = terminal.dim
+    nz = nx + nr
+    nm = faces * slots
+    f = model.discrete(config.step)  # RK4 over one step h
+    stage = stage_cost(model, config.cost_exponent)
+
+    # ---- parameters: the measured state, the weights, the obstacles, the path (or target)
+    x_k = ca.SX.sym('x0', nx)
+    w_weights = ca.SX.sym('w', len(CostWeights._fields))
+    weights = symbolic_weights(w_weights)
+    obs = ca.SX.sym('obs', 3 * faces * slots)
+    p_path = ca.SX.sym('path', terminal.num_params)
+    A_list, b_list = [], []  # obstacle j is {p : A_j p <= b_j}
+    for j in range(slots):
+        base = 3 * faces * j
+        A_list.append(ca.reshape(obs[base:base + 2 * faces], faces, 2))
+        b_list.append(obs[base + 2 * faces:base + 3 * faces])
+
+    # ---- decision variables, stage by stage
+    Z = [ca.SX.sym(f'z{k}', nz) for k in range(n + 1)]
+    U = [ca.SX.sym(f'u{k}', nu) for k in range(n)]  # u_N = u_s is a constant, (6d)-(6e)
+    MU = [None] + [ca.SX.sym(f'mu{k}', nm) for k in range(1, n + 1)]
+    order: list[ca.SX] = []
+    for k in range(n + 1):
+        order.append(Z[k])
+        if k < n:
+            order.append(U[k])
+        if k >= 1:
+            order.append(MU[k])
+    w = ca.vertcat(*order)
+    layout = _layout(w.numel(), n, nx, nz, nu, nm)
+
+    g, lbg, ubg = [], [], []
+    ng_stage = []
+
+    def add(expr: ca.SX, lower: float, upper: float) -> int:
+        size = expr.numel()
+        g.append(ca.vec(expr))
+        lbg.append(np.full(size, lower, dtype=float))
+        ubg.append(np.full(size, upper, dtype=float))
+        return size
+
+    cost = 0
+    for k in range(n + 1):
+        x_l, r_l = Z[k][:nx], Z[k][nx:]
+        if k < n:
+            # (6a), cost (5): + l(x_l - x_s, u_l - u_s)
+            cost = cost + stage(x_l, U[k], terminal.steady_state(r_l, p_path), w_weights)
+            # (6c): x_{l+1} = f(x_l, u_l); and r_{l+1} = r_l (one reference)
+            add(Z[k + 1] - ca.vertcat(f(x_l, U[k]), r_l), 0.0, 0.0)
+        rows = 0
+        if k == 0:
+            # (6b): x_0 = x(k)
+            rows += add(x_l - x_k, 0.0, 0.0)
+        else:
+            # (6h) via Farkas (8), l = 1..N: p_l is outside {A p <= b} iff some mu >= 0 with
+            # sum(mu) = 1 has (A p_l - b)^T mu > 0 (without sum(mu) = 1, mu = 0 would do)
+            for j in range(slots):
+                mu = MU[k][j * faces:(j + 1) * faces]
+                p = x_l[0:2]
+                rows += add(ca.dot(ca.mtimes(A_list[j], p) - b_list[j], mu),
+                            config.farkas_margin, ca.inf)
+                rows += add(ca.sum1(mu), 1.0, 1.0)
+        if k == n:
+            # (6d)-(6f): the terminal condition, and (6a): + weights.offset V_o
+            residual, offset_cost = terminal.condition(x_l, r_l, p_path, weights)
+            # drop entries that are identically zero (a free steady state): an empty
+            # Jacobian row makes the KKT system singular and the solver wanders off
+            kept = [residual[i] for i in range(residual.numel()) if not residual[i].is_zero()]
+            if kept:
+                rows += add(ca.vertcat(*kept), 0.0, 0.0)
+            cost = cost + weights.offset * offset_cost
+        ng_stage.append(rows)
+
+    # (6g): (x_l, u_l) in Z; r in its range (s in [0, 1]); mu >= 0 (8)
+    lbw, ubw = np.zeros(w.numel()), np.zeros(w.numel())
+    for k in range(n + 1):
+        lbw[layout.x[k]], ubw[layout.x[k]] = model.x_min, model.x_max
+        lbw[layout.r[k]], ubw[layout.r[k]] = terminal.lower, terminal.upper
+        if k < n:
+            lbw[layout.u[k]], ubw[layout.u[k]] = model.u_min, model.u_max
+        if k >= 1:
+            lbw[layout.mu[k - 1]], ubw[layout.mu[k - 1]] = 0.0, np.inf
+
+    g_all = ca.vertcat(*g)
+    params = ca.vertcat(x_k, w_weights, obs, p_path)
+    structure = {
+        'N': n,
+        'nx': [nz] * (n + 1),
+        'nu': [nu] + [nu + nm] * (n - 1) + [nm] if n > 1 else [nu, nm],
+        'ng': ng_stage,
+    }
+    return Formulation(
+        problem={'x': w, 'p': params, 'f': cost, 'g': g_all}, structure=structure,
+        slots=slots, faces=faces, lbw=lbw, ubw=ubw,
+        lbg=np.concatenate(lbg), ubg=np.concatenate(ubg), layout=layout,
+        cost_fn=ca.Function('cost', [w, params], [cost]),
+        g_fn=ca.Function('g', [w, params], [g_all]),
+    )
+
+
+def _layout(size: int, n: int, nx: int, nz: int, nu: int, nm: int) -> Layout:
+    """Return the indices of x, r, u and mu in the stage-wise decision vector."""
+    index = np.arange(size)
+    xs, rs, us, mus = [], [], [], []
+    offset = 0
+    for k in range(n + 1):
+        xs.append(index[offset:offset + nx])
+        rs.append(index[offset + nx:offset + nz])
+        offset += nz
+        if k < n:
+            us.append(index[offset:offset + nu])
+            offset += nu
+        if k >= 1:
+            mus.append(index[offset:offset + nm])
+            offset += nm
+    return Layout(x=np.array(xs), r=np.array(rs), u=np.array(us),
+                  mu=np.array(mus).reshape(n, nm))
+
+
+def parameter_vector(x0: np.ndarray, weights: CostWeights, obstacles: np.ndarray,
+                     terminal_params: np.ndarray) -> np.ndarray:
+    """Return the NLP's parameters: (x(k), weights, obstacle_parameters(), path or target)."""
+    return np.concatenate([x0, np.array(weights.as_vector()), obstacles, terminal_params])
+
+
+def obstacle_parameters(selected: Sequence[ConvexPolygon], slots: int,
+                        faces: int) -> np.ndarray:
+    """Return the (A, b) of each obstacle slot, padded to the NLP's slots and faces."""
+    values = []
+    for j in range(slots):
+        if j < len(selected):
+            # pad by repeating a real face: a padding face with a huge offset would let a
+            # multiplier of -1e-9 (within the solver's bound tolerance) buy a fake
+            # separation of 1e6 * 1e-9
+            o = selected[j]
+            rows = np.minimum(np.arange(faces), o.num_faces - 1)
+            A, b = o.A[rows], o.b[rows]
+        else:
+            A = np.zeros((faces, 2))
+            b = np.full(faces, -1.0)  # an empty slot: (0 p + 1)^T mu = 1 >= margin
+        values.append(np.concatenate([A.reshape(-1, order='F'), b]))
+    return np.concatenate(values) if values else np.zeros(0)
+
+
+def feasible_multipliers(x: np.ndarray, selected: Sequence[ConvexPolygon], slots: int,
+                         faces: int) -> np.ndarray:
+    """Put each multiplier on the most separating face: a feasible mu for clear points.
+
+    Args:
+        x: (N+1, nx) states; the positions of steps 1..N get multipliers.
+        selected: the obstacles of the slots (the rest are empty).
+        slots: obstacle slots of the NLP.
+        faces: half-planes per slot.
+
+    Returns:
+        The flat multipliers in the order of Layout.mu.
+
+    """
+    n = x.shape[0] - 1
+    mu = np.zeros((n, slots, faces))
+    for j in range(slots):
+        if j < len(selected):
+            # the padded rows repeat the last face (see obstacle_parameters)
+            faces_j = min(selected[j].num_faces, faces)
+            face = np.argmax(x[1:, :2] @ selected[j].A[:faces_j].T - selected[j].b[:faces_j],
+                             axis=1)
+        else:
+            face = np.zeros(n, dtype=int)
+        mu[np.arange(n), j, face] = 1.0
+    return mu.reshape(-1)

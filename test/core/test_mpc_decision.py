@@ -1,0 +1,92 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The rule that decides what a control step applies: each branch, with plain values."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from mpc_local_planner.core.mpc import decide, Decision, PlanSource
+
+
+def choose(*, verified: bool = True, value: float = 1.0, candidate_ok: bool = True,
+           candidate_value: float = 2.0, previous: bool = True,
+           clear: bool = True) -> Decision:
+    return decide(solver_verified=verified, solver_value=value, candidate_ok=candidate_ok,
+                  candidate_value=candidate_value, has_previous_plan=previous,
+                  candidate_collision_free=clear)
+
+
+def test_a_verified_solution_cheaper_than_the_candidate_is_applied() -> None:
+    decision = choose(value=1.0, candidate_value=2.0)
+    assert decision is Decision.SOLVER
+    assert decision.source is PlanSource.SOLVER
+    assert not decision.is_failure
+
+
+def test_a_verified_solution_as_cheap_as_the_candidate_within_tolerance_is_applied() -> None:
+    assert choose(value=100.0 + 1e-5, candidate_value=100.0) is Decision.SOLVER
+
+
+def test_a_verified_solution_is_applied_when_the_candidate_fails_verification() -> None:
+    # the candidate's value means nothing then, even if it looks cheaper
+    assert choose(value=5.0, candidate_ok=False, candidate_value=0.0) is Decision.SOLVER
+    assert choose(value=5.0, candidate_ok=False, candidate_value=math.inf,
+                  previous=False, clear=False) is Decision.SOLVER
+
+
+def test_a_cheaper_verified_candidate_beats_a_verified_solution_without_a_failure() -> None:
+    decision = choose(value=3.0, candidate_value=2.0)
+    assert decision is Decision.CANDIDATE_CHEAPER
+    assert decision.source is PlanSource.CANDIDATE
+    assert not decision.is_failure
+
+
+def test_the_verified_candidate_is_applied_when_the_solver_fails() -> None:
+    decision = choose(verified=False, value=math.inf, candidate_value=2.0)
+    assert decision is Decision.CANDIDATE_SOLVER_FAILED
+    assert decision.source is PlanSource.CANDIDATE
+    assert decision.is_failure
+
+
+def test_the_clear_candidate_off_the_prediction_is_applied_after_a_previous_plan() -> None:
+    decision = choose(verified=False, value=math.inf, candidate_ok=False, previous=True,
+                      clear=True)
+    assert decision is Decision.CANDIDATE_OFF_PREDICTION
+    assert decision.source is PlanSource.CANDIDATE
+    assert decision.is_failure
+
+
+@pytest.mark.parametrize(('previous', 'clear'), [(True, False), (False, True), (False, False)])
+def test_the_robot_stops_when_nothing_is_verified_and_the_candidate_is_not_usable(
+        previous: bool, clear: bool) -> None:
+    decision = choose(verified=False, value=math.inf, candidate_ok=False, previous=previous,
+                      clear=clear)
+    assert decision is Decision.STOP
+    assert decision.source is PlanSource.STOP
+    assert decision.is_failure
+
+
+def test_every_decision_but_the_solver_says_why_in_the_status() -> None:
+    assert Decision.SOLVER.value == ''
+    assert all(d.value for d in Decision if d is not Decision.SOLVER)
+
+
+def test_plan_sources_read_as_their_names_in_logs_and_comparisons() -> None:
+    assert PlanSource.STOP == 'stop'
+    assert f'{PlanSource.CANDIDATE}' == 'candidate'
+    assert str(PlanSource.SOLVER) == 'solver'
