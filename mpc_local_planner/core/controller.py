@@ -15,8 +15,8 @@
 """The controller behind the mpc_controller node, without ROS.
 
 `MpcController` owns a `PathReferenceMPC`, the world's obstacles and the plan, and decides
-what to command at each control step: the MPC's first input, or zero with a reason (no plan,
-no, stale or invalid odometry, invalid plan, goal reached, solver stop, error). The node only
+what to command at each control step: the MPC's first input, or zero, with a `Reason` (no
+plan, no, stale or invalid odometry, invalid plan, goal reached, solver stop, error). The node only
 converts messages and publishes, so everything that can go wrong is testable here without a
 DDS participant.
 
@@ -34,6 +34,7 @@ Safety rules kept here (see the README's "Safety behaviours"):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import Enum
 import math
 from typing import NamedTuple, Sequence
 
@@ -41,8 +42,8 @@ import numpy as np
 
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.mpc.step import MpcSolution, PathReferenceMPC
-from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.mpc import MpcSolution, PathReferenceMPC, PlanSource
+from mpc_local_planner.core.obstacles import ConvexPolygon, first_blocked_segment
 from mpc_local_planner.core.paths import ReferencePath, simplify_polyline, WaypointPath, wrap_angle
 
 __all__ = [
@@ -50,41 +51,60 @@ __all__ = [
     'ControlOutput',
     'MAX_COORDINATE',
     'MpcController',
-    'REASON_CANDIDATE',
-    'REASON_ERROR',
-    'REASON_GOAL',
-    'REASON_INVALID_ODOM',
-    'REASON_INVALID_PLAN',
-    'REASON_NO_ODOM',
-    'REASON_NO_PLAN',
-    'REASON_OK',
-    'REASON_STALE_ODOM',
-    'REASON_STOP',
-    'first_blocked_segment',
+    'Reason',
 ]
 
-REASON_OK = 'tracking'
-REASON_NO_PLAN = 'no plan yet'
-REASON_NO_ODOM = 'no odometry yet'
-REASON_STALE_ODOM = 'odometry is stale'
-REASON_GOAL = 'goal reached'
-REASON_STOP = 'no feasible input: stopping'
-# The input is the proof's shifted candidate, not a fresh solver solution (verified all the
-# same; it runs out after N steps). Mostly the solver failed; rarely it converged to a
-# solution costlier than the candidate.
-REASON_CANDIDATE = 'applying the shifted candidate: no cheaper verified solver solution'
-REASON_ERROR = 'error'
-# Prefixes of the reasons for refused input (followed by ': ' and the problem).
-REASON_INVALID_ODOM = 'invalid odometry'
-REASON_INVALID_PLAN = 'invalid plan'
+
+class Reason(Enum):
+    """Why the controller commands what it commands (the value is the diagnostics' word).
+
+    Only TRACKING and CANDIDATE apply an MPC input; every other reason comes with a zero
+    command. Free text about the case (what was wrong with a plan, an exception's message)
+    travels separately, in `ControlOutput.detail`.
+    """
+
+    TRACKING = 'tracking'
+    # The input is the proof's shifted candidate, not a fresh solver solution (verified all
+    # the same; it runs out after N steps). Mostly the solver failed; rarely it converged to
+    # a solution costlier than the candidate.
+    CANDIDATE = 'candidate'
+    NO_PLAN = 'no_plan'
+    NO_ODOM = 'no_odom'
+    STALE_ODOM = 'stale_odom'
+    INVALID_ODOM = 'invalid_odom'
+    INVALID_PLAN = 'invalid_plan'
+    GOAL_REACHED = 'goal_reached'
+    STOP = 'stop'
+    ERROR = 'error'
+
+    @property
+    def text(self) -> str:
+        """Say it in words, for logs and DiagnosticStatus.message."""
+        return _REASON_TEXT[self]
+
+    @property
+    def applies_input(self) -> bool:
+        """Whether the command is an MPC input (else it is zero)."""
+        return self in (Reason.TRACKING, Reason.CANDIDATE)
+
+
+_REASON_TEXT = {
+    Reason.TRACKING: 'tracking',
+    Reason.CANDIDATE: 'applying the shifted candidate (no cheaper verified solver solution)',
+    Reason.NO_PLAN: 'no plan yet',
+    Reason.NO_ODOM: 'no odometry yet',
+    Reason.STALE_ODOM: 'odometry is stale',
+    Reason.INVALID_ODOM: 'invalid odometry',
+    Reason.INVALID_PLAN: 'invalid plan',
+    Reason.GOAL_REACHED: 'goal reached',
+    Reason.STOP: 'no feasible input, stopping',
+    Reason.ERROR: 'error',
+}
+
 
 # Positions beyond this (metres from the origin) are refused as garbage: a local planner has
 # no use for them, and the quartic cost of a coordinate near 1e77 overflows to inf.
 MAX_COORDINATE = 1e6
-# Obstacles are shrunk by this much for the plan check: a plan that only grazes the grown
-# obstacle (as RRT* plans at exactly the clearance do) is not refused.
-_GRAZE_TOLERANCE = 1e-9
-
 # Tolerances of the Ramer-Douglas-Peucker pass that makes a long plan fit the solver's
 # segment capacity, tried in order (metres).
 _SIMPLIFY_TOLERANCES = (0.0, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2)
@@ -94,16 +114,23 @@ class ControlOutput(NamedTuple):
     """What to command now, and why.
 
     Attributes:
-        u: (2,) input (v, omega) within the model's bounds; zero unless reason is REASON_OK
-            or REASON_CANDIDATE.
+        u: (2,) input (v, omega) within the model's bounds; zero unless reason.applies_input.
         solution: the MPC's solution when it ran, else None.
-        reason: REASON_OK or why the command is zero (REASON_ERROR is followed by ': ...').
+        reason: why the command is what it is.
+        detail: free text about the case ('' when the reason says it all), e.g. what is
+            wrong with a refused plan, or an exception's message.
 
     """
 
     u: np.ndarray
     solution: MpcSolution | None
-    reason: str
+    reason: Reason
+    detail: str = ''
+
+    @property
+    def message(self) -> str:
+        """Return the reason in words, followed by ': detail' when there is one."""
+        return f'{self.reason.text}: {self.detail}' if self.detail else self.reason.text
 
 
 @dataclass(frozen=True)
@@ -233,28 +260,28 @@ class MpcController:
             The path now followed.
 
         Raises:
-            ValueError: 'invalid plan: ...' if poses is not (M, 3) finite numbers within
-                MAX_COORDINATE with two distinct positions, has more than max_plan_poses
-                rows, or the path to follow passes through an obstacle grown by the robot
-                radius.
+            ValueError: saying what is wrong (Reason.INVALID_PLAN's detail) if poses is
+                not (M, 3) finite numbers within MAX_COORDINATE with two distinct
+                positions, has more than max_plan_poses rows, or the path to follow passes
+                through an obstacle grown by the robot radius.
 
         """
         arr = np.asarray(poses, dtype=float)
         if arr.ndim != 2 or arr.shape[1] != 3:
-            msg = f'{REASON_INVALID_PLAN}: poses must have shape (M, 3), got {arr.shape}'
+            msg = f'poses must have shape (M, 3), got {arr.shape}'
             raise ValueError(msg)
         if len(arr) < 2:
-            msg = f'{REASON_INVALID_PLAN}: needs at least two poses, got {len(arr)}'
+            msg = f'needs at least two poses, got {len(arr)}'
             raise ValueError(msg)
         if len(arr) > self.settings.max_plan_poses:
-            msg = (f'{REASON_INVALID_PLAN}: {len(arr)} poses, more than max_plan_poses '
+            msg = (f'{len(arr)} poses, more than max_plan_poses '
                    f'({self.settings.max_plan_poses})')
             raise ValueError(msg)
         if not np.all(np.isfinite(arr)):
-            msg = f'{REASON_INVALID_PLAN}: poses contain NaN or inf'
+            msg = 'poses contain NaN or inf'
             raise ValueError(msg)
         if np.max(np.abs(arr[:, :2])) > MAX_COORDINATE:
-            msg = (f'{REASON_INVALID_PLAN}: a position is more than {MAX_COORDINATE:g} m from '
+            msg = (f'a position is more than {MAX_COORDINATE:g} m from '
                    'the origin')
             raise ValueError(msg)
         points = arr[:, :2]
@@ -264,7 +291,7 @@ class MpcController:
             if 2 * len(simplified) - 1 <= self.settings.capacity:
                 break
         else:
-            msg = (f'{REASON_INVALID_PLAN}: {len(points)} poses do not fit '
+            msg = (f'{len(points)} poses do not fit '
                    f'{self.settings.capacity} segments even simplified at '
                    f'{_SIMPLIFY_TOLERANCES[-1]} m')
             raise ValueError(msg)
@@ -274,7 +301,7 @@ class MpcController:
                                 turn_length=self.settings.turn_length,
                                 capacity=self.settings.capacity)
         except ValueError as err:
-            msg = f'{REASON_INVALID_PLAN}: {err}'
+            msg = str(err)
             raise ValueError(msg) from None
         self._check_clear(path)
         self.set_path(path)
@@ -292,7 +319,7 @@ class MpcController:
         if blocked is not None:
             k, i = blocked
             a, b = path.knots[i, :2], path.knots[i + 1, :2]
-            msg = (f'{REASON_INVALID_PLAN}: it passes through obstacle {k} (grown by the robot '
+            msg = (f'it passes through obstacle {k} (grown by the robot '
                    f'radius {radius:g} m) between ({a[0]:.3f}, {a[1]:.3f}) and '
                    f'({b[0]:.3f}, {b[1]:.3f})')
             raise ValueError(msg)
@@ -345,7 +372,7 @@ class MpcController:
                 state_time: float | None = None) -> ControlOutput:
         """Return the command for the measured state at time now.
 
-        Never raises: anything unexpected becomes a zero command with REASON_ERROR.
+        Never raises: anything unexpected becomes a zero command with Reason.ERROR.
 
         Args:
             state: (3,) measured (x, y, yaw), or None when no odometry has come.
@@ -355,97 +382,61 @@ class MpcController:
         """
         zero = np.zeros(2)
         if self._path is None:
-            return self._idle(zero, REASON_NO_PLAN)
+            return self._idle(Reason.NO_PLAN)
         if state is None:
-            return self._idle(zero, REASON_NO_ODOM)
+            return self._idle(Reason.NO_ODOM)
         if state_time is not None:
             age = now - state_time
             # "not within" so that a NaN age (NaN compares false) counts as stale; a state
             # from the future by more than the timeout means the clock jumped back
             if not -self.settings.odom_timeout <= age <= self.settings.odom_timeout:
-                return self._idle(zero, REASON_STALE_ODOM)
+                return self._idle(Reason.STALE_ODOM)
         try:
             x = self.check_state(state)
         except ValueError as err:
-            return self._idle(zero, f'{REASON_ERROR}: {REASON_INVALID_ODOM}: {err}')
+            return self._idle(Reason.INVALID_ODOM, str(err))
         try:
             position, heading = self.goal_error(x)
             if (position <= self.settings.goal_tolerance
                     and heading <= self.settings.goal_heading_tolerance):
-                return self._idle(zero, REASON_GOAL)
+                return self._idle(Reason.GOAL_REACHED)
             solution = self._mpc.solve(x)
-        except Exception as err:  # noqa: BLE001 (a controller must not die: stop instead)
+        except Exception as err:  # a controller must not die: stop instead
             self._solver_failures += 1
-            return self._idle(zero, f'{REASON_ERROR}: {type(err).__name__}: {err}')
+            return self._idle(Reason.ERROR, f'{type(err).__name__}: {err}')
         self._solved_last_step = True
         if not solution.success:
             self._solver_failures += 1
-        if solution.source == 'stop':
-            return ControlOutput(zero, solution, REASON_STOP)
-        if solution.source == 'candidate' and solution.failures > self._config.horizon:
+        source = PlanSource(solution.source)
+        if source is PlanSource.STOP:
+            return ControlOutput(zero, solution, Reason.STOP)
+        if source is PlanSource.CANDIDATE and solution.failures > self._config.horizon:
             # the shifted candidate has run out (N shifts leave only steady-state inputs):
             # stop, and let the next step start over from the measured state
             self._mpc.reset()
             self._solved_last_step = False
-            return ControlOutput(zero, solution, REASON_STOP)
+            return ControlOutput(zero, solution, Reason.STOP, 'the shifted candidate ran out')
         u = np.asarray(solution.u0, dtype=float).reshape(-1)
         if u.shape != (2,) or not np.all(np.isfinite(u)):
             self._mpc.reset()
             self._solved_last_step = False
-            return ControlOutput(zero, solution, f'{REASON_ERROR}: non-finite input {u}')
+            return ControlOutput(zero, solution, Reason.ERROR, f'non-finite input {u}')
         u = np.clip(u, self._model.u_min, self._model.u_max)
-        return ControlOutput(u, solution, REASON_OK if solution.success else REASON_CANDIDATE)
+        reason = Reason.TRACKING if solution.success else Reason.CANDIDATE
+        return ControlOutput(u, solution, reason)
 
-    def stop(self, reason: str) -> ControlOutput:
+    def stop(self, reason: Reason, detail: str = '') -> ControlOutput:
         """Return a zero command with reason (the node's verdict on refused input).
 
         The warm start is dropped as after any step without an MPC input, so that the next
         solve starts from the measured state instead of a shift of a plan never applied.
         """
-        return self._idle(np.zeros(2), reason)
+        return self._idle(reason, detail)
 
-    def _idle(self, zero: np.ndarray, reason: str) -> ControlOutput:
+    def _idle(self, reason: Reason, detail: str = '') -> ControlOutput:
         # The shifted warm start assumes its first input was applied: after a step without
         # one, start the MPC over (s restarts at the projection).
         if self._solved_last_step:
             self._mpc.reset()
             self._solved_last_step = False
-        return ControlOutput(zero, None, reason)
-
-
-def first_blocked_segment(obstacles: Sequence[ConvexPolygon], points: np.ndarray
-                          ) -> tuple[int, int] | None:
-    """Return (obstacle, segment) of the first polyline segment through an obstacle's interior.
-
-    Exact for convex polygons (Cyrus-Beck clipping, vectorised over the segments): the
-    segment a + t (b - a), t in [0, 1], meets {A p <= b} where every face bounds t from one
-    side. Obstacles are shrunk by a nanometre so that a segment along a face or through a
-    corner (a plan at exactly the clearance) is not counted.
-
-    Args:
-        obstacles: convex polygons, already grown as the caller needs.
-        points: (M, 2) polyline vertices; a zero-length segment is a point test.
-
-    Returns:
-        None if every segment is clear.
-
-    """
-    pts = np.asarray(points, dtype=float)
-    if len(pts) < 2:
-        return None
-    a, d = pts[:-1], np.diff(pts, axis=0)
-    for k, obstacle in enumerate(obstacles):
-        slack = (obstacle.b - _GRAZE_TOLERANCE)[None, :] - a @ obstacle.A.T  # (S, F)
-        rate = d @ obstacle.A.T  # face i allows rate t <= slack
-        parallel = np.abs(rate) < 1e-15
-        with np.errstate(divide='ignore', invalid='ignore'):
-            ratio = slack / rate
-        enter = np.where((rate < 0) & ~parallel, ratio, -np.inf)
-        leave = np.where((rate > 0) & ~parallel, ratio, np.inf)
-        outside = np.any(parallel & (slack < 0), axis=1)
-        t_enter = np.maximum(np.max(enter, axis=1), 0.0)
-        t_leave = np.minimum(np.min(leave, axis=1), 1.0)
-        hits = np.flatnonzero((t_enter <= t_leave) & ~outside)
-        if len(hits):
-            return k, int(hits[0])
-    return None
+        return ControlOutput(np.zeros(2), None, reason, detail)

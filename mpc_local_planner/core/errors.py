@@ -12,24 +12,15 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Exceptions of the package, one per role, and the throttle the nodes report problems with.
-
-The exceptions let callers catch exactly what they handle. `ProblemThrottle` decides when a
-node logs a recurring input problem again: one clear error when the problem starts, then at
-most one per period while it lasts, and again at once after the input was valid in between.
-"""
+"""Exceptions of the package, one per role, so that callers catch exactly what they handle."""
 
 from __future__ import annotations
 
-__all__ = ['PlanningError', 'SolverError', 'WorldError']
+__all__ = ['PlanningError', 'WorldError']
 
 
 class PlanningError(Exception):
     """The global planner could not produce a collision-free path (or its inputs are invalid)."""
-
-
-class SolverError(Exception):
-    """The MPC's optimisation problem could not be solved to a usable solution."""
 
 
 class WorldError(ValueError):

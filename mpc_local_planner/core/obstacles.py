@@ -18,13 +18,18 @@ The MPC needs obstacles as linear inequalities (Farkas' lemma turns "outside" in
 linear condition on a multiplier vector); the planner and the checks need point queries.
 Rows of A are kept at unit norm so that A p - b is the signed distance of p to each face's
 line: inflation and margins are then in metres.
+
+Segments against polygons have one clipper here (`ObstacleSet.segment_hits`, Cyrus-Beck,
+vectorised over segments and obstacles); its `grazing` argument says whether a segment that
+only touches a boundary counts. The planner counts it (its tree edges must keep the full
+clearance); the controller's plan check does not (a plan at exactly the clearance is valid).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 import math
-from typing import Iterable, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -32,10 +37,18 @@ __all__ = [
     'ConvexPolygon',
     'ObstacleSet',
     'convex_hull',
-    'inflate_all',
+    'first_blocked_segment',
+    'GRAZE_TOLERANCE',
     'min_clearance',
     'point_in_any',
+    'segment_collides',
 ]
+
+# With grazing=False, obstacles are shrunk by this much (metres) before clipping, so that a
+# segment along a face or through a corner does not count as a hit.
+GRAZE_TOLERANCE = 1e-9
+# |a . d| below this counts as a segment parallel to a face (d is in metres).
+_PARALLEL_TOL = 1e-12
 
 
 def convex_hull(points: np.ndarray) -> np.ndarray:
@@ -126,16 +139,6 @@ class ConvexPolygon:
     def num_faces(self) -> int:
         """Number of half-planes (the size of the Farkas multiplier vector)."""
         return int(self.A.shape[0])
-
-    @property
-    def centroid(self) -> np.ndarray:
-        """Mean of the vertices: a cheap centre for selecting nearby obstacles."""
-        return self.vertices.mean(axis=0)
-
-    @property
-    def bounding_radius(self) -> float:
-        """Largest distance from the centroid to a vertex."""
-        return float(np.max(np.linalg.norm(self.vertices - self.centroid, axis=1)))
 
     def inflate(self, distance: float) -> ConvexPolygon:
         """Shift every face outwards by distance (metres).
@@ -231,10 +234,89 @@ class ObstacleSet:
         order = np.argsort(bound[chosen], kind='stable')
         return chosen[order], bound[chosen[order]]
 
+    def first_containing(self, point: np.ndarray) -> int | None:
+        """Return the index of the first obstacle containing point (boundary included)."""
+        inside = np.flatnonzero(self.signed_distance_lower_bound(point)[0] <= 0.0)
+        return int(inside[0]) if len(inside) else None
 
-def inflate_all(obstacles: Iterable[ConvexPolygon], distance: float) -> list[ConvexPolygon]:
-    """Inflate every obstacle by the same distance."""
-    return [obstacle.inflate(distance) for obstacle in obstacles]
+    def segment_hits(self, starts: np.ndarray, ends: np.ndarray, *,
+                     grazing: bool) -> np.ndarray:
+        """Say, per segment and obstacle, whether the closed segment meets the obstacle.
+
+        Cyrus-Beck clipping, exact for convex polygons (no sampling): the point a + t (b - a)
+        is in {A p <= b} iff every face i has rate_i t <= slack_i, with
+        rate_i = a_i . (b - a) and slack_i = b_i - a_i . a; each face bounds t from one side
+        (a face parallel to the segment either excludes it or says nothing), and the segment
+        meets the polygon iff the interval left of [0, 1] is not empty.
+
+        Args:
+            starts: (S, 2) segment starts (further columns are ignored); (2,) for one.
+            ends: (S, 2) segment ends; a zero-length segment is a point test.
+            grazing: True: a segment that only touches an obstacle's boundary (along a
+                face, or through a corner) hits it, matching `ConvexPolygon.contains`.
+                False: it does not (obstacles are shrunk by GRAZE_TOLERANCE first).
+
+        Returns:
+            (S, K) booleans, K the number of obstacles.
+
+        """
+        a = np.atleast_2d(np.asarray(starts, dtype=float))[:, :2]
+        d = np.atleast_2d(np.asarray(ends, dtype=float))[:, :2] - a
+        offsets = self._b if grazing else self._b - GRAZE_TOLERANCE
+        slack = offsets[None] - np.einsum('kfj,sj->skf', self._A, a)  # (S, K, F)
+        rate = np.einsum('kfj,sj->skf', self._A, d)
+        parallel = np.abs(rate) < _PARALLEL_TOL
+        ratio = slack / np.where(parallel, 1.0, rate)
+        enter = np.where(parallel, np.where(slack < 0, np.inf, -np.inf),
+                         np.where(rate < 0, ratio, -np.inf))
+        leave = np.where(parallel | (rate < 0), np.inf, ratio)
+        t_enter = np.maximum(np.max(enter, axis=2, initial=-np.inf), 0.0)
+        t_leave = np.minimum(np.min(leave, axis=2, initial=np.inf), 1.0)
+        return t_enter <= t_leave
+
+
+def segment_collides(obstacles: Sequence[ConvexPolygon] | ObstacleSet, a: Sequence[float],
+                     b: Sequence[float], *, grazing: bool = True) -> bool:
+    """Say whether the closed segment from a to b meets any of the obstacles.
+
+    Args:
+        obstacles: convex polygons, already inflated as the caller needs.
+        a: segment start (x, y); further entries are ignored.
+        b: segment end (x, y); further entries are ignored.
+        grazing: whether touching a boundary counts (see `ObstacleSet.segment_hits`).
+
+    """
+    stack = obstacles if isinstance(obstacles, ObstacleSet) else ObstacleSet(obstacles)
+    return bool(np.any(stack.segment_hits(np.asarray(a, dtype=float)[:2],
+                                          np.asarray(b, dtype=float)[:2], grazing=grazing)))
+
+
+def first_blocked_segment(obstacles: Sequence[ConvexPolygon], points: np.ndarray, *,
+                          grazing: bool = False) -> tuple[int, int] | None:
+    """Return (obstacle, segment) of the first polyline segment that meets an obstacle.
+
+    The first obstacle (in the given order) that any segment meets, and the first such
+    segment. By default grazing does not count, so that a plan at exactly the clearance
+    passes.
+
+    Args:
+        obstacles: convex polygons, already grown as the caller needs.
+        points: (M, 2) polyline vertices (further columns are ignored).
+        grazing: whether touching a boundary counts (see `ObstacleSet.segment_hits`).
+
+    Returns:
+        None if every segment is clear (or there are fewer than two points).
+
+    """
+    pts = np.atleast_2d(np.asarray(points, dtype=float))
+    if len(pts) < 2 or not obstacles:
+        return None
+    hits = ObstacleSet(obstacles).segment_hits(pts[:-1], pts[1:], grazing=grazing)  # (S, K)
+    blocked = np.flatnonzero(np.any(hits, axis=0))
+    if not len(blocked):
+        return None
+    k = int(blocked[0])
+    return k, int(np.flatnonzero(hits[:, k])[0])
 
 
 def point_in_any(

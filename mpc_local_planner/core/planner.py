@@ -38,20 +38,17 @@ from ompl import geometric as og
 from ompl import util as ou
 
 from mpc_local_planner.core.errors import PlanningError
-from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
 
 __all__ = [
     'PlannerConfig',
     'RrtStarPlanner',
     'path_length',
-    'segment_collides',
 ]
 
 # OMPL ignores seed 0 (it then seeds from the clock), so OMPL gets seed + 1 and every
 # PlannerConfig.seed, including the default 0, is reproducible. Its seeds are 32-bit.
 _MAX_SEED = 2**32 - 2
-# |a . d| below this counts as a segment parallel to a face (d is in metres).
-_PARALLEL_TOL = 1e-12
 # OMPL's RNG seed and log level are process-wide: one plan at a time.
 _OMPL_LOCK = threading.Lock()
 
@@ -109,76 +106,6 @@ class PlannerConfig:
         return self.robot_radius + self.clearance
 
 
-class _HalfPlanes:
-    """All obstacles' faces stacked, for vectorised point and segment queries.
-
-    One matrix for all obstacles keeps each query to a few NumPy calls, which matters because
-    OMPL calls them thousands of times per plan (a BARN world has ~200 octagons).
-    """
-
-    def __init__(self, obstacles: Sequence[ConvexPolygon]) -> None:
-        self.empty = len(obstacles) == 0
-        if self.empty:
-            return
-        self.A = np.vstack([obstacle.A for obstacle in obstacles])
-        self.b = np.concatenate([obstacle.b for obstacle in obstacles])
-        counts = np.array([obstacle.num_faces for obstacle in obstacles])
-        self.starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-
-    def first_containing(self, point: np.ndarray) -> int | None:
-        """Return the index of an obstacle containing point (boundary included), or None."""
-        if self.empty:
-            return None
-        depth = np.maximum.reduceat(self.A @ point - self.b, self.starts)
-        inside = np.flatnonzero(depth <= 0.0)
-        return int(inside[0]) if len(inside) else None
-
-    def hits_segment(self, a: np.ndarray, b: np.ndarray) -> bool:
-        """Say whether the closed segment a-b meets any obstacle (Cyrus-Beck clipping).
-
-        Point a + t (b - a) is inside obstacle k iff every face i of k has
-        a_i . (a + t d) <= b_i: each face bounds t from one side, and the segment meets k iff
-        the resulting interval intersects [0, 1].
-        """
-        if self.empty:
-            return False
-        d = b - a
-        slack = self.b - self.A @ a
-        rate = self.A @ d
-        parallel = np.abs(rate) < _PARALLEL_TOL
-        with np.errstate(divide='ignore', invalid='ignore'):
-            ratio = slack / rate
-        enter = np.where((rate < 0) & ~parallel, ratio, -np.inf)
-        leave = np.where((rate > 0) & ~parallel, ratio, np.inf)
-        # A face parallel to the segment with the segment on its outer side excludes it.
-        enter = np.where(parallel & (slack < 0), np.inf, enter)
-        t_enter = np.maximum(np.maximum.reduceat(enter, self.starts), 0.0)
-        t_leave = np.minimum(np.minimum.reduceat(leave, self.starts), 1.0)
-        return bool(np.any(t_enter <= t_leave))
-
-
-def segment_collides(
-    obstacles: Sequence[ConvexPolygon], a: Sequence[float], b: Sequence[float]
-) -> bool:
-    """Say whether the closed segment from a to b touches any of the obstacles.
-
-    Exact for convex polygons (no sampling), boundary included: a segment that grazes an
-    obstacle collides, matching `ConvexPolygon.contains`.
-
-    Args:
-        obstacles: Convex polygons, already inflated as the caller needs.
-        a: Segment start (x, y); further entries are ignored.
-        b: Segment end (x, y); further entries are ignored.
-
-    Returns:
-        True if some point of the segment lies in some obstacle.
-
-    """
-    start = np.asarray(a, dtype=float)[:2]
-    end = np.asarray(b, dtype=float)[:2]
-    return _HalfPlanes(obstacles).hits_segment(start, end)
-
-
 def path_length(waypoints: np.ndarray) -> float:
     """Return the length of the polyline through the waypoints ((M, 2) or (M, 3): x, y used)."""
     pts = np.asarray(waypoints, dtype=float)
@@ -187,18 +114,23 @@ def path_length(waypoints: np.ndarray) -> float:
     return float(np.sum(np.linalg.norm(np.diff(pts[:, :2], axis=0), axis=1)))
 
 
+def _hits(obstacles: ObstacleSet, a: np.ndarray, b: np.ndarray) -> bool:
+    """Say whether segment a-b touches an inflated obstacle (grazing counts: full clearance)."""
+    return bool(np.any(obstacles.segment_hits(a, b, grazing=True)))
+
+
 class _ExactMotionValidator(ob.MotionValidator):
     """OMPL motion validator that tests each edge exactly against the inflated obstacles."""
 
-    def __init__(self, si: ob.SpaceInformation, halfplanes: _HalfPlanes) -> None:
+    def __init__(self, si: ob.SpaceInformation, obstacles: ObstacleSet) -> None:
         super().__init__(si)
-        self._halfplanes = halfplanes
+        self._obstacles = obstacles
 
-    def checkMotion(self, s1: ob.State, s2: ob.State, *args: object) -> bool:  # noqa: N802
+    def checkMotion(self, s1: ob.State, s2: ob.State, *args: object) -> bool:
         """Return True if the straight motion from s1 to s2 is collision free (OMPL's name)."""
         a = np.array([s1[0], s1[1]])
         b = np.array([s2[0], s2[1]])
-        return not self._halfplanes.hits_segment(a, b)
+        return not _hits(self._obstacles, a, b)
 
 
 class _StateValidity:
@@ -208,8 +140,8 @@ class _StateValidity:
     reference cycle through C++ would keep them alive past the plan.
     """
 
-    def __init__(self, halfplanes: _HalfPlanes, bounds: tuple[float, float, float, float]):
-        self._halfplanes = halfplanes
+    def __init__(self, obstacles: ObstacleSet, bounds: tuple[float, float, float, float]):
+        self._obstacles = obstacles
         self._bounds = bounds
 
     def __call__(self, state: ob.State) -> bool:
@@ -217,7 +149,7 @@ class _StateValidity:
         xmin, xmax, ymin, ymax = self._bounds
         if not (xmin <= x <= xmax and ymin <= y <= ymax):
             return False
-        return self._halfplanes.first_containing(np.array([x, y])) is None
+        return self._obstacles.first_containing(np.array([x, y])) is None
 
 
 @contextlib.contextmanager
@@ -261,7 +193,7 @@ class RrtStarPlanner:
         self.inflated_obstacles = tuple(
             obstacle.inflate(config.inflation) for obstacle in obstacles
         )
-        self._halfplanes = _HalfPlanes(self.inflated_obstacles)
+        self._obstacles = ObstacleSet(self.inflated_obstacles)
 
     def plan(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
         """Plan a collision-free polyline from start to goal.
@@ -279,9 +211,9 @@ class RrtStarPlanner:
                 no exact solution within the iterations and the time limit.
 
         """
-        start_xy = self._check_endpoint(start, 'start')
-        goal_xy = self._check_endpoint(goal, 'goal')
-        if not self._halfplanes.hits_segment(start_xy, goal_xy):
+        start_xy = self.check_endpoint(start, 'start')
+        goal_xy = self.check_endpoint(goal, 'goal')
+        if not _hits(self._obstacles, start_xy, goal_xy):
             # RRT* would converge to this segment anyway; skip the sampling.
             return np.vstack([start_xy, goal_xy])
         with _OMPL_LOCK, _ompl_log_level(ou.LOG_WARN):
@@ -290,8 +222,21 @@ class RrtStarPlanner:
         waypoints[-1] = goal_xy
         return waypoints
 
-    def _check_endpoint(self, pose: np.ndarray, label: str) -> np.ndarray:
-        """Return pose[:2] after checking it is finite, in bounds and collision free."""
+    def check_endpoint(self, pose: np.ndarray, label: str) -> np.ndarray:
+        """Return pose[:2] after checking it is finite, in bounds and clear of the obstacles.
+
+        Clear of the obstacles as the planner grows them (robot_radius + clearance): a start
+        or goal that passes this may still be walled off, but one that fails it can never
+        be planned to.
+
+        Args:
+            pose: (x, y[, theta]).
+            label: what the pose is ('start', 'goal'), for the message.
+
+        Raises:
+            PlanningError: saying why the pose cannot be planned from or to.
+
+        """
         xy = np.asarray(pose, dtype=float).reshape(-1)[:2]
         if len(xy) != 2 or not np.all(np.isfinite(xy)):
             msg = f'{label} must hold finite x and y, got {pose!r}'
@@ -300,7 +245,7 @@ class RrtStarPlanner:
         if not (xmin <= xy[0] <= xmax and ymin <= xy[1] <= ymax):
             msg = f'{label} ({xy[0]:g}, {xy[1]:g}) is outside the bounds {self.bounds}'
             raise PlanningError(msg)
-        index = self._halfplanes.first_containing(xy)
+        index = self._obstacles.first_containing(xy)
         if index is not None:
             msg = (
                 f'{label} ({xy[0]:g}, {xy[1]:g}) is in collision with obstacle {index} '
@@ -328,8 +273,8 @@ class RrtStarPlanner:
 
         setup = og.SimpleSetup(space)
         info = setup.getSpaceInformation()
-        setup.setStateValidityChecker(_StateValidity(self._halfplanes, self.bounds))
-        info.setMotionValidator(_ExactMotionValidator(info, self._halfplanes))
+        setup.setStateValidityChecker(_StateValidity(self._obstacles, self.bounds))
+        info.setMotionValidator(_ExactMotionValidator(info, self._obstacles))
 
         start_state = space.allocState()
         goal_state = space.allocState()

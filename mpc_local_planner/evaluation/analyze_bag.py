@@ -20,6 +20,11 @@ controller's diagnostics, which carry the measured state and the command; for a 
 those keys (another controller, or ``ros2 bag record`` of only odom and cmd_vel) the rows are
 rebuilt from odometry, with the command from its twist.
 
+The obstacles come from the world the bag's metadata records (bag_recorder's ``world_file``
+parameter; closed_loop sets it), or from ``--world``, which takes precedence. A bag that
+records no world, analysed without ``--world``, is refused: clearance and collisions against
+a guessed world would be wrong.
+
 Usage: ``analyze_bag BAG --out DIR [--world WORLD]``.
 """
 
@@ -30,13 +35,24 @@ import json
 import math
 from pathlib import Path
 import sys
+import tempfile
 from typing import Any, NamedTuple, Sequence
 
 import numpy as np
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_typestore, Stores
+import yaml
 
-__all__ = ['BagRun', 'analyze', 'main', 'read_run']
+from mpc_local_planner.core.diagnostics import (
+    BagKey,
+    CONTROLLER_DIAGNOSTICS_TOPIC,
+    ControllerDiagnostics,
+    Key,
+)
+from mpc_local_planner.core.mpc import PlanSource
+from mpc_local_planner.worlds.world import load_world, World
+
+__all__ = ['BagRun', 'analyze', 'main', 'read_run', 'recorded_world']
 
 
 class BagRun(NamedTuple):
@@ -80,16 +96,9 @@ def _poses(path_msg: Any) -> np.ndarray:
                      for p in path_msg.poses]).reshape(-1, 3)
 
 
-def _number(values: dict[str, str], key: str) -> float:
-    try:
-        return float(values[key])
-    except (KeyError, ValueError):
-        return math.nan
-
-
 def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str = '/cmd_vel',
              plan_topic: str = '/plan', local_plan_topic: str = '/local_plan',
-             diagnostics_topic: str = '/mpc/diagnostics') -> BagRun:
+             diagnostics_topic: str = '/' + CONTROLLER_DIAGNOSTICS_TOPIC) -> BagRun:
     """Read a closed-loop bag into arrays.
 
     Raises:
@@ -103,7 +112,7 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
         raise FileNotFoundError(msg)
     typestore = get_typestore(Stores.ROS2_JAZZY)
     odom: list[tuple[float, float, float, float, float, float]] = []
-    diags: list[tuple[float, dict[str, str]]] = []
+    diags: list[tuple[float, dict[str, str]]] = []  # (stamp, the status's values)
     plan = None
     predictions: list[np.ndarray] = []
     counts: dict[str, int] = {}
@@ -130,19 +139,19 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
     failures = 0
     goal_reached = False
     rows: list[list[float]] = []
-    if diags and 'x' in diags[0][1]:
+    if diags and Key.X.value in diags[0][1]:
         started = False
         for t, values in diags:
-            started = started or values.get('source', '') != ''  # the first MPC step
+            step = ControllerDiagnostics.from_values(values)
+            started = started or step.source is not None  # the first MPC step
             if not started:
                 continue
-            rows.append([t] + [_number(values, k) for k in
-                               ('x', 'y', 'theta', 'v', 'omega', 's_k', 'V_N', 'solve_ms')])
-            check = values.get('lyapunov_ok', '')
-            lyapunov.append(None if check == '' else check == 'true')
-            if values.get('source', '') not in ('', 'solver'):
+            rows.append([t, step.x, step.y, step.theta, step.v, step.omega, step.s, step.value,
+                         step.solve_ms])
+            lyapunov.append(step.lyapunov_ok)
+            if step.source not in (None, PlanSource.SOLVER):
                 failures += 1
-            goal_reached = goal_reached or values.get('goal_reached') == 'true'
+            goal_reached = goal_reached or step.goal_reached
     elif odom:
         # a bag without our diagnostics: one row per odometry message, the command from
         # the odometry's twist (what the base executes)
@@ -158,29 +167,71 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
                   solver_failures=failures, goal_reached=goal_reached, counts=counts)
 
 
+def recorded_world(bag: str | Path) -> World | None:
+    """Return the world a bag's metadata records (bag_recorder's world_file), or None.
+
+    The world is loaded from the recorded contents, under the recorded file name (its suffix
+    picks the format, its stem is the world's name), so the file need not exist any more.
+
+    Raises:
+        FileNotFoundError: if the bag has no metadata.yaml.
+        ValueError: if the recorded world does not load (WorldError).
+
+    """
+    metadata = Path(bag) / 'metadata.yaml'
+    if not metadata.is_file():
+        msg = f'bag not found (no metadata.yaml): {bag}'
+        raise FileNotFoundError(msg)
+    info = yaml.safe_load(metadata.read_text(encoding='utf-8')) or {}
+    custom = (info.get('rosbag2_bagfile_information') or {}).get('custom_data') or {}
+    contents = custom.get(BagKey.WORLD.value)
+    if contents is None:
+        return None
+    name = Path(str(custom.get(BagKey.WORLD_FILE.value) or 'world.yaml')).name
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / name
+        path.write_text(str(contents), encoding='utf-8')
+        return load_world(path)
+
+
 def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None = None,
             title: str = '', position_tolerance: float = 0.05,
             heading_tolerance: float = 0.1,
             extra: dict[str, Any] | None = None) -> dict[str, Any]:
     """Write trajectory.csv, metrics.json and trajectory.png of a bag into out.
 
-    The goal is the last pose of the plan (else the world's goal); obstacles come from the
-    world file (default: the paper's scenario). extra is merged into the metrics.
+    The goal is the last pose of the plan (else the world's goal); the obstacles are the
+    world's: world_file if given, else the world the bag records. extra is merged into the
+    metrics.
 
     Returns:
         The metrics (also written to metrics.json).
+
+    Raises:
+        FileNotFoundError: if the bag or world_file does not exist.
+        ValueError: if neither world_file is given nor the bag records its world, or the bag
+            holds nothing to analyse (no control step, no odometry).
 
     """
     from mpc_local_planner.evaluation.metrics import compute_metrics
     from mpc_local_planner.evaluation.plotting import plot_runs
     from mpc_local_planner.evaluation.trajectory import write_trajectory_csv
     from mpc_local_planner.worlds.data_files import resolve_data_file
-    from mpc_local_planner.worlds.world import load_world
 
+    if world_file is not None:
+        world = load_world(resolve_data_file(world_file))
+    else:
+        world = recorded_world(bag)
+        if world is None:
+            msg = (f'{bag}: the bag does not record its world (bag_recorder without '
+                   'world_file): give the world with --world')
+            raise ValueError(msg)
+    run = read_run(bag)
+    if not len(run.rows):
+        msg = f'{bag}: no control step with the MPC and no odometry: nothing to analyse'
+        raise ValueError(msg)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    world = load_world(resolve_data_file(world_file or 'worlds/paper_obstacle.yaml'))
-    run = read_run(bag)
     goal = run.plan[-1] if run.plan is not None and len(run.plan) else np.asarray(world.goal)
     reference_length = None
     if run.plan is not None and len(run.plan) > 1:
@@ -193,6 +244,7 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
         position_tolerance=position_tolerance, heading_tolerance=heading_tolerance)
     metrics['controller_goal_reached'] = run.goal_reached
     metrics['messages'] = run.counts
+    metrics['world_name'] = world.name
     metrics.update(extra or {})
     write_trajectory_csv(out / 'trajectory.csv', run.rows)
     (out / 'metrics.json').write_text(json.dumps(metrics, indent=2, default=_json_default) + '\n',
@@ -239,7 +291,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('bag', help='rosbag2 directory (mcap or sqlite3)')
     parser.add_argument('--out', required=True, help='directory for the outputs')
     parser.add_argument('--world', default=None,
-                        help='world file with the obstacles (default: the paper scenario)')
+                        help='world file with the obstacles (default: the world the bag '
+                             'records; a bag that records none needs this)')
     args = parser.parse_args(argv)
     try:
         metrics = analyze(args.bag, args.out, world_file=args.world)

@@ -19,6 +19,10 @@ received, exactly what ``ros2 bag record`` stores) and go to `rosbags.rosbag2.Wr
 connections' message definitions and type hashes come from rosbags' Jazzy typestore, so
 ``ros2 bag info`` and the rosbags Reader both read the result. Timestamps are the node's
 ROS time at reception (simulated time under ``use_sim_time``).
+
+With ``world_file`` set, the bag's metadata (rosbag2 ``custom_data``) records the world: its
+path and its contents, under the keys of `BagKey`, so that analyze_bag finds the obstacles
+the run had without being told.
 """
 
 from __future__ import annotations
@@ -26,25 +30,32 @@ from __future__ import annotations
 from importlib import import_module
 from pathlib import Path
 import sys
-import threading
 from typing import Any
 
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import get_typestore, Stores
 
-from mpc_local_planner.ros.conversions import describe
+from mpc_local_planner.core.diagnostics import (
+    BagKey,
+    CONTROLLER_DIAGNOSTICS_TOPIC,
+    PLANNER_DIAGNOSTICS_TOPIC,
+)
 from mpc_local_planner.ros.node_main import run_node
+from mpc_local_planner.ros.parameters import describe
+from mpc_local_planner.ros.qos import recorder_qos
+from mpc_local_planner.worlds.data_files import resolve_data_file
 
 __all__ = ['BagRecorderNode', 'DEFAULT_TOPICS', 'DEFAULT_TYPES', 'main', 'message_class']
 
-DEFAULT_TOPICS = ['odom', 'cmd_vel', 'plan', 'local_plan', 'mpc/diagnostics']
+DEFAULT_TOPICS = ['odom', 'cmd_vel', 'plan', 'local_plan', CONTROLLER_DIAGNOSTICS_TOPIC,
+                  PLANNER_DIAGNOSTICS_TOPIC]
 DEFAULT_TYPES = ['nav_msgs/msg/Odometry', 'geometry_msgs/msg/Twist', 'nav_msgs/msg/Path',
-                 'nav_msgs/msg/Path', 'diagnostic_msgs/msg/DiagnosticArray']
-DEFAULT_LATCHED = ['plan']
+                 'nav_msgs/msg/Path', 'diagnostic_msgs/msg/DiagnosticArray',
+                 'diagnostic_msgs/msg/DiagnosticArray']
+DEFAULT_LATCHED = ['plan', PLANNER_DIAGNOSTICS_TOPIC]
 BAG_VERSION = 9
 
 
@@ -75,16 +86,18 @@ class BagRecorderNode(Node):
         super().__init__('bag_recorder', **kwargs)
         self.add_on_set_parameters_callback(self.parameters_callback)
         self._declare_parameters()
-        self._lock = threading.Lock()
         self._typestore = get_typestore(Stores.ROS2_JAZZY)
         self.counts: dict[str, int] = {}
         topics = list(self.get_parameter('topics').value)
         types = list(self.get_parameter('types').value)
         latched = set(self.get_parameter('transient_local_topics').value)
         self.path = Path(str(self.get_parameter('output').value)).expanduser()
+        world = self._read_world(str(self.get_parameter('world_file').value))
         self._writer: Writer | None = Writer(self.path, version=BAG_VERSION,
                                              storage_plugin=StoragePlugin.MCAP)
         self._writer.open()
+        for key, value in world.items():
+            self._writer.set_custom_data(key.value, value)
         self._subscriptions_by_topic = {}
         try:
             for topic, type_name in zip(topics, types, strict=True):
@@ -104,6 +117,22 @@ class BagRecorderNode(Node):
             "their types, 'pkg/msg/Name', one per topic", read_only=True))
         self.declare_parameter('transient_local_topics', DEFAULT_LATCHED, describe(
             'topics subscribed transient_local (latched, such as plan)', read_only=True))
+        self.declare_parameter('world_file', '', describe(
+            "world file to record in the bag's metadata (a path, or a name in the package's "
+            "config/ or config/worlds/); '' = none", read_only=True))
+
+    @staticmethod
+    def _read_world(world_file: str) -> dict[BagKey, str]:
+        """Return the metadata that records world_file ({} for '').
+
+        Raises:
+            FileNotFoundError: if the file is not found.
+
+        """
+        if not world_file:
+            return {}
+        path = resolve_data_file(world_file)
+        return {BagKey.WORLD_FILE: str(path), BagKey.WORLD: path.read_text(encoding='utf-8')}
 
     def parameters_callback(self, parameters: list[Parameter]) -> SetParametersResult:
         """Refuse types that do not import and topic/type lists of different lengths."""
@@ -127,11 +156,9 @@ class BagRecorderNode(Node):
 
     def _add_topic(self, topic: str, type_name: str, *, latched: bool) -> None:
         cls = message_class(type_name)
-        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=(DurabilityPolicy.TRANSIENT_LOCAL if latched
-                                     else DurabilityPolicy.VOLATILE))
         subscription = self.create_subscription(
-            cls, topic, lambda data, name=topic: self._on_message(name, data), qos, raw=True)
+            cls, topic, lambda data, name=topic: self._on_message(name, data),
+            recorder_qos(latched=latched), raw=True)
         resolved = subscription.topic_name
         canonical = type_name if type_name.count('/') == 2 else type_name.replace('/', '/msg/')
         assert self._writer is not None
@@ -143,20 +170,18 @@ class BagRecorderNode(Node):
         try:
             _, connection, resolved = self._subscriptions_by_topic[topic]
             stamp = self.get_clock().now().nanoseconds
-            with self._lock:
-                if self._writer is None:
-                    return
-                self._writer.write(connection, stamp, data)
-                self.counts[resolved] += 1
-        except Exception as err:  # noqa: BLE001 (never let a callback kill the executor)
+            if self._writer is None:
+                return
+            self._writer.write(connection, stamp, data)
+            self.counts[resolved] += 1
+        except Exception as err:  # never let a callback kill the executor
             self.get_logger().error(f'could not record {topic}: {err}', throttle_duration_sec=1.0)
 
     def close(self) -> None:
         """Finish the bag (writes its metadata); later messages are dropped."""
-        with self._lock:
-            if self._writer is not None:
-                self._writer.close()
-                self._writer = None
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
 
     def destroy_node(self) -> None:
         """Close the bag, then destroy the node."""

@@ -20,9 +20,15 @@ processes (``python -m mpc_local_planner.<module> --ros-args -p ...``, so no ros
 needed) and this process records and watches. The simulator drives ``/clock`` at ``--rtf``
 times real time and every node uses sim time. The run stops when the controller reports
 the goal reached, at the world's (or ``--time-limit``) simulated time limit, or at the
-``--timeout`` in wall seconds. Then the bag is analysed: ``--out`` receives ``bag/``,
-``trajectory.csv``, ``metrics.json`` and ``trajectory.png``. Exit code 0 iff the target was
-reached without collision.
+``--timeout`` in wall seconds. Then the bag (which records the world in its metadata) is
+analysed: ``--out`` receives ``bag/``, ``trajectory.csv``, ``metrics.json`` and
+``trajectory.png``. Exit code 0 iff the target was reached without collision.
+
+With ``--path rrt`` no plan may come: a start or goal inside the obstacles as the planner
+inflates them (robot radius + clearance) is refused before anything starts, and a goal the
+planner cannot reach (walled off) ends the run as soon as the planner says so on
+``planner/diagnostics``. Either way the reason is one line on stderr and the exit code is 2,
+as for an invalid option.
 
 With ``--respawn`` (separate processes only) a node process that exits is started again, as
 launch's ``respawn``, instead of ending the run: kill the controller mid-run and the
@@ -48,20 +54,35 @@ from typing import Any, Sequence
 from diagnostic_msgs.msg import DiagnosticArray
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import Executor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from mpc_local_planner.core.diagnostics import (
+    CONTROLLER_DIAGNOSTICS_TOPIC,
+    ControllerDiagnostics,
+    PLANNER_DIAGNOSTICS_TOPIC,
+    PlannerDiagnostics,
+)
+from mpc_local_planner.core.errors import PlanningError
+from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
 from mpc_local_planner.evaluation.analyze_bag import analyze, summary
-from mpc_local_planner.ros.conversions import DIAGNOSTICS_QOS, drain_executor
+from mpc_local_planner.ros.bag_recorder_node import BagRecorderNode
+from mpc_local_planner.ros.executors import spin_until
 from mpc_local_planner.ros.node_main import EXIT_INVALID_PARAMETERS
+from mpc_local_planner.ros.parameters import DEFAULT_WORLD_FILE
+from mpc_local_planner.ros.qos import DIAGNOSTICS_QOS, PLANNER_DIAGNOSTICS_QOS
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world, World
 
-__all__ = ['LoopOptions', 'LoopResult', 'main', 'node_command', 'node_parameters',
-           'run_closed_loop', 'spawn_node']
+__all__ = ['EXIT_NO_PLAN', 'LoopOptions', 'LoopResult', 'check_plannable', 'flush_recording',
+           'main', 'node_command', 'node_parameters', 'run_closed_loop', 'spawn_node']
 
-DEFAULT_WORLD = 'worlds/paper_obstacle.yaml'
+DEFAULT_WORLD = DEFAULT_WORLD_FILE
+# Exit code when no plan can come (as for invalid options: the run was misconfigured).
+EXIT_NO_PLAN = 2
+# Wall seconds the recorder gets, after the run stops, to write what the monitor has seen.
+FLUSH_TIMEOUT = 5.0
 # Simulated seconds allowed when the world sets no time_limit.
 DEFAULT_TIME_LIMIT = 60.0
 # Wall seconds a child process gets to exit after SIGINT before it is killed.
@@ -146,27 +167,83 @@ def _ros_arg(name: str, value: Any) -> str:
 
 
 class _Monitor(Node):
-    """Watch the controller's diagnostics for the goal (in sim time)."""
+    """Watch the controller's diagnostics for the goal and the planner's for a failure."""
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('closed_loop_monitor', **kwargs)
         self.goal_reached = False
-        self.steps = 0
+        self.messages = 0  # diagnostics messages of the controller received
         self.last_reason = ''
-        self._sub = self.create_subscription(DiagnosticArray, 'mpc/diagnostics',
+        self.plan_failure: str | None = None  # why the planner published no plan
+        self._sub = self.create_subscription(DiagnosticArray, CONTROLLER_DIAGNOSTICS_TOPIC,
                                              self.diagnostics_callback, DIAGNOSTICS_QOS)
+        self._planner_sub = self.create_subscription(
+            DiagnosticArray, PLANNER_DIAGNOSTICS_TOPIC, self.planner_callback,
+            PLANNER_DIAGNOSTICS_QOS)
+
+    @property
+    def diagnostics_topic(self) -> str:
+        """The controller's diagnostics topic, resolved."""
+        return self._sub.topic_name
 
     def diagnostics_callback(self, msg: DiagnosticArray) -> None:
         """Note each control step and whether the controller is at the goal."""
+        self.messages += 1
         for status in msg.status:
-            values = {kv.key: kv.value for kv in status.values}
-            self.steps += 1
-            self.last_reason = status.message
-            self.goal_reached = values.get('goal_reached') == 'true'
+            step = ControllerDiagnostics.from_values((kv.key, kv.value) for kv in status.values)
+            self.last_reason = step.message
+            self.goal_reached = step.goal_reached
+
+    def planner_callback(self, msg: DiagnosticArray) -> None:
+        """Note whether the planner's latest goal failed (a later plan clears it)."""
+        for status in msg.status:
+            outcome = PlannerDiagnostics.from_values((kv.key, kv.value) for kv in status.values)
+            self.plan_failure = None if outcome.planned else (outcome.detail or 'no plan')
 
     def sim_time(self) -> float:
         """Return the current ROS (simulated) time in seconds."""
         return self.get_clock().now().nanoseconds * 1e-9
+
+
+def flush_recording(executor: Executor, recorder: BagRecorderNode, monitor: _Monitor, *,
+                    timeout_sec: float = FLUSH_TIMEOUT) -> bool:
+    """Spin until the recorder holds every controller diagnostics message the monitor saw.
+
+    The run stops on the message that says the goal is reached; without this the executor
+    may never run the recorder's callback for it, and the bag (so metrics.json's
+    controller_goal_reached) would miss the arrival.
+
+    Returns:
+        True if the recorder caught up within timeout_sec.
+
+    """
+    return spin_until(
+        executor, lambda: recorder.counts.get(monitor.diagnostics_topic, 0) >= monitor.messages,
+        timeout_sec=timeout_sec)
+
+
+def check_plannable(world: World, planner_parameters: dict[str, Any]) -> None:
+    """Refuse a start or goal that no plan can reach: inside an obstacle as the planner grows it.
+
+    The planner grows every obstacle by robot_radius (the larger of its parameter and the
+    world's) plus clearance, as the global_planner node will with these parameters.
+
+    Raises:
+        PlanningError: saying which pose is in which inflated obstacle (or out of bounds).
+
+    """
+    defaults = PlannerConfig()
+    radius = max(float(planner_parameters.get('robot_radius', defaults.robot_radius)),
+                 world.robot_radius)
+    clearance = float(planner_parameters.get('clearance', defaults.clearance))
+    planner = RrtStarPlanner(world.obstacles, world.bounds,
+                             config=PlannerConfig(robot_radius=radius, clearance=clearance))
+    for label, pose in (('start', world.start), ('goal', world.goal)):
+        try:
+            planner.check_endpoint(pose, label)
+        except PlanningError as err:
+            msg = f'{world.name}: no plan can come: {err}'
+            raise PlanningError(msg) from None
 
 
 def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> LoopResult:
@@ -175,26 +252,28 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
     Raises:
         FileNotFoundError: if the world file does not exist.
         ValueError: on an invalid option (e.g. --path analytic on a world without one).
+        PlanningError: with --path rrt, if no plan can come (a start or goal inside an
+            inflated obstacle, found before anything starts) or the planner says it found
+            none (the run ends at once; the bag is kept, not analysed).
 
     """
-    from mpc_local_planner.ros.bag_recorder_node import BagRecorderNode
-
     world_file = resolve_data_file(options.world)
     world = load_world(world_file)
     if not options.rtf > 0:
         msg = f'--rtf must be > 0, got {options.rtf}'
         raise ValueError(msg)
+    if options.respawn and not options.separate_processes:
+        msg = '--respawn needs --separate-processes'
+        raise ValueError(msg)
     params = node_parameters(options, world_file, world)
+    if options.path == 'rrt':
+        check_plannable(world, params['global_planner'])
     time_limit = options.time_limit or world.time_limit or DEFAULT_TIME_LIMIT
     out = Path(options.out)
     out.mkdir(parents=True, exist_ok=True)
     bag = out / 'bag'
     if bag.exists():
         shutil.rmtree(bag)
-
-    if options.respawn and not options.separate_processes:
-        msg = '--respawn needs --separate-processes'
-        raise ValueError(msg)
 
     context = Context()
     rclpy.init(args=['--ros-args', *ros_args] if ros_args else None, context=context)
@@ -208,11 +287,13 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
     executor = SingleThreadedExecutor(context=context)
     start = time.monotonic()
     stop_reason = 'timeout'
+    plan_failure: str | None = None
     sim_time = math.nan
     try:
         sim = [Parameter('use_sim_time', value=True)]
         recorder = BagRecorderNode(context=context, parameter_overrides=[
-            *sim, Parameter('output', value=str(bag))])
+            *sim, Parameter('output', value=str(bag)),
+            Parameter('world_file', value=str(world_file))])
         monitor = _Monitor(context=context, parameter_overrides=sim)
         nodes += [recorder, monitor]
         if options.separate_processes:
@@ -228,6 +309,10 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
             if monitor.goal_reached:
                 stop_reason = 'goal reached'
                 break
+            if monitor.plan_failure is not None:
+                plan_failure = monitor.plan_failure
+                stop_reason = f'no plan: {plan_failure}'
+                break
             if sim_time > time_limit:
                 stop_reason = f'simulated time limit ({time_limit:g} s)'
                 break
@@ -240,20 +325,23 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
                 name = dead[0]
                 stop_reason = f'{name} exited (code {children[name].returncode})'
                 break
+        flush_recording(executor, recorder, monitor)
     finally:
         wall_time = time.monotonic() - start
         _stop_children(list(children.values()))
         executor.shutdown()
-        drain_executor(executor)
         for node in reversed(nodes):
             node.destroy_node()
         rclpy.try_shutdown(context=context)
 
+    if plan_failure is not None:
+        msg = f'{world.name}: no plan came: {plan_failure}'
+        raise PlanningError(msg)
     run_info = {'stop_reason': stop_reason, 'wall_time': wall_time, 'sim_time': sim_time,
                 'separate_processes': options.separate_processes, 'rtf': options.rtf,
                 'respawns': respawns,
                 'path_source': options.path, 'world': str(world_file)}
-    metrics = analyze(bag, out, world_file=world_file, extra=run_info,
+    metrics = analyze(bag, out, extra=run_info,
                       title=f'{world.name}: {options.path} path, rtf {options.rtf:g}')
     success = bool(metrics.get('reached')) and not metrics.get('collision')
     return LoopResult(metrics=metrics, stop_reason=stop_reason, wall_time=wall_time,
@@ -344,17 +432,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         index = argv.index('--ros-args')
         argv, ros_args = argv[:index], argv[index + 1:]
     parser = argparse.ArgumentParser(prog='closed_loop', description=__doc__.splitlines()[0])
-    parser.add_argument('--world', default=DEFAULT_WORLD,
-                        help='world file (a path or a name in config/worlds/)')
-    parser.add_argument('--out', default='out/closed_loop', help='output directory')
-    parser.add_argument('--path', choices=('rrt', 'analytic'), default='analytic',
+    defaults = LoopOptions()
+    parser.add_argument('--world', default=defaults.world,
+                        help="world file (a path, or a name in config/worlds/ with or without "
+                             "'.yaml')")
+    parser.add_argument('--out', default=defaults.out, help='output directory')
+    parser.add_argument('--path', choices=('rrt', 'analytic'), default=defaults.path,
                         help="reference: the world's analytic path or an RRT* plan")
-    parser.add_argument('--rtf', type=float, default=4.0,
+    parser.add_argument('--rtf', type=float, default=defaults.rtf,
                         help='real-time factor of the simulated clock')
-    parser.add_argument('--timeout', type=float, default=120.0, help='wall-clock limit (s)')
+    parser.add_argument('--timeout', type=float, default=defaults.timeout,
+                        help='wall-clock limit (s)')
     parser.add_argument('--time-limit', type=float, default=None,
-                        help="simulated-time limit (s; default: the world's, else 60)")
-    parser.add_argument('--seed', type=int, default=0, help='RRT* seed')
+                        help="simulated-time limit (s; default: the world's, else "
+                             f'{DEFAULT_TIME_LIMIT:g})')
+    parser.add_argument('--seed', type=int, default=defaults.seed, help='RRT* seed')
     parser.add_argument('--separate-processes', action='store_true',
                         help='run planner, controller and simulator as separate processes')
     parser.add_argument('--respawn', action='store_true',
@@ -366,8 +458,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                           separate_processes=args.separate_processes, respawn=args.respawn)
     try:
         result = run_closed_loop(options, ros_args=ros_args)
+    except PlanningError as err:
+        print(f'closed_loop: {err}', file=sys.stderr, flush=True)
+        return EXIT_NO_PLAN
     except (FileNotFoundError, ValueError) as err:
-        print(f'closed_loop: {err}', file=sys.stderr)
+        print(f'closed_loop: {err}', file=sys.stderr, flush=True)
         return 2
     print(f'stopped: {result.stop_reason} after {result.wall_time:.1f} s wall, '
           f'{result.sim_time:.1f} s simulated')

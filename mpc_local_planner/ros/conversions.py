@@ -22,31 +22,14 @@ from __future__ import annotations
 
 import math
 import struct
-import time
 from typing import Sequence
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Pose, PoseStamped, Quaternion, Twist
 from nav_msgs.msg import Odometry, Path
 import numpy as np
-from rcl_interfaces.msg import (
-    FloatingPointRange,
-    IntegerRange,
-    ParameterDescriptor,
-    ParameterType,
-)
-from rclpy.executors import Executor
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 __all__ = [
-    'CMD_VEL_QOS',
-    'DIAGNOSTICS_QOS',
-    'GOAL_QOS',
-    'LOCAL_PLAN_QOS',
-    'ODOM_QOS',
-    'PLAN_QOS',
-    'describe',
-    'drain_executor',
     'odometry_to_state',
     'path_pose_count',
     'path_to_poses',
@@ -60,17 +43,6 @@ __all__ = [
     'u_from_twist',
     'yaw_to_quaternion',
 ]
-
-# Topic QoS of design.md section 3 (shared by publishers, subscribers and the recorder).
-PLAN_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                      history=HistoryPolicy.KEEP_LAST)
-ODOM_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
-CMD_VEL_QOS = ODOM_QOS
-LOCAL_PLAN_QOS = ODOM_QOS
-DIAGNOSTICS_QOS = ODOM_QOS
-GOAL_QOS = ODOM_QOS
 
 # A quaternion shorter than this carries no orientation (an unset message is all zeros).
 MIN_QUATERNION_NORM = 1e-9
@@ -255,52 +227,3 @@ def u_from_twist(twist: Twist) -> np.ndarray:
     u = np.array([twist.linear.x, twist.angular.z], dtype=float)
     u[~np.isfinite(u)] = 0.0
     return u
-
-
-def describe(description: str, *, float_range: tuple[float, float] | None = None,
-             int_range: tuple[int, int] | None = None, read_only: bool = False,
-             dynamic_typing: bool = False) -> ParameterDescriptor:
-    """Return a ParameterDescriptor with an optional range (rclpy enforces it on set).
-
-    Args:
-        description: what the parameter does, its unit, and when a change takes effect.
-        float_range: inclusive (from, to) for a double parameter.
-        int_range: inclusive (from, to) for an integer parameter.
-        read_only: refuse every change after the declaration.
-        dynamic_typing: allow the type to change (e.g. an optional array given as []).
-
-    """
-    descriptor = ParameterDescriptor(description=description, read_only=read_only,
-                                     dynamic_typing=dynamic_typing)
-    if float_range is not None:
-        descriptor.type = ParameterType.PARAMETER_DOUBLE
-        descriptor.floating_point_range = [
-            FloatingPointRange(from_value=float(float_range[0]), to_value=float(float_range[1]),
-                               step=0.0)]
-    if int_range is not None:
-        descriptor.type = ParameterType.PARAMETER_INTEGER
-        descriptor.integer_range = [
-            IntegerRange(from_value=int(int_range[0]), to_value=int(int_range[1]), step=0)]
-    return descriptor
-
-
-def drain_executor(executor: Executor, timeout_sec: float = 5.0) -> bool:
-    """Wait for the callbacks a MultiThreadedExecutor has in flight, after its shutdown().
-
-    rclpy 7.1 (Jazzy) does not join the MultiThreadedExecutor's thread pool on shutdown, so
-    destroying nodes right after it races with callbacks still running (a solve, say); they
-    then fail with "cannot use Destroyable" and Python warns that the exception was never
-    retrieved. Call this between ``executor.shutdown()`` and ``destroy_node()``.
-
-    Returns:
-        True if every callback finished within timeout_sec.
-
-    """
-    futures = list(getattr(executor, '_futures', ()))
-    deadline = time.monotonic() + timeout_sec
-    while any(not f.done() for f in futures) and time.monotonic() < deadline:
-        time.sleep(0.01)
-    for future in futures:
-        if future.done():
-            future.exception()  # retrieved: logged by the callback itself if it matters
-    return all(f.done() for f in futures)

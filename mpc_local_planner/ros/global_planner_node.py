@@ -20,9 +20,12 @@ The goal comes from the ``goal`` parameter ([x, y, theta]) or a PoseStamped on
 published on ``plan`` (reliable, transient_local: a late controller still gets it). With
 ``analytic_path`` set the node publishes that path, sampled, instead of planning.
 
-A goal it cannot plan to (inside an obstacle, out of bounds, not finite, in another frame),
-or a start in collision, is logged as an error and nothing is published: the plan in force
-stays, and the next valid goal is planned as usual.
+A goal it cannot plan to (inside an inflated obstacle, walled off, out of bounds, not
+finite, in another frame), or a start in collision, is logged as an error and nothing is
+published on ``plan``: the plan in force stays, and the next valid goal is planned as usual.
+The outcome of every goal, planned or not and why, is published on ``planner/diagnostics``
+(DiagnosticArray, reliable and transient_local; keys in core/diagnostics.py), so that a
+supervisor such as closed_loop learns that no plan will come.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ import math
 import sys
 from typing import Any
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry, Path
 import numpy as np
@@ -39,19 +43,18 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from mpc_local_planner.core.diagnostics import PLANNER_DIAGNOSTICS_TOPIC, PlannerDiagnostics
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.paths import analytic_path
-from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
+from mpc_local_planner.core.planner import path_length, PlannerConfig, RrtStarPlanner
 from mpc_local_planner.ros.conversions import (
-    describe,
-    GOAL_QOS,
-    ODOM_QOS,
     odometry_to_state,
-    PLAN_QOS,
     pose_to_array,
     poses_to_path,
 )
 from mpc_local_planner.ros.node_main import run_node
+from mpc_local_planner.ros.parameters import DEFAULT_WORLD_FILE, describe
+from mpc_local_planner.ros.qos import GOAL_QOS, ODOM_QOS, PLAN_QOS, PLANNER_DIAGNOSTICS_QOS
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world, World
 
@@ -100,6 +103,9 @@ class GlobalPlannerNode(Node):
         self.last_plan: np.ndarray | None = None
         self.plan_count = 0
         self._plan_pub = self.create_publisher(Path, 'plan', PLAN_QOS)
+        self._diag_pub = self.create_publisher(DiagnosticArray, PLANNER_DIAGNOSTICS_TOPIC,
+                                               PLANNER_DIAGNOSTICS_QOS)
+        self.last_outcome: PlannerDiagnostics | None = None
         self._odom_sub = self.create_subscription(Odometry, 'odom', self.odom_callback,
                                                   ODOM_QOS)
         self._goal_sub = self.create_subscription(PoseStamped, 'goal_pose', self.goal_callback,
@@ -109,26 +115,27 @@ class GlobalPlannerNode(Node):
 
     # ------------------------------------------------------------------ parameters
     def _declare_parameters(self) -> None:
-        self.declare_parameter('world_file', 'worlds/paper_obstacle.yaml', describe(
+        defaults = PlannerConfig()
+        self.declare_parameter('world_file', DEFAULT_WORLD_FILE, describe(
             "world YAML/JSON: obstacles and bounds (a path, or a name in the package's "
             'config/ or config/worlds/); used at the next plan'))
         self.declare_parameter('goal', Parameter.Type.DOUBLE_ARRAY, describe(
             'goal [x, y, theta]; setting it plans from the current odometry (optional: '
             'goal_pose messages do the same)'))
-        self.declare_parameter('iterations', 1000, describe(
+        self.declare_parameter('iterations', defaults.iterations, describe(
             'RRT* iterations per plan', int_range=(1, 10_000_000)))
-        self.declare_parameter('time_limit', 5.0, describe(
+        self.declare_parameter('time_limit', defaults.time_limit, describe(
             'upper bound on planning time (s)', float_range=(0.001, 600.0)))
-        self.declare_parameter('seed', 0, describe(
+        self.declare_parameter('seed', defaults.seed, describe(
             "seed of OMPL's random numbers (reproducible plans)", int_range=(0, 2**31 - 1)))
-        self.declare_parameter('range', 0.0, describe(
+        self.declare_parameter('range', defaults.range, describe(
             'RRT* extension length (m); 0 = OMPL chooses', float_range=(0.0, 1e3)))
-        self.declare_parameter('robot_radius', 0.0, describe(
+        self.declare_parameter('robot_radius', defaults.robot_radius, describe(
             "robot radius (m); the larger of this and the world's is used",
             float_range=(0.0, 10.0)))
-        self.declare_parameter('clearance', 0.1, describe(
+        self.declare_parameter('clearance', defaults.clearance, describe(
             'extra obstacle inflation beyond the radius (m)', float_range=(0.0, 10.0)))
-        self.declare_parameter('simplify', False, describe(
+        self.declare_parameter('simplify', defaults.simplify, describe(
             "shortcut the path with OMPL's simplifier"))
         self.declare_parameter('analytic_path', '', describe(
             "publish this analytic path (e.g. 'paper_sinusoid') instead of planning; '' = "
@@ -146,7 +153,7 @@ class GlobalPlannerNode(Node):
             elif parameter.name == 'world_file':
                 try:
                     load_world(resolve_data_file(str(parameter.value)))
-                except Exception as err:  # noqa: BLE001 (any failure to load refuses it)
+                except Exception as err:  # any failure to load refuses it
                     reasons.append(str(err) or type(err).__name__)
             elif parameter.name == 'analytic_path' and parameter.value:
                 try:
@@ -164,7 +171,7 @@ class GlobalPlannerNode(Node):
             if 'world_file' in names:
                 self._world = self._read_world()
             self._planner = self._make_planner()
-        except Exception as err:  # noqa: BLE001 (validated above: a bug, but keep running)
+        except Exception as err:  # validated above: a bug, but keep running
             self.get_logger().error(f'could not apply {sorted(names)}: {err}')
             return
         if 'goal' in names:
@@ -223,6 +230,7 @@ class GlobalPlannerNode(Node):
             goal = pose_to_array(msg.pose)
         except ValueError as err:
             self.get_logger().error(f'goal refused, no plan published: {err}')
+            self._report(PlannerDiagnostics(planned=False, detail=f'goal refused: {err}'))
             return
         self._pending_goal = goal
         self._try_plan()
@@ -237,12 +245,12 @@ class GlobalPlannerNode(Node):
         start = self._state.copy()
         try:
             waypoints = self._planner.plan(start, goal)
-        except PlanningError as err:
-            self.get_logger().error(
-                f'no plan to ({goal[0]:g}, {goal[1]:g}), none published: {err}')
-            return
-        except Exception as err:  # noqa: BLE001 (never let a callback kill the executor)
-            self.get_logger().error(f'planner failed: {type(err).__name__}: {err}')
+        except Exception as err:  # PlanningError; anything else must not kill the executor
+            cause = str(err) if isinstance(err, PlanningError) else (
+                f'planner failed: {type(err).__name__}: {err}')
+            detail = f'no plan to ({goal[0]:g}, {goal[1]:g}): {cause}'
+            self.get_logger().error(f'{detail}; none published')
+            self._report(PlannerDiagnostics(planned=False, detail=detail))
             return
         poses = waypoints_to_poses(waypoints, float(start[2]), float(goal[2]))
         self._publish(poses)
@@ -258,8 +266,25 @@ class GlobalPlannerNode(Node):
         self._plan_pub.publish(msg)
         self.last_plan = poses
         self.plan_count += 1
-        length = float(np.sum(np.linalg.norm(np.diff(poses[:, :2], axis=0), axis=1)))
-        self.get_logger().info(f'published a plan: {len(poses)} poses, {length:.2f} m')
+        length = path_length(poses)
+        detail = f'published a plan: {len(poses)} poses, {length:.2f} m'
+        self.get_logger().info(detail)
+        self._report(PlannerDiagnostics(planned=True, detail=detail, poses=len(poses),
+                                        length=length))
+
+    def _report(self, outcome: PlannerDiagnostics) -> None:
+        """Publish the outcome of the latest goal on planner/diagnostics."""
+        self.last_outcome = outcome
+        status = DiagnosticStatus()
+        status.name = f'{self.get_name()}: RRT*'
+        status.hardware_id = self.get_fully_qualified_name()
+        status.level = bytes([int(outcome.level)])
+        status.message = outcome.detail
+        status.values = [KeyValue(key=k, value=v) for k, v in outcome.to_values()]
+        array = DiagnosticArray()
+        array.header.stamp = self.get_clock().now().to_msg()
+        array.status = [status]
+        self._diag_pub.publish(array)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import math
 import sys
-import threading
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -37,7 +36,6 @@ from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry, Path
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
@@ -47,72 +45,73 @@ from mpc_local_planner.core.controller import (
     ControllerSettings,
     ControlOutput,
     MpcController,
-    REASON_CANDIDATE,
-    REASON_GOAL,
-    REASON_INVALID_ODOM,
-    REASON_INVALID_PLAN,
-    REASON_OK,
-    REASON_STALE_ODOM,
-    REASON_STOP,
+    Reason,
+)
+from mpc_local_planner.core.diagnostics import (
+    CONTROLLER_DIAGNOSTICS_TOPIC,
+    ControllerDiagnostics,
+    Level,
 )
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path
 from mpc_local_planner.ros.conversions import (
-    CMD_VEL_QOS,
-    describe,
-    DIAGNOSTICS_QOS,
-    LOCAL_PLAN_QOS,
-    ODOM_QOS,
     odometry_to_state,
     path_pose_count,
     path_to_poses,
-    PLAN_QOS,
     poses_to_path,
     seconds_to_stamp,
     stamp_to_seconds,
     twist_from_u,
 )
 from mpc_local_planner.ros.node_main import EXIT_INVALID_PARAMETERS, run_node
+from mpc_local_planner.ros.parameters import DEFAULT_WORLD_FILE, describe
+from mpc_local_planner.ros.qos import (
+    CMD_VEL_QOS,
+    DIAGNOSTICS_QOS,
+    LOCAL_PLAN_QOS,
+    ODOM_QOS,
+    PLAN_QOS,
+)
 from mpc_local_planner.ros.throttle import ProblemThrottle
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world
 
-__all__ = ['DEFAULTS', 'EXIT_INVALID_PARAMETERS', 'MpcControllerNode', 'build_settings', 'main']
+__all__ = ['DEFAULTS', 'EXIT_INVALID_PARAMETERS', 'MpcControllerNode', 'build_settings',
+           'log_line', 'main']
 
 # Seconds between two error logs of an input problem that persists.
 ERROR_THROTTLE_S = 2.0
 
-# Parameter defaults: the paper's values (config/mpc_controller.yaml mirrors them).
-DEFAULTS: dict[str, Any] = {
-    'horizon': 10,
-    'step': 0.2,
-    'v_max': 0.31,
-    'omega_max': 1.9,
-    'weights.position': 1.0,
-    'weights.heading': 0.1,
-    'weights.v': 1.0,
-    'weights.omega': 1.0,
-    'offset_weight': 1000.0,
-    'robot_radius': 0.0,
-    'collision_margin': -1.0,
-    'world_file': 'worlds/paper_obstacle.yaml',
-    'analytic_path': '',
-    'solver': MpcConfig().solver,  # the fastest verified backend (see mpc_bench)
-    'max_iterations': 200,
-    'goal_tolerance': 0.02,
-    'goal_heading_tolerance': 0.05,
-    'odom_timeout': 0.5,
-    'max_plan_poses': 10_000,
-    'frame_id': 'map',
-}
-
+# Parameter -> field of MpcConfig, Unicycle and ControllerSettings.
 _MPC_FIELDS = {
     'horizon': 'horizon', 'step': 'step', 'weights.position': 'weight_position',
     'weights.heading': 'weight_heading', 'weights.v': 'weight_v', 'weights.omega': 'weight_omega',
-    'offset_weight': 'offset_weight', 'solver': 'solver', 'max_iterations': 'max_iterations',
+    'offset_weight': 'offset_weight', 'robot_radius': 'robot_radius', 'solver': 'solver',
+    'max_iterations': 'max_iterations',
 }
+_MODEL_FIELDS = ('v_max', 'omega_max')
 _SETTINGS_FIELDS = ('goal_tolerance', 'goal_heading_tolerance', 'odom_timeout')
+# collision_margin None (v_max step / 2) is -1 as a parameter: a double cannot be None.
+_AUTO_MARGIN = -1.0
+
+
+def _defaults() -> dict[str, Any]:
+    config, model, settings = MpcConfig(), Unicycle(), ControllerSettings()
+    values: dict[str, Any] = {name: getattr(config, field) for name, field in _MPC_FIELDS.items()}
+    values.update({name: getattr(model, name) for name in _MODEL_FIELDS})
+    values.update({name: getattr(settings, name) for name in _SETTINGS_FIELDS})
+    margin = config.collision_margin
+    values['collision_margin'] = _AUTO_MARGIN if margin is None else float(margin)
+    values['max_plan_poses'] = settings.max_plan_poses
+    values.update({'world_file': DEFAULT_WORLD_FILE, 'analytic_path': '',
+                   'frame_id': 'map'})
+    return values
+
+
+# Parameter defaults: those of the dataclasses (the paper's values; config/mpc_controller.yaml
+# mirrors them), plus the node's own.
+DEFAULTS: dict[str, Any] = _defaults()
 
 
 def load_obstacles(world_file: str) -> tuple[list[ConvexPolygon], float]:
@@ -144,7 +143,7 @@ def build_settings(values: dict[str, Any], *, world_radius: float = 0.0
     mpc_kwargs['collision_margin'] = None if margin < 0 else margin
     mpc_kwargs['robot_radius'] = max(float(values['robot_radius']), world_radius)
     config = MpcConfig(**mpc_kwargs)  # raises ValueError with validate_mpc_config's reasons
-    model = Unicycle(v_max=float(values['v_max']), omega_max=float(values['omega_max']))
+    model = Unicycle(**{name: float(values[name]) for name in _MODEL_FIELDS})
     settings = ControllerSettings(**{k: float(values[k]) for k in _SETTINGS_FIELDS},
                                   max_plan_poses=int(values['max_plan_poses']))
     return config, model, settings
@@ -168,7 +167,6 @@ class MpcControllerNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('mpc_controller', **kwargs)
-        self._lock = threading.RLock()
         self._world_cache: dict[str, tuple[list[ConvexPolygon], float]] = {}
         self.add_on_set_parameters_callback(self.parameters_callback)
         self._declare_parameters()
@@ -189,23 +187,20 @@ class MpcControllerNode(Node):
         self._odom_problem: str | None = None
         self._plan_problem: str | None = None
         self._problems = ProblemThrottle(ERROR_THROTTLE_S)
-        self._last_reason = ''
+        self._last_message = ''
         self._last_step_time: float | None = None
         self.last_output: ControlOutput | None = None
         self.goal_reached = False
 
-        self._inputs_group = MutuallyExclusiveCallbackGroup()
-        self._timer_group = MutuallyExclusiveCallbackGroup()
         self._cmd_pub = self.create_publisher(Twist, 'cmd_vel', CMD_VEL_QOS)
         self._local_plan_pub = self.create_publisher(Path, 'local_plan', LOCAL_PLAN_QOS)
-        self._diag_pub = self.create_publisher(DiagnosticArray, 'mpc/diagnostics',
+        self._diag_pub = self.create_publisher(DiagnosticArray, CONTROLLER_DIAGNOSTICS_TOPIC,
                                                DIAGNOSTICS_QOS)
-        self._odom_sub = self.create_subscription(
-            Odometry, 'odom', self.odom_callback, ODOM_QOS, callback_group=self._inputs_group)
+        self._odom_sub = self.create_subscription(Odometry, 'odom', self.odom_callback,
+                                                  ODOM_QOS)
         # raw: the size of a plan is checked before rclpy spends ~15 us per pose on it
-        self._plan_sub = self.create_subscription(
-            Path, 'plan', self.plan_callback, PLAN_QOS, callback_group=self._inputs_group,
-            raw=True)
+        self._plan_sub = self.create_subscription(Path, 'plan', self.plan_callback, PLAN_QOS,
+                                                  raw=True)
         self._timer = None
         self._make_timer()
 
@@ -279,7 +274,7 @@ class MpcControllerNode(Node):
             check_obstacles(obstacles, config)
             if values['analytic_path']:
                 analytic_path(str(values['analytic_path']))
-        except Exception as err:  # noqa: BLE001 (whatever the cause, refuse with a reason)
+        except Exception as err:  # whatever the cause, refuse with a reason
             reason = str(err) or type(err).__name__
             return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
@@ -291,19 +286,19 @@ class MpcControllerNode(Node):
             values = self._values()
             obstacles, radius = self._load_world(values['world_file'])
             config, model, settings = build_settings(values, world_radius=radius)
-            with self._lock:  # never between two halves of a solve
-                if 'world_file' in names:
-                    self.controller.set_obstacles(obstacles)
-                self.controller.update_config(config)
-                if model != self.controller.model:
-                    self.controller.set_model(model)
-                self.controller.settings = settings
-                if 'analytic_path' in names and values['analytic_path']:
-                    self.controller.set_path(analytic_path(values['analytic_path']))
-                    self._plan_problem = None  # the plan topic is ignored from now on
+            # one thread runs every callback: never between two halves of a solve
+            if 'world_file' in names:
+                self.controller.set_obstacles(obstacles)
+            self.controller.update_config(config)
+            if model != self.controller.model:
+                self.controller.set_model(model)
+            self.controller.settings = settings
+            if 'analytic_path' in names and values['analytic_path']:
+                self.controller.set_path(analytic_path(values['analytic_path']))
+                self._plan_problem = None  # the plan topic is ignored from now on
             if 'step' in names:
                 self._make_timer()
-        except Exception as err:  # noqa: BLE001 (validated above: a bug, but keep running)
+        except Exception as err:  # validated above: a bug, but keep running
             self.get_logger().error(f'could not apply {sorted(names)}: {err}')
             return
         self.get_logger().info(f'parameters changed: {sorted(names)}')
@@ -312,8 +307,7 @@ class MpcControllerNode(Node):
         if self._timer is not None:
             self.destroy_timer(self._timer)
         step = float(self.get_parameter('step').value)
-        self._timer = self.create_timer(step, self.timer_callback,
-                                        callback_group=self._timer_group)
+        self._timer = self.create_timer(step, self.timer_callback)
 
     # ------------------------------------------------------------------ callbacks
     def _now(self) -> float:
@@ -328,12 +322,13 @@ class MpcControllerNode(Node):
         receipt = self._now()
         try:
             state = self.controller.check_state(odometry_to_state(msg))
-        except Exception as err:  # noqa: BLE001 (ValueError, or a message gone wrong)
+        except Exception as err:  # ValueError, or a message gone wrong
             self._state, self._state_time = None, None
-            self._odom_problem = f'{REASON_INVALID_ODOM}: {err}'
+            self._odom_problem = str(err) or type(err).__name__
             if self._problems.report('odom'):
                 self.get_logger().error(
-                    f'{self._odom_problem}; cmd_vel is zero until valid odometry comes')
+                    f'{Reason.INVALID_ODOM.text}: {self._odom_problem}; cmd_vel is zero until '
+                    'valid odometry comes')
             return
         stamp = stamp_to_seconds(msg.header.stamp)
         self._state = state
@@ -358,18 +353,15 @@ class MpcControllerNode(Node):
         try:
             plan = self._read_plan(msg)
             poses = path_to_poses(plan)
-            with self._lock:
-                path = self.controller.set_plan(poses)
-                self._prepare()
-        except Exception as err:  # noqa: BLE001 (ValueError mostly; never leave a callback)
-            problem = str(err)
-            if not problem.startswith(REASON_INVALID_PLAN):
-                problem = f'{REASON_INVALID_PLAN}: {problem or type(err).__name__}'
-            with self._lock:
-                self.controller.clear_path()
-                self._plan_problem = problem
+            path = self.controller.set_plan(poses)
+            self._prepare()
+        except Exception as err:  # ValueError mostly; never leave a callback
+            problem = str(err) or type(err).__name__
+            self.controller.clear_path()
+            self._plan_problem = problem
             if self._problems.report('plan'):
-                self.get_logger().error(f'{problem}; cmd_vel is zero until a valid plan comes')
+                self.get_logger().error(f'{Reason.INVALID_PLAN.text}: {problem}; cmd_vel is '
+                                        'zero until a valid plan comes')
             return
         self._plan_problem = None
         self._problems.resolve('plan')
@@ -380,14 +372,13 @@ class MpcControllerNode(Node):
         """Return the plan message after the checks that need no conversion of its poses.
 
         Raises:
-            ValueError: 'invalid plan: ...' if it has too many poses or the wrong frame.
+            ValueError: if it has too many poses or the wrong frame.
 
         """
         limit = self.controller.settings.max_plan_poses
 
         def too_many(count: int) -> ValueError:
-            return ValueError(
-                f'{REASON_INVALID_PLAN}: {count} poses, more than max_plan_poses ({limit})')
+            return ValueError(f'{count} poses, more than max_plan_poses ({limit})')
 
         if isinstance(msg, (bytes, bytearray)):
             count = path_pose_count(bytes(msg))
@@ -398,35 +389,34 @@ class MpcControllerNode(Node):
             raise too_many(len(msg.poses))
         frame = str(self.get_parameter('frame_id').value)
         if msg.header.frame_id != frame:
-            problem = (f'{REASON_INVALID_PLAN}: frame {msg.header.frame_id!r} is not '
-                       f'{frame!r} (this node does not transform plans)')
+            problem = (f'frame {msg.header.frame_id!r} is not {frame!r} (this node does not '
+                       'transform plans)')
             raise ValueError(problem)
         return msg
 
     def _prepare(self) -> None:
         try:
             self.controller.prepare()
-        except Exception as err:  # noqa: BLE001 (the first solve builds instead)
+        except Exception as err:  # the first solve builds instead
             self.get_logger().warning(f'could not prepare the NLPs: {err}')
 
     def timer_callback(self) -> None:
         """Solve, then publish cmd_vel, local_plan and diagnostics; zero on any failure."""
-        with self._lock:  # a plan being set (and its NLPs built) finishes first
-            now = self._now()
-            step = float(self.get_parameter('step').value)
-            if (self._last_step_time is not None
-                    and 0 <= now - self._last_step_time < 0.5 * step):
-                return  # a timer fired twice for one instant (ROS-time timers can): one step
-            self._last_step_time = now
-            problem = self._odom_problem or self._plan_problem
-            try:
-                if problem is not None:
-                    output = self.controller.stop(problem)
-                else:
-                    output = self.controller.compute(self._state, now,
-                                                     state_time=self._state_time)
-            except Exception as err:  # noqa: BLE001 (compute never raises; belt and braces)
-                output = ControlOutput(np.zeros(2), None, f'error: {err}')
+        now = self._now()
+        step = float(self.get_parameter('step').value)
+        if (self._last_step_time is not None
+                and 0 <= now - self._last_step_time < 0.5 * step):
+            return  # a timer fired twice for one instant (ROS-time timers can): one step
+        self._last_step_time = now
+        try:
+            if self._odom_problem is not None:
+                output = self.controller.stop(Reason.INVALID_ODOM, self._odom_problem)
+            elif self._plan_problem is not None:
+                output = self.controller.stop(Reason.INVALID_PLAN, self._plan_problem)
+            else:
+                output = self.controller.compute(self._state, now, state_time=self._state_time)
+        except Exception as err:  # compute never raises; belt and braces
+            output = ControlOutput(np.zeros(2), None, Reason.ERROR, str(err))
         self.last_output = output
         self._cmd_pub.publish(twist_from_u(output.u))
         try:
@@ -436,74 +426,71 @@ class MpcControllerNode(Node):
                     output.solution.x_pred[:, :3],
                     frame_id=str(self.get_parameter('frame_id').value), stamp=stamp))
             self._diag_pub.publish(self._diagnostics(output, now))
-        except Exception as err:  # noqa: BLE001
+        except Exception as err:  # a message that cannot be built: keep controlling
             self.get_logger().warning(f'could not publish: {err}', throttle_duration_sec=1.0)
-        self._log_reason(output.reason)
+        self._log(output)
 
-    def _log_reason(self, reason: str) -> None:
-        if reason == self._last_reason:
+    def _log(self, output: ControlOutput) -> None:
+        """Log a change of reason (refused input is logged, throttled, where refused)."""
+        message = output.message
+        if message == self._last_message:
             return
-        self._last_reason = reason
-        self.goal_reached = reason == REASON_GOAL
-        if reason.startswith((REASON_INVALID_ODOM, REASON_INVALID_PLAN)):
-            return  # logged (throttled) where the input was refused
-        if reason.startswith('error'):
-            if self._problems.report('error'):
-                self.get_logger().error(reason)
-        elif reason in (REASON_STALE_ODOM, REASON_STOP, REASON_CANDIDATE):
-            self.get_logger().warning(
-                f'{reason}: cmd_vel is zero (solver failures so far: '
-                f'{self.controller.solver_failures})')
-        elif reason == REASON_GOAL:
-            state = self._state if self._state is not None else np.full(3, np.nan)
-            position, heading = self.controller.goal_error(state)
-            self.get_logger().info(f'goal reached: {position:.3f} m, {heading:.3f} rad off')
+        self._last_message = message
+        self.goal_reached = output.reason is Reason.GOAL_REACHED
+        if output.reason in (Reason.INVALID_ODOM, Reason.INVALID_PLAN):
+            return
+        if output.reason is Reason.ERROR and not self._problems.report('error'):
+            return
+        state = self._state if self._state is not None else np.full(3, np.nan)
+        level, line = log_line(output, failures=self.controller.solver_failures,
+                               goal_error=self.controller.goal_error(state))
+        # one call site per severity: rclpy refuses a call site that changes severity
+        if level is Level.ERROR:
+            self.get_logger().error(line)
+        elif level is Level.WARN:
+            self.get_logger().warning(line)
         else:
-            self.get_logger().info(reason)
+            self.get_logger().info(line)
 
     def _diagnostics(self, output: ControlOutput, now: float) -> DiagnosticArray:
-        sol = output.solution
-        state = self._state if self._state is not None else np.full(3, np.nan)
+        record = ControllerDiagnostics.from_output(
+            output, state=self._state, state_time=self._state_time,
+            failures_total=self.controller.solver_failures)
         status = DiagnosticStatus()
         status.name = f'{self.get_name()}: MPC'
         status.hardware_id = self.get_fully_qualified_name()
-        status.message = output.reason
-        if output.reason in (REASON_OK, REASON_GOAL) and (sol is None or sol.success):
-            status.level = DiagnosticStatus.OK
-        elif (output.reason.startswith(('error', REASON_INVALID_ODOM, REASON_INVALID_PLAN))
-              or output.reason == REASON_STOP):
-            status.level = DiagnosticStatus.ERROR
-        else:
-            status.level = DiagnosticStatus.WARN
-        values = {
-            's_k': sol.s if sol else math.nan,
-            'V_N': sol.value if sol else math.nan,
-            'solve_ms': 1e3 * sol.solve_time_s if sol else math.nan,
-            'status': sol.status if sol else '',
-            'source': sol.source if sol else '',
-            'failures': sol.failures if sol else 0,
-            'failures_total': self.controller.solver_failures,
-            'lyapunov_ok': '' if sol is None or sol.lyapunov_ok is None else sol.lyapunov_ok,
-            'iterations': sol.iterations if sol else 0,
-            'reason': output.reason,
-            'goal_reached': output.reason == REASON_GOAL,
-            'state_time': self._state_time if self._state_time is not None else math.nan,
-            'x': state[0], 'y': state[1], 'theta': state[2],
-            'v': output.u[0], 'omega': output.u[1],
-        }
-        status.values = [KeyValue(key=k, value=_format(v)) for k, v in values.items()]
+        status.message = record.message
+        status.level = bytes([int(record.level)])
+        status.values = [KeyValue(key=k, value=v) for k, v in record.to_values()]
         array = DiagnosticArray()
         array.header.stamp = seconds_to_stamp(max(now, 0.0))
         array.status = [status]
         return array
 
 
-def _format(value: Any) -> str:
-    if isinstance(value, bool):
-        return 'true' if value else 'false'
-    if isinstance(value, (float, np.floating)):
-        return repr(float(value))
-    return str(value)
+def log_line(output: ControlOutput, *, failures: int,
+             goal_error: tuple[float, float]) -> tuple[Level, str]:
+    """Return the level and the line the node logs when the reason changes to output's.
+
+    Args:
+        output: the control step.
+        failures: the controller's solver failures so far.
+        goal_error: (position, heading) error to the end of the plan.
+
+    """
+    reason, message = output.reason, output.message
+    if reason is Reason.CANDIDATE:
+        v, omega = output.u
+        return Level.WARN, (f'{message}: applying its input v = {v:.3f} m/s, omega = '
+                            f'{omega:.3f} rad/s (solver failures so far: {failures})')
+    if reason in (Reason.STALE_ODOM, Reason.STOP):
+        return Level.WARN, f'{message}: cmd_vel is zero (solver failures so far: {failures})'
+    if reason is Reason.GOAL_REACHED:
+        position, heading = goal_error
+        return Level.OK, f'{message}: {position:.3f} m, {heading:.3f} rad off'
+    if reason is Reason.ERROR:
+        return Level.ERROR, f'{message}; cmd_vel is zero'
+    return Level.OK, message
 
 
 def main(args: list[str] | None = None) -> int:

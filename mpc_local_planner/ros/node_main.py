@@ -14,6 +14,8 @@
 
 """The main() every node shares: spin until Ctrl-C, refuse bad parameters with exit code 2.
 
+Ctrl-C (SIGINT) ends the spin cleanly: no traceback, no error log, exit code 0.
+
 A node that cannot start with its parameters (or the files they name) says why in one line
 on stderr and exits with EXIT_INVALID_PARAMETERS instead of a traceback, so that a launch
 file, a supervisor or closed_loop --respawn can tell "misconfigured" from "crashed".
@@ -53,6 +55,12 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        # Ctrl-C can shut the context down while the executor builds its wait set (rclpy 7.1
+        # then raises RCLError, not ExternalShutdownException): a clean stop all the same.
+        # With the context still up, it is a failure.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.destroy_node()

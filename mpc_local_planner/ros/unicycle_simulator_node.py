@@ -41,15 +41,10 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock as ClockMsg
 
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.ros.conversions import (
-    CMD_VEL_QOS,
-    describe,
-    ODOM_QOS,
-    seconds_to_stamp,
-    state_to_odometry,
-    u_from_twist,
-)
+from mpc_local_planner.ros.conversions import seconds_to_stamp, state_to_odometry, u_from_twist
 from mpc_local_planner.ros.node_main import run_node
+from mpc_local_planner.ros.parameters import describe
+from mpc_local_planner.ros.qos import CLOCK_QOS, CMD_VEL_QOS, ODOM_QOS
 from mpc_local_planner.ros.throttle import ProblemThrottle
 
 __all__ = ['UnicycleSimulatorNode', 'main', 'validate_simulator_parameters']
@@ -86,7 +81,7 @@ class UnicycleSimulatorNode(Node):
         self._last_tick: float | None = None
         self._problems = ProblemThrottle(2.0)
         self._odom_pub = self.create_publisher(Odometry, 'odom', ODOM_QOS)
-        self._clock_pub = self.create_publisher(ClockMsg, 'clock', 10)
+        self._clock_pub = self.create_publisher(ClockMsg, 'clock', CLOCK_QOS)
         self._cmd_sub = self.create_subscription(Twist, 'cmd_vel', self.cmd_vel_callback,
                                                  CMD_VEL_QOS)
         self._steady_clock = Clock(clock_type=ClockType.STEADY_TIME)
@@ -94,6 +89,7 @@ class UnicycleSimulatorNode(Node):
         self._make_timer()
 
     def _declare_parameters(self) -> None:
+        model = Unicycle()
         self.declare_parameter('initial_pose', [0.0, 0.0, 0.0], describe(
             'start pose [x, y, theta] (m, m, rad); read once at start'))
         self.declare_parameter('rate', 50.0, describe(
@@ -108,9 +104,9 @@ class UnicycleSimulatorNode(Node):
         self.declare_parameter('real_time_factor', 1.0, describe(
             'simulated seconds per wall second when publish_clock is true',
             float_range=(0.01, 100.0)))
-        self.declare_parameter('v_max', 0.31, describe(
+        self.declare_parameter('v_max', model.v_max, describe(
             'saturation of |linear.x| (m/s)', float_range=(0.001, 10.0)))
-        self.declare_parameter('omega_max', 1.9, describe(
+        self.declare_parameter('omega_max', model.omega_max, describe(
             'saturation of |angular.z| (rad/s)', float_range=(0.001, 50.0)))
         self.declare_parameter('frame_id', 'odom', describe('odometry frame'))
         self.declare_parameter('child_frame_id', 'base_link', describe('robot frame'))
@@ -214,7 +210,9 @@ class UnicycleSimulatorNode(Node):
                 child_frame_id=str(self.get_parameter('child_frame_id').value)))
             if publish_clock:
                 self._clock_pub.publish(ClockMsg(clock=stamp))
-        except Exception as err:  # noqa: BLE001 (never let a callback kill the executor)
+        except Exception as err:  # never let a callback kill the executor
+            if not self.context.ok():
+                return  # Ctrl-C shut the context down during the step: not a failure
             self.get_logger().error(f'simulation step failed: {err}',
                                     throttle_duration_sec=1.0)
 

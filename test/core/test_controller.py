@@ -21,13 +21,9 @@ import pytest
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.controller import (
     ControllerSettings,
+    ControlOutput,
     MpcController,
-    REASON_ERROR,
-    REASON_GOAL,
-    REASON_NO_ODOM,
-    REASON_NO_PLAN,
-    REASON_OK,
-    REASON_STALE_ODOM,
+    Reason,
 )
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.paths import analytic_path, WaypointPath
@@ -48,7 +44,7 @@ def controller() -> MpcController:
 def test_without_a_plan_the_command_is_zero_with_a_reason(controller: MpcController) -> None:
     fresh = MpcController(obstacles=WORLD.obstacles)
     out = fresh.compute(WORLD.start, 0.0)
-    assert out.reason == REASON_NO_PLAN
+    assert out.reason is Reason.NO_PLAN
     assert out.solution is None
     np.testing.assert_array_equal(out.u, [0.0, 0.0])
 
@@ -56,7 +52,7 @@ def test_without_a_plan_the_command_is_zero_with_a_reason(controller: MpcControl
 def test_without_odometry_the_command_is_zero(controller: MpcController) -> None:
     controller.set_plan(PLAN)
     out = controller.compute(None, 10.0)
-    assert out.reason == REASON_NO_ODOM
+    assert out.reason is Reason.NO_ODOM
     np.testing.assert_array_equal(out.u, [0.0, 0.0])
 
 
@@ -64,14 +60,14 @@ def test_stale_odometry_gives_zero(controller: MpcController) -> None:
     controller.set_plan(PLAN)
     timeout = controller.settings.odom_timeout
     out = controller.compute(WORLD.start, 10.0, state_time=10.0 - 2 * timeout)
-    assert out.reason == REASON_STALE_ODOM
+    assert out.reason is Reason.STALE_ODOM
     np.testing.assert_array_equal(out.u, [0.0, 0.0])
 
 
 def test_a_plan_gives_a_bounded_command_and_a_prediction(controller: MpcController) -> None:
     controller.set_plan(PLAN)
     out = controller.compute(WORLD.start, 1.0, state_time=0.9)
-    assert out.reason == REASON_OK
+    assert out.reason is Reason.TRACKING
     assert out.solution is not None
     model = controller.model
     assert np.all(out.u >= model.u_min - 1e-12) and np.all(out.u <= model.u_max + 1e-12)
@@ -83,17 +79,42 @@ def test_the_goal_reached_gives_zero(controller: MpcController) -> None:
     controller.set_plan(PLAN)
     near_goal = WORLD.goal + np.array([0.005, 0.0, 0.01])
     out = controller.compute(near_goal, 0.0)
-    assert out.reason == REASON_GOAL
+    assert out.reason is Reason.GOAL_REACHED
     np.testing.assert_array_equal(out.u, [0.0, 0.0])
     position, heading = controller.goal_error(near_goal)
     assert position == pytest.approx(0.005) and heading == pytest.approx(0.01)
 
 
-def test_a_non_finite_state_gives_zero_with_an_error_reason(controller: MpcController) -> None:
+def test_a_non_finite_state_gives_zero_as_invalid_odometry_with_the_problem_as_detail(
+        controller: MpcController) -> None:
     controller.set_plan(PLAN)
     out = controller.compute(np.array([0.0, np.nan, 0.0]), 0.0)
-    assert out.reason.startswith(REASON_ERROR)
+    assert out.reason is Reason.INVALID_ODOM
+    assert 'three finite numbers' in out.detail
+    assert out.message == f'invalid odometry: {out.detail}'
     np.testing.assert_array_equal(out.u, [0.0, 0.0])
+
+
+def test_an_exception_in_the_solve_gives_zero_with_the_error_reason_and_its_message() -> None:
+    controller = MpcController(obstacles=WORLD.obstacles)
+    controller.set_plan(PLAN)
+
+    def broken(state: np.ndarray) -> None:
+        raise RuntimeError('boom')
+
+    controller.mpc.solve = broken  # type: ignore[method-assign]
+    out = controller.compute(WORLD.start, 0.0)
+    assert out.reason is Reason.ERROR and out.detail == 'RuntimeError: boom'
+    assert controller.solver_failures == 1
+    np.testing.assert_array_equal(out.u, [0.0, 0.0])
+
+
+def test_only_tracking_and_the_candidate_apply_an_input_and_every_reason_has_words() -> None:
+    assert {r for r in Reason if r.applies_input} == {Reason.TRACKING, Reason.CANDIDATE}
+    assert all(r.text and ': ' not in r.text for r in Reason)
+    assert len({r.value for r in Reason}) == len(Reason)
+    plain = ControlOutput(np.zeros(2), None, Reason.NO_PLAN)
+    assert plain.detail == '' and plain.message == 'no plan yet'
 
 
 @pytest.mark.parametrize(('poses', 'match'), [
@@ -106,7 +127,7 @@ def test_bad_plans_are_refused_and_the_old_one_kept(controller: MpcController,
                                                     poses: np.ndarray, match: str) -> None:
     controller.set_plan(PLAN)
     before = controller.path
-    with pytest.raises(ValueError, match=f'invalid plan: .*{match}'):
+    with pytest.raises(ValueError, match=match):
         controller.set_plan(poses)
     assert controller.path is before
 
@@ -130,7 +151,7 @@ def test_a_new_horizon_takes_effect_at_the_next_solve(controller: MpcController)
     controller.set_path(analytic_path('paper_sinusoid'))
     controller.update_config(controller.config.with_changes(horizon=6))
     out = controller.compute(WORLD.start, 0.0)
-    assert out.reason == REASON_OK
+    assert out.reason is Reason.TRACKING
     assert out.solution.x_pred.shape == (7, 3)
     controller.update_config(controller.config.with_changes(horizon=10))
 
@@ -140,7 +161,7 @@ def test_new_velocity_bounds_bound_the_command() -> None:
     controller.set_path(analytic_path('paper_sinusoid'))
     controller.set_model(Unicycle(v_max=0.1, omega_max=0.5))
     out = controller.compute(WORLD.start, 0.0)
-    assert out.reason == REASON_OK
+    assert out.reason is Reason.TRACKING
     assert abs(out.u[0]) <= 0.1 + 1e-12 and abs(out.u[1]) <= 0.5 + 1e-12
     assert out.u[0] > 0.05
 

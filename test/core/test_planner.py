@@ -18,19 +18,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from hypothesis import given, settings
-from hypothesis import strategies as st
 import numpy as np
 import pytest
 
 from mpc_local_planner.core.errors import PlanningError
-from mpc_local_planner.core.obstacles import ConvexPolygon, point_in_any
-from mpc_local_planner.core.planner import (
-    path_length,
-    PlannerConfig,
-    RrtStarPlanner,
-    segment_collides,
-)
+from mpc_local_planner.core.obstacles import ConvexPolygon, point_in_any, segment_collides
+from mpc_local_planner.core.planner import path_length, PlannerConfig, RrtStarPlanner
 from mpc_local_planner.worlds.data_files import BARN_DIR
 from mpc_local_planner.worlds.world import load_world, paper_world, World
 
@@ -201,35 +194,14 @@ def test_planner_rejects_empty_bounds() -> None:
         RrtStarPlanner([], (1.0, 0.0, 0.0, 1.0))
 
 
-def test_segment_collides_detects_crossing_grazing_and_clear_segments() -> None:
-    box = [ConvexPolygon.from_box(0.0, 0.0, 1.0, 1.0)]
-
-    assert segment_collides(box, [-1.0, 0.5], [2.0, 0.5])  # crosses, both ends outside
-    assert segment_collides(box, [-1.0, 1.0], [2.0, 1.0])  # runs along the top face
-    assert segment_collides(box, [0.0, 2.0], [2.0, 0.0])  # touches only the corner (1, 1)
-    assert not segment_collides(box, [0.5, 2.0], [1.5, 1.0])  # passes the corner above
-    assert not segment_collides(box, [-1.0, 1.01], [2.0, 1.01])
-    assert not segment_collides(box, [1.2, -1.0], [2.0, 2.0])
-    assert segment_collides(box, [0.5, 0.5], [0.5, 0.5])  # a point inside
-    assert not segment_collides([], [0.0, 0.0], [1.0, 1.0])
-
-
-@settings(max_examples=200, deadline=None)
-@given(
-    st.lists(st.floats(-3.0, 3.0), min_size=4, max_size=4),
-)
-def test_segment_collides_agrees_with_dense_sampling(coords: list[float]) -> None:
-    polygon = ConvexPolygon.from_vertices([[0.0, 0.0], [1.0, -0.5], [1.5, 0.7], [0.3, 1.2]])
-    a, b = np.array(coords[:2]), np.array(coords[2:])
-    samples = np.linspace(a, b, 2001)
-    depth = polygon.signed_distance_lower_bound(samples)
-
-    exact = segment_collides([polygon], a, b)
-
-    if depth.min() < -1e-3:
-        assert exact  # a sample is clearly inside
-    elif depth.min() > 1e-3:
-        assert not exact  # every sample is clearly outside (sampling step < 4.3 mm)
+def test_check_endpoint_refuses_a_goal_inside_an_obstacle_as_the_planner_inflates_it() -> None:
+    box = ConvexPolygon.from_box(0.0, 0.0, 1.0, 1.0)
+    planner = RrtStarPlanner([box], (-2.0, 3.0, -2.0, 3.0),
+                             config=PlannerConfig(robot_radius=0.1, clearance=0.1))
+    np.testing.assert_allclose(planner.check_endpoint(np.array([1.25, 0.5, 0.0]), 'goal'),
+                               [1.25, 0.5])
+    with pytest.raises(PlanningError, match=r'goal \(1.15, 0.5\) is in collision with obstacle 0'):
+        planner.check_endpoint(np.array([1.15, 0.5, 0.0]), 'goal')  # outside the raw box
 
 
 def test_path_length_sums_segment_lengths() -> None:

@@ -29,22 +29,21 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_typestore, Stores
 
 from mpc_local_planner.evaluation.analyze_bag import main as analyze_main
-from mpc_local_planner.evaluation.analyze_bag import read_run
+from mpc_local_planner.evaluation.analyze_bag import read_run, recorded_world
 from mpc_local_planner.ros.bag_recorder_node import BagRecorderNode
 from mpc_local_planner.ros.conversions import (
-    CMD_VEL_QOS,
-    ODOM_QOS,
-    PLAN_QOS,
     poses_to_path,
     seconds_to_stamp,
     state_to_odometry,
     twist_from_u,
 )
+from mpc_local_planner.ros.qos import CMD_VEL_QOS, ODOM_QOS, PLAN_QOS
+from mpc_local_planner.worlds.data_files import resolve_data_file
 
 
-def record(ros, bag: Path, odoms: int, cmds: int) -> BagRecorderNode:  # noqa: ANN001
+def record(ros, bag: Path, odoms: int, cmds: int, world_file: str = '') -> BagRecorderNode:
     recorder = ros.add(BagRecorderNode(context=ros.context, parameter_overrides=[
-        Parameter('output', value=str(bag))]))
+        Parameter('output', value=str(bag)), Parameter('world_file', value=world_file)]))
     talker = ros.add(Node('talker', context=ros.context))
     odom_pub = talker.create_publisher(Odometry, 'odom', ODOM_QOS)
     cmd_pub = talker.create_publisher(Twist, 'cmd_vel', CMD_VEL_QOS)
@@ -64,7 +63,8 @@ def record(ros, bag: Path, odoms: int, cmds: int) -> BagRecorderNode:  # noqa: A
     return recorder
 
 
-def test_recorded_bag_is_mcap_readable_by_rosbags_with_topics_and_counts(ros, tmp_path) -> None:  # noqa: ANN001
+@pytest.mark.slow
+def test_recorded_bag_is_mcap_readable_by_rosbags_with_topics_and_counts(ros, tmp_path) -> None:
     bag = tmp_path / 'bag'
     record(ros, bag, odoms=25, cmds=7)
     assert list(bag.glob('*.mcap'))
@@ -74,10 +74,11 @@ def test_recorded_bag_is_mcap_readable_by_rosbags_with_topics_and_counts(ros, tm
         assert topics == {
             '/odom': 'nav_msgs/msg/Odometry', '/cmd_vel': 'geometry_msgs/msg/Twist',
             '/plan': 'nav_msgs/msg/Path', '/local_plan': 'nav_msgs/msg/Path',
-            '/mpc/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray'}
+            '/mpc/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
+            '/planner/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray'}
         counts = {c.topic: c.msgcount for c in reader.connections}
         assert counts == {'/odom': 25, '/cmd_vel': 7, '/plan': 1, '/local_plan': 0,
-                          '/mpc/diagnostics': 0}
+                          '/mpc/diagnostics': 0, '/planner/diagnostics': 0}
         xs = []
         for connection, _, data in reader.messages():
             msg = typestore.deserialize_cdr(data, connection.msgtype)
@@ -86,7 +87,8 @@ def test_recorded_bag_is_mcap_readable_by_rosbags_with_topics_and_counts(ros, tm
         np.testing.assert_allclose(xs, 0.1 * np.arange(25))
 
 
-def test_analyze_bag_rebuilds_rows_from_odometry_without_diagnostics(ros, tmp_path) -> None:  # noqa: ANN001
+@pytest.mark.slow
+def test_analyze_bag_rebuilds_rows_from_odometry_without_diagnostics(ros, tmp_path) -> None:
     bag = tmp_path / 'bag'
     record(ros, bag, odoms=10, cmds=0)
     run = read_run(bag)
@@ -97,13 +99,37 @@ def test_analyze_bag_rebuilds_rows_from_odometry_without_diagnostics(ros, tmp_pa
     assert run.plan.shape == (2, 3)
 
 
-def test_recorder_refuses_an_unknown_message_type(ros, tmp_path) -> None:  # noqa: ANN001
+@pytest.mark.slow
+def test_recorder_refuses_an_unknown_message_type(ros, tmp_path) -> None:
     with pytest.raises(InvalidParameterValueException, match='not available'):
         BagRecorderNode(context=ros.context, parameter_overrides=[
             Parameter('output', value=str(tmp_path / 'bag')),
             Parameter('topics', value=['odom']), Parameter('types', value=['nope_msgs/msg/X'])])
 
 
-def test_analyze_bag_reports_a_missing_bag(tmp_path, capsys) -> None:  # noqa: ANN001
+@pytest.mark.slow
+def test_recorder_records_the_world_file_and_its_contents_in_the_metadata(ros, tmp_path) -> None:
+    bag = tmp_path / 'bag'
+    record(ros, bag, odoms=3, cmds=0, world_file='rrt_cluttered')
+    world = recorded_world(bag)
+    assert world is not None and world.name == 'rrt_cluttered'
+    assert len(world.obstacles) == 7 and world.robot_radius == 0.1
+    metadata = (bag / 'metadata.yaml').read_text()
+    assert str(resolve_data_file('rrt_cluttered.yaml')) in metadata
+
+
+@pytest.mark.slow
+def test_a_bag_recorded_without_a_world_is_refused_without_world(ros, tmp_path, capsys) -> None:
+    bag = tmp_path / 'bag'
+    record(ros, bag, odoms=5, cmds=0)
+    assert recorded_world(bag) is None
+    assert analyze_main([str(bag), '--out', str(tmp_path / 'out')]) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and 'does not record its world' in err and '--world' in err
+    assert analyze_main([str(bag), '--out', str(tmp_path / 'out'), '--world',
+                         'paper_obstacle']) == 1  # analysed: the robot never got there
+
+
+def test_analyze_bag_reports_a_missing_bag(tmp_path, capsys) -> None:
     assert analyze_main([str(tmp_path / 'missing'), '--out', str(tmp_path / 'out')]) == 2
     assert 'bag not found' in capsys.readouterr().err

@@ -25,16 +25,20 @@ import pytest
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.controller import ControlOutput, Reason
+from mpc_local_planner.core.diagnostics import (
+    CONTROLLER_DIAGNOSTICS_TOPIC,
+    ControllerDiagnostics,
+    Level,
+    PLANNER_DIAGNOSTICS_TOPIC,
+    PlannerDiagnostics,
+)
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.planner import segment_collides
+from mpc_local_planner.core.obstacles import segment_collides
 from mpc_local_planner.ros.conversions import (
-    CMD_VEL_QOS,
-    DIAGNOSTICS_QOS,
-    LOCAL_PLAN_QOS,
-    ODOM_QOS,
     odometry_to_state,
     path_to_poses,
-    PLAN_QOS,
     poses_to_path,
     stamp_to_seconds,
     state_to_odometry,
@@ -42,10 +46,23 @@ from mpc_local_planner.ros.conversions import (
     yaw_to_quaternion,
 )
 from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
-from mpc_local_planner.ros.mpc_controller_node import MpcControllerNode
+from mpc_local_planner.ros.mpc_controller_node import (
+    load_obstacles,
+    log_line,
+    MpcControllerNode,
+)
+from mpc_local_planner.ros.qos import (
+    CMD_VEL_QOS,
+    DIAGNOSTICS_QOS,
+    LOCAL_PLAN_QOS,
+    ODOM_QOS,
+    PLAN_QOS,
+    PLANNER_DIAGNOSTICS_QOS,
+)
 from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
 from mpc_local_planner.worlds.world import paper_world
 
+pytestmark = pytest.mark.slow  # DDS: every test spins nodes in an rclpy context
 WORLD = paper_world()
 PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
                  [2.5, 0.0, WORLD.goal[2]]])
@@ -54,7 +71,7 @@ PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
 class Probe(Node):
     """A test node: publishes what a node listens to and keeps what it says."""
 
-    def __init__(self, context) -> None:  # noqa: ANN001
+    def __init__(self, context) -> None:
         super().__init__('probe', context=context)
         self.cmd_pub = self.create_publisher(Twist, 'cmd_vel', CMD_VEL_QOS)
         self.odom_pub = self.create_publisher(Odometry, 'odom', ODOM_QOS)
@@ -64,17 +81,27 @@ class Probe(Node):
         self.cmds: list[Twist] = []
         self.plans: list[Path] = []
         self.local_plans: list[Path] = []
-        self.diagnostics: list[dict[str, str]] = []
+        self.diagnostics: list[ControllerDiagnostics] = []
+        self.messages: list[str] = []  # DiagnosticStatus.message, one per step
+        self.planner_outcomes: list[PlannerDiagnostics] = []
         self.create_subscription(Odometry, 'odom', self.odoms.append, ODOM_QOS)
         self.create_subscription(Twist, 'cmd_vel', self.cmds.append, CMD_VEL_QOS)
         self.create_subscription(Path, 'plan', self.plans.append, PLAN_QOS)
         self.create_subscription(Path, 'local_plan', self.local_plans.append, LOCAL_PLAN_QOS)
-        self.create_subscription(DiagnosticArray, 'mpc/diagnostics', self._diag, DIAGNOSTICS_QOS)
+        self.create_subscription(DiagnosticArray, CONTROLLER_DIAGNOSTICS_TOPIC, self._diag,
+                                 DIAGNOSTICS_QOS)
+        self.create_subscription(DiagnosticArray, PLANNER_DIAGNOSTICS_TOPIC, self._planner,
+                                 PLANNER_DIAGNOSTICS_QOS)
 
     def _diag(self, msg: DiagnosticArray) -> None:
-        values = {kv.key: kv.value for kv in msg.status[0].values}
-        values['message'] = msg.status[0].message
-        self.diagnostics.append(values)
+        status = msg.status[0]
+        self.diagnostics.append(ControllerDiagnostics.from_values(
+            (kv.key, kv.value) for kv in status.values))
+        self.messages.append(status.message)
+
+    def _planner(self, msg: DiagnosticArray) -> None:
+        self.planner_outcomes.append(PlannerDiagnostics.from_values(
+            (kv.key, kv.value) for kv in msg.status[0].values))
 
     def publish_odom(self, state: np.ndarray) -> None:
         self.odom_pub.publish(state_to_odometry(state, np.zeros(2),
@@ -91,7 +118,7 @@ def exact_arc(pose: np.ndarray, v: float, omega: float, t: float) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- simulator
-def run_simulator(ros, command: tuple[float, float], duration: float) -> list[Odometry]:  # noqa: ANN001
+def run_simulator(ros, command: tuple[float, float], duration: float) -> list[Odometry]:
     sim = ros.add(UnicycleSimulatorNode(context=ros.context, parameter_overrides=[
         Parameter('publish_clock', value=True), Parameter('real_time_factor', value=10.0),
         Parameter('rate', value=50.0), Parameter('cmd_timeout', value=0.0),
@@ -123,13 +150,13 @@ def check_arc(odoms: list[Odometry], v: float, omega: float) -> None:
     np.testing.assert_allclose(np.diff(stamps), 0.02, atol=1e-6)  # one tick of 1/rate each
 
 
-def test_simulator_integrates_a_constant_twist_as_the_unicycle_arc(ros) -> None:  # noqa: ANN001
+def test_simulator_integrates_a_constant_twist_as_the_unicycle_arc(ros) -> None:
     odoms = run_simulator(ros, (0.2, 0.5), duration=1.0)
     np.testing.assert_allclose(u_from_twist(odoms[-1].twist.twist), [0.2, 0.5])
     check_arc(odoms, 0.2, 0.5)
 
 
-def test_simulator_saturates_the_command_at_the_bounds(ros) -> None:  # noqa: ANN001
+def test_simulator_saturates_the_command_at_the_bounds(ros) -> None:
     odoms = run_simulator(ros, (1.0, -5.0), duration=0.5)
     bounds = Unicycle().u_max
     np.testing.assert_allclose(u_from_twist(odoms[-1].twist.twist), [bounds[0], -bounds[1]])
@@ -137,37 +164,39 @@ def test_simulator_saturates_the_command_at_the_bounds(ros) -> None:  # noqa: AN
 
 
 # ----------------------------------------------------------------------------- controller
-def make_controller(ros, **params) -> tuple[MpcControllerNode, Probe]:  # noqa: ANN001, ANN003
+def make_controller(ros, **params) -> tuple[MpcControllerNode, Probe]:
     overrides = [Parameter(k, value=v) for k, v in params.items()]
     controller = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=overrides))
     probe = ros.add(Probe(ros.context))
     return controller, probe
 
 
-def test_controller_without_a_plan_commands_zero_and_says_why(ros) -> None:  # noqa: ANN001
+def test_controller_without_a_plan_commands_zero_and_says_why(ros) -> None:
     _, probe = make_controller(ros)
     assert ros.spin_until(lambda: probe.odom_pub.get_subscription_count() > 0)
     probe.publish_odom(WORLD.start)
-    assert ros.spin_until(lambda: any(d['message'] == 'no plan yet' for d in probe.diagnostics))
+    assert ros.spin_until(lambda: any(d.reason is Reason.NO_PLAN for d in probe.diagnostics))
+    index = next(i for i, d in enumerate(probe.diagnostics) if d.reason is Reason.NO_PLAN)
+    assert probe.messages[index] == 'no plan yet' and probe.diagnostics[index].detail == ''
     assert probe.cmds
     assert all(c.linear.x == 0.0 and c.angular.z == 0.0 for c in probe.cmds)
 
 
-def test_controller_answers_odometry_and_a_plan_with_a_bounded_cmd_vel(ros) -> None:  # noqa: ANN001
+def test_controller_answers_odometry_and_a_plan_with_a_bounded_cmd_vel(ros) -> None:
     _, probe = make_controller(ros)
     assert ros.spin_until(lambda: probe.plan_pub.get_subscription_count() > 0)
     probe.plan_pub.publish(poses_to_path(PLAN))
 
     def driving() -> bool:
         probe.publish_odom(WORLD.start)
-        return any(d.get('source') == 'solver' for d in probe.diagnostics)
+        return any(d.source == 'solver' for d in probe.diagnostics)
 
     assert ros.spin_until(driving, timeout=30.0)
     assert ros.spin_until(lambda: len(probe.local_plans) > 0)
-    solved = next(d for d in probe.diagnostics if d.get('source') == 'solver')
-    assert 0.0 <= float(solved['s_k']) <= 1.0
-    assert float(solved['V_N']) > 0 and float(solved['solve_ms']) > 0
-    assert {'status', 'failures', 'lyapunov_ok'} <= solved.keys()
+    solved = next(d for d in probe.diagnostics if d.source == 'solver')
+    assert 0.0 <= solved.s <= 1.0
+    assert solved.value > 0 and solved.solve_ms > 0 and solved.status
+    assert solved.reason is Reason.TRACKING and solved.level is Level.OK
     u_max = Unicycle().u_max
     commands = np.array([u_from_twist(c) for c in probe.cmds])
     assert np.all(np.abs(commands) <= u_max + 1e-9)
@@ -177,7 +206,7 @@ def test_controller_answers_odometry_and_a_plan_with_a_bounded_cmd_vel(ros) -> N
     np.testing.assert_allclose(prediction[0, :2], WORLD.start[:2], atol=1e-6)
 
 
-def test_controller_applies_a_new_horizon_at_the_next_solve(ros) -> None:  # noqa: ANN001
+def test_controller_applies_a_new_horizon_at_the_next_solve(ros) -> None:
     controller, probe = make_controller(ros, analytic_path='paper_sinusoid')
     result = controller.set_parameters([Parameter('horizon', value=5)])[0]
     assert result.successful, result.reason
@@ -196,7 +225,7 @@ def test_controller_applies_a_new_horizon_at_the_next_solve(ros) -> None:  # noq
     ('world_file', 'no_such_world.yaml', 'not found'),
     ('analytic_path', 'no_such_path', 'unknown analytic path'),
 ])
-def test_controller_refuses_invalid_parameters_with_a_reason(ros, name, value, reason) -> None:  # noqa: ANN001
+def test_controller_refuses_invalid_parameters_with_a_reason(ros, name, value, reason) -> None:
     controller, _ = make_controller(ros)
     before = controller.get_parameter(name).value
     result = controller.set_parameters([Parameter(name, value=value)])[0]
@@ -206,7 +235,7 @@ def test_controller_refuses_invalid_parameters_with_a_reason(ros, name, value, r
 
 
 # ----------------------------------------------------------------------------- planner
-def test_planner_path_starts_at_odometry_ends_at_goal_and_is_collision_free(ros) -> None:  # noqa: ANN001
+def test_planner_path_starts_at_odometry_ends_at_goal_and_is_collision_free(ros) -> None:
     goal = [float(v) for v in WORLD.goal]
     planner = ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
         Parameter('goal', value=goal), Parameter('world_file', value='paper_obstacle.yaml')]))
@@ -241,11 +270,85 @@ def test_planner_path_starts_at_odometry_ends_at_goal_and_is_collision_free(ros)
         assert not segment_collides(inflated, a, b)
 
 
-def test_planner_refuses_a_malformed_goal(ros) -> None:  # noqa: ANN001
+def test_planner_says_on_its_diagnostics_why_no_plan_comes_and_when_one_does(ros) -> None:
+    planner = ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
+        Parameter('world_file', value='paper_obstacle')]))
+    probe = ros.add(Probe(ros.context))
+    assert ros.spin_until(lambda: probe.odom_pub.get_subscription_count() > 0)
+    probe.publish_odom(WORLD.start)
+    assert ros.spin_until(lambda: planner.robot_pose is not None)
+    # outside the box, inside it as the planner inflates it (robot radius + clearance)
+    assert planner.set_parameters([Parameter('goal', value=[1.55, 0.0, 0.0])])[0].successful
+    assert ros.spin_until(lambda: len(probe.planner_outcomes) == 1)
+    failed = probe.planner_outcomes[0]
+    assert not failed.planned and failed.level is Level.ERROR
+    assert 'no plan to (1.55, 0)' in failed.detail and 'inflated by 0.1 m' in failed.detail
+    assert not probe.plans
+    assert planner.set_parameters([Parameter('goal', value=[float(v) for v in WORLD.goal])]
+                                  )[0].successful
+    assert ros.spin_until(lambda: len(probe.planner_outcomes) == 2 and probe.plans)
+    planned = probe.planner_outcomes[1]
+    assert planned.planned and planned.poses == len(probe.plans[-1].poses) and planned.length > 0
+
+
+def test_nodes_find_world_files_named_without_a_suffix(ros) -> None:
+    controller = ros.add(MpcControllerNode(context=ros.context))
+    planner = ros.add(GlobalPlannerNode(context=ros.context))
+    for node in (controller, planner):
+        result = node.set_parameters([Parameter('world_file', value='rrt_cluttered')])[0]
+        assert result.successful, result.reason
+    obstacles, radius = load_obstacles('rrt_cluttered')
+    assert len(obstacles) == 7 and radius == 0.1
+
+
+def test_the_candidate_log_line_says_its_input_is_applied() -> None:
+    output = ControlOutput(np.array([0.2, -0.5]), None, Reason.CANDIDATE)
+    level, line = log_line(output, failures=4, goal_error=(1.0, 0.1))
+    assert level is Level.WARN
+    assert 'cmd_vel is zero' not in line
+    assert line.startswith(Reason.CANDIDATE.text)
+    assert 'v = 0.200 m/s, omega = -0.500 rad/s' in line and 'failures so far: 4' in line
+    for reason in (Reason.STOP, Reason.STALE_ODOM):
+        level, line = log_line(ControlOutput(np.zeros(2), None, reason), failures=4,
+                               goal_error=(1.0, 0.1))
+        assert level is Level.WARN and 'cmd_vel is zero' in line
+
+
+def test_planner_refuses_a_malformed_goal(ros) -> None:
     planner = ros.add(GlobalPlannerNode(context=ros.context))
     result = planner.set_parameters([Parameter('goal', value=[1.0, 2.0])])[0]
     assert not result.successful
     assert 'goal must be [x, y, theta]' in result.reason
+
+
+def test_shipped_params_files_mirror_the_defaults_the_nodes_take_from_the_dataclasses() -> None:
+    import yaml
+
+    from mpc_local_planner.core.planner import PlannerConfig
+    from mpc_local_planner.ros.mpc_controller_node import DEFAULTS
+    from mpc_local_planner.worlds.data_files import resolve_data_file
+
+    def flat(values: dict, prefix: str = '') -> dict:
+        out = {}
+        for key, value in values.items():
+            if isinstance(value, dict):
+                out.update(flat(value, f'{prefix}{key}.'))
+            else:
+                out[prefix + key] = value
+        return out
+
+    def params(name: str) -> dict:
+        text = resolve_data_file(f'{name}.yaml').read_text()
+        return flat(yaml.safe_load(text)[name]['ros__parameters'])
+
+    controller = params('mpc_controller')
+    assert controller == {k: v for k, v in DEFAULTS.items() if k in controller}
+    assert MpcConfig().horizon == DEFAULTS['horizon'] and Unicycle().v_max == DEFAULTS['v_max']
+    planner = params('global_planner')
+    defaults = PlannerConfig()
+    for field in ('iterations', 'time_limit', 'seed', 'range', 'robot_radius', 'clearance',
+                  'simplify'):
+        assert planner[field] == getattr(defaults, field), field
 
 
 @pytest.mark.parametrize(('name', 'node_class'), [
@@ -253,7 +356,7 @@ def test_planner_refuses_a_malformed_goal(ros) -> None:  # noqa: ANN001
     ('global_planner', GlobalPlannerNode),
     ('unicycle_simulator', UnicycleSimulatorNode),
 ])
-def test_shipped_params_files_load_and_hold_the_paper_values(name, node_class) -> None:  # noqa: ANN001
+def test_shipped_params_files_load_and_hold_the_paper_values(name, node_class) -> None:
     import rclpy
     from rclpy.context import Context
 

@@ -1,0 +1,62 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The QoS of every topic the package uses, shared by publishers, subscribers and recorder.
+
+Latched topics (``plan``, ``planner/diagnostics``) are reliable and transient_local with
+depth 1, so that a node that starts late still gets the latest message; the streams
+(``odom``, ``cmd_vel``, ``local_plan``, ``mpc/diagnostics``, ``goal_pose``) are reliable and
+volatile with depth 10.
+"""
+
+from __future__ import annotations
+
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+__all__ = [
+    'CLOCK_QOS',
+    'CMD_VEL_QOS',
+    'DIAGNOSTICS_QOS',
+    'GOAL_QOS',
+    'LOCAL_PLAN_QOS',
+    'ODOM_QOS',
+    'PLAN_QOS',
+    'PLANNER_DIAGNOSTICS_QOS',
+    'recorder_qos',
+]
+
+PLAN_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                      history=HistoryPolicy.KEEP_LAST)
+# the outcome of the latest goal: a supervisor that subscribes late still learns it
+PLANNER_DIAGNOSTICS_QOS = PLAN_QOS
+ODOM_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
+CMD_VEL_QOS = ODOM_QOS
+LOCAL_PLAN_QOS = ODOM_QOS
+DIAGNOSTICS_QOS = ODOM_QOS
+GOAL_QOS = ODOM_QOS
+CLOCK_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
+
+# Messages the recorder queues per topic while the executor is busy.
+_RECORDER_DEPTH = 100
+
+
+def recorder_qos(*, latched: bool) -> QoSProfile:
+    """Return the recorder's subscription QoS (reliable; transient_local if latched)."""
+    return QoSProfile(depth=_RECORDER_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=(DurabilityPolicy.TRANSIENT_LOCAL if latched
+                                  else DurabilityPolicy.VOLATILE),
+                      history=HistoryPolicy.KEEP_LAST)

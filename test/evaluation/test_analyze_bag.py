@@ -1,0 +1,124 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""analyze_bag on bags written here with rosbags (no DDS): the world and the goal flag."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+import numpy as np
+import pytest
+from rclpy.serialization import serialize_message
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import get_typestore, Stores
+
+from mpc_local_planner.core.controller import ControlOutput, Reason
+from mpc_local_planner.core.diagnostics import BagKey, ControllerDiagnostics
+from mpc_local_planner.core.mpc import PlanSource
+from mpc_local_planner.core.obstacles import min_clearance
+from mpc_local_planner.evaluation.analyze_bag import analyze, main, read_run, recorded_world
+from mpc_local_planner.worlds.data_files import resolve_data_file
+from mpc_local_planner.worlds.world import load_world
+
+RRT_WORLD = resolve_data_file('rrt_cluttered')
+
+
+def steps(count: int, *, arrive: bool) -> list[ControllerDiagnostics]:
+    """Control steps along y = 1.65, between rrt_cluttered's obstacles."""
+    records = []
+    for i in range(count):
+        last = arrive and i == count - 1
+        output = ControlOutput(np.array([0.0 if last else 0.3, 0.0]), None,
+                               Reason.GOAL_REACHED if last else Reason.TRACKING)
+        record = ControllerDiagnostics.from_output(
+            output, state=np.array([0.1 * i, 1.65, 0.0]), state_time=0.2 * i,
+            failures_total=0)
+        records.append(record._replace(source=PlanSource.SOLVER, s=i / count, value=1.0,
+                                       solve_ms=2.0))
+    return records
+
+
+def write_bag(bag: Path, records: list[ControllerDiagnostics], *,
+              world_file: Path | None = None) -> None:
+    """Write /mpc/diagnostics as bag_recorder would, with the world in the metadata if given."""
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        if world_file is not None:
+            writer.set_custom_data(BagKey.WORLD_FILE.value, str(world_file))
+            writer.set_custom_data(BagKey.WORLD.value, world_file.read_text())
+        connection = writer.add_connection('/mpc/diagnostics',
+                                           'diagnostic_msgs/msg/DiagnosticArray',
+                                           typestore=typestore)
+        for record in records:
+            msg = DiagnosticArray()
+            msg.header.stamp.sec = int(record.state_time)
+            msg.header.stamp.nanosec = int(round((record.state_time % 1) * 1e9))
+            msg.status = [DiagnosticStatus(message=record.message, values=[
+                KeyValue(key=k, value=v) for k, v in record.to_values()])]
+            writer.write(connection, int(record.state_time * 1e9), serialize_message(msg))
+
+
+def test_the_world_recorded_in_the_bag_gives_the_true_clearance(tmp_path: Path) -> None:
+    world_copy = tmp_path / 'rrt_cluttered.yaml'
+    world_copy.write_text(RRT_WORLD.read_text())
+    bag = tmp_path / 'bag'
+    write_bag(bag, steps(20, arrive=True), world_file=world_copy)
+    world_copy.unlink()  # the contents travel in the bag
+
+    recorded = recorded_world(bag)
+    assert recorded is not None and recorded.name == 'rrt_cluttered'
+    metrics = analyze(bag, tmp_path / 'out')
+    world = load_world(RRT_WORLD)
+    rows = read_run(bag).rows
+    truth = min_clearance(list(world.obstacles), rows[:, 1:3]) - world.robot_radius
+    assert metrics['world_name'] == 'rrt_cluttered'
+    assert metrics['min_clearance'] == pytest.approx(truth)
+    # --world takes precedence (the paper's box is elsewhere: a wrong, larger clearance)
+    paper = analyze(bag, tmp_path / 'paper', world_file='paper_obstacle')
+    assert paper['min_clearance'] > metrics['min_clearance'] + 0.1
+
+
+def test_a_bag_without_its_world_is_refused_in_one_line_unless_given_one(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bag = tmp_path / 'bag'
+    write_bag(bag, steps(5, arrive=False))
+    assert main([str(bag), '--out', str(tmp_path / 'out')]) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and err.startswith('analyze_bag: ') and '--world' in err
+    assert not (tmp_path / 'out' / 'metrics.json').exists()
+    with pytest.raises(ValueError, match='does not record its world'):
+        analyze(bag, tmp_path / 'out')
+    assert main([str(bag), '--out', str(tmp_path / 'out'), '--world', 'rrt_cluttered']) == 1
+
+
+def test_the_goal_flag_comes_from_the_last_step_when_only_it_says_so(tmp_path: Path) -> None:
+    bag = tmp_path / 'bag'
+    write_bag(bag, steps(10, arrive=True), world_file=RRT_WORLD)
+    assert read_run(bag).goal_reached
+    metrics = analyze(bag, tmp_path / 'out')
+    assert json.loads((tmp_path / 'out' / 'metrics.json').read_text())[
+        'controller_goal_reached'] is True
+    assert metrics['controller_goal_reached'] is True
+    unfinished = tmp_path / 'unfinished'
+    write_bag(unfinished, steps(9, arrive=False), world_file=RRT_WORLD)
+    assert not read_run(unfinished).goal_reached
+
+
+def test_a_bag_with_nothing_to_analyse_is_refused_not_crashed(tmp_path: Path) -> None:
+    bag = tmp_path / 'bag'
+    write_bag(bag, [], world_file=RRT_WORLD)
+    with pytest.raises(ValueError, match='nothing to analyse'):
+        analyze(bag, tmp_path / 'out')
