@@ -31,23 +31,25 @@ import math
 import platform
 import sys
 import time
-from typing import Any, Sequence
+from typing import Any, NamedTuple, Sequence
 
 import casadi as ca
 import numpy as np
 
 from mpc_local_planner.core.config import MpcConfig, SOLVERS
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.mpc.step import PathReferenceMPC
+from mpc_local_planner.core.mpc import PathReferenceMPC
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import paper_sinusoid, ReferencePath
+from mpc_local_planner.evaluation.rollout import ControlStep, rollout, StopRule
 
 __all__ = ['closed_loop', 'extra_obstacles', 'main', 'NaiveMpc', 'paper_obstacle']
 
 STEP = 0.2
 HORIZONS = (10, 20, 40)
 OBSTACLE_COUNTS = (1, 5, 20)
-# Stop a closed loop when the robot is this close to the target (and count it as reached).
+# Stop a closed loop when the robot is this close to the target (and count it as reached;
+# headings compared wrapped).
 REACHED_POSITION = 0.02
 REACHED_HEADING = 0.05
 
@@ -73,6 +75,12 @@ def extra_obstacles(count: int, path: ReferencePath) -> list[ConvexPolygon]:
         c = pose[:2] + (0.42 + 0.08 * (i % 2)) * normal
         boxes.append(ConvexPolygon.from_box(c[0] - 0.05, c[1] - 0.05, c[0] + 0.05, c[1] + 0.05))
     return boxes
+
+
+class NaiveSolution(NamedTuple):
+    """What the naive MPC reports of a step beyond the rollout's ControlStep."""
+
+    iterations: int
 
 
 class NaiveMpc:
@@ -118,6 +126,12 @@ class NaiveMpc:
         opti.solver('ipopt', {'print_time': False}, {'print_level': 0, 'sb': 'yes'})
         self._opti, self._x0, self._U = opti, x0, U
 
+    def step(self, x: np.ndarray) -> ControlStep:
+        """Return the rollout's step: u0, solve time, success, iterations in detail."""
+        u, seconds, iterations, ok = self.solve(x)
+        return ControlStep(u=u, solve_time_s=seconds, success=ok,
+                           detail=NaiveSolution(iterations=iterations))
+
     def solve(self, x: np.ndarray) -> tuple[np.ndarray, float, int, bool]:
         """Return (u0, solve seconds, iterations, success)."""
         self._opti.set_value(self._x0, x)
@@ -143,13 +157,14 @@ def _stats(values: list[float]) -> dict[str, float]:
 
 def closed_loop(solver: str, horizon: int, obstacles: list[ConvexPolygon], *,
                 max_steps: int, compile_functions: bool = True) -> dict[str, Any]:
-    """Run the paper's scenario in closed loop and return timings and the outcome.
+    """Run the paper's scenario in closed loop (evaluation.rollout); return timings and outcome.
 
     solver is a backend of MpcConfig.solver or 'naive'. For the package's backends, a first
-    closed loop builds (and compiles) the NLPs it meets; the timed one reuses them.
+    closed loop builds (and compiles) the NLPs it meets; the timed one reuses them. A run
+    ends within REACHED_POSITION and REACHED_HEADING of the target (headings wrapped) or
+    after max_steps solves (every recorded state is solved for, the final one included).
     """
     model, path = Unicycle(), paper_sinusoid()
-    goal = path.goal
     if solver == 'naive':
         config = MpcConfig(horizon=horizon, step=STEP)
         controller: Any = NaiveMpc(model, config, obstacles, path)
@@ -158,51 +173,38 @@ def closed_loop(solver: str, horizon: int, obstacles: list[ConvexPolygon], *,
         config = MpcConfig(horizon=horizon, step=STEP, solver=solver, compile=compile_functions)
         controller = PathReferenceMPC(model, config, obstacles=obstacles, path=path)
         runs = 2
+    # No stall rule: the naive MPC stands in front of the box, and its solves there are timed
+    # for the whole run, as the published tables were.
+    rule = StopRule(time_limit=(max_steps - 1) * STEP, position_tolerance=REACHED_POSITION,
+                    heading_tolerance=REACHED_HEADING, stall_steps=max_steps + 2)
     warmup: dict[str, Any] = {}
     for run in range(runs):
-        x = path.start.copy()
-        solve_ms, step_ms, iterations, in_reach, active = [], [], [], [], []
-        length, failures, lyapunov_bad, collision = 0.0, 0, 0, False
-        reached = False
-        for _ in range(max_steps):
-            start = time.perf_counter()
-            if solver == 'naive':
-                u, seconds, its, ok = controller.solve(x)
-                failures += not ok
-            else:
-                sol = controller.solve(x)
-                u, seconds, its = sol.u0, sol.solve_time_s, sol.iterations
-                failures += sol.source != 'solver'
-                lyapunov_bad += sol.lyapunov_ok is False
-                in_reach.append(sol.obstacles_in_reach)
-                active.append(sol.obstacles_active)
-            step_ms.append(1e3 * (time.perf_counter() - start))
-            solve_ms.append(1e3 * seconds)
-            iterations.append(its)
-            x_next = model.step(x, u, STEP)
-            length += float(np.hypot(*(x_next[:2] - x[:2])))
-            x = x_next
-            collision = collision or any(bool(o.contains(x[:2])[0]) for o in obstacles)
-            if (np.hypot(*(x[:2] - goal[:2])) < REACHED_POSITION
-                    and abs(x[2] - goal[2]) < REACHED_HEADING):
-                reached = True
-                break
+        result = rollout(controller, model, path.start, path.goal, h=STEP, rule=rule)
         if run == 0 and runs == 2:
-            warmup = {'step_ms': _stats(step_ms)}
+            warmup = {'step_ms': _stats(list(1e3 * result.step_times))}
             controller.wait_compiled()
             controller.reset()
+    details = [step.detail for step in result.steps]
+    iterations = [int(getattr(d, 'iterations', 0)) for d in details]
+    in_reach = [d.obstacles_in_reach for d in details if hasattr(d, 'obstacles_in_reach')]
+    active = [d.obstacles_active for d in details if hasattr(d, 'obstacles_active')]
+    xy = result.rows[:, 1:3]
     return {
         'solver': solver if solver == 'naive' or not compile_functions else f'{solver}+compiled',
-        'horizon': horizon, 'obstacles': len(obstacles), 'steps': len(solve_ms),
-        'solve_ms': _stats(solve_ms), 'step_ms': _stats(step_ms),
+        'horizon': horizon, 'obstacles': len(obstacles), 'steps': len(result.steps),
+        'solve_ms': _stats(list(1e3 * result.solve_times)),
+        'step_ms': _stats(list(1e3 * result.step_times)),
         'iterations_median': float(np.median(iterations)),
         'iterations_max': int(np.max(iterations)),
         'in_reach_max': int(max(in_reach, default=len(obstacles))),
         'in_reach_median': float(np.median(in_reach)) if in_reach else float(len(obstacles)),
         'active_max': int(max(active, default=len(obstacles))),
         'active_median': float(np.median(active)) if active else float(len(obstacles)),
-        'reached': reached, 'path_length': length, 'collision': collision,
-        'failures': failures, 'lyapunov_violations': lyapunov_bad,
+        'reached': result.reached, 'outcome': result.outcome.value,
+        'path_length': float(np.sum(np.linalg.norm(np.diff(xy, axis=0), axis=1))),
+        'collision': any(bool(np.any(o.contains(xy))) for o in obstacles),
+        'failures': result.solver_failures,
+        'lyapunov_violations': sum(1 for ok in result.lyapunov_ok if ok is False),
         'first_run': warmup,
     }
 
@@ -254,7 +256,13 @@ def bench_dds(steps: int = 100) -> dict[str, Any]:
     from rclpy.executors import SingleThreadedExecutor
     from rosgraph_msgs.msg import Clock
 
-    from mpc_local_planner.ros.conversions import ODOM_QOS, seconds_to_stamp, state_to_odometry
+    from mpc_local_planner.core.diagnostics import (
+        CONTROLLER_DIAGNOSTICS_TOPIC,
+        ControllerDiagnostics,
+    )
+    from mpc_local_planner.ros.conversions import seconds_to_stamp, state_to_odometry
+    from mpc_local_planner.ros.executors import spin_until
+    from mpc_local_planner.ros.qos import CLOCK_QOS, CMD_VEL_QOS, DIAGNOSTICS_QOS, ODOM_QOS
 
     env = dict(os.environ)
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
@@ -277,13 +285,14 @@ def bench_dds(steps: int = 100) -> dict[str, Any]:
         got['cmd'] = (time.perf_counter(), np.array([msg.linear.x, msg.angular.z]))
 
     def diag_callback(msg: DiagnosticArray) -> None:
-        values = {kv.key: kv.value for st in msg.status for kv in st.values}
-        got['diag'] = values
+        got['diag'] = ControllerDiagnostics.from_values(
+            (kv.key, kv.value) for st in msg.status for kv in st.values)
 
-    clock_pub = node.create_publisher(Clock, '/clock', 10)
+    clock_pub = node.create_publisher(Clock, '/clock', CLOCK_QOS)
     odom_pub = node.create_publisher(Odometry, 'odom', ODOM_QOS)
-    node.create_subscription(Twist, 'cmd_vel', cmd_callback, ODOM_QOS)
-    node.create_subscription(DiagnosticArray, 'mpc/diagnostics', diag_callback, ODOM_QOS)
+    node.create_subscription(Twist, 'cmd_vel', cmd_callback, CMD_VEL_QOS)
+    node.create_subscription(DiagnosticArray, CONTROLLER_DIAGNOSTICS_TOPIC, diag_callback,
+                             DIAGNOSTICS_QOS)
     model, path = Unicycle(), paper_sinusoid()
     x, t_sim = path.start.copy(), 1.0
     latency, beyond, solve, rss = [], [], [], math.nan
@@ -306,13 +315,11 @@ def bench_dds(steps: int = 100) -> dict[str, Any]:
             t_sim += STEP
             sent = time.perf_counter()
             clock_pub.publish(Clock(clock=seconds_to_stamp(t_sim)))
-            end = sent + 5.0
-            while (got['cmd'] is None or got['diag'] is None) and time.perf_counter() < end:
-                executor.spin_once(timeout_sec=0.01)
-            if got['cmd'] is None or got['diag'] is None:
+            if not spin_until(executor, lambda: got['cmd'] is not None and got['diag'] is not None,
+                              timeout_sec=5.0, period_sec=0.01):
                 continue
             received, u = got['cmd']
-            solve_ms = float(got['diag'].get('solve_ms', 'nan'))
+            solve_ms = got['diag'].solve_ms
             if k >= 5 and math.isfinite(solve_ms):  # first steps build; at the goal, no solve
                 latency.append(1e3 * (received - sent))
                 solve.append(solve_ms)

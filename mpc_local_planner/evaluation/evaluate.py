@@ -30,11 +30,13 @@
 
 Controllers: ``proposed`` (PathReferenceMPC on the RRT* WaypointPath), ``tracking`` (the
 TrackingMPC baseline, target only) and ``pure_pursuit`` (lookahead pure pursuit of the same
-polyline, no obstacle constraints). A run stops at success, at first contact, at the time
-limit, or after STALL_STEPS steps standing still.
+polyline, no obstacle constraints). Each run is an evaluation.rollout: it stops at success
+(position only), at first contact, at the time limit, or after STALL_STEPS steps standing
+still; the ``stop_reason`` column holds the rollout's Outcome value.
 
 Writes ``runs.csv`` (one row per world x controller, appended as runs finish) and
-``summary.md`` (one table row per controller).
+``summary.md`` (one table row per controller). With ``--save-trajectories``, the runs go to
+``OUT/trajectories`` and ``--plot 0,1,2`` later draws those worlds in ``OUT/<suite>_runs.png``.
 """
 
 from __future__ import annotations
@@ -43,30 +45,43 @@ import argparse
 from concurrent.futures import as_completed, ProcessPoolExecutor
 import csv
 from dataclasses import dataclass
+import json
 import math
 import multiprocessing
 import os
 from pathlib import Path
 import sys
 import time
-from typing import Any, Callable, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
 from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit, PurePursuitConfig
+from mpc_local_planner.core.baselines.tracking_mpc import TrackingMPC
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.mpc.step import PathReferenceMPC, TrackingMPC
-from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.mpc import PathReferenceMPC
+from mpc_local_planner.core.obstacles import ConvexPolygon, segment_collides
 from mpc_local_planner.core.paths import WaypointPath
 from mpc_local_planner.core.planner import (
     PlannerConfig,
     PlanningError,
     RrtStarPlanner,
-    segment_collides,
 )
 from mpc_local_planner.evaluation.metrics import compute_metrics
-from mpc_local_planner.evaluation.trajectory import write_trajectory_csv
+from mpc_local_planner.evaluation.plotting import plot_world_panels, WorldPanel
+from mpc_local_planner.evaluation.rollout import (
+    circle_clearance,
+    Clearance,
+    MpcAdapter,
+    Outcome,
+    polygon_clearance,
+    PurePursuitAdapter,
+    rollout,
+    RolloutController,
+    StopRule,
+)
+from mpc_local_planner.evaluation.trajectory import read_trajectory_csv, write_trajectory_csv
 from mpc_local_planner.worlds.data_files import BARN_DIR
 
 __all__ = [
@@ -74,6 +89,7 @@ __all__ = [
     'barn_score',
     'CONTROLLERS',
     'main',
+    'plot_suite_runs',
     'random_world',
     'run_task',
     'shortcut',
@@ -89,8 +105,6 @@ CSV_COLUMNS = (
 )
 DEFAULT_BARN_DIR = BARN_DIR
 ROBOT_RADIUS = 0.2
-STALL_INPUT = 1e-4
-STALL_STEPS = 25
 # Random suite: the workspace, the start and goal, and success.
 RANDOM_BOUNDS = (-1.0, 7.0, -3.0, 3.0)
 RANDOM_START = np.array([0.0, 0.0, 0.0])
@@ -276,7 +290,6 @@ def barn_world(path: Path, *, seed: int, margin: float, merge: bool = False) -> 
     planner and the MPC; contact is still measured from the exact cylinders.
     """
     import dataclasses
-    import json
 
     from mpc_local_planner.worlds.merging import merge_cylinders
     from mpc_local_planner.worlds.world import load_barn_world
@@ -314,26 +327,11 @@ def _scenario(task: Task, margin: float) -> Scenario:
                       margin=margin, merge=task.merge)
 
 
-def _clearance_fn(scenario: Scenario) -> Callable[[np.ndarray], np.ndarray]:
+def _clearance_fn(scenario: Scenario) -> Clearance:
     """Return points (n, 2) -> clearance of the robot circle from the true obstacles."""
     if scenario.cylinders is not None:
-        centres = scenario.cylinders
-        gap = scenario.cylinder_radius + ROBOT_RADIUS
-
-        def circles(points: np.ndarray) -> np.ndarray:
-            d = np.linalg.norm(points[:, None, :] - centres[None, :, :], axis=2)
-            return np.min(d, axis=1) - gap
-        return circles
-
-    obstacles = scenario.obstacles
-
-    def polygons(points: np.ndarray) -> np.ndarray:
-        dist = np.min(np.stack([o.distance(points) for o in obstacles]), axis=0)
-        inside = np.zeros(len(points), dtype=bool)
-        for o in obstacles:
-            inside |= o.contains(points)
-        return np.where(inside, -1.0, dist) - ROBOT_RADIUS
-    return polygons
+        return circle_clearance(scenario.cylinders, scenario.cylinder_radius, ROBOT_RADIUS)
+    return polygon_clearance(scenario.obstacles, ROBOT_RADIUS)
 
 
 # Per worker process: one MPC per (controller, bounds), reused across worlds so the NLPs it
@@ -342,19 +340,12 @@ _MPC_CACHE: dict[tuple, PathReferenceMPC | TrackingMPC] = {}
 
 
 def _controller(task: Task, scenario: Scenario, model: Unicycle,
-                config: MpcConfig) -> Callable[[np.ndarray], tuple]:
-    """Return x -> (u, s, value, solve_ms, ok) for the task's controller."""
+                config: MpcConfig) -> RolloutController:
+    """Return the task's controller with the rollout's step interface."""
     if task.controller == 'pure_pursuit':
-        follower = PurePursuit(scenario.waypoints, PurePursuitConfig(
+        return PurePursuitAdapter(PurePursuit(scenario.waypoints, PurePursuitConfig(
             v_max=model.v_max, omega_max=model.omega_max,
-            goal_tolerance=min(0.03, scenario.goal_tolerance / 2)))
-
-        def pursue(x: np.ndarray) -> tuple:
-            t0 = time.perf_counter()
-            u = follower.command(x)
-            return u, follower.progress / max(follower.length, 1e-9), math.nan, \
-                (time.perf_counter() - t0) * 1e3, True
-        return pursue
+            goal_tolerance=min(0.03, scenario.goal_tolerance / 2))))
     if task.controller not in ('proposed', 'tracking'):
         msg = f'unknown controller {task.controller!r}'
         raise ValueError(msg)
@@ -374,12 +365,7 @@ def _controller(task: Task, scenario: Scenario, model: Unicycle,
     # its candidate trajectory (constraint generation, see mpc.py)
     mpc.set_obstacles(scenario.obstacles)
     mpc.reset()
-
-    def solve(x: np.ndarray) -> tuple:
-        solution = mpc.solve(x)
-        return solution.u0, solution.s, solution.value, solution.solve_time_s * 1e3, \
-            solution.success
-    return solve
+    return MpcAdapter(mpc)
 
 
 def _empty_row(task: Task, scenario: Scenario | None, reason: str) -> dict[str, Any]:
@@ -404,38 +390,18 @@ def run_task(task: Task) -> dict[str, Any]:
         return _empty_row(task, scenario, 'no reference path: ' + scenario.note)
     controller = _controller(task, scenario, model, config)
     clearance = _clearance_fn(scenario)
-    h = config.step
-    x = np.asarray(scenario.start, dtype=float).copy()
     goal = np.asarray(scenario.goal, dtype=float)
-    rows: list[list[float]] = []
-    failures = still = 0
-    reason = 'time limit'
-    success_time = None
-    collided = False
-    for k in range(int(math.ceil(scenario.time_limit / h)) + 1):
-        t = k * h
-        if clearance(x[None, :2])[0] <= 0.0:
-            collided = True
-        distance = math.hypot(x[0] - goal[0], x[1] - goal[1])
-        if collided or distance <= scenario.goal_tolerance:
-            rows.append([t, *x[:3], 0.0, 0.0, math.nan, math.nan, math.nan])
-            if collided:
-                reason = 'contact'
-            else:
-                reason, success_time = 'goal', t
-            break
-        u, s, value, solve_ms, ok = controller(x)
-        failures += 0 if ok else 1
-        rows.append([t, *x[:3], *np.asarray(u)[:2], s, value, solve_ms])
-        still = still + 1 if float(np.max(np.abs(u))) < STALL_INPUT else 0
-        if still >= STALL_STEPS:
-            reason = 'stalled'
-            break
-        x = model.step(x, np.asarray(u, dtype=float), h)
-    data = np.array(rows, dtype=float)
-    metrics = compute_metrics(data, goal=goal, obstacles=(), solver_failures=failures)
+    # success is a position within the goal tolerance: neither suite asks for a heading
+    rule = StopRule(time_limit=scenario.time_limit,
+                    position_tolerance=scenario.goal_tolerance)
+    run = rollout(controller, model, scenario.start, goal, h=config.step, rule=rule,
+                  clearance=clearance)
+    data = run.rows
+    metrics = compute_metrics(data, goal=goal, obstacles=(),
+                              solver_failures=run.solver_failures)
     min_clear = float(np.min(clearance(data[:, 1:3])))
-    success = success_time is not None and not collided
+    success = run.reached
+    success_time = run.end_time if success else None
     ref_len = _length(scenario.waypoints) if scenario.waypoints is not None else None
     if task.trajectory_dir:
         folder = Path(task.trajectory_dir)
@@ -444,15 +410,17 @@ def run_task(task: Task) -> dict[str, Any]:
         if scenario.waypoints is not None:
             np.savetxt(folder / f'path_{task.world:03d}.csv', scenario.waypoints,
                        delimiter=',', header='x,y', comments='')
-    row = _empty_row(task, scenario, reason)
+        if task.suite == 'random':
+            _save_world(folder, scenario, task.world)
+    row = _empty_row(task, scenario, run.outcome.value + (f': {run.note}' if run.note else ''))
     row.update(
-        success=success, collision=collided or min_clear <= 0.0,
-        time=success_time if success_time is not None else data[-1, 0],
+        success=success, collision=run.outcome is Outcome.COLLISION or min_clear <= 0.0,
+        time=run.end_time,
         path_length=metrics['path_length'], min_clearance=min_clear,
         solve_ms_median=metrics['solve_ms_median'], solve_ms_max=metrics['solve_ms_max'],
         reference_length=ref_len,
         final_distance=math.hypot(data[-1, 1] - goal[0], data[-1, 2] - goal[1]),
-        steps=len(data), solver_failures=failures)
+        steps=len(data), solver_failures=run.solver_failures)
     if scenario.barn_path_length is not None:
         row['barn_score'] = barn_score(success, success_time, scenario.barn_path_length)
     return row
@@ -535,52 +503,88 @@ def summarize(rows: list[dict[str, Any]], *, suite: str, title: str = '') -> str
     return '\n'.join(lines) + '\n'
 
 
-def plot_barn_runs(out: Path, barn_dir: Path, worlds: Sequence[int]) -> Path:
-    """Draw the saved BARN runs of some worlds (cylinders, RRT* path, trajectories) in a PNG.
+def _world_file(folder: Path, world: int) -> Path:
+    return folder / f'world_{world:03d}.json'
 
-    Reads ``OUT/trajectories`` (written with --save-trajectories) and ``OUT/runs.csv``.
-    """
-    import json
 
-    import matplotlib
+def _save_world(folder: Path, scenario: Scenario, world: int) -> None:
+    """Write what a random world's figure needs (obstacles, start, goal) beside its runs."""
+    data = {'name': scenario.name, 'bounds': list(scenario.bounds),
+            'obstacles': [o.vertices.tolist() for o in scenario.obstacles],
+            'start': np.asarray(scenario.start, dtype=float).tolist(),
+            'goal': np.asarray(scenario.goal, dtype=float).tolist(),
+            'goal_tolerance': scenario.goal_tolerance}
+    _world_file(folder, world).write_text(json.dumps(data) + '\n', encoding='utf-8')
 
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
 
-    from mpc_local_planner.evaluation.trajectory import read_trajectory_csv
-
+def _panel(out: Path, suite: str, world: int, barn_dir: Path,
+           rows: dict[tuple[int, str], dict[str, Any]]) -> WorldPanel:
+    """Return the figure panel of one world of an earlier run with --save-trajectories."""
     folder = out / 'trajectories'
-    rows = {(int(r['world']), r['controller']): r for r in _read_rows(out / 'runs.csv')}
-    fig, axes = plt.subplots(1, len(worlds), figsize=(3.2 * len(worlds), 7.5), squeeze=False)
-    for ax, world in zip(axes[0], worlds, strict=True):
+    if suite == 'barn':
         data = json.loads((barn_dir / f'world_{world:03d}.json').read_text(encoding='utf-8'))
+        polygons: list[np.ndarray] = []
+        circles = np.asarray(data['cylinders'], dtype=float).reshape(-1, 2)
         radius = float(data['cylinder_radius'])
-        for cx, cy in data['cylinders']:
-            ax.add_patch(plt.Circle((cx, cy), radius, color='0.3'))
-        path_file = folder / f'path_{world:03d}.csv'
-        if path_file.is_file():
-            path = np.loadtxt(path_file, delimiter=',', skiprows=1, ndmin=2)
-            ax.plot(path[:, 0], path[:, 1], 'k--', lw=0.8, label='RRT* path')
-        for name, colour in (('proposed', 'tab:blue'), ('tracking', 'tab:red'),
-                             ('pure_pursuit', 'tab:orange')):
-            run = folder / f'{name}_{world:03d}.csv'
-            if not run.is_file():
-                continue
-            traj = np.asarray(read_trajectory_csv(run))
-            row = rows.get((world, name), {})
-            ok = 'ok' if _true(row.get('success')) else 'fail'
-            ax.plot(traj[:, 1], traj[:, 2], color=colour, lw=1.5, label=f'{name} ({ok})')
-        start, goal = data['start'], data['goal']
-        ax.plot(start[0], start[1], 'go')
-        ax.add_patch(plt.Circle(goal, float(data.get('goal_tolerance', 1.0)), fill=False,
-                                color='g', ls=':'))
-        ax.set_aspect('equal')
-        ax.set_title(f'BARN world {world}')
-        ax.legend(fontsize=6, loc='lower right')
-    fig.tight_layout()
-    target = out / 'barn_runs.png'
-    fig.savefig(target, dpi=120)
-    plt.close(fig)
+        bounds = None
+        name = f'BARN world {world}'
+    else:
+        data = json.loads(_world_file(folder, world).read_text(encoding='utf-8'))
+        polygons = [np.asarray(v, dtype=float) for v in data['obstacles']]
+        circles, radius = None, 0.0
+        bounds = tuple(data['bounds'])
+        name = f'random world {world}'
+    path_file = folder / f'path_{world:03d}.csv'
+    reference = (np.loadtxt(path_file, delimiter=',', skiprows=1, ndmin=2)
+                 if path_file.is_file() else None)
+    runs, outcomes = [], []
+    for controller in CONTROLLERS:
+        run = folder / f'{controller}_{world:03d}.csv'
+        if not run.is_file():
+            continue
+        row = rows.get((world, controller), {})
+        reached = _true(row.get('success'))
+        runs.append((controller, read_trajectory_csv(run), reached))
+        outcomes.append(f"{controller}: {str(row.get('stop_reason', '?')).split(':')[0]}")
+    return WorldPanel(
+        title='\n'.join([name, *outcomes]), polygons=polygons, circles=circles,
+        circle_radius=radius, start=np.asarray(data['start'], dtype=float),
+        goal=np.asarray(data['goal'], dtype=float),
+        goal_tolerance=float(data.get('goal_tolerance', 1.0)), reference=reference, runs=runs,
+        bounds=bounds)
+
+
+def plot_suite_runs(out: Path, suite: str, worlds: Sequence[int], *,
+                    barn_dir: Path = DEFAULT_BARN_DIR) -> Path:
+    """Draw the saved runs of some worlds (obstacles, reference path, trajectories) in a PNG.
+
+    Reads ``OUT/runs.csv`` and ``OUT/trajectories`` (written with --save-trajectories) and
+    writes ``OUT/barn_runs.png`` or ``OUT/random_runs.png``.
+
+    Raises:
+        FileNotFoundError: if the run's files for a world are missing.
+
+    """
+    folder = out / 'trajectories'
+    runs_csv = out / 'runs.csv'
+    needed = [runs_csv] + ([_world_file(folder, w) for w in worlds] if suite == 'random'
+                           else [folder])
+    missing = [str(p) for p in needed if not p.exists()]
+    if missing:
+        msg = (f'{", ".join(missing[:3])} not found: run the {suite} suite with '
+               f'--save-trajectories and --out {out} first')
+        raise FileNotFoundError(msg)
+    rows = {(int(r['world']), r['controller']): r for r in _read_rows(runs_csv)}
+    panels = [_panel(out, suite, w, barn_dir, rows) for w in worlds]
+    if suite == 'barn':
+        title = 'BARN worlds: RRT* reference and closed loops (circle robot, known map)'
+        size = (2.4, 7.0)
+    else:
+        title = 'Random worlds: RRT* reference and closed loops'
+        size = (4.6, 3.8)
+    target = out / f'{suite}_runs.png'
+    plot_world_panels(target, panels, title=title, panel_size=size,
+                      columns=5 if suite == 'barn' else 3)
     return target
 
 
@@ -620,11 +624,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--merge', action='store_true',
                         help='BARN: merge rows of touching cylinders into rectangles')
     parser.add_argument('--plot', default='',
-                        help='BARN: only draw these worlds (e.g. 0,10,50) from an earlier '
-                        'run with --save-trajectories in OUT, then exit')
+                        help='only draw these worlds (e.g. 0,10,50) of an earlier run of the '
+                        'suite with --save-trajectories in OUT, then exit')
     args = parser.parse_args(argv)
     if args.plot:
-        print(plot_barn_runs(args.out, args.barn_dir, _parse_worlds(args.plot)))
+        try:
+            target = plot_suite_runs(args.out, args.suite, _parse_worlds(args.plot),
+                                     barn_dir=args.barn_dir)
+        except FileNotFoundError as err:
+            parser.error(str(err))
+        print(target)
         return 0
 
     controllers = [c.strip() for c in args.controllers.split(',') if c.strip()]

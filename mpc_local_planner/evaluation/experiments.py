@@ -23,8 +23,10 @@
 - rrt: Fig. 3: an RRT* path after 1000 iterations, corners and all, followed by the MPC on a
   shorter route, with no smoothing.
 
-Each run writes metrics.json and trajectory.csv (design.md section 3) in its own folder, and
-each experiment a PNG with all its runs.
+Each run is an evaluation.rollout (stopping within STOP_POSITION_TOLERANCE and
+STOP_HEADING_TOLERANCE of the target, headings wrapped) and writes metrics.json (with the
+rollout's outcome) and trajectory.csv (evaluation/trajectory.py) in its own folder; each
+experiment draws a PNG with all its runs.
 """
 
 from __future__ import annotations
@@ -32,21 +34,22 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass, field
 import json
-import math
 from pathlib import Path
 import sys
 from typing import Any, Sequence
 
 import numpy as np
 
+from mpc_local_planner.core.baselines.tracking_mpc import TrackingMPC
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import RobotModel, Unicycle
-from mpc_local_planner.core.mpc.step import PathReferenceMPC, TrackingMPC
+from mpc_local_planner.core.mpc import PathReferenceMPC
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path, WaypointPath
 from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
-from mpc_local_planner.evaluation.metrics import compute_metrics, reached_mask
+from mpc_local_planner.evaluation.metrics import compute_metrics
 from mpc_local_planner.evaluation.plotting import plot_runs
+from mpc_local_planner.evaluation.rollout import Outcome, polygon_clearance, rollout, StopRule
 from mpc_local_planner.evaluation.trajectory import write_trajectory_csv
 from mpc_local_planner.worlds.world import load_world, World
 
@@ -58,29 +61,29 @@ WORLDS_DIR = CONFIG_DIR / 'worlds'
 # the figures show convergence, not just arrival.
 STOP_POSITION_TOLERANCE = 0.01
 STOP_HEADING_TOLERANCE = 0.05
-# A run that commands |u| below this for STALL_STEPS steps has stopped for good.
-STALL_INPUT = 1e-4
-STALL_STEPS = 25
 PREDICTIONS_SHOWN = 6
 # RRT* extension length of the rrt experiment: short steps, as a planner that must answer
 # fast would use, leave the corners of the paper's Fig. 3 after 1000 iterations.
 RRT_RANGE = 0.3
+# The horizon figure's enlarged panel: the corner, where the nine runs part.
+HORIZON_ZOOM = (1.3, 2.15, -0.1, 0.75)
 
 
 @dataclass
 class ClosedLoopResult:
-    """What a closed-loop run produced."""
+    """What a closed-loop run produced: the rollout, a few predictions and the metrics."""
 
     label: str
     rows: np.ndarray
     predictions: list[np.ndarray]
     lyapunov_ok: list[bool | None]
     solver_failures: int
+    outcome: Outcome
     metrics: dict[str, Any] = field(default_factory=dict)
 
 
 def run_closed_loop(
-    controller: PathReferenceMPC | TrackingMPC,
+    controller: Any,
     model: RobotModel,
     start: np.ndarray,
     *,
@@ -91,40 +94,30 @@ def run_closed_loop(
     robot_radius: float = 0.0,
     reference_length: float | None = None,
 ) -> ClosedLoopResult:
-    """Run controller and model in closed loop (the do-mpc make_step symmetry).
+    """Run an MPC and the model in closed loop (evaluation.rollout) and compute the metrics.
 
-    The loop ends at the goal (within STOP_* tolerances), after max_time, or when the robot
-    has stood still for STALL_STEPS steps away from the goal (the baseline's local minimum).
+    The run ends at the goal (within the STOP_* tolerances, headings wrapped), at contact,
+    after max_time, or when the robot has stood still for STALL_STEPS steps away from the
+    goal (the baseline's local minimum).
     """
     h = controller.config.step
-    x = np.asarray(start, dtype=float).copy()
-    rows, predictions, lyapunov = [], [], []
-    failures = 0
-    still = 0
-    steps = int(math.ceil(max_time / h))
-    for k in range(steps + 1):
-        solution = controller.solve(x)
-        u = solution.u0
-        failures += 0 if solution.success else 1
-        lyapunov.append(solution.lyapunov_ok)
-        rows.append([k * h, *x[:3], *u[:2], solution.s, solution.value,
-                     solution.solve_time_s * 1e3])
-        if k % max(1, steps // 40) == 0:
-            predictions.append(solution.x_pred[:, :3].copy())
-        done = reached_mask(np.array(rows[-1]), goal, position_tolerance=STOP_POSITION_TOLERANCE,
-                            heading_tolerance=STOP_HEADING_TOLERANCE)[0]
-        still = still + 1 if np.max(np.abs(u)) < STALL_INPUT else 0
-        if done or still >= STALL_STEPS or k == steps:
-            break
-        x = model.step(x, u, h)
-    data = np.array(rows)
+    rule = StopRule(time_limit=max_time, position_tolerance=STOP_POSITION_TOLERANCE,
+                    heading_tolerance=STOP_HEADING_TOLERANCE)
+    run = rollout(controller, model, start, goal, h=h, rule=rule,
+                  clearance=polygon_clearance(obstacles, robot_radius))
+    stride = max(1, rule.steps(h) // 40)
+    predictions = [step.prediction[:, :3].copy() for k, step in enumerate(run.steps)
+                   if k % stride == 0 and step.prediction is not None]
     shown = predictions[:: max(1, len(predictions) // PREDICTIONS_SHOWN)][:PREDICTIONS_SHOWN]
-    result = ClosedLoopResult(label=label, rows=data, predictions=shown, lyapunov_ok=lyapunov,
-                              solver_failures=failures)
+    result = ClosedLoopResult(label=label, rows=run.rows, predictions=shown,
+                              lyapunov_ok=run.lyapunov_ok, solver_failures=run.solver_failures,
+                              outcome=run.outcome)
     result.metrics = compute_metrics(
-        data, goal=goal, obstacles=obstacles, robot_radius=robot_radius,
-        reference_length=reference_length, solver_failures=failures, lyapunov_ok=lyapunov)
+        run.rows, goal=goal, obstacles=obstacles, robot_radius=robot_radius,
+        reference_length=reference_length, solver_failures=run.solver_failures,
+        lyapunov_ok=run.lyapunov_ok)
     result.metrics['label'] = label
+    result.metrics['outcome'] = run.outcome.value
     result.metrics['horizon'] = controller.config.horizon
     result.metrics['step'] = h
     result.metrics['solver'] = controller.config.solver
@@ -196,7 +189,7 @@ def horizon_experiment(out: Path, base: MpcConfig,
     lines.append(f'\nReference path length: {path.length():.3f} m')
     (out / 'table.md').write_text('\n'.join(lines) + '\n')
     plot_runs(out / 'horizon.png', world=world, reference=path.knots,
-              runs=[(r.label, r.rows) for r in results],
+              runs=[(r.label, r.rows) for r in results], zoom=HORIZON_ZOOM,
               title='Longer horizon, shorter path (straight, 90 degree turn, straight)')
     return results
 

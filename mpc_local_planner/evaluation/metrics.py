@@ -63,7 +63,7 @@ def compute_metrics(
     position_tolerance: float = 0.05,
     heading_tolerance: float = 0.1,
 ) -> dict[str, Any]:
-    """Return the metrics of design.md section 3 as a JSON-serialisable dict.
+    """Return the run's metrics (arrival, errors, length, clearance, V_N, timing) as a dict.
 
     Args:
         rows: (n, 9) trajectory rows (t, x, y, theta, v, omega, s, V_N, solve_ms).

@@ -28,6 +28,7 @@ from mpc_local_planner.evaluation.evaluate import (
     random_world,
     shortcut,
 )
+from mpc_local_planner.evaluation.rollout import Outcome
 from mpc_local_planner.worlds.data_files import BARN_DIR
 
 BARN_DIR = BARN_DIR
@@ -45,7 +46,8 @@ def random_out(tmp_path_factory):
     out = tmp_path_factory.mktemp('random')
     # The tracking baseline runs until the time limit where it gets stuck: too slow here.
     assert main(['--suite', 'random', '--count', '2', '--seed', '3', '--out', str(out),
-                 '--controllers', 'proposed,pure_pursuit', '--jobs', '1']) == 0
+                 '--controllers', 'proposed,pure_pursuit', '--jobs', '1',
+                 '--save-trajectories']) == 0
     return out
 
 
@@ -67,6 +69,19 @@ def test_proposed_mpc_reaches_the_goal_without_collision_where_assumption_1_hold
         assert r['success'] == 'True' and r['collision'] == 'False', r
         assert float(r['min_clearance']) > 0
         assert float(r['final_distance']) <= 0.05
+
+
+def test_random_suite_plot_draws_the_saved_worlds_in_a_png(random_out) -> None:
+    assert main(['--suite', 'random', '--out', str(random_out), '--plot', '0,1']) == 0
+    assert (random_out / 'random_runs.png').stat().st_size > 10_000
+    rows = _rows(random_out)
+    assert {r['stop_reason'] for r in rows} <= {o.value for o in Outcome}
+
+
+def test_plot_without_saved_runs_is_a_usage_error(tmp_path) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(['--suite', 'random', '--out', str(tmp_path), '--plot', '0'])
+    assert exit_info.value.code == 2
 
 
 def test_random_worlds_are_reproducible_and_block_the_straight_line() -> None:

@@ -1,0 +1,349 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""THE closed loop without ROS: one controller, one model, one stop rule.
+
+The experiments, the evaluation suites and the benchmark all run their closed loops here, so
+they stop for the same reasons and write the same rows (the trajectory.csv format).
+
+A controller is anything with ``step(x) -> ControlStep`` (the `RolloutController` protocol);
+`as_controller` adapts the package's controllers: anything with ``solve(x) -> MpcSolution``
+(the paper's PathReferenceMPC, the TrackingMPC baseline) and anything with
+``command(x) -> u`` (pure pursuit). The plant is the model's ``step(x, u, h)``.
+
+Each step k, at t = k h: the controller answers for the state x_k, the row (t, x_k, its answer)
+is recorded, then the stop rule is applied to x_k in this order:
+
+1. COLLISION: a clearance function was given and the clearance at x_k is <= 0;
+2. REACHED: position error <= position_tolerance and wrapped heading error
+   |wrap_angle(theta - theta_goal)| <= heading_tolerance (inf: position only);
+3. STALLED: |u| < stall_input for stall_steps consecutive steps (a local minimum);
+4. TIME_LIMIT: t >= time_limit.
+
+Otherwise u_k is applied: x_{k+1} = model.step(x_k, u_k, h). A controller that raises
+PlanningError (it has no way to the goal) or commands a non-finite input ends the run as
+STOPPED; its last row has a zero input.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import time
+from typing import Any, Callable, NamedTuple, Protocol, Sequence, TYPE_CHECKING
+
+import numpy as np
+
+from mpc_local_planner.core.errors import PlanningError
+from mpc_local_planner.core.paths import wrap_angle
+from mpc_local_planner.evaluation.trajectory import trajectory_row
+
+if TYPE_CHECKING:
+    from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit
+    from mpc_local_planner.core.obstacles import ConvexPolygon
+
+__all__ = [
+    'as_controller',
+    'circle_clearance',
+    'Clearance',
+    'ControlStep',
+    'MpcAdapter',
+    'Outcome',
+    'polygon_clearance',
+    'PurePursuitAdapter',
+    'rollout',
+    'Rollout',
+    'RolloutController',
+    'STALL_INPUT',
+    'STALL_STEPS',
+    'StopRule',
+]
+
+# A run whose commands stay below this (each component, absolute) for STALL_STEPS steps has
+# stopped for good away from the goal.
+STALL_INPUT = 1e-4
+STALL_STEPS = 25
+
+Clearance = Callable[[np.ndarray], np.ndarray]
+
+
+class Outcome(enum.Enum):
+    """Why a rollout ended."""
+
+    REACHED = 'reached'
+    COLLISION = 'collision'
+    STALLED = 'stalled'
+    TIME_LIMIT = 'time limit'
+    STOPPED = 'stopped'
+
+
+class StopRule(NamedTuple):
+    """When a rollout ends (see the module docstring for the order of the checks).
+
+    Attributes:
+        time_limit: seconds of simulated time; the last row is at t = ceil(time_limit / h) h.
+        position_tolerance: metres to the goal position that count as reached.
+        heading_tolerance: radians of wrapped heading error that count as reached; inf
+            compares positions only (the BARN challenge).
+        stall_input: a command with every |component| below this is standing still.
+        stall_steps: consecutive standing-still steps that end the run as STALLED.
+
+    """
+
+    time_limit: float
+    position_tolerance: float
+    heading_tolerance: float = math.inf
+    stall_input: float = STALL_INPUT
+    stall_steps: int = STALL_STEPS
+
+    def reached(self, x: np.ndarray, goal: np.ndarray) -> bool:
+        """Say whether the pose x is within the tolerances of the goal (headings wrapped)."""
+        position_error = math.hypot(float(x[0]) - float(goal[0]), float(x[1]) - float(goal[1]))
+        if position_error > self.position_tolerance:
+            return False
+        if math.isinf(self.heading_tolerance):
+            return True
+        heading_error = abs(float(wrap_angle(float(x[2]) - float(goal[2]))))
+        return heading_error <= self.heading_tolerance
+
+    def steps(self, h: float) -> int:
+        """Return the index of the last step within the time limit at step length h."""
+        return int(math.ceil(self.time_limit / h - 1e-9))
+
+
+class ControlStep(NamedTuple):
+    """A controller's answer for one state.
+
+    Attributes:
+        u: (2,) input (v, omega) to apply now.
+        s: path progress in [0, 1] (NaN where there is none).
+        value: V_N, the cost of what is applied (NaN where there is none).
+        solve_time_s: the controller's own solve time, seconds.
+        success: the input is a fresh solver solution (counts solver failures).
+        lyapunov_ok: whether V_N decreased as the theorem says (None: no check).
+        prediction: (N+1, nx) predicted states, or None.
+        detail: the controller's own record of the step (the MpcSolution for the MPCs).
+
+    """
+
+    u: np.ndarray
+    s: float = math.nan
+    value: float = math.nan
+    solve_time_s: float = math.nan
+    success: bool = True
+    lyapunov_ok: bool | None = None
+    prediction: np.ndarray | None = None
+    detail: Any = None
+
+
+class RolloutController(Protocol):
+    """What the rollout needs of a controller."""
+
+    def step(self, x: np.ndarray) -> ControlStep:
+        """Return the controller's answer for the state x."""
+
+
+class MpcAdapter:
+    """Step interface of anything with ``solve(x) -> MpcSolution`` (the paper's MPC, tracking)."""
+
+    def __init__(self, mpc: Any) -> None:
+        self.mpc = mpc
+
+    def step(self, x: np.ndarray) -> ControlStep:
+        """Solve for x and return the applied input with the solution's bookkeeping."""
+        solution = self.mpc.solve(x)
+        return ControlStep(
+            u=np.asarray(solution.u0, dtype=float), s=float(solution.s),
+            value=float(solution.value), solve_time_s=float(solution.solve_time_s),
+            success=bool(solution.success), lyapunov_ok=solution.lyapunov_ok,
+            prediction=solution.x_pred, detail=solution)
+
+
+class PurePursuitAdapter:
+    """Step interface of a pure-pursuit follower: s is its progress over the path's length."""
+
+    def __init__(self, follower: PurePursuit) -> None:
+        self.follower = follower
+
+    def step(self, x: np.ndarray) -> ControlStep:
+        """Return the follower's command for x, timed."""
+        start = time.perf_counter()
+        u = np.asarray(self.follower.command(x), dtype=float)
+        seconds = time.perf_counter() - start
+        return ControlStep(u=u, s=self.follower.progress / max(self.follower.length, 1e-9),
+                           solve_time_s=seconds)
+
+
+def as_controller(controller: Any) -> RolloutController:
+    """Return controller with the step interface: itself, or the adapter that fits it.
+
+    Raises:
+        TypeError: if it has neither ``step``, ``solve`` nor ``command``.
+
+    """
+    if callable(getattr(controller, 'step', None)):
+        return controller
+    if callable(getattr(controller, 'solve', None)):
+        return MpcAdapter(controller)
+    if callable(getattr(controller, 'command', None)):
+        return PurePursuitAdapter(controller)
+    msg = f'{type(controller).__name__} has no step(x), solve(x) or command(x)'
+    raise TypeError(msg)
+
+
+class Rollout(NamedTuple):
+    """What a closed-loop run produced.
+
+    Attributes:
+        outcome: why the run ended.
+        rows: (n, 9) trajectory rows (trajectory.TRAJECTORY_COLUMNS), one per step.
+        steps: the controller's answers, one per row (STOPPED: one fewer).
+        step_times: wall time of each controller call, seconds (adapter included).
+        h: the step length, seconds.
+        note: why the controller stopped (STOPPED), else ''.
+
+    """
+
+    outcome: Outcome
+    rows: np.ndarray
+    steps: tuple[ControlStep, ...]
+    step_times: np.ndarray
+    h: float
+    note: str = ''
+
+    @property
+    def reached(self) -> bool:
+        """The run ended at the goal."""
+        return self.outcome is Outcome.REACHED
+
+    @property
+    def end_time(self) -> float:
+        """Time of the last row, seconds."""
+        return float(self.rows[-1, 0])
+
+    @property
+    def solve_times(self) -> np.ndarray:
+        """Each step's solve time as the controller reports it, seconds."""
+        return np.array([step.solve_time_s for step in self.steps], dtype=float)
+
+    @property
+    def solver_failures(self) -> int:
+        """Steps whose input is not a fresh solver solution."""
+        return sum(1 for step in self.steps if not step.success)
+
+    @property
+    def lyapunov_ok(self) -> list[bool | None]:
+        """Per step, the controller's V_N check (None: no check)."""
+        return [step.lyapunov_ok for step in self.steps]
+
+
+def rollout(
+    controller: Any,
+    model: Any,
+    start: np.ndarray,
+    goal: np.ndarray,
+    *,
+    h: float,
+    rule: StopRule,
+    clearance: Clearance | None = None,
+) -> Rollout:
+    """Run controller and model in closed loop until the stop rule ends the run.
+
+    Args:
+        controller: a RolloutController, or anything as_controller adapts.
+        model: the plant: ``model.step(x, u, h) -> x_next``.
+        start: the initial state.
+        goal: the goal pose (x, y, theta).
+        h: the step length, seconds.
+        rule: when to stop.
+        clearance: points (n, 2) -> clearance of the robot from the true obstacles (<= 0 is
+            contact), or None to ignore collisions (measure them from the rows instead).
+
+    Returns:
+        The outcome, the rows and the controller's answers.
+
+    """
+    stepper = as_controller(controller)
+    goal = np.asarray(goal, dtype=float)
+    x = np.asarray(start, dtype=float).copy()
+    last = rule.steps(h)
+    rows: list[np.ndarray] = []
+    steps: list[ControlStep] = []
+    step_times: list[float] = []
+    still = 0
+    outcome, note = Outcome.TIME_LIMIT, ''
+    for k in range(last + 1):
+        t = k * h
+        started = time.perf_counter()
+        try:
+            answer = stepper.step(x)
+        except PlanningError as err:
+            outcome, note = Outcome.STOPPED, f'{type(err).__name__}: {err}'
+            rows.append(trajectory_row(t, x))
+            break
+        step_times.append(time.perf_counter() - started)
+        u = np.asarray(answer.u, dtype=float)
+        if not np.all(np.isfinite(u)):
+            outcome, note = Outcome.STOPPED, f'non-finite input {u.tolist()}'
+            rows.append(trajectory_row(t, x))
+            break
+        steps.append(answer)
+        rows.append(trajectory_row(t, x, u, s=answer.s, value=answer.value,
+                                   solve_ms=answer.solve_time_s * 1e3))
+        if clearance is not None and clearance(x[None, :2])[0] <= 0.0:
+            outcome = Outcome.COLLISION
+            break
+        if rule.reached(x, goal):
+            outcome = Outcome.REACHED
+            break
+        still = still + 1 if float(np.max(np.abs(u))) < rule.stall_input else 0
+        if still >= rule.stall_steps:
+            outcome = Outcome.STALLED
+            break
+        if k == last:
+            break
+        x = np.asarray(model.step(x, u, h), dtype=float)
+    return Rollout(outcome=outcome, rows=np.array(rows, dtype=float), steps=tuple(steps),
+                   step_times=np.array(step_times, dtype=float), h=float(h), note=note)
+
+
+def polygon_clearance(obstacles: Sequence[ConvexPolygon], robot_radius: float) -> Clearance:
+    """Return points (n, 2) -> clearance of a robot circle from convex polygons (m).
+
+    A centre inside a polygon has clearance -1 - robot_radius; no obstacles: inf.
+    """
+    obstacles = tuple(obstacles)
+
+    def clearance(points: np.ndarray) -> np.ndarray:
+        if not obstacles:
+            return np.full(len(points), math.inf)
+        distance = np.min(np.stack([o.distance(points) for o in obstacles]), axis=0)
+        inside = np.zeros(len(points), dtype=bool)
+        for o in obstacles:
+            inside |= o.contains(points)
+        return np.where(inside, -1.0, distance) - robot_radius
+    return clearance
+
+
+def circle_clearance(centres: np.ndarray, radius: float, robot_radius: float) -> Clearance:
+    """Return points (n, 2) -> clearance of a robot circle from circles (BARN's cylinders)."""
+    centres = np.asarray(centres, dtype=float).reshape(-1, 2)
+    gap = radius + robot_radius
+
+    def clearance(points: np.ndarray) -> np.ndarray:
+        if len(centres) == 0:
+            return np.full(len(points), math.inf)
+        d = np.linalg.norm(points[:, None, :] - centres[None, :, :], axis=2)
+        return np.min(d, axis=1) - gap
+    return clearance

@@ -1,0 +1,177 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The closed loop without ROS: its stop rule, its rows and its controller adapters."""
+
+import math
+
+import numpy as np
+import pytest
+
+from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit
+from mpc_local_planner.core.errors import PlanningError
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.evaluation.rollout import (
+    as_controller,
+    circle_clearance,
+    ControlStep,
+    MpcAdapter,
+    Outcome,
+    polygon_clearance,
+    PurePursuitAdapter,
+    rollout,
+    StopRule,
+)
+from mpc_local_planner.evaluation.trajectory import (
+    read_trajectory_csv,
+    TRAJECTORY_COLUMNS,
+    TRAJECTORY_INDEX,
+    trajectory_row,
+    write_trajectory_csv,
+)
+
+H = 0.2
+
+
+class Constant:
+    """A controller that commands the same input everywhere."""
+
+    def __init__(self, u):
+        self.u = np.asarray(u, dtype=float)
+        self.calls = 0
+
+    def step(self, x):
+        self.calls += 1
+        return ControlStep(u=self.u, s=0.5, value=2.0, solve_time_s=1e-3)
+
+
+def test_a_heading_of_plus_pi_reaches_a_goal_heading_of_minus_pi() -> None:
+    rule = StopRule(time_limit=10.0, position_tolerance=0.01, heading_tolerance=0.05)
+    goal = np.array([1.0, 2.0, -math.pi])
+    assert rule.reached(np.array([1.0, 2.0, math.pi]), goal)
+    assert rule.reached(np.array([1.0, 2.0, math.pi + 4 * math.pi]), goal)
+    assert not rule.reached(np.array([1.0, 2.0, 0.0]), goal)
+    run = rollout(Constant([0.0, 0.0]), Unicycle(), np.array([1.0, 2.0, math.pi]), goal, h=H,
+                  rule=rule)
+    assert run.outcome is Outcome.REACHED and run.reached
+    assert len(run.rows) == 1 and len(run.steps) == 1
+
+
+def test_an_infinite_heading_tolerance_compares_positions_only() -> None:
+    rule = StopRule(time_limit=10.0, position_tolerance=1.0)
+    assert rule.reached(np.array([0.5, 0.5, 3.0]), np.array([0.0, 0.0, 0.0]))
+    assert not rule.reached(np.array([1.0, 0.5, 0.0]), np.array([0.0, 0.0, 0.0]))
+
+
+def test_a_controller_standing_still_away_from_the_goal_stalls() -> None:
+    rule = StopRule(time_limit=100.0, position_tolerance=0.05, stall_steps=7)
+    controller = Constant([0.0, 0.0])
+    run = rollout(controller, Unicycle(), np.zeros(3), np.array([1.0, 0.0, 0.0]), h=H,
+                  rule=rule)
+    assert run.outcome is Outcome.STALLED
+    assert len(run.rows) == 7 == controller.calls
+    assert np.all(run.rows[:, TRAJECTORY_INDEX['x']] == 0.0)
+
+
+def test_a_run_that_never_arrives_ends_at_the_time_limit() -> None:
+    rule = StopRule(time_limit=3.0, position_tolerance=0.05)
+    run = rollout(Constant([0.1, 0.0]), Unicycle(), np.zeros(3), np.array([5.0, 0.0, 0.0]),
+                  h=H, rule=rule)
+    assert run.outcome is Outcome.TIME_LIMIT
+    assert len(run.rows) == 16  # t = 0, 0.2, ..., 3.0
+    assert run.end_time == pytest.approx(3.0)
+    assert run.rows[-1, TRAJECTORY_INDEX['x']] == pytest.approx(0.1 * 3.0)
+    assert run.solve_times == pytest.approx(np.full(16, 1e-3))
+    assert len(run.step_times) == 16 and run.solver_failures == 0
+
+
+def test_the_run_stops_at_the_goal_with_the_rows_of_every_step() -> None:
+    rule = StopRule(time_limit=30.0, position_tolerance=0.05)
+    run = rollout(Constant([0.25, 0.0]), Unicycle(), np.zeros(3), np.array([1.0, 0.0, 0.0]),
+                  h=H, rule=rule)
+    assert run.outcome is Outcome.REACHED
+    poses = run.rows[:, [TRAJECTORY_INDEX[k] for k in ('x', 'y', 'theta')]]
+    assert rule.reached(poses[-1], np.array([1.0, 0.0, 0.0]))  # the first row within 5 cm
+    assert not rule.reached(poses[-2], np.array([1.0, 0.0, 0.0]))
+    assert run.rows[:, TRAJECTORY_INDEX['t']] == pytest.approx(H * np.arange(len(run.rows)))
+    assert np.all(run.rows[:, TRAJECTORY_INDEX['V_N']] == 2.0)
+    assert np.all(run.rows[:, TRAJECTORY_INDEX['solve_ms']] == pytest.approx(1.0))
+
+
+def test_contact_ends_the_run_before_the_goal_counts() -> None:
+    box = ConvexPolygon.from_box(0.5, -0.5, 1.5, 0.5)
+    rule = StopRule(time_limit=30.0, position_tolerance=0.05)
+    run = rollout(Constant([0.25, 0.0]), Unicycle(), np.zeros(3), np.array([2.0, 0.0, 0.0]),
+                  h=H, rule=rule, clearance=polygon_clearance([box], 0.2))
+    assert run.outcome is Outcome.COLLISION
+    assert run.rows[-1, TRAJECTORY_INDEX['x']] == pytest.approx(0.3)
+    circles = circle_clearance(np.array([[1.0, 0.0]]), 0.1, 0.2)
+    assert circles(np.array([[0.0, 0.0], [0.7, 0.0]])) == pytest.approx([0.7, 0.0])
+
+
+def test_a_controller_without_an_answer_stops_the_run() -> None:
+    class Lost:
+        def step(self, x):
+            msg = 'no way to the goal'
+            raise PlanningError(msg)
+
+    rule = StopRule(time_limit=30.0, position_tolerance=0.05)
+    run = rollout(Lost(), Unicycle(), np.zeros(3), np.array([2.0, 0.0, 0.0]), h=H, rule=rule)
+    assert run.outcome is Outcome.STOPPED and 'no way' in run.note
+    assert len(run.rows) == 1 and not run.steps
+    assert run.rows[0, TRAJECTORY_INDEX['v']] == 0.0
+    run = rollout(Constant([math.nan, 0.0]), Unicycle(), np.zeros(3), np.array([2.0, 0.0, 0.0]),
+                  h=H, rule=rule)
+    assert run.outcome is Outcome.STOPPED and 'non-finite' in run.note
+
+
+def test_the_row_builder_puts_each_value_in_its_named_column(tmp_path) -> None:
+    row = trajectory_row(1.5, [1.0, 2.0, 0.3, 99.0], [0.2, -0.1], s=0.4, value=7.0,
+                         solve_ms=3.5)
+    assert row.shape == (len(TRAJECTORY_COLUMNS),)
+    expected = {'t': 1.5, 'x': 1.0, 'y': 2.0, 'theta': 0.3, 'v': 0.2, 'omega': -0.1, 's': 0.4,
+                'V_N': 7.0, 'solve_ms': 3.5}
+    for name, value in expected.items():
+        assert row[TRAJECTORY_INDEX[name]] == value
+    still = trajectory_row(0.0, np.zeros(3))
+    assert still[TRAJECTORY_INDEX['v']] == 0.0 and still[TRAJECTORY_INDEX['omega']] == 0.0
+    assert np.isnan(still[[TRAJECTORY_INDEX[k] for k in ('s', 'V_N', 'solve_ms')]]).all()
+    write_trajectory_csv(tmp_path / 'trajectory.csv', np.stack([row, still]))
+    back = read_trajectory_csv(tmp_path / 'trajectory.csv')
+    assert back[0] == pytest.approx(row)
+
+
+def test_the_package_controllers_plug_in_through_adapters() -> None:
+    class FakeMpc:
+        def solve(self, x):
+            from types import SimpleNamespace
+            return SimpleNamespace(u0=np.array([0.1, 0.0]), s=0.2, value=3.0,
+                                   solve_time_s=0.004, success=False, lyapunov_ok=True,
+                                   x_pred=np.zeros((3, 3)))
+
+    mpc = as_controller(FakeMpc())
+    assert isinstance(mpc, MpcAdapter)
+    step = mpc.step(np.zeros(3))
+    assert step.value == 3.0 and not step.success and step.prediction.shape == (3, 3)
+    follower = as_controller(PurePursuit(np.array([[0.0, 0.0], [2.0, 0.0]])))
+    assert isinstance(follower, PurePursuitAdapter)
+    rule = StopRule(time_limit=30.0, position_tolerance=0.05)
+    run = rollout(follower, Unicycle(), np.zeros(3), np.array([2.0, 0.0, 0.0]), h=H, rule=rule)
+    assert run.outcome is Outcome.REACHED
+    assert np.all(np.diff(run.rows[:, TRAJECTORY_INDEX['s']]) >= 0)
+    constant = Constant([0.0, 0.0])
+    assert as_controller(constant) is constant
+    with pytest.raises(TypeError, match='no step'):
+        as_controller(object())
