@@ -52,15 +52,17 @@ from rclpy.serialization import deserialize_message  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 
 from mpc_local_planner.ros.conversions import (  # noqa: E402
+    seconds_to_stamp,
+    stamp_to_seconds,
+    state_to_odometry,
+)
+from mpc_local_planner.ros.qos import (  # noqa: E402
     CMD_VEL_QOS,
     DIAGNOSTICS_QOS,
     GOAL_QOS,
     LOCAL_PLAN_QOS,
     ODOM_QOS,
     PLAN_QOS,
-    seconds_to_stamp,
-    stamp_to_seconds,
-    state_to_odometry,
 )
 
 # /rosout as rclpy publishes it (Jazzy): reliable, transient_local, depth 1000.

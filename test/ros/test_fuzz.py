@@ -17,7 +17,8 @@ The conversions either return finite values or raise ValueError. The controller 
 simulator nodes get random message sequences through their callbacks (called directly, the
 way the executor calls them; simulated time is set by the test) and every twist they
 publish, as the probe receives it over DDS, is finite and within the unicycle's bounds.
-Hypothesis is derandomized with a bounded number of examples: the same cases every run.
+The node tests are marked slow (DDS). Hypothesis is derandomized with a bounded number of
+examples: the same cases every run.
 """
 
 from __future__ import annotations
@@ -154,10 +155,17 @@ def test_path_to_poses_gives_finite_poses_or_value_error_and_the_cdr_count_is_ex
 
 
 @FUZZ
-@given(data=st.binary(max_size=64))
-def test_path_pose_count_reads_garbage_without_raising(data: bytes) -> None:
-    count = path_pose_count(data)
-    assert count is None or 0 <= count < 2**32
+@given(msg=paths(), garbage=st.binary(max_size=64), cut=st.integers(0, 400))
+def test_path_pose_count_reads_the_count_or_none_from_cut_or_padded_messages_and_garbage(
+        msg: Path, garbage: bytes, cut: int) -> None:
+    data = serialize_message(msg)
+    # bytes after the count do not change it; a cut message gives the count or "don't know"
+    assert path_pose_count(data + garbage) == len(msg.poses)
+    assert path_pose_count(data[:cut]) in (None, len(msg.poses))
+    # garbage does not raise, and too few bytes for a header and a count mean None
+    count = path_pose_count(garbage)
+    if len(garbage) < 16:
+        assert count is None
 
 
 @FUZZ
@@ -177,9 +185,19 @@ def test_poses_to_path_and_stamps_refuse_non_finite_values_with_value_error(
 
 @FUZZ
 @given(twist=twists(), stamp=stamps())
-def test_twists_and_stamps_always_convert_to_finite_numbers(twist: Twist, stamp: Time) -> None:
+def test_twists_convert_to_finite_numbers_and_stamps_round_trip_to_a_microsecond(
+        twist: Twist, stamp: Time) -> None:
     assert np.all(np.isfinite(u_from_twist(twist)))
-    assert math.isfinite(stamp_to_seconds(stamp))
+    seconds = stamp_to_seconds(stamp)
+    nanoseconds = stamp.sec * 10**9 + stamp.nanosec  # exact; nanosec may exceed a second
+    if not 0.0 <= seconds < 2.0**31:
+        with pytest.raises(ValueError, match='a stamp must be'):
+            seconds_to_stamp(seconds)
+        assert nanoseconds < 0 or nanoseconds >= 2**31 * 10**9 - 10**3
+        return
+    back = seconds_to_stamp(seconds)
+    assert 0 <= back.nanosec < 10**9
+    assert abs(back.sec * 10**9 + back.nanosec - nanoseconds) <= 10**3
 
 
 # ----------------------------------------------------------------------------- nodes
@@ -242,6 +260,7 @@ EVENTS = st.lists(st.one_of(
 ), min_size=1, max_size=12)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(events=EVENTS)
 def test_controller_callbacks_survive_random_messages_and_publish_bounded_twists(
@@ -279,6 +298,7 @@ def test_controller_callbacks_survive_random_messages_and_publish_bounded_twists
     assert np.all(np.isfinite(raw)) and np.all(np.abs(raw) <= U_MAX + 1e-12)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(commands=st.lists(twists(), min_size=1, max_size=6))
 def test_simulator_callbacks_survive_random_twists_and_stay_finite_and_saturated(

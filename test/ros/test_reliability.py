@@ -21,8 +21,6 @@ on how loaded the machine is.
 from __future__ import annotations
 
 import copy
-import glob
-import json
 import math
 import os
 import signal
@@ -38,16 +36,13 @@ import pytest
 from rcl_interfaces.msg import Log
 from rclpy.parameter import Parameter
 
-from mpc_local_planner.core.controller import (
-    first_blocked_segment,
-    REASON_CANDIDATE,
-    REASON_OK,
-    REASON_STALE_ODOM,
-    REASON_STOP,
-)
+from mpc_local_planner.core.controller import Reason
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.ros.closed_loop import MODULES
+from mpc_local_planner.core.mpc.step import SolveAttempt
+from mpc_local_planner.core.obstacles import first_blocked_segment
+from mpc_local_planner.ros.closed_loop import MODULES, spawn_node
 from mpc_local_planner.ros.conversions import (
+    odometry_to_state,
     path_to_poses,
     poses_to_path,
     seconds_to_stamp,
@@ -60,6 +55,7 @@ from mpc_local_planner.ros.mpc_controller_node import ERROR_THROTTLE_S, MpcContr
 from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
 from mpc_local_planner.worlds.world import paper_world
 
+pytestmark = pytest.mark.slow  # DDS, and node processes
 WORLD = paper_world()
 # A plan around the paper's box (above it), headings as the planner sends them.
 PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
@@ -125,8 +121,8 @@ def applied(diag: dict) -> np.ndarray:
 
 def tracking(probe, after: int = 0) -> bool:  # noqa: ANN001
     """Say whether a step after the first `after` diagnostics drove on a solver solution."""
-    return any(d['message'] == REASON_OK and d['source'] == 'solver' and applied(d)[0] > 0.01
-               for d in probe.diagnostics[after:])
+    return any(d['reason'] == Reason.TRACKING.value and d['source'] == 'solver'
+               and applied(d)[0] > 0.01 for d in probe.diagnostics[after:])
 
 
 def errors(probe, node: str, text: str) -> list[str]:  # noqa: ANN001
@@ -278,7 +274,7 @@ def test_stale_odometry_gives_zero_within_one_control_period_and_fresh_odometry_
     first = len(probe.diagnostics)
 
     def stale() -> list[dict]:
-        return [d for d in probe.diagnostics[first:] if d['message'] == REASON_STALE_ODOM]
+        return [d for d in probe.diagnostics[first:] if d['reason'] == Reason.STALE_ODOM.value]
 
     assert clock.run_until(lambda: bool(stale()))
     # the first step later than odom_timeout after the last odometry commands zero
@@ -300,15 +296,19 @@ def test_stale_odometry_gives_zero_within_one_control_period_and_fresh_odometry_
 def test_odometry_stamped_in_the_future_goes_stale_when_it_stops(ros) -> None:  # noqa: ANN001
     _, probe, clock = start_controller(ros)
     clock.odom = None
-    probe.publish_odom(WORLD.start, stamp=clock.t + 3600.0)  # a clock an hour ahead
-    stop = clock.t
+    moved = WORLD.start + np.array([0.01, 0.0, 0.0])  # a pose to tell this message by
+    probe.publish_odom(moved, stamp=clock.t + 3600.0)  # a clock an hour ahead, then silence
     first = len(probe.diagnostics)
-    assert clock.run_until(lambda: any(d['message'] == REASON_STALE_ODOM
-                                       for d in probe.diagnostics[first:]))
-    stale = next(d for d in probe.diagnostics[first:] if d['message'] == REASON_STALE_ODOM)
-    # timed from its arrival (a few ticks after it was sent, on a loaded machine), not from
-    # its stamp an hour ahead
-    assert stale['stamp'] <= stop + ODOM_TIMEOUT + STEP + 1.0
+
+    def steps() -> list[dict]:
+        return probe.diagnostics[first:]
+
+    assert clock.run_until(lambda: any(d['reason'] == Reason.STALE_ODOM.value for d in steps()))
+    taken = next(d for d in steps() if float(d['x']) == moved[0])  # the first step using it
+    stale = next(d for d in steps() if d['reason'] == Reason.STALE_ODOM.value)
+    # timed from its arrival (before the step that first used it), not from its stamp
+    assert taken['reason'] != Reason.STALE_ODOM.value
+    assert stale['stamp'] <= taken['stamp'] + ODOM_TIMEOUT + STEP + 1e-6
 
 
 def test_simulator_stops_the_robot_when_cmd_vel_stops_for_cmd_timeout(ros) -> None:  # noqa: ANN001
@@ -355,7 +355,8 @@ def test_simulator_stops_the_robot_when_cmd_vel_stops_for_cmd_timeout(ros) -> No
 # ----------------------------------------------------------------------------- 3. solver failure
 def failing_solver(nlp, w0, params, active, solver=None):  # noqa: ANN001, ANN201, ARG001
     """Stand-in for PathReferenceMPC._run_solver: every NLP solve fails (IPOPT's too)."""
-    return False, np.asarray(w0, dtype=float), math.inf, 'injected failure', 0, 0.0
+    return SolveAttempt(verified=False, w=np.asarray(w0, dtype=float), value=math.inf,
+                        status='injected failure', iterations=0, seconds=0.0)
 
 
 def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_then_stop(
@@ -384,25 +385,26 @@ def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_th
     def after_patch() -> list[dict]:
         return [d for d in probe.diagnostics if d['stamp'] > patched_at]
 
-    assert ros.spin_until(lambda: sum(d['message'] == REASON_STOP for d in after_patch()) >= 3,
-                          timeout=60.0), after_patch()[-3:]
+    assert ros.spin_until(
+        lambda: sum(d['reason'] == Reason.STOP.value for d in after_patch()) >= 3,
+        timeout=60.0), after_patch()[-3:]
     steps = after_patch()
     candidates = [d for d in steps if d['source'] == 'candidate' and applied(d).any()]
     # the proof's candidate: the verified inputs shifted by one step per failure...
     assert 1 <= len(candidates) <= horizon
     for k, diag in enumerate(candidates, start=1):
-        assert diag['message'] == REASON_CANDIDATE
+        assert diag['reason'] == Reason.CANDIDATE.value
         assert int(diag['failures']) == k
         np.testing.assert_allclose(applied(diag), verified.u_pred[k], atol=1e-12)
     # ...then it has run out: zero from the N-th failure on, the robot stops
-    stop = steps.index(next(d for d in steps if d['message'] == REASON_STOP))
+    stop = steps.index(next(d for d in steps if d['reason'] == Reason.STOP.value))
     assert int(steps[stop]['failures']) == horizon + 1
     assert all(not applied(d).any() for d in steps[len(candidates):])
     assert steps[stop]['level'] == 2
     assert int(steps[-1]['failures_total']) >= failures_before + horizon + 1
     assert ros.spin_until(lambda: abs(probe.odoms[-1].twist.twist.linear.x) < 1e-12
                           and abs(probe.odoms[-1].twist.twist.angular.z) < 1e-12)
-    assert any(REASON_STOP in line for line in probe.log_lines('mpc_controller', Log.WARN))
+    assert any(Reason.STOP.text in line for line in probe.log_lines('mpc_controller', Log.WARN))
     check_commands(probe)
 
     # the solver is back: the robot drives on
@@ -420,7 +422,7 @@ def test_a_state_inside_the_obstacle_is_infeasible_the_robot_stops_and_resumes_o
     clock.odom = np.array([1.25, 0.0, 0.0])  # inside the box: no input keeps it clear
 
     def stopped() -> list[dict]:
-        return [d for d in probe.diagnostics[first:] if d['message'] == REASON_STOP]
+        return [d for d in probe.diagnostics[first:] if d['reason'] == Reason.STOP.value]
 
     assert clock.run_until(lambda: len(stopped()) >= 2)
     for diag in stopped():
@@ -616,100 +618,204 @@ def test_planner_publishes_no_plan_from_a_start_in_collision_and_plans_once_clea
 
 
 # ----------------------------------------------------------------------------- 6. restart
-def end_process_group(process: subprocess.Popen) -> None:
-    """Stop a process started with start_new_session, and every node it started.
+# Wall seconds the whole drill may take before it counts as hung. It guards against a process
+# that never answers; no assertion depends on it (they are all in simulated time).
+HANG_GUARD = 600.0
+SIM_RATE = 50.0  # the simulator's default rate (Hz of simulated time)
+CMD_TIMEOUT = 0.5  # the simulator's default cmd_timeout (s of simulated time)
+TIME_LIMIT = 60.0  # simulated seconds for the drill (closed_loop's default time limit)
 
-    SIGKILL of closed_loop alone would leave its node processes running (seen once after a
-    failed assertion here): SIGINT lets it shut them down, then the group is killed.
+
+class RecordingSimulator(UnicycleSimulatorNode):
+    """The simulator, noting when (its simulated time) and what each cmd_vel it took said."""
+
+    def __init__(self, **kwargs) -> None:  # noqa: ANN003
+        self.received: list[tuple[float, np.ndarray]] = []
+        super().__init__(**kwargs)
+
+    def cmd_vel_callback(self, msg: Twist) -> None:
+        super().cmd_vel_callback(msg)
+        self.received.append((self.get_clock().now().nanoseconds * 1e-9, u_from_twist(msg)))
+
+
+TICKS_PER_STEP = round(STEP * SIM_RATE)  # the controller's default step is 10 simulator ticks
+
+
+class Lockstep:
+    """Simulated time owned by the test, advanced in lockstep with the nodes.
+
+    Each tick publishes /clock one simulator period later and waits until the simulator has
+    integrated that period (its odometry stamped with the new time has arrived). The
+    controller's timer, created before its first /clock, fires at the multiples of STEP
+    (TICKS_PER_STEP ticks); a controller process starts at such an instant, and time stands
+    still (the same /clock published again) until its first step. From then on every tick at
+    a multiple of STEP waits for that step's diagnostics and for the simulator to have
+    received the step's cmd_vel. So every step happens at its instant whatever the machine's
+    speed: a slow solve only stops the clock. The one wall-clock limit, HANG_GUARD, fails
+    the test if a process stops answering.
     """
-    if process.poll() is None:
-        os.killpg(process.pid, signal.SIGINT)
-        try:
-            process.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            pass
-    try:
-        os.killpg(process.pid, signal.SIGKILL)
-    except ProcessLookupError:
-        pass  # the group is gone already
-    process.wait()
 
+    def __init__(self, ros, probe, simulator: RecordingSimulator, logs) -> None:  # noqa: ANN001
+        self.ros, self.probe, self.simulator, self.logs = ros, probe, simulator, logs
+        self.ticks = int(SIM_RATE)  # t = 1 s: 0 is "no time yet" for a node with use_sim_time
+        self.deadline = time.monotonic() + HANG_GUARD
+        self.controller: subprocess.Popen | None = None
+        self.first_diagnostic = 0  # the index of the current controller's first diagnostics
+        self.first_command = 0  # the index of the first cmd_vel it can have sent
 
-def child_processes(parent: int, module: str) -> list[int]:
-    """Pids of parent's children whose command line runs module (from /proc)."""
-    pids = []
-    for stat in glob.glob('/proc/[0-9]*/stat'):
-        try:
-            fields = open(stat, encoding='utf-8').read().rsplit(')', 1)[1].split()
-            pid = int(stat.split('/')[2])
-            cmdline = open(f'/proc/{pid}/cmdline', 'rb').read().decode(errors='replace')
-        except (OSError, IndexError, ValueError):
-            continue  # gone meanwhile
-        if int(fields[1]) == parent and module in cmdline:
-            pids.append(pid)
-    return pids
+    @property
+    def t(self) -> float:
+        return self.ticks / SIM_RATE
 
+    def at_control_instant(self) -> bool:
+        return self.ticks % TICKS_PER_STEP == 0
 
-# Simulated seconds a probe's clock may lag the simulator's (rtf 2: 0.125 s of wall time).
-LAG = 0.25
+    def wait(self, condition: Callable[[], bool], what: str) -> None:
+        """Spin until condition() holds; fail if the controller died or the guard ran out."""
+        while not condition():
+            if self.controller is not None and self.controller.poll() is not None:
+                pytest.fail(f'the controller exited (code {self.controller.returncode}) while '
+                            f'waiting for {what}:\n{self.log_tail()}')
+            if time.monotonic() > self.deadline:
+                pytest.fail(f'hang guard ({HANG_GUARD:g} s wall): no {what} at '
+                            f't = {self.t:.2f} s; {self.state()}:\n{self.log_tail()}')
+            self.ros.executor.spin_once(timeout_sec=0.01)
 
+    def state(self) -> str:
+        steps = [(d['stamp'], d['reason']) for d in self.steps()[-3:]]
+        return (f'last steps {steps} of {len(self.steps())}, '
+                f'{len(self.simulator.received) - self.first_command} commands received')
 
-def test_a_killed_controller_stops_the_robot_and_a_restarted_one_drives_to_the_target(
-        ros, tmp_path) -> None:  # noqa: ANN001
-    cmd_timeout, rate = 0.5, 50.0  # the simulator's defaults, as closed_loop runs it
-    loop = subprocess.Popen(
-        [sys.executable, '-m', 'mpc_local_planner.ros.closed_loop', '--separate-processes',
-         '--respawn', '--path', 'rrt', '--rtf', '2', '--timeout', '90', '--out', str(tmp_path)],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-        start_new_session=True)  # its own process group: the cleanup reaches the nodes too
-    try:
-        probe = ros.probe(use_sim_time=True)
+    def log_tail(self) -> str:
+        log = self.logs / 'mpc_controller.log'
+        return log.read_text()[-3000:] if log.exists() else '(no controller log)'
 
-        def halfway() -> bool:
-            return bool(probe.odoms) and probe.odoms[-1].pose.pose.position.x > 1.0 and (
-                probe.odoms[-1].twist.twist.linear.x > 0.05)
+    def start_controller(self, *, again: bool = False) -> None:
+        """Start an mpc_controller process as closed_loop does.
 
-        assert ros.spin_until(halfway, timeout=60.0)
-        assert ros.spin_until(
-            lambda: len(child_processes(loop.pid, MODULES['mpc_controller'])) == 1,
-            timeout=10.0), child_processes(loop.pid, MODULES['mpc_controller'])
-        controllers = child_processes(loop.pid, MODULES['mpc_controller'])
-        os.kill(controllers[0], signal.SIGKILL)
-        killed_at = probe.now()
-        commands = len(probe.cmds)
+        Time stands still until it has taken its first step and has the plan.
+        """
+        assert self.at_control_instant()
+        self.first_diagnostic = len(self.probe.diagnostics)
+        self.first_command = len(self.simulator.received)
+        rosout = len(self.probe.logs)
+        self.controller = spawn_node('mpc_controller', {'use_sim_time': True},
+                                     self.logs / 'mpc_controller.log', append=again)
+        published = -math.inf
 
-        # the simulator stops the robot cmd_timeout after the last command it got
-        def stopped() -> bool:
-            late = [m for m in probe.odoms if stamp(m) > killed_at]
-            return len(late) > 5 and all(m.twist.twist.linear.x == 0.0 for m in late[-5:])
+        def ready() -> bool:
+            nonlocal published
+            if time.monotonic() - published > 0.1:  # until it listens: the same time again
+                self.probe.publish_clock(self.t)
+                published = time.monotonic()
+            return self.stepped() and any(
+                entry.name == 'mpc_controller' and entry.msg.startswith('new plan')
+                for entry in self.probe.logs[rosout:])
 
-        assert ros.spin_until(stopped, timeout=30.0)
-        late = [m for m in probe.odoms if stamp(m) > killed_at]
-        halted = stamp(next(m for m in late if m.twist.twist.linear.x == 0.0))
-        moving = [stamp(m) for m in late if m.twist.twist.linear.x != 0.0
-                  and stamp(m) < halted]
-        # the killed controller's commands: all arrived before the robot halted (a new
-        # controller needs seconds to start); the probe's clock lags the simulator's by
-        # the /clock delivery, LAG of simulated time at most
-        last_command = max(t for t in probe.cmd_times if t <= halted)
-        assert len(probe.cmd_times) >= commands
-        assert killed_at <= moving[-1]  # it coasted on the last command...
-        assert moving[-1] <= last_command + cmd_timeout + 2.0 / rate + LAG  # ...cmd_timeout
+        self.wait(ready, 'first control step with the plan')
 
-        # closed_loop started a new controller: it gets /plan and drives to the target
-        output, _ = loop.communicate(timeout=90)
-    finally:
-        end_process_group(loop)
-    assert loop.returncode == 0, output
-    metrics = json.loads((tmp_path / 'metrics.json').read_text())
-    assert metrics['reached'] and not metrics['collision'], metrics
-    assert [r['node'] for r in metrics['respawns']] == ['mpc_controller']
-    assert metrics['messages']['/plan'] == 1  # planned once: the new controller got that plan
-    positions = np.array([[m.pose.pose.position.x, m.pose.pose.position.y] for m in probe.odoms])
-    for obstacle in WORLD.obstacles:
-        assert not np.any(obstacle.contains(positions))
-    assert 'started again' in (tmp_path / 'logs' / 'mpc_controller.log').read_text()
+    def kill_controller(self) -> None:
+        """SIGKILL the controller process and reap it: it sends nothing more."""
+        os.kill(self.controller.pid, signal.SIGKILL)
+        self.controller.wait(timeout=HANG_GUARD)
+        self.controller = None
+
+    def steps(self) -> list[dict]:
+        """The current controller's control steps (its diagnostics)."""
+        return self.probe.diagnostics[self.first_diagnostic:]
+
+    def stepped(self) -> bool:
+        """Say whether the controller's step at this instant is done and its cmd_vel taken."""
+        steps = self.steps()
+        return bool(steps) and steps[-1]['stamp'] > self.t - 0.5 / SIM_RATE and (
+            len(self.simulator.received) - self.first_command >= len(steps))
+
+    def tick(self) -> None:
+        self.ticks += 1
+        self.probe.publish_clock(self.t)
+        self.wait(lambda: bool(self.probe.odoms) and stamp(self.probe.odoms[-1])
+                  >= self.t - 1e-6, 'odometry from the simulator')
+        if self.controller is not None and self.at_control_instant():
+            self.wait(self.stepped, 'control step')
+
+    def run_until(self, condition: Callable[[], bool], what: str) -> None:
+        """Tick until condition() holds (bounded by the hang guard only)."""
+        while not condition():
+            if time.monotonic() > self.deadline:
+                pytest.fail(f'hang guard ({HANG_GUARD:g} s wall): not {what} at '
+                            f't = {self.t:.2f} s:\n{self.log_tail()}')
+            self.tick()
 
 
 def stamp(msg: Odometry) -> float:
     return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
+def test_a_killed_controller_stops_the_robot_and_a_restarted_one_drives_to_the_target(
+        ros, tmp_path) -> None:  # noqa: ANN001
+    simulator = ros.add(RecordingSimulator(context=ros.context, parameter_overrides=[
+        Parameter('use_sim_time', value=True), Parameter('rate', value=SIM_RATE),
+        Parameter('cmd_timeout', value=CMD_TIMEOUT),
+        Parameter('initial_pose', value=[float(v) for v in WORLD.start])]))
+    probe = ros.probe(use_sim_time=True)
+    probe.plan_pub.publish(poses_to_path(PLAN))  # once: transient_local keeps it for late nodes
+    loop = Lockstep(ros, probe, simulator, tmp_path / 'logs')
+    try:
+        # a controller process drives the robot past x = 1 (above the box)
+        loop.start_controller()
+        def halfway() -> bool:
+            return (simulator.state[0] > 1.0 and bool(simulator.received)
+                    and simulator.received[-1][1][0] > 0.05)
+
+        loop.run_until(lambda: halfway() or loop.t > TIME_LIMIT, 'halfway')
+        assert halfway(), f'not past x = 1 after {loop.t:g} s: {simulator.state}'
+        last_time, last_u = simulator.received[-1]
+        commands = len(simulator.received)
+        loop.kill_controller()
+
+        # the simulator drives on the last command for cmd_timeout, then stops the robot
+        loop.run_until(lambda: loop.t > last_time + CMD_TIMEOUT + 1.0, 'a second after')
+        assert len(simulator.received) == commands  # the killed controller sent nothing more
+        after = [m for m in probe.odoms if stamp(m) > last_time]
+        moving = [m for m in after if stamp(m) - last_time <= CMD_TIMEOUT + 1e-9]
+        halted = after[len(moving):]
+        assert stamp(moving[-1]) - last_time >= CMD_TIMEOUT - 1.0 / SIM_RATE - 1e-9
+        for msg in moving:
+            np.testing.assert_array_equal(u_from_twist(msg.twist.twist), last_u)
+        assert len(halted) >= SIM_RATE  # a second of odometry, all of it standing still
+        halted_at = odometry_to_state(halted[0])
+        for msg in halted:
+            np.testing.assert_array_equal(u_from_twist(msg.twist.twist), [0.0, 0.0])
+            np.testing.assert_array_equal(odometry_to_state(msg), halted_at)
+
+        # a new controller process gets the plan (published once, transient_local) and
+        # drives to the target
+        loop.run_until(loop.at_control_instant, 'a control instant')
+        rosout = len(probe.logs)
+        loop.start_controller(again=True)
+        def arrived() -> bool:
+            return any(d['goal_reached'] == 'true' for d in loop.steps())
+
+        loop.run_until(lambda: arrived() or loop.t > TIME_LIMIT, 'at the goal')
+        assert arrived(), f'not at the goal after {loop.t:g} s: {simulator.state}'
+        restarted = stamp(next(m for m in probe.odoms if stamp(m) > loop.steps()[0]['stamp']))
+    finally:
+        if loop.controller is not None:
+            loop.controller.send_signal(signal.SIGINT)
+            try:
+                loop.controller.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                loop.controller.kill()
+                loop.controller.wait()
+    new_plans = [entry.msg for entry in probe.logs[rosout:]
+                 if entry.name == 'mpc_controller' and entry.msg.startswith('new plan')]
+    assert len(new_plans) == 1 and new_plans[0].startswith(f'new plan: {len(PLAN)} poses')
+    # the robot stood still until the new controller's first step
+    for msg in probe.odoms:
+        if stamp(halted[0]) <= stamp(msg) < restarted:
+            np.testing.assert_array_equal(odometry_to_state(msg), halted_at)
+    np.testing.assert_allclose(simulator.state[:2], WORLD.goal[:2], atol=0.05)
+    positions = np.array([[m.pose.pose.position.x, m.pose.pose.position.y] for m in probe.odoms])
+    for obstacle in WORLD.obstacles:
+        assert not np.any(obstacle.contains(positions))
+    assert 'started again' in (tmp_path / 'logs' / 'mpc_controller.log').read_text()
