@@ -31,6 +31,8 @@ setup(
         ('share/' + package_name, ['package.xml']),
         (os.path.join('share', package_name, 'config'), glob('config/*.yaml')),
         (os.path.join('share', package_name, 'config', 'worlds'), glob('config/worlds/*.yaml')),
+        (os.path.join('share', package_name, 'launch'), glob('launch/*.launch.py')),
+        (os.path.join('share', package_name, 'rviz'), glob('rviz/*.rviz')),
     ],
     install_requires=[
         'numpy',
@@ -39,6 +41,8 @@ setup(
         'rosbags>=0.10',
         'matplotlib',
         'pyyaml',
+        'scipy',
+        'pillow',
     ],
     extras_require={
         # The ROS 2 Jazzy Python wheels on PyPI, for machines without a ROS install.
@@ -50,6 +54,8 @@ setup(
             'ros-visualization-msgs==5.3.6',
             'ros-diagnostic-msgs==5.3.6',
             'ros-rosgraph-msgs==2.0.3',
+            'ros-sensor-msgs==5.3.6',
+            'ros-lifecycle-msgs==2.0.3',
         ],
         'test': ['pytest', 'hypothesis', 'ruff'],
     },
@@ -68,6 +74,7 @@ setup(
             'closed_loop = mpc_local_planner.ros.closed_loop:main',
             'analyze_bag = mpc_local_planner.evaluation.analyze_bag:main',
             'mpc_bench = mpc_local_planner.evaluation.bench:main',
+            'world_to_map = mpc_local_planner.worlds.world_to_map:main',
         ],
     },
 )

@@ -1,0 +1,58 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""Run the planner and the MPC on a real robot (``ros2 launch ... navigation.launch.py``).
+
+The robot's driver supplies ``odom`` and takes ``cmd_vel``; goals come on ``goal_pose``
+(RViz's "2D Goal Pose"). Both nodes read the obstacles of ``world`` (a world YAML).
+
+Checked statically only: ``launch`` and ``launch_ros`` are not installable from PyPI, so the
+tests compile this file and check the executables and files it names (test/ros/test_launch.py).
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+PACKAGE = 'mpc_local_planner'
+
+
+def generate_launch_description() -> LaunchDescription:
+    """Declare the arguments and the two nodes."""
+    config = os.path.join(get_package_share_directory(PACKAGE), 'config')
+    world = LaunchConfiguration('world')
+    use_sim_time = LaunchConfiguration('use_sim_time')
+    return LaunchDescription([
+        DeclareLaunchArgument('world', default_value='paper_obstacle.yaml',
+                              description='world YAML with the obstacles: a path or a name'),
+        DeclareLaunchArgument('use_sim_time', default_value='false',
+                              description='true when a simulator or a bag drives /clock'),
+        DeclareLaunchArgument('planner_params',
+                              default_value=os.path.join(config, 'global_planner.yaml')),
+        DeclareLaunchArgument('controller_params',
+                              default_value=os.path.join(config, 'mpc_controller.yaml')),
+        Node(package=PACKAGE, executable='global_planner', name='global_planner',
+             output='screen',
+             parameters=[LaunchConfiguration('planner_params'),
+                         {'use_sim_time': use_sim_time, 'world_file': world}]),
+        Node(package=PACKAGE, executable='mpc_controller', name='mpc_controller',
+             output='screen',
+             parameters=[LaunchConfiguration('controller_params'),
+                         {'use_sim_time': use_sim_time, 'world_file': world}]),
+    ])

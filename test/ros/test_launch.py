@@ -1,0 +1,210 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""The launch files and the RViz config, checked without ``launch`` (not installable here).
+
+``launch`` and ``launch_ros`` are not on PyPI, so the launch files run against small stand-ins
+of the few launch classes they use: the stand-ins record what the launch file asks for, and
+the tests check it against the package (console scripts, installed files, declared
+parameters). What launch itself does with a description is not checked here.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib
+from importlib import metadata
+import importlib.util
+from pathlib import Path
+import sys
+import types
+from typing import Any
+
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parents[2]
+LAUNCH_FILES = sorted((ROOT / 'launch').glob('*.launch.py'))
+RVIZ_FILE = ROOT / 'rviz' / 'mpc_local_planner.rviz'
+SHARE = '/install/share/mpc_local_planner'
+
+
+class _Recorded:
+    """Stand-in for a launch class: keeps its arguments."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        self.args, self.kwargs = args, kwargs
+
+
+class _LaunchConfiguration(_Recorded):
+    def perform(self, context: dict[str, str]) -> str:
+        return context[self.args[0]]
+
+
+def _stand_in_modules() -> dict[str, types.ModuleType]:
+    """Return modules named like launch's, with just the names the launch files import."""
+    names = {
+        'launch': {'LaunchDescription': _Recorded, 'LaunchContext': dict},
+        'launch.actions': {'DeclareLaunchArgument': _Recorded, 'OpaqueFunction': _Recorded},
+        'launch.conditions': {'IfCondition': _Recorded},
+        'launch.substitutions': {'LaunchConfiguration': _LaunchConfiguration},
+        'launch_ros': {},
+        'launch_ros.actions': {'Node': _Recorded},
+        'ament_index_python': {},
+        'ament_index_python.packages': {'get_package_share_directory': lambda pkg: SHARE},
+    }
+    modules = {}
+    for name, attributes in names.items():
+        module = types.ModuleType(name)
+        module.__dict__.update(attributes)
+        modules[name] = module
+    return modules
+
+
+def _describe(path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[dict[str, str], list]:
+    """Run the launch file's generate_launch_description; return (arguments, nodes)."""
+    for name, module in _stand_in_modules().items():
+        monkeypatch.setitem(sys.modules, name, module)
+    spec = importlib.util.spec_from_file_location(path.stem.replace('.', '_'), path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    description = module.generate_launch_description()
+    entities = description.args[0]
+    arguments = {e.args[0]: e.kwargs['default_value'] for e in entities
+                 if isinstance(e, _Recorded) and 'default_value' in e.kwargs}
+    nodes = []
+    for entity in entities:
+        if 'package' in entity.kwargs:
+            nodes.append(entity)
+        elif 'function' in entity.kwargs:  # OpaqueFunction: run it as launch would
+            nodes += entity.kwargs['function'](dict(arguments))
+    return arguments, nodes
+
+
+def _console_scripts() -> set[str]:
+    entry_points = metadata.distribution('mpc_local_planner').entry_points
+    return {e.name for e in entry_points if e.group == 'console_scripts'}
+
+
+def _installed_share_files() -> set[str]:
+    """Return share/mpc_local_planner/... paths that setup.py's data_files install."""
+    tree = ast.parse((ROOT / 'setup.py').read_text())
+    installed = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and getattr(node.func, 'id', '') == 'glob':
+            pattern = ast.literal_eval(node.args[0])
+            installed |= {str(p.relative_to(ROOT)) for p in ROOT.glob(pattern)}
+    return {f'{SHARE}/{p}' for p in installed}
+
+
+def _declared_parameters(executable: str, ros: Any) -> set[str]:
+    """Return the parameter names a node of the executable declares (the real node)."""
+    module_name = {'unicycle_simulator': 'unicycle_simulator_node',
+                   'global_planner': 'global_planner_node',
+                   'mpc_controller': 'mpc_controller_node',
+                   'bag_recorder': 'bag_recorder_node'}[executable]
+    module = importlib.import_module(f'mpc_local_planner.ros.{module_name}')
+    node_class = next(value for name, value in vars(module).items()
+                      if name.endswith('Node') and isinstance(value, type)
+                      and value.__module__ == module.__name__)
+    overrides = []
+    if executable == 'bag_recorder':  # it opens its bag at construction
+        from rclpy.parameter import Parameter
+
+        overrides = [Parameter('output', value=str(ros.tmp_path / 'bag'))]
+    node = ros.add(node_class(context=ros.context, parameter_overrides=overrides))
+    return set(node._parameters)
+
+
+def test_there_are_a_simulation_and_a_navigation_launch_file() -> None:
+    assert {p.name for p in LAUNCH_FILES} == {'simulation.launch.py', 'navigation.launch.py'}
+
+
+@pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
+def test_launch_file_compiles(path: Path) -> None:
+    compile(path.read_text(), str(path), 'exec')
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
+def test_launch_file_names_only_console_scripts_installed_files_and_declared_parameters(
+        path: Path, monkeypatch: pytest.MonkeyPatch, ros: Any, tmp_path: Path) -> None:
+    ros.tmp_path = tmp_path
+    arguments, nodes = _describe(path, monkeypatch)
+    scripts, installed = _console_scripts(), _installed_share_files()
+    assert f'{SHARE}/launch/{path.name}' in installed
+    assert nodes, 'the launch file starts no node'
+    for node in nodes:
+        executable = node.kwargs['executable']
+        assert node.kwargs['package'] == 'mpc_local_planner'
+        assert executable in scripts, f'{executable} is not a console script'
+        declared = _declared_parameters(executable, ros)
+        for entry in node.kwargs['parameters']:
+            if isinstance(entry, str):
+                assert entry in installed, f'{entry} is not installed'
+            elif isinstance(entry, dict):
+                assert set(entry) <= declared, f'{executable}: {set(entry) - declared}'
+            else:  # a LaunchConfiguration naming a params file
+                default = arguments[entry.args[0]]
+                assert default in installed, f'{default} is not installed'
+    for name, default in arguments.items():
+        if default.startswith(SHARE):
+            assert default in installed, f'argument {name}: {default} is not installed'
+
+
+def test_simulation_launch_runs_every_node_on_simulated_time_and_records_on_request(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    _, nodes = _describe(ROOT / 'launch' / 'simulation.launch.py', monkeypatch)
+    by_name = {n.kwargs['executable']: n for n in nodes}
+    assert set(by_name) == {'unicycle_simulator', 'global_planner', 'mpc_controller',
+                            'bag_recorder'}
+    for name, node in by_name.items():
+        values = {k: v for entry in node.kwargs['parameters'] if isinstance(entry, dict)
+                  for k, v in entry.items()}
+        if name == 'unicycle_simulator':
+            assert values['publish_clock'] is True
+        else:
+            assert values['use_sim_time'] is True
+    assert by_name['bag_recorder'].kwargs['condition'].args == ('false',)
+
+
+def _rviz_topics(config: Any) -> set[str]:
+    """Return every topic the RViz config names (displays and tools)."""
+    topics = set()
+
+    def visit(item: Any) -> None:
+        if isinstance(item, dict):
+            topic = item.get('Topic')
+            if isinstance(topic, dict):
+                topics.add(topic['Value'])
+            for value in item.values():
+                visit(value)
+        elif isinstance(item, list):
+            for value in item:
+                visit(value)
+
+    visit(config)
+    return topics
+
+
+def test_rviz_config_is_yaml_with_the_map_frame_and_a_goal_tool_on_goal_pose() -> None:
+    config = yaml.safe_load(RVIZ_FILE.read_text())
+    manager = config['Visualization Manager']
+    assert manager['Global Options']['Fixed Frame'] == 'map'
+    goal_tools = [t for t in manager['Tools'] if t['Class'] == 'rviz_default_plugins/SetGoal']
+    assert [t['Topic']['Value'] for t in goal_tools] == ['/goal_pose']
+    classes = {d['Class'] for d in manager['Displays']}
+    assert {'rviz_default_plugins/Path', 'rviz_default_plugins/Odometry',
+            'rviz_default_plugins/MarkerArray', 'rviz_default_plugins/Polygon'} <= classes
