@@ -21,6 +21,12 @@ experiments never care where a scenario came from:
 - BARN JSON (Perille et al. 2020, as converted under ``data/barn``): cylinders of one radius,
   approximated by circumscribed octagons so that avoiding the polygon avoids the cylinder.
 
+A world may also hold ``unknown_obstacles``: things that exist in the simulated world (the
+laser sees them, the robot can hit them) but in no map and in no node's prior knowledge, so
+that perception has something to discover. ``World.true_shapes`` keeps the exact geometry of
+everything physically present (circles as `Circle`, not as their octagons) for the simulated
+laser and the contact check, which must not inherit the planner's conservative approximation.
+
 Everything is validated on load. A malformed world fails here, with the file and the field in
 the message, instead of as a NaN deep inside a solver.
 """
@@ -31,7 +37,7 @@ from dataclasses import dataclass
 import json
 import math
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, NamedTuple, NoReturn
 
 import numpy as np
 import yaml
@@ -41,6 +47,8 @@ from mpc_local_planner.core.obstacles import ConvexPolygon
 
 __all__ = [
     'BARN_MARGIN',
+    'Circle',
+    'Shape',
     'World',
     'load_barn_world',
     'load_world',
@@ -63,6 +71,7 @@ _YAML_KEYS = frozenset(
         'time_limit',
         'name',
         'description',
+        'unknown_obstacles',
     }
 )
 _BARN_KEYS = ('cylinder_radius', 'cylinders', 'start', 'goal')
@@ -79,6 +88,23 @@ _PAPER_WORLD = {
     'path': 'paper_sinusoid',
     'robot_radius': 0.0,
 }
+
+
+class Circle(NamedTuple):
+    """A disk, kept exactly: a BARN cylinder or a world file's ``circle``.
+
+    The obstacles the MPC sees are polygons circumscribed about it; the simulated laser and
+    the contact check use the disk itself, so the robot is not blamed for touching corners
+    that do not exist.
+    """
+
+    x: float
+    y: float
+    radius: float
+
+
+#: The exact geometry of one physical obstacle: a convex polygon or a disk.
+Shape = ConvexPolygon | Circle
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,6 +126,12 @@ class World:
             path comes from the global planner.
         goal_tolerance: Distance to the goal that counts as arrival, when the world sets one.
         time_limit: Time budget of a run in seconds, when the world sets one.
+        unknown_obstacles: Obstacles that exist (laser, contacts) but are in no map and in no
+            node's prior knowledge; as polygons, circles circumscribed like ``obstacles``.
+        true_shapes: The exact geometry of every physical obstacle, known and unknown (disks
+            as `Circle`). Empty means the polygons themselves are exact; use `physical_shapes`.
+            It describes the world, not a representation of it, so replacing ``obstacles`` by
+            a merged or simplified set leaves it valid.
 
     """
 
@@ -112,6 +144,18 @@ class World:
     path: str | None = None
     goal_tolerance: float | None = None
     time_limit: float | None = None
+    unknown_obstacles: tuple[ConvexPolygon, ...] = ()
+    true_shapes: tuple[Shape, ...] = ()
+
+    def physical_shapes(self) -> tuple[Shape, ...]:
+        """Return the exact shapes of everything the laser sees and the robot can touch.
+
+        ``true_shapes`` when the world has them, else the known and unknown polygons (a world
+        built in code from polygons only).
+        """
+        if self.true_shapes:
+            return self.true_shapes
+        return tuple(self.obstacles) + tuple(self.unknown_obstacles)
 
     def inflated_obstacles(self, extra: float = 0.0) -> tuple[ConvexPolygon, ...]:
         """Return the obstacles inflated by the robot radius plus extra (metres)."""
@@ -160,7 +204,8 @@ def world_from_dict(data: Any, *, name: str, source: str | None = None) -> World
 
     Args:
         data: The parsed mapping with ``bounds``, ``obstacles``, ``start``, ``goal`` and the
-            optional ``path``, ``robot_radius``, ``goal_tolerance``, ``time_limit``.
+            optional ``path``, ``robot_radius``, ``goal_tolerance``, ``time_limit``,
+            ``unknown_obstacles``.
         name: Name of the world.
         source: Where the data came from, for error messages (defaults to the name).
 
@@ -182,7 +227,10 @@ def world_from_dict(data: Any, *, name: str, source: str | None = None) -> World
             _fail(where, f'missing required key {key!r}')
 
     bounds = _bounds(data['bounds'], where)
-    obstacles = _obstacles(data.get('obstacles') or [], where)
+    obstacles, known_shapes = _obstacles(data.get('obstacles') or [], where)
+    unknown_obstacles, unknown_shapes = _obstacles(
+        data.get('unknown_obstacles') or [], where, key='unknown_obstacles'
+    )
     start = _vector(data['start'], 3, 'start', where)
     goal = _vector(data['goal'], 3, 'goal', where)
     robot_radius = _number(data.get('robot_radius', 0.0), 'robot_radius', where, minimum=0.0)
@@ -202,6 +250,8 @@ def world_from_dict(data: Any, *, name: str, source: str | None = None) -> World
         path=path,
         goal_tolerance=goal_tolerance,
         time_limit=time_limit,
+        unknown_obstacles=unknown_obstacles,
+        true_shapes=known_shapes + unknown_shapes,
     )
 
 
@@ -267,6 +317,7 @@ def load_barn_world(path: str | Path, *, robot_radius: float = 0.2, sides: int =
     obstacles = tuple(
         ConvexPolygon.from_circle(float(x), float(y), radius, sides=sides) for x, y in centres
     )
+    cylinders_exact = tuple(Circle(float(x), float(y), radius) for x, y in centres)
     return _make_world(
         name=path.stem,
         where=where,
@@ -278,6 +329,7 @@ def load_barn_world(path: str | Path, *, robot_radius: float = 0.2, sides: int =
         path=None,
         goal_tolerance=_optional_positive(data.get('goal_tolerance'), 'goal_tolerance', where),
         time_limit=_optional_positive(data.get('time_limit_s'), 'time_limit_s', where),
+        true_shapes=cylinders_exact,
     )
 
 
@@ -304,6 +356,12 @@ def _make_world(*, name: str, where: str, **fields: Any) -> World:
         for index, obstacle in enumerate(world.obstacles):
             if bool(obstacle.contains(pose[:2])[0]):
                 _fail(where, f'{label} ({pose[0]:g}, {pose[1]:g}) is inside obstacle {index}')
+        for index, obstacle in enumerate(world.unknown_obstacles):
+            if bool(obstacle.contains(pose[:2])[0]):
+                _fail(
+                    where,
+                    f'{label} ({pose[0]:g}, {pose[1]:g}) is inside unknown obstacle {index}',
+                )
     return world
 
 
@@ -350,27 +408,36 @@ def _bounds(value: Any, where: str) -> tuple[float, float, float, float]:
     return (xmin, xmax, ymin, ymax)
 
 
-def _obstacles(value: Any, where: str) -> tuple[ConvexPolygon, ...]:
-    """Parse the obstacle list: each item is one of {box: ...}, {polygon: ...}, {circle: ...}."""
+def _obstacles(
+    value: Any, where: str, *, key: str = 'obstacles'
+) -> tuple[tuple[ConvexPolygon, ...], tuple[Shape, ...]]:
+    """Parse an obstacle list: each item is one of {box: ...}, {polygon: ...}, {circle: ...}.
+
+    Returns the polygons (circles circumscribed) and, in the same order, the exact shapes.
+    """
     if not isinstance(value, list):
-        _fail(where, f'obstacles must be a list, got {type(value).__name__}')
-    obstacles = []
+        _fail(where, f'{key} must be a list, got {type(value).__name__}')
+    obstacles: list[ConvexPolygon] = []
+    shapes: list[Shape] = []
     for index, item in enumerate(value):
-        what = f'obstacles[{index}]'
+        what = f'{key}[{index}]'
         if not isinstance(item, dict) or len(item) != 1:
             _fail(where, f'{what} must have exactly one key (box, polygon or circle): {item!r}')
         kind, spec = next(iter(item.items()))
         try:
             if kind == 'box':
                 obstacles.append(ConvexPolygon.from_box(*_vector(spec, 4, what, where)))
+                shapes.append(obstacles[-1])
             elif kind == 'circle':
                 x, y, r = _vector(spec, 3, what, where)
                 obstacles.append(ConvexPolygon.from_circle(x, y, r))
+                shapes.append(Circle(float(x), float(y), float(r)))
             elif kind == 'polygon':
                 if not isinstance(spec, list) or len(spec) < 3:
                     _fail(where, f'{what}: a polygon needs a list of >= 3 [x, y], got {spec!r}')
                 vertices = [_vector(v, 2, f'{what}[{i}]', where) for i, v in enumerate(spec)]
                 obstacles.append(ConvexPolygon.from_vertices(vertices))
+                shapes.append(obstacles[-1])
             else:
                 _fail(where, f'{what}: unknown obstacle kind {kind!r} (box, polygon or circle)')
         except WorldError:
@@ -378,4 +445,4 @@ def _obstacles(value: Any, where: str) -> tuple[ConvexPolygon, ...]:
         except ValueError as err:
             msg = f'{where}: {what}: {err}'
             raise WorldError(msg) from None
-    return tuple(obstacles)
+    return tuple(obstacles), tuple(shapes)

@@ -26,9 +26,10 @@ import pytest
 import yaml
 
 from mpc_local_planner.core.errors import WorldError
-from mpc_local_planner.core.obstacles import min_clearance
+from mpc_local_planner.core.obstacles import ConvexPolygon, min_clearance
 from mpc_local_planner.worlds.data_files import BARN_DIR
 from mpc_local_planner.worlds.world import (
+    Circle,
     load_barn_world,
     load_world,
     paper_world,
@@ -61,7 +62,8 @@ def write_yaml(tmp_path: Path, data: Any, name: str = 'world.yaml') -> Path:
     return path
 
 
-@pytest.mark.parametrize('name', ['paper_obstacle', 'corridor_turn', 'rrt_cluttered'])
+@pytest.mark.parametrize('name', ['paper_obstacle', 'corridor_turn', 'rrt_cluttered',
+                                  'unknown_box'])
 def test_every_shipped_world_loads_with_start_and_goal_in_free_space(name: str) -> None:
     world = load_world(WORLDS / f'{name}.yaml')
 
@@ -168,6 +170,62 @@ def test_barn_world_becomes_octagons_with_heading_bounds_and_limits() -> None:
     angles = np.linspace(0, 2 * np.pi, 50)
     rim = centres[0] + r * np.column_stack([np.cos(angles), np.sin(angles)])
     assert world.obstacles[0].contains(rim, margin=1e-12).all()
+
+
+def test_barn_world_keeps_the_exact_cylinders_as_true_shapes() -> None:
+    world = load_barn_world(BARN / 'world_000.json')
+    raw = json.loads((BARN / 'world_000.json').read_text())
+
+    assert len(world.true_shapes) == len(raw['cylinders'])
+    assert world.physical_shapes() == world.true_shapes
+    assert world.true_shapes[0] == Circle(*raw['cylinders'][0], raw['cylinder_radius'])
+    assert world.unknown_obstacles == ()
+
+
+def test_unknown_obstacles_are_parsed_like_obstacles_but_kept_apart() -> None:
+    data = valid_world() | {'unknown_obstacles': [{'box': [2.5, 2.0, 3.0, 2.5]},
+                                                  {'circle': [0.5, 2.5, 0.2]}]}
+    world = world_from_dict(data, name='hidden')
+
+    assert len(world.obstacles) == 3 and len(world.unknown_obstacles) == 2
+    assert world.unknown_obstacles[1].num_faces == 8
+    shapes = world.physical_shapes()
+    assert len(shapes) == 5
+    assert shapes[2] == Circle(3.0, 2.5, 0.2) and shapes[4] == Circle(0.5, 2.5, 0.2)
+    assert isinstance(shapes[3], ConvexPolygon)
+    # Worlds without unknown obstacles (and worlds built in code) keep their behaviour.
+    plain = world_from_dict(valid_world(), name='plain')
+    assert plain.unknown_obstacles == ()
+    assert len(plain.physical_shapes()) == 3
+
+
+@pytest.mark.parametrize(('changes', 'match'), [
+    ({'unknown_obstacles': {'box': [1, 1, 2, 2]}}, 'unknown_obstacles must be a list'),
+    ({'unknown_obstacles': [{'cone': [1, 1]}]}, r'unknown_obstacles\[0\]: unknown obstacle kind'),
+    ({'unknown_obstacles': [{'box': [0, 0, 1, 1]}]}, r'start \(0.5, 0.5\) is inside unknown'),
+])
+def test_malformed_unknown_obstacles_raise_world_error(changes: dict[str, Any],
+                                                       match: str) -> None:
+    with pytest.raises(WorldError, match=match):
+        world_from_dict(valid_world() | changes, name='hidden')
+
+
+def test_unknown_box_lies_on_the_route_planned_around_the_known_wall() -> None:
+    world = load_world(WORLDS / 'unknown_box.yaml')
+    (wall,) = world.obstacles
+    (box,) = world.unknown_obstacles
+    # The shortest route around the wall inflated by robot radius + 0.1 m clearance.
+    grown = wall.inflate(world.robot_radius + 0.1)
+    xmin, ymin = grown.vertices.min(axis=0)
+    xmax, ymax = grown.vertices.max(axis=0)
+    route = np.array([world.start[:2], [xmin, ymax], [xmax, ymax], world.goal[:2]])
+    samples = np.vstack([np.linspace(a, b, 100) for a, b in zip(route[:-1], route[1:],
+                                                                 strict=True)])
+
+    assert min_clearance([grown], samples) >= -1e-9 and ymin < world.start[1]
+    assert min_clearance([box], samples) <= 0.3
+    assert min_clearance([wall], box.vertices) >= 0.5  # a way past both remains
+    assert box.vertices[:, 1].max() + 2 * world.robot_radius + 0.2 < world.bounds[3]
 
 
 def test_barn_loader_honours_robot_radius_and_sides() -> None:

@@ -1,0 +1,321 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Occupancy grids as the controller and the planner need them.
+
+- `grid_rectangles`: the MPC avoids convex polygons, one Farkas multiplier vector each, so a
+  map's occupied cells near the robot are merged into few axis-aligned rectangles that cover
+  them exactly (runs of occupied cells per row, stacked while the run below is the same).
+- `PlanningGrid`: what the RRT* planner checks its motions against: the static map, plus
+  cells marked by scan returns and cleared along the beams, unknown cells free (optimistic,
+  as the BARN baselines plan), inflated by the robot radius plus a clearance with a
+  Euclidean distance transform.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+from scipy.ndimage import binary_dilation, distance_transform_edt
+
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.perception.scan_obstacles import (
+    compose_pose,
+    Scan,
+    validate_scan,
+)
+from mpc_local_planner.worlds.map_files import OccupancyMap, OCCUPIED
+
+__all__ = [
+    'DEFAULT_OCCUPIED_THRESHOLD',
+    'GridError',
+    'PlanningGrid',
+    'grid_from_fields',
+    'grid_rectangles',
+]
+
+#: Cells with at least this value are obstacles (map_server's occupied_thresh 0.65).
+DEFAULT_OCCUPIED_THRESHOLD = 65
+
+
+class GridError(ValueError):
+    """An occupancy grid is malformed (size, resolution or origin)."""
+
+
+def grid_from_fields(data: Sequence[int] | np.ndarray, width: int, height: int,
+                     resolution: float, origin: Sequence[float]) -> OccupancyMap:
+    """Check the fields of an OccupancyGrid message and return them as a map.
+
+    Args:
+        data: Row-major cell values, row 0 at the bottom (the message's ``data``).
+        width: Number of columns.
+        height: Number of rows.
+        resolution: Cell side, metres.
+        origin: (x, y, yaw) of the grid's lower-left corner in the map frame.
+
+    Returns:
+        The grid.
+
+    Raises:
+        GridError: If width * height != len(data), a size is not positive, the resolution is
+            not > 0 or the origin is not finite.
+
+    """
+    values = np.asarray(data)
+    if isinstance(width, bool) or isinstance(height, bool) or not (
+            isinstance(width, (int, np.integer)) and isinstance(height, (int, np.integer))):
+        msg = f'grid width and height must be integers, got {width!r}, {height!r}'
+        raise GridError(msg)
+    if width <= 0 or height <= 0:
+        msg = f'grid width and height must be > 0, got {width} x {height}'
+        raise GridError(msg)
+    if values.ndim != 1 or width * height != len(values):
+        msg = f'grid is {width} x {height} = {width * height} cells but data has {values.size}'
+        raise GridError(msg)
+    if not (isinstance(resolution, (int, float)) and math.isfinite(resolution)
+            and resolution > 0.0):
+        msg = f'grid resolution must be > 0, got {resolution!r}'
+        raise GridError(msg)
+    origin = tuple(float(v) for v in origin)
+    if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
+        msg = f'grid origin must be three finite numbers (x, y, yaw), got {origin!r}'
+        raise GridError(msg)
+    if values.size and (values.min() < -1 or values.max() > OCCUPIED):
+        msg = 'grid values must be -1 (unknown) or 0..100'
+        raise GridError(msg)
+    return OccupancyMap(data=values.astype(np.int8).reshape(height, width),
+                        resolution=float(resolution), origin=origin)  # type: ignore[arg-type]
+
+
+def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return (row, first column, end column) of every horizontal run of True cells."""
+    padded = np.zeros((mask.shape[0], mask.shape[1] + 2), dtype=np.int8)
+    padded[:, 1:-1] = mask
+    step = np.diff(padded, axis=1)
+    rows_s, starts = np.nonzero(step == 1)
+    _, ends = np.nonzero(step == -1)  # same row-major order as the starts
+    return rows_s, starts, ends
+
+
+def grid_rectangles(occupancy: OccupancyMap, *, centre: Sequence[float] | None = None,
+                    radius: float = math.inf,
+                    threshold: int = DEFAULT_OCCUPIED_THRESHOLD) -> list[ConvexPolygon]:
+    """Cover the occupied cells in a window with few axis-aligned rectangles, exactly.
+
+    Each row's occupied cells form runs; a run stacks onto the rectangle below it when that
+    rectangle's run has the same columns. The rectangles are disjoint and their union is
+    exactly the occupied cells of the window (cell edges, not centres), in the map frame
+    (rotated with the grid's origin yaw).
+
+    Args:
+        occupancy: The grid.
+        centre: (x, y) of the window's centre in the map frame; None: the whole grid.
+        radius: Half the side of the square window, metres (cells that overlap it count).
+        threshold: Cells with a value >= threshold are occupied (unknown, -1, is not).
+
+    Returns:
+        The rectangles as ConvexPolygon boxes.
+
+    """
+    r0, c0, r1, c1 = 0, 0, occupancy.height, occupancy.width
+    if centre is not None and math.isfinite(radius):
+        res = occupancy.resolution
+        row, col = occupancy.world_to_cell(np.asarray(centre, dtype=float)[:2])
+        cells = int(math.ceil(radius / res))
+        r0, r1 = max(int(row) - cells, 0), min(int(row) + cells + 1, occupancy.height)
+        c0, c1 = max(int(col) - cells, 0), min(int(col) + cells + 1, occupancy.width)
+        if r0 >= r1 or c0 >= c1:
+            return []
+    mask = occupancy.data[r0:r1, c0:c1] >= threshold
+    rows, starts, ends = _runs(mask)
+    if not len(rows):
+        return []
+    order = np.lexsort((rows, ends, starts))
+    rows, starts, ends = rows[order], starts[order], ends[order]
+    same = np.zeros(len(rows), dtype=bool)
+    same[1:] = (starts[1:] == starts[:-1]) & (ends[1:] == ends[:-1]) & (
+        rows[1:] == rows[:-1] + 1)
+    first = np.flatnonzero(~same)
+    last = np.append(first[1:], len(rows)) - 1
+    bottom, top = rows[first] + r0, rows[last] + r0 + 1
+    left, right = starts[first] + c0, ends[first] + c0
+    return _boxes(occupancy, bottom, top, left, right)
+
+
+def _boxes(occupancy: OccupancyMap, bottom: np.ndarray, top: np.ndarray, left: np.ndarray,
+           right: np.ndarray) -> list[ConvexPolygon]:
+    """Build polygons for cell-index boxes [left, right) x [bottom, top) in the map frame."""
+    x0, y0, yaw = occupancy.origin
+    res = occupancy.resolution
+    c, s = math.cos(yaw), math.sin(yaw)
+    local = np.stack([np.column_stack([left, bottom]), np.column_stack([right, bottom]),
+                      np.column_stack([right, top]), np.column_stack([left, top])],
+                     axis=1).astype(float) * res  # (K, 4, 2), counter-clockwise
+    corners = np.stack([x0 + c * local[..., 0] - s * local[..., 1],
+                        y0 + s * local[..., 0] + c * local[..., 1]], axis=-1)
+    normals = np.array([[s, -c], [c, s], [-s, c], [-c, -s]])  # -y, +x, +y, -x rotated
+    offsets = np.einsum('fj,kfj->kf', normals, corners)
+    return [ConvexPolygon(A=normals.copy(), b=offsets[k], vertices=corners[k])
+            for k in range(len(corners))]
+
+
+class PlanningGrid:
+    """The planner's grid: static map plus scans, inflated for motion checks.
+
+    Static cells at or above ``threshold`` are permanent. Scans mark the cells of their
+    returns and clear, in the scan layer only, the cells their beams pass through (up to the
+    cell before the return, or ``clear_range`` for a beam without return). Unknown cells
+    and everything outside the grid count as free. A cell is blocked when some point of it
+    is within ``inflation`` of some point of an occupied cell, so inflation never shrinks an
+    obstacle: the occupied cells are grown by their 8 neighbours (the nearest points of two
+    cells are a lattice step apart less than their centres), then by a Euclidean distance
+    transform. Queries look up the cell of each point; segments are sampled at most half a
+    cell apart.
+
+    Args:
+        static_map: The map (its extent is the grid's extent).
+        inflation: Robot radius plus clearance, metres (>= 0).
+        threshold: Occupied threshold of the static map.
+        clear_range: Beams clear at most this far, metres (as nav2's raytrace_max_range).
+
+    Raises:
+        ValueError: If inflation or clear_range is negative or not finite.
+
+    """
+
+    def __init__(self, static_map: OccupancyMap, *, inflation: float,
+                 threshold: int = DEFAULT_OCCUPIED_THRESHOLD, clear_range: float = 5.0) -> None:
+        if not (math.isfinite(inflation) and inflation >= 0.0):
+            msg = f'inflation must be >= 0, got {inflation!r}'
+            raise ValueError(msg)
+        if not (math.isfinite(clear_range) and clear_range >= 0.0):
+            msg = f'clear_range must be >= 0, got {clear_range!r}'
+            raise ValueError(msg)
+        self.map = static_map
+        self.inflation = float(inflation)
+        self.clear_range = float(clear_range)
+        self._static = static_map.data >= threshold
+        self._scan = np.zeros_like(self._static)
+        self._blocked: np.ndarray | None = None
+
+    @property
+    def occupied(self) -> np.ndarray:
+        """(height, width) booleans: static obstacles or scan marks (row 0 at the bottom)."""
+        return self._static | self._scan
+
+    @property
+    def blocked(self) -> np.ndarray:
+        """(height, width) booleans: cells within the inflation of an occupied cell."""
+        if self._blocked is None:
+            occupied = self.occupied
+            if not occupied.any():
+                self._blocked = np.zeros_like(occupied)
+            else:
+                grown = binary_dilation(occupied, structure=np.ones((3, 3), dtype=bool))
+                distance = distance_transform_edt(~grown) * self.map.resolution
+                self._blocked = distance <= self.inflation + 1e-9
+        return self._blocked
+
+    def clear_scans(self) -> None:
+        """Forget every scan mark (the static map stays)."""
+        self._scan[:] = False
+        self._blocked = None
+
+    def add_scan(self, scan: Scan, robot_pose: Sequence[float], *,
+                 laser_pose: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
+        """Clear the cells the beams pass through, then mark the cells of the returns.
+
+        Args:
+            scan: The scan (validated here).
+            robot_pose: (x, y, yaw) of the robot in the map frame at the scan's stamp.
+            laser_pose: (x, y, yaw) of the laser in the robot frame.
+
+        Raises:
+            ScanError: If the scan or a pose is malformed.
+
+        """
+        validate_scan(scan)
+        ox, oy, oyaw = compose_pose(robot_pose, laser_pose)
+        ranges = np.asarray(scan.ranges, dtype=float)
+        valid = (ranges >= scan.range_min) & (ranges <= scan.range_max)
+        theta = oyaw + scan.angle_min + np.arange(len(ranges)) * scan.angle_increment
+        free = np.where(valid, ranges, np.where(ranges > scan.range_max, scan.range_max, 0.0))
+        free = np.minimum(free, self.clear_range)
+        res = self.map.resolution
+        # Clear up to one cell short of the return, sampled every half cell.
+        length = np.maximum(free - res, 0.0)
+        counts = np.ceil(length / (0.5 * res)).astype(np.int64) + 1
+        counts[length <= 0.0] = 0
+        if counts.sum():
+            beam = np.repeat(np.arange(len(ranges)), counts)
+            step = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
+            dist = np.minimum(step * 0.5 * res, length[beam])
+            xs = ox + dist * np.cos(theta[beam])
+            ys = oy + dist * np.sin(theta[beam])
+            rows, cols = self.map.world_to_cell(np.column_stack([xs, ys]))
+            inside = self.map.contains_cell(rows, cols)
+            self._scan[rows[inside], cols[inside]] = False
+        hits = np.column_stack([ox + ranges[valid] * np.cos(theta[valid]),
+                                oy + ranges[valid] * np.sin(theta[valid])])
+        rows, cols = self.map.world_to_cell(hits)
+        inside = self.map.contains_cell(rows, cols)
+        self._scan[rows[inside], cols[inside]] = True
+        self._blocked = None
+
+    def is_free(self, points: np.ndarray) -> np.ndarray:
+        """Say, per point, whether its cell is free after inflation (outside counts free).
+
+        Args:
+            points: (N, 2) or (2,) map-frame points (further columns are ignored).
+
+        Returns:
+            (N,) booleans.
+
+        """
+        pts = np.atleast_2d(np.asarray(points, dtype=float))[:, :2]
+        rows, cols = self.map.world_to_cell(pts)
+        inside = self.map.contains_cell(rows, cols)
+        free = np.ones(len(pts), dtype=bool)
+        blocked = self.blocked
+        free[inside] = ~blocked[rows[inside], cols[inside]]
+        return free
+
+    def segment_is_free(self, a: Sequence[float], b: Sequence[float]) -> bool:
+        """Say whether the segment from a to b stays in free cells (sampled <= half a cell)."""
+        return self.path_is_free(np.array([np.asarray(a, dtype=float)[:2],
+                                           np.asarray(b, dtype=float)[:2]]))
+
+    def path_is_free(self, waypoints: np.ndarray) -> bool:
+        """Say whether a polyline stays in free cells, every segment sampled <= half a cell.
+
+        Args:
+            waypoints: (M, 2) vertices (further columns are ignored); one point is a point test.
+
+        Returns:
+            True if every sample is free.
+
+        """
+        pts = np.atleast_2d(np.asarray(waypoints, dtype=float))[:, :2]
+        if len(pts) < 2:
+            return bool(np.all(self.is_free(pts)))
+        delta = np.diff(pts, axis=0)
+        length = np.hypot(delta[:, 0], delta[:, 1])
+        counts = np.ceil(length / (0.5 * self.map.resolution)).astype(np.int64) + 1
+        seg = np.repeat(np.arange(len(delta)), counts)
+        step = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
+        frac = step / np.maximum(counts[seg] - 1, 1)
+        samples = pts[seg] + frac[:, None] * delta[seg]
+        return bool(np.all(self.is_free(samples)))

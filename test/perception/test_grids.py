@@ -1,0 +1,134 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Tests of grid rectangles and of the planner's grid."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mpc_local_planner.core.obstacles import ConvexPolygon, point_in_any
+from mpc_local_planner.perception.grids import (
+    grid_from_fields,
+    grid_rectangles,
+    GridError,
+    PlanningGrid,
+)
+from mpc_local_planner.perception.laser import SimulatedLaser
+from mpc_local_planner.perception.scan_obstacles import Scan
+from mpc_local_planner.worlds.map_files import OccupancyMap
+
+L_SHAPE = np.array([  # row 0 at the bottom
+    [0, 0, 0, 0, 0, 0],
+    [0, 100, 100, 100, 0, 0],
+    [0, 100, 0, 0, 0, 0],
+    [0, 100, 0, 0, 70, -1],
+    [0, 0, 0, 0, 10, 0],
+], dtype=np.int8)
+
+
+def cover_mask(rectangles: list[ConvexPolygon], grid: OccupancyMap) -> np.ndarray:
+    rows, cols = np.mgrid[0:grid.height, 0:grid.width]
+    centres = grid.cell_to_world(rows.ravel(), cols.ravel())
+    return point_in_any(rectangles, centres).reshape(grid.height, grid.width)
+
+
+def test_rectangles_cover_the_occupied_cells_exactly_with_few_disjoint_pieces() -> None:
+    grid = OccupancyMap(L_SHAPE, 0.5, (1.0, -2.0, 0.0))
+
+    rectangles = grid_rectangles(grid)
+
+    np.testing.assert_array_equal(cover_mask(rectangles, grid), L_SHAPE >= 65)
+    assert len(rectangles) == 3  # the L's foot, its stem, the lone cell
+    areas = [np.prod(np.ptp(r.vertices, axis=0)) for r in rectangles]
+    assert sum(areas) == pytest.approx(np.count_nonzero(L_SHAPE >= 65) * 0.25)  # disjoint
+    lone = [r for r in rectangles if np.allclose(np.ptp(r.vertices, axis=0), 0.5)][0]
+    np.testing.assert_allclose(lone.vertices.min(axis=0), [1.0 + 4 * 0.5, -2.0 + 3 * 0.5])
+
+
+def test_rectangles_follow_a_rotated_origin_and_a_window() -> None:
+    grid = OccupancyMap(L_SHAPE, 0.5, (0.0, 0.0, math.pi / 2))
+    rectangles = grid_rectangles(grid)
+    np.testing.assert_array_equal(cover_mask(rectangles, grid), L_SHAPE >= 65)
+
+    window = grid_rectangles(OccupancyMap(L_SHAPE, 1.0), centre=(4.5, 3.5), radius=0.4)
+    assert len(window) == 1  # only the lone cell's neighbourhood
+    assert grid_rectangles(OccupancyMap(L_SHAPE, 1.0), threshold=101) == []
+
+
+def test_grid_from_fields_validates_the_message() -> None:
+    grid = grid_from_fields(L_SHAPE.ravel().tolist(), 6, 5, 0.5, (0.0, 0.0, 0.0))
+    np.testing.assert_array_equal(grid.data, L_SHAPE)
+    for args, match in [
+        ((L_SHAPE.ravel(), 5, 5, 0.5, (0, 0, 0)), r'5 x 5 = 25 cells but data has 30'),
+        ((L_SHAPE.ravel(), 6, 5, 0.0, (0, 0, 0)), 'resolution must be > 0'),
+        ((L_SHAPE.ravel(), 6, 5, math.nan, (0, 0, 0)), 'resolution must be > 0'),
+        ((L_SHAPE.ravel(), 6, 5, 0.5, (0, math.inf, 0)), 'origin must be three finite'),
+        ((L_SHAPE.ravel(), 0, 0, 0.5, (0, 0, 0)), 'must be > 0'),
+        ((np.full(30, 120), 6, 5, 0.5, (0, 0, 0)), r'-1 \(unknown\) or 0..100'),
+    ]:
+        with pytest.raises(GridError, match=match):
+            grid_from_fields(*args)
+
+
+def empty_map() -> OccupancyMap:
+    data = np.zeros((40, 60), dtype=np.int8)  # 6 m x 4 m at 0.1 m, origin (-1, -2)
+    data[:, 30] = 100  # a wall at x = 2.0 .. 2.1
+    data[18:22, 30] = -1  # with an unknown gap at y = -0.2 .. 0.2
+    return OccupancyMap(data, 0.1, (-1.0, -2.0, 0.0))
+
+
+def test_planning_grid_inflates_the_static_map_and_treats_unknown_as_free() -> None:
+    grid = PlanningGrid(empty_map(), inflation=0.25)
+
+    assert grid.is_free(np.array([[1.0, 1.0], [2.05, 0.0]])).tolist() == [True, False]
+    # Cell 1.7 .. 1.8 comes within 0.2 of the wall's cells: blocked; 1.6 .. 1.7 does not.
+    assert not grid.is_free(np.array([1.75, 1.0]))[0]
+    assert grid.is_free(np.array([1.65, 1.0]))[0]
+    narrow = PlanningGrid(empty_map(), inflation=0.0)
+    assert narrow.segment_is_free((0.0, 0.0), (4.0, 0.0))  # through the unknown gap
+    assert not narrow.segment_is_free((0.0, 1.0), (4.0, 1.0))
+    assert narrow.path_is_free(np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 1.5]]))
+    assert not narrow.path_is_free(np.array([[0.0, 0.0], [4.0, 0.0], [0.0, 1.5]]))
+    assert grid.is_free(np.array([100.0, 100.0]))[0]  # outside the map: unknown, free
+
+
+def test_planning_grid_marks_scan_returns_and_clears_along_the_beams() -> None:
+    grid = PlanningGrid(empty_map(), inflation=0.0)
+    box = ConvexPolygon.from_box(1.0, -0.2, 1.3, 0.2)
+    laser = SimulatedLaser([box], fov=math.pi, beams=181)
+    grid.add_scan(laser.scan((0.0, 0.0, 0.0)), (0.0, 0.0, 0.0))
+    assert not grid.segment_is_free((0.0, 0.0), (1.5, 0.0))  # the box blocks the gap now
+    assert grid.is_free(np.array([0.5, 0.0]))[0]
+
+    # The box is gone: the next scan's beams pass where it was and clear its cells.
+    grid.add_scan(SimulatedLaser([], fov=math.pi, beams=181).scan((0.0, 0.0, 0.0)),
+                  (0.0, 0.0, 0.0))
+    assert grid.segment_is_free((0.0, 0.0), (1.5, 0.0))
+    assert not grid.is_free(np.array([2.05, 1.0]))[0]  # scans never clear the static map
+
+    grid.add_scan(laser.scan((0.0, 0.0, 0.0)), (0.0, 0.0, 0.0))
+    grid.clear_scans()
+    assert grid.segment_is_free((0.0, 0.0), (1.5, 0.0))
+
+
+def test_planning_grid_refuses_bad_options_and_scans() -> None:
+    with pytest.raises(ValueError, match='inflation'):
+        PlanningGrid(empty_map(), inflation=-0.1)
+    grid = PlanningGrid(empty_map(), inflation=0.1)
+    with pytest.raises(ValueError, match='NaN'):
+        grid.add_scan(Scan(0.0, 0.1, 0.0, 5.0, np.array([1.0, math.nan])), (0.0, 0.0, 0.0))

@@ -1,0 +1,203 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Tests of scans to convex obstacles and of the obstacle memory."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+
+from mpc_local_planner.core.obstacles import ConvexPolygon, min_clearance, point_in_any
+from mpc_local_planner.perception.laser import SimulatedLaser
+from mpc_local_planner.perception.scan_obstacles import (
+    cluster_bounds,
+    ObstacleMemory,
+    Scan,
+    scan_points,
+    scan_to_obstacles,
+    ScanError,
+    validate_scan,
+)
+
+BOX = ConvexPolygon.from_box(2.0, -0.5, 2.6, 0.5)
+
+
+def covered(obstacles: list[ConvexPolygon], points: np.ndarray, tol: float = 1e-6) -> bool:
+    return bool(np.all(point_in_any(obstacles, points, margin=tol)))
+
+
+def test_box_in_front_gives_obstacles_covering_its_visible_face_and_nothing_far_off() -> None:
+    scan = SimulatedLaser([BOX]).scan((0.0, 0.0, 0.0))
+
+    obstacles = scan_to_obstacles(scan, (0.0, 0.0, 0.0))
+
+    face = np.column_stack([np.full(101, 2.0), np.linspace(-0.5, 0.5, 101)])
+    assert covered(obstacles, face)
+    assert len(obstacles) <= 3
+    for obstacle in obstacles:  # bounded, with an interior, near the box
+        assert len(obstacle.vertices) >= 3
+        assert min_clearance([BOX], obstacle.vertices) <= 0.1
+        assert np.ptp(obstacle.vertices, axis=0).min() >= 0.03
+
+
+def test_laser_mounting_pose_and_robot_pose_put_points_in_the_map_frame() -> None:
+    laser = SimulatedLaser([BOX])
+    # The laser sits 0.5 m ahead of a robot at (-0.5, 0) facing +x: it is at the origin.
+    scan = laser.scan((0.0, 0.0, 0.0))
+    points, beams = scan_points(scan, (-0.5, 0.0, 0.0), laser_pose=(0.5, 0.0, 0.0))
+    assert np.allclose(points[:, 0], 2.0)
+    # The same scan from a robot turned by 90 degrees with the laser turned back by -90.
+    turned, _ = scan_points(scan, (0.0, 0.0, math.pi / 2), laser_pose=(0.0, 0.0, -math.pi / 2))
+    np.testing.assert_allclose(turned, points, atol=1e-12)
+    assert len(beams) == len(points)
+
+
+def test_two_separate_boxes_give_separate_clusters() -> None:
+    other = ConvexPolygon.from_box(2.0, 1.5, 2.6, 2.5)
+    scan = SimulatedLaser([BOX, other]).scan((0.0, 0.0, 0.0))
+    points, _ = scan_points(scan, (0.0, 0.0, 0.0))
+
+    first, last = cluster_bounds(points, 0.3)
+    obstacles = scan_to_obstacles(scan, (0.0, 0.0, 0.0))
+
+    assert len(first) == 2
+    assert all(np.ptp(points[a:b + 1, 1]) < 1.2 for a, b in zip(first, last, strict=True))
+    touching = [o for o in obstacles
+                if min_clearance([BOX], o.vertices) < 0.1 and min_clearance([other], o.vertices)
+                < 0.1]
+    assert not touching  # no piece bridges the gap between the boxes
+
+
+def test_a_wall_becomes_few_thin_polygons_along_it() -> None:
+    wall = ConvexPolygon.from_box(-3.0, 1.0, 3.0, 1.2)
+    scan = SimulatedLaser([wall], fov=math.pi, beams=361).scan((0.0, 0.0, math.pi / 2))
+
+    obstacles = scan_to_obstacles(scan, (0.0, 0.0, math.pi / 2))
+
+    assert 1 <= len(obstacles) <= 3
+    face = np.column_stack([np.linspace(-2.5, 2.5, 201), np.full(201, 1.0)])
+    assert covered(obstacles, face)
+    for obstacle in obstacles:
+        ys = obstacle.vertices[:, 1]
+        assert ys.min() >= 0.9 and ys.max() <= 1.1  # thin, and along the wall
+        assert np.ptp(obstacle.vertices[:, 0]) > 1.0
+
+
+def test_split_and_merge_splits_an_l_shaped_corner() -> None:
+    corner = ConvexPolygon.from_box(1.0, 1.0, 3.0, 3.0)
+    scan = SimulatedLaser([corner], fov=math.pi, beams=361).scan((0.0, 0.0, math.pi / 4))
+
+    obstacles = scan_to_obstacles(scan, (0.0, 0.0, math.pi / 4))
+
+    assert len(obstacles) >= 2
+    faces = np.vstack([np.column_stack([np.linspace(1, 3, 50), np.full(50, 1.0)]),
+                       np.column_stack([np.full(50, 1.0), np.linspace(1, 3, 50)])])
+    assert covered(obstacles, faces)
+
+
+def test_a_single_return_still_gives_a_polygon_with_an_interior() -> None:
+    ranges = np.full(9, np.inf)
+    ranges[4] = 2.0
+    scan = Scan(-0.4, 0.1, 0.05, 10.0, ranges)
+
+    (obstacle,) = scan_to_obstacles(scan, (0.0, 0.0, 0.0))
+
+    assert obstacle.contains(np.array([2.0, 0.0]), margin=1e-9)[0]
+    assert np.ptp(obstacle.vertices, axis=0).min() > 0.0
+
+
+def test_memory_keeps_an_obstacle_after_the_robot_turns_away() -> None:
+    laser = SimulatedLaser([BOX])
+    memory = ObstacleMemory(ttl=5.0)
+    memory.update(laser.scan((0.0, 0.0, 0.0), stamp=0.0), (0.0, 0.0, 0.0))
+    seen = memory.obstacles()
+
+    memory.update(laser.scan((0.0, 0.0, math.pi), stamp=1.0), (0.0, 0.0, math.pi))
+
+    assert memory.obstacles() == seen
+    assert covered(memory.obstacles(), np.array([[2.0, 0.0]]))
+    assert memory.obstacles((0.0, 0.0), 1.0) == []  # only within the radius asked
+    assert memory.obstacles((0.0, 0.0), 2.5) == seen
+
+
+def test_memory_replaces_rather_than_duplicates_what_it_sees_again() -> None:
+    laser = SimulatedLaser([BOX])
+    memory = ObstacleMemory(ttl=5.0)
+    for k in range(5):
+        current = memory.update(laser.scan((0.0, 0.0, 0.0), stamp=0.1 * k), (0.0, 0.0, 0.0))
+
+    assert memory.obstacles() == current
+
+
+def test_a_later_beam_through_where_an_obstacle_was_clears_it() -> None:
+    memory = ObstacleMemory(ttl=5.0)
+    memory.update(SimulatedLaser([BOX]).scan((0.0, 0.0, 0.0), stamp=0.0), (0.0, 0.0, 0.0))
+    # The box is gone; a wall behind it returns the beams that pass where it was. Seen from
+    # a pose from which the old pieces are only partly in view (so only crossing clears).
+    wall = ConvexPolygon.from_box(4.0, -3.0, 4.2, 3.0)
+    pose = (0.0, 1.5, -0.3)
+    memory.update(SimulatedLaser([wall]).scan(pose, stamp=1.0), pose)
+
+    assert not covered(memory.obstacles(), np.array([[2.0, 0.0]]), tol=0.0)
+
+
+def test_the_ttl_expires_remembered_obstacles() -> None:
+    laser = SimulatedLaser([BOX])
+    memory = ObstacleMemory(ttl=2.0)
+    memory.update(laser.scan((0.0, 0.0, 0.0), stamp=0.0), (0.0, 0.0, 0.0))
+    memory.update(laser.scan((0.0, 0.0, math.pi), stamp=1.5), (0.0, 0.0, math.pi))
+    assert memory.obstacles()
+
+    memory.update(laser.scan((0.0, 0.0, math.pi), stamp=2.5), (0.0, 0.0, math.pi))
+
+    assert memory.obstacles() == []
+    with pytest.raises(ScanError, match='older than the last'):
+        memory.update(laser.scan((0.0, 0.0, 0.0), stamp=1.0), (0.0, 0.0, 0.0))
+
+
+def good_scan(**changes: Any) -> Scan:
+    return Scan(-1.0, 0.01, 0.05, 10.0, np.full(201, 3.0))._replace(**changes)
+
+
+@pytest.mark.parametrize(('scan', 'match'), [
+    (good_scan(angle_increment=math.nan), 'angle_increment must be finite'),
+    (good_scan(angle_increment=0.0), 'must not be 0'),
+    (good_scan(ranges=np.array([1.0, math.nan])), 'NaN at beam 1'),
+    (good_scan(ranges=np.array([1.0, -0.5])), 'negative value at beam 1'),
+    (good_scan(intensities=np.ones(3)), '201 ranges but 3 intensities'),
+    (good_scan(ranges=np.ones(10_001), angle_increment=1e-4), 'more than the 10000'),
+    (good_scan(range_max=0.01), 'range_min < range_max'),
+    (good_scan(angle_min=math.inf), 'angle_min must be finite'),
+    (good_scan(stamp=math.nan), 'stamp must be finite'),
+])
+def test_malformed_scans_raise_scan_error(scan: Scan, match: str) -> None:
+    with pytest.raises(ScanError, match=match):
+        validate_scan(scan)
+
+
+def test_inf_and_out_of_range_readings_are_no_return_not_errors() -> None:
+    ranges = np.array([np.inf, 0.01, 3.0, 20.0])
+    scan = Scan(-0.1, 0.1, 0.05, 10.0, ranges)
+
+    validate_scan(scan)
+    points, beams = scan_points(scan, (0.0, 0.0, 0.0))
+
+    assert beams.tolist() == [2]
+    with pytest.raises(ScanError, match='robot pose must be three finite'):
+        scan_to_obstacles(scan, (0.0, math.nan, 0.0))
+    assert issubclass(ScanError, ValueError)
