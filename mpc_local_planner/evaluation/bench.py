@@ -147,7 +147,7 @@ class NaiveMpc:
         return u, seconds, int(self._opti.stats().get('iter_count', 0)), ok
 
 
-def _stats(values: list[float]) -> dict[str, float]:
+def stats(values: list[float]) -> dict[str, float]:
     a = np.asarray(values, dtype=float)
     if a.size == 0:
         return {'median': math.nan, 'p95': math.nan, 'max': math.nan}
@@ -181,7 +181,7 @@ def closed_loop(solver: str, horizon: int, obstacles: list[ConvexPolygon], *,
     for run in range(runs):
         result = rollout(controller, model, path.start, path.goal, h=STEP, rule=rule)
         if run == 0 and runs == 2:
-            warmup = {'step_ms': _stats(list(1e3 * result.step_times))}
+            warmup = {'step_ms': stats(list(1e3 * result.step_times))}
             controller.wait_compiled()
             controller.reset()
     details = [step.detail for step in result.steps]
@@ -192,8 +192,8 @@ def closed_loop(solver: str, horizon: int, obstacles: list[ConvexPolygon], *,
     return {
         'solver': solver if solver == 'naive' or not compile_functions else f'{solver}+compiled',
         'horizon': horizon, 'obstacles': len(obstacles), 'steps': len(result.steps),
-        'solve_ms': _stats(list(1e3 * result.solve_times)),
-        'step_ms': _stats(list(1e3 * result.step_times)),
+        'solve_ms': stats(list(1e3 * result.solve_times)),
+        'step_ms': stats(list(1e3 * result.step_times)),
         'iterations_median': float(np.median(iterations)),
         'iterations_max': int(np.max(iterations)),
         'in_reach_max': int(max(in_reach, default=len(obstacles))),
@@ -224,126 +224,7 @@ def bench_rrt(repeats: int) -> dict[str, Any]:
         start = time.perf_counter()
         planner.plan(world.start, world.goal)
         times.append(1e3 * (time.perf_counter() - start))
-    return {'iterations': 1000, 'plans': repeats, 'plan_ms': _stats(times)}
-
-
-def _rss_mb(pid: int) -> float:
-    with open(f'/proc/{pid}/status', encoding='ascii') as f:
-        for line in f:
-            if line.startswith('VmRSS:'):
-                return float(line.split()[1]) / 1024.0
-    return math.nan
-
-
-def bench_dds(steps: int = 100) -> dict[str, Any]:
-    """Time the controller node, a separate process, over DDS with simulated time.
-
-    A probe node plays simulator and clock: it publishes ``odom`` (the state, stamped at
-    the current simulated time), then advances ``/clock`` by one step h, which fires the
-    controller's timer; it times from that clock message to the ``cmd_vel`` it causes, and
-    reads the solve time the controller reports on ``mpc/diagnostics``. Latency beyond the
-    solve = that interval minus the reported solve time (DDS both ways, executor wake-up,
-    the controller's Python around the solve). rclpy is imported here only.
-    """
-    import os
-    import subprocess
-
-    from diagnostic_msgs.msg import DiagnosticArray
-    from geometry_msgs.msg import Twist
-    from nav_msgs.msg import Odometry
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rosgraph_msgs.msg import Clock
-
-    from mpc_local_planner.core.diagnostics import (
-        CONTROLLER_DIAGNOSTICS_TOPIC,
-        ControllerDiagnostics,
-    )
-    from mpc_local_planner.ros.conversions import seconds_to_stamp, state_to_odometry
-    from mpc_local_planner.ros.executors import spin_until
-    from mpc_local_planner.ros.qos import CLOCK_QOS, CMD_VEL_QOS, DIAGNOSTICS_QOS, ODOM_QOS
-
-    env = dict(os.environ)
-    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    env.setdefault('ROS_DOMAIN_ID', '43')
-    os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')})
-    cmd = [sys.executable, '-m', 'mpc_local_planner.ros.mpc_controller_node', '--ros-args',
-           '-p', 'use_sim_time:=true', '-p', 'analytic_path:=paper_sinusoid',
-           '-p', 'world_file:=worlds/paper_obstacle.yaml', '-p', f'solver:={MpcConfig().solver}',
-           '-p', f'step:={STEP}', '-p', 'odom_timeout:=1000.0']
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            text=True)
-    context = Context()
-    rclpy.init(context=context)
-    node = rclpy.create_node('mpc_bench_probe', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    got: dict[str, Any] = {'cmd': None, 'diag': None}
-
-    def cmd_callback(msg: Twist) -> None:
-        got['cmd'] = (time.perf_counter(), np.array([msg.linear.x, msg.angular.z]))
-
-    def diag_callback(msg: DiagnosticArray) -> None:
-        got['diag'] = ControllerDiagnostics.from_values(
-            (kv.key, kv.value) for st in msg.status for kv in st.values)
-
-    clock_pub = node.create_publisher(Clock, '/clock', CLOCK_QOS)
-    odom_pub = node.create_publisher(Odometry, 'odom', ODOM_QOS)
-    node.create_subscription(Twist, 'cmd_vel', cmd_callback, CMD_VEL_QOS)
-    node.create_subscription(DiagnosticArray, CONTROLLER_DIAGNOSTICS_TOPIC, diag_callback,
-                             DIAGNOSTICS_QOS)
-    model, path = Unicycle(), paper_sinusoid()
-    x, t_sim = path.start.copy(), 1.0
-    latency, beyond, solve, rss = [], [], [], math.nan
-    try:
-        deadline = time.monotonic() + 120.0
-        while time.monotonic() < deadline and (odom_pub.get_subscription_count() == 0
-                                               or clock_pub.get_subscription_count() == 0):
-            executor.spin_once(timeout_sec=0.1)
-            if proc.poll() is not None:
-                msg = f'controller exited: {proc.stderr.read()[-2000:]}'
-                raise RuntimeError(msg)
-        clock_pub.publish(Clock(clock=seconds_to_stamp(t_sim)))
-        executor.spin_once(timeout_sec=1.0)  # let the controller see the clock, then odom
-        for k in range(steps + 5):
-            odom_pub.publish(state_to_odometry(x, np.zeros(2), stamp=seconds_to_stamp(t_sim)))
-            end = time.perf_counter() + 0.02  # odom first: let it arrive before the clock
-            while time.perf_counter() < end:
-                executor.spin_once(timeout_sec=0.005)
-            got['cmd'], got['diag'] = None, None
-            t_sim += STEP
-            sent = time.perf_counter()
-            clock_pub.publish(Clock(clock=seconds_to_stamp(t_sim)))
-            if not spin_until(executor, lambda: got['cmd'] is not None and got['diag'] is not None,
-                              timeout_sec=5.0, period_sec=0.01):
-                continue
-            received, u = got['cmd']
-            solve_ms = got['diag'].solve_ms
-            if k >= 5 and math.isfinite(solve_ms):  # first steps build; at the goal, no solve
-                latency.append(1e3 * (received - sent))
-                solve.append(solve_ms)
-                beyond.append(1e3 * (received - sent) - solve_ms)
-            x = model.step(x, u, STEP)
-        rss = _rss_mb(proc.pid)
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=context)
-        proc.terminate()
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-    result = {'steps': len(latency), 'latency_ms': _stats(latency), 'solve_ms': _stats(solve),
-              'beyond_solve_ms': _stats(beyond), 'controller_rss_mb': rss}
-    result['summary'] = (
-        f"DDS (controller as its own process, sim time, {len(latency)} steps): clock->cmd_vel "
-        f"median {result['latency_ms']['median']:.2f} ms, p95 {result['latency_ms']['p95']:.2f}"
-        f" ms; reported solve median {result['solve_ms']['median']:.2f} ms; beyond the solve "
-        f"median {result['beyond_solve_ms']['median']:.2f} ms, p95 "
-        f"{result['beyond_solve_ms']['p95']:.2f} ms; controller RSS {rss:.0f} MB")
-    return result
+    return {'iterations': 1000, 'plans': repeats, 'plan_ms': stats(times)}
 
 
 def _row(r: dict[str, Any], naive: dict[str, Any] | None) -> str:
@@ -418,7 +299,10 @@ def main(argv: Sequence[str] | None = None) -> int:
           f", p95 {rrt['plan_ms']['p95']:.1f} ms over {rrt['plans']} seeds", flush=True)
 
     if not args.skip_dds:
-        dds = bench_dds(steps=30 if args.quick else 100)
+        # the one part that needs rclpy, hence in ros/ and imported only when it runs
+        from mpc_local_planner.ros.latency_bench import measure_controller_latency
+
+        dds = measure_controller_latency(steps=30 if args.quick else 100)
         results['dds'] = dds
         print(dds['summary'], flush=True)
 

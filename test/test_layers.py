@@ -1,0 +1,93 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""The layers: only ros/ talks ROS, and each layer imports only the layers below it.
+
+Checked by reading every module's import statements (at any depth, so a lazy import inside a
+function counts too), not by importing the modules.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / 'mpc_local_planner'
+MODULES = sorted(PACKAGE.rglob('*.py'))
+# What a module may import from this package, by layer (the first folder under the package).
+ALLOWED_LAYERS = {
+    'core': {'core'},
+    'worlds': {'core', 'worlds'},
+    'perception': {'core', 'worlds', 'perception'},
+    'evaluation': {'core', 'perception', 'worlds', 'evaluation', 'ros'},
+    'ros': {'core', 'perception', 'worlds', 'evaluation', 'ros'},
+}
+# ament_index_python is a plain lookup of installed files (worlds/data_files.py), not ROS I/O
+ROS_PREFIXES = ('rclpy', 'rcl_interfaces', 'rosidl', 'launch')
+
+
+def _imports(path: Path) -> list[tuple[str, int]]:
+    """Return (module name, line) of every import in the file, relative ones resolved."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    package = list(path.relative_to(PACKAGE.parent).with_suffix('').parts[:-1])
+    names = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names += [(alias.name, node.lineno) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[:len(package) - node.level + 1]
+                module = '.'.join(base + ([node.module] if node.module else []))
+            else:
+                module = node.module or ''
+            names.append((module, node.lineno))
+    return names
+
+
+def _layer(path: Path) -> str:
+    parts = path.relative_to(PACKAGE).parts
+    return parts[0] if len(parts) > 1 else ''
+
+
+def _is_ros(module: str) -> bool:
+    top = module.split('.')[0]
+    return top.startswith(ROS_PREFIXES) or top.endswith('_msgs')
+
+
+def test_the_scan_finds_the_imports_it_must_judge() -> None:
+    names = {name for name, _ in _imports(PACKAGE / 'ros' / 'mpc_controller_node.py')}
+    assert 'rclpy.node' in names
+    assert 'nav_msgs.msg' in names
+    assert _is_ros('geometry_msgs.msg') and _is_ros('rclpy') and not _is_ros('numpy')
+
+
+@pytest.mark.parametrize('path', MODULES, ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_only_ros_modules_import_rclpy_or_message_packages(path: Path) -> None:
+    if _layer(path) == 'ros':
+        return
+    found = [f'{name} (line {line})' for name, line in _imports(path) if _is_ros(name)]
+    assert not found, f'{path.relative_to(PACKAGE)} imports ROS: {found}'
+
+
+@pytest.mark.parametrize('path', MODULES, ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_each_layer_imports_only_the_layers_below_it(path: Path) -> None:
+    layer = _layer(path)
+    if layer not in ALLOWED_LAYERS:
+        return
+    used = {name.split('.')[1] for name, _ in _imports(path)
+            if name.startswith('mpc_local_planner.') and len(name.split('.')) > 2}
+    assert used <= ALLOWED_LAYERS[layer], f'{layer} imports {used - ALLOWED_LAYERS[layer]}'
