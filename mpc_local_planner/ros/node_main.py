@@ -12,7 +12,14 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The main() every node shares: spin until Ctrl-C, refuse bad parameters with exit code 2.
+"""The main() every node shares: ``--help``, lifecycle autostart, spin until Ctrl-C, exit codes.
+
+``<executable> --help`` prints the node's parameters with their defaults and starts nothing
+(no rclpy.init, no files written), as a user of ``ros2 run`` expects.
+
+A lifecycle node whose ``autostart`` parameter is true is configured and activated at once,
+so ``ros2 run`` alone gives a working node; with autostart false it waits for a lifecycle
+manager (or ``ros2 lifecycle set``). A configure that fails is refused like bad parameters.
 
 Ctrl-C (SIGINT) ends the spin cleanly: no traceback, no error log, exit code 0.
 
@@ -24,33 +31,74 @@ file, a supervisor or closed_loop --respawn can tell "misconfigured" from "crash
 from __future__ import annotations
 
 import sys
-from typing import Callable
+from typing import Callable, Sequence
 
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
+from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.node import Node
+from rclpy.utilities import remove_ros_args
 
-__all__ = ['EXIT_INVALID_PARAMETERS', 'run_node']
+from mpc_local_planner.ros.parameters import format_help, ParameterSpec
+
+__all__ = ['EXIT_INVALID_PARAMETERS', 'autostart', 'run_node', 'wants_help']
 
 # Exit code of a node whose parameters are invalid.
 EXIT_INVALID_PARAMETERS = 2
 
 
-def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = None) -> int:
-    """Create the node and spin it until Ctrl-C or shutdown.
+def wants_help(args: Sequence[str] | None) -> bool:
+    """Say whether the command line (without its --ros-args part) asks for --help."""
+    argv = list(sys.argv if args is None else args)
+    return any(arg in ('-h', '--help') for arg in remove_ros_args(argv)[1:])
+
+
+def autostart(node: LifecycleNode) -> str | None:
+    """Configure and activate node if its ``autostart`` parameter is true.
 
     Returns:
-        0, or EXIT_INVALID_PARAMETERS if creating the node raised on its parameters.
+        None when the node is active (or waits for a manager), else why it is not.
 
     """
+    if not node.get_parameter('autostart').value:
+        return None
+    if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+        return 'configure failed (see the log above)'
+    if node.trigger_activate() != TransitionCallbackReturn.SUCCESS:
+        return 'activate failed (see the log above)'
+    return None
+
+
+def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = None, *,
+             summary: str = '', parameters: Sequence[ParameterSpec] = ()) -> int:
+    """Print --help, or create the node (autostarting a lifecycle node) and spin it.
+
+    Args:
+        make_node: builds the node (after rclpy.init).
+        name: the executable's name, for messages.
+        args: the command line, sys.argv by default.
+        summary: what the node does, for --help.
+        parameters: the node's parameter table, for --help.
+
+    Returns:
+        0, or EXIT_INVALID_PARAMETERS if creating (or configuring) the node failed on its
+        parameters.
+
+    """
+    if wants_help(args):
+        print(format_help(name, summary, parameters), end='')
+        return 0
     rclpy.init(args=args)
     node = None
     try:
         try:
             node = make_node()
+            problem = autostart(node) if isinstance(node, LifecycleNode) else None
         except (ParameterException, ValueError, TypeError, OSError) as err:
-            print(f'{name}: refusing to start: {err}', file=sys.stderr, flush=True)
+            problem = str(err)
+        if problem is not None:
+            print(f'{name}: refusing to start: {problem}', file=sys.stderr, flush=True)
             return EXIT_INVALID_PARAMETERS
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
