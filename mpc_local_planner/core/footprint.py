@@ -1,0 +1,158 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""The robot's footprint: a circle (``robot_radius``) or a convex polygon (``footprint``).
+
+Nav2 users give a footprint as the string ``"[[x, y], [x, y], ...]"`` (the robot frame,
+x forward) or a radius; both are accepted here under Nav2's names. A polygon must be convex
+with a non-empty interior: the exact separation of two convex polygons is what the MPC's
+hard constraint is built on, so a non-convex or degenerate footprint is refused rather than
+silently replaced by its hull.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from typing import Sequence
+
+import numpy as np
+import yaml
+
+__all__ = ['CIRCLE', 'Footprint', 'JACKAL', 'parse_footprint']
+
+# Smallest turn (cross product, m^2) between consecutive edges that counts as a corner.
+_COLLINEAR_TOLERANCE = 1e-12
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """A circle of ``radius`` (vertices None), or a convex polygon in the robot frame.
+
+    Attributes:
+        radius: the circle's radius; for a polygon, the circumscribed radius (the farthest
+            vertex from the robot's origin), which bounds the sweep of a turn.
+        vertices: (K, 2) counter-clockwise vertices of the polygon, or None for a circle.
+
+    """
+
+    radius: float
+    vertices: np.ndarray | None = None
+
+    @classmethod
+    def circle(cls, radius: float) -> Footprint:
+        """Return a round robot of radius (m, >= 0)."""
+        radius = float(radius)
+        if not math.isfinite(radius) or radius < 0.0:
+            msg = f'robot_radius must be a finite number >= 0, got {radius}'
+            raise ValueError(msg)
+        return cls(radius=radius)
+
+    @classmethod
+    def polygon(cls, vertices: Sequence[Sequence[float]] | np.ndarray) -> Footprint:
+        """Return a convex polygonal robot; vertices in either orientation, no repeats.
+
+        Raises:
+            ValueError: fewer than 3 vertices, non-finite values, repeated or collinear
+                vertices (no interior), or a polygon that is not convex.
+
+        """
+        points = np.asarray(vertices, dtype=float)
+        if points.ndim != 2 or points.shape[1] != 2 or len(points) < 3:
+            msg = f'a footprint polygon needs at least 3 [x, y] vertices, got {points.tolist()}'
+            raise ValueError(msg)
+        if not np.all(np.isfinite(points)):
+            msg = 'footprint vertices must be finite numbers'
+            raise ValueError(msg)
+        edges = np.roll(points, -1, axis=0) - points
+        if np.any(np.linalg.norm(edges, axis=1) <= 0.0):
+            msg = 'footprint has a repeated vertex'
+            raise ValueError(msg)
+        turns = edges[:, 0] * np.roll(edges, -1, axis=0)[:, 1] \
+            - edges[:, 1] * np.roll(edges, -1, axis=0)[:, 0]
+        if np.any(np.abs(turns) <= _COLLINEAR_TOLERANCE):
+            msg = 'footprint has collinear consecutive vertices (no corner there) or no interior'
+            raise ValueError(msg)
+        if not (np.all(turns > 0) or np.all(turns < 0)):
+            msg = 'footprint polygon is not convex'
+            raise ValueError(msg)
+        headings = np.arctan2(edges[:, 1], edges[:, 0])
+        exterior = np.angle(np.exp(1j * (np.roll(headings, -1) - headings)))
+        if abs(abs(float(np.sum(exterior))) - 2 * math.pi) > 1e-6:
+            msg = 'footprint polygon crosses itself (it turns around more than once)'
+            raise ValueError(msg)
+        if turns[0] < 0:
+            points = points[::-1]  # counter-clockwise, as ConvexPolygon keeps them
+        return cls(radius=float(np.max(np.linalg.norm(points, axis=1))), vertices=points)
+
+    @property
+    def is_circle(self) -> bool:
+        """A round robot (the fast special case: exact with a single inflation)."""
+        return self.vertices is None
+
+    def at(self, pose: Sequence[float]) -> np.ndarray:
+        """Return the polygon's vertices at pose (x, y, theta) in the world frame.
+
+        For a circle, a 16-gon circumscribing it (for drawing, e.g. RViz's PolygonStamped).
+        """
+        x, y, theta = (float(v) for v in pose[:3])
+        if self.vertices is None:
+            angles = np.linspace(0.0, 2 * np.pi, 16, endpoint=False)
+            scale = self.radius / math.cos(math.pi / 16)
+            local = scale * np.column_stack([np.cos(angles), np.sin(angles)])
+        else:
+            local = self.vertices
+        c, s = math.cos(theta), math.sin(theta)
+        return local @ np.array([[c, s], [-s, c]]) + np.array([x, y])
+
+
+# The BARN challenge's robot, a Clearpath Jackal: 0.508 m long, 0.430 m wide, centred.
+JACKAL = Footprint.polygon([[0.254, 0.215], [-0.254, 0.215], [-0.254, -0.215], [0.254, -0.215]])
+CIRCLE = Footprint.circle(0.0)
+
+
+def parse_footprint(footprint: str | Sequence[Sequence[float]] | None,
+                    robot_radius: float = 0.0) -> Footprint:
+    """Return the footprint Nav2's parameters describe.
+
+    Args:
+        footprint: ``"[[x, y], ...]"`` (Nav2's string form), a list of [x, y], or
+            ``''``/``'[]'``/None for a round robot.
+        robot_radius: the radius used when no polygon is given.
+
+    Raises:
+        ValueError: a string that is not a list of [x, y] pairs, or an invalid polygon.
+
+    """
+    if isinstance(footprint, str):
+        text = footprint.strip()
+        if text in ('', '[]'):
+            return Footprint.circle(robot_radius)
+        try:
+            footprint = yaml.safe_load(text)
+        except yaml.YAMLError as err:
+            msg = f'footprint {text!r} is not of the form "[[x, y], [x, y], ...]"'
+            raise ValueError(msg) from err
+        if not isinstance(footprint, list):
+            msg = f'footprint {text!r} is not of the form "[[x, y], [x, y], ...]"'
+            raise ValueError(msg)
+    if footprint is None or len(footprint) == 0:
+        return Footprint.circle(robot_radius)
+    try:
+        vertices = np.asarray(footprint, dtype=float)
+    except (TypeError, ValueError) as err:
+        msg = f'footprint {footprint!r} is not a list of [x, y] pairs'
+        raise ValueError(msg) from err
+    return Footprint.polygon(vertices)

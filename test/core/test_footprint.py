@@ -1,0 +1,55 @@
+import math
+
+import numpy as np
+import pytest
+
+from mpc_local_planner.core.footprint import Footprint, JACKAL, parse_footprint
+
+
+def test_nav2_string_form_gives_a_counter_clockwise_polygon_and_its_circumscribed_radius() -> None:
+    footprint = parse_footprint('[[0.254, 0.215], [0.254, -0.215], [-0.254, -0.215], '
+                                '[-0.254, 0.215]]')
+    assert not footprint.is_circle
+    area2 = np.sum(footprint.vertices[:, 0] * np.roll(footprint.vertices[:, 1], -1)
+                   - np.roll(footprint.vertices[:, 0], -1) * footprint.vertices[:, 1])
+    assert area2 > 0  # counter-clockwise although given clockwise
+    assert footprint.radius == pytest.approx(math.hypot(0.254, 0.215))
+    assert JACKAL.radius == pytest.approx(0.3328, abs=1e-4)
+
+
+@pytest.mark.parametrize('text', ['', '[]', None])
+def test_no_polygon_means_a_round_robot_of_robot_radius(text: str | None) -> None:
+    footprint = parse_footprint(text, robot_radius=0.2)
+    assert footprint.is_circle and footprint.radius == 0.2
+
+
+@pytest.mark.parametrize(('vertices', 'match'), [
+    ([[0, 0], [1, 0]], 'at least 3'),
+    ([[0, 0], [1, 0], [2, 0]], 'collinear'),
+    ([[0, 0], [1, 0], [1, 0], [0, 1]], 'repeated'),
+    ([[0, 0], [2, 0], [1, 0.2], [2, 1], [0, 1]], 'not convex'),
+    ([[0, 0], [1, 0], [0, float('nan')]], 'finite'),
+    ([[math.cos(a), math.sin(a)] for a in np.arange(5) * 4 * math.pi / 5], 'crosses itself'),
+])
+def test_non_convex_or_degenerate_polygons_are_refused(vertices: list, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        Footprint.polygon(vertices)
+
+
+@pytest.mark.parametrize('text', ['[[0, 0], [1, 0]', 'footprint', '[[0, "a"], [1, 0], [0, 1]]'])
+def test_malformed_strings_are_refused_with_the_expected_form(text: str) -> None:
+    with pytest.raises(ValueError):
+        parse_footprint(text)
+
+
+def test_a_negative_radius_is_refused() -> None:
+    with pytest.raises(ValueError, match='>= 0'):
+        Footprint.circle(-0.1)
+
+
+def test_the_polygon_at_a_pose_is_rotated_then_translated() -> None:
+    corners = JACKAL.at([1.0, 2.0, math.pi / 2])
+    # the front-left corner (0.254, 0.215) turns to (-0.215, 0.254)
+    assert np.any(np.all(np.isclose(corners, [1.0 - 0.215, 2.0 + 0.254]), axis=1))
+    circle = Footprint.circle(0.2).at([0.0, 0.0, 0.0])
+    assert np.all(np.linalg.norm(circle, axis=1) >= 0.2)
