@@ -70,7 +70,7 @@ def _is_ros(module: str) -> bool:
 
 def test_the_scan_finds_the_imports_it_must_judge() -> None:
     names = {name for name, _ in _imports(PACKAGE / 'ros' / 'mpc_controller_node.py')}
-    assert 'rclpy.node' in names
+    assert any(name.startswith('rclpy') for name in names)
     assert 'nav_msgs.msg' in names
     assert _is_ros('geometry_msgs.msg') and _is_ros('rclpy') and not _is_ros('numpy')
 

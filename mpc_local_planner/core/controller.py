@@ -217,6 +217,21 @@ class MpcController:
         return self._mpc
 
     @property
+    def obstacles(self) -> tuple[ConvexPolygon, ...]:
+        """The obstacles as described (the world's), not inflated."""
+        return tuple(self._obstacles)
+
+    @property
+    def grown_obstacles(self) -> tuple[ConvexPolygon, ...]:
+        """The obstacles as the MPC sees them: grown by robot radius plus collision margin."""
+        return self._mpc.inflated_obstacles
+
+    @property
+    def active_obstacles(self) -> tuple[ConvexPolygon, ...]:
+        """The grown obstacles the last solve held in its NLP (Farkas constraints)."""
+        return self._mpc.last_active_obstacles
+
+    @property
     def solver_failures(self) -> int:
         """Control steps since construction whose input is not a fresh solver solution.
 

@@ -55,6 +55,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import Executor, SingleThreadedExecutor
+from rclpy.lifecycle import LifecycleNode
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -69,7 +70,7 @@ from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
 from mpc_local_planner.evaluation.analyze_bag import analyze, summary
 from mpc_local_planner.ros.bag_recorder_node import BagRecorderNode
 from mpc_local_planner.ros.executors import spin_until
-from mpc_local_planner.ros.node_main import EXIT_INVALID_PARAMETERS
+from mpc_local_planner.ros.node_main import autostart, EXIT_INVALID_PARAMETERS
 from mpc_local_planner.ros.parameters import DEFAULT_WORLD_FILE
 from mpc_local_planner.ros.qos import DIAGNOSTICS_QOS, PLANNER_DIAGNOSTICS_QOS
 from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -349,20 +350,33 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
 
 
 def _create_nodes(params: dict[str, dict[str, Any]], context: Context) -> list[Node]:
+    """Create planner, controller and simulator in context; autostart the lifecycle ones.
+
+    Raises:
+        ValueError: if a lifecycle node does not configure or activate (the nodes created so
+            far are destroyed).
+
+    """
     from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
     from mpc_local_planner.ros.mpc_controller_node import MpcControllerNode
     from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
 
-    def overrides(name: str) -> list[Parameter]:
-        return [Parameter(k, value=v) for k, v in params[name].items()]
-
     # the simulator last: the clock starts once everyone listens
-    planner = GlobalPlannerNode(context=context, parameter_overrides=overrides('global_planner'))
-    controller = MpcControllerNode(context=context,
-                                   parameter_overrides=overrides('mpc_controller'))
-    simulator = UnicycleSimulatorNode(context=context,
-                                      parameter_overrides=overrides('unicycle_simulator'))
-    return [planner, controller, simulator]
+    classes = (('global_planner', GlobalPlannerNode), ('mpc_controller', MpcControllerNode),
+               ('unicycle_simulator', UnicycleSimulatorNode))
+    nodes: list[Node] = []
+    for name, node_class in classes:
+        overrides = [Parameter(k, value=v) for k, v in params[name].items()]
+        node = node_class(context=context, parameter_overrides=overrides)
+        nodes.append(node)
+        # as run_node does: configured and activated unless autostart is false
+        problem = autostart(node) if isinstance(node, LifecycleNode) else None
+        if problem is not None:
+            for created in reversed(nodes):
+                created.destroy_node()
+            msg = f'{name}: {problem}'
+            raise ValueError(msg)
+    return nodes
 
 
 def node_command(name: str, parameters: dict[str, Any]) -> list[str]:

@@ -25,21 +25,36 @@ import struct
 from typing import Sequence
 
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Pose, PoseStamped, Quaternion, Twist
+from geometry_msgs.msg import (
+    Point,
+    Point32,
+    PolygonStamped,
+    Pose,
+    PoseStamped,
+    Quaternion,
+    Twist,
+    TwistStamped,
+)
 from nav_msgs.msg import Odometry, Path
 import numpy as np
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker
 
 __all__ = [
+    'delete_all_marker',
     'odometry_to_state',
     'path_pose_count',
     'path_to_poses',
     'pose_to_array',
+    'polygon_marker',
+    'polygon_stamped',
     'poses_to_path',
     'quaternion_to_yaw',
     'seconds_to_stamp',
     'stamp_to_seconds',
     'state_to_odometry',
     'twist_from_u',
+    'twist_stamped_from_u',
     'u_from_twist',
     'yaw_to_quaternion',
 ]
@@ -227,3 +242,81 @@ def u_from_twist(twist: Twist) -> np.ndarray:
     u = np.array([twist.linear.x, twist.angular.z], dtype=float)
     u[~np.isfinite(u)] = 0.0
     return u
+
+
+def twist_stamped_from_u(u: np.ndarray | Sequence[float], *, stamp: Time,
+                         frame_id: str = 'base_link') -> TwistStamped:
+    """Return the TwistStamped of u = (v, omega) in frame_id (Nav2's stamped cmd_vel)."""
+    msg = TwistStamped()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    msg.twist = twist_from_u(u)
+    return msg
+
+
+def _closed_ring(vertices: np.ndarray | Sequence[Sequence[float]]) -> np.ndarray:
+    ring = np.asarray(vertices, dtype=float).reshape(-1, 2)
+    if len(ring) < 2 or not np.all(np.isfinite(ring)):
+        msg = f'a polygon needs at least two finite vertices, got {ring.tolist()}'
+        raise ValueError(msg)
+    return ring
+
+
+def polygon_stamped(vertices: np.ndarray | Sequence[Sequence[float]], *, frame_id: str,
+                    stamp: Time) -> PolygonStamped:
+    """Return a geometry_msgs/PolygonStamped of (K, 2) vertices (implicitly closed).
+
+    Raises:
+        ValueError: if vertices are not at least two finite (x, y) pairs.
+
+    """
+    msg = PolygonStamped()
+    msg.header.frame_id = frame_id
+    msg.header.stamp = stamp
+    msg.polygon.points = [Point32(x=float(x), y=float(y), z=0.0)
+                          for x, y in _closed_ring(vertices)]
+    return msg
+
+
+def polygon_marker(vertices: np.ndarray | Sequence[Sequence[float]], *, ns: str,
+                   marker_id: int, frame_id: str, stamp: Time,
+                   rgba: Sequence[float], width: float) -> Marker:
+    """Return a LINE_STRIP Marker tracing the closed polygon of (K, 2) vertices.
+
+    Args:
+        vertices: the polygon's corners in order; the first is repeated at the end.
+        ns: the marker namespace (RViz lists and toggles markers by it).
+        marker_id: the id within ns (a marker with the same ns and id is replaced).
+        frame_id: the frame of the vertices.
+        stamp: the header stamp.
+        rgba: colour, four numbers in [0, 1].
+        width: line width (m).
+
+    Raises:
+        ValueError: if vertices are not at least two finite (x, y) pairs.
+
+    """
+    ring = _closed_ring(vertices)
+    marker = Marker()
+    marker.header.frame_id = frame_id
+    marker.header.stamp = stamp
+    marker.ns = ns
+    marker.id = int(marker_id)
+    marker.type = Marker.LINE_STRIP
+    marker.action = Marker.ADD
+    marker.pose.orientation.w = 1.0
+    marker.scale.x = float(width)
+    marker.color = ColorRGBA(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]),
+                             a=float(rgba[3]))
+    marker.points = [Point(x=float(x), y=float(y), z=0.0)
+                     for x, y in np.vstack([ring, ring[:1]])]
+    return marker
+
+
+def delete_all_marker(*, frame_id: str, stamp: Time) -> Marker:
+    """Return the Marker that deletes every marker of its publisher (DELETEALL)."""
+    marker = Marker()
+    marker.header.frame_id = frame_id
+    marker.header.stamp = stamp
+    marker.action = Marker.DELETEALL
+    return marker

@@ -14,11 +14,21 @@
 
 """global_planner: OMPL RRT* from the current odometry to the goal; publishes plan.
 
+A lifecycle (managed) node, as Nav2's navigation servers are: ``configure`` loads the world,
+builds the planner and creates the publishers and subscriptions; ``activate`` starts planning
+and publishing; ``deactivate`` stops both; ``cleanup`` frees the planner and destroys the
+publishers and subscriptions; ``shutdown`` does the same from any state. With ``autostart``
+(the default) the executable configures and activates itself, so ``ros2 run`` alone gives a
+working planner; with ``autostart:=false`` it waits for a lifecycle manager (or
+``ros2 lifecycle set /global_planner configure``, then ``activate``).
+
 The goal comes from the ``goal`` parameter ([x, y, theta]) or a PoseStamped on
 ``goal_pose`` (RViz's "2D Goal Pose"). Each new goal is planned once, from the latest
 ``odom`` pose, around the world's obstacles inflated by robot_radius + clearance, and
 published on ``plan`` (reliable, transient_local: a late controller still gets it). With
-``analytic_path`` set the node publishes that path, sampled, instead of planning.
+``analytic_path`` set the node publishes that path, sampled, instead of planning. Nothing is
+published before activation: a ``goal`` parameter is planned once the node is active (and
+odometry has come); a ``goal_pose`` that arrives while the node is inactive is refused.
 
 A goal it cannot plan to (inside an inflated obstacle, walled off, out of bounds, not
 finite, in another frame), or a start in collision, is logged as an error and nothing is
@@ -40,8 +50,10 @@ from nav_msgs.msg import Odometry, Path
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import ParameterUninitializedException
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle.publisher import LifecyclePublisher
 from rclpy.parameter import Parameter
+from rclpy.subscription import Subscription
 
 from mpc_local_planner.core.diagnostics import PLANNER_DIAGNOSTICS_TOPIC, PlannerDiagnostics
 from mpc_local_planner.core.errors import PlanningError
@@ -52,13 +64,18 @@ from mpc_local_planner.ros.conversions import (
     pose_to_array,
     poses_to_path,
 )
+from mpc_local_planner.ros.lifecycle import ManagedNode
 from mpc_local_planner.ros.node_main import run_node
-from mpc_local_planner.ros.parameters import DEFAULT_WORLD_FILE, describe
+from mpc_local_planner.ros.parameters import (
+    declare_parameters,
+    DEFAULT_WORLD_FILE,
+    ParameterSpec,
+)
 from mpc_local_planner.ros.qos import GOAL_QOS, ODOM_QOS, PLAN_QOS, PLANNER_DIAGNOSTICS_QOS
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world, World
 
-__all__ = ['GlobalPlannerNode', 'main', 'waypoints_to_poses']
+__all__ = ['GlobalPlannerNode', 'PARAMETERS', 'SUMMARY', 'main', 'waypoints_to_poses']
 
 
 # Poses of a published analytic path (enough for RViz and for a polyline controller).
@@ -66,6 +83,41 @@ ANALYTIC_SAMPLES = 101
 
 _PLANNER_FIELDS = ('iterations', 'time_limit', 'seed', 'range', 'robot_radius', 'clearance',
                    'simplify')
+_DEFAULTS = PlannerConfig()  # the single source of the planner's defaults
+
+SUMMARY = ('OMPL RRT* from the current odometry (odom) to the goal (the goal parameter or '
+           'goal_pose); publishes plan (reliable, transient_local) and planner/diagnostics. '
+           'A lifecycle node: configure loads the world, activate starts planning.')
+
+PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('world_file', DEFAULT_WORLD_FILE,
+                  "world YAML/JSON: obstacles and bounds (a path, or a name in the package's "
+                  'config/ or config/worlds/); used at the next plan'),
+    ParameterSpec('goal', Parameter.Type.DOUBLE_ARRAY,
+                  'goal [x, y, theta]; setting it plans from the current odometry once the '
+                  'node is active (optional: goal_pose messages do the same)'),
+    ParameterSpec('iterations', _DEFAULTS.iterations, 'RRT* iterations per plan',
+                  int_range=(1, 10_000_000)),
+    ParameterSpec('time_limit', _DEFAULTS.time_limit, 'upper bound on planning time (s)',
+                  float_range=(0.001, 600.0)),
+    ParameterSpec('seed', _DEFAULTS.seed, "seed of OMPL's random numbers (reproducible plans)",
+                  int_range=(0, 2**31 - 1)),
+    ParameterSpec('range', _DEFAULTS.range, 'RRT* extension length (m); 0 = OMPL chooses',
+                  float_range=(0.0, 1e3)),
+    ParameterSpec('robot_radius', _DEFAULTS.robot_radius,
+                  "robot radius (m); the larger of this and the world's is used",
+                  float_range=(0.0, 10.0)),
+    ParameterSpec('clearance', _DEFAULTS.clearance,
+                  'extra obstacle inflation beyond the radius (m)', float_range=(0.0, 10.0)),
+    ParameterSpec('simplify', _DEFAULTS.simplify, "shortcut the path with OMPL's simplifier"),
+    ParameterSpec('analytic_path', '',
+                  "publish this analytic path (e.g. 'paper_sinusoid') instead of planning; '' "
+                  '= plan with RRT*'),
+    ParameterSpec('frame_id', 'map', 'frame of the plan'),
+    ParameterSpec('autostart', True,
+                  'configure and activate at start; false = wait for a lifecycle manager (or '
+                  '`ros2 lifecycle set`)', read_only=True),
+)
 
 
 def waypoints_to_poses(waypoints: np.ndarray, start_yaw: float, goal_yaw: float) -> np.ndarray:
@@ -88,60 +140,111 @@ def _check_goal(goal: list[float] | None) -> str | None:
     return None
 
 
-class GlobalPlannerNode(Node):
-    """Plan with RRT* from odom to the goal and publish the plan."""
+class GlobalPlannerNode(ManagedNode):
+    """Plan with RRT* from odom to the goal and publish the plan (a lifecycle node)."""
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('global_planner', **kwargs)
         self.add_on_set_parameters_callback(self.parameters_callback)
-        self._declare_parameters()
+        declare_parameters(self, PARAMETERS)
         self.add_post_set_parameters_callback(self.post_parameters_callback)
-        self._world = self._read_world()
-        self._planner = self._make_planner()
+        # created by on_configure, freed by on_cleanup
+        self._world: World | None = None
+        self._planner: RrtStarPlanner | None = None
+        self._plan_pub: LifecyclePublisher | None = None
+        self._diag_pub: LifecyclePublisher | None = None
+        self._odom_sub: Subscription | None = None
+        self._goal_sub: Subscription | None = None
+        self._active = False
         self._state: np.ndarray | None = None
-        self._pending_goal: np.ndarray | None = self._goal_parameter()
+        self._pending_goal: np.ndarray | None = None
         self.last_plan: np.ndarray | None = None
         self.plan_count = 0
-        self._plan_pub = self.create_publisher(Path, 'plan', PLAN_QOS)
-        self._diag_pub = self.create_publisher(DiagnosticArray, PLANNER_DIAGNOSTICS_TOPIC,
-                                               PLANNER_DIAGNOSTICS_QOS)
         self.last_outcome: PlannerDiagnostics | None = None
+
+    # ------------------------------------------------------------------ lifecycle
+    @property
+    def planner(self) -> RrtStarPlanner | None:
+        """The planner while the node is configured (inactive or active), else None."""
+        return self._planner
+
+    @property
+    def is_active(self) -> bool:
+        """Whether the node is active: it plans and publishes."""
+        return self._active
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Load the world, build the planner, create the publishers and subscriptions."""
+        try:
+            self._world = self._read_world()
+            self._planner = self._make_planner()
+        except Exception as err:  # a world that vanished since it was validated, a bad config
+            self.get_logger().error(f'configure failed: {err}')
+            self._release()
+            return TransitionCallbackReturn.FAILURE
+        self._plan_pub = self.create_lifecycle_publisher(Path, 'plan', PLAN_QOS)
+        self._diag_pub = self.create_lifecycle_publisher(
+            DiagnosticArray, PLANNER_DIAGNOSTICS_TOPIC, PLANNER_DIAGNOSTICS_QOS)
         self._odom_sub = self.create_subscription(Odometry, 'odom', self.odom_callback,
                                                   ODOM_QOS)
         self._goal_sub = self.create_subscription(PoseStamped, 'goal_pose', self.goal_callback,
                                                   GOAL_QOS)
+        self._pending_goal = self._goal_parameter()
+        self.get_logger().info('configured')
+        return super().on_configure(state)
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Enable the publishers; plan a goal given as a parameter, or publish analytic_path."""
+        result = super().on_activate(state)
+        if result != TransitionCallbackReturn.SUCCESS:
+            return result
+        self._active = True
+        self.get_logger().info('active')
         if self.get_parameter('analytic_path').value:
             self._publish_analytic()
+        else:
+            self._try_plan()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop planning and publishing (the latched plan stays with its subscribers)."""
+        self._active = False
+        self.get_logger().info('inactive: goals are not planned until activated')
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Free the planner and the world; destroy the publishers and subscriptions."""
+        self._release()
+        self.get_logger().info('cleaned up')
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Release everything, from whichever state the node is in."""
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Release everything after a failed transition (back to unconfigured)."""
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+
+    def _release(self) -> None:
+        self._active = False
+        for publisher in (self._plan_pub, self._diag_pub):
+            if publisher is not None:
+                self.destroy_lifecycle_publisher(publisher)
+        for subscription in (self._odom_sub, self._goal_sub):
+            if subscription is not None:
+                self.destroy_subscription(subscription)
+        self._plan_pub = self._diag_pub = None
+        self._odom_sub = self._goal_sub = None
+        self._planner = None
+        self._world = None
+        self._state = None
+        self._pending_goal = None
 
     # ------------------------------------------------------------------ parameters
-    def _declare_parameters(self) -> None:
-        defaults = PlannerConfig()
-        self.declare_parameter('world_file', DEFAULT_WORLD_FILE, describe(
-            "world YAML/JSON: obstacles and bounds (a path, or a name in the package's "
-            'config/ or config/worlds/); used at the next plan'))
-        self.declare_parameter('goal', Parameter.Type.DOUBLE_ARRAY, describe(
-            'goal [x, y, theta]; setting it plans from the current odometry (optional: '
-            'goal_pose messages do the same)'))
-        self.declare_parameter('iterations', defaults.iterations, describe(
-            'RRT* iterations per plan', int_range=(1, 10_000_000)))
-        self.declare_parameter('time_limit', defaults.time_limit, describe(
-            'upper bound on planning time (s)', float_range=(0.001, 600.0)))
-        self.declare_parameter('seed', defaults.seed, describe(
-            "seed of OMPL's random numbers (reproducible plans)", int_range=(0, 2**31 - 1)))
-        self.declare_parameter('range', defaults.range, describe(
-            'RRT* extension length (m); 0 = OMPL chooses', float_range=(0.0, 1e3)))
-        self.declare_parameter('robot_radius', defaults.robot_radius, describe(
-            "robot radius (m); the larger of this and the world's is used",
-            float_range=(0.0, 10.0)))
-        self.declare_parameter('clearance', defaults.clearance, describe(
-            'extra obstacle inflation beyond the radius (m)', float_range=(0.0, 10.0)))
-        self.declare_parameter('simplify', defaults.simplify, describe(
-            "shortcut the path with OMPL's simplifier"))
-        self.declare_parameter('analytic_path', '', describe(
-            "publish this analytic path (e.g. 'paper_sinusoid') instead of planning; '' = "
-            'plan with RRT*'))
-        self.declare_parameter('frame_id', 'map', describe('frame of the plan'))
-
     def parameters_callback(self, parameters: list[Parameter]) -> SetParametersResult:
         """Refuse a malformed goal, an unknown world or analytic path, bad planner settings."""
         reasons = []
@@ -165,8 +268,13 @@ class GlobalPlannerNode(Node):
         return SetParametersResult(successful=True)
 
     def post_parameters_callback(self, parameters: list[Parameter]) -> None:
-        """Rebuild the planner after a change; a new goal is planned at once."""
+        """Rebuild a configured planner after a change; a new goal is planned when active.
+
+        Unconfigured, nothing is built: configure reads the parameters as they then are.
+        """
         names = {p.name for p in parameters}
+        if self._world is None:
+            return
         try:
             if 'world_file' in names:
                 self._world = self._read_world()
@@ -177,13 +285,15 @@ class GlobalPlannerNode(Node):
         if 'goal' in names:
             self._pending_goal = self._goal_parameter()
             self._try_plan()
-        if 'analytic_path' in names and self.get_parameter('analytic_path').value:
+        if ('analytic_path' in names and self._active
+                and self.get_parameter('analytic_path').value):
             self._publish_analytic()
 
     def _read_world(self) -> World:
         return load_world(resolve_data_file(str(self.get_parameter('world_file').value)))
 
     def _make_planner(self) -> RrtStarPlanner:
+        assert self._world is not None  # configured
         values = {name: self.get_parameter(name).value for name in _PLANNER_FIELDS}
         values['robot_radius'] = max(float(values['robot_radius']), self._world.robot_radius)
         values['iterations'] = int(values['iterations'])
@@ -220,7 +330,11 @@ class GlobalPlannerNode(Node):
             self._try_plan()
 
     def goal_callback(self, msg: PoseStamped) -> None:
-        """Plan to a goal sent as a PoseStamped (RViz's 2D Goal Pose)."""
+        """Plan to a goal sent as a PoseStamped (RViz's 2D Goal Pose); refused unless active."""
+        if not self._active:
+            self.get_logger().warning('goal refused: the planner is inactive (activate it '
+                                      'first); no plan published')
+            return
         frame = str(self.get_parameter('frame_id').value)
         try:
             if msg.header.frame_id != frame:
@@ -236,7 +350,9 @@ class GlobalPlannerNode(Node):
         self._try_plan()
 
     def _try_plan(self) -> None:
-        if self._pending_goal is None or self.get_parameter('analytic_path').value:
+        """Plan the pending goal if the node is active and the robot's pose is known."""
+        if (not self._active or self._planner is None or self._pending_goal is None
+                or self.get_parameter('analytic_path').value):
             return
         if self._state is None:
             self.get_logger().info('goal received: waiting for odometry', once=True)
@@ -263,6 +379,7 @@ class GlobalPlannerNode(Node):
     def _publish(self, poses: np.ndarray) -> None:
         msg = poses_to_path(poses, frame_id=str(self.get_parameter('frame_id').value),
                             stamp=self.get_clock().now().to_msg())
+        assert self._plan_pub is not None  # active
         self._plan_pub.publish(msg)
         self.last_plan = poses
         self.plan_count += 1
@@ -275,6 +392,8 @@ class GlobalPlannerNode(Node):
     def _report(self, outcome: PlannerDiagnostics) -> None:
         """Publish the outcome of the latest goal on planner/diagnostics."""
         self.last_outcome = outcome
+        if self._diag_pub is None:
+            return
         status = DiagnosticStatus()
         status.name = f'{self.get_name()}: RRT*'
         status.hardware_id = self.get_fully_qualified_name()
@@ -288,8 +407,12 @@ class GlobalPlannerNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the node until Ctrl-C (exit code 2, with the reason, on invalid parameters)."""
-    return run_node(GlobalPlannerNode, 'global_planner', args)
+    """Run the node until Ctrl-C (exit code 2, with the reason, on invalid parameters).
+
+    ``--help`` prints the parameters and their defaults and starts nothing.
+    """
+    return run_node(GlobalPlannerNode, 'global_planner', args, summary=SUMMARY,
+                    parameters=PARAMETERS)
 
 
 if __name__ == '__main__':

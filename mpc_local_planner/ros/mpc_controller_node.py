@@ -14,15 +14,25 @@
 
 """mpc_controller: the paper's MPC every `step` seconds of ROS time on odom and plan.
 
-Subscribes ``odom`` and ``plan`` (reliable, transient_local), publishes ``cmd_vel``,
-``local_plan`` (the prediction) and ``mpc/diagnostics``. All decisions live in
-`MpcController`; this node converts messages, keeps the latest inputs and publishes.
+A lifecycle node, as Nav2's servers are. Unconfigured after construction (parameters
+declared, nothing else); ``configure`` loads the world, builds the MPC and creates the
+publishers and subscriptions (odom and plan are taken in from then on); ``activate`` starts
+the control timer, and only then is anything published; ``deactivate`` publishes one zero
+cmd_vel and stops the timer; ``cleanup`` frees the NLP and every publisher and
+subscription; ``shutdown`` does the same (with a zero cmd_vel first when active). With
+``autostart`` (the default) ``run_node`` configures and activates at start.
+
+Subscribes ``odom`` and ``plan`` (reliable, transient_local), publishes ``cmd_vel`` (Twist, or
+TwistStamped with ``enable_stamped_cmd_vel``), ``local_plan`` (the prediction),
+``mpc/diagnostics``, ``mpc/obstacles`` (what it avoids, as MarkerArray) and ``mpc/footprint``.
+All decisions live in `MpcController`; this node converts messages, keeps the latest inputs
+and publishes.
 
 Refused input (odometry with NaN, inf or a zero quaternion; a plan that is empty, too short,
 too long, not finite, in another frame or through an obstacle) makes the command zero until
 valid input comes, with one error per problem in the log (throttled) and the problem in
 the diagnostics. Invalid parameters are refused with a reason; at start, the process exits
-with code 2 and the reason on stderr.
+with code 2 and the reason on stderr (so does a configure that fails, with autostart).
 """
 
 from __future__ import annotations
@@ -32,13 +42,14 @@ import sys
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Twist
+from geometry_msgs.msg import PolygonStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry, Path
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
+from visualization_msgs.msg import MarkerArray
 
 from mpc_local_planner.core.config import MpcConfig, SOLVERS
 from mpc_local_planner.core.controller import (
@@ -52,20 +63,30 @@ from mpc_local_planner.core.diagnostics import (
     ControllerDiagnostics,
     Level,
 )
+from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path
 from mpc_local_planner.ros.conversions import (
+    delete_all_marker,
     odometry_to_state,
     path_pose_count,
     path_to_poses,
+    polygon_marker,
+    polygon_stamped,
     poses_to_path,
     seconds_to_stamp,
     stamp_to_seconds,
     twist_from_u,
+    twist_stamped_from_u,
 )
+from mpc_local_planner.ros.lifecycle import ManagedNode
 from mpc_local_planner.ros.node_main import EXIT_INVALID_PARAMETERS, run_node
-from mpc_local_planner.ros.parameters import DEFAULT_WORLD_FILE, describe
+from mpc_local_planner.ros.parameters import (
+    declare_parameters,
+    DEFAULT_WORLD_FILE,
+    ParameterSpec,
+)
 from mpc_local_planner.ros.qos import (
     CMD_VEL_QOS,
     DIAGNOSTICS_QOS,
@@ -77,11 +98,27 @@ from mpc_local_planner.ros.throttle import ProblemThrottle
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world
 
-__all__ = ['DEFAULTS', 'EXIT_INVALID_PARAMETERS', 'MpcControllerNode', 'build_settings',
-           'log_line', 'main']
+__all__ = ['DEFAULTS', 'EXIT_INVALID_PARAMETERS', 'FOOTPRINT_TOPIC', 'MpcControllerNode',
+           'OBSTACLES_TOPIC', 'PARAMETERS', 'build_settings', 'log_line', 'main']
 
 # Seconds between two error logs of an input problem that persists.
 ERROR_THROTTLE_S = 2.0
+# What the controller avoids (MarkerArray) and the robot's outline (PolygonStamped).
+OBSTACLES_TOPIC = 'mpc/obstacles'
+FOOTPRINT_TOPIC = 'mpc/footprint'
+# Streams like local_plan: reliable, volatile, depth 10.
+MARKERS_QOS = LOCAL_PLAN_QOS
+# mpc/obstacles goes out when what it shows changes, and at least every this many control
+# steps (for an RViz that subscribes late: the topic is volatile).
+OBSTACLE_REFRESH_STEPS = 10
+# Marker namespaces, colours (r, g, b, a) and line widths (m).
+MARKER_STYLE = {
+    'raw': ((0.2, 0.2, 0.2, 1.0), 0.02),  # as described in the world
+    'grown': ((1.0, 0.6, 0.0, 0.8), 0.015),  # inflated by robot radius + collision margin
+    'active': ((0.9, 0.0, 0.0, 1.0), 0.04),  # held in the NLP at the last solve
+}
+# The frame of a TwistStamped cmd_vel.
+BASE_FRAME = 'base_link'
 
 # Parameter -> field of MpcConfig, Unicycle and ControllerSettings.
 _MPC_FIELDS = {
@@ -94,24 +131,85 @@ _MODEL_FIELDS = ('v_max', 'omega_max')
 _SETTINGS_FIELDS = ('goal_tolerance', 'goal_heading_tolerance', 'odom_timeout')
 # collision_margin None (v_max step / 2) is -1 as a parameter: a double cannot be None.
 _AUTO_MARGIN = -1.0
+# The defaults come from the dataclasses (the paper's values), the single source.
+_CONFIG, _MODEL, _SETTINGS = MpcConfig(), Unicycle(), ControllerSettings()
+_SHAPE = 'changes the NLP shape: rebuilt before the next solve'
+_WEIGHT = (0.0, 1e6)
 
+# The node's parameters: declared from this table, and listed by ``mpc_controller --help``
+# (config/mpc_controller.yaml mirrors the defaults).
+PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('horizon', int(_CONFIG.horizon), f'prediction steps N; {_SHAPE}',
+                  int_range=(1, 200)),
+    ParameterSpec('step', float(_CONFIG.step),
+                  f'sampling time h (s of ROS time) and control period; {_SHAPE}',
+                  float_range=(0.01, 5.0)),
+    ParameterSpec('v_max', float(_MODEL.v_max),
+                  'speed bound |v| (m/s); rebuilds the NLP before the next solve',
+                  float_range=(0.001, 10.0)),
+    ParameterSpec('omega_max', float(_MODEL.omega_max),
+                  'turn-rate bound |omega| (rad/s); rebuilds the NLP', float_range=(0.001, 50.0)),
+    ParameterSpec('weights.position', float(_CONFIG.weight_position),
+                  'stage weight of dx^4 and dy^4; next solve', float_range=_WEIGHT),
+    ParameterSpec('weights.heading', float(_CONFIG.weight_heading),
+                  'stage weight of dtheta^4; next solve', float_range=_WEIGHT),
+    ParameterSpec('weights.v', float(_CONFIG.weight_v), 'stage weight of v^4; next solve',
+                  float_range=_WEIGHT),
+    ParameterSpec('weights.omega', float(_CONFIG.weight_omega),
+                  'stage weight of omega^4; next solve', float_range=_WEIGHT),
+    ParameterSpec('offset_weight', float(_CONFIG.offset_weight),
+                  'offset cost weight of (1 - s)^2; next solve', float_range=(1e-6, 1e9)),
+    ParameterSpec('robot_radius', float(_CONFIG.robot_radius),
+                  "obstacle inflation and footprint radius (m); the larger of this and the "
+                  "world's is used", float_range=(0.0, 10.0)),
+    ParameterSpec('collision_margin',
+                  _AUTO_MARGIN if _CONFIG.collision_margin is None
+                  else float(_CONFIG.collision_margin),
+                  'extra inflation (m) against corner cutting between samples; '
+                  '-1 = v_max step / 2', float_range=(-1.0, 10.0)),
+    ParameterSpec('world_file', DEFAULT_WORLD_FILE,
+                  "world YAML/JSON with the obstacles (a path, or a name in the package's "
+                  "config/ or config/worlds/); '' = none; read again at each configure"),
+    ParameterSpec('analytic_path', '',
+                  "follow this analytic path (e.g. 'paper_sinusoid') instead of the plan "
+                  "topic; '' = use plan"),
+    ParameterSpec('solver', str(_CONFIG.solver), f'NLP solver, one of {SOLVERS}'),
+    ParameterSpec('max_iterations', int(_CONFIG.max_iterations),
+                  f'solver iterations per solve; {_SHAPE}', int_range=(1, 100000)),
+    ParameterSpec('goal_tolerance', float(_SETTINGS.goal_tolerance),
+                  'distance to the end of the plan that counts as arrived (m): then cmd_vel '
+                  'is zero', float_range=(1e-4, 10.0)),
+    ParameterSpec('goal_heading_tolerance', float(_SETTINGS.goal_heading_tolerance),
+                  'heading error that counts as arrived (rad)', float_range=(1e-4, math.pi)),
+    ParameterSpec('odom_timeout', float(_SETTINGS.odom_timeout),
+                  'odometry older than this (s) is stale: cmd_vel is zero',
+                  float_range=(0.001, 3600.0)),
+    ParameterSpec('max_plan_poses', int(_SETTINGS.max_plan_poses),
+                  'a plan with more poses is refused (cmd_vel is zero until a valid plan '
+                  'comes)', int_range=(2, 10_000_000)),
+    ParameterSpec('frame_id', 'map',
+                  'frame of local_plan, mpc/obstacles and mpc/footprint, and the frame a plan '
+                  'must be in'),
+    ParameterSpec('enable_stamped_cmd_vel', False,
+                  'publish cmd_vel as geometry_msgs/TwistStamped (frame base_link) instead of '
+                  "Twist (Nav2's name); read at configure"),
+    ParameterSpec('autostart', True,
+                  'configure and activate at start; false = wait for a lifecycle manager '
+                  '(or ros2 lifecycle set)', read_only=True),
+)
 
-def _defaults() -> dict[str, Any]:
-    config, model, settings = MpcConfig(), Unicycle(), ControllerSettings()
-    values: dict[str, Any] = {name: getattr(config, field) for name, field in _MPC_FIELDS.items()}
-    values.update({name: getattr(model, name) for name in _MODEL_FIELDS})
-    values.update({name: getattr(settings, name) for name in _SETTINGS_FIELDS})
-    margin = config.collision_margin
-    values['collision_margin'] = _AUTO_MARGIN if margin is None else float(margin)
-    values['max_plan_poses'] = settings.max_plan_poses
-    values.update({'world_file': DEFAULT_WORLD_FILE, 'analytic_path': '',
-                   'frame_id': 'map'})
-    return values
+# Parameter defaults by name.
+DEFAULTS: dict[str, Any] = {spec.name: spec.default for spec in PARAMETERS}
 
-
-# Parameter defaults: those of the dataclasses (the paper's values; config/mpc_controller.yaml
-# mirrors them), plus the node's own.
-DEFAULTS: dict[str, Any] = _defaults()
+_SUMMARY = """\
+The MPC of Lorenzen et al. (a lifecycle node): every `step` seconds of ROS time while active,
+it solves for the latest odom (nav_msgs/Odometry) along the latest plan (nav_msgs/Path,
+transient_local; or an analytic path) and publishes cmd_vel (geometry_msgs/Twist, or
+TwistStamped with enable_stamped_cmd_vel), local_plan (the prediction), mpc/diagnostics,
+mpc/obstacles (visualization_msgs/MarkerArray: the obstacles raw, grown, and those active in
+the NLP) and mpc/footprint (geometry_msgs/PolygonStamped). Invalid input stops the robot
+(zero cmd_vel) until valid input comes. With autostart false it waits unconfigured for a
+lifecycle manager; deactivate publishes one zero cmd_vel."""
 
 
 def load_obstacles(world_file: str) -> tuple[list[ConvexPolygon], float]:
@@ -162,24 +260,42 @@ def check_obstacles(obstacles: list[ConvexPolygon], config: MpcConfig) -> None:
             raise ValueError(msg)
 
 
-class MpcControllerNode(Node):
-    """Run the MPC on the latest odom and plan; publish cmd_vel, local_plan, diagnostics."""
+def _same(a: tuple, b: tuple) -> bool:
+    """Say whether two tuples hold the same objects (identity, not equality)."""
+    return len(a) == len(b) and all(x is y for x, y in zip(a, b, strict=True))
+
+
+class MpcControllerNode(ManagedNode):
+    """Run the MPC on the latest odom and plan; publish cmd_vel, local_plan, diagnostics.
+
+    Attributes:
+        controller: the MpcController (and its NLPs) while configured, else None.
+        last_output: the latest control step's output (None before the first).
+        control_steps: control steps since configure (each published one cmd_vel).
+        goal_reached: whether the latest step said the goal is reached.
+
+    """
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('mpc_controller', **kwargs)
         self._world_cache: dict[str, tuple[list[ConvexPolygon], float]] = {}
+        self.controller: MpcController | None = None
+        self._cmd_pub = None
+        self._local_plan_pub = None
+        self._diag_pub = None
+        self._obstacles_pub = None
+        self._footprint_pub = None
+        self._odom_sub = None
+        self._plan_sub = None
+        self._timer = None
+        self._stamped = False
+        self._forget_inputs()
         self.add_on_set_parameters_callback(self.parameters_callback)
-        self._declare_parameters()
+        declare_parameters(self, PARAMETERS)
         self.add_post_set_parameters_callback(self.post_parameters_callback)
 
-        values = self._values()
-        obstacles, radius = self._load_world(values['world_file'])
-        config, model, settings = build_settings(values, world_radius=radius)
-        self.controller = MpcController(model, config, obstacles=obstacles, settings=settings)
-        if values['analytic_path']:
-            self.controller.set_path(analytic_path(values['analytic_path']))
-            self._prepare()
-
+    def _forget_inputs(self) -> None:
+        """Drop the latest odometry, plan verdicts and step bookkeeping (as at construction)."""
         self._state: np.ndarray | None = None
         self._state_time: float | None = None
         # what is wrong with the latest odometry / plan (None when valid): the command is
@@ -189,68 +305,127 @@ class MpcControllerNode(Node):
         self._problems = ProblemThrottle(ERROR_THROTTLE_S)
         self._last_message = ''
         self._last_step_time: float | None = None
+        self._markers_shown: tuple[tuple, tuple] | None = None  # (grown, active) last sent
+        self._steps_since_markers = 0
         self.last_output: ControlOutput | None = None
+        self.control_steps = 0
         self.goal_reached = False
 
-        self._cmd_pub = self.create_publisher(Twist, 'cmd_vel', CMD_VEL_QOS)
-        self._local_plan_pub = self.create_publisher(Path, 'local_plan', LOCAL_PLAN_QOS)
-        self._diag_pub = self.create_publisher(DiagnosticArray, CONTROLLER_DIAGNOSTICS_TOPIC,
-                                               DIAGNOSTICS_QOS)
+    # ------------------------------------------------------------------ lifecycle
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Load the world, build the MPC, create the publishers and subscriptions.
+
+        Returns:
+            FAILURE (back to unconfigured, with the reason in the log) if the world file
+            cannot be read or the parameters do not make a controller.
+
+        """
+        try:
+            values = self._values()
+            world_file = str(values['world_file'])
+            self._world_cache.pop(world_file, None)  # read it again: it may have changed
+            obstacles, radius = self._load_world(world_file)
+            config, model, settings = build_settings(values, world_radius=radius)
+            check_obstacles(obstacles, config)
+            controller = MpcController(model, config, obstacles=obstacles, settings=settings)
+            if values['analytic_path']:
+                controller.set_path(analytic_path(values['analytic_path']))
+        except Exception as err:  # a bad world file mostly; refuse with a reason
+            self.get_logger().error(f'configure failed: {err}')
+            return TransitionCallbackReturn.FAILURE
+        self.controller = controller
+        self._forget_inputs()
+        if values['analytic_path']:
+            self._prepare()
+        self._stamped = bool(values['enable_stamped_cmd_vel'])
+        self._cmd_pub = self.create_lifecycle_publisher(
+            TwistStamped if self._stamped else Twist, 'cmd_vel', CMD_VEL_QOS)
+        self._local_plan_pub = self.create_lifecycle_publisher(Path, 'local_plan',
+                                                               LOCAL_PLAN_QOS)
+        self._diag_pub = self.create_lifecycle_publisher(
+            DiagnosticArray, CONTROLLER_DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS)
+        self._obstacles_pub = self.create_lifecycle_publisher(MarkerArray, OBSTACLES_TOPIC,
+                                                              MARKERS_QOS)
+        self._footprint_pub = self.create_lifecycle_publisher(PolygonStamped, FOOTPRINT_TOPIC,
+                                                              MARKERS_QOS)
         self._odom_sub = self.create_subscription(Odometry, 'odom', self.odom_callback,
                                                   ODOM_QOS)
         # raw: the size of a plan is checked before rclpy spends ~15 us per pose on it
         self._plan_sub = self.create_subscription(Path, 'plan', self.plan_callback, PLAN_QOS,
                                                   raw=True)
-        self._timer = None
-        self._make_timer()
+        self.get_logger().info(f'configured: {len(obstacles)} obstacles, horizon '
+                               f'{config.horizon}, step {config.step:g} s')
+        return super().on_configure(state)
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Enable the publishers and start the control timer."""
+        result = super().on_activate(state)
+        if result == TransitionCallbackReturn.SUCCESS:
+            self._make_timer()
+            self.get_logger().info('active: controlling')
+        return result
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Publish one zero cmd_vel, stop the control timer, disable the publishers."""
+        self._stop_robot()
+        self._destroy_timer()
+        self.get_logger().info('inactive: cmd_vel zero once, then silent')
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Free the NLP (the controller) and destroy publishers, subscriptions and timer."""
+        self._release()
+        self.get_logger().info('cleaned up: the NLP is freed')
+        return super().on_cleanup(state)
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop the robot if active, then clean up."""
+        if self._timer is not None:
+            self._stop_robot()
+        self._release()
+        return super().on_shutdown(state)
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Clean up after a transition raised, so that the node can be configured again."""
+        self._release()
+        return super().on_error(state)
+
+    def destroy_node(self) -> None:
+        """Drop the controller (and its NLP) with the node."""
+        self.controller = None
+        super().destroy_node()
+
+    def _stop_robot(self) -> None:
+        """Publish one zero cmd_vel (while the publisher is still enabled)."""
+        if self._cmd_pub is None:
+            return
+        try:
+            self._cmd_pub.publish(self._cmd_message(np.zeros(2), self._now()))
+        except Exception as err:  # the command must not fail a transition
+            self.get_logger().warning(f'could not publish a zero cmd_vel: {err}')
+
+    def _destroy_timer(self) -> None:
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+            self._timer = None
+
+    def _release(self) -> None:
+        """Destroy the timer, subscriptions and publishers, and drop the controller."""
+        self._destroy_timer()
+        for sub in (self._odom_sub, self._plan_sub):
+            if sub is not None:
+                self.destroy_subscription(sub)
+        self._odom_sub = self._plan_sub = None
+        for pub in (self._cmd_pub, self._local_plan_pub, self._diag_pub, self._obstacles_pub,
+                    self._footprint_pub):
+            if pub is not None:
+                self.destroy_lifecycle_publisher(pub)
+        self._cmd_pub = self._local_plan_pub = self._diag_pub = None
+        self._obstacles_pub = self._footprint_pub = None
+        self.controller = None  # the MPC and its NLPs go with it
+        self._forget_inputs()
 
     # ------------------------------------------------------------------ parameters
-    def _declare_parameters(self) -> None:
-        weight = (0.0, 1e6)
-        shape = 'changes the NLP shape: rebuilt before the next solve'
-        specs = {
-            'horizon': describe(f'prediction steps N; {shape}', int_range=(1, 200)),
-            'step': describe(f'sampling time h (s of ROS time) and control period; {shape}',
-                             float_range=(0.01, 5.0)),
-            'v_max': describe('speed bound |v| (m/s); rebuilds the NLP before the next solve',
-                              float_range=(0.001, 10.0)),
-            'omega_max': describe('turn-rate bound |omega| (rad/s); rebuilds the NLP',
-                                  float_range=(0.001, 50.0)),
-            'weights.position': describe('stage weight of dx^4 and dy^4; next solve',
-                                         float_range=weight),
-            'weights.heading': describe('stage weight of dtheta^4; next solve',
-                                        float_range=weight),
-            'weights.v': describe('stage weight of v^4; next solve', float_range=weight),
-            'weights.omega': describe('stage weight of omega^4; next solve',
-                                      float_range=weight),
-            'offset_weight': describe('offset cost weight of (1 - s)^2; next solve',
-                                      float_range=(1e-6, 1e9)),
-            'robot_radius': describe('obstacle inflation (m); the larger of this and the '
-                                     "world's is used", float_range=(0.0, 10.0)),
-            'collision_margin': describe('extra inflation (m) against corner cutting between '
-                                         'samples; -1 = v_max step / 2',
-                                         float_range=(-1.0, 10.0)),
-            'world_file': describe('world YAML/JSON with the obstacles (a path, or a name in '
-                                   "the package's config/ or config/worlds/); '' = none"),
-            'analytic_path': describe("follow this analytic path (e.g. 'paper_sinusoid') "
-                                      "instead of the plan topic; '' = use plan"),
-            'solver': describe(f'NLP solver, one of {SOLVERS}'),
-            'max_iterations': describe(f'solver iterations per solve; {shape}',
-                                       int_range=(1, 100000)),
-            'goal_tolerance': describe('distance to the end of the plan that counts as '
-                                       'arrived (m): then cmd_vel is zero',
-                                       float_range=(1e-4, 10.0)),
-            'goal_heading_tolerance': describe('heading error that counts as arrived (rad)',
-                                               float_range=(1e-4, math.pi)),
-            'odom_timeout': describe('odometry older than this (s) is stale: cmd_vel is zero',
-                                     float_range=(0.001, 3600.0)),
-            'max_plan_poses': describe('a plan with more poses is refused (cmd_vel is zero '
-                                       'until a valid plan comes)', int_range=(2, 10_000_000)),
-            'frame_id': describe('frame of local_plan, and the frame a plan must be in'),
-        }
-        for name, descriptor in specs.items():
-            self.declare_parameter(name, DEFAULTS[name], descriptor)
-
     def _values(self, overrides: list[Parameter] = ()) -> dict[str, Any]:
         values = dict(DEFAULTS)
         for name in DEFAULTS:
@@ -280,8 +455,13 @@ class MpcControllerNode(Node):
         return SetParametersResult(successful=True)
 
     def post_parameters_callback(self, parameters: list[Parameter]) -> None:
-        """Apply accepted changes; the MPC picks them up at its next solve."""
+        """Apply accepted changes; the MPC picks them up at its next solve.
+
+        Unconfigured, there is nothing to apply: configure reads every value.
+        """
         names = {p.name for p in parameters}
+        if self.controller is None:
+            return
         try:
             values = self._values()
             obstacles, radius = self._load_world(values['world_file'])
@@ -296,7 +476,7 @@ class MpcControllerNode(Node):
             if 'analytic_path' in names and values['analytic_path']:
                 self.controller.set_path(analytic_path(values['analytic_path']))
                 self._plan_problem = None  # the plan topic is ignored from now on
-            if 'step' in names:
+            if 'step' in names and self._timer is not None:
                 self._make_timer()
         except Exception as err:  # validated above: a bug, but keep running
             self.get_logger().error(f'could not apply {sorted(names)}: {err}')
@@ -304,8 +484,7 @@ class MpcControllerNode(Node):
         self.get_logger().info(f'parameters changed: {sorted(names)}')
 
     def _make_timer(self) -> None:
-        if self._timer is not None:
-            self.destroy_timer(self._timer)
+        self._destroy_timer()
         step = float(self.get_parameter('step').value)
         self._timer = self.create_timer(step, self.timer_callback)
 
@@ -408,6 +587,7 @@ class MpcControllerNode(Node):
                 and 0 <= now - self._last_step_time < 0.5 * step):
             return  # a timer fired twice for one instant (ROS-time timers can): one step
         self._last_step_time = now
+        self.control_steps += 1
         try:
             if self._odom_problem is not None:
                 output = self.controller.stop(Reason.INVALID_ODOM, self._odom_problem)
@@ -418,17 +598,54 @@ class MpcControllerNode(Node):
         except Exception as err:  # compute never raises; belt and braces
             output = ControlOutput(np.zeros(2), None, Reason.ERROR, str(err))
         self.last_output = output
-        self._cmd_pub.publish(twist_from_u(output.u))
+        self._cmd_pub.publish(self._cmd_message(output.u, now))
         try:
+            stamp = seconds_to_stamp(max(now, 0.0))
+            frame = str(self.get_parameter('frame_id').value)
             if output.solution is not None:
-                stamp = seconds_to_stamp(max(now, 0.0))
                 self._local_plan_pub.publish(poses_to_path(
-                    output.solution.x_pred[:, :3],
-                    frame_id=str(self.get_parameter('frame_id').value), stamp=stamp))
+                    output.solution.x_pred[:, :3], frame_id=frame, stamp=stamp))
             self._diag_pub.publish(self._diagnostics(output, now))
+            self._publish_obstacles(output, frame, stamp)
+            if self._state is not None:
+                footprint = Footprint.circle(self.controller.config.robot_radius)
+                self._footprint_pub.publish(polygon_stamped(
+                    footprint.at(self._state), frame_id=frame, stamp=stamp))
         except Exception as err:  # a message that cannot be built: keep controlling
             self.get_logger().warning(f'could not publish: {err}', throttle_duration_sec=1.0)
         self._log(output)
+
+    def _cmd_message(self, u: np.ndarray, now: float) -> Twist | TwistStamped:
+        """Return cmd_vel's message for u: a Twist, or a TwistStamped in base_link."""
+        if not self._stamped:
+            return twist_from_u(u)
+        return twist_stamped_from_u(u, stamp=seconds_to_stamp(max(now, 0.0)),
+                                    frame_id=BASE_FRAME)
+
+    def _publish_obstacles(self, output: ControlOutput, frame: str, stamp: Any) -> None:
+        """Publish the obstacles raw, grown and active when that changes (or now and then).
+
+        Each publication starts with DELETEALL, so markers of obstacles gone (or no longer
+        active) disappear; ids are the obstacles' indices within their namespace.
+        """
+        grown = self.controller.grown_obstacles
+        # active only if this step solved: a stop without a solve holds nothing
+        active = self.controller.active_obstacles if output.solution is not None else ()
+        self._steps_since_markers += 1
+        shown = self._markers_shown
+        if (shown is not None and _same(shown[0], grown) and _same(shown[1], active)
+                and self._steps_since_markers < OBSTACLE_REFRESH_STEPS):
+            return
+        markers = [delete_all_marker(frame_id=frame, stamp=stamp)]
+        for ns, polygons in (('raw', self.controller.obstacles), ('grown', grown),
+                             ('active', active)):
+            rgba, width = MARKER_STYLE[ns]
+            markers += [polygon_marker(p.vertices, ns=ns, marker_id=i, frame_id=frame,
+                                       stamp=stamp, rgba=rgba, width=width)
+                        for i, p in enumerate(polygons)]
+        self._obstacles_pub.publish(MarkerArray(markers=markers))
+        self._markers_shown = (grown, active)
+        self._steps_since_markers = 0
 
     def _log(self, output: ControlOutput) -> None:
         """Log a change of reason (refused input is logged, throttled, where refused)."""
@@ -494,8 +711,12 @@ def log_line(output: ControlOutput, *, failures: int,
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the node until Ctrl-C (exit code 2, with the reason, on invalid parameters)."""
-    return run_node(MpcControllerNode, 'mpc_controller', args)
+    """Run the node until Ctrl-C (exit code 2, with the reason, on invalid parameters).
+
+    ``--help`` prints the parameters with their defaults and starts nothing.
+    """
+    return run_node(MpcControllerNode, 'mpc_controller', args, summary=_SUMMARY,
+                    parameters=PARAMETERS)
 
 
 if __name__ == '__main__':

@@ -52,6 +52,7 @@ from mpc_local_planner.ros.conversions import (
     yaw_to_quaternion,
 )
 from mpc_local_planner.ros.mpc_controller_node import MpcControllerNode
+from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
 from mpc_local_planner.worlds.world import paper_world
 
@@ -210,6 +211,7 @@ class Nodes:
         # neither node is spun: the test calls their callbacks, the executor the probe's
         self.idle = SingleThreadedExecutor(context=ros.context)
         self.controller = MpcControllerNode(context=ros.context, parameter_overrides=sim_time)
+        assert autostart(self.controller) is None  # configured and active, as run_node does
         self.simulator = UnicycleSimulatorNode(context=ros.context,
                                                parameter_overrides=sim_time)
         for node in (self.controller, self.simulator):

@@ -22,6 +22,7 @@ from geometry_msgs.msg import PoseStamped, Twist
 from nav_msgs.msg import Odometry, Path
 import numpy as np
 import pytest
+from rclpy.lifecycle import LifecycleNode
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -51,6 +52,7 @@ from mpc_local_planner.ros.mpc_controller_node import (
     log_line,
     MpcControllerNode,
 )
+from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.qos import (
     CMD_VEL_QOS,
     DIAGNOSTICS_QOS,
@@ -106,6 +108,13 @@ class Probe(Node):
     def publish_odom(self, state: np.ndarray) -> None:
         self.odom_pub.publish(state_to_odometry(state, np.zeros(2),
                                                 stamp=self.get_clock().now().to_msg()))
+
+
+def started(node: Node) -> Node:
+    """Configure and activate a lifecycle node (autostart is true by default), as run_node does."""
+    if isinstance(node, LifecycleNode):
+        assert autostart(node) is None
+    return node
 
 
 def exact_arc(pose: np.ndarray, v: float, omega: float, t: float) -> np.ndarray:
@@ -166,7 +175,8 @@ def test_simulator_saturates_the_command_at_the_bounds(ros) -> None:
 # ----------------------------------------------------------------------------- controller
 def make_controller(ros, **params) -> tuple[MpcControllerNode, Probe]:
     overrides = [Parameter(k, value=v) for k, v in params.items()]
-    controller = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=overrides))
+    controller = started(ros.add(
+        MpcControllerNode(context=ros.context, parameter_overrides=overrides)))
     probe = ros.add(Probe(ros.context))
     return controller, probe
 
@@ -237,8 +247,8 @@ def test_controller_refuses_invalid_parameters_with_a_reason(ros, name, value, r
 # ----------------------------------------------------------------------------- planner
 def test_planner_path_starts_at_odometry_ends_at_goal_and_is_collision_free(ros) -> None:
     goal = [float(v) for v in WORLD.goal]
-    planner = ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
-        Parameter('goal', value=goal), Parameter('world_file', value='paper_obstacle.yaml')]))
+    planner = started(ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
+        Parameter('goal', value=goal), Parameter('world_file', value='paper_obstacle.yaml')])))
     probe = ros.add(Probe(ros.context))
     start = np.array([0.1, -0.2, 0.3])
 
@@ -271,8 +281,8 @@ def test_planner_path_starts_at_odometry_ends_at_goal_and_is_collision_free(ros)
 
 
 def test_planner_says_on_its_diagnostics_why_no_plan_comes_and_when_one_does(ros) -> None:
-    planner = ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
-        Parameter('world_file', value='paper_obstacle')]))
+    planner = started(ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
+        Parameter('world_file', value='paper_obstacle')])))
     probe = ros.add(Probe(ros.context))
     assert ros.spin_until(lambda: probe.odom_pub.get_subscription_count() > 0)
     probe.publish_odom(WORLD.start)
@@ -292,8 +302,8 @@ def test_planner_says_on_its_diagnostics_why_no_plan_comes_and_when_one_does(ros
 
 
 def test_nodes_find_world_files_named_without_a_suffix(ros) -> None:
-    controller = ros.add(MpcControllerNode(context=ros.context))
-    planner = ros.add(GlobalPlannerNode(context=ros.context))
+    controller = started(ros.add(MpcControllerNode(context=ros.context)))
+    planner = started(ros.add(GlobalPlannerNode(context=ros.context)))
     for node in (controller, planner):
         result = node.set_parameters([Parameter('world_file', value='rrt_cluttered')])[0]
         assert result.successful, result.reason
@@ -315,7 +325,7 @@ def test_the_candidate_log_line_says_its_input_is_applied() -> None:
 
 
 def test_planner_refuses_a_malformed_goal(ros) -> None:
-    planner = ros.add(GlobalPlannerNode(context=ros.context))
+    planner = started(ros.add(GlobalPlannerNode(context=ros.context)))
     result = planner.set_parameters([Parameter('goal', value=[1.0, 2.0])])[0]
     assert not result.successful
     assert 'goal must be [x, y, theta]' in result.reason

@@ -34,6 +34,8 @@ from nav_msgs.msg import Odometry, Path
 import numpy as np
 import pytest
 from rcl_interfaces.msg import Log
+from rclpy.lifecycle import LifecycleNode
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from mpc_local_planner.core.controller import Reason
@@ -52,6 +54,7 @@ from mpc_local_planner.ros.conversions import (
 )
 from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
 from mpc_local_planner.ros.mpc_controller_node import ERROR_THROTTLE_S, MpcControllerNode
+from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
 from mpc_local_planner.worlds.world import paper_world
 
@@ -66,6 +69,13 @@ ODOM_TIMEOUT = 0.5  # the controller's default odom_timeout (s)
 
 
 # ----------------------------------------------------------------------------- helpers
+def started(node: Node) -> Node:
+    """Configure and activate a lifecycle node (autostart is true by default), as run_node does."""
+    if isinstance(node, LifecycleNode):
+        assert autostart(node) is None
+    return node
+
+
 class SimClock:
     """Simulated time owned by the test: each tick publishes odometry (if set), then /clock.
 
@@ -134,7 +144,7 @@ def start_controller(ros, **params) -> tuple[MpcControllerNode, object, SimClock
     """A controller in simulated time with a probe that owns the clock; tracking PLAN."""
     overrides = [Parameter('use_sim_time', value=True)]
     overrides += [Parameter(k, value=v) for k, v in params.items()]
-    node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=overrides))
+    node = started(ros.add(MpcControllerNode(context=ros.context, parameter_overrides=overrides)))
     probe = ros.probe(use_sim_time=True)
     clock = SimClock(ros, probe)
     assert ros.spin_until(lambda: probe.plan_pub.get_subscription_count() > 0
@@ -365,9 +375,9 @@ def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_th
     ros.add(UnicycleSimulatorNode(context=ros.context, parameter_overrides=[
         Parameter('publish_clock', value=True), Parameter('real_time_factor', value=2.0),
         Parameter('initial_pose', value=[float(v) for v in WORLD.start])]))
-    node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=[
+    node = started(ros.add(MpcControllerNode(context=ros.context, parameter_overrides=[
         Parameter('use_sim_time', value=True), Parameter('analytic_path', value='paper_sinusoid'),
-        Parameter('horizon', value=horizon)]))
+        Parameter('horizon', value=horizon)])))
     probe = ros.probe(use_sim_time=True)
 
     def driving_on_the_solver() -> bool:
@@ -537,8 +547,8 @@ def goal_message(x: float, y: float, yaw: float = 0.0, frame_id: str = 'map') ->
 
 
 def start_planner(ros) -> tuple[GlobalPlannerNode, object]:  # noqa: ANN001
-    planner = ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
-        Parameter('world_file', value='paper_obstacle.yaml')]))
+    planner = started(ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
+        Parameter('world_file', value='paper_obstacle.yaml')])))
     probe = ros.probe()
     assert ros.spin_until(lambda: probe.goal_pub.get_subscription_count() > 0
                           and probe.odom_pub.get_subscription_count() > 0)

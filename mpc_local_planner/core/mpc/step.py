@@ -242,6 +242,7 @@ class MpcBase(ABC):
         self._nlps: dict[tuple[int, int], Nlp] = {}
         self._structure_key: tuple | None = None
         self._last_nlp: Nlp | None = None
+        self._last_active: tuple[ConvexPolygon, ...] = ()
         self._rollouts: dict[tuple[float, int], ca.Function] = {}
         self._stage_fn = stage_cost(model, self._config.cost_exponent)
         self.set_obstacles(obstacles)
@@ -265,6 +266,16 @@ class MpcBase(ABC):
         if nlp is None:
             return self._config.solver
         return nlp.backend + ('+compiled' if nlp.compiled else '')
+
+    @property
+    def inflated_obstacles(self) -> tuple[ConvexPolygon, ...]:
+        """The obstacles as the NLP sees them: grown by config.inflation()."""
+        return tuple(self._inflated)
+
+    @property
+    def last_active_obstacles(self) -> tuple[ConvexPolygon, ...]:
+        """The inflated obstacles the last solve held as Farkas constraints (its NLP's)."""
+        return self._last_active
 
     def update_config(self, config: MpcConfig) -> None:
         """Apply new settings at the next solve; shape changes rebuild the NLP there."""
@@ -295,6 +306,7 @@ class MpcBase(ABC):
         inflation = self._config.inflation(float(self._model.u_max[0]))
         self._inflated = [o.inflate(inflation) for o in self._raw_obstacles]
         self._obstacle_set = ObstacleSet(self._inflated)
+        self._last_active = ()
 
     def reset(self) -> None:
         """Forget the previous solution (warm start, candidate, Lyapunov history)."""
@@ -608,6 +620,7 @@ class MpcBase(ABC):
         reachable = self._reachable(x0)
         candidate = self._candidate(x0)
         result = self._generate_constraints(x0, candidate, reachable)
+        self._last_active = tuple(result.active)
         attempt = result.attempt
         decision = decide(
             solver_verified=attempt.verified, solver_value=attempt.value,
