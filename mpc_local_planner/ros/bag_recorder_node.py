@@ -23,6 +23,10 @@ ROS time at reception (simulated time under ``use_sim_time``).
 With ``world_file`` set, the bag's metadata (rosbag2 ``custom_data``) records the world: its
 path and its contents, under the keys of `BagKey`, so that analyze_bag finds the obstacles
 the run had without being told.
+
+The output folder must not exist: the recorder refuses to start (one line on stderr, exit
+code 2) rather than overwrite or mix runs. ``bag_recorder --help`` lists the parameters and
+creates nothing.
 """
 
 from __future__ import annotations
@@ -44,11 +48,12 @@ from mpc_local_planner.core.diagnostics import (
     PLANNER_DIAGNOSTICS_TOPIC,
 )
 from mpc_local_planner.ros.node_main import run_node
-from mpc_local_planner.ros.parameters import describe
+from mpc_local_planner.ros.parameters import declare_parameters, ParameterSpec
 from mpc_local_planner.ros.qos import recorder_qos
 from mpc_local_planner.worlds.data_files import resolve_data_file
 
-__all__ = ['BagRecorderNode', 'DEFAULT_TOPICS', 'DEFAULT_TYPES', 'main', 'message_class']
+__all__ = ['BagRecorderNode', 'DEFAULT_TOPICS', 'DEFAULT_TYPES', 'PARAMETERS', 'SUMMARY', 'main',
+           'message_class']
 
 DEFAULT_TOPICS = ['odom', 'cmd_vel', 'plan', 'local_plan', CONTROLLER_DIAGNOSTICS_TOPIC,
                   PLANNER_DIAGNOSTICS_TOPIC]
@@ -57,6 +62,24 @@ DEFAULT_TYPES = ['nav_msgs/msg/Odometry', 'geometry_msgs/msg/Twist', 'nav_msgs/m
                  'diagnostic_msgs/msg/DiagnosticArray']
 DEFAULT_LATCHED = ['plan', PLANNER_DIAGNOSTICS_TOPIC]
 BAG_VERSION = 9
+
+SUMMARY = ('Record topics into an mcap rosbag2 (no rosbag2_py or ros2cli needed), with the '
+           "world in the bag's metadata; the output folder must not exist.")
+
+PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('output', 'bag', 'bag directory to create (must not exist); read once at start',
+                  read_only=True),
+    ParameterSpec('topics', DEFAULT_TOPICS,
+                  'topics to record (relative names resolve in the node namespace)',
+                  read_only=True),
+    ParameterSpec('types', DEFAULT_TYPES, "their types, 'pkg/msg/Name', one per topic",
+                  read_only=True),
+    ParameterSpec('transient_local_topics', DEFAULT_LATCHED,
+                  'topics subscribed transient_local (latched, such as plan)', read_only=True),
+    ParameterSpec('world_file', '',
+                  "world file to record in the bag's metadata (a path, or a name in the "
+                  "package's config/ or config/worlds/); '' = none", read_only=True),
+)
 
 
 def message_class(type_name: str) -> type:
@@ -85,13 +108,16 @@ class BagRecorderNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('bag_recorder', **kwargs)
         self.add_on_set_parameters_callback(self.parameters_callback)
-        self._declare_parameters()
+        declare_parameters(self, PARAMETERS)
         self._typestore = get_typestore(Stores.ROS2_JAZZY)
         self.counts: dict[str, int] = {}
         topics = list(self.get_parameter('topics').value)
         types = list(self.get_parameter('types').value)
         latched = set(self.get_parameter('transient_local_topics').value)
         self.path = Path(str(self.get_parameter('output').value)).expanduser()
+        if self.path.exists():
+            msg = f'output {str(self.path)!r} exists: remove it or choose another output'
+            raise FileExistsError(msg)
         world = self._read_world(str(self.get_parameter('world_file').value))
         self._writer: Writer | None = Writer(self.path, version=BAG_VERSION,
                                              storage_plugin=StoragePlugin.MCAP)
@@ -107,19 +133,6 @@ class BagRecorderNode(Node):
             self._writer = None
             raise
         self.get_logger().info(f'recording {len(topics)} topics into {self.path}')
-
-    def _declare_parameters(self) -> None:
-        self.declare_parameter('output', 'bag', describe(
-            'bag directory to create (must not exist); read once at start', read_only=True))
-        self.declare_parameter('topics', DEFAULT_TOPICS, describe(
-            'topics to record (relative names resolve in the node namespace)', read_only=True))
-        self.declare_parameter('types', DEFAULT_TYPES, describe(
-            "their types, 'pkg/msg/Name', one per topic", read_only=True))
-        self.declare_parameter('transient_local_topics', DEFAULT_LATCHED, describe(
-            'topics subscribed transient_local (latched, such as plan)', read_only=True))
-        self.declare_parameter('world_file', '', describe(
-            "world file to record in the bag's metadata (a path, or a name in the package's "
-            "config/ or config/worlds/); '' = none", read_only=True))
 
     @staticmethod
     def _read_world(world_file: str) -> dict[BagKey, str]:
@@ -190,8 +203,12 @@ class BagRecorderNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the node until Ctrl-C (exit code 2, with the reason, on invalid parameters)."""
-    return run_node(BagRecorderNode, 'bag_recorder', args)
+    """Run the node until Ctrl-C (exit code 2, with the reason, on invalid parameters).
+
+    ``--help`` prints the parameters and their defaults and starts nothing (creates no bag).
+    """
+    return run_node(BagRecorderNode, 'bag_recorder', args, summary=SUMMARY,
+                    parameters=PARAMETERS)
 
 
 if __name__ == '__main__':

@@ -20,9 +20,11 @@ With ``publish_clock`` the node is the clock: each tick of a steady wall timer, 
 ``real_time_factor`` times real time, and a slow tick slows the simulation down instead of
 making it jump. Without it, the node integrates in ROS time (wall or an external clock).
 
-A cmd_vel older than ``cmd_timeout`` (a controller that died or hangs) is replaced by zero,
-and so is one with NaN or inf in linear.x or angular.z (its sender is broken: no part of it
-is trusted); the saturation bounds every command that is integrated.
+``cmd_vel`` is a geometry_msgs/Twist, or a TwistStamped with ``enable_stamped_cmd_vel``
+(Nav2's parameter; give the controller the same value). A cmd_vel older than ``cmd_timeout``
+(a controller that died or hangs; the age counts from its arrival, stamped or not) is
+replaced by zero, and so is one with NaN or inf in linear.x or angular.z (its sender is
+broken: no part of it is trusted); the saturation bounds every command that is integrated.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ import math
 import sys
 from typing import Any
 
-from geometry_msgs.msg import Twist
+from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
@@ -43,15 +45,47 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.ros.conversions import seconds_to_stamp, state_to_odometry, u_from_twist
 from mpc_local_planner.ros.node_main import run_node
-from mpc_local_planner.ros.parameters import describe
+from mpc_local_planner.ros.parameters import declare_parameters, ParameterSpec
 from mpc_local_planner.ros.qos import CLOCK_QOS, CMD_VEL_QOS, ODOM_QOS
 from mpc_local_planner.ros.throttle import ProblemThrottle
 
-__all__ = ['UnicycleSimulatorNode', 'main', 'validate_simulator_parameters']
+__all__ = ['PARAMETERS', 'SUMMARY', 'UnicycleSimulatorNode', 'main',
+           'validate_simulator_parameters']
 
 
 # At most this many integration steps catch up a late tick (real-time mode).
 MAX_CATCH_UP_STEPS = 10
+_MODEL = Unicycle()  # the single source of the saturation defaults
+
+SUMMARY = ('Integrate a unicycle driven by cmd_vel (Twist, or TwistStamped with '
+           'enable_stamped_cmd_vel) with saturation; publish odom, and clock with '
+           'publish_clock.')
+
+PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('initial_pose', [0.0, 0.0, 0.0],
+                  'start pose [x, y, theta] (m, m, rad); read once at start'),
+    ParameterSpec('rate', 50.0,
+                  'integration rate in Hz of simulated time (one RK4 step of 1/rate per tick)',
+                  float_range=(1.0, 1000.0)),
+    ParameterSpec('cmd_timeout', 0.5,
+                  'a cmd_vel older than this (s of simulated time) is replaced by zero; '
+                  '0 = never', float_range=(0.0, 60.0)),
+    ParameterSpec('enable_stamped_cmd_vel', False,
+                  "subscribe cmd_vel as geometry_msgs/TwistStamped (Nav2's name); false = "
+                  'Twist; read once at start', read_only=True),
+    ParameterSpec('publish_clock', False,
+                  'drive /clock from the simulation (other nodes then use_sim_time)',
+                  read_only=True),
+    ParameterSpec('real_time_factor', 1.0,
+                  'simulated seconds per wall second when publish_clock is true',
+                  float_range=(0.01, 100.0)),
+    ParameterSpec('v_max', _MODEL.v_max, 'saturation of |linear.x| (m/s)',
+                  float_range=(0.001, 10.0)),
+    ParameterSpec('omega_max', _MODEL.omega_max, 'saturation of |angular.z| (rad/s)',
+                  float_range=(0.001, 50.0)),
+    ParameterSpec('frame_id', 'odom', 'odometry frame'),
+    ParameterSpec('child_frame_id', 'base_link', 'robot frame'),
+)
 
 
 def validate_simulator_parameters(values: dict[str, Any]) -> str | None:
@@ -70,7 +104,7 @@ class UnicycleSimulatorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('unicycle_simulator', **kwargs)
         self.add_on_set_parameters_callback(self.parameters_callback)
-        self._declare_parameters()
+        declare_parameters(self, PARAMETERS)
         self.add_post_set_parameters_callback(self.post_parameters_callback)
         pose = np.array(self.get_parameter('initial_pose').value, dtype=float)
         self._state = pose
@@ -82,34 +116,12 @@ class UnicycleSimulatorNode(Node):
         self._problems = ProblemThrottle(2.0)
         self._odom_pub = self.create_publisher(Odometry, 'odom', ODOM_QOS)
         self._clock_pub = self.create_publisher(ClockMsg, 'clock', CLOCK_QOS)
-        self._cmd_sub = self.create_subscription(Twist, 'cmd_vel', self.cmd_vel_callback,
+        cmd_type = TwistStamped if self.get_parameter('enable_stamped_cmd_vel').value else Twist
+        self._cmd_sub = self.create_subscription(cmd_type, 'cmd_vel', self.cmd_vel_callback,
                                                  CMD_VEL_QOS)
         self._steady_clock = Clock(clock_type=ClockType.STEADY_TIME)
         self._timer = None
         self._make_timer()
-
-    def _declare_parameters(self) -> None:
-        model = Unicycle()
-        self.declare_parameter('initial_pose', [0.0, 0.0, 0.0], describe(
-            'start pose [x, y, theta] (m, m, rad); read once at start'))
-        self.declare_parameter('rate', 50.0, describe(
-            'integration rate in Hz of simulated time (one RK4 step of 1/rate per tick)',
-            float_range=(1.0, 1000.0)))
-        self.declare_parameter('cmd_timeout', 0.5, describe(
-            'a cmd_vel older than this (s of simulated time) is replaced by zero; 0 = never',
-            float_range=(0.0, 60.0)))
-        self.declare_parameter('publish_clock', False, describe(
-            'drive /clock from the simulation (other nodes then use_sim_time)',
-            read_only=True))
-        self.declare_parameter('real_time_factor', 1.0, describe(
-            'simulated seconds per wall second when publish_clock is true',
-            float_range=(0.01, 100.0)))
-        self.declare_parameter('v_max', model.v_max, describe(
-            'saturation of |linear.x| (m/s)', float_range=(0.001, 10.0)))
-        self.declare_parameter('omega_max', model.omega_max, describe(
-            'saturation of |angular.z| (rad/s)', float_range=(0.001, 50.0)))
-        self.declare_parameter('frame_id', 'odom', describe('odometry frame'))
-        self.declare_parameter('child_frame_id', 'base_link', describe('robot frame'))
 
     # ------------------------------------------------------------------ parameters
     def parameters_callback(self, parameters: list[Parameter]) -> SetParametersResult:
@@ -163,8 +175,10 @@ class UnicycleSimulatorNode(Node):
             return self._sim_time
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def cmd_vel_callback(self, msg: Twist) -> None:
+    def cmd_vel_callback(self, msg: Twist | TwistStamped) -> None:
         """Take the new command (saturated when integrated); a non-finite one means stop."""
+        if isinstance(msg, TwistStamped):
+            msg = msg.twist  # the same checks and timeout as a Twist
         raw = (msg.linear.x, msg.angular.z)
         if not all(math.isfinite(value) for value in raw):
             self._u = np.zeros(2)
@@ -218,8 +232,12 @@ class UnicycleSimulatorNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the node until Ctrl-C (exit code 2, with the reason, on invalid parameters)."""
-    return run_node(UnicycleSimulatorNode, 'unicycle_simulator', args)
+    """Run the node until Ctrl-C (exit code 2, with the reason, on invalid parameters).
+
+    ``--help`` prints the parameters and their defaults and starts nothing.
+    """
+    return run_node(UnicycleSimulatorNode, 'unicycle_simulator', args, summary=SUMMARY,
+                    parameters=PARAMETERS)
 
 
 if __name__ == '__main__':

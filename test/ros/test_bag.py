@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+import re
 
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
@@ -31,6 +32,7 @@ from rosbags.typesys import get_typestore, Stores
 from mpc_local_planner.evaluation.analyze_bag import main as analyze_main
 from mpc_local_planner.evaluation.analyze_bag import read_run, recorded_world
 from mpc_local_planner.ros.bag_recorder_node import BagRecorderNode
+from mpc_local_planner.ros.bag_recorder_node import main as recorder_main
 from mpc_local_planner.ros.conversions import (
     poses_to_path,
     seconds_to_stamp,
@@ -128,6 +130,27 @@ def test_a_bag_recorded_without_a_world_is_refused_without_world(ros, tmp_path, 
     assert err.count('\n') == 1 and 'does not record its world' in err and '--world' in err
     assert analyze_main([str(bag), '--out', str(tmp_path / 'out'), '--world',
                          'paper_obstacle']) == 1  # analysed: the robot never got there
+
+
+@pytest.mark.slow
+def test_recorder_refuses_an_existing_output_folder_and_leaves_it_untouched(ros, tmp_path) -> None:
+    bag = tmp_path / 'bag'
+    bag.mkdir()
+    (bag / 'earlier_run.mcap').write_bytes(b'not ours')
+    with pytest.raises(FileExistsError, match="output '.*bag' exists: remove it"):
+        BagRecorderNode(context=ros.context, parameter_overrides=[
+            Parameter('output', value=str(bag))])
+    assert [p.name for p in bag.iterdir()] == ['earlier_run.mcap']
+
+
+def test_recorder_help_lists_its_parameters_and_creates_no_bag(tmp_path, monkeypatch,
+                                                               capsys) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert recorder_main(['bag_recorder', '--help']) == 0
+    out = capsys.readouterr().out
+    assert out.startswith('usage: bag_recorder')
+    assert re.search(r"^  output +'bag'", out, re.MULTILINE), out
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_analyze_bag_reports_a_missing_bag(tmp_path, capsys) -> None:

@@ -1,0 +1,135 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Every console script answers --help and starts nothing; bag_recorder refuses in one line.
+
+``<script> --help`` exits 0 with a usage line, names each node's parameters with their
+defaults, and writes nothing in its working directory; bag_recorder with an existing output
+folder exits 2 with exactly one line on stderr.
+
+The scripts are the package's ``console_scripts`` entry points as installed
+(importlib.metadata), plus any that setup.py declares and an older editable install does not
+list yet (run as ``python -m <module>``), so a new executable is covered without a reinstall.
+"""
+
+from __future__ import annotations
+
+import ast
+from importlib import import_module
+from importlib.metadata import entry_points
+from pathlib import Path
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from mpc_local_planner.ros.parameters import ParameterSpec
+
+pytestmark = pytest.mark.slow  # one process per executable
+
+DISTRIBUTION = 'mpc_local_planner'
+SETUP_PY = Path(__file__).resolve().parents[2] / 'setup.py'
+# Wall seconds an executable may take to print its help (or refuse) before it counts as hung.
+HANG_GUARD = 60.0
+
+
+def setup_py_scripts() -> dict[str, str]:
+    """Return setup.py's console_scripts as {name: 'module:function'}."""
+    tree = ast.parse(SETUP_PY.read_text(encoding='utf-8'))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Dict):
+            for key, value in zip(node.keys, node.values, strict=True):
+                if isinstance(key, ast.Constant) and key.value == 'console_scripts':
+                    entries = ast.literal_eval(value)
+                    return {name.strip(): target.strip()
+                            for name, target in (entry.split('=') for entry in entries)}
+    return {}
+
+
+def console_scripts() -> dict[str, str]:
+    """Return every console script of the package as {name: 'module:function'}."""
+    installed = {ep.name: ep.value for ep in entry_points(group='console_scripts')
+                 if ep.dist is not None and ep.dist.name == DISTRIBUTION}
+    return {**setup_py_scripts(), **installed}
+
+
+SCRIPTS = console_scripts()
+
+
+def command(name: str) -> list[str]:
+    """Return how to run script name: the installed script, else ``python -m module``."""
+    beside = Path(sys.executable).parent / name  # the script of this interpreter's install
+    found = str(beside) if beside.is_file() else shutil.which(name)
+    if found is not None:
+        return [found]
+    return [sys.executable, '-m', SCRIPTS[name].split(':')[0]]
+
+
+def node_parameters(name: str) -> tuple[ParameterSpec, ...] | None:
+    """Return the PARAMETERS table of a node's module, None for an argparse command."""
+    module_name = SCRIPTS[name].split(':')[0]
+    if not (module_name.startswith('mpc_local_planner.ros.') and module_name.endswith('_node')):
+        return None
+    return getattr(import_module(module_name), 'PARAMETERS', ())
+
+
+def scalar_default(value: object) -> str | None:
+    """Return how --help shows a scalar default (None for lists and unset parameters)."""
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, float):
+        return f'{value:g}'
+    if isinstance(value, (int, str)):
+        return repr(value) if isinstance(value, str) else str(value)
+    return None
+
+
+def test_the_package_has_the_executables_the_readme_names() -> None:
+    assert {'global_planner', 'mpc_controller', 'unicycle_simulator', 'bag_recorder',
+            'closed_loop', 'analyze_bag', 'mpc_bench', 'world_to_map'} <= set(SCRIPTS)
+
+
+@pytest.mark.parametrize('name', sorted(SCRIPTS))
+def test_help_prints_usage_and_the_parameters_starts_nothing_and_writes_nothing(
+        name, tmp_path) -> None:  # noqa: ANN001
+    result = subprocess.run([*command(name), '--help'], cwd=tmp_path, capture_output=True,
+                            text=True, timeout=HANG_GUARD, check=False)
+    assert result.returncode == 0, result.stderr
+    assert 'usage' in result.stdout.lower(), result.stdout
+    assert 'Traceback' not in result.stderr, result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+    specs = node_parameters(name)
+    if specs is None:
+        return  # an argparse command: usage is all it owes
+    assert specs, f'{name} has no PARAMETERS table for --help'
+    lines = result.stdout.splitlines()
+    for spec in specs:
+        row = [line for line in lines if line.split()[:1] == [spec.name]]
+        assert row, f'{name} --help does not list {spec.name}:\n{result.stdout}'
+        shown = scalar_default(spec.default)
+        if shown is not None:
+            after_name = row[0].split(None, 1)[1]
+            assert after_name.startswith(shown), (spec.name, row[0])
+
+
+def test_bag_recorder_refuses_an_existing_output_folder_in_one_line(tmp_path) -> None:
+    (tmp_path / 'bag').mkdir()
+    result = subprocess.run([*command('bag_recorder'), '--ros-args', '-p', 'output:=bag'],
+                            cwd=tmp_path, capture_output=True, text=True, timeout=HANG_GUARD,
+                            check=False)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.count('\n') == 1, result.stderr
+    assert result.stderr.startswith('bag_recorder: refusing to start: ')
+    assert 'exists' in result.stderr and 'Traceback' not in result.stderr
+    assert list((tmp_path / 'bag').iterdir()) == []  # nothing written into it
