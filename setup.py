@@ -31,6 +31,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
         (os.path.join('share', package_name, 'config'), glob('config/*.yaml')),
         (os.path.join('share', package_name, 'config', 'worlds'), glob('config/worlds/*.yaml')),
+        (os.path.join('share', package_name, 'config', 'maps'), glob('config/maps/*')),
         (os.path.join('share', package_name, 'launch'), glob('launch/*.launch.py')),
         (os.path.join('share', package_name, 'rviz'), glob('rviz/*.rviz')),
     ],
@@ -75,6 +76,7 @@ setup(
             'analyze_bag = mpc_local_planner.evaluation.analyze_bag:main',
             'mpc_bench = mpc_local_planner.evaluation.bench:main',
             'world_to_map = mpc_local_planner.worlds.world_to_map:main',
+            'map_server = mpc_local_planner.ros.map_server_node:main',
         ],
     },
 )

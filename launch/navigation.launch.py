@@ -16,7 +16,8 @@
 """Run the planner and the MPC on a real robot (``ros2 launch ... navigation.launch.py``).
 
 The robot's driver supplies ``odom`` and takes ``cmd_vel``; goals come on ``goal_pose``
-(RViz's "2D Goal Pose"). Both nodes read the obstacles of ``world`` (a world YAML).
+(RViz's "2D Goal Pose"). Both nodes read the obstacles of ``world`` (a world YAML); the map
+server serves the robot's known map ``map`` (map_server format) on ``/map``.
 
 Checked statically only: ``launch`` and ``launch_ros`` are not installable from PyPI, so the
 tests compile this file and check the executables and files it names (test/ros/test_launch.py).
@@ -34,19 +35,25 @@ PACKAGE = 'mpc_local_planner'
 
 
 def generate_launch_description() -> LaunchDescription:
-    """Declare the arguments and the two nodes."""
+    """Declare the arguments and the three nodes."""
     config = os.path.join(get_package_share_directory(PACKAGE), 'config')
     world = LaunchConfiguration('world')
     use_sim_time = LaunchConfiguration('use_sim_time')
     return LaunchDescription([
         DeclareLaunchArgument('world', default_value='paper_obstacle.yaml',
                               description='world YAML with the obstacles: a path or a name'),
+        DeclareLaunchArgument('map',
+                              default_value=os.path.join(config, 'maps', 'paper_obstacle.yaml'),
+                              description='the known map (map_server YAML): a path or a name'),
         DeclareLaunchArgument('use_sim_time', default_value='false',
                               description='true when a simulator or a bag drives /clock'),
         DeclareLaunchArgument('planner_params',
                               default_value=os.path.join(config, 'global_planner.yaml')),
         DeclareLaunchArgument('controller_params',
                               default_value=os.path.join(config, 'mpc_controller.yaml')),
+        Node(package=PACKAGE, executable='map_server', name='map_server', output='screen',
+             parameters=[{'use_sim_time': use_sim_time,
+                          'yaml_filename': LaunchConfiguration('map')}]),
         Node(package=PACKAGE, executable='global_planner', name='global_planner',
              output='screen',
              parameters=[LaunchConfiguration('planner_params'),

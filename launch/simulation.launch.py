@@ -15,9 +15,11 @@
 
 """Simulate the robot and drive it with the paper's MPC (``ros2 launch ... simulation.launch.py``).
 
-Starts the unicycle simulator (it drives ``/clock``), the global planner and the MPC
-controller, all on simulated time, and the bag recorder with ``record:=true``. The world
-(``world:=NAME`` or a path) gives the simulator's start pose and the planner's goal; each
+Starts the unicycle simulator (it drives ``/clock``), the map server, the global planner and
+the MPC controller, all on simulated time, and the bag recorder with ``record:=true``. The
+world (``world:=NAME`` or a path) gives the simulator's start pose and the planner's goal; the
+map server serves ``map:=FILE``, by default the world's map ``maps/<world name>.yaml`` (its
+known obstacles, made by ``world_to_map``), and is left out if the world has none. Each
 node's parameters come from its YAML under ``share/mpc_local_planner/config`` unless a
 ``*_params`` argument names another file.
 
@@ -37,6 +39,18 @@ from launch_ros.actions import Node
 PACKAGE = 'mpc_local_planner'
 
 
+def _map_file(name: str, world_name: str) -> str | None:
+    """Return the map to serve: the one named, else the world's own map (None if none)."""
+    from mpc_local_planner.worlds.data_files import resolve_data_file
+
+    if name:
+        return str(resolve_data_file(name))
+    try:
+        return str(resolve_data_file(f'maps/{world_name}.yaml'))
+    except FileNotFoundError:
+        return None
+
+
 def _nodes(context: LaunchContext) -> list[Node]:
     """Read the world once the arguments are known, and start the nodes for it."""
     from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -49,7 +63,11 @@ def _nodes(context: LaunchContext) -> list[Node]:
     world = load_world(world_file)
     use_sim_time = arg('use_sim_time').lower() == 'true'
     common = {'use_sim_time': use_sim_time}
-    return [
+    map_file = _map_file(arg('map'), world.name)
+    map_server = [] if map_file is None else [
+        Node(package=PACKAGE, executable='map_server', name='map_server', output='screen',
+             parameters=[common, {'yaml_filename': map_file}])]
+    return map_server + [
         Node(package=PACKAGE, executable='unicycle_simulator', name='unicycle_simulator',
              output='screen',
              parameters=[arg('simulator_params'), {
@@ -75,6 +93,10 @@ def generate_launch_description() -> LaunchDescription:
     return LaunchDescription([
         DeclareLaunchArgument('world', default_value='paper_obstacle.yaml',
                               description='world YAML: a path, or a name under config/worlds'),
+        DeclareLaunchArgument('map', default_value='',
+                              description='map YAML for map_server: a path, or a name such as '
+                                          'maps/unknown_box.yaml; empty: maps/<world name>.yaml '
+                                          'if it exists, else no map_server'),
         DeclareLaunchArgument('use_sim_time', default_value='true',
                               description='the simulator drives /clock; every node follows it'),
         DeclareLaunchArgument('real_time_factor', default_value='1.0',

@@ -30,6 +30,7 @@ __all__ = [
     'DIAGNOSTICS_QOS',
     'GOAL_QOS',
     'LOCAL_PLAN_QOS',
+    'MAP_QOS',
     'ODOM_QOS',
     'PLAN_QOS',
     'PLANNER_DIAGNOSTICS_QOS',
@@ -60,3 +61,9 @@ def recorder_qos(*, latched: bool) -> QoSProfile:
                       durability=(DurabilityPolicy.TRANSIENT_LOCAL if latched
                                   else DurabilityPolicy.VOLATILE),
                       history=HistoryPolicy.KEEP_LAST)
+
+# ``map`` as nav2_map_server publishes it: reliable, transient_local, depth 1, so RViz or a
+# planner that starts after the map server still receives the map it sent once.
+MAP_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     history=HistoryPolicy.KEEP_LAST)

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import ast
 import importlib
-from importlib import metadata
 import importlib.util
 from pathlib import Path
 import sys
@@ -33,6 +32,8 @@ import types
 from typing import Any
 
 import pytest
+from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
+from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 import yaml
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -73,8 +74,12 @@ def _stand_in_modules() -> dict[str, types.ModuleType]:
     return modules
 
 
-def _describe(path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[dict[str, str], list]:
-    """Run the launch file's generate_launch_description; return (arguments, nodes)."""
+def _describe(path: Path, monkeypatch: pytest.MonkeyPatch,
+              overrides: dict[str, str] | None = None) -> tuple[dict[str, str], list]:
+    """Run the launch file's generate_launch_description; return (arguments, nodes).
+
+    overrides are launch arguments given on the command line (``world:=...``).
+    """
     for name, module in _stand_in_modules().items():
         monkeypatch.setitem(sys.modules, name, module)
     spec = importlib.util.spec_from_file_location(path.stem.replace('.', '_'), path)
@@ -89,13 +94,25 @@ def _describe(path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[dict[str, st
         if 'package' in entity.kwargs:
             nodes.append(entity)
         elif 'function' in entity.kwargs:  # OpaqueFunction: run it as launch would
-            nodes += entity.kwargs['function'](dict(arguments))
+            nodes += entity.kwargs['function']({**arguments, **(overrides or {})})
     return arguments, nodes
 
 
 def _console_scripts() -> set[str]:
-    entry_points = metadata.distribution('mpc_local_planner').entry_points
-    return {e.name for e in entry_points if e.group == 'console_scripts'}
+    """Return the console scripts setup.py declares.
+
+    Read from setup.py, not from the installed metadata: an editable install's entry points
+    are stale until it is reinstalled.
+    """
+    tree = ast.parse((ROOT / 'setup.py').read_text())
+    scripts = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Dict):
+            for key, value in zip(node.keys, node.values, strict=True):
+                if isinstance(key, ast.Constant) and key.value == 'console_scripts':
+                    scripts |= {entry.split('=')[0].strip()
+                                for entry in ast.literal_eval(value)}
+    return scripts
 
 
 def _installed_share_files() -> set[str]:
@@ -109,11 +126,24 @@ def _installed_share_files() -> set[str]:
     return {f'{SHARE}/{p}' for p in installed}
 
 
-def _declared_parameters(executable: str, ros: Any) -> set[str]:
-    """Return the parameter names a node of the executable declares (the real node)."""
+def _installed_path(path: str) -> str:
+    """Return where a file the launch file names lies once installed.
+
+    Under the stand-ins the package's files resolve to the source tree's config/, which
+    setup.py installs under share/.
+    """
+    resolved = Path(path).resolve()
+    if not path.startswith(SHARE) and resolved.is_relative_to(ROOT):
+        return f'{SHARE}/{resolved.relative_to(ROOT)}'
+    return path
+
+
+def _make_node(executable: str, ros: Any) -> Any:
+    """Construct the real node of an executable with its defaults, spun by ros."""
     module_name = {'unicycle_simulator': 'unicycle_simulator_node',
                    'global_planner': 'global_planner_node',
                    'mpc_controller': 'mpc_controller_node',
+                   'map_server': 'map_server_node',
                    'bag_recorder': 'bag_recorder_node'}[executable]
     module = importlib.import_module(f'mpc_local_planner.ros.{module_name}')
     node_class = next(value for name, value in vars(module).items()
@@ -124,8 +154,12 @@ def _declared_parameters(executable: str, ros: Any) -> set[str]:
         from rclpy.parameter import Parameter
 
         overrides = [Parameter('output', value=str(ros.tmp_path / 'bag'))]
-    node = ros.add(node_class(context=ros.context, parameter_overrides=overrides))
-    return set(node._parameters)
+    return ros.add(node_class(context=ros.context, parameter_overrides=overrides))
+
+
+def _declared_parameters(executable: str, ros: Any) -> set[str]:
+    """Return the parameter names a node of the executable declares (the real node)."""
+    return set(_make_node(executable, ros)._parameters)
 
 
 def test_there_are_a_simulation_and_a_navigation_launch_file() -> None:
@@ -168,8 +202,8 @@ def test_simulation_launch_runs_every_node_on_simulated_time_and_records_on_requ
         monkeypatch: pytest.MonkeyPatch) -> None:
     _, nodes = _describe(ROOT / 'launch' / 'simulation.launch.py', monkeypatch)
     by_name = {n.kwargs['executable']: n for n in nodes}
-    assert set(by_name) == {'unicycle_simulator', 'global_planner', 'mpc_controller',
-                            'bag_recorder'}
+    assert set(by_name) == {'unicycle_simulator', 'map_server', 'global_planner',
+                            'mpc_controller', 'bag_recorder'}
     for name, node in by_name.items():
         values = {k: v for entry in node.kwargs['parameters'] if isinstance(entry, dict)
                   for k, v in entry.items()}
@@ -178,6 +212,52 @@ def test_simulation_launch_runs_every_node_on_simulated_time_and_records_on_requ
         else:
             assert values['use_sim_time'] is True
     assert by_name['bag_recorder'].kwargs['condition'].args == ('false',)
+
+
+def _parameter_values(node: _Recorded, arguments: dict[str, str]) -> dict[str, Any]:
+    """Return a launched node's dict parameters, launch arguments replaced by defaults."""
+    values = {k: v for entry in node.kwargs['parameters'] if isinstance(entry, dict)
+              for k, v in entry.items()}
+    return {k: arguments[v.args[0]] if isinstance(v, _LaunchConfiguration) else v
+            for k, v in values.items()}
+
+
+@pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
+def test_launch_file_starts_a_map_server_on_an_installed_map(
+        path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    arguments, nodes = _describe(path, monkeypatch)
+    [map_server] = [n for n in nodes if n.kwargs['executable'] == 'map_server']
+    yaml_filename = _parameter_values(map_server, arguments)['yaml_filename']
+    assert _installed_path(yaml_filename) == f'{SHARE}/config/maps/paper_obstacle.yaml'
+    installed = _installed_share_files()
+    assert f'{SHARE}/config/maps/paper_obstacle.yaml' in installed
+    image = yaml.safe_load((ROOT / 'config' / 'maps' / 'paper_obstacle.yaml').read_text())
+    assert f'{SHARE}/config/maps/{image["image"]}' in installed
+
+
+def test_every_shipped_world_has_an_installed_map(monkeypatch: pytest.MonkeyPatch) -> None:
+    installed = _installed_share_files()
+    for world in sorted((ROOT / 'config' / 'worlds').glob('*.yaml')):
+        _, nodes = _describe(ROOT / 'launch' / 'simulation.launch.py', monkeypatch,
+                             {'world': world.stem})
+        [map_server] = [n for n in nodes if n.kwargs['executable'] == 'map_server']
+        yaml_filename = _parameter_values(map_server, {})['yaml_filename']
+        assert _installed_path(yaml_filename) == f'{SHARE}/config/maps/{world.stem}.yaml'
+        assert _installed_path(yaml_filename) in installed
+
+
+def test_simulation_launch_serves_the_map_argument_or_none_for_a_world_without_a_map(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    simulation = ROOT / 'launch' / 'simulation.launch.py'
+    _, nodes = _describe(simulation, monkeypatch, {'map': 'maps/unknown_box.yaml'})
+    [map_server] = [n for n in nodes if n.kwargs['executable'] == 'map_server']
+    assert _parameter_values(map_server, {})['yaml_filename'].endswith(
+        'config/maps/unknown_box.yaml')
+    mapless = tmp_path / 'mapless_world.yaml'
+    mapless.write_text((ROOT / 'config' / 'worlds' / 'paper_obstacle.yaml').read_text())
+    _, nodes = _describe(simulation, monkeypatch, {'world': str(mapless)})
+    executables = {n.kwargs['executable'] for n in nodes}
+    assert 'map_server' not in executables and 'mpc_controller' in executables
 
 
 def _rviz_topics(config: Any) -> set[str]:
@@ -199,6 +279,66 @@ def _rviz_topics(config: Any) -> set[str]:
     return topics
 
 
+def _rviz_endpoints(config: Any) -> list[tuple[str, dict]]:
+    """Return (role, Topic entry) per topic: displays subscribe, tools (2D Goal Pose) publish."""
+    manager = config['Visualization Manager']
+    found: list[tuple[str, dict]] = []
+
+    def visit(item: Any, role: str) -> None:
+        if isinstance(item, dict):
+            if isinstance(item.get('Topic'), dict):
+                found.append((role, item['Topic']))
+            for value in item.values():
+                visit(value, role)
+        elif isinstance(item, list):
+            for value in item:
+                visit(value, role)
+
+    visit(manager['Displays'], 'subscribe')
+    visit(manager['Tools'], 'publish')
+    assert {topic['Value'] for _, topic in found} == _rviz_topics(config)
+    return found
+
+
+# RViz's QoS names, and the rclpy policies they stand for.
+_RVIZ_DURABILITY = {'Volatile': DurabilityPolicy.VOLATILE,
+                    'Transient Local': DurabilityPolicy.TRANSIENT_LOCAL}
+
+
+@pytest.mark.slow
+def test_every_topic_the_rviz_config_names_is_served_by_a_node_with_a_matching_qos(
+        ros: Any) -> None:
+    config = yaml.safe_load(RVIZ_FILE.read_text())
+    nodes = [_make_node(executable, ros) for executable in
+             ('unicycle_simulator', 'map_server', 'global_planner', 'mpc_controller')]
+    for node in nodes:  # lifecycle nodes create their publishers at configure
+        if isinstance(node, LifecycleNode):
+            assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS, node.get_name()
+    names = {node.get_name() for node in nodes}
+    published = {pub.topic_name for node in nodes for pub in node.publishers}
+    subscribed = {sub.topic_name for node in nodes for sub in node.subscriptions}
+    graph = nodes[0]
+    for role, topic in _rviz_endpoints(config):
+        name, durability = topic['Value'], _RVIZ_DURABILITY[topic['Durability Policy']]
+        reliable = topic['Reliability Policy'] == 'Reliable'
+        if role == 'subscribe':  # an RViz display: a node must publish it
+            assert name in published, f'RViz shows {name}, which no node publishes'
+            peers = graph.get_publishers_info_by_topic(name)
+        else:  # an RViz tool: a node must listen
+            assert name in subscribed, f'RViz publishes {name}, to which no node listens'
+            peers = graph.get_subscriptions_info_by_topic(name)
+        peers = [info for info in peers if info.node_name in names]
+        assert peers, name
+        for info in peers:
+            # a latched topic needs a transient_local reader (else a late RViz misses it),
+            # and a transient_local or reliable reader an equally strong writer
+            assert info.qos_profile.durability == durability, (name, info.node_name)
+            if role == 'subscribe':
+                assert not reliable or info.qos_profile.reliability == ReliabilityPolicy.RELIABLE
+            else:
+                assert reliable or info.qos_profile.reliability != ReliabilityPolicy.RELIABLE
+
+
 def test_rviz_config_is_yaml_with_the_map_frame_and_a_goal_tool_on_goal_pose() -> None:
     config = yaml.safe_load(RVIZ_FILE.read_text())
     manager = config['Visualization Manager']
@@ -207,4 +347,9 @@ def test_rviz_config_is_yaml_with_the_map_frame_and_a_goal_tool_on_goal_pose() -
     assert [t['Topic']['Value'] for t in goal_tools] == ['/goal_pose']
     classes = {d['Class'] for d in manager['Displays']}
     assert {'rviz_default_plugins/Path', 'rviz_default_plugins/Odometry',
-            'rviz_default_plugins/MarkerArray', 'rviz_default_plugins/Polygon'} <= classes
+            'rviz_default_plugins/MarkerArray', 'rviz_default_plugins/Polygon',
+            'rviz_default_plugins/Map'} <= classes
+    [map_display] = [d for d in manager['Displays'] if d['Class'] == 'rviz_default_plugins/Map']
+    assert map_display['Topic']['Value'] == '/map'
+    assert map_display['Topic']['Durability Policy'] == 'Transient Local'
+    assert map_display['Topic']['Reliability Policy'] == 'Reliable'
