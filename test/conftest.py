@@ -36,27 +36,28 @@ os.environ['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 100)
 
 # ----------------------------------------------------------------------------- rclpy fixtures
 # Imported after the environment is set (above): DDS reads it at the first rclpy.init.
-import time  # noqa: E402
-from typing import Callable, Iterator  # noqa: E402
+import time
+from typing import Callable, Iterator, NamedTuple
 
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from geometry_msgs.msg import PoseStamped, Twist  # noqa: E402
-from nav_msgs.msg import Odometry, Path  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-from rcl_interfaces.msg import Log  # noqa: E402
-from rclpy.node import Node  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
-from rclpy.serialization import deserialize_message  # noqa: E402
-from rosgraph_msgs.msg import Clock  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, Twist
+from nav_msgs.msg import Odometry, Path
+import numpy as np
+import pytest
+from rcl_interfaces.msg import Log
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from rosgraph_msgs.msg import Clock
 
-from mpc_local_planner.ros.conversions import (  # noqa: E402
+from mpc_local_planner.core.diagnostics import ControllerDiagnostics
+from mpc_local_planner.ros.conversions import (
     seconds_to_stamp,
     stamp_to_seconds,
     state_to_odometry,
 )
-from mpc_local_planner.ros.qos import (  # noqa: E402
+from mpc_local_planner.ros.qos import (
     CMD_VEL_QOS,
     DIAGNOSTICS_QOS,
     GOAL_QOS,
@@ -83,7 +84,7 @@ class RosHarness:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.nodes: list = []
 
-    def add(self, node):  # noqa: ANN001, ANN201 (any rclpy Node)
+    def add(self, node):
         """Spin node with the others; it is destroyed at teardown."""
         self.nodes.append(node)
         self.executor.add_node(node)
@@ -130,6 +131,15 @@ def ros_module() -> Iterator[RosHarness]:
         harness.close()
 
 
+class ReportedStep(NamedTuple):
+    """One mpc/diagnostics message as a test reads it: the typed step and its status."""
+
+    step: ControllerDiagnostics
+    level: int  # DiagnosticStatus level (0 OK, 1 WARN, 2 ERROR)
+    message: str
+    stamp: float
+
+
 class Probe(Node):
     """A test node: publishes what the nodes listen to and keeps what they say.
 
@@ -138,7 +148,7 @@ class Probe(Node):
     come from /rosout (``logs``), and ``publish_clock`` lets a test own simulated time.
     """
 
-    def __init__(self, context, *, use_sim_time: bool = False) -> None:  # noqa: ANN001
+    def __init__(self, context, *, use_sim_time: bool = False) -> None:
         super().__init__('probe', context=context, parameter_overrides=[
             Parameter('use_sim_time', value=use_sim_time)])
         self.cmd_pub = self.create_publisher(Twist, 'cmd_vel', CMD_VEL_QOS)
@@ -151,7 +161,7 @@ class Probe(Node):
         self.cmd_times: list[float] = []  # the probe's ROS time at each cmd_vel's arrival
         self.raw_plans: list[bytes] = []
         self.local_plans: list[Path] = []
-        self.diagnostics: list[dict] = []
+        self.diagnostics: list[ReportedStep] = []
         self.logs: list[Log] = []
         self.create_subscription(Odometry, 'odom', self.odoms.append, ODOM_QOS)
         self.create_subscription(Twist, 'cmd_vel', self._cmd_vel, CMD_VEL_QOS)
@@ -176,13 +186,12 @@ class Probe(Node):
 
     def _diagnostics(self, msg: DiagnosticArray) -> None:
         status = msg.status[0]
-        values: dict = {kv.key: kv.value for kv in status.values}
-        values['message'] = status.message
-        values['level'] = int.from_bytes(status.level, 'little')
-        values['stamp'] = stamp_to_seconds(msg.header.stamp)
-        self.diagnostics.append(values)
+        self.diagnostics.append(ReportedStep(
+            step=ControllerDiagnostics.from_values((kv.key, kv.value) for kv in status.values),
+            level=int.from_bytes(status.level, 'little'), message=status.message,
+            stamp=stamp_to_seconds(msg.header.stamp)))
 
-    def publish_odom(self, state, stamp: float | None = None) -> None:  # noqa: ANN001
+    def publish_odom(self, state, stamp: float | None = None) -> None:
         """Publish odometry of state (x, y, yaw), stamped now or at stamp (seconds)."""
         when = self.get_clock().now().to_msg() if stamp is None else seconds_to_stamp(stamp)
         self.odom_pub.publish(state_to_odometry(np.asarray(state, dtype=float), np.zeros(2),

@@ -182,7 +182,7 @@ class RrtStarPlanner:
         obstacles: Sequence[ConvexPolygon],
         bounds: tuple[float, float, float, float],
         *,
-        config: PlannerConfig = PlannerConfig(),  # noqa: B008 (frozen, so sharing is safe)
+        config: PlannerConfig = PlannerConfig(),
     ) -> None:
         xmin, xmax, ymin, ymax = (float(v) for v in bounds)
         if not (all(map(math.isfinite, (xmin, xmax, ymin, ymax))) and xmin < xmax and ymin < ymax):

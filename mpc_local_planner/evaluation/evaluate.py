@@ -688,7 +688,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 for future in as_completed(futures):
                     try:
                         row = future.result()
-                    except Exception as err:  # noqa: BLE001 - one broken run, not the suite
+                    except Exception as err:
                         task = futures[future]
                         row = _empty_row(task, None, f'error: {type(err).__name__}: {err}')
                     record(row)

@@ -44,7 +44,7 @@ def config_roots() -> list[Path]:
         from ament_index_python.packages import get_package_share_directory
 
         roots.append(Path(get_package_share_directory(PACKAGE_NAME)) / 'config')
-    except Exception:  # noqa: BLE001 (no ament index, or the package is not in it)
+    except Exception:
         pass
     for prefix in (sys.prefix, site.getuserbase()):
         roots.append(Path(prefix) / 'share' / PACKAGE_NAME / 'config')

@@ -102,7 +102,7 @@ def test_the_package_has_the_executables_the_readme_names() -> None:
 
 @pytest.mark.parametrize('name', sorted(SCRIPTS))
 def test_help_prints_usage_and_the_parameters_starts_nothing_and_writes_nothing(
-        name, tmp_path) -> None:  # noqa: ANN001
+        name, tmp_path) -> None:
     result = subprocess.run([*command(name), '--help'], cwd=tmp_path, capture_output=True,
                             text=True, timeout=HANG_GUARD, check=False)
     assert result.returncode == 0, result.stderr

@@ -72,7 +72,7 @@ FRAME = st.one_of(st.just('map'), st.just('map'), st.sampled_from(['', 'odom', '
 
 
 @st.composite
-def quaternions(draw) -> Quaternion:  # noqa: ANN001
+def quaternions(draw) -> Quaternion:
     if draw(st.booleans()):
         return yaw_to_quaternion(draw(st.floats(-10.0, 10.0)))
     return Quaternion(x=draw(ANY_FLOAT), y=draw(ANY_FLOAT), z=draw(ANY_FLOAT),
@@ -80,13 +80,13 @@ def quaternions(draw) -> Quaternion:  # noqa: ANN001
 
 
 @st.composite
-def stamps(draw) -> Time:  # noqa: ANN001
+def stamps(draw) -> Time:
     return Time(sec=draw(st.integers(-2**31, 2**31 - 1)),
                 nanosec=draw(st.integers(0, 2**32 - 1)))
 
 
 @st.composite
-def odometries(draw, stamp: Time | None = None) -> Odometry:  # noqa: ANN001
+def odometries(draw, stamp: Time | None = None) -> Odometry:
     msg = Odometry()
     msg.header.frame_id = draw(FRAME)
     msg.header.stamp = stamp if stamp is not None else draw(stamps())
@@ -99,7 +99,7 @@ def odometries(draw, stamp: Time | None = None) -> Odometry:  # noqa: ANN001
 
 
 @st.composite
-def paths(draw, max_poses: int = 12) -> Path:  # noqa: ANN001
+def paths(draw, max_poses: int = 12) -> Path:
     msg = Path()
     msg.header.frame_id = draw(FRAME)
     for _ in range(draw(st.integers(0, max_poses))):
@@ -113,7 +113,7 @@ def paths(draw, max_poses: int = 12) -> Path:  # noqa: ANN001
 
 
 @st.composite
-def twists(draw) -> Twist:  # noqa: ANN001
+def twists(draw) -> Twist:
     msg = Twist()
     msg.linear.x = draw(st.one_of(st.floats(-1.0, 1.0), ANY_FLOAT))
     msg.angular.z = draw(st.one_of(st.floats(-3.0, 3.0), ANY_FLOAT))
@@ -173,7 +173,7 @@ def test_path_pose_count_reads_the_count_or_none_from_cut_or_padded_messages_and
 @given(poses=st.lists(st.tuples(ANY_FLOAT, ANY_FLOAT, ANY_FLOAT), max_size=6),
        seconds=ANY_FLOAT)
 def test_poses_to_path_and_stamps_refuse_non_finite_values_with_value_error(
-        poses: list, seconds: float) -> None:  # noqa: ANN001
+        poses: list, seconds: float) -> None:
     arr = np.array(poses, dtype=float).reshape(-1, 3)
     try:
         msg = poses_to_path(arr, stamp=seconds_to_stamp(seconds))
@@ -205,7 +205,7 @@ def test_twists_convert_to_finite_numbers_and_stamps_round_trip_to_a_microsecond
 class Nodes:
     """A controller and a simulator in simulated time set by the test, and a probe."""
 
-    def __init__(self, ros) -> None:  # noqa: ANN001
+    def __init__(self, ros) -> None:
         sim_time = [Parameter('use_sim_time', value=True)]
         self.ros = ros
         # neither node is spun: the test calls their callbacks, the executor the probe's
@@ -235,7 +235,7 @@ class Nodes:
 
 
 @pytest.fixture(scope='module')
-def nodes(ros_module) -> Iterator[Nodes]:  # noqa: ANN001
+def nodes(ros_module) -> Iterator[Nodes]:
     harness = Nodes(ros_module)
     try:
         yield harness
@@ -266,7 +266,7 @@ EVENTS = st.lists(st.one_of(
 @FUZZ
 @given(events=EVENTS)
 def test_controller_callbacks_survive_random_messages_and_publish_bounded_twists(
-        nodes: Nodes, events: list) -> None:  # noqa: ANN001
+        nodes: Nodes, events: list) -> None:
     node = nodes.controller
     for event in events + [('tick',)]:
         kind = event[0]

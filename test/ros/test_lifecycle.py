@@ -63,7 +63,7 @@ QUIET_PERIODS = 5  # control periods of simulated time that must pass in silence
 class LifecycleProbe(Node):
     """Ask a lifecycle node for transitions over its services; keep markers and footprints."""
 
-    def __init__(self, context, target: str = 'mpc_controller') -> None:  # noqa: ANN001
+    def __init__(self, context, target: str = 'mpc_controller') -> None:
         super().__init__('lifecycle_probe', context=context)
         self.change_client = self.create_client(ChangeState, f'/{target}/change_state')
         self.state_client = self.create_client(GetState, f'/{target}/get_state')
@@ -75,7 +75,7 @@ class LifecycleProbe(Node):
                                  LOCAL_PLAN_QOS)
 
 
-def call(ros, client, request):  # noqa: ANN001, ANN201
+def call(ros, client, request):
     """Call a service over DDS and spin until the answer comes."""
     assert ros.spin_until(client.service_is_ready)
     future = client.call_async(request)
@@ -83,19 +83,19 @@ def call(ros, client, request):  # noqa: ANN001, ANN201
     return future.result()
 
 
-def change_state(ros, probe: LifecycleProbe, transition: int) -> bool:  # noqa: ANN001
+def change_state(ros, probe: LifecycleProbe, transition: int) -> bool:
     return call(ros, probe.change_client,
                 ChangeState.Request(transition=Transition(id=transition))).success
 
 
-def get_state(ros, probe: LifecycleProbe) -> str:  # noqa: ANN001
+def get_state(ros, probe: LifecycleProbe) -> str:
     return call(ros, probe.state_client, GetState.Request()).current_state.label
 
 
 class Clock:
     """Simulated time owned by the test: each tick publishes odometry, then /clock."""
 
-    def __init__(self, ros, probe) -> None:  # noqa: ANN001
+    def __init__(self, ros, probe) -> None:
         self.ros, self.probe = ros, probe
         self.t = 1.0  # 0 is "no time yet" for a node with use_sim_time
         self.odom = np.array(WORLD.start, dtype=float)
@@ -107,7 +107,7 @@ class Clock:
         for _ in range(6):
             self.ros.executor.spin_once(timeout_sec=0.002)
 
-    def run_until(self, condition, timeout: float = 30.0) -> bool:  # noqa: ANN001
+    def run_until(self, condition, timeout: float = 30.0) -> bool:
         return self.ros.spin_until(lambda: condition() or self.tick(), timeout=timeout)
 
     def run_for(self, seconds: float) -> None:
@@ -127,15 +127,15 @@ def subscribed(node: Node) -> set[str]:
         node.get_name(), node.get_namespace())}
 
 
-def is_zero(twist) -> bool:  # noqa: ANN001
+def is_zero(twist) -> bool:
     return twist.linear.x == 0.0 and twist.angular.z == 0.0
 
 
-def driving(probe) -> bool:  # noqa: ANN001
+def driving(probe) -> bool:
     return any(c.linear.x > 0.01 for c in probe.cmds)
 
 
-def test_every_lifecycle_transition_over_dds_and_what_each_state_publishes(ros) -> None:  # noqa: ANN001
+def test_every_lifecycle_transition_over_dds_and_what_each_state_publishes(ros) -> None:
     node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=[
         Parameter('use_sim_time', value=True), Parameter('autostart', value=False)]))
     lifecycle = ros.add(LifecycleProbe(ros.context))
@@ -207,7 +207,7 @@ def test_every_lifecycle_transition_over_dds_and_what_each_state_publishes(ros) 
 
 
 def test_a_configure_that_cannot_read_the_world_fails_and_the_node_stays_unconfigured(
-        ros, tmp_path) -> None:  # noqa: ANN001
+        ros, tmp_path) -> None:
     world = tmp_path / 'world.yaml'
     good = ('bounds: [-5, 5, -5, 5]\nobstacles:\n  - box: [1, -1, 1.5, 1]\n'
             'start: [0.0, 0.0, 0.0]\ngoal: [2.5, 0.0, 0.0]\n')
@@ -225,7 +225,7 @@ def test_a_configure_that_cannot_read_the_world_fails_and_the_node_stays_unconfi
     assert len(node.controller.obstacles) == 1
 
 
-def test_a_destroyed_controller_leaves_rosout_to_the_next_one_of_its_name(ros) -> None:  # noqa: ANN001
+def test_a_destroyed_controller_leaves_rosout_to_the_next_one_of_its_name(ros) -> None:
     context = Context()
     rclpy.init(context=context)
     try:
@@ -244,7 +244,7 @@ def test_a_destroyed_controller_leaves_rosout_to_the_next_one_of_its_name(ros) -
 
 
 def test_markers_show_the_obstacles_raw_grown_and_active_and_the_footprint_follows_odom(
-        ros) -> None:  # noqa: ANN001
+        ros) -> None:
     radius = 0.1
     node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=[
         Parameter('use_sim_time', value=True), Parameter('robot_radius', value=radius)]))
@@ -286,7 +286,7 @@ def test_markers_show_the_obstacles_raw_grown_and_active_and_the_footprint_follo
     np.testing.assert_allclose(distances, radius / math.cos(math.pi / 16), atol=1e-6)
 
 
-def test_enable_stamped_cmd_vel_publishes_twist_stamped_in_base_link(ros) -> None:  # noqa: ANN001
+def test_enable_stamped_cmd_vel_publishes_twist_stamped_in_base_link(ros) -> None:
     node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=[
         Parameter('enable_stamped_cmd_vel', value=True)]))
     assert autostart(node) is None
@@ -301,7 +301,7 @@ def test_enable_stamped_cmd_vel_publishes_twist_stamped_in_base_link(ros) -> Non
     assert node.last_output.reason is Reason.NO_PLAN
 
 
-def test_help_lists_the_parameters_with_defaults_starts_nothing_and_exits_0(tmp_path) -> None:  # noqa: ANN001
+def test_help_lists_the_parameters_with_defaults_starts_nothing_and_exits_0(tmp_path) -> None:
     env = dict(os.environ, ROS_LOG_DIR=str(tmp_path / 'ros_log'), ROS_HOME=str(tmp_path))
     work = tmp_path / 'work'
     work.mkdir()

@@ -46,14 +46,14 @@ TIMEOUT = 20.0
 class Manager:
     """The lifecycle clients of a probe node, as nav2_lifecycle_manager uses them."""
 
-    def __init__(self, ros, probe) -> None:  # noqa: ANN001
+    def __init__(self, ros, probe) -> None:
         self.ros = ros
         self.change = probe.create_client(ChangeState, '/global_planner/change_state')
         self.get = probe.create_client(GetState, '/global_planner/get_state')
         assert ros.spin_until(lambda: self.change.service_is_ready()
                               and self.get.service_is_ready(), timeout=TIMEOUT)
 
-    def _call(self, client, request):  # noqa: ANN001, ANN202
+    def _call(self, client, request):
         future = client.call_async(request)
         self.ros.executor.spin_until_future_complete(future, timeout_sec=TIMEOUT)
         assert future.done(), f'no answer from {client.srv_name}'
@@ -70,7 +70,7 @@ class Manager:
         return self._call(self.change, request).success
 
 
-def planner_endpoints(probe) -> set[str]:  # noqa: ANN001
+def planner_endpoints(probe) -> set[str]:
     """Return which of plan, odom and goal_pose the planner publishes or subscribes now."""
     endpoints = {
         'plan': probe.get_publishers_info_by_topic('/plan'),
@@ -92,7 +92,7 @@ def goal_message(x: float, y: float, yaw: float) -> PoseStamped:
     return goal
 
 
-def start(ros, **parameters):  # noqa: ANN001, ANN003, ANN201
+def start(ros, **parameters):
     """Return the planner (autostart false), a probe and its manager."""
     overrides = [Parameter('autostart', value=False),
                  Parameter('world_file', value='paper_obstacle.yaml')]
@@ -102,7 +102,7 @@ def start(ros, **parameters):  # noqa: ANN001, ANN003, ANN201
     return planner, probe, Manager(ros, probe)
 
 
-def refused_while_inactive(ros, planner, probe, goal: PoseStamped) -> None:  # noqa: ANN001
+def refused_while_inactive(ros, planner, probe, goal: PoseStamped) -> None:
     """Send odometry and goal to an inactive planner: it says so and publishes nothing."""
     plans, received = planner.plan_count, len(probe.raw_plans)
     before = len(probe.log_lines('global_planner'))
@@ -120,7 +120,7 @@ def refused_while_inactive(ros, planner, probe, goal: PoseStamped) -> None:  # n
     assert planner.plan_count == plans and len(probe.raw_plans) == received
 
 
-def wait_for_plan(ros, planner, probe, count: int) -> np.ndarray:  # noqa: ANN001
+def wait_for_plan(ros, planner, probe, count: int) -> np.ndarray:
     """Publish odometry until the count-th plan arrives; return its poses."""
 
     def planned() -> bool:
@@ -197,7 +197,7 @@ def test_the_planner_shuts_down_from_unconfigured_and_inactive(ros, transitions,
 
 
 def test_a_configure_that_cannot_load_the_world_fails_and_the_planner_stays_unconfigured(
-        ros, tmp_path) -> None:  # noqa: ANN001
+        ros, tmp_path) -> None:
     world = tmp_path / 'world.yaml'
     world.write_text(EMPTY_WORLD)
     planner, probe, manager = start(ros, world_file=str(world))
@@ -214,7 +214,7 @@ def test_a_configure_that_cannot_load_the_world_fails_and_the_planner_stays_unco
 
 
 def test_a_destroyed_planner_does_not_silence_the_rosout_of_a_later_one_of_the_same_name(
-        ros) -> None:  # noqa: ANN001
+        ros) -> None:
     # rclpy 7.1 leaves a lifecycle node's rcl handle to the garbage collector; collected late,
     # it unregistered the /rosout publisher of the next node named global_planner
     old = GlobalPlannerNode(context=ros.context)

@@ -40,7 +40,7 @@ from rclpy.parameter import Parameter
 
 from mpc_local_planner.core.controller import Reason
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.mpc.step import SolveAttempt
+from mpc_local_planner.core.mpc.step import PlanSource, SolveAttempt
 from mpc_local_planner.core.obstacles import first_blocked_segment
 from mpc_local_planner.ros.closed_loop import MODULES, spawn_node
 from mpc_local_planner.ros.conversions import (
@@ -86,7 +86,7 @@ class SimClock:
 
     """
 
-    def __init__(self, ros, probe, dt: float = 0.05) -> None:  # noqa: ANN001
+    def __init__(self, ros, probe, dt: float = 0.05) -> None:
         self.ros, self.probe, self.dt = ros, probe, dt
         self.t = 1.0  # 0 is "no time yet" for a node with use_sim_time
         self.odom: np.ndarray | Odometry | None = None
@@ -115,7 +115,7 @@ class SimClock:
         return condition()
 
 
-def check_commands(probe) -> np.ndarray:  # noqa: ANN001
+def check_commands(probe) -> np.ndarray:
     """Assert every cmd_vel so far is finite and within the unicycle's bounds; return them."""
     commands = np.array([u_from_twist(c) for c in probe.cmds]).reshape(-1, 2)
     raw = np.array([[c.linear.x, c.angular.z] for c in probe.cmds]).reshape(-1, 2)
@@ -124,23 +124,23 @@ def check_commands(probe) -> np.ndarray:  # noqa: ANN001
     return commands
 
 
-def applied(diag: dict) -> np.ndarray:
+def applied(diag) -> np.ndarray:
     """The (v, omega) a control step published, from its diagnostics."""
-    return np.array([float(diag['v']), float(diag['omega'])])
+    return np.array([diag.step.v, diag.step.omega])
 
 
-def tracking(probe, after: int = 0) -> bool:  # noqa: ANN001
+def tracking(probe, after: int = 0) -> bool:
     """Say whether a step after the first `after` diagnostics drove on a solver solution."""
-    return any(d['reason'] == Reason.TRACKING.value and d['source'] == 'solver'
+    return any(d.step.reason is Reason.TRACKING and d.step.source is PlanSource.SOLVER
                and applied(d)[0] > 0.01 for d in probe.diagnostics[after:])
 
 
-def errors(probe, node: str, text: str) -> list[str]:  # noqa: ANN001
+def errors(probe, node: str, text: str) -> list[str]:
     """Error lines node logged that contain text."""
     return [line for line in probe.log_lines(node, Log.ERROR) if text in line]
 
 
-def start_controller(ros, **params) -> tuple[MpcControllerNode, object, SimClock]:  # noqa: ANN001, ANN003
+def start_controller(ros, **params) -> tuple[MpcControllerNode, object, SimClock]:
     """A controller in simulated time with a probe that owns the clock; tracking PLAN."""
     overrides = [Parameter('use_sim_time', value=True)]
     overrides += [Parameter(k, value=v) for k, v in params.items()]
@@ -210,7 +210,7 @@ BAD_PLANS = {
 }
 
 
-def check_refusal(ros, probe, clock, prefix: str, text: str,  # noqa: ANN001
+def check_refusal(ros, probe, clock, prefix: str, text: str,
                   restore: Callable[[], None]) -> None:
     """The command goes to zero with the problem as the reason; one error; then recovery."""
     first = len(probe.diagnostics)
@@ -218,14 +218,14 @@ def check_refusal(ros, probe, clock, prefix: str, text: str,  # noqa: ANN001
 
     def refused() -> list[dict]:
         return [d for d in probe.diagnostics[first:]
-                if d['message'].startswith(prefix) and text in d['message']]
+                if d.message.startswith(prefix) and text in d.message]
 
     # a few refused steps, and the error line from /rosout
     assert clock.run_until(lambda: len(refused()) >= 3
                            and errors(probe, 'mpc_controller', text)), probe.diagnostics[-3:]
     for diag in refused():
         np.testing.assert_array_equal(applied(diag), [0.0, 0.0])
-        assert diag['level'] == 2  # DiagnosticStatus.ERROR
+        assert diag.level == 2  # DiagnosticStatus.ERROR
     # every step after the first refused one commands zero until the input is fixed
     index = probe.diagnostics.index(refused()[0])
     assert all(not applied(d).any() for d in probe.diagnostics[index:])
@@ -240,7 +240,7 @@ def check_refusal(ros, probe, clock, prefix: str, text: str,  # noqa: ANN001
 
 
 @pytest.mark.parametrize('case', list(BAD_ODOMETRY))
-def test_bad_odometry_stops_the_robot_with_one_error_and_it_resumes(ros, case: str) -> None:  # noqa: ANN001
+def test_bad_odometry_stops_the_robot_with_one_error_and_it_resumes(ros, case: str) -> None:
     _, probe, clock = start_controller(ros)
     message, text = BAD_ODOMETRY[case]
     clock.odom = message
@@ -254,7 +254,7 @@ def test_bad_odometry_stops_the_robot_with_one_error_and_it_resumes(ros, case: s
 
 
 @pytest.mark.parametrize('case', list(BAD_PLANS))
-def test_a_bad_plan_stops_the_robot_with_one_error_and_a_valid_one_resumes(ros, case: str) -> None:  # noqa: ANN001
+def test_a_bad_plan_stops_the_robot_with_one_error_and_a_valid_one_resumes(ros, case: str) -> None:
     _, probe, clock = start_controller(ros)
     make, text = BAD_PLANS[case]
     probe.plan_pub.publish(make())
@@ -262,7 +262,7 @@ def test_a_bad_plan_stops_the_robot_with_one_error_and_a_valid_one_resumes(ros, 
                   lambda: probe.plan_pub.publish(poses_to_path(PLAN)))
 
 
-def test_a_plan_with_repeated_points_is_followed_without_them(ros) -> None:  # noqa: ANN001
+def test_a_plan_with_repeated_points_is_followed_without_them(ros) -> None:
     _, probe, clock = start_controller(ros)
     repeated = np.repeat(PLAN, 3, axis=0)  # every waypoint three times
     after = len(probe.diagnostics)
@@ -277,23 +277,23 @@ def test_a_plan_with_repeated_points_is_followed_without_them(ros) -> None:  # n
 
 # ----------------------------------------------------------------------------- 2. stale data
 def test_stale_odometry_gives_zero_within_one_control_period_and_fresh_odometry_resumes(
-        ros) -> None:  # noqa: ANN001
+        ros) -> None:
     _, probe, clock = start_controller(ros)
     clock.odom = None  # the odometry stops
     last = clock.last_odom_stamp
     first = len(probe.diagnostics)
 
     def stale() -> list[dict]:
-        return [d for d in probe.diagnostics[first:] if d['reason'] == Reason.STALE_ODOM.value]
+        return [d for d in probe.diagnostics[first:] if d.step.reason is Reason.STALE_ODOM]
 
     assert clock.run_until(lambda: bool(stale()))
     # the first step later than odom_timeout after the last odometry commands zero
-    assert stale()[0]['stamp'] <= last + ODOM_TIMEOUT + STEP + 1e-6
+    assert stale()[0].stamp <= last + ODOM_TIMEOUT + STEP + 1e-6
     np.testing.assert_array_equal(applied(stale()[0]), [0.0, 0.0])
     index = probe.diagnostics.index(stale()[0])
     # until then the robot was driven on odometry at most odom_timeout old
     for diag in probe.diagnostics[first:index]:
-        assert diag['stamp'] - last <= ODOM_TIMEOUT + 1e-6
+        assert diag.stamp - last <= ODOM_TIMEOUT + 1e-6
     assert clock.run_until(lambda: len(stale()) >= 3)
     assert all(not applied(d).any() for d in probe.diagnostics[index:])
 
@@ -303,7 +303,7 @@ def test_stale_odometry_gives_zero_within_one_control_period_and_fresh_odometry_
     check_commands(probe)
 
 
-def test_odometry_stamped_in_the_future_goes_stale_when_it_stops(ros) -> None:  # noqa: ANN001
+def test_odometry_stamped_in_the_future_goes_stale_when_it_stops(ros) -> None:
     _, probe, clock = start_controller(ros)
     clock.odom = None
     moved = WORLD.start + np.array([0.01, 0.0, 0.0])  # a pose to tell this message by
@@ -313,15 +313,15 @@ def test_odometry_stamped_in_the_future_goes_stale_when_it_stops(ros) -> None:  
     def steps() -> list[dict]:
         return probe.diagnostics[first:]
 
-    assert clock.run_until(lambda: any(d['reason'] == Reason.STALE_ODOM.value for d in steps()))
-    taken = next(d for d in steps() if float(d['x']) == moved[0])  # the first step using it
-    stale = next(d for d in steps() if d['reason'] == Reason.STALE_ODOM.value)
+    assert clock.run_until(lambda: any(d.step.reason is Reason.STALE_ODOM for d in steps()))
+    taken = next(d for d in steps() if d.step.x == moved[0])  # the first step using it
+    stale = next(d for d in steps() if d.step.reason is Reason.STALE_ODOM)
     # timed from its arrival (before the step that first used it), not from its stamp
-    assert taken['reason'] != Reason.STALE_ODOM.value
-    assert stale['stamp'] <= taken['stamp'] + ODOM_TIMEOUT + STEP + 1e-6
+    assert taken.step.reason is not Reason.STALE_ODOM
+    assert stale.stamp <= taken.stamp + ODOM_TIMEOUT + STEP + 1e-6
 
 
-def test_simulator_stops_the_robot_when_cmd_vel_stops_for_cmd_timeout(ros) -> None:  # noqa: ANN001
+def test_simulator_stops_the_robot_when_cmd_vel_stops_for_cmd_timeout(ros) -> None:
     rate, timeout = 50.0, 0.5
     ros.add(UnicycleSimulatorNode(context=ros.context, parameter_overrides=[
         Parameter('publish_clock', value=True), Parameter('real_time_factor', value=5.0),
@@ -363,14 +363,14 @@ def test_simulator_stops_the_robot_when_cmd_vel_stops_for_cmd_timeout(ros) -> No
 
 
 # ----------------------------------------------------------------------------- 3. solver failure
-def failing_solver(nlp, w0, params, active, solver=None):  # noqa: ANN001, ANN201, ARG001
+def failing_solver(nlp, w0, params, active, solver=None):
     """Stand-in for PathReferenceMPC._run_solver: every NLP solve fails (IPOPT's too)."""
     return SolveAttempt(verified=False, w=np.asarray(w0, dtype=float), value=math.inf,
                         status='injected failure', iterations=0, seconds=0.0)
 
 
 def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_then_stop(
-        ros, monkeypatch) -> None:  # noqa: ANN001
+        ros, monkeypatch) -> None:
     horizon = 10
     ros.add(UnicycleSimulatorNode(context=ros.context, parameter_overrides=[
         Parameter('publish_clock', value=True), Parameter('real_time_factor', value=2.0),
@@ -382,7 +382,7 @@ def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_th
 
     def driving_on_the_solver() -> bool:
         out = node.last_output
-        solved = sum(d['source'] == 'solver' for d in probe.diagnostics)
+        solved = sum(d.step.source is PlanSource.SOLVER for d in probe.diagnostics)
         return (solved >= 5 and out is not None and out.solution is not None
                 and out.solution.success and out.u[0] > 0.05)
 
@@ -393,25 +393,25 @@ def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_th
     monkeypatch.setattr(node.controller.mpc, '_run_solver', failing_solver)
 
     def after_patch() -> list[dict]:
-        return [d for d in probe.diagnostics if d['stamp'] > patched_at]
+        return [d for d in probe.diagnostics if d.stamp > patched_at]
 
     assert ros.spin_until(
-        lambda: sum(d['reason'] == Reason.STOP.value for d in after_patch()) >= 3,
+        lambda: sum(d.step.reason is Reason.STOP for d in after_patch()) >= 3,
         timeout=60.0), after_patch()[-3:]
     steps = after_patch()
-    candidates = [d for d in steps if d['source'] == 'candidate' and applied(d).any()]
+    candidates = [d for d in steps if d.step.source is PlanSource.CANDIDATE and applied(d).any()]
     # the proof's candidate: the verified inputs shifted by one step per failure...
     assert 1 <= len(candidates) <= horizon
     for k, diag in enumerate(candidates, start=1):
-        assert diag['reason'] == Reason.CANDIDATE.value
-        assert int(diag['failures']) == k
+        assert diag.step.reason is Reason.CANDIDATE
+        assert diag.step.failures == k
         np.testing.assert_allclose(applied(diag), verified.u_pred[k], atol=1e-12)
     # ...then it has run out: zero from the N-th failure on, the robot stops
-    stop = steps.index(next(d for d in steps if d['reason'] == Reason.STOP.value))
-    assert int(steps[stop]['failures']) == horizon + 1
+    stop = steps.index(next(d for d in steps if d.step.reason is Reason.STOP))
+    assert steps[stop].step.failures == horizon + 1
     assert all(not applied(d).any() for d in steps[len(candidates):])
-    assert steps[stop]['level'] == 2
-    assert int(steps[-1]['failures_total']) >= failures_before + horizon + 1
+    assert steps[stop].level == 2
+    assert steps[-1].step.failures_total >= failures_before + horizon + 1
     assert ros.spin_until(lambda: abs(probe.odoms[-1].twist.twist.linear.x) < 1e-12
                           and abs(probe.odoms[-1].twist.twist.angular.z) < 1e-12)
     assert any(Reason.STOP.text in line for line in probe.log_lines('mpc_controller', Log.WARN))
@@ -425,22 +425,22 @@ def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_th
 
 
 def test_a_state_inside_the_obstacle_is_infeasible_the_robot_stops_and_resumes_outside(
-        ros) -> None:  # noqa: ANN001
+        ros) -> None:
     node, probe, clock = start_controller(ros)
     failures = node.controller.solver_failures
     first = len(probe.diagnostics)
     clock.odom = np.array([1.25, 0.0, 0.0])  # inside the box: no input keeps it clear
 
     def stopped() -> list[dict]:
-        return [d for d in probe.diagnostics[first:] if d['reason'] == Reason.STOP.value]
+        return [d for d in probe.diagnostics[first:] if d.step.reason is Reason.STOP]
 
     assert clock.run_until(lambda: len(stopped()) >= 2)
     for diag in stopped():
         np.testing.assert_array_equal(applied(diag), [0.0, 0.0])
-        assert diag['source'] == 'stop' and diag['level'] == 2
-        assert int(diag['failures']) >= 1
+        assert diag.step.source is PlanSource.STOP and diag.level == 2
+        assert diag.step.failures >= 1
     assert node.controller.solver_failures >= failures + 2
-    assert int(stopped()[-1]['failures_total']) > failures
+    assert stopped()[-1].step.failures_total > failures
     check_commands(probe)
 
     clock.odom = WORLD.start.copy()
@@ -461,7 +461,7 @@ goal: [3.0, 0.0, 0.0]
 
 
 def test_invalid_parameters_refuse_to_start_with_a_reason_on_stderr_and_exit_code_2(
-        tmp_path) -> None:  # noqa: ANN001
+        tmp_path) -> None:
     malformed = tmp_path / 'malformed.yaml'
     malformed.write_text(MALFORMED_WORLD)
     cases = {
@@ -502,7 +502,7 @@ def test_invalid_parameters_refuse_to_start_with_a_reason_on_stderr_and_exit_cod
 
 
 def test_invalid_parameters_at_run_time_are_refused_with_a_reason_and_the_node_runs_on(
-        ros, tmp_path) -> None:  # noqa: ANN001
+        ros, tmp_path) -> None:
     (tmp_path / 'malformed.yaml').write_text(MALFORMED_WORLD)
     (tmp_path / 'decagon.yaml').write_text(DECAGON_WORLD)
     node, probe, clock = start_controller(ros)
@@ -546,7 +546,7 @@ def goal_message(x: float, y: float, yaw: float = 0.0, frame_id: str = 'map') ->
     return goal
 
 
-def start_planner(ros) -> tuple[GlobalPlannerNode, object]:  # noqa: ANN001
+def start_planner(ros) -> tuple[GlobalPlannerNode, object]:
     planner = started(ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
         Parameter('world_file', value='paper_obstacle.yaml')])))
     probe = ros.probe()
@@ -555,7 +555,7 @@ def start_planner(ros) -> tuple[GlobalPlannerNode, object]:  # noqa: ANN001
     return planner, probe
 
 
-def refuse_goal(ros, planner, probe, goal: PoseStamped, state: np.ndarray, text: str) -> None:  # noqa: ANN001
+def refuse_goal(ros, planner, probe, goal: PoseStamped, state: np.ndarray, text: str) -> None:
     """Send goal with the robot at state: an error that says text, and no plan."""
     plans = planner.plan_count
     probe.goal_pub.publish(goal)
@@ -569,7 +569,7 @@ def refuse_goal(ros, planner, probe, goal: PoseStamped, state: np.ndarray, text:
     assert planner.plan_count == plans
 
 
-def plan_to(ros, planner, probe, goal: np.ndarray, state: np.ndarray) -> np.ndarray:  # noqa: ANN001
+def plan_to(ros, planner, probe, goal: np.ndarray, state: np.ndarray) -> np.ndarray:
     """Send a valid goal: the plan from state to goal, as published."""
     plans = planner.plan_count
     received = len(probe.raw_plans)
@@ -595,7 +595,7 @@ def plan_to(ros, planner, probe, goal: np.ndarray, state: np.ndarray) -> np.ndar
 
 
 def test_planner_refuses_goals_it_cannot_reach_publishes_nothing_and_plans_the_next(
-        ros) -> None:  # noqa: ANN001
+        ros) -> None:
     planner, probe = start_planner(ros)
     start = np.array([0.1, -0.2, 0.3])
     nan_goal = goal_message(0.0, 0.0)
@@ -615,7 +615,7 @@ def test_planner_refuses_goals_it_cannot_reach_publishes_nothing_and_plans_the_n
     plan_to(ros, planner, probe, np.array([2.5, 1.5, 1.0]), start)
 
 
-def test_planner_publishes_no_plan_from_a_start_in_collision_and_plans_once_clear(ros) -> None:  # noqa: ANN001
+def test_planner_publishes_no_plan_from_a_start_in_collision_and_plans_once_clear(ros) -> None:
     planner, probe = start_planner(ros)
     goal = np.array([2.5, 0.0, 0.0])
     refuse_goal(ros, planner, probe, goal_message(*goal), np.array([1.25, 0.5, 0.0]),
@@ -639,7 +639,7 @@ TIME_LIMIT = 60.0  # simulated seconds for the drill (closed_loop's default time
 class RecordingSimulator(UnicycleSimulatorNode):
     """The simulator, noting when (its simulated time) and what each cmd_vel it took said."""
 
-    def __init__(self, **kwargs) -> None:  # noqa: ANN003
+    def __init__(self, **kwargs) -> None:
         self.received: list[tuple[float, np.ndarray]] = []
         super().__init__(**kwargs)
 
@@ -665,7 +665,7 @@ class Lockstep:
     the test if a process stops answering.
     """
 
-    def __init__(self, ros, probe, simulator: RecordingSimulator, logs) -> None:  # noqa: ANN001
+    def __init__(self, ros, probe, simulator: RecordingSimulator, logs) -> None:
         self.ros, self.probe, self.simulator, self.logs = ros, probe, simulator, logs
         self.ticks = int(SIM_RATE)  # t = 1 s: 0 is "no time yet" for a node with use_sim_time
         self.deadline = time.monotonic() + HANG_GUARD
@@ -692,7 +692,7 @@ class Lockstep:
             self.ros.executor.spin_once(timeout_sec=0.01)
 
     def state(self) -> str:
-        steps = [(d['stamp'], d['reason']) for d in self.steps()[-3:]]
+        steps = [(d.stamp, d.step.reason) for d in self.steps()[-3:]]
         return (f'last steps {steps} of {len(self.steps())}, '
                 f'{len(self.simulator.received) - self.first_command} commands received')
 
@@ -737,7 +737,7 @@ class Lockstep:
     def stepped(self) -> bool:
         """Say whether the controller's step at this instant is done and its cmd_vel taken."""
         steps = self.steps()
-        return bool(steps) and steps[-1]['stamp'] > self.t - 0.5 / SIM_RATE and (
+        return bool(steps) and steps[-1].stamp > self.t - 0.5 / SIM_RATE and (
             len(self.simulator.received) - self.first_command >= len(steps))
 
     def tick(self) -> None:
@@ -762,7 +762,7 @@ def stamp(msg: Odometry) -> float:
 
 
 def test_a_killed_controller_stops_the_robot_and_a_restarted_one_drives_to_the_target(
-        ros, tmp_path) -> None:  # noqa: ANN001
+        ros, tmp_path) -> None:
     simulator = ros.add(RecordingSimulator(context=ros.context, parameter_overrides=[
         Parameter('use_sim_time', value=True), Parameter('rate', value=SIM_RATE),
         Parameter('cmd_timeout', value=CMD_TIMEOUT),
@@ -804,11 +804,11 @@ def test_a_killed_controller_stops_the_robot_and_a_restarted_one_drives_to_the_t
         rosout = len(probe.logs)
         loop.start_controller(again=True)
         def arrived() -> bool:
-            return any(d['goal_reached'] == 'true' for d in loop.steps())
+            return any(d.step.goal_reached for d in loop.steps())
 
         loop.run_until(lambda: arrived() or loop.t > TIME_LIMIT, 'at the goal')
         assert arrived(), f'not at the goal after {loop.t:g} s: {simulator.state}'
-        restarted = stamp(next(m for m in probe.odoms if stamp(m) > loop.steps()[0]['stamp']))
+        restarted = stamp(next(m for m in probe.odoms if stamp(m) > loop.steps()[0].stamp))
     finally:
         if loop.controller is not None:
             loop.controller.send_signal(signal.SIGINT)

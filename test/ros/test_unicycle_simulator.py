@@ -44,7 +44,7 @@ ROSOUT_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
 @pytest.mark.parametrize(('stamped', 'msg_type'), [(False, Twist), (True, TwistStamped)],
                          ids=['Twist', 'TwistStamped'])
 def test_the_simulator_takes_cmd_vel_of_the_configured_type_with_the_same_checks(
-        ros, stamped, msg_type) -> None:  # noqa: ANN001
+        ros, stamped, msg_type) -> None:
     sim = ros.add(UnicycleSimulatorNode(context=ros.context, parameter_overrides=[
         Parameter('enable_stamped_cmd_vel', value=stamped),
         Parameter('publish_clock', value=True), Parameter('real_time_factor', value=10.0),
