@@ -30,8 +30,9 @@ file, a supervisor or closed_loop --respawn can tell "misconfigured" from "crash
 
 from __future__ import annotations
 
+import functools
 import sys
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence, TypeVar
 
 import rclpy
 from rclpy.exceptions import ParameterException
@@ -42,10 +43,36 @@ from rclpy.utilities import remove_ros_args
 
 from mpc_local_planner.ros.parameters import format_help, ParameterSpec
 
-__all__ = ['EXIT_INVALID_PARAMETERS', 'autostart', 'run_node', 'wants_help']
+__all__ = ['EXIT_INVALID_PARAMETERS', 'autostart', 'destroy_on_failure', 'run_node',
+           'wants_help']
 
 # Exit code of a node whose parameters are invalid.
 EXIT_INVALID_PARAMETERS = 2
+
+_Init = TypeVar('_Init', bound=Callable[..., None])
+
+
+def destroy_on_failure(init: _Init) -> _Init:
+    """Decorate a node's __init__: if it raises, destroy the half-built node, then re-raise.
+
+    A node whose constructor raised (invalid parameters, a file that cannot be read) is never
+    destroyed by its caller; rclpy then finalises its handle at some later garbage collection,
+    which unregisters the /rosout publisher of whichever node has the same name by then, so
+    that node's log lines are silently lost. Destroying it at once avoids that.
+    """
+
+    @functools.wraps(init)
+    def wrapper(self: Node, *args: Any, **kwargs: Any) -> None:
+        try:
+            init(self, *args, **kwargs)
+        except BaseException:
+            try:
+                self.destroy_node()
+            except Exception:  # the node may not have been built far enough to destroy
+                pass
+            raise
+
+    return wrapper  # type: ignore[return-value]
 
 
 def wants_help(args: Sequence[str] | None) -> bool:

@@ -94,3 +94,42 @@ def test_run_node_treats_a_failed_spin_after_ctrl_c_as_a_clean_stop(monkeypatch)
     monkeypatch.setattr(node_main.rclpy, 'spin', broken_spin)
     with pytest.raises(RuntimeError, match='a real failure'):
         node_main.run_node(lambda: RclpyNode('spun'), 'spun', [])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('node_name', ['unicycle_simulator', 'global_planner'])
+def test_a_node_that_refused_its_parameters_leaves_no_handle_to_silence_the_next_one(
+        ros, node_name: str) -> None:
+    import gc
+
+    from rclpy.parameter import Parameter
+
+    from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
+    from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
+
+    node_class, bad = {
+        'unicycle_simulator': (UnicycleSimulatorNode,
+                               Parameter('initial_pose', value=[0.0, float('nan'), 0.0])),
+        'global_planner': (GlobalPlannerNode, Parameter('iterations', value=0)),
+    }[node_name]
+    probe = ros.probe()
+
+    def refuse() -> Exception | None:
+        try:
+            node_class(context=ros.context, parameter_overrides=[bad])
+        except Exception as err:  # what run_node turns into exit code 2
+            return err  # its traceback keeps the refused node's frame alive, as pytest.raises does
+        return None
+
+    refusal = refuse()
+    assert refusal is not None
+    node = ros.add(node_class(context=ros.context))
+    assert ros.spin_until(lambda: probe.count_subscribers('/rosout') > 0)
+    del refusal
+    gc.collect()  # a handle left behind is finalised now, after the new node of its name exists
+
+    def heard() -> bool:
+        node.get_logger().error('still heard')
+        return 'still heard' in probe.log_lines(node_name)
+
+    assert ros.spin_until(heard, timeout=20.0)
