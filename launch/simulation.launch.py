@@ -23,6 +23,13 @@ known obstacles, made by ``world_to_map``), and is left out if the world has non
 node's parameters come from its YAML under ``share/mpc_local_planner/config`` unless a
 ``*_params`` argument names another file.
 
+The simulator always holds the true world (known and unknown obstacles: its laser on
+``scan`` and its contact count on ``simulator/contacts``). With ``sensing:=true`` no other
+node reads the world's obstacles: the planner plans on the map and the scans (``use_map``,
+``use_scan``, no ``world_file``) and the controller avoids what the map and the scans show
+(``obstacle_sources: [map, scan]``); a world without a map is then refused, since nothing
+would know its known obstacles.
+
 Checked statically only: ``launch`` and ``launch_ros`` are not installable from PyPI, so the
 tests compile this file and check the executables and files it names (test/ros/test_launch.py).
 """
@@ -51,6 +58,18 @@ def _map_file(name: str, world_name: str) -> str | None:
         return None
 
 
+def _radius(params_file: str, node: str, world_radius: float) -> float:
+    """Return the larger of the world's robot_radius and the one node's params file sets."""
+    import yaml
+
+    try:
+        with open(params_file, encoding='utf-8') as stream:
+            values = yaml.safe_load(stream)[node]['ros__parameters']
+        return max(world_radius, float(values.get('robot_radius', 0.0)))
+    except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError):
+        return world_radius  # no such file or entry: the node's default (0) is smaller
+
+
 def _nodes(context: LaunchContext) -> list[Node]:
     """Read the world once the arguments are known, and start the nodes for it."""
     from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -62,8 +81,23 @@ def _nodes(context: LaunchContext) -> list[Node]:
     world_file = str(resolve_data_file(arg('world')))
     world = load_world(world_file)
     use_sim_time = arg('use_sim_time').lower() == 'true'
+    sensing = arg('sensing').lower() == 'true'
     common = {'use_sim_time': use_sim_time}
     map_file = _map_file(arg('map'), world.name)
+    if sensing and map_file is None:
+        msg = (f'sensing:=true needs a map of the known obstacles of {world.name} '
+               '(map:=FILE, or config/maps/<world name>.yaml; world_to_map makes one)')
+        raise RuntimeError(msg)
+    # with sensing, the planner and the controller know the map and the scans only (and
+    # the robot's radius, which they no longer read from the world)
+    planner_world = ({'world_file': '', 'use_map': True, 'use_scan': True,
+                      'robot_radius': _radius(arg('planner_params'), 'global_planner',
+                                              world.robot_radius)}
+                     if sensing else {'world_file': world_file})
+    controller_world = ({'world_file': '', 'obstacle_sources': ['map', 'scan'],
+                         'robot_radius': _radius(arg('controller_params'), 'mpc_controller',
+                                                 world.robot_radius)}
+                        if sensing else {'world_file': world_file})
     map_server = [] if map_file is None else [
         Node(package=PACKAGE, executable='map_server', name='map_server', output='screen',
              parameters=[common, {'yaml_filename': map_file}])]
@@ -73,14 +107,18 @@ def _nodes(context: LaunchContext) -> list[Node]:
              parameters=[arg('simulator_params'), {
                  'publish_clock': use_sim_time,
                  'real_time_factor': float(arg('real_time_factor')),
-                 'initial_pose': [float(v) for v in world.start]}]),
+                 'initial_pose': [float(v) for v in world.start],
+                 'world_file': world_file, 'robot_radius': float(world.robot_radius),
+                 # no TF here (tf2 is not installable): the simulated odometry is ground truth
+                 # in the map frame, so RViz (fixed frame map) shows it as it is
+                 'frame_id': 'map'}]),
         Node(package=PACKAGE, executable='global_planner', name='global_planner',
              output='screen',
              parameters=[arg('planner_params'), common, {
-                 'world_file': world_file, 'goal': [float(v) for v in world.goal]}]),
+                 **planner_world, 'goal': [float(v) for v in world.goal]}]),
         Node(package=PACKAGE, executable='mpc_controller', name='mpc_controller',
              output='screen',
-             parameters=[arg('controller_params'), common, {'world_file': world_file}]),
+             parameters=[arg('controller_params'), common, controller_world]),
         Node(package=PACKAGE, executable='bag_recorder', name='bag_recorder',
              output='screen', condition=IfCondition(arg('record')),
              parameters=[arg('recorder_params'), common, {'output': arg('bag')}]),
@@ -97,6 +135,10 @@ def generate_launch_description() -> LaunchDescription:
                               description='map YAML for map_server: a path, or a name such as '
                                           'maps/unknown_box.yaml; empty: maps/<world name>.yaml '
                                           'if it exists, else no map_server'),
+        DeclareLaunchArgument('sensing', default_value='false',
+                              description='true: the planner and the controller know only the '
+                                          "map and the simulator's laser scans (unknown "
+                                          'obstacles are found by the laser)'),
         DeclareLaunchArgument('use_sim_time', default_value='true',
                               description='the simulator drives /clock; every node follows it'),
         DeclareLaunchArgument('real_time_factor', default_value='1.0',

@@ -33,7 +33,8 @@ import numpy as np
 from mpc_local_planner.evaluation.trajectory import TRAJECTORY_INDEX as COL
 from mpc_local_planner.worlds.world import World
 
-__all__ = ['CONTROLLER_COLOURS', 'draw_world', 'plot_runs', 'plot_world_panels', 'WorldPanel']
+__all__ = ['CONTROLLER_COLOURS', 'draw_sensed', 'draw_unknown_obstacles', 'draw_world',
+           'plot_runs', 'plot_world_panels', 'WorldPanel']
 
 RUN_COLOURS = ('tab:blue', 'tab:red', 'tab:green', 'tab:purple', 'tab:orange', 'tab:brown',
                'tab:pink', 'tab:olive', 'tab:cyan')
@@ -54,6 +55,11 @@ CONTROLLER_STYLES = ({'linestyle': '-', 'linewidth': 3.0, 'alpha': 0.85},
 LEGEND_OUTSIDE = {'loc': 'upper left', 'bbox_to_anchor': (1.02, 1.0), 'borderaxespad': 0.0}
 # Reference paths are drawn over the runs.
 REFERENCE_ZORDER = 5
+# Obstacles in no map (only the laser finds them): hatched orange, apart from the known grey.
+UNKNOWN_STYLE = {'facecolor': (1.0, 0.65, 0.0, 0.25), 'edgecolor': 'tab:orange',
+                 'hatch': '///', 'linewidth': 1.2}
+# Outlines of what the robot sensed, one colour per instant (early light, late dark).
+SENSED_COLOURS = ('tab:cyan', 'tab:green', 'tab:purple', 'tab:brown', 'tab:pink', 'tab:olive')
 
 
 def draw_world(ax: object, world: World) -> None:
@@ -69,6 +75,29 @@ def draw_world(ax: object, world: World) -> None:
         ax.plot(pose[0], pose[1], marker, color='black', markersize=9, label=label)
         ax.arrow(pose[0], pose[1], 0.15 * np.cos(pose[2]), 0.15 * np.sin(pose[2]),
                  head_width=0.04, color='black')
+
+
+def draw_unknown_obstacles(ax: object, world: World) -> None:
+    """Draw the world's unknown obstacles (in no map; the laser finds them) hatched orange."""
+    for i, obstacle in enumerate(world.unknown_obstacles):
+        ax.add_patch(Polygon(obstacle.vertices, closed=True,
+                             label='unknown obstacle' if i == 0 else None, **UNKNOWN_STYLE))
+
+
+def draw_sensed(ax: object, snapshots: Sequence[tuple[float, Sequence[np.ndarray]]]) -> None:
+    """Draw obstacle outlines the robot knew at a few instants, one colour per instant.
+
+    Args:
+        ax: the axes.
+        snapshots: (simulated time, (K, 2) outlines) per instant, in time order.
+
+    """
+    for i, (when, polygons) in enumerate(snapshots):
+        colour = SENSED_COLOURS[i % len(SENSED_COLOURS)]
+        for j, vertices in enumerate(polygons):
+            ax.add_patch(Polygon(np.asarray(vertices)[:, :2], closed=True, fill=False,
+                                 edgecolor=colour, linewidth=1.0, linestyle='--',
+                                 label=f'sensed at {when:.1f} s' if j == 0 else None))
 
 
 def _run_styles(count: int) -> list[dict[str, object]]:
@@ -121,6 +150,8 @@ def plot_runs(
     extra_paths: Sequence[tuple[str, np.ndarray]] = (),
     title: str = '',
     zoom: tuple[float, float, float, float] | None = None,
+    show_unknown: bool = False,
+    sensed: Sequence[tuple[float, Sequence[np.ndarray]]] = (),
 ) -> None:
     """Draw one figure of the world with reference path, runs and predicted horizons.
 
@@ -137,6 +168,9 @@ def plot_runs(
         title: figure title.
         zoom: (xmin, xmax, ymin, ymax) of a second panel that enlarges where runs differ;
             the first panel marks it with a rectangle.
+        show_unknown: also draw the world's unknown obstacles, hatched orange.
+        sensed: (simulated time, (K, 2) outlines) of what the robot knew at a few instants,
+            drawn dashed, one colour per instant.
 
     """
     panels = 1 if zoom is None else 2
@@ -145,6 +179,9 @@ def plot_runs(
     axes = [fig.add_subplot(1, panels, i + 1) for i in range(panels)]
     for ax in axes:
         _draw_runs(ax, world, reference, runs, predictions, extra_paths)
+        if show_unknown:
+            draw_unknown_obstacles(ax, world)
+        draw_sensed(ax, sensed)
     xmin, xmax, ymin, ymax = world.bounds
     axes[0].set_xlim(xmin, xmax)
     axes[0].set_ylim(ymin, ymax)

@@ -35,6 +35,22 @@ launch's ``respawn``, instead of ending the run: kill the controller mid-run and
 simulator stops the robot after ``cmd_timeout``, then the new controller gets ``/plan``
 (transient_local) and drives on. A process that refuses its parameters (exit code 2) is not
 started again, and at most MAX_RESPAWNS restarts happen per run.
+
+The simulator always holds the TRUE world (the world file's known and unknown obstacles) and
+counts contact episodes on ``simulator/contacts``; ``metrics.json`` reports ``contacts`` and a
+run with a contact fails (exit code 1). With ``--sensing`` no node but the simulator reads the
+world's obstacles: a ``map_server`` serves a map of the KNOWN obstacles (rasterised at
+MAP_RESOLUTION into ``--out``/map/), the planner plans on that map and the scans
+(``use_map``, ``use_scan``, ``world_file: ''``), the controller avoids what the map and the
+laser show (``obstacle_sources: [map, scan]``), and the bag records ``scan`` too. The figure
+draws unknown obstacles apart from known ones and, with ``--sensing``, what the controller
+avoided (``mpc/obstacles``, namespace ``raw``) at a few instants.
+
+With ``--path rrt`` the monitor also acts as a minimal navigator: when the controller says
+the remaining plan is blocked (``path_blocked`` in its diagnostics: an obstacle the plan did
+not know, seen by the laser), it sends the goal again on ``goal_pose``, at most once per
+REPLAN_PERIOD of simulated time while the plan stays blocked, and the planner plans anew from
+the robot's pose on what it knows now. ``metrics.json`` counts these in ``replans``.
 """
 
 from __future__ import annotations
@@ -52,12 +68,17 @@ import time
 from typing import Any, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped
+import numpy as np
 import rclpy
 from rclpy.context import Context
+from rclpy.exceptions import ParameterException
 from rclpy.executors import Executor, SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from std_msgs.msg import UInt32
+from visualization_msgs.msg import Marker, MarkerArray
 
 from mpc_local_planner.core.diagnostics import (
     CONTROLLER_DIAGNOSTICS_TOPIC,
@@ -67,17 +88,32 @@ from mpc_local_planner.core.diagnostics import (
 )
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
-from mpc_local_planner.evaluation.analyze_bag import analyze, summary
-from mpc_local_planner.ros.bag_recorder_node import BagRecorderNode
+from mpc_local_planner.evaluation.analyze_bag import analyze, read_run, summary
+from mpc_local_planner.evaluation.plotting import plot_runs
+from mpc_local_planner.ros.bag_recorder_node import (
+    BagRecorderNode,
+    DEFAULT_LATCHED,
+    DEFAULT_TOPICS,
+    DEFAULT_TYPES,
+)
+from mpc_local_planner.ros.conversions import seconds_to_stamp, yaw_to_quaternion
 from mpc_local_planner.ros.executors import spin_until
 from mpc_local_planner.ros.node_main import autostart, EXIT_INVALID_PARAMETERS
 from mpc_local_planner.ros.parameters import DEFAULT_WORLD_FILE
-from mpc_local_planner.ros.qos import DIAGNOSTICS_QOS, PLANNER_DIAGNOSTICS_QOS
+from mpc_local_planner.ros.qos import (
+    CONTACTS_QOS,
+    DIAGNOSTICS_QOS,
+    GOAL_QOS,
+    LOCAL_PLAN_QOS,
+    PLANNER_DIAGNOSTICS_QOS,
+)
 from mpc_local_planner.worlds.data_files import resolve_data_file
+from mpc_local_planner.worlds.map_files import rasterize_world, save_map
 from mpc_local_planner.worlds.world import load_world, World
 
-__all__ = ['EXIT_NO_PLAN', 'LoopOptions', 'LoopResult', 'check_plannable', 'flush_recording',
-           'main', 'node_command', 'node_parameters', 'run_closed_loop', 'spawn_node']
+__all__ = ['EXIT_NO_PLAN', 'LoopOptions', 'LoopResult', 'MAP_RESOLUTION', 'check_plannable',
+           'flush_recording', 'main', 'node_command', 'node_parameters', 'recorder_topics',
+           'run_closed_loop', 'spawn_node', 'write_known_map']
 
 DEFAULT_WORLD = DEFAULT_WORLD_FILE
 # Exit code when no plan can come (as for invalid options: the run was misconfigured).
@@ -90,8 +126,25 @@ DEFAULT_TIME_LIMIT = 60.0
 CHILD_EXIT_TIMEOUT = 5.0
 # Restarts of node processes per run with --respawn (a crash loop ends the run instead).
 MAX_RESPAWNS = 10
+# Cell side (m) of the map of the known obstacles that --sensing serves.
+MAP_RESOLUTION = 0.05
+# Topics the simulator publishes (unicycle_simulator_node's names; not imported, so that
+# this module does not load the nodes before they are needed).
+SCAN_TOPIC = 'scan'
+CONTACTS_TOPIC = 'simulator/contacts'
+# What the controller avoids (mpc_controller_node's OBSTACLES_TOPIC) and the namespace of
+# the obstacles as it takes them in (from the map and the scans with --sensing).
+OBSTACLES_TOPIC = 'mpc/obstacles'
+RAW_NAMESPACE = 'raw'
+# With --sensing, the monitor keeps what the controller avoids at most once per this many
+# simulated seconds; the figure shows SENSED_SNAPSHOTS of them, spread over the run.
+SNAPSHOT_PERIOD = 2.0
+SENSED_SNAPSHOTS = 4
+# Simulated seconds between two goals re-sent while the controller reports a blocked plan.
+REPLAN_PERIOD = 2.0
 
 MODULES = {
+    'map_server': 'mpc_local_planner.ros.map_server_node',
     'global_planner': 'mpc_local_planner.ros.global_planner_node',
     'mpc_controller': 'mpc_local_planner.ros.mpc_controller_node',
     'unicycle_simulator': 'mpc_local_planner.ros.unicycle_simulator_node',
@@ -111,6 +164,7 @@ class LoopOptions:
     separate_processes: bool = False
     respawn: bool = False
     seed: int = 0
+    sensing: bool = False
     extra_parameters: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
@@ -126,9 +180,18 @@ class LoopResult:
     success: bool
 
 
-def node_parameters(options: LoopOptions, world_file: Path, world: World
-                    ) -> dict[str, dict[str, Any]]:
-    """Return each node's parameter values for a run (use_sim_time included)."""
+def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
+                    map_file: Path | None = None) -> dict[str, dict[str, Any]]:
+    """Return each node's parameter values for a run (use_sim_time included).
+
+    The simulator always gets the true world (for the laser and the contacts). With
+    options.sensing the planner and the controller get no world file: they see the map
+    (map_file, which map_server serves) and the scans.
+
+    Raises:
+        ValueError: if --path analytic names no path of the world, or sensing lacks map_file.
+
+    """
     analytic = world.path if options.path == 'analytic' else ''
     if options.path == 'analytic' and not world.path:
         msg = f'--path analytic: the world {world.name} names no analytic path (use --path rrt)'
@@ -145,8 +208,20 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World
         'unicycle_simulator': {
             'publish_clock': True, 'real_time_factor': float(options.rtf),
             'initial_pose': [float(v) for v in world.start],
+            'world_file': str(world_file), 'robot_radius': float(world.robot_radius),
         },
     }
+    if options.sensing:
+        if map_file is None:
+            msg = '--sensing needs the map of the known obstacles (map_file)'
+            raise ValueError(msg)
+        params['map_server'] = {'use_sim_time': True, 'yaml_filename': str(map_file)}
+        # without a world file they cannot take the robot's radius from it
+        radius = float(world.robot_radius)
+        params['global_planner'].update(use_map=True, use_scan=True, world_file='',
+                                        robot_radius=radius)
+        params['mpc_controller'].update(obstacle_sources=['map', 'scan'], world_file='',
+                                        robot_radius=radius)
     for name, extra in options.extra_parameters.items():
         params.setdefault(name, {}).update(extra)
     return params
@@ -167,12 +242,53 @@ def _ros_arg(name: str, value: Any) -> str:
     return f'{name}:={text}'
 
 
-class _Monitor(Node):
-    """Watch the controller's diagnostics for the goal and the planner's for a failure."""
+def write_known_map(world: World, folder: Path) -> Path:
+    """Rasterise the world's KNOWN obstacles at MAP_RESOLUTION into folder; return the YAML."""
+    return save_map(rasterize_world(world, MAP_RESOLUTION), folder, world.name)
 
-    def __init__(self, **kwargs: Any) -> None:
+
+def recorder_topics(*, sensing: bool) -> dict[str, list[str]]:
+    """Return the recorder's topics, types and latched topics (scan too with sensing)."""
+    topics = [*DEFAULT_TOPICS, CONTACTS_TOPIC]
+    types = [*DEFAULT_TYPES, 'std_msgs/msg/UInt32']
+    if sensing:
+        topics.append(SCAN_TOPIC)
+        types.append('sensor_msgs/msg/LaserScan')
+    return {'topics': topics, 'types': types,
+            'transient_local_topics': [*DEFAULT_LATCHED, CONTACTS_TOPIC]}
+
+
+def _raw_polygons(msg: MarkerArray) -> list[np.ndarray]:
+    """Return the (K, 2) outlines of the markers in the raw namespace (closed rings opened)."""
+    polygons = []
+    for marker in msg.markers:
+        if marker.ns != RAW_NAMESPACE or marker.action != Marker.ADD or len(marker.points) < 2:
+            continue
+        ring = np.array([(p.x, p.y) for p in marker.points], dtype=float)
+        if len(ring) > 2 and np.allclose(ring[0], ring[-1]):
+            ring = ring[:-1]
+        polygons.append(ring)
+    return polygons
+
+
+class _Monitor(Node):
+    """Watch the controller's diagnostics for the goal and the planner's for a failure.
+
+    Also counts the simulator's contacts and, with sensing, keeps what the controller
+    avoids (its raw obstacles) at a few instants for the figure.
+    """
+
+    def __init__(self, *, sensing: bool = False, replan_goal: Sequence[float] | None = None,
+                 **kwargs: Any) -> None:
         super().__init__('closed_loop_monitor', **kwargs)
         self.goal_reached = False
+        self.replans: list[float] = []  # simulated times at which the goal was sent again
+        self._replan_goal = None if replan_goal is None else [float(v) for v in replan_goal]
+        self._goal_pub = (None if replan_goal is None
+                          else self.create_publisher(PoseStamped, 'goal_pose', GOAL_QOS))
+        self.contacts: int | None = None  # the simulator's count, once heard
+        # (simulated time, raw obstacle outlines) every SNAPSHOT_PERIOD at most
+        self.sensed: list[tuple[float, list[np.ndarray]]] = []
         self.messages = 0  # diagnostics messages of the controller received
         self.last_reason = ''
         self.plan_failure: str | None = None  # why the planner published no plan
@@ -181,6 +297,25 @@ class _Monitor(Node):
         self._planner_sub = self.create_subscription(
             DiagnosticArray, PLANNER_DIAGNOSTICS_TOPIC, self.planner_callback,
             PLANNER_DIAGNOSTICS_QOS)
+        self._contacts_sub = self.create_subscription(UInt32, CONTACTS_TOPIC,
+                                                      self.contacts_callback, CONTACTS_QOS)
+        self._obstacles_sub = None
+        if sensing:
+            self._obstacles_sub = self.create_subscription(
+                MarkerArray, OBSTACLES_TOPIC, self.obstacles_callback, LOCAL_PLAN_QOS)
+
+    def contacts_callback(self, msg: UInt32) -> None:
+        """Keep the simulator's contact count (it only grows)."""
+        self.contacts = max(int(msg.data), self.contacts or 0)
+
+    def obstacles_callback(self, msg: MarkerArray) -> None:
+        """Keep what the controller avoids, once per SNAPSHOT_PERIOD of simulated time."""
+        now = self.sim_time()
+        if self.sensed and now < self.sensed[-1][0] + SNAPSHOT_PERIOD:
+            return
+        polygons = _raw_polygons(msg)
+        if polygons:
+            self.sensed.append((now, polygons))
 
     @property
     def diagnostics_topic(self) -> str:
@@ -194,12 +329,34 @@ class _Monitor(Node):
             step = ControllerDiagnostics.from_values((kv.key, kv.value) for kv in status.values)
             self.last_reason = step.message
             self.goal_reached = step.goal_reached
+            if step.path_blocked and not step.goal_reached:
+                self._replan()
+
+    def _replan(self) -> None:
+        """Send the goal again (the planner plans from the robot's pose), if it is time."""
+        if self._goal_pub is None or self._replan_goal is None:
+            return
+        now = self.sim_time()
+        if self.replans and now < self.replans[-1] + REPLAN_PERIOD:
+            return
+        self.replans.append(now)
+        x, y, theta = self._replan_goal
+        goal = PoseStamped()
+        goal.header.frame_id = 'map'
+        goal.header.stamp = seconds_to_stamp(now)
+        goal.pose.position.x, goal.pose.position.y = x, y
+        goal.pose.orientation = yaw_to_quaternion(theta)
+        self._goal_pub.publish(goal)
+        self.get_logger().info(f'the plan is blocked: goal ({x:g}, {y:g}) sent again to '
+                               'the planner')
 
     def planner_callback(self, msg: DiagnosticArray) -> None:
         """Note whether the planner's latest goal failed (a later plan clears it)."""
         for status in msg.status:
             outcome = PlannerDiagnostics.from_values((kv.key, kv.value) for kv in status.values)
-            self.plan_failure = None if outcome.planned else (outcome.detail or 'no plan')
+            if outcome.waiting:
+                continue  # waiting for the map: the plan is still to come
+            self.plan_failure = (outcome.detail or 'no plan') if outcome.failed else None
 
     def sim_time(self) -> float:
         """Return the current ROS (simulated) time in seconds."""
@@ -266,12 +423,15 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
     if options.respawn and not options.separate_processes:
         msg = '--respawn needs --separate-processes'
         raise ValueError(msg)
-    params = node_parameters(options, world_file, world)
+    params = node_parameters(options, world_file, world,
+                             map_file=Path(options.out) / 'map' / f'{world.name}.yaml')
     if options.path == 'rrt':
         check_plannable(world, params['global_planner'])
     time_limit = options.time_limit or world.time_limit or DEFAULT_TIME_LIMIT
     out = Path(options.out)
     out.mkdir(parents=True, exist_ok=True)
+    if options.sensing:
+        params['map_server']['yaml_filename'] = str(write_known_map(world, out / 'map'))
     bag = out / 'bag'
     if bag.exists():
         shutil.rmtree(bag)
@@ -294,8 +454,11 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
         sim = [Parameter('use_sim_time', value=True)]
         recorder = BagRecorderNode(context=context, parameter_overrides=[
             *sim, Parameter('output', value=str(bag)),
-            Parameter('world_file', value=str(world_file))])
-        monitor = _Monitor(context=context, parameter_overrides=sim)
+            Parameter('world_file', value=str(world_file)),
+            *(Parameter(k, value=v)
+              for k, v in recorder_topics(sensing=options.sensing).items())])
+        monitor = _Monitor(context=context, parameter_overrides=sim, sensing=options.sensing,
+                           replan_goal=world.goal if options.path == 'rrt' else None)
         nodes += [recorder, monitor]
         if options.separate_processes:
             children = _spawn(params, out / 'logs')
@@ -340,37 +503,62 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
         raise PlanningError(msg)
     run_info = {'stop_reason': stop_reason, 'wall_time': wall_time, 'sim_time': sim_time,
                 'separate_processes': options.separate_processes, 'rtf': options.rtf,
-                'respawns': respawns,
+                'respawns': respawns, 'sensing': options.sensing,
+                'contacts': monitor.contacts, 'replans': len(monitor.replans),
                 'path_source': options.path, 'world': str(world_file)}
-    metrics = analyze(bag, out, extra=run_info,
-                      title=f'{world.name}: {options.path} path, rtf {options.rtf:g}')
-    success = bool(metrics.get('reached')) and not metrics.get('collision')
+    title = (f'{world.name}: {options.path} path, rtf {options.rtf:g}'
+             + (', sensing' if options.sensing else ''))
+    metrics = analyze(bag, out, extra=run_info, title=title)
+    if options.sensing or world.unknown_obstacles:
+        _plot_sensing(bag, out / 'trajectory.png', world, monitor.sensed, title)
+    success = (bool(metrics.get('reached')) and not metrics.get('collision')
+               and not monitor.contacts)
     return LoopResult(metrics=metrics, stop_reason=stop_reason, wall_time=wall_time,
                       sim_time=sim_time, out=out, success=success)
 
 
+def _plot_sensing(bag: Path, png: Path, world: World,
+                  sensed: Sequence[tuple[float, list[np.ndarray]]], title: str) -> None:
+    """Redraw the run's figure with the unknown obstacles and a few sensed snapshots."""
+    run = read_run(bag)
+    step = max(1, len(run.predictions) // 8)
+    picks = sorted({int(round(i)) for i in np.linspace(0, len(sensed) - 1,
+                                                        min(SENSED_SNAPSHOTS, len(sensed)))})
+    plot_runs(png, world=world, reference=run.plan, runs=[('mpc_controller', run.rows)],
+              predictions=run.predictions[::step], title=title, show_unknown=True,
+              sensed=[sensed[i] for i in picks] if sensed else ())
+
+
 def _create_nodes(params: dict[str, dict[str, Any]], context: Context) -> list[Node]:
-    """Create planner, controller and simulator in context; autostart the lifecycle ones.
+    """Create (map server,) planner, controller and simulator; autostart the lifecycle ones.
 
     Raises:
-        ValueError: if a lifecycle node does not configure or activate (the nodes created so
-            far are destroyed).
+        ValueError: if a node refuses its parameters, or a lifecycle node does not configure
+            or activate (the nodes created so far are destroyed).
 
     """
     from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
+    from mpc_local_planner.ros.map_server_node import MapServerNode
     from mpc_local_planner.ros.mpc_controller_node import MpcControllerNode
     from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
 
     # the simulator last: the clock starts once everyone listens
-    classes = (('global_planner', GlobalPlannerNode), ('mpc_controller', MpcControllerNode),
+    classes = (('map_server', MapServerNode), ('global_planner', GlobalPlannerNode),
+               ('mpc_controller', MpcControllerNode),
                ('unicycle_simulator', UnicycleSimulatorNode))
     nodes: list[Node] = []
     for name, node_class in classes:
+        if name not in params:  # map_server: only with --sensing
+            continue
         overrides = [Parameter(k, value=v) for k, v in params[name].items()]
-        node = node_class(context=context, parameter_overrides=overrides)
-        nodes.append(node)
-        # as run_node does: configured and activated unless autostart is false
-        problem = autostart(node) if isinstance(node, LifecycleNode) else None
+        try:
+            node = node_class(context=context, parameter_overrides=overrides)
+        except (ParameterException, ValueError, TypeError, OSError) as err:
+            node, problem = None, f'refusing to start: {err}'
+        else:
+            nodes.append(node)
+            # as run_node does: configured and activated unless autostart is false
+            problem = autostart(node) if isinstance(node, LifecycleNode) else None
         if problem is not None:
             for created in reversed(nodes):
                 created.destroy_node()
@@ -405,7 +593,7 @@ def spawn_node(name: str, parameters: dict[str, Any], log: Path, *,
 
 def _spawn(params: dict[str, dict[str, Any]], logs: Path) -> dict[str, subprocess.Popen]:
     return {name: spawn_node(name, params[name], logs / f'{name}.log')
-            for name in ('global_planner', 'mpc_controller', 'unicycle_simulator')}
+            for name in MODULES if name in params}
 
 
 def _respawn(options: LoopOptions, dead: list[str], children: dict[str, subprocess.Popen],
@@ -463,13 +651,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--seed', type=int, default=defaults.seed, help='RRT* seed')
     parser.add_argument('--separate-processes', action='store_true',
                         help='run planner, controller and simulator as separate processes')
+    parser.add_argument('--sensing', action='store_true',
+                        help='the planner and the controller know only a map of the known '
+                             "obstacles and the simulator's laser scans; unknown obstacles "
+                             'are found by the laser')
     parser.add_argument('--respawn', action='store_true',
                         help='with --separate-processes: start a node process that exits '
                              'again instead of ending the run (a restart drill)')
     args = parser.parse_args(argv)
     options = LoopOptions(world=args.world, out=args.out, path=args.path, rtf=args.rtf,
                           timeout=args.timeout, time_limit=args.time_limit, seed=args.seed,
-                          separate_processes=args.separate_processes, respawn=args.respawn)
+                          separate_processes=args.separate_processes, respawn=args.respawn,
+                          sensing=args.sensing)
     try:
         result = run_closed_loop(options, ros_args=ros_args)
     except PlanningError as err:
@@ -481,8 +674,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f'stopped: {result.stop_reason} after {result.wall_time:.1f} s wall, '
           f'{result.sim_time:.1f} s simulated')
     print(summary(result.metrics))
+    print(f'contacts: {result.metrics.get("contacts")}')
     print(f'outputs in {result.out.resolve()}: bag/, trajectory.csv, metrics.json, '
-          'trajectory.png')
+          'trajectory.png' + (', map/' if options.sensing else ''))
     return 0 if result.success else 1
 
 

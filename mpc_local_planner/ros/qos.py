@@ -27,6 +27,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 __all__ = [
     'CLOCK_QOS',
     'CMD_VEL_QOS',
+    'CONTACTS_QOS',
     'DIAGNOSTICS_QOS',
     'GOAL_QOS',
     'LOCAL_PLAN_QOS',
@@ -34,6 +35,7 @@ __all__ = [
     'ODOM_QOS',
     'PLAN_QOS',
     'PLANNER_DIAGNOSTICS_QOS',
+    'SCAN_QOS',
     'recorder_qos',
 ]
 
@@ -67,3 +69,12 @@ def recorder_qos(*, latched: bool) -> QoSProfile:
 MAP_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      history=HistoryPolicy.KEEP_LAST)
+
+# ``scan`` as a subscriber takes it: best effort (what sensor drivers publish, and a reliable
+# publisher such as the simulator matches it too), depth 5, volatile: an old scan is useless.
+SCAN_QOS = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
+# ``simulator/contacts``: the number of contact episodes so far, latched like ``plan``.
+CONTACTS_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                          history=HistoryPolicy.KEEP_LAST)

@@ -25,10 +25,22 @@ making it jump. Without it, the node integrates in ROS time (wall or an external
 (a controller that died or hangs; the age counts from its arrival, stamped or not) is
 replaced by zero, and so is one with NaN or inf in linear.x or angular.z (its sender is
 broken: no part of it is trusted); the saturation bounds every command that is integrated.
+
+The node holds the TRUE world (``world_file``: known and unknown obstacles, disks as disks;
+'' = an empty world). Every ``1 / scan.rate`` s of simulated time (counted in ticks, so the
+scans are deterministic under ``publish_clock``) it casts a simulated laser from the robot's
+pose and publishes ``scan`` (sensor_msgs/LaserScan in ``child_frame_id``, the laser at the
+robot's origin facing forward, stamped like the odometry of the same pose; ``inf`` where a
+beam hits nothing, per REP 117). Each tick it checks the robot's disk (``robot_radius``, or
+the world's if larger) against the true world and counts contact EPISODES (entering contact
+counts one; staying in contact does not): ``simulator/contacts`` (std_msgs/UInt32, latched)
+carries the count, published at start with 0 and again at every new contact, and the first
+contact is logged as an ERROR.
 """
 
 from __future__ import annotations
 
+import array
 import math
 import sys
 from typing import Any
@@ -40,16 +52,24 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import LaserScan
+from std_msgs.msg import UInt32
 
 from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.perception.laser import contact, SimulatedLaser, TrueGeometry
+from mpc_local_planner.perception.scan_obstacles import Scan
 from mpc_local_planner.ros.conversions import seconds_to_stamp, state_to_odometry, u_from_twist
-from mpc_local_planner.ros.node_main import run_node
+from mpc_local_planner.ros.node_main import destroy_on_failure, run_node
 from mpc_local_planner.ros.parameters import declare_parameters, ParameterSpec
-from mpc_local_planner.ros.qos import CLOCK_QOS, CMD_VEL_QOS, ODOM_QOS
+from mpc_local_planner.ros.qos import CLOCK_QOS, CMD_VEL_QOS, CONTACTS_QOS, ODOM_QOS
 from mpc_local_planner.ros.throttle import ProblemThrottle
+from mpc_local_planner.worlds.data_files import resolve_data_file
+from mpc_local_planner.worlds.world import load_world, World
 
-__all__ = ['PARAMETERS', 'SUMMARY', 'UnicycleSimulatorNode', 'main',
+__all__ = ['CONTACTS_TOPIC', 'PARAMETERS', 'SCAN_PUBLISHER_QOS', 'SCAN_RANGE_MIN',
+           'SCAN_TOPIC', 'SUMMARY', 'UnicycleSimulatorNode', 'laser_scan_msg', 'main',
            'validate_simulator_parameters']
 
 
@@ -57,9 +77,25 @@ __all__ = ['PARAMETERS', 'SUMMARY', 'UnicycleSimulatorNode', 'main',
 MAX_CATCH_UP_STEPS = 10
 _MODEL = Unicycle()  # the single source of the saturation defaults
 
+SCAN_TOPIC = 'scan'
+CONTACTS_TOPIC = 'simulator/contacts'
+# The simulated laser's closest valid reading (m), as a LaserScan's range_min.
+SCAN_RANGE_MIN = 0.05
+# The publisher side of ``scan``: reliable, volatile, depth 10 (best-effort readers match).
+SCAN_PUBLISHER_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                                durability=DurabilityPolicy.VOLATILE,
+                                history=HistoryPolicy.KEEP_LAST)
+# At most this many beams (a bigger scan is a typo, and would stall every tick).
+MAX_SCAN_BEAMS = 10_000
+# Tolerance when counting scan periods in ticks (rate / scan.rate need not be an integer).
+_TICK_EPS = 1e-9
+_SCAN_PARAMETERS = frozenset({'scan.fov', 'scan.beams', 'scan.range_max', 'scan.noise_std',
+                              'scan.seed', 'robot_radius'})
+
 SUMMARY = ('Integrate a unicycle driven by cmd_vel (Twist, or TwistStamped with '
            'enable_stamped_cmd_vel) with saturation; publish odom, and clock with '
-           'publish_clock.')
+           'publish_clock; simulate a laser (scan) and count contacts with the true world '
+           '(simulator/contacts).')
 
 PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('initial_pose', [0.0, 0.0, 0.0],
@@ -84,7 +120,27 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('omega_max', _MODEL.omega_max, 'saturation of |angular.z| (rad/s)',
                   float_range=(0.001, 50.0)),
     ParameterSpec('frame_id', 'odom', 'odometry frame'),
-    ParameterSpec('child_frame_id', 'base_link', 'robot frame'),
+    ParameterSpec('child_frame_id', 'base_link', 'robot frame (also the frame of scan)'),
+    ParameterSpec('world_file', '',
+                  'the TRUE world (known and unknown obstacles) the laser sees and the robot '
+                  "can touch: a path, or a name in the package's config/ or config/worlds/; "
+                  "'' = an empty world; read once at start", read_only=True),
+    ParameterSpec('robot_radius', 0.0,
+                  "radius of the robot's disk for contacts (m); the larger of this and the "
+                  "world's robot_radius counts", float_range=(0.0, 10.0)),
+    ParameterSpec('scan.rate', 10.0,
+                  'laser scans per second of simulated time (at most one per tick, so at '
+                  'most rate)', float_range=(0.01, 1000.0)),
+    ParameterSpec('scan.fov', 4.71,
+                  'field of view (rad), in (0, 2 pi]: angle_min = -fov / 2, '
+                  'angle_increment = fov / (beams - 1)'),
+    ParameterSpec('scan.beams', 720, f'beams per scan, 2 to {MAX_SCAN_BEAMS}'),
+    ParameterSpec('scan.range_max', 10.0,
+                  f'farthest reading (m), > range_min = {SCAN_RANGE_MIN}; beyond it a beam '
+                  'reads inf'),
+    ParameterSpec('scan.noise_std', 0.0,
+                  'standard deviation of the Gaussian range noise (m), >= 0'),
+    ParameterSpec('scan.seed', 0, 'seed of the noise generator (runs are reproducible)'),
 )
 
 
@@ -95,12 +151,64 @@ def validate_simulator_parameters(values: dict[str, Any]) -> str | None:
         pose = list(pose)
         if len(pose) != 3 or not all(math.isfinite(float(v)) for v in pose):
             return f'initial_pose must be [x, y, theta] (3 finite numbers), got {pose}'
+    checks = {
+        'scan.fov': (lambda v: 0.0 < v <= 2.0 * math.pi, 'in (0, 2 pi]'),
+        'scan.range_max': (lambda v: SCAN_RANGE_MIN < v < math.inf,
+                           f'finite and > range_min = {SCAN_RANGE_MIN}'),
+        'scan.noise_std': (lambda v: 0.0 <= v < math.inf, 'finite and >= 0'),
+    }
+    for name, (valid, what) in checks.items():
+        value = values.get(name)
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not valid(
+                float(value)):
+            return f'{name} must be a number {what}, got {value!r}'
+    beams = values.get('scan.beams')
+    if beams is not None and (isinstance(beams, bool) or not isinstance(beams, int)
+                              or not 2 <= beams <= MAX_SCAN_BEAMS):
+        return f'scan.beams must be an integer from 2 to {MAX_SCAN_BEAMS}, got {beams!r}'
+    seed = values.get('scan.seed')
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+        return f'scan.seed must be an integer >= 0, got {seed!r}'
     return None
+
+
+def laser_scan_msg(scan: Scan, *, frame_id: str, stamp: Any) -> LaserScan:
+    """Return scan as a sensor_msgs/LaserScan (ranges as float32; inf stays inf)."""
+    msg = LaserScan()
+    msg.header.frame_id = frame_id
+    msg.header.stamp = stamp
+    msg.angle_min = float(scan.angle_min)
+    msg.angle_max = float(scan.angle_min + (len(scan.ranges) - 1) * scan.angle_increment)
+    msg.angle_increment = float(scan.angle_increment)
+    msg.time_increment = 0.0  # every beam cast at the same instant
+    msg.scan_time = 0.0
+    msg.range_min = float(scan.range_min)
+    msg.range_max = float(scan.range_max)
+    ranges = array.array('f')
+    ranges.frombytes(np.asarray(scan.ranges, dtype=np.float32).tobytes())
+    msg.ranges = ranges
+    return msg
+
+
+def _load_true_world(name: str) -> World | None:
+    """Return the world named by world_file ('' = None: an empty world).
+
+    Raises:
+        FileNotFoundError: if the file does not exist.
+        ValueError: if it is not a valid world (WorldError).
+
+    """
+    if not name:
+        return None
+    return load_world(resolve_data_file(name))
 
 
 class UnicycleSimulatorNode(Node):
     """Integrate a unicycle driven by cmd_vel; publish odom and optionally clock."""
 
+    @destroy_on_failure
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('unicycle_simulator', **kwargs)
         self.add_on_set_parameters_callback(self.parameters_callback)
@@ -114,7 +222,19 @@ class UnicycleSimulatorNode(Node):
         self._last_cmd_time: float | None = None
         self._last_tick: float | None = None
         self._problems = ProblemThrottle(2.0)
+        self._world = _load_true_world(str(self.get_parameter('world_file').value))
+        self._geometry = TrueGeometry.from_world(self._world) if self._world else TrueGeometry(
+            [])
+        # scan periods elapsed since the last scan, advanced by scan.rate / rate per tick:
+        # scans follow the simulation's steps, not the wall clock
+        self._scan_phase = 0.0
+        self._in_contact = False
+        self._contacts = 0
+        self._laser = self._make_laser()
         self._odom_pub = self.create_publisher(Odometry, 'odom', ODOM_QOS)
+        self._scan_pub = self.create_publisher(LaserScan, SCAN_TOPIC, SCAN_PUBLISHER_QOS)
+        self._contacts_pub = self.create_publisher(UInt32, CONTACTS_TOPIC, CONTACTS_QOS)
+        self._contacts_pub.publish(UInt32(data=0))
         self._clock_pub = self.create_publisher(ClockMsg, 'clock', CLOCK_QOS)
         cmd_type = TwistStamped if self.get_parameter('enable_stamped_cmd_vel').value else Twist
         self._cmd_sub = self.create_subscription(cmd_type, 'cmd_vel', self.cmd_vel_callback,
@@ -130,7 +250,7 @@ class UnicycleSimulatorNode(Node):
         try:
             reason = validate_simulator_parameters(values)
         except (TypeError, ValueError) as err:
-            reason = f'initial_pose must be [x, y, theta] (3 finite numbers): {err}'
+            reason = f'invalid value: {err}'
         if reason is not None:
             return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
@@ -142,10 +262,23 @@ class UnicycleSimulatorNode(Node):
             self._model = self._read_model()
         if names & {'rate', 'real_time_factor'}:
             self._make_timer()
+        if names & _SCAN_PARAMETERS:
+            self._laser = self._make_laser()
 
     def _read_model(self) -> Unicycle:
         return Unicycle(v_max=float(self.get_parameter('v_max').value),
                         omega_max=float(self.get_parameter('omega_max').value))
+
+    def _make_laser(self) -> SimulatedLaser:
+        noise = float(self.get_parameter('scan.noise_std').value)
+        seed = int(self.get_parameter('scan.seed').value)
+        self._radius = max(float(self.get_parameter('robot_radius').value),
+                           self._world.robot_radius if self._world else 0.0)
+        return SimulatedLaser(self._geometry, fov=float(self.get_parameter('scan.fov').value),
+                              beams=int(self.get_parameter('scan.beams').value),
+                              range_min=SCAN_RANGE_MIN,
+                              range_max=float(self.get_parameter('scan.range_max').value),
+                              noise_std=noise, rng=np.random.default_rng(seed))
 
     def _make_timer(self) -> None:
         if self._timer is not None:
@@ -169,6 +302,16 @@ class UnicycleSimulatorNode(Node):
     def sim_time(self) -> float:
         """Simulated seconds so far (publish_clock mode)."""
         return self._sim_time
+
+    @property
+    def contacts(self) -> int:
+        """Contact episodes with the true world so far."""
+        return self._contacts
+
+    @property
+    def robot_radius(self) -> float:
+        """The radius of the disk checked for contacts (m)."""
+        return self._radius
 
     def _now(self) -> float:
         if self.get_parameter('publish_clock').value:
@@ -212,6 +355,8 @@ class UnicycleSimulatorNode(Node):
             for _ in range(steps):
                 self._state = self._model.step(self._state, u, self._dt)
                 self._sim_time += self._dt
+                self._scan_phase += float(self.get_parameter('scan.rate').value) * self._dt
+                self._check_contact()
             publish_clock = self.get_parameter('publish_clock').value
             if publish_clock:
                 stamp = seconds_to_stamp(self._sim_time)
@@ -222,6 +367,7 @@ class UnicycleSimulatorNode(Node):
                 self._state, u, stamp=stamp,
                 frame_id=str(self.get_parameter('frame_id').value),
                 child_frame_id=str(self.get_parameter('child_frame_id').value)))
+            self._publish_scan(stamp)
             if publish_clock:
                 self._clock_pub.publish(ClockMsg(clock=stamp))
         except Exception as err:  # never let a callback kill the executor
@@ -229,6 +375,34 @@ class UnicycleSimulatorNode(Node):
                 return  # Ctrl-C shut the context down during the step: not a failure
             self.get_logger().error(f'simulation step failed: {err}',
                                     throttle_duration_sec=1.0)
+
+
+    def _check_contact(self) -> None:
+        """Count a contact episode when the robot's disk starts touching the true world."""
+        touching = contact(self._geometry, float(self._state[0]), float(self._state[1]),
+                           self._radius)
+        if touching and not self._in_contact:
+            self._contacts += 1
+            self._contacts_pub.publish(UInt32(data=self._contacts))
+            where = f'({self._state[0]:.3f}, {self._state[1]:.3f})'
+            if self._contacts == 1:
+                self.get_logger().error(
+                    f'contact: the robot (radius {self._radius:g} m) touches an obstacle at '
+                    f'{where}, {self._sim_time:.2f} s simulated')
+            else:
+                self.get_logger().warning(
+                    f'contact episode {self._contacts} at {where}, '
+                    f'{self._sim_time:.2f} s simulated')
+        self._in_contact = touching
+
+    def _publish_scan(self, stamp: Any) -> None:
+        """Cast and publish a scan if a scan period ended during this tick."""
+        if self._scan_phase < 1.0 - _TICK_EPS:
+            return
+        self._scan_phase = max(0.0, self._scan_phase - math.floor(self._scan_phase + _TICK_EPS))
+        scan = self._laser.scan(self._state)
+        self._scan_pub.publish(laser_scan_msg(
+            scan, frame_id=str(self.get_parameter('child_frame_id').value), stamp=stamp))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -40,10 +40,13 @@ from mpc_local_planner.ros.closed_loop import (
     LoopOptions,
     main,
     node_parameters,
+    recorder_topics,
     run_closed_loop,
+    write_known_map,
 )
 from mpc_local_planner.ros.qos import DIAGNOSTICS_QOS
 from mpc_local_planner.worlds.data_files import resolve_data_file
+from mpc_local_planner.worlds.map_files import load_map
 from mpc_local_planner.worlds.world import load_world
 
 WORLD_FILE = resolve_data_file('paper_obstacle.yaml')
@@ -72,6 +75,7 @@ def check_run(out, metrics) -> None:
     assert on_disk['world_name'] == WORLD.name  # from the bag's metadata
     assert (out / 'trajectory.png').stat().st_size > 0
     assert on_disk['messages']['/odom'] > 100 and on_disk['messages']['/plan'] == 1
+    assert on_disk['contacts'] == 0  # counted by the simulator in every mode
 
 
 @pytest.mark.slow
@@ -182,3 +186,86 @@ def test_the_diagnostics_that_stop_the_run_reach_the_bag(ros, tmp_path: Path) ->
     recorder.close()
     assert read_run(bag).goal_reached
     assert recorder.counts['/mpc/diagnostics'] == monitor.messages == 3
+
+
+UNKNOWN_BOX_FILE = resolve_data_file('unknown_box.yaml')
+UNKNOWN_BOX = load_world(UNKNOWN_BOX_FILE)
+
+
+def test_with_sensing_no_node_but_the_simulator_reads_the_world(tmp_path) -> None:
+    map_file = tmp_path / 'map.yaml'
+    params = node_parameters(LoopOptions(path='rrt', sensing=True), UNKNOWN_BOX_FILE,
+                             UNKNOWN_BOX, map_file=map_file)
+    assert params['unicycle_simulator']['world_file'] == str(UNKNOWN_BOX_FILE)
+    assert params['unicycle_simulator']['robot_radius'] == 0.2
+    assert params['map_server']['yaml_filename'] == str(map_file)
+    planner, controller = params['global_planner'], params['mpc_controller']
+    assert planner['use_map'] is True and planner['use_scan'] is True
+    assert controller['obstacle_sources'] == ['map', 'scan']
+    # the radius they can no longer read from the world
+    assert planner['robot_radius'] == controller['robot_radius'] == 0.2
+    readers = {name for name, values in params.items() if values.get('world_file')}
+    assert readers == {'unicycle_simulator'}
+    np.testing.assert_allclose(planner['goal'], UNKNOWN_BOX.goal)
+    # without sensing the simulator holds the true world all the same (contacts)
+    plain = node_parameters(LoopOptions(path='rrt'), UNKNOWN_BOX_FILE, UNKNOWN_BOX)
+    assert plain['unicycle_simulator']['world_file'] == str(UNKNOWN_BOX_FILE)
+    assert 'map_server' not in plain and 'obstacle_sources' not in plain['mpc_controller']
+    with pytest.raises(ValueError, match='map'):
+        node_parameters(LoopOptions(path='rrt', sensing=True), UNKNOWN_BOX_FILE, UNKNOWN_BOX)
+
+
+def test_the_served_map_holds_the_known_obstacles_and_not_the_unknown_ones(tmp_path) -> None:
+    occupancy = load_map(write_known_map(UNKNOWN_BOX, tmp_path / 'map'))
+    assert occupancy.resolution == pytest.approx(0.05)
+
+    def value(x: float, y: float) -> int:
+        rows, cols = occupancy.world_to_cell(np.array([[x, y]]))
+        return int(occupancy.data[rows[0], cols[0]])
+
+    assert value(2.0, 0.0) == 100  # the known wall
+    assert value(3.0, 0.6) == 0  # the unknown box: in no map
+    assert value(0.0, 0.0) == 0
+
+
+def test_the_recorder_records_scan_with_sensing_and_contacts_always() -> None:
+    plain, sensing = recorder_topics(sensing=False), recorder_topics(sensing=True)
+    assert 'scan' not in plain['topics'] and 'simulator/contacts' in plain['topics']
+    index = sensing['topics'].index('scan')
+    assert sensing['types'][index] == 'sensor_msgs/msg/LaserScan'
+    assert len(sensing['topics']) == len(sensing['types'])
+    assert 'simulator/contacts' in sensing['transient_local_topics']
+
+
+def check_sensing_run(out: Path, world) -> dict:
+    metrics = json.loads((out / 'metrics.json').read_text())
+    assert metrics['reached'] is True and metrics['stop_reason'] == 'goal reached', metrics
+    assert metrics['contacts'] == 0 and metrics['sensing'] is True
+    assert (out / 'map' / f'{world.name}.yaml').is_file()
+    assert (out / 'trajectory.png').stat().st_size > 0
+    rows = read_trajectory_csv(out / 'trajectory.csv')
+    for obstacle in (*world.obstacles, *world.unknown_obstacles):
+        assert not np.any(obstacle.contains(rows[:, 1:3]))
+    assert read_run(out / 'bag').counts  # the bag is readable
+    return metrics
+
+
+@pytest.mark.slow
+def test_closed_loop_with_sensing_reaches_the_paper_target_without_contact(tmp_path) -> None:
+    code = main(['--world', str(WORLD_FILE), '--out', str(tmp_path), '--sensing',
+                 '--rtf', '4', '--timeout', '120'])
+    assert code == 0
+    check_sensing_run(tmp_path, WORLD)
+
+
+@pytest.mark.slow
+def test_a_run_with_a_contact_fails_and_reports_it(tmp_path) -> None:
+    # an unknown box on the paper's path, and no sensing: the controller drives into it
+    world = tmp_path / 'hidden_box.yaml'
+    world.write_text(WORLD_FILE.read_text()
+                     + 'unknown_obstacles:\n  - box: [0.2, 0.25, 0.45, 0.5]\n')
+    code = main(['--world', str(world), '--out', str(tmp_path / 'out'), '--rtf', '4',
+                 '--timeout', '120', '--time-limit', '40'])
+    assert code == 1
+    metrics = json.loads((tmp_path / 'out' / 'metrics.json').read_text())
+    assert metrics['contacts'] >= 1

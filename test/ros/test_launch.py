@@ -260,6 +260,54 @@ def test_simulation_launch_serves_the_map_argument_or_none_for_a_world_without_a
     assert 'map_server' not in executables and 'mpc_controller' in executables
 
 
+@pytest.mark.slow
+def test_simulation_launch_with_sensing_gives_the_world_only_to_the_simulator(
+        monkeypatch: pytest.MonkeyPatch, ros: Any, tmp_path: Path) -> None:
+    ros.tmp_path = tmp_path
+    simulation = ROOT / 'launch' / 'simulation.launch.py'
+    arguments, nodes = _describe(simulation, monkeypatch,
+                                 {'sensing': 'true', 'world': 'unknown_box'})
+    assert arguments['sensing'] == 'false'  # off unless asked for
+    values = {n.kwargs['executable']: _parameter_values(n, {}) for n in nodes}
+    world_file = str(ROOT / 'config' / 'worlds' / 'unknown_box.yaml')
+    simulator = values['unicycle_simulator']
+    assert simulator['world_file'] == world_file and simulator['robot_radius'] == 0.2
+    assert values['global_planner']['world_file'] == ''
+    assert values['global_planner']['use_map'] is True
+    assert values['global_planner']['use_scan'] is True
+    assert values['mpc_controller']['world_file'] == ''
+    assert values['mpc_controller']['obstacle_sources'] == ['map', 'scan']
+    assert _installed_path(values['map_server']['yaml_filename']) == (
+        f'{SHARE}/config/maps/unknown_box.yaml')
+    # no node but the simulator reads the world's obstacles
+    readers = {name for name, v in values.items() if v.get('world_file')}
+    assert readers == {'unicycle_simulator'}
+    # and every node declares what the launch file gives it
+    for node in nodes:
+        executable = node.kwargs['executable']
+        declared = _declared_parameters(executable, ros)
+        assert set(values[executable]) <= declared, (executable,
+                                                    set(values[executable]) - declared)
+
+
+def test_simulation_launch_gives_the_simulator_the_true_world_without_sensing(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    simulation = ROOT / 'launch' / 'simulation.launch.py'
+    _, nodes = _describe(simulation, monkeypatch, {'world': 'unknown_box'})
+    values = {n.kwargs['executable']: _parameter_values(n, {}) for n in nodes}
+    world_file = str(ROOT / 'config' / 'worlds' / 'unknown_box.yaml')
+    # the simulator counts contacts in every mode; planner and controller read the world
+    assert values['unicycle_simulator']['world_file'] == world_file
+    assert values['global_planner']['world_file'] == world_file
+    assert values['mpc_controller']['world_file'] == world_file
+    assert 'obstacle_sources' not in values['mpc_controller']
+    # sensing on a world without a map: refused, with the reason
+    mapless = tmp_path / 'mapless_world.yaml'
+    mapless.write_text((ROOT / 'config' / 'worlds' / 'paper_obstacle.yaml').read_text())
+    with pytest.raises(RuntimeError, match='sensing:=true needs a map'):
+        _describe(simulation, monkeypatch, {'world': str(mapless), 'sensing': 'true'})
+
+
 def _rviz_topics(config: Any) -> set[str]:
     """Return every topic the RViz config names (displays and tools)."""
     topics = set()
