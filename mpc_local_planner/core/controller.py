@@ -16,16 +16,19 @@
 
 `MpcController` owns a `PathReferenceMPC`, the world's obstacles and the plan, and decides
 what to command at each control step: the MPC's first input, or zero, with a `Reason` (no
-plan, no, stale or invalid odometry, invalid plan, goal reached, solver stop, error). The node only
-converts messages and publishes, so everything that can go wrong is testable here without a
-DDS participant.
+plan, no, stale or invalid odometry, no or stale scan, invalid plan, goal reached, solver stop,
+error). The node only converts messages and publishes, so everything that can go wrong is
+testable here without a DDS participant.
 
 Safety rules kept here (see the README's "Safety behaviours"):
-- a plan is refused unless it is finite, within MAX_COORDINATE, has two distinct positions,
-  at most max_plan_poses poses, and clears the obstacles grown by the robot radius;
+- a plan is refused unless it is finite, within MAX_COORDINATE, has two distinct positions and
+  at most max_plan_poses poses; a plan through an obstacle is followed (the MPC stops in front
+  of the obstacle or goes around it: its terminal state x_N = g_p(s) must be clear too), and
+  `path_blockage` says where the remaining plan is first blocked;
 - a state is refused unless it is finite and within MAX_COORDINATE;
 - odometry older than odom_timeout, or from the future by more than that (the clock jumped
-  back), is stale;
+  back), is stale; so is a scan older than scan_timeout when the scan is a source of
+  obstacles (and before the first one, there is no scan: the robot does not drive blind);
 - the proof's shifted candidate is applied for at most N consecutive solver failures: its
   inputs run out after N shifts, and then the robot stops;
 - every command is finite and within the model's bounds, else it is zero.
@@ -43,15 +46,17 @@ import numpy as np
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import MpcSolution, PathReferenceMPC, PlanSource
-from mpc_local_planner.core.obstacles import ConvexPolygon, first_blocked_segment
+from mpc_local_planner.core.obstacles import ConvexPolygon, first_blocked_segment, ObstacleSet
 from mpc_local_planner.core.paths import ReferencePath, simplify_polyline, WaypointPath, wrap_angle
 
 __all__ = [
+    'Blockage',
     'ControllerSettings',
     'ControlOutput',
     'MAX_COORDINATE',
     'MpcController',
     'Reason',
+    'within_faces',
 ]
 
 
@@ -76,6 +81,10 @@ class Reason(Enum):
     GOAL_REACHED = 'goal_reached'
     STOP = 'stop'
     ERROR = 'error'
+    # The laser is a source of obstacles and its latest valid scan is older than scan_timeout
+    # (malformed scans are dropped, so only bad ones coming also ends here), or none came yet.
+    STALE_SCAN = 'stale_scan'
+    NO_SCAN = 'no_scan'
 
     @property
     def text(self) -> str:
@@ -99,6 +108,8 @@ _REASON_TEXT = {
     Reason.GOAL_REACHED: 'goal reached',
     Reason.STOP: 'no feasible input, stopping',
     Reason.ERROR: 'error',
+    Reason.STALE_SCAN: 'scan is stale',
+    Reason.NO_SCAN: 'no scan yet',
 }
 
 
@@ -108,6 +119,51 @@ MAX_COORDINATE = 1e6
 # Tolerances of the Ramer-Douglas-Peucker pass that makes a long plan fit the solver's
 # segment capacity, tried in order (metres).
 _SIMPLIFY_TOLERANCES = (0.0, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2)
+
+
+class Blockage(NamedTuple):
+    """Where the remaining plan first meets an obstacle the controller knows.
+
+    Attributes:
+        blocked: whether the plan, from the robot's projection on, meets a grown obstacle.
+        at: arc length (m) along the plan from the robot's projection to the first blocked
+            point; NaN when the plan is clear (or there is no plan or state).
+
+    """
+
+    blocked: bool = False
+    at: float = math.nan
+
+
+def within_faces(obstacles: Sequence[ConvexPolygon], max_faces: int) -> list[ConvexPolygon]:
+    """Return the obstacles, those with more than max_faces faces replaced by a rectangle.
+
+    The rectangle is the smallest-area one around the polygon with a side along one of its
+    edges (it contains the polygon: avoiding it avoids the polygon). Sensed obstacles (a
+    scan cluster's hull) may have more faces than the NLP's slots hold; the world's are
+    refused instead, with a reason, where the parameters are checked.
+    """
+    fitted = []
+    for obstacle in obstacles:
+        if obstacle.num_faces <= max_faces:
+            fitted.append(obstacle)
+            continue
+        vertices = np.asarray(obstacle.vertices, dtype=float)
+        edges = np.roll(vertices, -1, axis=0) - vertices
+        angles = np.arctan2(edges[:, 1], edges[:, 0])
+        best = None
+        for angle in angles:
+            c, s = math.cos(angle), math.sin(angle)
+            along = vertices @ np.array([c, s])
+            across = vertices @ np.array([-s, c])
+            area = np.ptp(along) * np.ptp(across)
+            if best is None or area < best[0]:
+                best = (area, c, s, along.min(), along.max(), across.min(), across.max())
+        _, c, s, a0, a1, b0, b1 = best
+        u, n = np.array([c, s]), np.array([-s, c])
+        corners = [a0 * u + b0 * n, a1 * u + b0 * n, a1 * u + b1 * n, a0 * u + b1 * n]
+        fitted.append(ConvexPolygon.from_vertices(corners))
+    return fitted
 
 
 class ControlOutput(NamedTuple):
@@ -146,6 +202,8 @@ class ControllerSettings:
             re-plans reuse the built solver).
         max_plan_poses: a plan with more poses is refused: converting and simplifying it
             would hold up the control loop (10,000 poses at 5 cm is 500 m).
+        scan_timeout: a scan older than this (seconds of ROS time) is stale, when the
+            laser is a source of obstacles (compute's scan_required).
 
     """
 
@@ -155,11 +213,12 @@ class ControllerSettings:
     turn_length: float = 0.25
     capacity: int = 64
     max_plan_poses: int = 10_000
+    scan_timeout: float = 0.5
 
     def __post_init__(self) -> None:
         """Refuse non-positive tolerances and capacities."""
         for name in ('goal_tolerance', 'goal_heading_tolerance', 'odom_timeout',
-                     'turn_length'):
+                     'turn_length', 'scan_timeout'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 msg = f'{name} must be > 0 and finite, got {value}'
@@ -194,6 +253,10 @@ class MpcController:
         self._path: ReferencePath | None = None
         self._solved_last_step = False
         self._solver_failures = 0
+        # the plan as a polyline (x, y) for path_blockage, and the segment of the robot's
+        # latest projection onto it (projections only move forward along a plan)
+        self._polyline: np.ndarray | None = None
+        self._projection_segment = 0
 
     # ------------------------------------------------------------------ configuration
     @property
@@ -254,15 +317,37 @@ class MpcController:
                                      path=self._path)
 
     def set_obstacles(self, obstacles: Sequence[ConvexPolygon]) -> None:
-        """Replace the obstacles (as described, not inflated)."""
-        self._mpc.set_obstacles(obstacles)
-        self._obstacles = list(obstacles)
+        """Replace the obstacles (as described, not inflated); cheap enough for every step.
+
+        Nothing is rebuilt and the warm start and the Lyapunov history are kept: the next
+        solve verifies the shifted candidate against the obstacles now in force (the MPC
+        checks every reachable obstacle geometrically and activates lazily), so a candidate
+        that an obstacle seen since blocks is not applied. The same obstacles again (the
+        same objects, as when no new scan or map came) change nothing.
+
+        Raises:
+            ValueError: if an obstacle has more faces than config.faces_per_obstacle (see
+                within_faces).
+
+        """
+        new = list(obstacles)
+        if len(new) == len(self._obstacles) and all(
+                a is b for a, b in zip(new, self._obstacles, strict=True)):
+            return
+        self._mpc.set_obstacles(new)
+        self._obstacles = new
 
     def set_path(self, path: ReferencePath) -> None:
         """Follow path (an analytic path, or a WaypointPath built elsewhere)."""
         self._mpc.set_path(path)
         self._path = path
         self._solved_last_step = False
+        if isinstance(path, WaypointPath):
+            polyline = path.knots[:, :2]
+        else:
+            polyline = path.sample()[1][:, :2]
+        self._polyline = np.asarray(polyline, dtype=float)
+        self._projection_segment = 0
 
     def set_plan(self, poses: np.ndarray) -> WaypointPath:
         """Follow a global plan of (M, 3) poses (x, y, yaw), as a nav_msgs/Path carries.
@@ -277,8 +362,10 @@ class MpcController:
         Raises:
             ValueError: saying what is wrong (Reason.INVALID_PLAN's detail) if poses is
                 not (M, 3) finite numbers within MAX_COORDINATE with two distinct
-                positions, has more than max_plan_poses rows, or the path to follow passes
-                through an obstacle grown by the robot radius.
+                positions, or has more than max_plan_poses rows. A plan through an obstacle
+                is not refused: the MPC keeps the robot out of the obstacle (it stops in
+                front of it, or goes around where the horizon reaches past it), and
+                path_blockage says where the plan is blocked, for a planner to re-plan.
 
         """
         arr = np.asarray(poses, dtype=float)
@@ -318,26 +405,8 @@ class MpcController:
         except ValueError as err:
             msg = str(err)
             raise ValueError(msg) from None
-        self._check_clear(path)
         self.set_path(path)
         return path
-
-    def _check_clear(self, path: WaypointPath) -> None:
-        """Refuse a path to follow that passes through an obstacle grown by the robot radius.
-
-        The MPC would never enter the obstacle (its constraints forbid it) but would stall in
-        front of it: Assumption 1 of the paper fails, and the operator should hear why.
-        """
-        radius = self._config.robot_radius
-        grown = [o.inflate(radius) if radius > 0 else o for o in self._obstacles]
-        blocked = first_blocked_segment(grown, path.knots[:, :2])
-        if blocked is not None:
-            k, i = blocked
-            a, b = path.knots[i, :2], path.knots[i + 1, :2]
-            msg = (f'it passes through obstacle {k} (grown by the robot '
-                   f'radius {radius:g} m) between ({a[0]:.3f}, {a[1]:.3f}) and '
-                   f'({b[0]:.3f}, {b[1]:.3f})')
-            raise ValueError(msg)
 
     def check_state(self, state: np.ndarray) -> np.ndarray:
         """Return state as a float (3,) array if it is a usable measurement.
@@ -371,7 +440,47 @@ class MpcController:
     def clear_path(self) -> None:
         """Forget the plan: the controller commands zero until a new one comes."""
         self._path = None
+        self._polyline = None
         self._mpc.reset()
+
+    def path_blockage(self, state: np.ndarray | None) -> Blockage:
+        """Say where the remaining plan first meets an obstacle grown as the MPC grows it.
+
+        The remaining plan is the plan's polyline from the robot's projection onto it (the
+        nearest point, on the segment of the last projection or a later one) to its end.
+
+        Args:
+            state: the robot's (x, y, yaw), or None (then: not blocked, NaN).
+
+        """
+        polyline = self._polyline
+        if polyline is None or state is None:
+            return Blockage()
+        try:
+            position = self.check_state(state)[:2]
+        except ValueError:
+            return Blockage()
+        start = min(self._projection_segment, len(polyline) - 2)
+        a, b = polyline[start:-1], polyline[start + 1:]
+        d = b - a
+        length2 = np.einsum('ij,ij->i', d, d)
+        t = np.clip(np.einsum('ij,ij->i', position - a, d) / np.maximum(length2, 1e-18), 0, 1)
+        nearest = a + t[:, None] * d
+        k = int(np.argmin(np.hypot(*(nearest - position).T)))
+        self._projection_segment = start + k
+        remaining = np.vstack([nearest[k], polyline[start + k + 1:]])
+        grown = self.grown_obstacles
+        if not grown or len(remaining) < 2:
+            return Blockage()
+        hits = ObstacleSet(grown).segment_hits(remaining[:-1], remaining[1:], grazing=False)
+        blocked = np.flatnonzero(np.any(hits, axis=1))
+        if not len(blocked):
+            return Blockage()
+        i = int(blocked[0])
+        lengths = np.hypot(*np.diff(remaining, axis=0).T)
+        return Blockage(True, float(np.sum(lengths[:i]))
+                        + _entry(remaining[i], remaining[i + 1],
+                                 [o for o, hit in zip(grown, hits[i], strict=True) if hit]))
 
     # ------------------------------------------------------------------ control
     def goal_error(self, state: np.ndarray) -> tuple[float, float]:
@@ -384,7 +493,8 @@ class MpcController:
         return position, heading
 
     def compute(self, state: np.ndarray | None, now: float, *,
-                state_time: float | None = None) -> ControlOutput:
+                state_time: float | None = None, scan_required: bool = False,
+                scan_time: float | None = None) -> ControlOutput:
         """Return the command for the measured state at time now.
 
         Never raises: anything unexpected becomes a zero command with Reason.ERROR.
@@ -393,6 +503,10 @@ class MpcController:
             state: (3,) measured (x, y, yaw), or None when no odometry has come.
             now: the current time (seconds, the clock of state_time).
             state_time: when state was measured; older than settings.odom_timeout is stale.
+            scan_required: the laser is a source of obstacles: without a scan (scan_time
+                None) or with one older than settings.scan_timeout the robot stops, as the
+                obstacles it knows may be out of date.
+            scan_time: the stamp of the latest valid scan (seconds), or None.
 
         """
         zero = np.zeros(2)
@@ -406,6 +520,12 @@ class MpcController:
             # from the future by more than the timeout means the clock jumped back
             if not -self.settings.odom_timeout <= age <= self.settings.odom_timeout:
                 return self._idle(Reason.STALE_ODOM)
+        if scan_required:
+            if scan_time is None:
+                return self._idle(Reason.NO_SCAN)
+            age = now - scan_time
+            if not -self.settings.scan_timeout <= age <= self.settings.scan_timeout:
+                return self._idle(Reason.STALE_SCAN)
         try:
             x = self.check_state(state)
         except ValueError as err:
@@ -455,3 +575,22 @@ class MpcController:
             self._mpc.reset()
             self._solved_last_step = False
         return ControlOutput(np.zeros(2), None, reason, detail)
+
+
+def _entry(a: np.ndarray, b: np.ndarray, obstacles: list[ConvexPolygon]) -> float:
+    """Return the distance from a along the segment to b at which it first meets obstacles.
+
+    Bisection on `first_blocked_segment` (grazing does not count, as in path_blockage)
+    over the segment's first part: 40 halvings put it within 1e-12 of the length.
+    """
+    length = float(np.hypot(*(b - a)))
+    if first_blocked_segment(obstacles, np.array([a, a])) is not None:
+        return 0.0
+    lo, hi = 0.0, 1.0
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        if first_blocked_segment(obstacles, np.array([a, a + mid * (b - a)])) is not None:
+            hi = mid
+        else:
+            lo = mid
+    return hi * length

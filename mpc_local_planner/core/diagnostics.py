@@ -32,7 +32,7 @@ from typing import Any, Iterable, Mapping, NamedTuple
 
 import numpy as np
 
-from mpc_local_planner.core.controller import ControlOutput, Reason
+from mpc_local_planner.core.controller import Blockage, ControlOutput, Reason
 from mpc_local_planner.core.mpc import PlanSource
 
 __all__ = [
@@ -81,6 +81,8 @@ class Key(Enum):
     THETA = 'theta'
     V = 'v'  # the command published
     OMEGA = 'omega'
+    PATH_BLOCKED = 'path_blocked'  # the remaining plan meets a grown obstacle
+    BLOCKED_AT = 'blocked_at'  # metres along the plan from the robot's projection (nan)
 
 
 class PlannerKey(Enum):
@@ -90,6 +92,7 @@ class PlannerKey(Enum):
     DETAIL = 'detail'  # why not (or what was published)
     POSES = 'poses'
     LENGTH = 'length'  # metres
+    WAITING = 'waiting'  # 'true' while the goal waits for input (a map): a plan may still come
 
 
 class BagKey(Enum):
@@ -143,10 +146,13 @@ class ControllerDiagnostics(NamedTuple):
     theta: float = math.nan
     v: float = 0.0
     omega: float = 0.0
+    path_blocked: bool = False
+    blocked_at: float = math.nan
 
     @classmethod
     def from_output(cls, output: ControlOutput, *, state: np.ndarray | None,
-                    state_time: float | None, failures_total: int) -> ControllerDiagnostics:
+                    state_time: float | None, failures_total: int,
+                    blockage: Blockage | None = None) -> ControllerDiagnostics:
         """Describe a control step.
 
         Args:
@@ -154,6 +160,8 @@ class ControllerDiagnostics(NamedTuple):
             state: the latest measured (x, y, theta), or None.
             state_time: when it was measured (seconds), or None.
             failures_total: the controller's count of steps without a fresh solution.
+            blockage: where the remaining plan is blocked (MpcController.path_blockage);
+                None: not blocked.
 
         """
         sol = output.solution
@@ -174,6 +182,8 @@ class ControllerDiagnostics(NamedTuple):
             state_time=math.nan if state_time is None else float(state_time),
             x=x, y=y, theta=theta,
             v=float(output.u[0]), omega=float(output.u[1]),
+            path_blocked=bool(blockage.blocked) if blockage else False,
+            blocked_at=float(blockage.at) if blockage else math.nan,
         )
 
     @property
@@ -205,11 +215,19 @@ class PlannerDiagnostics(NamedTuple):
     detail: str = ''
     poses: int = 0
     length: float = math.nan
+    waiting: bool = False
 
     @property
     def level(self) -> Level:
-        """OK for a published plan, ERROR when none will come for this goal."""
-        return Level.OK if self.planned else Level.ERROR
+        """OK for a published plan, WARN while waiting, ERROR when none will come."""
+        if self.planned:
+            return Level.OK
+        return Level.WARN if self.waiting else Level.ERROR
+
+    @property
+    def failed(self) -> bool:
+        """No plan will come for this goal (not published, and not waiting for input)."""
+        return not self.planned and not self.waiting
 
     def to_values(self) -> list[tuple[str, str]]:
         """Return the (key, value) strings in `PlannerKey` order."""

@@ -35,13 +35,21 @@ from geometry_msgs.msg import (
     Twist,
     TwistStamped,
 )
-from nav_msgs.msg import Odometry, Path
+from nav_msgs.msg import OccupancyGrid, Odometry, Path
 import numpy as np
+from sensor_msgs.msg import LaserScan
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker
 
+from mpc_local_planner.perception.grids import grid_from_fields, GridError
+from mpc_local_planner.perception.scan_obstacles import Scan
+from mpc_local_planner.worlds.map_files import OccupancyMap
+
 __all__ = [
     'delete_all_marker',
+    'grid_from_message',
+    'scan_beam_count',
+    'scan_from_message',
     'odometry_to_state',
     'path_pose_count',
     'path_to_poses',
@@ -320,3 +328,65 @@ def delete_all_marker(*, frame_id: str, stamp: Time) -> Marker:
     marker.header.stamp = stamp
     marker.action = Marker.DELETEALL
     return marker
+
+
+def scan_beam_count(data: bytes) -> int | None:
+    """Return how many ranges a serialised sensor_msgs/LaserScan holds, without decoding it.
+
+    A corrupt or hostile scan may claim millions of beams; the count is read from the CDR
+    bytes (as `path_pose_count` reads a Path's) so that such a scan is refused before rclpy
+    decodes it into Python floats: the encapsulation header, stamp (8 bytes), frame_id
+    (uint32 length with the NUL, then the characters, padded to 4), seven float32 (angle_min,
+    angle_max, angle_increment, time_increment, scan_time, range_min, range_max), then the
+    ranges' sequence length as a uint32.
+
+    Returns:
+        The count, or None if data is too short or not CDR (deserialise it to find out why).
+
+    """
+    if len(data) < 16 or data[0] != 0 or data[1] not in (0, 1):
+        return None
+    order = '<' if data[1] == 1 else '>'
+    body = 4
+    (length,) = struct.unpack_from(f'{order}I', data, body + 8)
+    offset = 12 + length
+    offset += -offset % 4
+    offset += 7 * 4
+    if body + offset + 4 > len(data):
+        return None
+    (count,) = struct.unpack_from(f'{order}I', data, body + offset)
+    return int(count)
+
+
+def scan_from_message(msg: LaserScan) -> Scan:
+    """Return the perception layer's Scan of a sensor_msgs/LaserScan (not validated here).
+
+    The ranges and intensities are float32 arrays as the message holds them (numpy views
+    of its buffers where rclpy gives array.array); the stamp is in seconds.
+    """
+    return Scan(angle_min=float(msg.angle_min), angle_increment=float(msg.angle_increment),
+                range_min=float(msg.range_min), range_max=float(msg.range_max),
+                ranges=np.asarray(msg.ranges, dtype=np.float32),
+                intensities=np.asarray(msg.intensities, dtype=np.float32),
+                stamp=stamp_to_seconds(msg.header.stamp))
+
+
+def grid_from_message(msg: OccupancyGrid) -> OccupancyMap:
+    """Return the occupancy map of a nav_msgs/OccupancyGrid, its fields checked.
+
+    Raises:
+        GridError: if the data length is not width x height, the resolution is not > 0,
+            the origin (or its orientation) is not finite, or a value is outside -1..100.
+
+    """
+    info = msg.info
+    origin = info.origin
+    try:
+        yaw = quaternion_to_yaw(origin.orientation)
+    except ValueError as err:
+        msg_text = f'grid origin orientation: {err}'
+        raise GridError(msg_text) from None
+    data = np.frombuffer(msg.data, dtype=np.int8) if isinstance(msg.data, (bytes, bytearray)) \
+        else np.asarray(msg.data, dtype=np.int8)
+    return grid_from_fields(data, int(info.width), int(info.height), float(info.resolution),
+                            (float(origin.position.x), float(origin.position.y), yaw))

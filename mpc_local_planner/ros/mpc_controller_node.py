@@ -22,17 +22,32 @@ cmd_vel and stops the timer; ``cleanup`` frees the NLP and every publisher and
 subscription; ``shutdown`` does the same (with a zero cmd_vel first when active). With
 ``autostart`` (the default) ``run_node`` configures and activates at start.
 
-Subscribes ``odom`` and ``plan`` (reliable, transient_local), publishes ``cmd_vel`` (Twist, or
+Subscribes ``odom`` and ``plan`` (reliable, transient_local), ``scan`` (sensor_msgs/LaserScan,
+best effort) when ``obstacle_sources`` lists 'scan' and ``map`` (nav_msgs/OccupancyGrid,
+transient_local) when it lists 'map'; publishes ``cmd_vel`` (Twist, or
 TwistStamped with ``enable_stamped_cmd_vel``), ``local_plan`` (the prediction),
 ``mpc/diagnostics``, ``mpc/obstacles`` (what it avoids, as MarkerArray) and ``mpc/footprint``.
 All decisions live in `MpcController`; this node converts messages, keeps the latest inputs
 and publishes.
 
+What the controller avoids, each control step: the world file's obstacles (source 'world'),
+the map's occupied cells near the robot merged into rectangles (source 'map'; recomputed
+when the map comes or the robot enters another cell), and what the laser saw (source 'scan':
+each scan's returns placed in the map frame with the odometry pose AT THE SCAN'S STAMP,
+interpolated in the last ODOM_HISTORY_S seconds of odometry (a scan older than that uses the
+oldest pose kept, a newer one the latest), clustered into convex pieces and remembered for
+``obstacle_memory`` seconds). A plan through an obstacle is followed: the MPC stops in front
+of it or goes around, and the diagnostics say ``path_blocked`` and ``blocked_at``.
+
 Refused input (odometry with NaN, inf or a zero quaternion; a plan that is empty, too short,
-too long, not finite, in another frame or through an obstacle) makes the command zero until
-valid input comes, with one error per problem in the log (throttled) and the problem in
-the diagnostics. Invalid parameters are refused with a reason; at start, the process exits
-with code 2 and the reason on stderr (so does a configure that fails, with autostart).
+too long, not finite or in another frame) makes the command zero until valid input comes,
+with one error per problem in the log (throttled) and the problem in the diagnostics. A
+malformed scan or grid (NaN or negative ranges, a zero increment, mismatched lengths, too
+many beams, another frame; a grid whose data is not width x height, a resolution <= 0, a
+non-finite origin) is dropped with one throttled error; with 'scan' a source, the robot
+stops until a scan comes and whenever the latest valid one is older than ``scan_timeout``.
+Invalid parameters are refused with a reason; at start, the process exits with code 2 and the
+reason on stderr (so does a configure that fails, with autostart).
 """
 
 from __future__ import annotations
@@ -43,20 +58,23 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PolygonStamped, Twist, TwistStamped
-from nav_msgs.msg import Odometry, Path
+from nav_msgs.msg import OccupancyGrid, Odometry, Path
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import MarkerArray
 
 from mpc_local_planner.core.config import MpcConfig, SOLVERS
 from mpc_local_planner.core.controller import (
+    Blockage,
     ControllerSettings,
     ControlOutput,
     MpcController,
     Reason,
+    within_faces,
 )
 from mpc_local_planner.core.diagnostics import (
     CONTROLLER_DIAGNOSTICS_TOPIC,
@@ -65,23 +83,28 @@ from mpc_local_planner.core.diagnostics import (
 )
 from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.obstacles import ConvexPolygon
-from mpc_local_planner.core.paths import analytic_path
+from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
+from mpc_local_planner.core.paths import analytic_path, wrap_angle
+from mpc_local_planner.perception.grids import grid_rectangles
+from mpc_local_planner.perception.scan_obstacles import MAX_BEAMS, ObstacleMemory, validate_scan
 from mpc_local_planner.ros.conversions import (
     delete_all_marker,
+    grid_from_message,
     odometry_to_state,
     path_pose_count,
     path_to_poses,
     polygon_marker,
     polygon_stamped,
     poses_to_path,
+    scan_beam_count,
+    scan_from_message,
     seconds_to_stamp,
     stamp_to_seconds,
     twist_from_u,
     twist_stamped_from_u,
 )
 from mpc_local_planner.ros.lifecycle import ManagedNode
-from mpc_local_planner.ros.node_main import EXIT_INVALID_PARAMETERS, run_node
+from mpc_local_planner.ros.node_main import destroy_on_failure, EXIT_INVALID_PARAMETERS, run_node
 from mpc_local_planner.ros.parameters import (
     declare_parameters,
     DEFAULT_WORLD_FILE,
@@ -91,15 +114,18 @@ from mpc_local_planner.ros.qos import (
     CMD_VEL_QOS,
     DIAGNOSTICS_QOS,
     LOCAL_PLAN_QOS,
+    MAP_QOS,
     ODOM_QOS,
     PLAN_QOS,
+    SCAN_QOS,
 )
 from mpc_local_planner.ros.throttle import ProblemThrottle
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world
 
 __all__ = ['DEFAULTS', 'EXIT_INVALID_PARAMETERS', 'FOOTPRINT_TOPIC', 'MpcControllerNode',
-           'OBSTACLES_TOPIC', 'PARAMETERS', 'build_settings', 'log_line', 'main']
+           'OBSTACLE_SOURCES', 'OBSTACLES_TOPIC', 'PARAMETERS', 'build_settings',
+           'check_sensing', 'log_line', 'main']
 
 # Seconds between two error logs of an input problem that persists.
 ERROR_THROTTLE_S = 2.0
@@ -119,6 +145,16 @@ MARKER_STYLE = {
 }
 # The frame of a TwistStamped cmd_vel.
 BASE_FRAME = 'base_link'
+# What obstacle_sources may list.
+OBSTACLE_SOURCES = ('world', 'scan', 'map')
+# Seconds of odometry kept to find the pose at a scan's stamp.
+ODOM_HISTORY_S = 2.0
+# Metres beyond the horizon's reach (v_max N h) plus the inflation within which map cells
+# and remembered scan obstacles are handed to the MPC.
+SENSING_MARGIN = 0.5
+# A serialised scan larger than this (both arrays at MAX_BEAMS float32, plus a header with
+# a long frame id) is refused before it is decoded.
+MAX_SCAN_BYTES = 2 * 4 * MAX_BEAMS + 4096
 
 # Parameter -> field of MpcConfig, Unicycle and ControllerSettings.
 _MPC_FIELDS = {
@@ -128,7 +164,8 @@ _MPC_FIELDS = {
     'max_iterations': 'max_iterations',
 }
 _MODEL_FIELDS = ('v_max', 'omega_max')
-_SETTINGS_FIELDS = ('goal_tolerance', 'goal_heading_tolerance', 'odom_timeout')
+_SETTINGS_FIELDS = ('goal_tolerance', 'goal_heading_tolerance', 'odom_timeout',
+                    'scan_timeout')
 # collision_margin None (v_max step / 2) is -1 as a parameter: a double cannot be None.
 _AUTO_MARGIN = -1.0
 # The defaults come from the dataclasses (the paper's values), the single source.
@@ -190,6 +227,21 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('frame_id', 'map',
                   'frame of local_plan, mpc/obstacles and mpc/footprint, and the frame a plan '
                   'must be in'),
+    ParameterSpec('obstacle_sources', ['world'],
+                  "what the controller avoids, any of 'world' (world_file's obstacles), "
+                  "'scan' (the laser, remembered for obstacle_memory s) and 'map' (the map's "
+                  'occupied cells near the robot); read at configure'),
+    ParameterSpec('laser_pose', [0.0, 0.0, 0.0],
+                  "the laser's [x, y, yaw] in the robot frame (m, m, rad); next scan"),
+    ParameterSpec('obstacle_memory', 5.0,
+                  'seconds an obstacle seen by the laser is remembered (unless a later beam '
+                  'passes through it); next scan', float_range=(0.01, 3600.0)),
+    ParameterSpec('scan_timeout', float(_SETTINGS.scan_timeout),
+                  "with 'scan' a source, a scan older than this (s) is stale: cmd_vel is zero "
+                  '(and before the first scan)', float_range=(0.001, 3600.0)),
+    ParameterSpec('base_frame_id', BASE_FRAME,
+                  'the robot frame: scans must be in it (laser_pose says where the laser '
+                  'sits), and a TwistStamped cmd_vel is in it'),
     ParameterSpec('enable_stamped_cmd_vel', False,
                   'publish cmd_vel as geometry_msgs/TwistStamped (frame base_link) instead of '
                   "Twist (Nav2's name); read at configure"),
@@ -207,8 +259,10 @@ it solves for the latest odom (nav_msgs/Odometry) along the latest plan (nav_msg
 transient_local; or an analytic path) and publishes cmd_vel (geometry_msgs/Twist, or
 TwistStamped with enable_stamped_cmd_vel), local_plan (the prediction), mpc/diagnostics,
 mpc/obstacles (visualization_msgs/MarkerArray: the obstacles raw, grown, and those active in
-the NLP) and mpc/footprint (geometry_msgs/PolygonStamped). Invalid input stops the robot
-(zero cmd_vel) until valid input comes. With autostart false it waits unconfigured for a
+the NLP) and mpc/footprint (geometry_msgs/PolygonStamped). Obstacles come from the world file,
+scan (sensor_msgs/LaserScan) and map (nav_msgs/OccupancyGrid), as obstacle_sources says.
+Invalid input, and a stale scan when the laser is a source, stops the robot (zero cmd_vel)
+until valid input comes. With autostart false it waits unconfigured for a
 lifecycle manager; deactivate publishes one zero cmd_vel."""
 
 
@@ -260,6 +314,27 @@ def check_obstacles(obstacles: list[ConvexPolygon], config: MpcConfig) -> None:
             raise ValueError(msg)
 
 
+def check_sensing(values: dict[str, Any]) -> None:
+    """Raise ValueError if obstacle_sources or laser_pose is not usable.
+
+    obstacle_sources must list only OBSTACLE_SOURCES (each at most once); laser_pose must be
+    three finite numbers.
+    """
+    sources = list(values['obstacle_sources'])
+    unknown = [s for s in sources if s not in OBSTACLE_SOURCES]
+    if unknown:
+        msg = f'obstacle_sources: unknown {unknown}, expected any of {list(OBSTACLE_SOURCES)}'
+        raise ValueError(msg)
+    if len(set(sources)) != len(sources):
+        msg = f'obstacle_sources lists a source twice: {sources}'
+        raise ValueError(msg)
+    pose = list(values['laser_pose'])
+    if len(pose) != 3 or not all(isinstance(v, (int, float)) and math.isfinite(v)
+                                 for v in pose):
+        msg = f'laser_pose must be three finite numbers [x, y, yaw], got {pose}'
+        raise ValueError(msg)
+
+
 def _same(a: tuple, b: tuple) -> bool:
     """Say whether two tuples hold the same objects (identity, not equality)."""
     return len(a) == len(b) and all(x is y for x, y in zip(a, b, strict=True))
@@ -276,6 +351,7 @@ class MpcControllerNode(ManagedNode):
 
     """
 
+    @destroy_on_failure
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('mpc_controller', **kwargs)
         self._world_cache: dict[str, tuple[list[ConvexPolygon], float]] = {}
@@ -287,8 +363,12 @@ class MpcControllerNode(ManagedNode):
         self._footprint_pub = None
         self._odom_sub = None
         self._plan_sub = None
+        self._scan_sub = None
+        self._map_sub = None
         self._timer = None
         self._stamped = False
+        self._sources: frozenset[str] = frozenset()
+        self._world_obstacles: list[ConvexPolygon] = []
         self._forget_inputs()
         self.add_on_set_parameters_callback(self.parameters_callback)
         declare_parameters(self, PARAMETERS)
@@ -307,6 +387,19 @@ class MpcControllerNode(ManagedNode):
         self._last_step_time: float | None = None
         self._markers_shown: tuple[tuple, tuple] | None = None  # (grown, active) last sent
         self._steps_since_markers = 0
+        # (time, state) of the last ODOM_HISTORY_S seconds of odometry, oldest first
+        self._odom_history: list[tuple[float, np.ndarray]] = []
+        # the laser's obstacles: the memory, its polygons fitted to the NLP's faces, when
+        # the latest valid scan was taken (None: none yet) and its stamp
+        self._memory: ObstacleMemory | None = None
+        self._scan_obstacles: ObstacleSet = ObstacleSet([])
+        self._scan_time: float | None = None
+        self._scan_stamp: float | None = None
+        # the latest valid map and its rectangles near the robot, by window cell
+        self._grid = None
+        self._map_window: tuple | None = None
+        self._map_obstacles: list[ConvexPolygon] = []
+        self.blockage = Blockage()
         self.last_output: ControlOutput | None = None
         self.control_steps = 0
         self.goal_reached = False
@@ -324,7 +417,10 @@ class MpcControllerNode(ManagedNode):
             values = self._values()
             world_file = str(values['world_file'])
             self._world_cache.pop(world_file, None)  # read it again: it may have changed
-            obstacles, radius = self._load_world(world_file)
+            check_sensing(values)
+            sources = frozenset(values['obstacle_sources'])
+            world_obstacles, radius = self._load_world(world_file)
+            obstacles = world_obstacles if 'world' in sources else []
             config, model, settings = build_settings(values, world_radius=radius)
             check_obstacles(obstacles, config)
             controller = MpcController(model, config, obstacles=obstacles, settings=settings)
@@ -334,7 +430,11 @@ class MpcControllerNode(ManagedNode):
             self.get_logger().error(f'configure failed: {err}')
             return TransitionCallbackReturn.FAILURE
         self.controller = controller
+        self._sources = sources
+        self._world_obstacles = list(obstacles)
         self._forget_inputs()
+        if 'scan' in sources:
+            self._memory = ObstacleMemory(float(values['obstacle_memory']))
         if values['analytic_path']:
             self._prepare()
         self._stamped = bool(values['enable_stamped_cmd_vel'])
@@ -353,8 +453,16 @@ class MpcControllerNode(ManagedNode):
         # raw: the size of a plan is checked before rclpy spends ~15 us per pose on it
         self._plan_sub = self.create_subscription(Path, 'plan', self.plan_callback, PLAN_QOS,
                                                   raw=True)
-        self.get_logger().info(f'configured: {len(obstacles)} obstacles, horizon '
-                               f'{config.horizon}, step {config.step:g} s')
+        if 'scan' in sources:
+            # raw: the beam count is checked before rclpy decodes the ranges
+            self._scan_sub = self.create_subscription(LaserScan, 'scan', self.scan_callback,
+                                                      SCAN_QOS, raw=True)
+        if 'map' in sources:
+            self._map_sub = self.create_subscription(OccupancyGrid, 'map', self.map_callback,
+                                                     MAP_QOS)
+        self.get_logger().info(f'configured: {len(obstacles)} obstacles from the world, '
+                               f'sources {sorted(sources)}, horizon {config.horizon}, step '
+                               f'{config.step:g} s')
         return super().on_configure(state)
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -412,10 +520,10 @@ class MpcControllerNode(ManagedNode):
     def _release(self) -> None:
         """Destroy the timer, subscriptions and publishers, and drop the controller."""
         self._destroy_timer()
-        for sub in (self._odom_sub, self._plan_sub):
+        for sub in (self._odom_sub, self._plan_sub, self._scan_sub, self._map_sub):
             if sub is not None:
                 self.destroy_subscription(sub)
-        self._odom_sub = self._plan_sub = None
+        self._odom_sub = self._plan_sub = self._scan_sub = self._map_sub = None
         for pub in (self._cmd_pub, self._local_plan_pub, self._diag_pub, self._obstacles_pub,
                     self._footprint_pub):
             if pub is not None:
@@ -444,9 +552,11 @@ class MpcControllerNode(ManagedNode):
         """Accept the new values only if the whole configuration stays valid."""
         try:
             values = self._values(parameters)
+            check_sensing(values)
             obstacles, radius = self._load_world(str(values['world_file']))
             config, _, _ = build_settings(values, world_radius=radius)
-            check_obstacles(obstacles, config)
+            if 'world' in values['obstacle_sources']:
+                check_obstacles(obstacles, config)
             if values['analytic_path']:
                 analytic_path(str(values['analytic_path']))
         except Exception as err:  # whatever the cause, refuse with a reason
@@ -466,9 +576,10 @@ class MpcControllerNode(ManagedNode):
             values = self._values()
             obstacles, radius = self._load_world(values['world_file'])
             config, model, settings = build_settings(values, world_radius=radius)
-            # one thread runs every callback: never between two halves of a solve
+            # one thread runs every callback: never between two halves of a solve; the
+            # obstacles in force are handed over at the next control step
             if 'world_file' in names:
-                self.controller.set_obstacles(obstacles)
+                self._world_obstacles = list(obstacles) if 'world' in self._sources else []
             self.controller.update_config(config)
             if model != self.controller.model:
                 self.controller.set_model(model)
@@ -478,6 +589,8 @@ class MpcControllerNode(ManagedNode):
                 self._plan_problem = None  # the plan topic is ignored from now on
             if 'step' in names and self._timer is not None:
                 self._make_timer()
+            if 'obstacle_memory' in names and self._memory is not None:
+                self._memory.ttl = float(values['obstacle_memory'])
         except Exception as err:  # validated above: a bug, but keep running
             self.get_logger().error(f'could not apply {sorted(names)}: {err}')
             return
@@ -513,8 +626,165 @@ class MpcControllerNode(ManagedNode):
         self._state = state
         self._state_time = min(stamp, receipt) if stamp > 0 else receipt
         self._odom_problem = None
+        self._remember_pose(stamp if stamp > 0 else receipt, state)
         if self._problems.resolve('odom'):
             self.get_logger().info('odometry is valid again')
+
+    def _remember_pose(self, time: float, state: np.ndarray) -> None:
+        """Keep state in the odometry history (sorted by time, ODOM_HISTORY_S long)."""
+        history = self._odom_history
+        if history and time < history[-1][0] - ODOM_HISTORY_S:
+            history.clear()  # the clock jumped back: the old poses are of another time
+        index = len(history)
+        while index > 0 and history[index - 1][0] > time:
+            index -= 1
+        history.insert(index, (time, state))
+        newest = history[-1][0]
+        while history and history[0][0] < newest - ODOM_HISTORY_S:
+            history.pop(0)
+
+    def pose_at(self, time: float) -> np.ndarray | None:
+        """Return the odometry pose at time, interpolated in the history (None if empty).
+
+        Between two odometry messages the position is interpolated linearly and the heading
+        along the shorter turn; before the oldest pose kept (ODOM_HISTORY_S) the oldest is
+        used, after the newest the newest (no extrapolation).
+        """
+        history = self._odom_history
+        if not history:
+            return None
+        if time <= history[0][0]:
+            return history[0][1].copy()
+        if time >= history[-1][0]:
+            return history[-1][1].copy()
+        index = 1
+        while history[index][0] < time:
+            index += 1
+        (t0, p0), (t1, p1) = history[index - 1], history[index]
+        f = (time - t0) / (t1 - t0) if t1 > t0 else 1.0
+        pose = p0 + f * (p1 - p0)
+        pose[2] = p0[2] + f * float(wrap_angle(p1[2] - p0[2]))
+        return pose
+
+    def scan_callback(self, msg: LaserScan | bytes) -> None:
+        """Place a scan's obstacles in the map frame and remember them; drop a bad scan.
+
+        The robot's pose is the odometry's at the scan's stamp (see pose_at). A malformed
+        scan is dropped with one throttled error, so the scan goes stale if only bad ones
+        come; the latest valid scan's time (its stamp, but never later than its arrival)
+        is what scan_timeout is measured against.
+
+        Args:
+            msg: the scan, or its CDR bytes as the raw subscription delivers them.
+
+        """
+        if self._memory is None:
+            return  # 'scan' is not a source (or not configured)
+        receipt = self._now()
+        try:
+            scan, stamp = self._read_scan(msg, receipt)
+            pose = self.pose_at(stamp)
+            if pose is None:
+                self.get_logger().info('scan dropped: no odometry yet to place it',
+                                       throttle_duration_sec=ERROR_THROTTLE_S)
+                return
+            if self._scan_stamp is not None and stamp < self._scan_stamp:
+                if self._scan_stamp - stamp <= ODOM_HISTORY_S:
+                    return  # out of order: the memory holds a newer view already
+                self._memory.clear()  # the clock jumped back
+            laser = [float(v) for v in self.get_parameter('laser_pose').value]
+            self._memory.update(scan, pose, laser_pose=laser)
+        except Exception as err:  # ScanError mostly; never leave a callback
+            problem = str(err) or type(err).__name__
+            if self._problems.report('scan'):
+                self.get_logger().error(f'invalid scan: {problem}; scan dropped (cmd_vel is '
+                                        'zero once the scan is stale)')
+            return
+        faces = self.controller.config.faces_per_obstacle
+        self._scan_obstacles = ObstacleSet(within_faces(self._memory.obstacles(), faces))
+        self._scan_stamp = stamp
+        self._scan_time = min(stamp, receipt)
+        if self._problems.resolve('scan'):
+            self.get_logger().info('scans are valid again')
+
+    def _read_scan(self, msg: LaserScan | bytes, receipt: float) -> tuple[Any, float]:
+        """Return the scan (validated, stamped) and its stamp in seconds.
+
+        Raises:
+            ValueError: if it is too large, in another frame, or malformed.
+
+        """
+        if isinstance(msg, (bytes, bytearray)):
+            count = scan_beam_count(bytes(msg))
+            if count is not None and count > MAX_BEAMS:
+                problem = f'{count} beams, more than the {MAX_BEAMS} accepted'
+                raise ValueError(problem)
+            if len(msg) > MAX_SCAN_BYTES:
+                problem = f'{len(msg)} bytes, more than {MAX_SCAN_BYTES} (too many values)'
+                raise ValueError(problem)
+            msg = deserialize_message(bytes(msg), LaserScan)
+        if len(msg.ranges) > MAX_BEAMS:
+            problem = f'{len(msg.ranges)} beams, more than the {MAX_BEAMS} accepted'
+            raise ValueError(problem)
+        frame = str(self.get_parameter('base_frame_id').value)
+        if msg.header.frame_id != frame:
+            problem = (f'frame {msg.header.frame_id!r} is not {frame!r} (this node does not '
+                       'transform scans: laser_pose says where the laser sits)')
+            raise ValueError(problem)
+        scan = scan_from_message(msg)
+        stamp = scan.stamp if scan.stamp > 0 else receipt
+        scan = scan._replace(stamp=stamp)
+        validate_scan(scan)
+        return scan, stamp
+
+    def map_callback(self, msg: OccupancyGrid) -> None:
+        """Keep a valid map (its rectangles near the robot are recomputed); drop a bad one."""
+        if 'map' not in self._sources or self.controller is None:
+            return
+        try:
+            frame = str(self.get_parameter('frame_id').value)
+            if msg.header.frame_id != frame:
+                problem = (f'frame {msg.header.frame_id!r} is not {frame!r} (this node does '
+                           'not transform maps)')
+                raise ValueError(problem)
+            grid = grid_from_message(msg)
+        except Exception as err:  # GridError mostly; never leave a callback
+            problem = str(err) or type(err).__name__
+            if self._problems.report('map'):
+                self.get_logger().error(f'invalid map: {problem}; map dropped (the previous '
+                                        'one, if any, stays in force)')
+            return
+        self._grid = grid
+        self._map_window = None
+        self._problems.resolve('map')
+        self.get_logger().info(f'new map: {grid.width} x {grid.height} cells of '
+                               f'{grid.resolution:g} m')
+
+    def _sensing_radius(self) -> float:
+        """Return how far from the robot sensed obstacles matter (reach, inflation, margin)."""
+        config, model = self.controller.config, self.controller.model
+        v_max = float(model.u_max[0])
+        return v_max * config.horizon * config.step + config.inflation(v_max) + SENSING_MARGIN
+
+    def _update_obstacles(self) -> None:
+        """Hand the obstacles in force to the controller: world + map + scan memory."""
+        sensed: list[ConvexPolygon] = []
+        position = self._state[:2] if self._state is not None else None
+        radius = self._sensing_radius()
+        if self._grid is not None and position is not None:
+            grid = self._grid
+            rows, cols = grid.world_to_cell(position)
+            window = (id(grid), int(rows), int(cols), radius)
+            if window != self._map_window:
+                faces = self.controller.config.faces_per_obstacle
+                self._map_obstacles = within_faces(
+                    grid_rectangles(grid, centre=position, radius=radius), faces)
+                self._map_window = window
+            sensed += self._map_obstacles
+        if len(self._scan_obstacles) and position is not None:
+            chosen, _ = self._scan_obstacles.near(position[None, :], radius)
+            sensed += [self._scan_obstacles.obstacles[i] for i in sorted(chosen)]
+        self.controller.set_obstacles(self._world_obstacles + sensed)
 
     def plan_callback(self, msg: Path | bytes) -> None:
         """Follow a new global plan (s restarts at the robot's projection onto it).
@@ -594,9 +864,16 @@ class MpcControllerNode(ManagedNode):
             elif self._plan_problem is not None:
                 output = self.controller.stop(Reason.INVALID_PLAN, self._plan_problem)
             else:
-                output = self.controller.compute(self._state, now, state_time=self._state_time)
+                self._update_obstacles()
+                output = self.controller.compute(
+                    self._state, now, state_time=self._state_time,
+                    scan_required='scan' in self._sources, scan_time=self._scan_time)
         except Exception as err:  # compute never raises; belt and braces
             output = ControlOutput(np.zeros(2), None, Reason.ERROR, str(err))
+        try:
+            self.blockage = self.controller.path_blockage(self._state)
+        except Exception:  # a report, not a decision: never let it stop the step
+            self.blockage = Blockage()
         self.last_output = output
         self._cmd_pub.publish(self._cmd_message(output.u, now))
         try:
@@ -620,7 +897,7 @@ class MpcControllerNode(ManagedNode):
         if not self._stamped:
             return twist_from_u(u)
         return twist_stamped_from_u(u, stamp=seconds_to_stamp(max(now, 0.0)),
-                                    frame_id=BASE_FRAME)
+                                    frame_id=str(self.get_parameter('base_frame_id').value))
 
     def _publish_obstacles(self, output: ControlOutput, frame: str, stamp: Any) -> None:
         """Publish the obstacles raw, grown and active when that changes (or now and then).
@@ -672,7 +949,7 @@ class MpcControllerNode(ManagedNode):
     def _diagnostics(self, output: ControlOutput, now: float) -> DiagnosticArray:
         record = ControllerDiagnostics.from_output(
             output, state=self._state, state_time=self._state_time,
-            failures_total=self.controller.solver_failures)
+            failures_total=self.controller.solver_failures, blockage=self.blockage)
         status = DiagnosticStatus()
         status.name = f'{self.get_name()}: MPC'
         status.hardware_id = self.get_fully_qualified_name()
@@ -700,7 +977,7 @@ def log_line(output: ControlOutput, *, failures: int,
         v, omega = output.u
         return Level.WARN, (f'{message}: applying its input v = {v:.3f} m/s, omega = '
                             f'{omega:.3f} rad/s (solver failures so far: {failures})')
-    if reason in (Reason.STALE_ODOM, Reason.STOP):
+    if reason in (Reason.STALE_ODOM, Reason.STOP, Reason.STALE_SCAN, Reason.NO_SCAN):
         return Level.WARN, f'{message}: cmd_vel is zero (solver failures so far: {failures})'
     if reason is Reason.GOAL_REACHED:
         position, heading = goal_error

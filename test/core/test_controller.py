@@ -11,7 +11,7 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""MpcController: the node's decisions without ROS (no plan, stale odometry, goal, errors)."""
+"""MpcController: the node's decisions without ROS (no plan, stale input, goal, blockage)."""
 
 from __future__ import annotations
 
@@ -24,8 +24,10 @@ from mpc_local_planner.core.controller import (
     ControlOutput,
     MpcController,
     Reason,
+    within_faces,
 )
 from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path, WaypointPath
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world, paper_world
@@ -177,3 +179,80 @@ def test_world_files_resolve_by_name_and_missing_ones_raise() -> None:
     assert resolve_data_file('worlds/corridor_turn.yaml').is_file()
     with pytest.raises(FileNotFoundError, match='no_such_world.yaml: not found'):
         resolve_data_file('no_such_world.yaml')
+
+
+def test_a_plan_through_an_obstacle_is_followed_and_reported_blocked_where_it_enters() -> None:
+    controller = MpcController(obstacles=WORLD.obstacles)
+    straight = np.array([WORLD.start, WORLD.goal])
+    path = controller.set_plan(straight)  # no longer refused
+    assert controller.path is path
+    out = controller.compute(WORLD.start, 0.0)
+    assert out.reason in (Reason.TRACKING, Reason.CANDIDATE, Reason.STOP)
+    blockage = controller.path_blockage(WORLD.start)
+    assert blockage.blocked
+    # the first point of the straight line inside the grown box, found independently
+    grown = controller.grown_obstacles[0]
+    t = np.linspace(0.0, 1.0, 200_001)
+    line = WORLD.start[:2] + t[:, None] * (WORLD.goal[:2] - WORLD.start[:2])
+    first = line[np.argmax(grown.contains(line))]
+    assert blockage.at == pytest.approx(np.hypot(*(first - WORLD.start[:2])), abs=1e-3)
+    # the MPC keeps the robot's prediction out of the grown obstacle
+    if out.solution is not None:
+        assert not np.any(grown.contains(out.solution.x_pred[:, :2], margin=-1e-6))
+
+
+def test_a_clear_plan_is_not_blocked_and_the_distance_counts_from_the_projection() -> None:
+    controller = MpcController(obstacles=WORLD.obstacles)
+    controller.set_plan(PLAN)
+    blockage = controller.path_blockage(WORLD.start)
+    assert not blockage.blocked and np.isnan(blockage.at)
+    assert not controller.path_blockage(None).blocked
+    controller.set_obstacles([ConvexPolygon.from_box(1.0, 1.2, 1.2, 1.4)])  # on the plan
+    ahead = controller.path_blockage(np.array([0.8, 1.3, 0.0]))  # on the plan's second leg
+    assert ahead.blocked
+    inflation = controller.config.inflation(controller.model.v_max)
+    assert ahead.at == pytest.approx(1.0 - inflation - 0.8, abs=1e-6)
+
+
+def test_with_the_scan_a_source_no_scan_or_a_stale_one_gives_zero() -> None:
+    controller = MpcController(obstacles=WORLD.obstacles,
+                               settings=ControllerSettings(scan_timeout=0.5))
+    controller.set_plan(PLAN)
+    out = controller.compute(WORLD.start, 10.0, state_time=10.0, scan_required=True)
+    assert out.reason is Reason.NO_SCAN and not out.u.any()
+    out = controller.compute(WORLD.start, 10.0, state_time=10.0, scan_required=True,
+                             scan_time=9.4)
+    assert out.reason is Reason.STALE_SCAN and out.message == 'scan is stale'
+    assert not out.u.any()
+    out = controller.compute(WORLD.start, 10.0, state_time=10.0, scan_required=True,
+                             scan_time=9.6)
+    assert out.reason is Reason.TRACKING
+    with pytest.raises(ValueError, match='scan_timeout'):
+        ControllerSettings(scan_timeout=0.0)
+
+
+def test_new_obstacles_keep_the_warm_start_and_the_lyapunov_history() -> None:
+    controller = MpcController(obstacles=WORLD.obstacles)
+    controller.set_path(analytic_path('paper_sinusoid'))
+    first = controller.compute(WORLD.start, 0.0)
+    state = first.solution.x_pred[1]
+    far = ConvexPolygon.from_box(10.0, 10.0, 11.0, 11.0)
+    controller.set_obstacles([*WORLD.obstacles, far])
+    assert len(controller.obstacles) == 2
+    second = controller.compute(state, 0.2)
+    assert second.reason is Reason.TRACKING
+    assert second.solution.lyapunov_ok is not None  # the history was kept, and checked
+    same = controller.grown_obstacles
+    controller.set_obstacles(list(controller.obstacles))  # the same objects: nothing to do
+    assert controller.grown_obstacles == same
+
+
+def test_polygons_with_too_many_faces_become_a_rectangle_around_them() -> None:
+    decagon = ConvexPolygon.from_circle(1.0, 2.0, 0.5, sides=10)
+    box = ConvexPolygon.from_box(0.0, 0.0, 1.0, 1.0)
+    fitted = within_faces([decagon, box], 8)
+    assert fitted[1] is box
+    assert fitted[0].num_faces == 4
+    assert np.all(fitted[0].contains(decagon.vertices, margin=1e-9))
+    area = np.ptp(fitted[0].vertices[:, 0]) * np.ptp(fitted[0].vertices[:, 1])
+    assert area < 1.2 * (2 * 0.5 / np.cos(np.pi / 10)) ** 2

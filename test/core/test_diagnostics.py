@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from mpc_local_planner.core.controller import ControlOutput, MpcController, Reason
+from mpc_local_planner.core.controller import Blockage, ControlOutput, MpcController, Reason
 from mpc_local_planner.core.diagnostics import (
     ControllerDiagnostics,
     Key,
@@ -110,3 +110,20 @@ def test_the_planner_outcome_survives_the_round_trip() -> None:
     assert not back.planned and back.detail == failed.detail and back.level is Level.ERROR
     planned = PlannerDiagnostics(planned=True, detail='published', poses=5, length=2.5)
     assert PlannerDiagnostics.from_values(planned.to_values()) == planned
+
+
+def test_a_blocked_plan_is_reported_with_where_it_is_blocked() -> None:
+    output = ControlOutput(np.zeros(2), None, Reason.STALE_SCAN)
+    record = ControllerDiagnostics.from_output(output, state=WORLD.start, state_time=1.0,
+                                               failures_total=0,
+                                               blockage=Blockage(True, 0.75))
+    values = dict(record.to_values())
+    assert values['path_blocked'] == 'true' and values['blocked_at'] == '0.75'
+    back = ControllerDiagnostics.from_values(values)
+    assert back.path_blocked and back.blocked_at == 0.75
+    assert back.reason is Reason.STALE_SCAN and back.message == 'scan is stale'
+    assert back.level is Level.WARN and level_of(Reason.NO_SCAN) is Level.WARN
+    clear = ControllerDiagnostics.from_output(output, state=None, state_time=None,
+                                              failures_total=0)
+    assert dict(clear.to_values())['path_blocked'] == 'false'
+    assert math.isnan(ControllerDiagnostics.from_values(clear.to_values()).blocked_at)

@@ -16,7 +16,9 @@
 The conversions either return finite values or raise ValueError. The controller and the
 simulator nodes get random message sequences through their callbacks (called directly, the
 way the executor calls them; simulated time is set by the test) and every twist they
-publish, as the probe receives it over DDS, is finite and within the unicycle's bounds.
+publish, as the probe receives it over DDS, is finite and within the unicycle's bounds. A
+second controller (namespace ``sensing``, obstacle_sources world, scan and map) gets random
+LaserScan and OccupancyGrid messages (and their CDR bytes) among good odometry and scans.
 The node tests are marked slow (DDS). Hypothesis is derandomized with a bounded number of
 examples: the same cases every run.
 """
@@ -30,22 +32,26 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, Quaternion, Twist
 from hypothesis import given, HealthCheck, settings
 from hypothesis import strategies as st
-from nav_msgs.msg import Odometry, Path
+from nav_msgs.msg import OccupancyGrid, Odometry, Path
 import numpy as np
 import pytest
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 from rclpy.time import Time as RosTime
+from sensor_msgs.msg import LaserScan
 
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.ros.conversions import (
+    grid_from_message,
     odometry_to_state,
     path_pose_count,
     path_to_poses,
     pose_to_array,
     poses_to_path,
     quaternion_to_yaw,
+    scan_beam_count,
+    scan_from_message,
     seconds_to_stamp,
     stamp_to_seconds,
     u_from_twist,
@@ -53,6 +59,7 @@ from mpc_local_planner.ros.conversions import (
 )
 from mpc_local_planner.ros.mpc_controller_node import MpcControllerNode
 from mpc_local_planner.ros.node_main import autostart
+from mpc_local_planner.ros.qos import CMD_VEL_QOS
 from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
 from mpc_local_planner.worlds.world import paper_world
 
@@ -109,6 +116,44 @@ def paths(draw, max_poses: int = 12) -> Path:
         pose.pose.position.y = draw(COORDINATE)
         pose.pose.orientation = draw(quaternions())
         msg.poses.append(pose)
+    return msg
+
+
+RANGE = st.one_of(st.floats(0.1, 5.0), st.floats(0.1, 5.0), SPECIAL, st.floats(-1.0, 0.0))
+INCREMENT = st.one_of(st.just(math.pi / 90), st.just(-math.pi / 90),
+                      st.sampled_from([0.0, math.nan, math.inf, 1e-9, 2.0]), ANY_FLOAT)
+SCAN_FRAME = st.one_of(st.just('base_link'), st.just('base_link'),
+                       st.sampled_from(['', 'laser', 'map']))
+
+
+@st.composite
+def scans(draw, stamp: Time | None = None) -> LaserScan:
+    msg = LaserScan()
+    msg.header.frame_id = draw(SCAN_FRAME)
+    msg.header.stamp = stamp if stamp is not None else draw(stamps())
+    msg.angle_min = draw(st.one_of(st.just(-math.pi / 2), ANY_FLOAT))
+    msg.angle_increment = draw(INCREMENT)
+    msg.range_min = draw(st.one_of(st.just(0.05), ANY_FLOAT))
+    msg.range_max = draw(st.one_of(st.just(5.0), ANY_FLOAT))
+    msg.ranges = draw(st.lists(RANGE, max_size=91))
+    if draw(st.booleans()):
+        msg.intensities = draw(st.lists(st.floats(0.0, 1.0), max_size=91))
+    return msg
+
+
+@st.composite
+def grids(draw) -> OccupancyGrid:
+    msg = OccupancyGrid()
+    msg.header.frame_id = draw(st.one_of(st.just('map'), st.just('map'), FRAME))
+    width, height = draw(st.integers(0, 12)), draw(st.integers(0, 12))
+    msg.info.width, msg.info.height = width, height
+    msg.info.resolution = draw(st.one_of(st.sampled_from([0.05, 0.1, 0.2]), ANY_FLOAT))
+    msg.info.origin.position.x = draw(COORDINATE)
+    msg.info.origin.position.y = draw(COORDINATE)
+    msg.info.origin.orientation = draw(quaternions())
+    count = width * height if draw(st.booleans()) else draw(st.integers(0, 200))
+    msg.data = draw(st.lists(st.one_of(st.sampled_from([-1, 0, 100]), st.integers(-128, 127)),
+                             min_size=count, max_size=count))
     return msg
 
 
@@ -185,6 +230,31 @@ def test_poses_to_path_and_stamps_refuse_non_finite_values_with_value_error(
 
 
 @FUZZ
+@given(msg=scans(), garbage=st.binary(max_size=64), cut=st.integers(0, 200))
+def test_scans_convert_and_their_cdr_beam_count_is_exact_or_none(
+        msg: LaserScan, garbage: bytes, cut: int) -> None:
+    data = serialize_message(msg)
+    assert scan_beam_count(data) == len(msg.ranges)
+    assert scan_beam_count(data + garbage) == len(msg.ranges)
+    assert scan_beam_count(data[:cut]) in (None, len(msg.ranges))
+    if len(garbage) < 16:
+        assert scan_beam_count(garbage) is None
+    scan = scan_from_message(msg)
+    assert len(scan.ranges) == len(msg.ranges)
+
+
+@FUZZ
+@given(msg=grids())
+def test_grids_convert_to_a_map_or_raise_value_error(msg: OccupancyGrid) -> None:
+    try:
+        grid = grid_from_message(msg)
+    except ValueError:
+        return
+    assert grid.data.shape == (msg.info.height, msg.info.width)
+    assert grid.resolution > 0 and all(math.isfinite(v) for v in grid.origin)
+
+
+@FUZZ
 @given(twist=twists(), stamp=stamps())
 def test_twists_convert_to_finite_numbers_and_stamps_round_trip_to_a_microsecond(
         twist: Twist, stamp: Time) -> None:
@@ -208,29 +278,38 @@ class Nodes:
     def __init__(self, ros) -> None:
         sim_time = [Parameter('use_sim_time', value=True)]
         self.ros = ros
-        # neither node is spun: the test calls their callbacks, the executor the probe's
+        # no node is spun: the test calls their callbacks, the executor the probe's
         self.idle = SingleThreadedExecutor(context=ros.context)
         self.controller = MpcControllerNode(context=ros.context, parameter_overrides=sim_time)
         assert autostart(self.controller) is None  # configured and active, as run_node does
+        self.sensing = MpcControllerNode(
+            context=ros.context, namespace='sensing', parameter_overrides=sim_time + [
+                Parameter('obstacle_sources', value=['world', 'scan', 'map'])])
+        assert autostart(self.sensing) is None
         self.simulator = UnicycleSimulatorNode(context=ros.context,
                                                parameter_overrides=sim_time)
-        for node in (self.controller, self.simulator):
+        for node in (self.controller, self.sensing, self.simulator):
             self.idle.add_node(node)
         self.probe = ros.probe()
+        self.sensing_cmds: list[Twist] = []
+        self.sensing_steps = 0
+        self.probe.create_subscription(Twist, 'sensing/cmd_vel', self.sensing_cmds.append,
+                                       CMD_VEL_QOS)
         self.t = 1.0
         self.steps = 0
         self.ticks = 0
         assert ros.spin_until(lambda: self.controller.count_subscribers('cmd_vel') > 0
+                              and self.sensing.count_subscribers('/sensing/cmd_vel') > 0
                               and self.simulator.count_subscribers('odom') > 0)
 
     def advance(self, seconds: float) -> None:
         self.t += seconds
-        for node in (self.controller, self.simulator):
+        for node in (self.controller, self.sensing, self.simulator):
             node.get_clock().set_ros_time_override(RosTime(nanoseconds=int(self.t * 1e9)))
 
     def close(self) -> None:
         self.idle.shutdown()
-        for node in (self.simulator, self.controller):
+        for node in (self.simulator, self.sensing, self.controller):
             node.destroy_node()
 
 
@@ -319,3 +398,70 @@ def test_simulator_callbacks_survive_random_twists_and_stay_finite_and_saturated
     np.testing.assert_array_equal(moving, raw)  # nothing non-finite was published
     assert np.all(np.abs(raw) <= U_MAX + 1e-12)
     assert all(np.all(np.isfinite(odometry_to_state(m))) for m in probe.odoms)
+
+
+def good_scan(t: float) -> LaserScan:
+    """A scan of a wall 1.2 m ahead of a robot at the start, stamped t."""
+    msg = LaserScan()
+    msg.header.frame_id = 'base_link'
+    msg.header.stamp = seconds_to_stamp(max(t, 0.0))
+    msg.angle_min, msg.angle_increment = -math.pi / 2, math.pi / 90
+    msg.angle_max = math.pi / 2
+    msg.range_min, msg.range_max = 0.05, 5.0
+    angles = msg.angle_min + np.arange(91) * msg.angle_increment
+    ranges = 1.2 / np.cos(angles)
+    msg.ranges = [float(r) if abs(1.2 * math.tan(a)) <= 1.0 else math.inf
+                  for r, a in zip(ranges, angles, strict=True)]
+    return msg
+
+
+SENSING_EVENTS = st.lists(st.one_of(
+    st.tuples(st.sampled_from(['scan', 'scan bytes']), scans()),
+    st.tuples(st.just('scan now'), scans(stamp=Time(sec=0, nanosec=0))),
+    st.tuples(st.just('grid'), grids()),
+    st.tuples(st.just('garbage bytes'), st.binary(max_size=80)),
+    st.tuples(st.just('good scan'), st.floats(-1.0, 0.3)), st.tuples(st.just('good scan'),
+                                                                      st.floats(-1.0, 0.3)),
+    GOOD_ODOM, GOOD_ODOM,
+    st.tuples(st.just('good plan')),
+    st.tuples(st.just('tick')), st.tuples(st.just('tick')), st.tuples(st.just('tick')),
+), min_size=1, max_size=12)
+
+
+@pytest.mark.slow
+@FUZZ
+@given(events=SENSING_EVENTS)
+def test_controller_survives_random_scans_and_grids_and_publishes_bounded_twists(
+        nodes: Nodes, events: list) -> None:
+    node = nodes.sensing
+    for event in events + [('tick',)]:
+        kind = event[0]
+        if kind in ('scan', 'scan now'):
+            node.scan_callback(event[1])
+        elif kind == 'scan bytes':
+            node.scan_callback(serialize_message(event[1]))
+        elif kind == 'garbage bytes':
+            node.scan_callback(event[1])
+        elif kind == 'grid':
+            node.map_callback(event[1])
+        elif kind == 'good scan':
+            node.scan_callback(serialize_message(good_scan(nodes.t + event[1])))
+        elif kind == 'good odom':
+            msg = Odometry()
+            msg.header.frame_id = 'odom'
+            msg.header.stamp = seconds_to_stamp(max(nodes.t + event[4], 0.0))
+            msg.pose.pose.position.x, msg.pose.pose.position.y = event[1], event[2]
+            msg.pose.pose.orientation = yaw_to_quaternion(event[3])
+            node.odom_callback(msg)
+        elif kind == 'good plan':
+            node.plan_callback(serialize_message(valid_plan()))
+        else:
+            nodes.advance(0.2)
+            node.timer_callback()
+            nodes.sensing_steps += 1
+            u = node.last_output.u
+            assert np.all(np.isfinite(u)) and np.all(np.abs(u) <= U_MAX + 1e-12), u
+    assert nodes.ros.spin_until(lambda: len(nodes.sensing_cmds) >= nodes.sensing_steps,
+                                timeout=5.0)
+    raw = np.array([[c.linear.x, c.angular.z] for c in nodes.sensing_cmds])
+    assert np.all(np.isfinite(raw)) and np.all(np.abs(raw) <= U_MAX + 1e-12)

@@ -202,8 +202,6 @@ BAD_PLANS = {
     'nan': (lambda: path_message(np.vstack([PLAN[:2], [[math.nan, 1.0, 0.0]], PLAN[2:]])),
             'position must be finite'),
     'one point repeated': (lambda: path_message(np.tile(PLAN[1], (5, 1))), 'two distinct'),
-    'through the obstacle': (lambda: path_message(np.array([WORLD.start, WORLD.goal])),
-                             'passes through obstacle 0'),
     'frame odom': (lambda: path_message(PLAN, frame_id='odom'), "frame 'odom' is not 'map'"),
     '100,000 poses': (lambda: dense_plan(100_000),
                       '100000 poses, more than max_plan_poses (10000)'),

@@ -1,0 +1,382 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""mpc_controller with obstacle_sources [scan] or [map]: it avoids what it senses.
+
+The test owns simulated time (it publishes /clock), plays the robot (it integrates the
+commands as a unicycle and publishes odometry) and the laser (it ray-casts a scan of the true
+world at the robot's pose and publishes it, stamped). Everything is asserted in ROS time.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Callable
+
+from nav_msgs.msg import OccupancyGrid
+import numpy as np
+import pytest
+from rcl_interfaces.msg import Log
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import LaserScan
+from visualization_msgs.msg import Marker, MarkerArray
+
+from mpc_local_planner.core.controller import Reason
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.perception.laser import SimulatedLaser
+from mpc_local_planner.ros.conversions import (
+    poses_to_path,
+    seconds_to_stamp,
+    u_from_twist,
+    yaw_to_quaternion,
+)
+from mpc_local_planner.ros.mpc_controller_node import (
+    ERROR_THROTTLE_S,
+    MpcControllerNode,
+    OBSTACLES_TOPIC,
+)
+from mpc_local_planner.ros.node_main import autostart
+from mpc_local_planner.ros.qos import LOCAL_PLAN_QOS, MAP_QOS
+
+pytestmark = pytest.mark.slow  # DDS
+
+U_MAX = Unicycle().u_max
+STEP = 0.2  # the controller's control period (s)
+SCAN_TIMEOUT = 0.5
+# A wall across the straight plan from (0, 0) to (3, 0), 1.2 m ahead of the start.
+WALL_X = 1.2
+WALL = ConvexPolygon.from_box(WALL_X, -1.0, WALL_X + 0.1, 1.0)
+PLAN = np.array([[0.0, 0.0, 0.0], [3.0, 0.0, 0.0]])
+# A laser with 180 degrees of view in front of the robot.
+FOV = math.pi
+BEAMS = 181
+
+
+class World:
+    """The test's robot, laser, clock and listeners, around one controller."""
+
+    def __init__(self, ros, obstacles: list[ConvexPolygon], **params) -> None:
+        overrides = [Parameter('use_sim_time', value=True), Parameter('world_file', value='')]
+        overrides += [Parameter(k, value=v) for k, v in params.items()]
+        self.ros = ros
+        self.node = ros.add(MpcControllerNode(context=ros.context,
+                                              parameter_overrides=overrides))
+        assert autostart(self.node) is None
+        self.probe = ros.probe(use_sim_time=True)
+        self.io = ros.add(Node('sensing_probe', context=ros.context))
+        self.scan_pub = self.io.create_publisher(
+            LaserScan, 'scan', QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE))
+        self.map_pub = self.io.create_publisher(OccupancyGrid, 'map', MAP_QOS)
+        self.markers: list[MarkerArray] = []
+        self.io.create_subscription(MarkerArray, OBSTACLES_TOPIC, self.markers.append,
+                                    LOCAL_PLAN_QOS)
+        self.laser = SimulatedLaser(obstacles, fov=FOV, beams=BEAMS, range_max=5.0) \
+            if obstacles else None
+        self.t = 1.0
+        self.state = np.zeros(3)
+        self.drive = True  # integrate the commands
+        self.scanning = True  # publish a scan each tick
+        self.positions: list[np.ndarray] = []
+        assert ros.spin_until(lambda: self.probe.odom_pub.get_subscription_count() > 0
+                              and self.probe.plan_pub.get_subscription_count() > 0
+                              and self.node.count_publishers('cmd_vel') > 0)
+
+    # ---------------------------------------------------------------- the robot and its laser
+    def scan_message(self, pose: np.ndarray, stamp: float) -> LaserScan:
+        msg = LaserScan()
+        msg.header.frame_id = 'base_link'
+        msg.header.stamp = seconds_to_stamp(stamp)
+        msg.angle_min = -FOV / 2
+        msg.angle_max = FOV / 2
+        msg.angle_increment = FOV / (BEAMS - 1)
+        msg.range_min = 0.05
+        msg.range_max = 5.0
+        if self.laser is None:
+            msg.ranges = [math.inf] * BEAMS
+        else:
+            msg.ranges = [float(r) for r in self.laser.scan(pose).ranges]
+        return msg
+
+    def u(self) -> np.ndarray:
+        return u_from_twist(self.probe.cmds[-1]) if self.probe.cmds else np.zeros(2)
+
+    def tick(self, dt: float = 0.05) -> None:
+        """Advance dt: move the robot on the last command, publish odom, scan, /clock."""
+        if self.drive:
+            v, omega = self.u()
+            x, y, th = self.state
+            self.state = np.array([x + dt * v * math.cos(th), y + dt * v * math.sin(th),
+                                   th + dt * omega])
+        self.t += dt
+        self.positions.append(self.state[:2].copy())
+        self.probe.publish_odom(self.state, stamp=self.t)
+        if self.scanning:
+            self.scan_pub.publish(self.scan_message(self.state, self.t))
+        self.probe.publish_clock(self.t)
+        for _ in range(6):
+            self.ros.executor.spin_once(timeout_sec=0.002)
+
+    def run_until(self, condition: Callable[[], bool], timeout: float = 60.0) -> bool:
+        deadline = time.monotonic() + timeout
+        while not condition() and time.monotonic() < deadline:
+            self.tick()
+        return condition()
+
+    def run_for(self, seconds: float) -> None:
+        end = self.t + seconds
+        assert self.run_until(lambda: self.t >= end - 1e-9)
+
+    # ---------------------------------------------------------------- what the node says
+    def steps(self, after: int = 0) -> list:
+        return [d.step for d in self.probe.diagnostics[after:]]
+
+    def raw(self) -> list[np.ndarray]:
+        """The vertices of the 'raw' markers of the latest mpc/obstacles."""
+        if not self.markers:
+            return []
+        return [np.array([[p.x, p.y] for p in m.points]) for m in self.markers[-1].markers
+                if m.ns == 'raw' and m.action == Marker.ADD]
+
+    def errors(self, text: str) -> list[str]:
+        return [line for line in self.probe.log_lines('mpc_controller', Log.ERROR)
+                if text in line]
+
+
+def check_commands(probe) -> None:
+    raw = np.array([[c.linear.x, c.angular.z] for c in probe.cmds]).reshape(-1, 2)
+    assert np.all(np.isfinite(raw)) and np.all(np.abs(raw) <= U_MAX + 1e-12)
+
+
+def inside(polygon: ConvexPolygon, points: np.ndarray) -> np.ndarray:
+    return polygon.contains(np.asarray(points).reshape(-1, 2))
+
+
+# ----------------------------------------------------------------------------- (a)
+def test_a_wall_seen_by_the_laser_is_placed_with_the_pose_at_the_scan_stamp_and_not_driven_into(
+        ros) -> None:
+    world = World(ros, [WALL], obstacle_sources=['scan'])
+    world.drive = world.scanning = False
+    world.probe.plan_pub.publish(poses_to_path(PLAN))
+    # odometry moves from x = 0 (t = 1.05) to x = 0.3 (t = 1.45); then a scan stamped at
+    # 1.25, taken where the robot was then (x = 0.15), comes last
+    for k in range(1, 9):
+        world.state = np.array([0.3 * (k - 1) / 7, 0.0, 0.0])
+        world.tick()
+    t_scan = 1.225  # between the odometry of 1.2 (x = 0.129) and 1.25 (x = 0.171)
+    pose_then = np.array([0.15, 0.0, 0.0])
+    world.scan_pub.publish(world.scan_message(pose_then, t_scan))
+
+    def wall_shown() -> bool:
+        return any(len(v) and np.min(v[:, 0]) < 2.0 for v in world.raw())
+
+    assert ros.spin_until(lambda: world.node._scan_time is not None, timeout=10.0)
+    assert world.run_until(wall_shown, timeout=20.0)
+    pieces = [v for v in world.raw() if len(v)]
+    near = np.vstack(pieces)
+    # the surface the laser saw is at x = 1.2 in the map frame (the latest pose would put
+    # it 0.15 m further, at 1.35); pieces are 4 cm thick, centred on the surface
+    assert np.all(np.abs(near[:, 0] - WALL_X) < 0.05), near
+    assert np.max(near[:, 1]) > 0.5 and np.min(near[:, 1]) < -0.5  # across the plan
+
+    # now the robot drives (on the commands), scanning as it goes: the plan through the wall
+    # is followed, not refused; the robot stops in front of the wall
+    world.drive = world.scanning = True
+    first = len(world.probe.diagnostics)
+    world.run_for(12.0)
+    steps = world.steps(first)
+    assert all(s.reason is not Reason.INVALID_PLAN for s in steps)
+    assert any(s.reason is Reason.TRACKING and s.v > 0.01 for s in steps)
+    blocked = [s for s in steps if s.path_blocked]
+    assert blocked, steps[-3:]
+    last = steps[-1]
+    assert last.path_blocked
+    # blocked_at: from the robot's projection to the grown wall's face (surface - 2 cm
+    # thickness/2 - inflation 3.1 cm)
+    assert last.blocked_at == pytest.approx(WALL_X - last.x - 0.051, abs=0.05)
+    positions = np.array(world.positions)
+    assert not np.any(inside(WALL, positions))
+    assert np.max(positions[:, 0]) < WALL_X - 0.02
+    assert np.max(positions[:, 0]) > 0.5  # it drove up to the wall
+    check_commands(world.probe)
+
+
+# ----------------------------------------------------------------------------- (b)
+def test_a_wall_behind_the_robot_is_remembered_until_obstacle_memory_expires(ros) -> None:
+    memory = 2.0
+    world = World(ros, [WALL], obstacle_sources=['scan'], obstacle_memory=memory)
+    world.drive = False
+    # within reach of the wall: obstacles farther than the horizon's reach (v_max N h plus
+    # the inflation and a margin, 1.15 m here) are not handed to the MPC, nor shown
+    world.state = np.array([0.4, 0.0, 0.0])
+    world.probe.plan_pub.publish(poses_to_path(PLAN))
+    assert world.run_until(lambda: any(len(v) and np.min(v[:, 0]) < 2.0 for v in world.raw()))
+    seen = world.t
+    # the robot turns away: its scans no longer see the wall (its field of view is 180 deg)
+    world.state = np.array([0.4, 0.0, math.pi])
+
+    def wall_shown() -> bool:
+        return any(len(v) and abs(np.mean(v[:, 0]) - WALL_X) < 0.1 for v in world.raw())
+
+    world.run_for(memory - 0.5)
+    assert wall_shown(), 'forgotten before obstacle_memory'
+    assert world.run_until(lambda: not wall_shown() or world.t > seen + memory + 1.0)
+    assert not wall_shown()
+    assert seen + memory - 0.1 <= world.t <= seen + memory + STEP + 0.1 + 0.05
+
+
+# ----------------------------------------------------------------------------- (c)
+def test_a_stale_scan_stops_the_robot_within_one_period_and_fresh_scans_resume(ros) -> None:
+    world = World(ros, [], obstacle_sources=['scan'], scan_timeout=SCAN_TIMEOUT)
+    world.scanning = False
+    world.probe.plan_pub.publish(poses_to_path(PLAN))
+    # before the first scan: no scan yet, zero
+    assert world.run_until(lambda: any(s.reason is Reason.NO_SCAN for s in world.steps()))
+    assert all(s.v == 0 and s.omega == 0 for s in world.steps())
+    world.scanning = True
+    assert world.run_until(lambda: any(s.reason is Reason.TRACKING and s.v > 0.01
+                                       for s in world.steps()))
+    world.scanning = False
+    last_scan = world.t
+    first = len(world.probe.diagnostics)
+    assert world.run_until(lambda: any(s.reason is Reason.STALE_SCAN
+                                       for s in world.steps(first)))
+    stale = next(d for d in world.probe.diagnostics[first:]
+                 if d.step.reason is Reason.STALE_SCAN)
+    assert stale.stamp <= last_scan + SCAN_TIMEOUT + STEP + 1e-6
+    assert stale.step.v == 0 and stale.step.omega == 0
+    assert world.probe.diagnostics[-1].message == 'scan is stale'
+    after = world.probe.diagnostics.index(stale)
+    world.run_for(0.5)
+    assert all(d.step.v == 0 and d.step.omega == 0 for d in world.probe.diagnostics[after:])
+    world.scanning = True
+    resume = len(world.probe.diagnostics)
+    assert world.run_until(lambda: any(s.reason is Reason.TRACKING and s.v > 0.01
+                                       for s in world.steps(resume)))
+    check_commands(world.probe)
+
+
+# ----------------------------------------------------------------------------- (d)
+def bad_scans(world: World) -> dict[str, tuple[Callable[[], LaserScan], str]]:
+    def changed(**fields) -> Callable[[], LaserScan]:
+        def make() -> LaserScan:
+            msg = world.scan_message(world.state, world.t)
+            for name, value in fields.items():
+                if name == 'frame_id':
+                    msg.header.frame_id = value
+                else:
+                    setattr(msg, name, value)
+            return msg
+        return make
+
+    return {
+        'nan range': (changed(ranges=[1.0, math.nan] + [2.0] * (BEAMS - 2)), 'NaN'),
+        'negative range': (changed(ranges=[-1.0] + [2.0] * (BEAMS - 1)), 'negative'),
+        'zero increment': (changed(angle_increment=0.0), 'angle_increment must not be 0'),
+        'nan increment': (changed(angle_increment=math.nan), 'angle_increment must be finite'),
+        'intensities': (changed(intensities=[1.0] * 3), 'intensities'),
+        '100,000 beams': (changed(ranges=[1.0] * 100_000), '100000 beams'),
+        'other frame': (changed(frame_id='laser'), "frame 'laser' is not 'base_link'"),
+    }
+
+
+def grid(width: int = 40, height: int = 40, resolution: float = 0.05,
+         origin: tuple[float, float] = (-1.0, -1.0), cells=None) -> OccupancyGrid:
+    msg = OccupancyGrid()
+    msg.header.frame_id = 'map'
+    msg.info.width, msg.info.height, msg.info.resolution = width, height, resolution
+    msg.info.origin.position.x, msg.info.origin.position.y = origin
+    msg.info.origin.orientation = yaw_to_quaternion(0.0)
+    msg.data = [0] * (width * height) if cells is None else cells
+    return msg
+
+
+BAD_GRIDS = {
+    'data length': (lambda: grid(cells=[0] * 7), 'data has 7'),
+    'zero resolution': (lambda: grid(resolution=0.0), 'resolution must be > 0'),
+    'nan origin': (lambda: grid(origin=(math.nan, 0.0)), 'origin'),
+    'other frame': (lambda: _framed(grid(), 'odom'), "frame 'odom' is not 'map'"),
+}
+
+
+def _framed(msg: OccupancyGrid, frame: str) -> OccupancyGrid:
+    msg.header.frame_id = frame
+    return msg
+
+
+def test_malformed_scans_and_grids_get_one_error_each_and_never_a_bad_command(ros) -> None:
+    world = World(ros, [], obstacle_sources=['scan', 'map'], scan_timeout=SCAN_TIMEOUT)
+    world.drive = False
+    world.probe.plan_pub.publish(poses_to_path(PLAN))
+    assert world.run_until(lambda: any(s.reason is Reason.TRACKING for s in world.steps()))
+    world.map_pub.publish(grid())
+    assert world.run_until(lambda: world.node._grid is not None)
+    for case, (make, text) in bad_scans(world).items():
+        began = time.monotonic()
+        world.scanning = False
+        for _ in range(3):  # the same problem, again and again: one error (throttled)
+            world.scan_pub.publish(make())
+            world.tick()
+        assert world.run_until(lambda: world.errors(text), timeout=10.0), case  # noqa: B023
+        lines = world.errors(text)
+        assert 1 <= len(lines) <= 1 + (time.monotonic() - began) / ERROR_THROTTLE_S, lines
+        assert lines[0].startswith('invalid scan')
+        # only bad scans: the scan goes stale and the robot stops
+        assert world.run_until(lambda: world.steps()[-1].reason is Reason.STALE_SCAN), case
+        world.scanning = True  # good scans again: the channel recovers (and reports anew)
+        assert world.run_until(lambda: world.steps()[-1].reason is Reason.TRACKING), case
+    for case, (make, text) in BAD_GRIDS.items():
+        began = time.monotonic()
+        for _ in range(3):
+            world.map_pub.publish(make())
+            world.tick()
+        assert world.run_until(lambda: world.errors(text), timeout=10.0), case  # noqa: B023
+        lines = world.errors(text)
+        assert 1 <= len(lines) <= 1 + (time.monotonic() - began) / ERROR_THROTTLE_S, lines
+        assert lines[0].startswith('invalid map')
+        world.map_pub.publish(grid())  # a valid map resolves the channel
+        world.run_for(0.2)
+    assert world.steps()[-1].reason is Reason.TRACKING
+    check_commands(world.probe)
+
+
+# ----------------------------------------------------------------------------- (e)
+def test_an_occupied_block_in_the_map_becomes_rectangles_and_the_plan_is_followed_up_to_it(
+        ros) -> None:
+    world = World(ros, [], obstacle_sources=['map'])
+    # 5 cm cells from (-1, -1); a block of cells over x in [1.0, 1.3], y in [-0.5, 0.5]
+    width = height = 80
+    cells = np.zeros((height, width), dtype=np.int8)
+    cells[10:30, 40:46] = 100
+    world.map_pub.publish(grid(width, height, 0.05, (-1.0, -1.0), cells.ravel().tolist()))
+    world.probe.plan_pub.publish(poses_to_path(PLAN))
+    assert world.run_until(lambda: world.raw(), timeout=20.0)
+    block = ConvexPolygon.from_box(1.0, -0.5, 1.3, 0.5)
+    shown = np.vstack(world.raw())
+    assert np.all(block.contains(shown, margin=1e-6))
+    # the cells within the window (the reach plus a margin, 1.15 m from the robot) count
+    np.testing.assert_allclose([shown[:, 0].min(), shown[:, 1].min(), shown[:, 1].max()],
+                               [1.0, -0.5, 0.5], atol=1e-6)
+    assert shown[:, 0].max() >= 1.15
+    world.run_for(10.0)
+    steps = world.steps()
+    assert all(s.reason is not Reason.INVALID_PLAN for s in steps)
+    assert steps[-1].path_blocked
+    assert steps[-1].blocked_at == pytest.approx(1.0 - 0.031 - steps[-1].x, abs=0.05)
+    positions = np.array(world.positions)
+    assert np.max(positions[:, 0]) > 0.5
+    assert not np.any(inside(block, positions))
+    check_commands(world.probe)
