@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Global planner: OMPL's RRT* in the plane, over the world's inflated obstacles.
+"""Global planner: OMPL's RRT* in the plane, over inflated obstacles or an inflated grid.
 
 The paper feeds the MPC an unsmoothed RRT* polyline: the MPC tracks the path's steady states
 and copes with the corners itself, so the planner only has to be collision free. It plans for
@@ -20,17 +20,23 @@ a point in R^2 among obstacles grown by the robot radius plus a clearance, and c
 tree edge exactly (segment against convex polygon) rather than by sampling along it, so no
 thin obstacle corner slips between two samples.
 
+On a grid (`RrtStarPlanner.on_grid`: an occupancy grid inflated by a distance transform, as
+perception's ``PlanningGrid`` keeps it from a map and scans), a state is checked by its
+cell, and an edge exactly too: every cell it passes through must be free (not samples along
+it, which could clip the corner of a blocked cell); the plane sampled is the grid's extent.
+
 Runs are reproducible: OMPL's global seed is set before each plan, and termination is by an
 iteration count (the paper's figure uses 1000) with a wall-clock limit only as a safeguard.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 import contextlib
 from dataclasses import dataclass
 import math
 import threading
+from typing import Any, Protocol
 
 import numpy as np
 from ompl import base as ob
@@ -41,8 +47,10 @@ from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
 
 __all__ = [
+    'FreeSpaceGrid',
     'PlannerConfig',
     'RrtStarPlanner',
+    'grid_bounds',
     'path_length',
 ]
 
@@ -119,29 +127,151 @@ def _hits(obstacles: ObstacleSet, a: np.ndarray, b: np.ndarray) -> bool:
     return bool(np.any(obstacles.segment_hits(a, b, grazing=True)))
 
 
-class _ExactMotionValidator(ob.MotionValidator):
-    """OMPL motion validator that tests each edge exactly against the inflated obstacles."""
+class FreeSpaceGrid(Protocol):
+    """What the planner needs of an inflated occupancy grid (perception's ``PlanningGrid``).
 
-    def __init__(self, si: ob.SpaceInformation, obstacles: ObstacleSet) -> None:
+    ``map`` is the grid's geometry (an ``OccupancyMap``: ``origin`` (x, y, yaw) of the
+    lower-left corner, ``resolution``, ``width``, ``height``, ``world_to_cell``,
+    ``contains_cell``); ``occupied`` the (height, width) cells that are obstacles before
+    inflation, ``blocked`` those within ``inflation`` (metres) of one. Points outside the
+    grid are free.
+    """
+
+    inflation: float
+
+    @property
+    def map(self) -> Any:
+        """The grid's geometry (origin, resolution, width, height, world_to_cell)."""
+
+    @property
+    def occupied(self) -> np.ndarray:
+        """(height, width) booleans: the obstacle cells before inflation."""
+
+    @property
+    def blocked(self) -> np.ndarray:
+        """(height, width) booleans: the cells within the inflation of an obstacle cell."""
+
+    def is_free(self, points: np.ndarray) -> np.ndarray:
+        """Say, per (N, 2) point, whether it is free after inflation."""
+
+
+def grid_bounds(grid: FreeSpaceGrid) -> tuple[float, float, float, float]:
+    """Return (xmin, xmax, ymin, ymax) of the grid's extent (its corners, if rotated)."""
+    occupancy = grid.map
+    x0, y0, yaw = (float(v) for v in occupancy.origin)
+    width = occupancy.width * float(occupancy.resolution)
+    height = occupancy.height * float(occupancy.resolution)
+    c, s = math.cos(yaw), math.sin(yaw)
+    local = np.array([[0.0, 0.0], [width, 0.0], [width, height], [0.0, height]])
+    xs = x0 + c * local[:, 0] - s * local[:, 1]
+    ys = y0 + s * local[:, 0] + c * local[:, 1]
+    return float(xs.min()), float(xs.max()), float(ys.min()), float(ys.max())
+
+
+class _Space:
+    """Where the robot's reference point may be: the queries the planner makes.
+
+    Two kinds: inflated polygons (exact segment tests) and an inflated grid. Holds only
+    NumPy data and plain callables: it must not reference OMPL objects, or the reference
+    cycle through C++ would keep them alive past the plan.
+    """
+
+    def __init__(self, point_free: Callable[[np.ndarray], bool],
+                 segment_free: Callable[[np.ndarray, np.ndarray], bool],
+                 collision: Callable[[np.ndarray], str | None]) -> None:
+        self.point_free = point_free
+        self.segment_free = segment_free
+        self.collision = collision
+
+
+def _polygon_space(obstacles: ObstacleSet, inflation: float) -> _Space:
+    def collision(xy: np.ndarray) -> str | None:
+        index = obstacles.first_containing(xy)
+        if index is None:
+            return None
+        return (f'in collision with obstacle {index} inflated by {inflation:g} m '
+                '(robot_radius + clearance)')
+
+    return _Space(point_free=lambda xy: obstacles.first_containing(xy) is None,
+                  segment_free=lambda a, b: not _hits(obstacles, a, b),
+                  collision=collision)
+
+
+def _cells_crossed(occupancy: Any, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return (rows, cols) of every cell the segment a-b passes through (may be outside).
+
+    Exact: the segment is cut where it crosses a grid line, and the middle of each piece
+    names one cell it runs through; so no cell is skipped, however little is clipped of it.
+    """
+    x0, y0, yaw = (float(v) for v in occupancy.origin)
+    res = float(occupancy.resolution)
+    c, s = math.cos(yaw), math.sin(yaw)
+    ends = np.array([a, b], dtype=float) - (x0, y0)
+    u = (c * ends[:, 0] + s * ends[:, 1]) / res  # grid coordinates, in cells
+    v = (-s * ends[:, 0] + c * ends[:, 1]) / res
+    cuts = [np.array([0.0, 1.0])]
+    for p0, p1 in ((u[0], u[1]), (v[0], v[1])):
+        if p1 != p0:
+            lines = np.arange(math.ceil(min(p0, p1)), math.floor(max(p0, p1)) + 1)
+            cuts.append((lines - p0) / (p1 - p0))
+    t = np.unique(np.clip(np.concatenate(cuts), 0.0, 1.0))
+    mid = 0.5 * (t[:-1] + t[1:]) if len(t) > 1 else t
+    mid = np.concatenate([mid, [0.0, 1.0]])  # the end points' own cells
+    cols = np.floor(u[0] + mid * (u[1] - u[0])).astype(np.int64)
+    rows = np.floor(v[0] + mid * (v[1] - v[0])).astype(np.int64)
+    return rows, cols
+
+
+def _grid_space(grid: FreeSpaceGrid) -> _Space:
+    occupancy = grid.map
+
+    def point_free(xy: np.ndarray) -> bool:
+        return bool(grid.is_free(xy.reshape(1, 2))[0])
+
+    def segment_free(a: np.ndarray, b: np.ndarray) -> bool:
+        rows, cols = _cells_crossed(occupancy, a, b)
+        inside = occupancy.contains_cell(rows, cols)  # outside the grid counts free
+        return not bool(np.any(grid.blocked[rows[inside], cols[inside]]))
+
+    def collision(xy: np.ndarray) -> str | None:
+        if point_free(xy):
+            return None
+        rows, cols = occupancy.world_to_cell(xy.reshape(1, 2))
+        row, col = int(rows[0]), int(cols[0])
+        where = 'in an occupied cell' if grid.occupied[row, col] else (
+            f'within {grid.inflation:g} m of an occupied cell')
+        return (f'{where} (cell row {row}, column {col}) of the grid inflated by '
+                f'{grid.inflation:g} m (robot_radius + clearance)')
+
+    return _Space(point_free=point_free, segment_free=segment_free, collision=collision)
+
+
+class _ExactMotionValidator(ob.MotionValidator):
+    """OMPL motion validator that tests each edge exactly against the inflated obstacles.
+
+    Polygons: segment against polygon; a grid: every cell the segment passes through.
+    """
+
+    def __init__(self, si: ob.SpaceInformation, space: _Space) -> None:
         super().__init__(si)
-        self._obstacles = obstacles
+        self._segment_free = space.segment_free
 
     def checkMotion(self, s1: ob.State, s2: ob.State, *args: object) -> bool:
         """Return True if the straight motion from s1 to s2 is collision free (OMPL's name)."""
         a = np.array([s1[0], s1[1]])
         b = np.array([s2[0], s2[1]])
-        return not _hits(self._obstacles, a, b)
+        return self._segment_free(a, b)
 
 
 class _StateValidity:
-    """State validity callable: inside the bounds and outside every inflated obstacle.
+    """State validity callable: inside the bounds and free (outside the inflated obstacles).
 
     A plain callable holding only NumPy data: it must not reference OMPL objects, or the
     reference cycle through C++ would keep them alive past the plan.
     """
 
-    def __init__(self, obstacles: ObstacleSet, bounds: tuple[float, float, float, float]):
-        self._obstacles = obstacles
+    def __init__(self, space: _Space, bounds: tuple[float, float, float, float]):
+        self._point_free = space.point_free
         self._bounds = bounds
 
     def __call__(self, state: ob.State) -> bool:
@@ -149,7 +279,16 @@ class _StateValidity:
         xmin, xmax, ymin, ymax = self._bounds
         if not (xmin <= x <= xmax and ymin <= y <= ymax):
             return False
-        return self._obstacles.first_containing(np.array([x, y])) is None
+        return self._point_free(np.array([x, y]))
+
+
+def _check_bounds(bounds: Sequence[float]) -> tuple[float, float, float, float]:
+    """Return the bounds as floats, refusing empty or non-finite ones."""
+    xmin, xmax, ymin, ymax = (float(v) for v in bounds)
+    if not (all(map(math.isfinite, (xmin, xmax, ymin, ymax))) and xmin < xmax and ymin < ymax):
+        msg = f'bounds must be finite (xmin, xmax, ymin, ymax) with min < max, got {bounds}'
+        raise ValueError(msg)
+    return xmin, xmax, ymin, ymax
 
 
 @contextlib.contextmanager
@@ -165,6 +304,9 @@ def _ompl_log_level(level: ou.LogLevel) -> Iterator[None]:
 
 class RrtStarPlanner:
     """RRT* from OMPL over fixed obstacles and bounds; one instance serves many queries.
+
+    `on_grid` builds one over an inflated occupancy grid instead; it reads the grid at
+    each plan, so cells that scans mark or clear between two plans count at the next one.
 
     Args:
         obstacles: The obstacles as described (not inflated); the planner inflates them by
@@ -184,16 +326,48 @@ class RrtStarPlanner:
         *,
         config: PlannerConfig = PlannerConfig(),
     ) -> None:
-        xmin, xmax, ymin, ymax = (float(v) for v in bounds)
-        if not (all(map(math.isfinite, (xmin, xmax, ymin, ymax))) and xmin < xmax and ymin < ymax):
-            msg = f'bounds must be finite (xmin, xmax, ymin, ymax) with min < max, got {bounds}'
-            raise ValueError(msg)
         self.config = config
-        self.bounds = (xmin, xmax, ymin, ymax)
+        self.bounds = _check_bounds(bounds)
+        self.grid: FreeSpaceGrid | None = None
         self.inflated_obstacles = tuple(
             obstacle.inflate(config.inflation) for obstacle in obstacles
         )
         self._obstacles = ObstacleSet(self.inflated_obstacles)
+        self._space = _polygon_space(self._obstacles, config.inflation)
+
+    @classmethod
+    def on_grid(
+        cls,
+        grid: FreeSpaceGrid,
+        *,
+        config: PlannerConfig = PlannerConfig(),
+        bounds: tuple[float, float, float, float] | None = None,
+    ) -> RrtStarPlanner:
+        """Return a planner whose states and edges are checked on an inflated grid.
+
+        The grid carries its own inflation (perception's ``PlanningGrid(map,
+        inflation=config.inflation)``); the planner does not inflate it again, and refuses
+        a grid inflated by less than robot_radius + clearance.
+
+        Args:
+            grid: The inflated grid (kept by reference: later scans count at the next plan).
+            config: Planner settings.
+            bounds: (xmin, xmax, ymin, ymax) to sample; None: the grid's extent.
+
+        Raises:
+            ValueError: If the grid is inflated by less than ``config.inflation`` or the
+                bounds are empty or not finite.
+
+        """
+        inflation = float(grid.inflation)
+        if not inflation >= config.inflation - 1e-9:
+            msg = (f'the grid is inflated by {inflation:g} m, less than robot_radius + '
+                   f'clearance = {config.inflation:g} m')
+            raise ValueError(msg)
+        planner = cls([], grid_bounds(grid) if bounds is None else bounds, config=config)
+        planner.grid = grid
+        planner._space = _grid_space(grid)
+        return planner
 
     def plan(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
         """Plan a collision-free polyline from start to goal.
@@ -204,7 +378,7 @@ class RrtStarPlanner:
 
         Returns:
             (M, 2) waypoints, M >= 2, with the first equal to start[:2] and the last equal to
-            goal[:2]; every segment clears the inflated obstacles.
+            goal[:2]; every segment clears the inflated obstacles (or the inflated grid).
 
         Raises:
             PlanningError: If start or goal is out of bounds or in collision, or if RRT* finds
@@ -213,7 +387,7 @@ class RrtStarPlanner:
         """
         start_xy = self.check_endpoint(start, 'start')
         goal_xy = self.check_endpoint(goal, 'goal')
-        if not _hits(self._obstacles, start_xy, goal_xy):
+        if self._space.segment_free(start_xy, goal_xy):
             # RRT* would converge to this segment anyway; skip the sampling.
             return np.vstack([start_xy, goal_xy])
         with _OMPL_LOCK, _ompl_log_level(ou.LOG_WARN):
@@ -245,12 +419,9 @@ class RrtStarPlanner:
         if not (xmin <= xy[0] <= xmax and ymin <= xy[1] <= ymax):
             msg = f'{label} ({xy[0]:g}, {xy[1]:g}) is outside the bounds {self.bounds}'
             raise PlanningError(msg)
-        index = self._obstacles.first_containing(xy)
-        if index is not None:
-            msg = (
-                f'{label} ({xy[0]:g}, {xy[1]:g}) is in collision with obstacle {index} '
-                f'inflated by {self.config.inflation:g} m (robot_radius + clearance)'
-            )
+        collision = self._space.collision(xy)
+        if collision is not None:
+            msg = f'{label} ({xy[0]:g}, {xy[1]:g}) is {collision}'
             raise PlanningError(msg)
         return xy
 
@@ -273,8 +444,8 @@ class RrtStarPlanner:
 
         setup = og.SimpleSetup(space)
         info = setup.getSpaceInformation()
-        setup.setStateValidityChecker(_StateValidity(self._obstacles, self.bounds))
-        info.setMotionValidator(_ExactMotionValidator(info, self._obstacles))
+        setup.setStateValidityChecker(_StateValidity(self._space, self.bounds))
+        info.setMotionValidator(_ExactMotionValidator(info, self._space))
 
         start_state = space.allocState()
         goal_state = space.allocState()

@@ -20,6 +20,11 @@ same problem written naively (CasADi Opti, IPOPT with default options, no warm s
 with 1, 5 and 20 obstacles, RRT* planning time for 1000 iterations, and (unless --skip-dds)
 the controller node's latency from /odom to /cmd_vel over DDS and its resident memory.
 
+Perception on BARN world 0 (the robot at poses along its start-goal line, heading to the
+goal): a simulated 720-beam scan; scan -> obstacles and the obstacle memory's update; and
+the whole control step with scan obstacles (memory update, obstacles set, MPC solve, N = 10)
+in a ROS-free closed loop along the world's RRT* path.
+
 Usage: ``python -m mpc_local_planner.evaluation.bench [--quick] [--skip-dds] [--out FILE]``.
 """
 
@@ -37,13 +42,36 @@ import casadi as ca
 import numpy as np
 
 from mpc_local_planner.core.config import MpcConfig, SOLVERS
+from mpc_local_planner.core.controller import (
+    ControllerSettings,
+    MpcController,
+    Reason,
+    within_faces,
+)
+from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC
 from mpc_local_planner.core.obstacles import ConvexPolygon
-from mpc_local_planner.core.paths import paper_sinusoid, ReferencePath
+from mpc_local_planner.core.paths import paper_sinusoid, ReferencePath, wrap_angle
+from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
 from mpc_local_planner.evaluation.rollout import ControlStep, rollout, StopRule
+from mpc_local_planner.perception.laser import contact, SimulatedLaser
+from mpc_local_planner.perception.raycast import TrueGeometry
+from mpc_local_planner.perception.scan_obstacles import ObstacleMemory, scan_to_obstacles
+from mpc_local_planner.worlds.data_files import BARN_DIR
+from mpc_local_planner.worlds.world import load_barn_world, World
 
-__all__ = ['closed_loop', 'extra_obstacles', 'main', 'NaiveMpc', 'paper_obstacle']
+__all__ = [
+    'barn_line_poses',
+    'bench_laser',
+    'bench_scan_control',
+    'bench_scan_obstacles',
+    'closed_loop',
+    'extra_obstacles',
+    'main',
+    'NaiveMpc',
+    'paper_obstacle',
+]
 
 STEP = 0.2
 HORIZONS = (10, 20, 40)
@@ -52,6 +80,17 @@ OBSTACLE_COUNTS = (1, 5, 20)
 # headings compared wrapped).
 REACHED_POSITION = 0.02
 REACHED_HEADING = 0.05
+# Perception rows: BARN world 0, the Jackal-like 720-beam laser, the targets they are held to.
+BARN_WORLD = 'world_000.json'
+BARN_ROBOT_RADIUS = 0.2
+LASER_BEAMS = 720
+OBSTACLE_TTL = 2.0  # s, the obstacle memory's time to live
+# The pose sweep: a 10 Hz laser on a robot driving the start-goal line at 0.5 m/s.
+SCAN_PERIOD = 0.1  # s
+SWEEP_SPEED = 0.5  # m/s
+TARGET_LASER_MS = 2.0
+TARGET_SCAN_OBSTACLES_MS = 2.0
+TARGET_CONTROL_STEP_MS = 5.0
 
 
 def paper_obstacle() -> ConvexPolygon:
@@ -227,6 +266,207 @@ def bench_rrt(repeats: int) -> dict[str, Any]:
     return {'iterations': 1000, 'plans': repeats, 'plan_ms': stats(times)}
 
 
+def _barn_world() -> World:
+    return load_barn_world(BARN_DIR / BARN_WORLD, robot_radius=BARN_ROBOT_RADIUS)
+
+
+def barn_line_poses(world: World, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return up to count poses along start-goal, heading to the goal, and their stamps.
+
+    The poses are SWEEP_SPEED * SCAN_PERIOD apart from the start on (the scans a robot
+    driving the line would take), at most to the goal; those where the robot's disk would
+    touch an obstacle are left out.
+
+    Returns:
+        ((K, 3) x, y, yaw; (K,) stamps in seconds).
+
+    """
+    start, goal = world.start[:2], world.goal[:2]
+    length = float(np.hypot(*(goal - start)))
+    yaw = math.atan2(goal[1] - start[1], goal[0] - start[0])
+    geometry = TrueGeometry.from_world(world)
+    distance = np.arange(count) * SWEEP_SPEED * SCAN_PERIOD
+    distance = distance[distance <= length]
+    points = start + (distance / length)[:, None] * (goal - start)
+    free = np.array([not contact(geometry, float(p[0]), float(p[1]), world.robot_radius)
+                     for p in points])
+    poses = np.column_stack([points, np.full(len(points), yaw)])[free]
+    return poses, distance[free] / SWEEP_SPEED
+
+
+def _timed_ms(function: Any, *args: Any, **kwargs: Any) -> tuple[float, Any]:
+    start = time.perf_counter()
+    result = function(*args, **kwargs)
+    return 1e3 * (time.perf_counter() - start), result
+
+
+def bench_laser(poses: int) -> dict[str, Any]:
+    """Time SimulatedLaser.scan (720 beams) on BARN world 0 at poses along its start-goal line."""
+    world = _barn_world()
+    laser = SimulatedLaser(TrueGeometry.from_world(world), beams=LASER_BEAMS)
+    sweep, stamps = barn_line_poses(world, poses)
+    laser.scan(sweep[0])  # first call outside the timing
+    times = [_timed_ms(laser.scan, pose, stamp=stamp)[0]
+             for pose, stamp in zip(sweep, stamps, strict=True)]
+    return {'world': BARN_WORLD, 'beams': LASER_BEAMS, 'scans': len(times),
+            'scan_ms': stats(times), 'target_ms': TARGET_LASER_MS}
+
+
+def bench_scan_obstacles(poses: int) -> dict[str, Any]:
+    """Time scan_to_obstacles and ObstacleMemory.update on BARN world 0 along its line.
+
+    The scans are taken in order along the line as a robot driving it would take them
+    (`barn_line_poses`), so that the memory holds what it would remember (update includes
+    scan_to_obstacles).
+    """
+    world = _barn_world()
+    laser = SimulatedLaser(TrueGeometry.from_world(world), beams=LASER_BEAMS)
+    sweep, stamps = barn_line_poses(world, poses)
+    scans = [laser.scan(pose, stamp=stamp) for pose, stamp in zip(sweep, stamps, strict=True)]
+    convert, pieces = [], []
+    for scan, pose in zip(scans, sweep, strict=True):
+        ms, obstacles = _timed_ms(scan_to_obstacles, scan, pose)
+        convert.append(ms)
+        pieces.append(len(obstacles))
+    memory = ObstacleMemory(OBSTACLE_TTL)
+    update, remembered = [], []
+    for scan, pose in zip(scans, sweep, strict=True):
+        update.append(_timed_ms(memory.update, scan, pose)[0])
+        remembered.append(len(memory))
+    return {'world': BARN_WORLD, 'beams': LASER_BEAMS, 'scans': len(scans),
+            'scan_to_obstacles_ms': stats(convert), 'memory_update_ms': stats(update),
+            'obstacles_per_scan_median': float(np.median(pieces)),
+            'remembered_median': float(np.median(remembered)),
+            'remembered_max': int(max(remembered)), 'ttl_s': OBSTACLE_TTL,
+            'target_ms': TARGET_SCAN_OBSTACLES_MS}
+
+
+def _barn_reference(world: World) -> tuple[np.ndarray, str]:
+    """Return (M, 3) poses of an RRT* path of the world (or its straight line) and its kind."""
+    config = PlannerConfig(iterations=3000, time_limit=30.0, seed=0, range=0.5,
+                           robot_radius=world.robot_radius, clearance=0.05)
+    try:
+        points = RrtStarPlanner(world.obstacles, world.bounds, config=config).plan(
+            world.start, world.goal)
+        kind = f'RRT* ({len(points)} waypoints)'
+    except PlanningError:
+        points = np.array([world.start[:2], world.goal[:2]])
+        kind = 'straight start-goal line (RRT* found no path)'
+    headings = np.arctan2(np.diff(points[:, 1]), np.diff(points[:, 0]))
+    yaw = np.concatenate([[world.start[2]], headings[1:], [world.goal[2]]])
+    return np.column_stack([points, yaw]), kind
+
+
+def _scan_control_run(world: World, poses: np.ndarray, steps: int,
+                      controller: MpcController) -> dict[str, Any]:
+    model = controller.model
+    config = controller.config
+    laser = SimulatedLaser(TrueGeometry.from_world(world), beams=LASER_BEAMS)
+    geometry = laser.geometry
+    memory = ObstacleMemory(OBSTACLE_TTL)
+    controller.set_plan(poses)
+    reach = float(model.u_max[0]) * config.step * config.horizon + config.inflation(
+        float(model.u_max[0])) + 0.5
+    x = np.array(world.start, dtype=float)
+    update_ms, solve_ms, step_ms, in_memory, in_reach = [], [], [], [], []
+    contacts, reached, failures = 0, False, 0
+    for k in range(steps):
+        t = k * config.step
+        scan = laser.scan(x, stamp=t)
+        start = time.perf_counter()
+        memory.update(scan, x)
+        nearby = within_faces(memory.obstacles(x[:2], reach), config.faces_per_obstacle)
+        middle = time.perf_counter()
+        controller.set_obstacles(nearby)
+        output = controller.compute(x, t)
+        end = time.perf_counter()
+        update_ms.append(1e3 * (middle - start))
+        solve_ms.append(1e3 * (end - middle))
+        step_ms.append(1e3 * (end - start))
+        in_memory.append(len(memory))
+        in_reach.append(len(nearby))
+        failures += int(output.solution is not None and not output.solution.success)
+        if output.reason is Reason.GOAL_REACHED:
+            reached = True
+            break
+        x = model.step(x, output.u, config.step)
+        contacts += int(contact(geometry, float(x[0]), float(x[1]), world.robot_radius))
+    goal_distance = float(np.hypot(x[0] - world.goal[0], x[1] - world.goal[1]))
+    return {'steps': len(step_ms), 'step_ms': stats(step_ms),
+            'memory_update_ms': stats(update_ms), 'set_and_solve_ms': stats(solve_ms),
+            'remembered_median': float(np.median(in_memory)),
+            'in_reach_median': float(np.median(in_reach)), 'in_reach_max': int(max(in_reach)),
+            'reached': reached, 'goal_distance': goal_distance,
+            'heading_error': abs(float(wrap_angle(x[2] - world.goal[2]))),
+            'contact_steps': contacts, 'not_solved_steps': failures}
+
+
+def bench_scan_control(steps: int) -> dict[str, Any]:
+    """Time the control step with scan obstacles on BARN world 0 (ROS-free, N = 10).
+
+    Each step: the laser scans from the true world (not timed), then the timed part: the
+    obstacle memory's update, the remembered obstacles within the horizon's reach (fitted
+    to the NLP's faces per obstacle, as the controller node fits them) set on the
+    MpcController, and its compute (the MPC solve and its checks); the plant is
+    Unicycle().step. A first, untimed run along the same path builds (and compiles) the NLPs
+    the timed run meets.
+    """
+    world = _barn_world()
+    poses, kind = _barn_reference(world)
+    config = MpcConfig(horizon=10, step=STEP, robot_radius=world.robot_radius)
+    settings = ControllerSettings(goal_tolerance=0.1, goal_heading_tolerance=math.pi,
+                                  capacity=2 * len(poses) + 1)
+    controller = MpcController(Unicycle(), config, settings=settings)
+    _scan_control_run(world, poses, steps, controller)  # builds the NLPs it meets
+    controller.mpc.wait_compiled()
+    controller.clear_path()
+    result = _scan_control_run(world, poses, steps, controller)
+    return {'world': BARN_WORLD, 'horizon': config.horizon, 'solver': config.solver,
+            'reference': kind, 'target_ms': TARGET_CONTROL_STEP_MS, **result}
+
+
+def _perception_lines(laser: dict[str, Any], scan: dict[str, Any],
+                      control: dict[str, Any]) -> list[str]:
+    def cell(figures: dict[str, float]) -> str:
+        return (f"{figures['median']:7.3f} | {figures['p95']:7.3f} | {figures['max']:7.3f}")
+
+    def verdict(figures: dict[str, float], target: float) -> str:
+        return 'met' if figures['median'] <= target else 'MISSED'
+
+    rows = [
+        ('simulated scan (720 beams)', laser['scan_ms'], laser['target_ms']),
+        ('scan_to_obstacles', scan['scan_to_obstacles_ms'], scan['target_ms']),
+        ('ObstacleMemory.update', scan['memory_update_ms'], scan['target_ms']),
+        ('control step: memory + MPC', control['step_ms'], control['target_ms']),
+        ('  of which memory update', control['memory_update_ms'], math.nan),
+        ('  of which set + solve', control['set_and_solve_ms'], math.nan),
+    ]
+    lines = ['| BARN world 0                 | median  |   p95   |   max   | target ms |'
+             '        |',
+             '|------------------------------|---------|---------|---------|-----------|'
+             '--------|']
+    for name, figures, target in rows:
+        goal = f'{target:9.1f}' if math.isfinite(target) else ' ' * 9
+        mark = verdict(figures, target) if math.isfinite(target) else ''
+        lines.append(f'| {name:<28} | {cell(figures)} | {goal} | {mark:<6} |')
+    lines.append(
+        f"scans: {scan['scans']} poses along the start-goal line, one scan per "
+        f"{SWEEP_SPEED * SCAN_PERIOD:g} m ({SCAN_PERIOD:g} s at {SWEEP_SPEED:g} m/s): median "
+        f"{scan['obstacles_per_scan_median']:g} obstacles per scan, "
+        f"{scan['remembered_median']:g} remembered (max {scan['remembered_max']}, ttl "
+        f"{OBSTACLE_TTL:g} s).")
+    lines.append(
+        f"control: N = {control['horizon']}, {control['solver']}, along the "
+        f"{control['reference']}, {control['steps']} steps, "
+        f"{'goal reached' if control['reached'] else 'goal not reached'} "
+        f"({control['goal_distance']:.2f} m from it), {control['remembered_median']:g} "
+        f"obstacles remembered (median), in reach median {control['in_reach_median']:g} "
+        f"(max {control['in_reach_max']}), "
+        f"{control['contact_steps']} steps in contact, {control['not_solved_steps']} steps "
+        'without a verified solver solution.')
+    return lines
+
+
 def _row(r: dict[str, Any], naive: dict[str, Any] | None) -> str:
     s = r['solve_ms']
     ratio = naive['solve_ms']['median'] / s['median'] if naive else math.nan
@@ -247,7 +487,8 @@ HEADER = ('| backend          |   N | obs | reach | active | solve ms |  p95 ms 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the benchmark, print the table and write JSON."""
     parser = argparse.ArgumentParser(prog='mpc_bench', description=__doc__.splitlines()[0])
-    parser.add_argument('--quick', action='store_true', help='fewer steps, N = 10 and 40 only')
+    parser.add_argument('--quick', action='store_true',
+                        help='fewer steps, N = 10 and 40 only, 50 scans and 60 control steps')
     parser.add_argument('--skip-dds', action='store_true', help='skip the ROS 2 measurement')
     parser.add_argument('--out', default='bench.json', help='JSON output file')
     parser.add_argument('--backends', nargs='*', default=list(SOLVERS),
@@ -297,6 +538,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     results['rrt'] = rrt
     print(f"\nRRT* 1000 iterations on rrt_cluttered.yaml: median {rrt['plan_ms']['median']:.1f} ms"
           f", p95 {rrt['plan_ms']['p95']:.1f} ms over {rrt['plans']} seeds", flush=True)
+
+    poses = 50 if args.quick else 200
+    laser = bench_laser(poses)
+    scan = bench_scan_obstacles(poses)
+    control = bench_scan_control(60 if args.quick else 400)
+    results['perception'] = {'laser': laser, 'scan_obstacles': scan, 'control_step': control}
+    print('\nperception and the control step with scan obstacles, ms (median, p95, max)')
+    for line in _perception_lines(laser, scan, control):
+        print(line, flush=True)
 
     if not args.skip_dds:
         # the one part that needs rclpy, hence in ros/ and imported only when it runs

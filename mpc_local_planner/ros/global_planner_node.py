@@ -30,6 +30,17 @@ published on ``plan`` (reliable, transient_local: a late controller still gets i
 published before activation: a ``goal`` parameter is planned once the node is active (and
 odometry has come); a ``goal_pose`` that arrives while the node is inactive is refused.
 
+With ``use_map`` it plans on an occupancy grid instead of the world's obstacles: the latest
+``map`` (nav_msgs/OccupancyGrid, transient_local), unknown cells free, inflated by
+robot_radius + clearance with a distance transform; the plane it samples is the map's extent
+(``world_file`` may then be ''). Until a map comes a goal waits (planner/diagnostics says
+'waiting for map'). A malformed map is refused with one throttled error and the grid in force
+stays. With ``use_scan`` too, each ``scan`` (sensor_msgs/LaserScan from the laser at
+``laser_pose`` in the robot frame) marks the cells of its returns and clears the cells its
+beams pass through, placed with the odometry pose nearest to its stamp; a malformed scan is
+dropped with one throttled error. The next goal is planned on the grid as the scans left it
+(re-planning a plan that becomes blocked is not this node's job yet).
+
 A goal it cannot plan to (inside an inflated obstacle, walled off, out of bounds, not
 finite, in another frame), or a start in collision, is logged as an error and nothing is
 published on ``plan``: the plan in force stays, and the next valid goal is planned as usual.
@@ -40,13 +51,14 @@ supervisor such as closed_loop learns that no plan will come.
 
 from __future__ import annotations
 
+from collections import deque
 import math
 import sys
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
-from nav_msgs.msg import Odometry, Path
+from nav_msgs.msg import OccupancyGrid, Odometry, Path
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import ParameterUninitializedException
@@ -54,24 +66,37 @@ from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.lifecycle.publisher import LifecyclePublisher
 from rclpy.parameter import Parameter
 from rclpy.subscription import Subscription
+from sensor_msgs.msg import LaserScan
 
 from mpc_local_planner.core.diagnostics import PLANNER_DIAGNOSTICS_TOPIC, PlannerDiagnostics
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.paths import analytic_path
 from mpc_local_planner.core.planner import path_length, PlannerConfig, RrtStarPlanner
+from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.ros.conversions import (
+    grid_from_message,
     odometry_to_state,
     pose_to_array,
     poses_to_path,
+    scan_from_message,
+    stamp_to_seconds,
 )
 from mpc_local_planner.ros.lifecycle import ManagedNode
-from mpc_local_planner.ros.node_main import run_node
+from mpc_local_planner.ros.node_main import destroy_on_failure, run_node
 from mpc_local_planner.ros.parameters import (
     declare_parameters,
     DEFAULT_WORLD_FILE,
     ParameterSpec,
 )
-from mpc_local_planner.ros.qos import GOAL_QOS, ODOM_QOS, PLAN_QOS, PLANNER_DIAGNOSTICS_QOS
+from mpc_local_planner.ros.qos import (
+    GOAL_QOS,
+    MAP_QOS,
+    ODOM_QOS,
+    PLAN_QOS,
+    PLANNER_DIAGNOSTICS_QOS,
+    SCAN_QOS,
+)
+from mpc_local_planner.ros.throttle import ProblemThrottle
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world, World
 
@@ -80,19 +105,35 @@ __all__ = ['GlobalPlannerNode', 'PARAMETERS', 'SUMMARY', 'main', 'waypoints_to_p
 
 # Poses of a published analytic path (enough for RViz and for a polyline controller).
 ANALYTIC_SAMPLES = 101
+# Odometry poses kept to place scans (a second at 100 Hz).
+ODOM_HISTORY = 100
+# A scan farther than this (seconds) from every kept odometry stamp is dropped: the pose it
+# would be placed with is not the robot's at the scan.
+SCAN_POSE_TOLERANCE = 0.5
 
 _PLANNER_FIELDS = ('iterations', 'time_limit', 'seed', 'range', 'robot_radius', 'clearance',
                    'simplify')
 _DEFAULTS = PlannerConfig()  # the single source of the planner's defaults
 
 SUMMARY = ('OMPL RRT* from the current odometry (odom) to the goal (the goal parameter or '
-           'goal_pose); publishes plan (reliable, transient_local) and planner/diagnostics. '
-           'A lifecycle node: configure loads the world, activate starts planning.')
+           "goal_pose), around the world's obstacles or, with use_map, on the map's grid "
+           '(plus scan with use_scan); publishes plan (reliable, transient_local) and '
+           'planner/diagnostics. A lifecycle node: configure loads the world, activate starts '
+           'planning.')
 
 PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('world_file', DEFAULT_WORLD_FILE,
                   "world YAML/JSON: obstacles and bounds (a path, or a name in the package's "
-                  'config/ or config/worlds/); used at the next plan'),
+                  "config/ or config/worlds/); used at the next plan; '' with use_map (only "
+                  "its robot_radius is used then)"),
+    ParameterSpec('use_map', False,
+                  "plan on the occupancy grid from `map` (unknown cells free) instead of the "
+                  "world's obstacles; applies at the next configure"),
+    ParameterSpec('use_scan', False,
+                  'mark the grid with `scan` returns and clear it along the beams (needs '
+                  'use_map); applies at the next configure'),
+    ParameterSpec('laser_pose', [0.0, 0.0, 0.0],
+                  'pose [x, y, yaw] of the laser in the robot frame (base_link)'),
     ParameterSpec('goal', Parameter.Type.DOUBLE_ARRAY,
                   'goal [x, y, theta]; setting it plans from the current odometry once the '
                   'node is active (optional: goal_pose messages do the same)'),
@@ -132,6 +173,12 @@ def waypoints_to_poses(waypoints: np.ndarray, start_yaw: float, goal_yaw: float)
     return np.column_stack([pts, yaw])
 
 
+def _check_laser_pose(pose: list[float]) -> str | None:
+    if len(pose) != 3 or not all(math.isfinite(float(v)) for v in pose):
+        return f'laser_pose must be [x, y, yaw] (3 finite numbers), got {list(pose)}'
+    return None
+
+
 def _check_goal(goal: list[float] | None) -> str | None:
     if goal is None or len(goal) == 0:
         return None
@@ -143,30 +190,47 @@ def _check_goal(goal: list[float] | None) -> str | None:
 class GlobalPlannerNode(ManagedNode):
     """Plan with RRT* from odom to the goal and publish the plan (a lifecycle node)."""
 
+    @destroy_on_failure
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('global_planner', **kwargs)
         self.add_on_set_parameters_callback(self.parameters_callback)
         declare_parameters(self, PARAMETERS)
         self.add_post_set_parameters_callback(self.post_parameters_callback)
         # created by on_configure, freed by on_cleanup
+        self._configured = False
+        self._use_map = False
+        self._use_scan = False
         self._world: World | None = None
+        self._grid: PlanningGrid | None = None
         self._planner: RrtStarPlanner | None = None
         self._plan_pub: LifecyclePublisher | None = None
         self._diag_pub: LifecyclePublisher | None = None
         self._odom_sub: Subscription | None = None
         self._goal_sub: Subscription | None = None
+        self._map_sub: Subscription | None = None
+        self._scan_sub: Subscription | None = None
         self._active = False
         self._state: np.ndarray | None = None
+        self._odom_history: deque[tuple[float, np.ndarray]] = deque(maxlen=ODOM_HISTORY)
         self._pending_goal: np.ndarray | None = None
+        self._waiting_reported = False
+        self._problems = ProblemThrottle()
         self.last_plan: np.ndarray | None = None
         self.plan_count = 0
+        self.map_count = 0
+        self.scan_count = 0
         self.last_outcome: PlannerDiagnostics | None = None
 
     # ------------------------------------------------------------------ lifecycle
     @property
     def planner(self) -> RrtStarPlanner | None:
-        """The planner while the node is configured (inactive or active), else None."""
+        """The planner while the node is configured (with use_map: once a map came), or None."""
         return self._planner
+
+    @property
+    def grid(self) -> PlanningGrid | None:
+        """With use_map, the grid plans are checked on (map plus scans), once a map came."""
+        return self._grid
 
     @property
     def is_active(self) -> bool:
@@ -174,14 +238,27 @@ class GlobalPlannerNode(ManagedNode):
         return self._active
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Load the world, build the planner, create the publishers and subscriptions."""
+        """Load the world, build the planner, create the publishers and subscriptions.
+
+        With use_map the planner is built when the first valid map comes.
+        """
+        self._use_map = bool(self.get_parameter('use_map').value)
+        self._use_scan = bool(self.get_parameter('use_scan').value)
         try:
-            self._world = self._read_world()
+            if self._use_scan and not self._use_map:
+                problem = 'use_scan needs use_map (scans mark the cells of the map)'
+                raise ValueError(problem)
+            if not self._use_map and not self.get_parameter('world_file').value:
+                problem = "world_file is '': give a world, or plan on the map with use_map"
+                raise ValueError(problem)
+            if not self._use_map or self.get_parameter('world_file').value:
+                self._world = self._read_world()
             self._planner = self._make_planner()
         except Exception as err:  # a world that vanished since it was validated, a bad config
             self.get_logger().error(f'configure failed: {err}')
             self._release()
             return TransitionCallbackReturn.FAILURE
+        self._configured = True
         self._plan_pub = self.create_lifecycle_publisher(Path, 'plan', PLAN_QOS)
         self._diag_pub = self.create_lifecycle_publisher(
             DiagnosticArray, PLANNER_DIAGNOSTICS_TOPIC, PLANNER_DIAGNOSTICS_QOS)
@@ -189,8 +266,16 @@ class GlobalPlannerNode(ManagedNode):
                                                   ODOM_QOS)
         self._goal_sub = self.create_subscription(PoseStamped, 'goal_pose', self.goal_callback,
                                                   GOAL_QOS)
-        self._pending_goal = self._goal_parameter()
-        self.get_logger().info('configured')
+        if self._use_map:
+            self._map_sub = self.create_subscription(OccupancyGrid, 'map', self.map_callback,
+                                                     MAP_QOS)
+        if self._use_scan:
+            self._scan_sub = self.create_subscription(LaserScan, 'scan', self.scan_callback,
+                                                      SCAN_QOS)
+        self._set_goal(self._goal_parameter())
+        self.get_logger().info('configured' + (
+            ' (planning on the map' + (' and scans' if self._use_scan else '') + ')'
+            if self._use_map else ''))
         return super().on_configure(state)
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -231,17 +316,20 @@ class GlobalPlannerNode(ManagedNode):
 
     def _release(self) -> None:
         self._active = False
+        self._configured = False
         for publisher in (self._plan_pub, self._diag_pub):
             if publisher is not None:
                 self.destroy_lifecycle_publisher(publisher)
-        for subscription in (self._odom_sub, self._goal_sub):
+        for subscription in (self._odom_sub, self._goal_sub, self._map_sub, self._scan_sub):
             if subscription is not None:
                 self.destroy_subscription(subscription)
         self._plan_pub = self._diag_pub = None
-        self._odom_sub = self._goal_sub = None
+        self._odom_sub = self._goal_sub = self._map_sub = self._scan_sub = None
         self._planner = None
+        self._grid = None
         self._world = None
         self._state = None
+        self._odom_history.clear()
         self._pending_goal = None
 
     # ------------------------------------------------------------------ parameters
@@ -253,7 +341,11 @@ class GlobalPlannerNode(ManagedNode):
                 reason = _check_goal(parameter.value)
                 if reason:
                     reasons.append(reason)
-            elif parameter.name == 'world_file':
+            elif parameter.name == 'laser_pose':
+                reason = _check_laser_pose(parameter.value)
+                if reason:
+                    reasons.append(reason)
+            elif parameter.name == 'world_file' and parameter.value:
                 try:
                     load_world(resolve_data_file(str(parameter.value)))
                 except Exception as err:  # any failure to load refuses it
@@ -263,9 +355,33 @@ class GlobalPlannerNode(ManagedNode):
                     analytic_path(str(parameter.value))
                 except ValueError as err:
                     reasons.append(str(err))
+        reasons += self._check_modes(parameters)
         if reasons:
             return SetParametersResult(successful=False, reason='; '.join(reasons))
         return SetParametersResult(successful=True)
+
+    def _check_modes(self, parameters: list[Parameter]) -> list[str]:
+        """Refuse use_scan without use_map, and no world without use_map (as they would be).
+
+        A parameter not declared yet (during the declarations) is not judged; configure
+        judges the combination again.
+        """
+        given = {p.name: p.value for p in parameters}
+
+        def value(name: str) -> Any:
+            if name in given:
+                return given[name]
+            return self.get_parameter(name).value if self.has_parameter(name) else None
+
+        if not {'world_file', 'use_map', 'use_scan'} & given.keys():
+            return []
+        reasons = []
+        use_map = value('use_map')
+        if value('use_scan') and use_map is False:
+            reasons.append('use_scan needs use_map (scans mark the cells of the map)')
+        if value('world_file') == '' and use_map is False:
+            reasons.append("world_file '' needs use_map (the map then gives the bounds)")
+        return reasons
 
     def post_parameters_callback(self, parameters: list[Parameter]) -> None:
         """Rebuild a configured planner after a change; a new goal is planned when active.
@@ -273,17 +389,23 @@ class GlobalPlannerNode(ManagedNode):
         Unconfigured, nothing is built: configure reads the parameters as they then are.
         """
         names = {p.name for p in parameters}
-        if self._world is None:
+        if not self._configured:
             return
+        for name in ('use_map', 'use_scan'):
+            if name in names and bool(self.get_parameter(name).value) != getattr(
+                    self, f'_{name}'):
+                self.get_logger().info(f'{name} applies at the next configure (cleanup, then '
+                                       'configure)')
         try:
             if 'world_file' in names:
-                self._world = self._read_world()
+                path = str(self.get_parameter('world_file').value)
+                self._world = self._read_world() if path else None
             self._planner = self._make_planner()
         except Exception as err:  # validated above: a bug, but keep running
             self.get_logger().error(f'could not apply {sorted(names)}: {err}')
             return
         if 'goal' in names:
-            self._pending_goal = self._goal_parameter()
+            self._set_goal(self._goal_parameter())
             self._try_plan()
         if ('analytic_path' in names and self._active
                 and self.get_parameter('analytic_path').value):
@@ -292,17 +414,32 @@ class GlobalPlannerNode(ManagedNode):
     def _read_world(self) -> World:
         return load_world(resolve_data_file(str(self.get_parameter('world_file').value)))
 
-    def _make_planner(self) -> RrtStarPlanner:
-        assert self._world is not None  # configured
+    def _planner_config(self) -> PlannerConfig:
         values = {name: self.get_parameter(name).value for name in _PLANNER_FIELDS}
-        values['robot_radius'] = max(float(values['robot_radius']), self._world.robot_radius)
+        world_radius = self._world.robot_radius if self._world is not None else 0.0
+        values['robot_radius'] = max(float(values['robot_radius']), world_radius)
         values['iterations'] = int(values['iterations'])
         values['seed'] = int(values['seed'])
         values['simplify'] = bool(values['simplify'])
         for key in ('time_limit', 'range', 'clearance'):
             values[key] = float(values[key])
-        return RrtStarPlanner(self._world.obstacles, self._world.bounds,
-                              config=PlannerConfig(**values))
+        return PlannerConfig(**values)
+
+    def _make_planner(self) -> RrtStarPlanner | None:
+        """Return the planner for the settings in force (None: use_map and no map yet).
+
+        On the grid, a change of robot_radius or clearance re-inflates the map: the scans'
+        marks are dropped with the old grid.
+        """
+        config = self._planner_config()
+        if not self._use_map:
+            assert self._world is not None  # configured without use_map
+            return RrtStarPlanner(self._world.obstacles, self._world.bounds, config=config)
+        if self._grid is None:
+            return None
+        if abs(self._grid.inflation - config.inflation) > 1e-12:
+            self._grid = PlanningGrid(self._grid.map, inflation=config.inflation)
+        return RrtStarPlanner.on_grid(self._grid, config=config)
 
     def _goal_parameter(self) -> np.ndarray | None:
         try:
@@ -320,14 +457,83 @@ class GlobalPlannerNode(ManagedNode):
         return None if self._state is None else self._state.copy()
 
     def odom_callback(self, msg: Odometry) -> None:
-        """Keep the robot's pose; plan a pending goal once the pose is known."""
+        """Keep the robot's pose (and recent ones, for scans); plan a pending goal."""
         try:
             self._state = odometry_to_state(msg)
         except ValueError as err:
             self.get_logger().warning(f'ignoring odometry: {err}', throttle_duration_sec=1.0)
             return
+        self._odom_history.append((stamp_to_seconds(msg.header.stamp), self._state.copy()))
         if self._pending_goal is not None:
             self._try_plan()
+
+    def map_callback(self, msg: OccupancyGrid) -> None:
+        """Plan on a new map from now on (its grid replaces the old one, scan marks too).
+
+        A malformed map is refused with one throttled error; the grid in force stays.
+        """
+        frame = str(self.get_parameter('frame_id').value)
+        try:
+            if msg.header.frame_id != frame:
+                problem = (f'frame {msg.header.frame_id!r} is not {frame!r} (this node does '
+                           'not transform maps)')
+                raise ValueError(problem)
+            occupancy = grid_from_message(msg)
+            config = self._planner_config()
+            grid = PlanningGrid(occupancy, inflation=config.inflation)
+            planner = RrtStarPlanner.on_grid(grid, config=config)
+        except Exception as err:  # GridError (a ValueError); nothing may escape a callback
+            if self._problems.report('map'):
+                kept = 'the grid in force stays' if self._grid is not None else 'no map yet'
+                self.get_logger().error(f'map refused ({kept}): {err}')
+            return
+        self._problems.resolve('map')
+        self._grid, self._planner = grid, planner
+        self.map_count += 1
+        self.get_logger().info(
+            f'map: {occupancy.width} x {occupancy.height} cells of {occupancy.resolution:g} '
+            f'm, origin {list(occupancy.origin)}; planning on it, inflated by '
+            f'{grid.inflation:g} m')
+        if self._pending_goal is not None:
+            self._try_plan()
+
+    def scan_callback(self, msg: LaserScan) -> None:
+        """Mark and clear the grid with a scan, placed with the odometry nearest its stamp.
+
+        A malformed scan, or one without odometry near its stamp, is dropped with one
+        throttled error.
+        """
+        if self._grid is None:
+            self.get_logger().info('scans are ignored until a map comes', once=True)
+            return
+        try:
+            scan = scan_from_message(msg)
+            pose = self._pose_at(scan.stamp)
+            self._grid.add_scan(scan, pose,
+                                laser_pose=list(self.get_parameter('laser_pose').value))
+        except Exception as err:  # ScanError (a ValueError); nothing may escape a callback
+            if self._problems.report('scan'):
+                self.get_logger().error(f'scan dropped: {err}')
+            return
+        self._problems.resolve('scan')
+        self.scan_count += 1
+
+    def _pose_at(self, stamp: float) -> np.ndarray:
+        """Return the kept odometry pose nearest to stamp (seconds).
+
+        Raises:
+            ValueError: if there is none within SCAN_POSE_TOLERANCE of it.
+
+        """
+        if not self._odom_history:
+            problem = 'no odometry yet to place it'
+            raise ValueError(problem)
+        when, pose = min(self._odom_history, key=lambda item: abs(item[0] - stamp))
+        if not abs(when - stamp) <= SCAN_POSE_TOLERANCE:
+            problem = (f'no odometry within {SCAN_POSE_TOLERANCE:g} s of its stamp '
+                       f'{stamp:.3f} s (nearest {when:.3f} s)')
+            raise ValueError(problem)
+        return pose
 
     def goal_callback(self, msg: PoseStamped) -> None:
         """Plan to a goal sent as a PoseStamped (RViz's 2D Goal Pose); refused unless active."""
@@ -346,13 +552,26 @@ class GlobalPlannerNode(ManagedNode):
             self.get_logger().error(f'goal refused, no plan published: {err}')
             self._report(PlannerDiagnostics(planned=False, detail=f'goal refused: {err}'))
             return
-        self._pending_goal = goal
+        self._set_goal(goal)
         self._try_plan()
 
+    def _set_goal(self, goal: np.ndarray | None) -> None:
+        self._pending_goal = goal
+        self._waiting_reported = False
+
     def _try_plan(self) -> None:
-        """Plan the pending goal if the node is active and the robot's pose is known."""
-        if (not self._active or self._planner is None or self._pending_goal is None
+        """Plan the pending goal if the node is active, the robot's pose (and map) known."""
+        if (not self._active or self._pending_goal is None
                 or self.get_parameter('analytic_path').value):
+            return
+        if self._planner is None:
+            if self._use_map and not self._waiting_reported:
+                goal = self._pending_goal
+                detail = (f'waiting for map: no valid OccupancyGrid on map yet; the goal '
+                          f'({goal[0]:g}, {goal[1]:g}) is planned when one comes')
+                self.get_logger().info(detail)
+                self._report(PlannerDiagnostics(planned=False, detail=detail, waiting=True))
+                self._waiting_reported = True
             return
         if self._state is None:
             self.get_logger().info('goal received: waiting for odometry', once=True)

@@ -23,8 +23,16 @@ import pytest
 
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.obstacles import ConvexPolygon, point_in_any, segment_collides
-from mpc_local_planner.core.planner import path_length, PlannerConfig, RrtStarPlanner
+from mpc_local_planner.core.planner import (
+    grid_bounds,
+    path_length,
+    PlannerConfig,
+    RrtStarPlanner,
+)
+from mpc_local_planner.perception.grids import PlanningGrid
+from mpc_local_planner.perception.laser import SimulatedLaser
 from mpc_local_planner.worlds.data_files import BARN_DIR
+from mpc_local_planner.worlds.map_files import OccupancyMap
 from mpc_local_planner.worlds.world import load_world, paper_world, World
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -208,3 +216,135 @@ def test_path_length_sums_segment_lengths() -> None:
     assert path_length(np.array([[0.0, 0.0], [3.0, 4.0], [3.0, 5.0]])) == pytest.approx(6.0)
     assert path_length(np.array([[0.0, 0.0, 1.0], [0.0, 2.0, 2.0]])) == pytest.approx(2.0)
     assert path_length(np.array([[1.0, 1.0]])) == 0.0
+
+
+# ----------------------------------------------------------------------------- on a grid
+RESOLUTION = 0.05
+GRID_CONFIG = PlannerConfig(robot_radius=0.2, clearance=0.1, iterations=1000, time_limit=60.0)
+
+
+def wall_map() -> OccupancyMap:
+    """A 10 m x 6 m map, free, with a wall x in [4.5, 5], y in [0, 4] (a gap above it)."""
+    data = np.zeros((120, 200), dtype=np.int8)
+    data[0:80, 90:100] = 100
+    data[110:, 0:20] = -1  # unknown cells count as free
+    return OccupancyMap(data=data, resolution=RESOLUTION, origin=(0.0, 0.0, 0.0))
+
+
+def grid_planner(occupancy: OccupancyMap, **options: object) -> RrtStarPlanner:
+    config = PlannerConfig(**{**GRID_CONFIG.__dict__, **options})  # type: ignore[arg-type]
+    grid = PlanningGrid(occupancy, inflation=config.inflation)
+    return RrtStarPlanner.on_grid(grid, config=config)
+
+
+def assert_free_on_grid(grid: PlanningGrid, waypoints: np.ndarray) -> None:
+    for a, b in zip(waypoints[:-1], waypoints[1:], strict=True):
+        assert grid.segment_is_free(a, b)
+        # an independent check: samples a millimetre apart, against the blocked cells
+        samples = np.linspace(a, b, max(int(np.linalg.norm(b - a) / 1e-3), 2))
+        assert grid.is_free(samples).all()
+
+
+def test_grid_planner_goes_around_a_wall_and_every_segment_is_free() -> None:
+    planner = grid_planner(wall_map())
+    assert planner.bounds == (0.0, 10.0, 0.0, 6.0)  # the grid's extent
+    start, goal = np.array([1.0, 1.0, 0.0]), np.array([9.0, 1.0, 0.0])
+
+    waypoints = planner.plan(start, goal)
+
+    assert planner.grid is not None
+    np.testing.assert_array_equal(waypoints[[0, -1]], [start[:2], goal[:2]])
+    assert len(waypoints) > 2
+    assert_free_on_grid(planner.grid, waypoints)  # type: ignore[arg-type]
+    # over the wall's top (y = 4) with the clearance: robot_radius + clearance above it
+    crossing = waypoints[np.argmin(np.abs(waypoints[:, 0] - 4.75))]
+    assert waypoints[:, 1].max() >= 4.0 + GRID_CONFIG.inflation
+    assert crossing[1] > 4.0
+
+
+def test_grid_planner_is_deterministic_for_a_seed() -> None:
+    first = grid_planner(wall_map(), seed=5).plan(np.array([1.0, 1.0]), np.array([9.0, 1.0]))
+    again = grid_planner(wall_map(), seed=5).plan(np.array([1.0, 1.0]), np.array([9.0, 1.0]))
+
+    np.testing.assert_array_equal(first, again)
+
+
+@pytest.mark.parametrize(
+    ('start', 'goal', 'match'),
+    [
+        ([1.0, 1.0], [4.7, 1.0], r'goal \(4.7, 1\) is in an occupied cell \(cell row 20, '
+         r'column 94\) of the grid inflated by 0.3 m \(robot_radius \+ clearance\)'),
+        ([4.3, 2.0], [9.0, 1.0], r'start \(4.3, 2\) is within 0.3 m of an occupied cell'),
+        ([1.0, 1.0], [11.0, 1.0], r'goal \(11, 1\) is outside the bounds \(0.0, 10.0'),
+    ],
+)
+def test_grid_planner_refuses_a_start_or_goal_in_an_inflated_cell_or_off_the_grid(
+    start: list[float], goal: list[float], match: str
+) -> None:
+    planner = grid_planner(wall_map())
+
+    with pytest.raises(PlanningError, match=match):
+        planner.plan(np.array(start), np.array(goal))
+
+
+def test_grid_planner_raises_when_the_goal_is_walled_off() -> None:
+    occupancy = wall_map()
+    occupancy.data[:, 90:100] = 100  # the wall now spans the whole height
+    planner = grid_planner(occupancy, iterations=200)
+
+    with pytest.raises(PlanningError, match='no collision-free path.*200 iterations'):
+        planner.plan(np.array([1.0, 1.0]), np.array([9.0, 1.0]))
+
+
+def test_grid_planner_avoids_cells_a_scan_marks_and_not_the_ones_a_later_scan_clears() -> None:
+    occupancy = OccupancyMap(data=np.zeros((120, 200), dtype=np.int8), resolution=RESOLUTION)
+    planner = grid_planner(occupancy)
+    grid = planner.grid
+    assert isinstance(grid, PlanningGrid)
+    start, goal = np.array([1.0, 3.0, 0.0]), np.array([9.0, 3.0, 0.0])
+    box = ConvexPolygon.from_box(5.0, 1.5, 5.3, 4.5)  # not in the map
+
+    np.testing.assert_array_equal(planner.plan(start, goal), [start[:2], goal[:2]])
+
+    grid.add_scan(SimulatedLaser([box], beams=720).scan(start), start)
+    around = planner.plan(start, goal)
+
+    assert len(around) > 2
+    assert_free_on_grid(grid, around)
+    # the scan saw the box's face x = 5, y in [1.5, 4.5]: the plan keeps the clearance to it
+    face = ConvexPolygon.from_box(5.0, 1.5, 5.0 + RESOLUTION, 4.5)
+    samples = np.concatenate([np.linspace(a, b, 500) for a, b in zip(around[:-1], around[1:],
+                                                                      strict=True)])
+    assert face.distance(samples).min() > GRID_CONFIG.inflation
+
+    grid.add_scan(SimulatedLaser([], beams=720).scan(start, stamp=1.0), start)  # box gone
+    np.testing.assert_array_equal(planner.plan(start, goal), [start[:2], goal[:2]])
+
+
+def test_grid_planner_refuses_an_edge_that_clips_only_the_corner_of_a_blocked_cell() -> None:
+    data = np.zeros((20, 20), dtype=np.int8)
+    data[10, 10] = 100  # blocked with its 8 neighbours: the square [9, 12] x [9, 12]
+    grid = PlanningGrid(OccupancyMap(data=data, resolution=1.0), inflation=0.0)
+    planner = RrtStarPlanner.on_grid(grid, config=PlannerConfig(clearance=0.0))
+    # the straight line cuts 0.02 m off the corner (9, 12), between two half-cell samples
+    start, goal = np.array([7.1, 10.08]), np.array([11.1, 14.08])
+
+    waypoints = planner.plan(start, goal)
+
+    assert len(waypoints) > 2
+    assert_free_on_grid(grid, waypoints)
+
+
+def test_grid_planner_refuses_a_grid_inflated_less_than_radius_plus_clearance() -> None:
+    grid = PlanningGrid(wall_map(), inflation=0.1)
+
+    with pytest.raises(ValueError, match=r'inflated by 0.1 m, less than .* = 0.3 m'):
+        RrtStarPlanner.on_grid(grid, config=GRID_CONFIG)
+
+
+def test_grid_bounds_cover_a_rotated_grid() -> None:
+    occupancy = OccupancyMap(data=np.zeros((10, 20), dtype=np.int8), resolution=0.1,
+                             origin=(1.0, 2.0, np.pi / 2))
+    grid = PlanningGrid(occupancy, inflation=0.0)
+
+    np.testing.assert_allclose(grid_bounds(grid), (0.0, 1.0, 2.0, 4.0), atol=1e-12)

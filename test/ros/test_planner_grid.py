@@ -1,0 +1,228 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""global_planner with use_map (and use_scan): plans on the map's grid, marked by scans.
+
+A probe publishes ``map`` (transient_local), ``odom``, ``scan`` and ``goal_pose`` over DDS and
+reads ``plan``, ``planner/diagnostics`` and /rosout.
+"""
+
+from __future__ import annotations
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import OccupancyGrid
+import numpy as np
+import pytest
+from rcl_interfaces.msg import Log
+from rclpy.exceptions import InvalidParameterValueException
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import LaserScan
+
+from mpc_local_planner.core.diagnostics import Level, PLANNER_DIAGNOSTICS_TOPIC, PlannerDiagnostics
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.perception.laser import SimulatedLaser
+from mpc_local_planner.ros.conversions import path_to_poses, seconds_to_stamp, yaw_to_quaternion
+from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
+from mpc_local_planner.ros.node_main import autostart
+from mpc_local_planner.ros.qos import MAP_QOS, PLANNER_DIAGNOSTICS_QOS, SCAN_QOS
+
+pytestmark = pytest.mark.slow  # topics over DDS
+
+RESOLUTION = 0.05
+ROBOT_RADIUS = 0.2
+CLEARANCE = 0.1
+INFLATION = ROBOT_RADIUS + CLEARANCE
+WALL = ConvexPolygon.from_box(4.5, 0.0, 5.0, 4.0)  # cells 90-99, rows 0-79 of the map
+# Wall seconds a plan or a message may take before the test fails.
+TIMEOUT = 20.0
+
+
+def grid_message(data: np.ndarray, *, resolution: float = RESOLUTION,
+                 width: int | None = None, height: int | None = None) -> OccupancyGrid:
+    """Return an OccupancyGrid of data (row 0 at the bottom), origin (0, 0), frame map."""
+    msg = OccupancyGrid()
+    msg.header.frame_id = 'map'
+    msg.info.resolution = resolution
+    msg.info.height = data.shape[0] if height is None else height
+    msg.info.width = data.shape[1] if width is None else width
+    msg.info.origin.orientation.w = 1.0
+    msg.data = np.asarray(data, dtype=np.int8).ravel().tolist()
+    return msg
+
+
+def wall_map() -> np.ndarray:
+    """10 m x 6 m, free, with WALL occupied (a gap above it) and some unknown cells."""
+    data = np.zeros((120, 200), dtype=np.int8)
+    data[0:80, 90:100] = 100
+    data[110:, 0:20] = -1
+    return data
+
+
+def goal_message(x: float, y: float) -> PoseStamped:
+    goal = PoseStamped()
+    goal.header.frame_id = 'map'
+    goal.pose.position.x, goal.pose.position.y = x, y
+    goal.pose.orientation = yaw_to_quaternion(0.0)
+    return goal
+
+
+def scan_message(shapes: list[ConvexPolygon], pose: np.ndarray, stamp: float, *,
+                 increment: float | None = None) -> LaserScan:
+    """Return a LaserScan that SimulatedLaser takes of shapes from pose (frame base_link)."""
+    laser = SimulatedLaser(shapes, beams=720)
+    scan = laser.scan(pose, stamp=stamp)
+    msg = LaserScan()
+    msg.header.frame_id = 'base_link'
+    msg.header.stamp = seconds_to_stamp(stamp)
+    msg.angle_min = scan.angle_min
+    msg.angle_increment = scan.angle_increment if increment is None else increment
+    msg.angle_max = scan.angle_min + scan.angle_increment * (len(scan.ranges) - 1)
+    msg.range_min, msg.range_max = scan.range_min, scan.range_max
+    msg.ranges = [float(r) for r in scan.ranges]
+    return msg
+
+
+def start(ros, **parameters):
+    """Return an active planner on the map (use_map, no world) and a probe with publishers."""
+    overrides = [Parameter('world_file', value=''), Parameter('use_map', value=True),
+                 Parameter('robot_radius', value=ROBOT_RADIUS),
+                 Parameter('clearance', value=CLEARANCE)]
+    overrides += [Parameter(name, value=value) for name, value in parameters.items()]
+    planner = ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=overrides))
+    assert autostart(planner) is None
+    probe = ros.probe()
+    probe.map_pub = probe.create_publisher(OccupancyGrid, 'map', MAP_QOS)
+    probe.scan_pub = probe.create_publisher(LaserScan, 'scan', SCAN_QOS)
+    probe.outcomes = []
+    probe.create_subscription(
+        DiagnosticArray, PLANNER_DIAGNOSTICS_TOPIC,
+        lambda msg: probe.outcomes.extend(
+            PlannerDiagnostics.from_values((kv.key, kv.value) for kv in s.values)
+            for s in msg.status),
+        PLANNER_DIAGNOSTICS_QOS)
+    return planner, probe
+
+
+def locate(ros, planner, probe, pose: np.ndarray, stamp: float | None = None) -> None:
+    """Publish odometry until the planner has it."""
+    def located() -> bool:
+        probe.publish_odom(pose, stamp)
+        return planner.robot_pose is not None and np.allclose(planner.robot_pose, pose)
+
+    assert ros.spin_until(located, timeout=TIMEOUT)
+
+
+def next_plan(ros, planner, probe, goal: PoseStamped) -> np.ndarray:
+    """Send a goal and return the (x, y) of the plan it gets."""
+    count = len(probe.raw_plans)
+    probe.goal_pub.publish(goal)
+    assert ros.spin_until(lambda: len(probe.raw_plans) > count, timeout=TIMEOUT), \
+        planner.last_outcome
+    return path_to_poses(probe.plans[-1])[:, :2]
+
+
+def samples(waypoints: np.ndarray) -> np.ndarray:
+    return np.concatenate([np.linspace(a, b, 400)
+                           for a, b in zip(waypoints[:-1], waypoints[1:], strict=True)])
+
+
+def test_planner_waits_for_the_map_then_plans_around_its_wall_with_the_clearance(ros) -> None:
+    planner, probe = start(ros)
+    locate(ros, planner, probe, np.array([1.0, 1.0, 0.0]))
+    probe.goal_pub.publish(goal_message(9.0, 1.0))
+
+    assert ros.spin_until(lambda: any('waiting for map' in o.detail for o in probe.outcomes),
+                          timeout=TIMEOUT), probe.outcomes
+    waiting = probe.outcomes[-1]
+    assert waiting.waiting and not waiting.planned and not waiting.failed
+    assert waiting.level == Level.WARN and not probe.raw_plans and planner.planner is None
+
+    probe.map_pub.publish(grid_message(wall_map()))  # the waiting goal is planned on it
+    assert ros.spin_until(lambda: len(probe.raw_plans) == 1, timeout=TIMEOUT), probe.outcomes
+
+    waypoints = path_to_poses(probe.plans[-1])[:, :2]
+    np.testing.assert_allclose(waypoints[[0, -1]], [[1.0, 1.0], [9.0, 1.0]])
+    assert len(waypoints) > 2
+    assert WALL.distance(samples(waypoints)).min() >= INFLATION - 1e-9
+    assert ros.spin_until(lambda: probe.outcomes[-1].planned, timeout=TIMEOUT)
+    assert planner.grid is not None and planner.grid.map.width == 200
+
+
+def test_planner_avoids_an_obstacle_a_scan_shows_and_the_map_lacks(ros) -> None:
+    planner, probe = start(ros, use_scan=True)
+    probe.map_pub.publish(grid_message(np.zeros((120, 200), dtype=np.int8)))
+    assert ros.spin_until(lambda: planner.grid is not None, timeout=TIMEOUT)
+    pose = np.array([1.0, 3.0, 0.0])
+    stamp = probe.now()
+    locate(ros, planner, probe, pose, stamp)
+
+    assert len(next_plan(ros, planner, probe, goal_message(9.0, 3.0))) == 2  # nothing seen
+
+    # a malformed scan is dropped with an error; the planner keeps running
+    bad = scan_message([], pose, stamp, increment=0.0)
+    assert ros.spin_until(lambda: probe.scan_pub.publish(bad) or any(
+        'scan dropped' in line for line in probe.log_lines('global_planner', Log.ERROR)),
+        timeout=TIMEOUT)
+    assert planner.scan_count == 0
+
+    box = ConvexPolygon.from_box(5.0, 1.5, 5.3, 4.5)  # in the world, not in the map
+    scan = scan_message([box], pose, stamp)
+    assert ros.spin_until(lambda: probe.scan_pub.publish(scan) or planner.scan_count > 0,
+                          timeout=TIMEOUT)
+
+    waypoints = next_plan(ros, planner, probe, goal_message(9.0, 3.1))
+    assert len(waypoints) > 2
+    face = ConvexPolygon.from_box(5.0, 1.5, 5.0 + RESOLUTION, 4.5)  # what the laser saw
+    assert face.distance(samples(waypoints)).min() >= INFLATION - 1e-9
+
+
+def test_a_malformed_map_is_refused_with_an_error_and_the_grid_in_force_stays(ros) -> None:
+    planner, probe = start(ros)
+    errors = lambda: probe.log_lines('global_planner', Log.ERROR)  # noqa: E731
+
+    bad_length = grid_message(wall_map(), width=150)  # 150 x 120 cells, 24000 values
+    probe.map_pub.publish(bad_length)
+    assert ros.spin_until(lambda: any('map refused (no map yet)' in e and '18000 cells' in e
+                                      for e in errors()), timeout=TIMEOUT), errors()
+    assert planner.grid is None and planner.planner is None
+
+    probe.map_pub.publish(grid_message(wall_map()))
+    assert ros.spin_until(lambda: planner.grid is not None, timeout=TIMEOUT)
+    grid = planner.grid
+
+    probe.map_pub.publish(grid_message(wall_map(), resolution=0.0))
+    assert ros.spin_until(lambda: any('map refused (the grid in force stays)' in e
+                                      and 'resolution must be > 0' in e for e in errors()),
+                          timeout=TIMEOUT), errors()
+    assert planner.grid is grid and planner.map_count == 1
+
+    locate(ros, planner, probe, np.array([1.0, 1.0, 0.0]))
+    waypoints = next_plan(ros, planner, probe, goal_message(9.0, 1.0))
+    assert WALL.distance(samples(waypoints)).min() >= INFLATION - 1e-9
+
+
+@pytest.mark.parametrize(
+    ('overrides', 'match'),
+    [
+        ({'use_scan': True}, 'use_scan needs use_map'),
+        ({'world_file': ''}, "world_file '' needs use_map"),
+        ({'use_map': True, 'laser_pose': [0.0, float('nan'), 0.0]}, 'laser_pose must be'),
+    ],
+)
+def test_planner_refuses_scans_without_the_map_and_no_world_without_the_map(
+        ros, overrides: dict, match: str) -> None:
+    with pytest.raises(InvalidParameterValueException, match=match):
+        GlobalPlannerNode(context=ros.context, parameter_overrides=[
+            Parameter(name, value=value) for name, value in overrides.items()])
