@@ -47,7 +47,7 @@ from mpc_local_planner.core.diagnostics import (
     CONTROLLER_DIAGNOSTICS_TOPIC,
     PLANNER_DIAGNOSTICS_TOPIC,
 )
-from mpc_local_planner.ros.node_main import run_node
+from mpc_local_planner.ros.node_main import destroy_on_failure, run_node
 from mpc_local_planner.ros.parameters import declare_parameters, ParameterSpec
 from mpc_local_planner.ros.qos import recorder_qos
 from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -105,6 +105,7 @@ def message_class(type_name: str) -> type:
 class BagRecorderNode(Node):
     """Record the topics named in ``topics`` (types in ``types``) into ``output``."""
 
+    @destroy_on_failure
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('bag_recorder', **kwargs)
         self.add_on_set_parameters_callback(self.parameters_callback)

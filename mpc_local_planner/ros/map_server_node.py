@@ -43,7 +43,7 @@ from rclpy.parameter import Parameter
 
 from mpc_local_planner.ros.conversions import yaw_to_quaternion
 from mpc_local_planner.ros.lifecycle import ManagedNode
-from mpc_local_planner.ros.node_main import run_node
+from mpc_local_planner.ros.node_main import destroy_on_failure, run_node
 from mpc_local_planner.ros.parameters import declare_parameters, ParameterSpec
 from mpc_local_planner.ros.qos import MAP_QOS
 from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -130,6 +130,7 @@ def occupancy_grid_msg(occupancy: OccupancyMap, *, frame_id: str, stamp: Time) -
 class MapServerNode(ManagedNode):
     """Load a map at configure and publish it (latched) at activate."""
 
+    @destroy_on_failure
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('map_server', **kwargs)
         self.add_on_set_parameters_callback(self.parameters_callback)
