@@ -152,6 +152,28 @@ def path_to_poses(path: Path) -> np.ndarray:
     return np.array([pose_to_array(p.pose) for p in path.poses])
 
 
+def _sequence_length_after_header(data: bytes, *, skip: int) -> int | None:
+    """Return the uint32 sequence length that follows a std_msgs/Header and skip bytes.
+
+    CDR: a 4-byte encapsulation header (byte 1 is 1 for little endian), then the Header's
+    stamp (8 bytes) and frame_id (uint32 length with the NUL, then the characters, padded to
+    4), then skip bytes of fixed fields, then the sequence length. None if data is too short
+    or not CDR.
+    """
+    if len(data) < 16 or data[0] != 0 or data[1] not in (0, 1):
+        return None
+    order = '<' if data[1] == 1 else '>'
+    body = 4
+    (length,) = struct.unpack_from(f'{order}I', data, body + 8)
+    offset = 12 + length
+    offset += -offset % 4
+    offset += skip
+    if body + offset + 4 > len(data):
+        return None
+    (count,) = struct.unpack_from(f'{order}I', data, body + offset)
+    return int(count)
+
+
 def path_pose_count(data: bytes) -> int | None:
     """Return how many poses a serialised nav_msgs/Path holds, without deserialising it.
 
@@ -165,17 +187,7 @@ def path_pose_count(data: bytes) -> int | None:
         The count, or None if data is too short or not CDR (deserialise it to find out why).
 
     """
-    if len(data) < 16 or data[0] != 0 or data[1] not in (0, 1):
-        return None
-    order = '<' if data[1] == 1 else '>'
-    body = 4
-    (length,) = struct.unpack_from(f'{order}I', data, body + 8)
-    offset = 12 + length
-    offset += -offset % 4
-    if body + offset + 4 > len(data):
-        return None
-    (count,) = struct.unpack_from(f'{order}I', data, body + offset)
-    return int(count)
+    return _sequence_length_after_header(data, skip=0)
 
 
 def poses_to_path(poses: np.ndarray | Sequence[Sequence[float]], *, frame_id: str = 'map',
@@ -344,18 +356,7 @@ def scan_beam_count(data: bytes) -> int | None:
         The count, or None if data is too short or not CDR (deserialise it to find out why).
 
     """
-    if len(data) < 16 or data[0] != 0 or data[1] not in (0, 1):
-        return None
-    order = '<' if data[1] == 1 else '>'
-    body = 4
-    (length,) = struct.unpack_from(f'{order}I', data, body + 8)
-    offset = 12 + length
-    offset += -offset % 4
-    offset += 7 * 4
-    if body + offset + 4 > len(data):
-        return None
-    (count,) = struct.unpack_from(f'{order}I', data, body + offset)
-    return int(count)
+    return _sequence_length_after_header(data, skip=7 * 4)  # the seven float32 fields
 
 
 def scan_from_message(msg: LaserScan) -> Scan:
