@@ -84,8 +84,9 @@ from mpc_local_planner.core.diagnostics import (
 from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
-from mpc_local_planner.core.paths import analytic_path, wrap_angle
+from mpc_local_planner.core.paths import analytic_path
 from mpc_local_planner.perception.grids import grid_rectangles
+from mpc_local_planner.perception.pose_history import PoseHistory
 from mpc_local_planner.perception.scan_obstacles import MAX_BEAMS, ObstacleMemory, validate_scan
 from mpc_local_planner.ros.conversions import (
     delete_all_marker,
@@ -387,8 +388,8 @@ class MpcControllerNode(ManagedNode):
         self._last_step_time: float | None = None
         self._markers_shown: tuple[tuple, tuple] | None = None  # (grown, active) last sent
         self._steps_since_markers = 0
-        # (time, state) of the last ODOM_HISTORY_S seconds of odometry, oldest first
-        self._odom_history: list[tuple[float, np.ndarray]] = []
+        # the last ODOM_HISTORY_S seconds of odometry, to place each scan where it was taken
+        self._odom_history = PoseHistory(ODOM_HISTORY_S)
         # the laser's obstacles: the memory, its polygons fitted to the NLP's faces, when
         # the latest valid scan was taken (None: none yet) and its stamp
         self._memory: ObstacleMemory | None = None
@@ -626,45 +627,13 @@ class MpcControllerNode(ManagedNode):
         self._state = state
         self._state_time = min(stamp, receipt) if stamp > 0 else receipt
         self._odom_problem = None
-        self._remember_pose(stamp if stamp > 0 else receipt, state)
+        self._odom_history.add(stamp if stamp > 0 else receipt, state)
         if self._problems.resolve('odom'):
             self.get_logger().info('odometry is valid again')
 
-    def _remember_pose(self, time: float, state: np.ndarray) -> None:
-        """Keep state in the odometry history (sorted by time, ODOM_HISTORY_S long)."""
-        history = self._odom_history
-        if history and time < history[-1][0] - ODOM_HISTORY_S:
-            history.clear()  # the clock jumped back: the old poses are of another time
-        index = len(history)
-        while index > 0 and history[index - 1][0] > time:
-            index -= 1
-        history.insert(index, (time, state))
-        newest = history[-1][0]
-        while history and history[0][0] < newest - ODOM_HISTORY_S:
-            history.pop(0)
-
     def pose_at(self, time: float) -> np.ndarray | None:
-        """Return the odometry pose at time, interpolated in the history (None if empty).
-
-        Between two odometry messages the position is interpolated linearly and the heading
-        along the shorter turn; before the oldest pose kept (ODOM_HISTORY_S) the oldest is
-        used, after the newest the newest (no extrapolation).
-        """
-        history = self._odom_history
-        if not history:
-            return None
-        if time <= history[0][0]:
-            return history[0][1].copy()
-        if time >= history[-1][0]:
-            return history[-1][1].copy()
-        index = 1
-        while history[index][0] < time:
-            index += 1
-        (t0, p0), (t1, p1) = history[index - 1], history[index]
-        f = (time - t0) / (t1 - t0) if t1 > t0 else 1.0
-        pose = p0 + f * (p1 - p0)
-        pose[2] = p0[2] + f * float(wrap_angle(p1[2] - p0[2]))
-        return pose
+        """Return the odometry pose at time (see PoseHistory.at; None before odometry)."""
+        return self._odom_history.at(time)
 
     def scan_callback(self, msg: LaserScan | bytes) -> None:
         """Place a scan's obstacles in the map frame and remember them; drop a bad scan.
