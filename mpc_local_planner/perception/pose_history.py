@@ -24,6 +24,7 @@ interpolates between the two poses around a stamp.
 from __future__ import annotations
 
 import bisect
+import math
 
 import numpy as np
 
@@ -62,6 +63,14 @@ class PoseHistory:
         self._poses.insert(index, np.array(pose[:3], dtype=float))
         oldest_kept = bisect.bisect_left(self._times, self._times[-1] - self.span)
         del self._times[:oldest_kept], self._poses[:oldest_kept]
+
+    def gap(self, time: float) -> float:
+        """Return how far (seconds) time is from the nearest pose kept (inf when empty)."""
+        if not self._times:
+            return math.inf
+        index = bisect.bisect_left(self._times, time)
+        neighbours = self._times[max(index - 1, 0):index + 1]
+        return min(abs(t - time) for t in neighbours)
 
     def at(self, time: float) -> np.ndarray | None:
         """Return the pose at time (None if empty).

@@ -51,7 +51,6 @@ supervisor such as closed_loop learns that no plan will come.
 
 from __future__ import annotations
 
-from collections import deque
 import math
 import sys
 from typing import Any
@@ -73,6 +72,7 @@ from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.paths import analytic_path
 from mpc_local_planner.core.planner import path_length, PlannerConfig, RrtStarPlanner
 from mpc_local_planner.perception.grids import PlanningGrid
+from mpc_local_planner.perception.pose_history import PoseHistory
 from mpc_local_planner.ros.conversions import (
     grid_from_message,
     odometry_to_state,
@@ -105,8 +105,8 @@ __all__ = ['GlobalPlannerNode', 'PARAMETERS', 'SUMMARY', 'main', 'waypoints_to_p
 
 # Poses of a published analytic path (enough for RViz and for a polyline controller).
 ANALYTIC_SAMPLES = 101
-# Odometry poses kept to place scans (a second at 100 Hz).
-ODOM_HISTORY = 100
+# Seconds of odometry kept to place scans.
+ODOM_HISTORY_S = 2.0
 # A scan farther than this (seconds) from every kept odometry stamp is dropped: the pose it
 # would be placed with is not the robot's at the scan.
 SCAN_POSE_TOLERANCE = 0.5
@@ -211,7 +211,7 @@ class GlobalPlannerNode(ManagedNode):
         self._scan_sub: Subscription | None = None
         self._active = False
         self._state: np.ndarray | None = None
-        self._odom_history: deque[tuple[float, np.ndarray]] = deque(maxlen=ODOM_HISTORY)
+        self._odom_history = PoseHistory(ODOM_HISTORY_S)
         self._pending_goal: np.ndarray | None = None
         self._waiting_reported = False
         self._problems = ProblemThrottle()
@@ -463,7 +463,7 @@ class GlobalPlannerNode(ManagedNode):
         except ValueError as err:
             self.get_logger().warning(f'ignoring odometry: {err}', throttle_duration_sec=1.0)
             return
-        self._odom_history.append((stamp_to_seconds(msg.header.stamp), self._state.copy()))
+        self._odom_history.add(stamp_to_seconds(msg.header.stamp), self._state)
         if self._pending_goal is not None:
             self._try_plan()
 
@@ -474,11 +474,7 @@ class GlobalPlannerNode(ManagedNode):
         """
         frame = str(self.get_parameter('frame_id').value)
         try:
-            if msg.header.frame_id != frame:
-                problem = (f'frame {msg.header.frame_id!r} is not {frame!r} (this node does '
-                           'not transform maps)')
-                raise ValueError(problem)
-            occupancy = grid_from_message(msg)
+            occupancy = grid_from_message(msg, frame_id=frame)
             config = self._planner_config()
             grid = PlanningGrid(occupancy, inflation=config.inflation)
             planner = RrtStarPlanner.on_grid(grid, config=config)
@@ -519,21 +515,19 @@ class GlobalPlannerNode(ManagedNode):
         self.scan_count += 1
 
     def _pose_at(self, stamp: float) -> np.ndarray:
-        """Return the kept odometry pose nearest to stamp (seconds).
+        """Return the odometry pose at stamp (seconds), interpolated in the history.
 
         Raises:
-            ValueError: if there is none within SCAN_POSE_TOLERANCE of it.
+            ValueError: if no pose kept is within SCAN_POSE_TOLERANCE of it.
 
         """
-        if not self._odom_history:
-            problem = 'no odometry yet to place it'
+        gap = self._odom_history.gap(stamp)
+        if not gap <= SCAN_POSE_TOLERANCE:
+            problem = ('no odometry yet to place it' if len(self._odom_history) == 0 else
+                       f'no odometry within {SCAN_POSE_TOLERANCE:g} s of its stamp '
+                       f'{stamp:.3f} s (nearest {gap:.3f} s away)')
             raise ValueError(problem)
-        when, pose = min(self._odom_history, key=lambda item: abs(item[0] - stamp))
-        if not abs(when - stamp) <= SCAN_POSE_TOLERANCE:
-            problem = (f'no odometry within {SCAN_POSE_TOLERANCE:g} s of its stamp '
-                       f'{stamp:.3f} s (nearest {when:.3f} s)')
-            raise ValueError(problem)
-        return pose
+        return self._odom_history.at(stamp)
 
     def goal_callback(self, msg: PoseStamped) -> None:
         """Plan to a goal sent as a PoseStamped (RViz's 2D Goal Pose); refused unless active."""

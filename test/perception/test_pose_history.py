@@ -39,3 +39,14 @@ def test_a_clock_that_jumps_back_clears_the_history() -> None:
     history.add(2.0, np.array([5.0, 5.0, 0.0]))
     assert len(history) == 1
     np.testing.assert_allclose(history.at(10.0), [5.0, 5.0, 0.0])
+
+
+def test_the_gap_is_the_time_to_the_nearest_pose_kept() -> None:
+    history = PoseHistory(span=2.0)
+    assert history.gap(1.0) == math.inf
+    history.add(1.0, np.zeros(3))
+    history.add(1.5, np.zeros(3))
+    assert history.gap(1.1) == pytest.approx(0.1)
+    assert history.gap(1.4) == pytest.approx(0.1)
+    assert history.gap(0.2) == pytest.approx(0.8)
+    assert history.gap(3.0) == pytest.approx(1.5)
