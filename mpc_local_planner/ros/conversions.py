@@ -372,14 +372,23 @@ def scan_from_message(msg: LaserScan) -> Scan:
                 stamp=stamp_to_seconds(msg.header.stamp))
 
 
-def grid_from_message(msg: OccupancyGrid) -> OccupancyMap:
+def grid_from_message(msg: OccupancyGrid, *, frame_id: str | None = None) -> OccupancyMap:
     """Return the occupancy map of a nav_msgs/OccupancyGrid, its fields checked.
 
+    Args:
+        msg: the grid.
+        frame_id: the frame it must be in (the nodes do not transform maps); None: any.
+
     Raises:
-        GridError: if the data length is not width x height, the resolution is not > 0,
-            the origin (or its orientation) is not finite, or a value is outside -1..100.
+        GridError: if the grid is in another frame, the data length is not width x height,
+            the resolution is not > 0, the origin (or its orientation) is not finite, or a
+            value is outside -1..100.
 
     """
+    if frame_id is not None and msg.header.frame_id != frame_id:
+        problem = (f'frame {msg.header.frame_id!r} is not {frame_id!r} (this node does not '
+                   'transform maps)')
+        raise GridError(problem)
     info = msg.info
     origin = info.origin
     try:

@@ -712,11 +712,7 @@ class MpcControllerNode(ManagedNode):
             return
         try:
             frame = str(self.get_parameter('frame_id').value)
-            if msg.header.frame_id != frame:
-                problem = (f'frame {msg.header.frame_id!r} is not {frame!r} (this node does '
-                           'not transform maps)')
-                raise ValueError(problem)
-            grid = grid_from_message(msg)
+            grid = grid_from_message(msg, frame_id=frame)
         except Exception as err:  # GridError mostly; never leave a callback
             problem = str(err) or type(err).__name__
             if self._problems.report('map'):
