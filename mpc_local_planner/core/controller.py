@@ -56,8 +56,14 @@ __all__ = [
     'MAX_COORDINATE',
     'MpcController',
     'Reason',
+    'SHARP_CORNER',
     'within_faces',
 ]
+
+# Sensed polygons with an interior angle below this (radians) are replaced by their enclosing
+# rectangle before the MPC grows them (see within_faces): growing by r moves a corner of angle
+# alpha by r / sin(alpha / 2), which is 2 r at 60 degrees.
+SHARP_CORNER = math.radians(60.0)
 
 
 class Reason(Enum):
@@ -136,34 +142,52 @@ class Blockage(NamedTuple):
 
 
 def within_faces(obstacles: Sequence[ConvexPolygon], max_faces: int) -> list[ConvexPolygon]:
-    """Return the obstacles, those with more than max_faces faces replaced by a rectangle.
+    """Return the obstacles, each with at most max_faces faces and no needle-sharp corner.
 
-    The rectangle is the smallest-area one around the polygon with a side along one of its
-    edges (it contains the polygon: avoiding it avoids the polygon). Sensed obstacles (a
-    scan cluster's hull) may have more faces than the NLP's slots hold; the world's are
-    refused instead, with a reason, where the parameters are checked.
+    A polygon with more faces than the NLP's slots hold (a scan cluster's hull) or with a
+    corner sharper than SHARP_CORNER is replaced by the smallest-area rectangle around it
+    with a side along one of its edges (it contains the polygon: avoiding it avoids the
+    polygon). Sharp corners matter because the MPC grows obstacles by shifting their faces:
+    a corner of angle alpha moves out by r / sin(alpha / 2), so the sliver a laser makes of
+    a face seen at a grazing angle (a parallelogram with 5 degree corners) grows metres long
+    spikes that block a free path (seen: a 0.2 m sliver grew into a 10 m needle that stopped
+    the robot 0.23 m before its goal). The world's obstacles with too many faces are refused
+    instead, with a reason, where the parameters are checked.
     """
     fitted = []
     for obstacle in obstacles:
-        if obstacle.num_faces <= max_faces:
+        if obstacle.num_faces <= max_faces and _sharpest_corner(obstacle) >= SHARP_CORNER:
             fitted.append(obstacle)
             continue
-        vertices = np.asarray(obstacle.vertices, dtype=float)
-        edges = np.roll(vertices, -1, axis=0) - vertices
-        angles = np.arctan2(edges[:, 1], edges[:, 0])
-        best = None
-        for angle in angles:
-            c, s = math.cos(angle), math.sin(angle)
-            along = vertices @ np.array([c, s])
-            across = vertices @ np.array([-s, c])
-            area = np.ptp(along) * np.ptp(across)
-            if best is None or area < best[0]:
-                best = (area, c, s, along.min(), along.max(), across.min(), across.max())
-        _, c, s, a0, a1, b0, b1 = best
-        u, n = np.array([c, s]), np.array([-s, c])
-        corners = [a0 * u + b0 * n, a1 * u + b0 * n, a1 * u + b1 * n, a0 * u + b1 * n]
-        fitted.append(ConvexPolygon.from_vertices(corners))
+        fitted.append(_enclosing_rectangle(obstacle))
     return fitted
+
+
+def _sharpest_corner(obstacle: ConvexPolygon) -> float:
+    """Return the smallest interior angle of a convex polygon, radians."""
+    normals = obstacle.A
+    # interior angle at the vertex between faces i-1 and i: pi minus the turn of the normal
+    cosines = np.einsum('ij,ij->i', normals, np.roll(normals, 1, axis=0))
+    return float(np.min(np.pi - np.arccos(np.clip(cosines, -1.0, 1.0))))
+
+
+def _enclosing_rectangle(obstacle: ConvexPolygon) -> ConvexPolygon:
+    """Return the smallest-area rectangle around the polygon with a side along an edge."""
+    vertices = np.asarray(obstacle.vertices, dtype=float)
+    edges = np.roll(vertices, -1, axis=0) - vertices
+    angles = np.arctan2(edges[:, 1], edges[:, 0])
+    best = None
+    for angle in angles:
+        c, s = math.cos(angle), math.sin(angle)
+        along = vertices @ np.array([c, s])
+        across = vertices @ np.array([-s, c])
+        area = np.ptp(along) * np.ptp(across)
+        if best is None or area < best[0]:
+            best = (area, c, s, along.min(), along.max(), across.min(), across.max())
+    _, c, s, a0, a1, b0, b1 = best
+    u, n = np.array([c, s]), np.array([-s, c])
+    corners = [a0 * u + b0 * n, a1 * u + b0 * n, a1 * u + b1 * n, a0 * u + b1 * n]
+    return ConvexPolygon.from_vertices(corners)
 
 
 class ControlOutput(NamedTuple):
