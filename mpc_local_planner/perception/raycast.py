@@ -69,24 +69,39 @@ class TrueGeometry:
             raise TypeError(msg)
         self.circles = np.array([tuple(c) for c in circles], dtype=float).reshape(-1, 3)
         self.polygons: list[ConvexPolygon] = polygons
-        faces = max((p.num_faces for p in polygons), default=1)
+        self._pack_polygons(polygons)
+        self._num_circles = len(self.circles)
+
+    def _pack_polygons(self, polygons: list[ConvexPolygon]) -> None:
+        """Pack the polygons' edges, faces and bounding disks into padded arrays.
+
+        Vectorised over all polygons at once: the obstacle memory builds a geometry of what
+        it remembers at every scan, and a Python loop per polygon cost 1.5 ms for 44 of them.
+        """
         count = len(polygons)
-        self._starts = np.zeros((count, faces, 2))
-        self._edges = np.zeros((count, faces, 2))
-        self._A = np.zeros((count, faces, 2))
-        self._b = np.zeros((count, faces))
-        bound = np.zeros((count, 3))
-        for i, polygon in enumerate(polygons):
-            rows = np.minimum(np.arange(faces), polygon.num_faces - 1)
-            vertices = polygon.vertices
-            self._starts[i] = vertices[rows]
-            self._edges[i] = np.roll(vertices, -1, axis=0)[rows] - vertices[rows]
-            self._A[i], self._b[i] = polygon.A[rows], polygon.b[rows]
-            centre = vertices.mean(axis=0)
-            bound[i] = (*centre, np.max(np.linalg.norm(vertices - centre, axis=1)))
+        sizes = np.array([p.num_faces for p in polygons], dtype=np.int64)
+        faces = int(sizes.max()) if count else 1
+        if count:
+            vertices = np.concatenate([p.vertices for p in polygons])
+            normals = np.concatenate([p.A for p in polygons])
+            offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+            # row r of polygon i is its face min(r, size - 1): padding repeats the last face
+            local = np.minimum(np.arange(faces)[None, :], sizes[:, None] - 1)
+            rows = offsets[:, None] + local
+            following = offsets[:, None] + (local + 1) % sizes[:, None]
+            self._starts = vertices[rows]
+            self._edges = vertices[following] - vertices[rows]
+            self._A = normals[rows]
+            self._b = np.concatenate([p.b for p in polygons])[rows]
+            centres = np.add.reduceat(vertices, offsets, axis=0) / sizes[:, None]
+            spread = np.hypot(*(vertices - np.repeat(centres, sizes, axis=0)).T)
+            bound = np.column_stack([centres, np.maximum.reduceat(spread, offsets)])
+        else:
+            self._starts = self._edges = self._A = np.zeros((0, faces, 2))
+            self._b = np.zeros((0, faces))
+            bound = np.zeros((0, 3))
         # Bounding disks: the circles themselves, then one per polygon.
         self._disks = np.vstack([self.circles, bound])
-        self._num_circles = len(self.circles)
 
     def __len__(self) -> int:
         return int(len(self._disks))

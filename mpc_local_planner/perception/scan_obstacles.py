@@ -23,12 +23,13 @@ The MPC avoids convex polygons {p : A p <= b}; a scan is a fan of points. The st
    and the laser's mounting pose in the robot frame.
 3. Clusters: consecutive points (in beam order) farther apart than ``gap`` belong to
    different objects.
-4. Convex pieces: a cluster that fits in ``small_size`` becomes its convex hull (thickened
-   behind the surface, so a single point or a flat arc still has an interior); a larger one is
-   split Douglas-Peucker style at its farthest point from the chord until every piece is
-   within ``split_tolerance`` of its chord, and each piece becomes a thin rectangle along the
-   chord, at least ``thickness`` wide, covering its points and reaching one beam spacing
-   past its ends (the surface may continue up to the next beam, which missed it).
+4. Convex pieces: a curved cluster that fits in ``small_size`` becomes its convex hull
+   (thickened behind the surface, so a single point still has an interior); a straight one
+   (within ``split_tolerance`` of its chord) or a larger one is split Douglas-Peucker style
+   at its farthest point from the chord until every piece is within ``split_tolerance`` of
+   its chord, and each piece becomes a thin rectangle along the chord, at least
+   ``thickness`` wide, covering its points and reaching one beam spacing past its ends (the
+   surface may continue up to the next beam, which missed it).
 5. `ObstacleMemory`: the laser does not see behind the robot, so obstacles are remembered for
    ``ttl`` seconds; a later beam that passes through a remembered obstacle proves it gone, and
    one whose view covers it entirely replaces it by what it sees now.
@@ -105,7 +106,8 @@ class ScanObstacleConfig:
         split_tolerance: A piece is split until its points are within this of its chord
             (metres); it also bounds how far a rectangle's face may be from the surface.
         thickness: Smallest width of a piece (metres): every obstacle has an interior.
-        small_size: Clusters whose bounding box diagonal is at most this become their hull.
+        small_size: Curved clusters whose bounding box diagonal is at most this become their
+            hull (straight ones become a rectangle along their chord).
 
     """
 
@@ -255,6 +257,25 @@ def _expand(first: np.ndarray, last: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return index, owner, offsets
 
 
+def _chord_deviation(points: np.ndarray, first: np.ndarray, last: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Return, for ranges of points, each point's distance from its range's chord.
+
+    Returns:
+        (point indices, their range, their distance from the chord, the largest per range).
+
+    """
+    index, owner, offsets = _expand(first, last)
+    a, b = points[first], points[last]
+    chord = b - a
+    length = np.hypot(chord[:, 0], chord[:, 1])
+    rel = points[index] - a[owner]
+    cross = np.abs(chord[owner, 0] * rel[:, 1] - chord[owner, 1] * rel[:, 0])
+    dev = np.where(length[owner] > 1e-12, cross / np.maximum(length[owner], 1e-12),
+                   np.hypot(rel[:, 0], rel[:, 1]))
+    return index, owner, dev, np.maximum.reduceat(dev, offsets)
+
+
 def _split(points: np.ndarray, first: np.ndarray, last: np.ndarray,
            tolerance: float) -> tuple[np.ndarray, np.ndarray]:
     """Split ranges Douglas-Peucker style until each is within tolerance of its chord.
@@ -264,15 +285,7 @@ def _split(points: np.ndarray, first: np.ndarray, last: np.ndarray,
     """
     done_first, done_last = [first[:0]], [last[:0]]
     while len(first):
-        index, owner, offsets = _expand(first, last)
-        a, b = points[first], points[last]
-        chord = b - a
-        length = np.hypot(chord[:, 0], chord[:, 1])
-        rel = points[index] - a[owner]
-        cross = np.abs(chord[owner, 0] * rel[:, 1] - chord[owner, 1] * rel[:, 0])
-        dev = np.where(length[owner] > 1e-12, cross / np.maximum(length[owner], 1e-12),
-                       np.hypot(rel[:, 0], rel[:, 1]))
-        worst = np.maximum.reduceat(dev, offsets)
+        index, owner, dev, worst = _chord_deviation(points, first, last)
         split = (worst > tolerance) & (last - first >= 2)
         done_first.append(first[~split])
         done_last.append(last[~split])
@@ -401,6 +414,10 @@ def _pieces(scan: Scan, robot_pose: Sequence[float], laser_pose: Sequence[float]
     span = (np.maximum.reduceat(points[index], offsets) -
             np.minimum.reduceat(points[index], offsets))
     small = np.hypot(span[:, 0], span[:, 1]) <= config.small_size
+    # A small but straight cluster (a face, maybe seen at a grazing angle) is a thin
+    # rectangle along its chord like a long one: its hull pushed back along the rays would be
+    # a sliver with needle corners, which grow into long spikes when inflated.
+    small &= _chord_deviation(points, first, last)[3] > config.split_tolerance
     obstacles = [_hull(points[first[k]:last[k] + 1], origin, config.thickness)
                  for k in np.flatnonzero(small)]
     piece_first, piece_last = _split(points, first[~small], last[~small],
