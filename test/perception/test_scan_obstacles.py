@@ -55,6 +55,22 @@ def test_box_in_front_gives_obstacles_covering_its_visible_face_and_nothing_far_
         assert np.ptp(obstacle.vertices, axis=0).min() >= 0.03
 
 
+def test_a_face_seen_at_a_grazing_angle_gives_pieces_without_needle_corners() -> None:
+    # unknown_box's box from where a run stalled: its bottom face at 6 degrees. Pushed back
+    # along the rays, that face's hull was a sliver with 5 degree corners, which the MPC's
+    # inflation grew into a 10 m spike across the robot's free path.
+    box = ConvexPolygon.from_box(2.8, 0.3, 3.3, 1.0)
+    pose = (4.341, 0.166, -0.887)
+    obstacles = scan_to_obstacles(SimulatedLaser([box]).scan(pose), pose)
+    assert obstacles
+    for obstacle in obstacles:
+        normals = obstacle.A
+        turn = np.arccos(np.clip(np.einsum('ij,ij->i', normals, np.roll(normals, 1, axis=0)),
+                                 -1.0, 1.0))
+        assert np.min(np.pi - turn) >= math.radians(60.0)
+        assert min_clearance([box], obstacle.vertices) <= 0.1
+
+
 def test_laser_mounting_pose_and_robot_pose_put_points_in_the_map_frame() -> None:
     laser = SimulatedLaser([BOX])
     # The laser sits 0.5 m ahead of a robot at (-0.5, 0) facing +x: it is at the origin.
