@@ -259,6 +259,16 @@ def test_closed_loop_with_sensing_reaches_the_paper_target_without_contact(tmp_p
 
 
 @pytest.mark.slow
+def test_closed_loop_with_sensing_goes_around_the_box_only_the_laser_shows(tmp_path) -> None:
+    # the first plan, on the map of the known wall, runs through the unknown box
+    code = main(['--world', str(UNKNOWN_BOX_FILE), '--out', str(tmp_path), '--sensing',
+                 '--path', 'rrt', '--rtf', '4', '--timeout', '150', '--time-limit', '60'])
+    assert code == 0
+    metrics = check_sensing_run(tmp_path, UNKNOWN_BOX)
+    assert metrics['replans'] >= 1
+
+
+@pytest.mark.slow
 def test_a_run_with_a_contact_fails_and_reports_it(tmp_path) -> None:
     # an unknown box on the paper's path, and no sensing: the controller drives into it
     world = tmp_path / 'hidden_box.yaml'
