@@ -134,6 +134,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'use_map); applies at the next configure'),
     ParameterSpec('laser_pose', [0.0, 0.0, 0.0],
                   'pose [x, y, yaw] of the laser in the robot frame (base_link)'),
+    ParameterSpec('base_frame_id', 'base_link',
+                  'the robot frame: scans must be in it (laser_pose says where the laser '
+                  'sits); read when a scan comes'),
     ParameterSpec('goal', Parameter.Type.DOUBLE_ARRAY,
                   'goal [x, y, theta]; setting it plans from the current odometry once the '
                   'node is active (optional: goal_pose messages do the same)'),
@@ -503,6 +506,11 @@ class GlobalPlannerNode(ManagedNode):
             self.get_logger().info('scans are ignored until a map comes', once=True)
             return
         try:
+            frame = str(self.get_parameter('base_frame_id').value)
+            if msg.header.frame_id != frame:
+                problem = (f'frame {msg.header.frame_id!r} is not {frame!r} (this node does not '
+                           'transform scans: laser_pose says where the laser sits)')
+                raise ValueError(problem)
             scan = scan_from_message(msg)
             pose = self._pose_at(scan.stamp)
             self._grid.add_scan(scan, pose,

@@ -176,8 +176,16 @@ def test_planner_avoids_an_obstacle_a_scan_shows_and_the_map_lacks(ros) -> None:
         'scan dropped' in line for line in probe.log_lines('global_planner', Log.ERROR)),
         timeout=TIMEOUT)
     assert planner.scan_count == 0
-
+    # so is a scan in another frame (the planner does not transform scans)
     box = ConvexPolygon.from_box(5.0, 1.5, 5.3, 4.5)  # in the world, not in the map
+    elsewhere = scan_message([box], pose, stamp)
+    elsewhere.header.frame_id = 'laser'
+    planner._problems.resolve('scan')  # the next problem is reported at once
+    assert ros.spin_until(lambda: probe.scan_pub.publish(elsewhere) or any(
+        "frame 'laser' is not 'base_link'" in line
+        for line in probe.log_lines('global_planner', Log.ERROR)), timeout=TIMEOUT)
+    assert planner.scan_count == 0
+
     scan = scan_message([box], pose, stamp)
     assert ros.spin_until(lambda: probe.scan_pub.publish(scan) or planner.scan_count > 0,
                           timeout=TIMEOUT)
