@@ -45,6 +45,7 @@ __all__ = [
     'PLANNER_DIAGNOSTICS_TOPIC',
     'PlannerDiagnostics',
     'PlannerKey',
+    'PlanTrigger',
 ]
 
 # Topics (relative, as the nodes publish them).
@@ -93,6 +94,8 @@ class PlannerKey(Enum):
     POSES = 'poses'
     LENGTH = 'length'  # metres
     WAITING = 'waiting'  # 'true' while the goal waits for input (a map): a plan may still come
+    TRIGGER = 'trigger'  # what asked for this plan: a PlanTrigger value
+    REPLANS = 'replans'  # re-plans since the node started (triggers blocked and periodic)
 
 
 class BagKey(Enum):
@@ -208,26 +211,45 @@ class ControllerDiagnostics(NamedTuple):
         return _from_values(cls, Key, values)
 
 
+class PlanTrigger(str, Enum):
+    """What asked the planner for a plan (a str, so diagnostics read the value)."""
+
+    GOAL = 'goal'  # a new goal (the parameter or goal_pose)
+    BLOCKED = 'blocked'  # the rest of the plan in force came too close to an obstacle
+    PERIODIC = 'periodic'  # replan_period elapsed
+
+    def __str__(self) -> str:
+        return self.value
+
+
 class PlannerDiagnostics(NamedTuple):
-    """The outcome of the planner's latest goal (fields: `PlannerKey` names in lower case)."""
+    """The outcome of the planner's latest attempt (fields: `PlannerKey` names in lower case)."""
 
     planned: bool = False
     detail: str = ''
     poses: int = 0
     length: float = math.nan
     waiting: bool = False
+    trigger: PlanTrigger = PlanTrigger.GOAL
+    replans: int = 0
 
     @property
     def level(self) -> Level:
-        """OK for a published plan, WARN while waiting, ERROR when none will come."""
+        """OK for a plan; WARN while waiting or for a failed re-plan; ERROR for a lost goal.
+
+        A failed re-plan leaves the plan in force; a failed goal leaves the robot no plan.
+        """
         if self.planned:
             return Level.OK
-        return Level.WARN if self.waiting else Level.ERROR
+        return Level.WARN if self.waiting or self.trigger is not PlanTrigger.GOAL else Level.ERROR
 
     @property
     def failed(self) -> bool:
-        """No plan will come for this goal (not published, and not waiting for input)."""
-        return not self.planned and not self.waiting
+        """No plan will come for this goal (a goal not planned, and not waiting for input).
+
+        A failed re-plan is not: the plan in force stays, and the next check tries again.
+        """
+        return not self.planned and not self.waiting and self.trigger is PlanTrigger.GOAL
 
     def to_values(self) -> list[tuple[str, str]]:
         """Return the (key, value) strings in `PlannerKey` order."""
@@ -263,6 +285,11 @@ def _parse(text: str, default: Any, name: str) -> Any:
             return PlanSource(text)
         except ValueError:
             return None
+    if name == 'trigger':
+        try:
+            return PlanTrigger(text)
+        except ValueError:
+            return default
     if name == 'lyapunov_ok':
         return None if text == '' else text == 'true'
     if isinstance(default, bool):

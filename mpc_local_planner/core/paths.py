@@ -40,6 +40,8 @@ __all__ = [
     'analytic_path',
     'distinct_waypoints',
     'paper_sinusoid',
+    'points_along',
+    'remaining_polyline',
     'simplify_polyline',
     'wrap_angle',
 ]
@@ -384,3 +386,56 @@ def simplify_polyline(points: np.ndarray, tolerance: float) -> np.ndarray:
             stack.append((first, split))
             stack.append((split, last))
     return pts[keep]
+
+
+def remaining_polyline(waypoints: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """Return the part of a polyline after the point's projection onto it.
+
+    What is left of a plan for a robot at point: the nearest point of the polyline (the
+    first segment wins a tie), then the later vertices. A re-planner checks this part only:
+    what the robot has passed cannot block it.
+
+    Args:
+        waypoints: (M, 2+) vertices, M >= 1 (further columns are ignored).
+        point: (2+,) the robot's position (further entries are ignored).
+
+    Returns:
+        (K, 2) vertices, K >= 1, starting at the projection.
+
+    """
+    pts = np.atleast_2d(np.asarray(waypoints, dtype=float))[:, :2]
+    p = np.asarray(point, dtype=float).reshape(-1)[:2]
+    if len(pts) < 2:
+        return pts.copy()
+    a, d = pts[:-1], np.diff(pts, axis=0)
+    length2 = np.einsum('ij,ij->i', d, d)
+    t = np.clip(np.einsum('ij,ij->i', p - a, d) / np.maximum(length2, 1e-18), 0.0, 1.0)
+    nearest = a + t[:, None] * d
+    k = int(np.argmin(np.hypot(*(nearest - p).T)))
+    return np.vstack([nearest[k], pts[k + 1:]])
+
+
+def points_along(waypoints: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Return points along a polyline at most spacing apart, and their arc lengths.
+
+    Every vertex is among the points (a segment's end is the next one's start, twice).
+
+    Args:
+        waypoints: (M, 2+) vertices, M >= 1 (further columns are ignored).
+        spacing: Largest distance between consecutive points, metres (> 0).
+
+    Returns:
+        ((K, 2) points, (K,) arc lengths), the first point the first vertex.
+
+    """
+    pts = np.atleast_2d(np.asarray(waypoints, dtype=float))[:, :2]
+    if len(pts) < 2:
+        return pts.copy(), np.zeros(len(pts))
+    delta = np.diff(pts, axis=0)
+    length = np.hypot(delta[:, 0], delta[:, 1])
+    counts = np.ceil(length / spacing).astype(np.int64) + 1
+    seg = np.repeat(np.arange(len(delta)), counts)
+    step = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
+    frac = step / np.maximum(counts[seg] - 1, 1)
+    start = np.concatenate([[0.0], np.cumsum(length)[:-1]])
+    return pts[seg] + frac[:, None] * delta[seg], start[seg] + frac * length[seg]

@@ -32,6 +32,7 @@ import numpy as np
 from scipy.ndimage import binary_dilation, distance_transform_edt
 
 from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.paths import points_along
 from mpc_local_planner.perception.scan_obstacles import (
     compose_pose,
     Scan,
@@ -210,6 +211,7 @@ class PlanningGrid:
         self._static = static_map.data >= threshold
         self._scan = np.zeros_like(self._static)
         self._blocked: np.ndarray | None = None
+        self._distance: np.ndarray | None = None
 
     @property
     def occupied(self) -> np.ndarray:
@@ -220,19 +222,29 @@ class PlanningGrid:
     def blocked(self) -> np.ndarray:
         """(height, width) booleans: cells within the inflation of an occupied cell."""
         if self._blocked is None:
+            self._blocked = self.distance <= self.inflation + 1e-9
+        return self._blocked
+
+    @property
+    def distance(self) -> np.ndarray:
+        """(height, width) lower bounds on each cell's distance to an occupied cell, metres.
+
+        A cell's value bounds the distance from any of its points to any point of an occupied
+        cell (the occupied cells are grown by their 8 neighbours first); inf without any.
+        """
+        if self._distance is None:
             occupied = self.occupied
             if not occupied.any():
-                self._blocked = np.zeros_like(occupied)
+                self._distance = np.full(occupied.shape, np.inf)
             else:
                 grown = binary_dilation(occupied, structure=np.ones((3, 3), dtype=bool))
-                distance = distance_transform_edt(~grown) * self.map.resolution
-                self._blocked = distance <= self.inflation + 1e-9
-        return self._blocked
+                self._distance = distance_transform_edt(~grown) * self.map.resolution
+        return self._distance
 
     def clear_scans(self) -> None:
         """Forget every scan mark (the static map stays)."""
         self._scan[:] = False
-        self._blocked = None
+        self._blocked = self._distance = None
 
     def add_scan(self, scan: Scan, robot_pose: Sequence[float], *,
                  laser_pose: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
@@ -273,7 +285,7 @@ class PlanningGrid:
         rows, cols = self.map.world_to_cell(hits)
         inside = self.map.contains_cell(rows, cols)
         self._scan[rows[inside], cols[inside]] = True
-        self._blocked = None
+        self._blocked = self._distance = None
 
     def is_free(self, points: np.ndarray) -> np.ndarray:
         """Say, per point, whether its cell is free after inflation (outside counts free).
@@ -298,6 +310,68 @@ class PlanningGrid:
         return self.path_is_free(np.array([np.asarray(a, dtype=float)[:2],
                                            np.asarray(b, dtype=float)[:2]]))
 
+    def first_within(self, waypoints: np.ndarray, margin: float) -> float | None:
+        """Return how far along a polyline it first comes within margin of an occupied cell.
+
+        Samples at most half a cell apart; outside the grid counts as free. This is the
+        re-planning test: a plan made clear of the inflation is blocked when a new obstacle
+        (a scan's mark) comes within margin of it.
+
+        Args:
+            waypoints: (M, 2) vertices (further columns are ignored).
+            margin: Distance to the occupied cells that counts as blocked, metres.
+
+        Returns:
+            The distance along the polyline (metres) of the first such sample, or None.
+
+        """
+        samples, along = self._samples(waypoints)
+        rows, cols = self.map.world_to_cell(samples)
+        inside = self.map.contains_cell(rows, cols)
+        near = np.zeros(len(samples), dtype=bool)
+        near[inside] = self.distance[rows[inside], cols[inside]] <= margin
+        hits = np.flatnonzero(near)
+        return float(along[hits[0]]) if len(hits) else None
+
+    def escape_point(self, position: Sequence[float], *, within: float,
+                     margin: float) -> np.ndarray | None:
+        """Return the nearest free cell's centre a robot at position can drive straight to.
+
+        A robot may stand inside the inflation (the planner's clearance is wider than the
+        controller's margin), where no plan can start; a re-plan starts from here instead.
+        Free means not blocked; the straight segment to it must stay farther than margin
+        (the robot's radius) from every occupied cell.
+
+        Args:
+            position: (x, y) of the robot, map frame.
+            within: Largest distance to the point, metres.
+            margin: Distance to occupied cells the segment must exceed, metres.
+
+        Returns:
+            (2,) the point, or None if there is none within reach.
+
+        """
+        origin = np.asarray(position, dtype=float).reshape(-1)[:2]
+        row, col = (int(v[0]) for v in self.map.world_to_cell(origin[None, :]))
+        reach = int(math.ceil(within / self.map.resolution)) + 1
+        r0, c0 = max(row - reach, 0), max(col - reach, 0)
+        window = ~self.blocked[r0:row + reach + 1, c0:col + reach + 1]
+        rows, cols = np.nonzero(window)
+        if not len(rows):
+            return None
+        centres = self.map.cell_to_world(rows + r0, cols + c0)
+        distance = np.hypot(*(centres - origin).T)
+        for k in np.argsort(distance, kind='stable'):
+            if distance[k] > within:
+                break
+            if self.first_within(np.vstack([origin, centres[k]]), margin) is None:
+                return centres[k]
+        return None
+
+    def _samples(self, waypoints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return points along a polyline at most half a cell apart, and their arc length."""
+        return points_along(waypoints, 0.5 * self.map.resolution)
+
     def path_is_free(self, waypoints: np.ndarray) -> bool:
         """Say whether a polyline stays in free cells, every segment sampled <= half a cell.
 
@@ -308,14 +382,4 @@ class PlanningGrid:
             True if every sample is free.
 
         """
-        pts = np.atleast_2d(np.asarray(waypoints, dtype=float))[:, :2]
-        if len(pts) < 2:
-            return bool(np.all(self.is_free(pts)))
-        delta = np.diff(pts, axis=0)
-        length = np.hypot(delta[:, 0], delta[:, 1])
-        counts = np.ceil(length / (0.5 * self.map.resolution)).astype(np.int64) + 1
-        seg = np.repeat(np.arange(len(delta)), counts)
-        step = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
-        frac = step / np.maximum(counts[seg] - 1, 1)
-        samples = pts[seg] + frac[:, None] * delta[seg]
-        return bool(np.all(self.is_free(samples)))
+        return bool(np.all(self.is_free(self._samples(waypoints)[0])))

@@ -126,6 +126,32 @@ def test_planning_grid_marks_scan_returns_and_clears_along_the_beams() -> None:
     assert grid.segment_is_free((0.0, 0.0), (1.5, 0.0))
 
 
+def test_first_within_says_how_far_along_a_path_an_obstacle_comes_within_the_margin() -> None:
+    grid = PlanningGrid(empty_map(), inflation=0.25)
+    # the wall's cells start at x = 2.0 (grown by a cell: 1.9); the path runs along y = 1
+    path = np.array([[0.0, 1.0], [3.0, 1.0]])
+    at = grid.first_within(path, 0.2)
+    assert at is not None and 1.6 <= at <= 1.75
+    assert grid.first_within(np.array([[0.0, 1.0], [1.0, 1.0], [1.0, -1.0]]), 0.2) is None
+    # the distances bound the true distance to the occupied cells from below
+    assert np.all(grid.distance[:17, 30] == 0.0)  # the wall (the gap at rows 18-21 is unknown)
+    assert grid.distance[0, 0] <= 2.9 + 1e-9  # cell x -1.0 .. -0.9, the wall from x = 2.0
+    assert PlanningGrid(OccupancyMap(np.zeros((4, 4), dtype=np.int8), 0.1, (0.0, 0.0, 0.0)),
+                        inflation=0.1).first_within(path, 10.0) is None
+
+
+def test_escape_point_is_the_nearest_clear_cell_reachable_straight_from_the_robot() -> None:
+    grid = PlanningGrid(empty_map(), inflation=0.25)
+    robot = np.array([1.75, 1.0])  # 0.15 m from the wall's grown cells: inside the inflation
+    assert not grid.is_free(robot)[0]
+    point = grid.escape_point(robot, within=1.0, margin=0.1)
+    assert point is not None and grid.is_free(point)[0]
+    assert np.hypot(*(point - robot)) <= 0.15 + 1e-9  # the cell just clear of it
+    assert grid.first_within(np.vstack([robot, point]), 0.1) is None
+    # nothing clear within reach: None
+    assert grid.escape_point(robot, within=0.05, margin=0.1) is None
+
+
 def test_planning_grid_refuses_bad_options_and_scans() -> None:
     with pytest.raises(ValueError, match='inflation'):
         PlanningGrid(empty_map(), inflation=-0.1)
