@@ -46,11 +46,10 @@ laser show (``obstacle_sources: [map, scan]``), and the bag records ``scan`` too
 draws unknown obstacles apart from known ones and, with ``--sensing``, what the controller
 avoided (``mpc/obstacles``, namespace ``raw``) at a few instants.
 
-With ``--path rrt`` the monitor also acts as a minimal navigator: when the controller says
-the remaining plan is blocked (``path_blocked`` in its diagnostics: an obstacle the plan did
-not know, seen by the laser), it sends the goal again on ``goal_pose``, at most once per
-REPLAN_PERIOD of simulated time while the plan stays blocked, and the planner plans anew from
-the robot's pose on what it knows now. ``metrics.json`` counts these in ``replans``.
+Re-planning is the planner's own: with ``--sensing`` it checks the rest of its plan against
+the map and the scans (``replan_check_rate``) and plans anew from the robot's pose when an
+obstacle the map did not have blocks it. ``metrics.json`` reports the planner's count of
+re-plans in ``replans``.
 """
 
 from __future__ import annotations
@@ -68,7 +67,6 @@ import time
 from typing import Any, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped
 import numpy as np
 import rclpy
 from rclpy.context import Context
@@ -96,14 +94,12 @@ from mpc_local_planner.ros.bag_recorder_node import (
     DEFAULT_TOPICS,
     DEFAULT_TYPES,
 )
-from mpc_local_planner.ros.conversions import seconds_to_stamp, yaw_to_quaternion
 from mpc_local_planner.ros.executors import spin_until
 from mpc_local_planner.ros.node_main import autostart, EXIT_INVALID_PARAMETERS
 from mpc_local_planner.ros.parameters import DEFAULT_WORLD_FILE
 from mpc_local_planner.ros.qos import (
     CONTACTS_QOS,
     DIAGNOSTICS_QOS,
-    GOAL_QOS,
     LOCAL_PLAN_QOS,
     PLANNER_DIAGNOSTICS_QOS,
 )
@@ -140,8 +136,6 @@ RAW_NAMESPACE = 'raw'
 # simulated seconds; the figure shows SENSED_SNAPSHOTS of them, spread over the run.
 SNAPSHOT_PERIOD = 2.0
 SENSED_SNAPSHOTS = 4
-# Simulated seconds between two goals re-sent while the controller reports a blocked plan.
-REPLAN_PERIOD = 2.0
 
 MODULES = {
     'map_server': 'mpc_local_planner.ros.map_server_node',
@@ -278,14 +272,10 @@ class _Monitor(Node):
     avoids (its raw obstacles) at a few instants for the figure.
     """
 
-    def __init__(self, *, sensing: bool = False, replan_goal: Sequence[float] | None = None,
-                 **kwargs: Any) -> None:
+    def __init__(self, *, sensing: bool = False, **kwargs: Any) -> None:
         super().__init__('closed_loop_monitor', **kwargs)
         self.goal_reached = False
-        self.replans: list[float] = []  # simulated times at which the goal was sent again
-        self._replan_goal = None if replan_goal is None else [float(v) for v in replan_goal]
-        self._goal_pub = (None if replan_goal is None
-                          else self.create_publisher(PoseStamped, 'goal_pose', GOAL_QOS))
+        self.replans = 0  # the planner's count of re-plans, as it last reported it
         self.contacts: int | None = None  # the simulator's count, once heard
         # (simulated time, raw obstacle outlines) every SNAPSHOT_PERIOD at most
         self.sensed: list[tuple[float, list[np.ndarray]]] = []
@@ -329,31 +319,12 @@ class _Monitor(Node):
             step = ControllerDiagnostics.from_values((kv.key, kv.value) for kv in status.values)
             self.last_reason = step.message
             self.goal_reached = step.goal_reached
-            if step.path_blocked and not step.goal_reached:
-                self._replan()
-
-    def _replan(self) -> None:
-        """Send the goal again (the planner plans from the robot's pose), if it is time."""
-        if self._goal_pub is None or self._replan_goal is None:
-            return
-        now = self.sim_time()
-        if self.replans and now < self.replans[-1] + REPLAN_PERIOD:
-            return
-        self.replans.append(now)
-        x, y, theta = self._replan_goal
-        goal = PoseStamped()
-        goal.header.frame_id = 'map'
-        goal.header.stamp = seconds_to_stamp(now)
-        goal.pose.position.x, goal.pose.position.y = x, y
-        goal.pose.orientation = yaw_to_quaternion(theta)
-        self._goal_pub.publish(goal)
-        self.get_logger().info(f'the plan is blocked: goal ({x:g}, {y:g}) sent again to '
-                               'the planner')
 
     def planner_callback(self, msg: DiagnosticArray) -> None:
         """Note whether the planner's latest goal failed (a later plan clears it)."""
         for status in msg.status:
             outcome = PlannerDiagnostics.from_values((kv.key, kv.value) for kv in status.values)
+            self.replans = max(self.replans, outcome.replans)
             if outcome.waiting:
                 continue  # waiting for the map: the plan is still to come
             self.plan_failure = (outcome.detail or 'no plan') if outcome.failed else None
@@ -457,8 +428,7 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
             Parameter('world_file', value=str(world_file)),
             *(Parameter(k, value=v)
               for k, v in recorder_topics(sensing=options.sensing).items())])
-        monitor = _Monitor(context=context, parameter_overrides=sim, sensing=options.sensing,
-                           replan_goal=world.goal if options.path == 'rrt' else None)
+        monitor = _Monitor(context=context, parameter_overrides=sim, sensing=options.sensing)
         nodes += [recorder, monitor]
         if options.separate_processes:
             children = _spawn(params, out / 'logs')
@@ -504,7 +474,7 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
     run_info = {'stop_reason': stop_reason, 'wall_time': wall_time, 'sim_time': sim_time,
                 'separate_processes': options.separate_processes, 'rtf': options.rtf,
                 'respawns': respawns, 'sensing': options.sensing,
-                'contacts': monitor.contacts, 'replans': len(monitor.replans),
+                'contacts': monitor.contacts, 'replans': monitor.replans,
                 'path_source': options.path, 'world': str(world_file)}
     title = (f'{world.name}: {options.path} path, rtf {options.rtf:g}'
              + (', sensing' if options.sensing else ''))

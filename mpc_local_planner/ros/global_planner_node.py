@@ -38,8 +38,15 @@ robot_radius + clearance with a distance transform; the plane it samples is the 
 stays. With ``use_scan`` too, each ``scan`` (sensor_msgs/LaserScan from the laser at
 ``laser_pose`` in the robot frame) marks the cells of its returns and clears the cells its
 beams pass through, placed with the odometry pose nearest to its stamp; a malformed scan is
-dropped with one throttled error. The next goal is planned on the grid as the scans left it
-(re-planning a plan that becomes blocked is not this node's job yet).
+dropped with one throttled error.
+
+Re-planning (``replan_check_rate``, 2 Hz by default): the rest of the plan in force, from the
+robot's projection onto it, is checked against the grid; when the robot following it would
+come within robot_radius of an occupied cell (an obstacle the map did not have, marked by
+the laser), the goal is planned again from the current odometry, and with ``replan_period``
+> 0 also periodically. A new plan replaces the old on ``plan``; the controller follows it from
+the robot's projection. ``planner/diagnostics`` says what triggered each plan and counts the
+re-plans; a failed re-plan is a warning and the plan in force stays.
 
 A goal it cannot plan to (inside an inflated obstacle, walled off, out of bounds, not
 finite, in another frame), or a start in collision, is logged as an error and nothing is
@@ -67,9 +74,13 @@ from rclpy.parameter import Parameter
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import LaserScan
 
-from mpc_local_planner.core.diagnostics import PLANNER_DIAGNOSTICS_TOPIC, PlannerDiagnostics
+from mpc_local_planner.core.diagnostics import (
+    PLANNER_DIAGNOSTICS_TOPIC,
+    PlannerDiagnostics,
+    PlanTrigger,
+)
 from mpc_local_planner.core.errors import PlanningError
-from mpc_local_planner.core.paths import analytic_path
+from mpc_local_planner.core.paths import analytic_path, remaining_polyline
 from mpc_local_planner.core.planner import path_length, PlannerConfig, RrtStarPlanner
 from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.perception.pose_history import PoseHistory
@@ -110,6 +121,9 @@ ODOM_HISTORY_S = 2.0
 # A scan farther than this (seconds) from every kept odometry stamp is dropped: the pose it
 # would be placed with is not the robot's at the scan.
 SCAN_POSE_TOLERANCE = 0.5
+# A re-plan from a robot standing within the planner's clearance of an obstacle starts from
+# the nearest clear point no farther than this (m) that it can drive straight to.
+ESCAPE_DISTANCE = 1.0
 
 _PLANNER_FIELDS = ('iterations', 'time_limit', 'seed', 'range', 'robot_radius', 'clearance',
                    'simplify')
@@ -158,6 +172,14 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "publish this analytic path (e.g. 'paper_sinusoid') instead of planning; '' "
                   '= plan with RRT*'),
     ParameterSpec('frame_id', 'map', 'frame of the plan'),
+    ParameterSpec('replan_check_rate', 2.0,
+                  'how often (Hz) the rest of the plan is checked against the grid (map plus '
+                  'scans); a plan an obstacle comes within robot_radius + clearance / 2 of is '
+                  're-planned from the current odometry; 0 = never (read at activate)',
+                  float_range=(0.0, 100.0)),
+    ParameterSpec('replan_period', 0.0,
+                  're-plan the goal in force this often (s) even when the plan is clear; 0 = '
+                  'only when blocked or for a new goal', float_range=(0.0, 3600.0)),
     ParameterSpec('autostart', True,
                   'configure and activate at start; false = wait for a lifecycle manager (or '
                   '`ros2 lifecycle set`)', read_only=True),
@@ -220,6 +242,10 @@ class GlobalPlannerNode(ManagedNode):
         self._problems = ProblemThrottle()
         self.last_plan: np.ndarray | None = None
         self.plan_count = 0
+        self.replan_count = 0
+        self._goal: np.ndarray | None = None  # the goal of the plan in force
+        self._plan_time = 0.0  # when the plan in force was published (node clock, s)
+        self._check_timer: Any = None
         self.map_count = 0
         self.scan_count = 0
         self.last_outcome: PlannerDiagnostics | None = None
@@ -288,6 +314,9 @@ class GlobalPlannerNode(ManagedNode):
             return result
         self._active = True
         self.get_logger().info('active')
+        rate = float(self.get_parameter('replan_check_rate').value)
+        if rate > 0.0:
+            self._check_timer = self.create_timer(1.0 / rate, self.check_plan)
         if self.get_parameter('analytic_path').value:
             self._publish_analytic()
         else:
@@ -297,6 +326,7 @@ class GlobalPlannerNode(ManagedNode):
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Stop planning and publishing (the latched plan stays with its subscribers)."""
         self._active = False
+        self._destroy_check_timer()
         self.get_logger().info('inactive: goals are not planned until activated')
         return super().on_deactivate(state)
 
@@ -317,8 +347,15 @@ class GlobalPlannerNode(ManagedNode):
         return TransitionCallbackReturn.SUCCESS
 
 
+    def _destroy_check_timer(self) -> None:
+        if self._check_timer is not None:
+            self.destroy_timer(self._check_timer)
+            self._check_timer = None
+
     def _release(self) -> None:
         self._active = False
+        self._destroy_check_timer()
+        self._goal = None
         self._configured = False
         for publisher in (self._plan_pub, self._diag_pub):
             if publisher is not None:
@@ -579,25 +616,88 @@ class GlobalPlannerNode(ManagedNode):
             self.get_logger().info('goal received: waiting for odometry', once=True)
             return
         goal, self._pending_goal = self._pending_goal, None
+        self._plan_to(goal, PlanTrigger.GOAL)
+
+    def check_plan(self) -> None:
+        """Re-plan the goal in force when the rest of its plan is blocked, or periodically.
+
+        Blocked means that the robot following the rest of the plan (from its projection onto
+        it) would come within robot_radius of a cell the grid now holds as occupied: an
+        obstacle the map did not have, seen by the laser. The world file's obstacles do not
+        change, so without use_map only replan_period re-plans.
+        """
+        if (not self._active or self._goal is None or self.last_plan is None
+                or self._state is None or self._planner is None or self._pending_goal is not None
+                or self.get_parameter('analytic_path').value):
+            return
+        rest = remaining_polyline(self.last_plan, self._state)
+        blocked_at = None
+        if self._grid is not None:
+            blocked_at = self._grid.first_within(rest, self._planner.config.robot_radius)
+        period = float(self.get_parameter('replan_period').value)
+        if blocked_at is not None:
+            self.get_logger().info(f'the plan is blocked {blocked_at:.2f} m ahead: re-planning')
+            self._plan_to(self._goal, PlanTrigger.BLOCKED)
+        elif period > 0.0 and self._now() - self._plan_time >= period:
+            self._plan_to(self._goal, PlanTrigger.PERIODIC)
+
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _plan_to(self, goal: np.ndarray, trigger: PlanTrigger) -> None:
+        """Plan from the current odometry to goal and publish; report why not otherwise."""
+        assert self._planner is not None and self._state is not None
         start = self._state.copy()
         try:
-            waypoints = self._planner.plan(start, goal)
+            waypoints = self._plan_from(start, goal, trigger)
         except Exception as err:  # PlanningError; anything else must not kill the executor
             cause = str(err) if isinstance(err, PlanningError) else (
                 f'planner failed: {type(err).__name__}: {err}')
             detail = f'no plan to ({goal[0]:g}, {goal[1]:g}): {cause}'
-            self.get_logger().error(f'{detail}; none published')
-            self._report(PlannerDiagnostics(planned=False, detail=detail))
+            if trigger is PlanTrigger.GOAL:
+                self.get_logger().error(f'{detail}; none published')
+            elif self._problems.report('replan'):
+                self.get_logger().warning(f'{trigger} re-plan failed: {detail}; the plan in '
+                                          'force stays')
+            self._report(PlannerDiagnostics(planned=False, detail=detail, trigger=trigger,
+                                            replans=self.replan_count))
             return
+        if trigger is PlanTrigger.GOAL:
+            self._goal = goal
+        else:
+            self.replan_count += 1
+            self._problems.resolve('replan')
         poses = waypoints_to_poses(waypoints, float(start[2]), float(goal[2]))
-        self._publish(poses)
+        self._publish(poses, trigger)
+
+    def _plan_from(self, start: np.ndarray, goal: np.ndarray,
+                   trigger: PlanTrigger) -> np.ndarray:
+        """Plan from start; a re-plan on the grid may start from a nearby clear point.
+
+        The MPC keeps a smaller margin than the planner's clearance, so a robot that stopped
+        in front of an obstacle it has just seen may stand within robot_radius + clearance
+        of it, where no plan can start. A re-plan then starts from the nearest clear cell
+        the robot can drive straight to (PlanningGrid.escape_point, within ESCAPE_DISTANCE),
+        and the plan begins with that short segment.
+        """
+        assert self._planner is not None
+        try:
+            return self._planner.plan(start, goal)
+        except PlanningError:
+            if trigger is PlanTrigger.GOAL or self._grid is None:
+                raise
+            escape = self._grid.escape_point(start, within=ESCAPE_DISTANCE,
+                                             margin=self._planner.config.robot_radius)
+            if escape is None:
+                raise
+            return np.vstack([start[:2], self._planner.plan(escape, goal)])
 
     def _publish_analytic(self) -> None:
         _, poses = analytic_path(str(self.get_parameter('analytic_path').value)).sample(
             ANALYTIC_SAMPLES)
         self._publish(poses)
 
-    def _publish(self, poses: np.ndarray) -> None:
+    def _publish(self, poses: np.ndarray, trigger: PlanTrigger = PlanTrigger.GOAL) -> None:
         msg = poses_to_path(poses, frame_id=str(self.get_parameter('frame_id').value),
                             stamp=self.get_clock().now().to_msg())
         assert self._plan_pub is not None  # active
@@ -605,10 +705,12 @@ class GlobalPlannerNode(ManagedNode):
         self.last_plan = poses
         self.plan_count += 1
         length = path_length(poses)
-        detail = f'published a plan: {len(poses)} poses, {length:.2f} m'
+        self._plan_time = self._now()
+        detail = f'published a plan ({trigger}): {len(poses)} poses, {length:.2f} m'
         self.get_logger().info(detail)
         self._report(PlannerDiagnostics(planned=True, detail=detail, poses=len(poses),
-                                        length=length))
+                                        length=length, trigger=trigger,
+                                        replans=self.replan_count))
 
     def _report(self, outcome: PlannerDiagnostics) -> None:
         """Publish the outcome of the latest goal on planner/diagnostics."""

@@ -30,7 +30,12 @@ from rclpy.exceptions import InvalidParameterValueException
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import LaserScan
 
-from mpc_local_planner.core.diagnostics import Level, PLANNER_DIAGNOSTICS_TOPIC, PlannerDiagnostics
+from mpc_local_planner.core.diagnostics import (
+    Level,
+    PLANNER_DIAGNOSTICS_TOPIC,
+    PlannerDiagnostics,
+    PlanTrigger,
+)
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.perception.laser import SimulatedLaser
 from mpc_local_planner.ros.conversions import path_to_poses, seconds_to_stamp, yaw_to_quaternion
@@ -234,3 +239,59 @@ def test_planner_refuses_scans_without_the_map_and_no_world_without_the_map(
     with pytest.raises(InvalidParameterValueException, match=match):
         GlobalPlannerNode(context=ros.context, parameter_overrides=[
             Parameter(name, value=value) for name, value in overrides.items()])
+
+
+def test_planner_replans_by_itself_when_a_scan_shows_an_obstacle_on_the_plan(ros) -> None:
+    planner, probe = start(ros, use_scan=True, replan_check_rate=20.0)
+    probe.map_pub.publish(grid_message(np.zeros((120, 200), dtype=np.int8)))
+    assert ros.spin_until(lambda: planner.grid is not None, timeout=TIMEOUT)
+    pose = np.array([1.0, 3.0, 0.0])
+    stamp = probe.now()
+    locate(ros, planner, probe, pose, stamp)
+    first = next_plan(ros, planner, probe, goal_message(9.0, 3.0))
+    assert len(first) == 2 and planner.replan_count == 0
+
+    # the laser shows a wall across the plan: the next check re-plans, with no new goal
+    box = ConvexPolygon.from_box(5.0, 1.5, 5.3, 4.5)
+    count = len(probe.raw_plans)
+    scan = scan_message([box], pose, stamp)
+    assert ros.spin_until(lambda: probe.scan_pub.publish(scan) or len(probe.raw_plans) > count,
+                          timeout=TIMEOUT), planner.last_outcome
+    replanned = path_to_poses(probe.plans[-1])[:, :2]
+    assert len(replanned) > 2
+    face = ConvexPolygon.from_box(5.0, 1.5, 5.0 + RESOLUTION, 4.5)  # what the laser saw
+    assert face.distance(samples(replanned)).min() >= INFLATION - 1e-9
+    assert planner.replan_count == 1
+    assert ros.spin_until(lambda: probe.outcomes and probe.outcomes[-1].replans == 1,
+                          timeout=TIMEOUT)
+    outcome = probe.outcomes[-1]
+    assert outcome.planned and outcome.trigger is PlanTrigger.BLOCKED
+
+    # the new plan is clear: further checks leave it alone
+    for _ in range(5):
+        planner.check_plan()
+    assert planner.replan_count == 1
+
+
+def test_a_robot_within_the_clearance_replans_from_the_nearest_clear_point(ros) -> None:
+    planner, probe = start(ros, use_scan=True, replan_check_rate=20.0)
+    probe.map_pub.publish(grid_message(np.zeros((120, 200), dtype=np.int8)))
+    assert ros.spin_until(lambda: planner.grid is not None, timeout=TIMEOUT)
+    locate(ros, planner, probe, np.array([1.0, 3.0, 0.0]))
+    next_plan(ros, planner, probe, goal_message(9.0, 3.0))
+
+    # the robot stopped 0.25 m in front of a box it has just seen (clearance 0.3 m)
+    pose = np.array([4.75, 3.0, 0.0])
+    stamp = probe.now()
+    locate(ros, planner, probe, pose, stamp)
+    box = ConvexPolygon.from_box(5.0, 1.5, 5.3, 4.5)
+    count = len(probe.raw_plans)
+    scan = scan_message([box], pose, stamp)
+    assert ros.spin_until(lambda: probe.scan_pub.publish(scan) or len(probe.raw_plans) > count,
+                          timeout=TIMEOUT), planner.last_outcome
+    replanned = path_to_poses(probe.plans[-1])[:, :2]
+    np.testing.assert_allclose(replanned[0], pose[:2])
+    face = ConvexPolygon.from_box(5.0, 1.5, 5.0 + RESOLUTION, 4.5)
+    # the first, short segment keeps the robot's radius; the rest the full inflation
+    assert face.distance(samples(replanned[:2])).min() > ROBOT_RADIUS
+    assert face.distance(samples(replanned[1:])).min() >= INFLATION - 1e-9
