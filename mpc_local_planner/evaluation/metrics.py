@@ -16,20 +16,88 @@
 
 Computing them from rows (not from live objects) lets the experiments, closed_loop and
 analyze_bag (which only has a bag) report the same numbers the same way.
+
+Clearance is measured from the robot's footprint: a circle of ``robot_radius`` (the numbers
+this module always gave, conventions included), or a convex polygon at each row's pose
+(x, y, theta), whose exact signed distance to the true shapes is what the BARN challenge's
+"no contact of the true footprint" is about (`footprint_clearance`).
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import wrap_angle
 from mpc_local_planner.evaluation.trajectory import TRAJECTORY_INDEX as COL
+from mpc_local_planner.perception.laser import footprint_distances, TrueGeometry
+from mpc_local_planner.worlds.world import Circle, Shape
 
-__all__ = ['compute_metrics', 'reached_mask']
+__all__ = ['PoseClearance', 'compute_metrics', 'footprint_clearance', 'reached_mask']
+
+#: poses (n, 3) [x, y, theta] -> clearance (n,) in metres; <= 0 is contact.
+PoseClearance = Callable[[np.ndarray], np.ndarray]
+
+
+def footprint_clearance(shapes: Sequence[Shape], footprint: Footprint) -> PoseClearance:
+    """Return poses (n, 3) -> clearance of the footprint from the shapes (m; <= 0: contact).
+
+    A circle footprint keeps the rollout's conventions exactly (``polygon_clearance`` and
+    ``circle_clearance`` of evaluation/rollout.py, so switching to this function changes no
+    result): from a polygon, the centre's distance minus the radius, and -1 - radius when
+    the centre is inside; from a disk, the centres' distance minus both radii. A polygon
+    footprint gives the exact signed distance at the pose's heading (minus the penetration
+    depth when overlapping). No shapes: inf.
+
+    Args:
+        shapes: The true obstacles (`ConvexPolygon` and `Circle`, e.g.
+            ``world.physical_shapes()``), not inflated.
+        footprint: The robot's shape.
+
+    Returns:
+        The clearance function; a circle footprint also accepts (n, 2) points.
+
+    """
+    shapes = tuple(shapes)
+    if footprint.is_circle:
+        polygons = tuple(s for s in shapes if isinstance(s, ConvexPolygon))
+        circles = np.array([tuple(s) for s in shapes if isinstance(s, Circle)],
+                           dtype=float).reshape(-1, 3)
+        radius = footprint.radius
+
+        def circle_clearance(poses: np.ndarray) -> np.ndarray:
+            points = np.atleast_2d(np.asarray(poses, dtype=float))[:, :2]
+            result = np.full(len(points), math.inf)
+            if polygons:
+                result = np.minimum(result, _circle_polygon_clearance(polygons, points, radius))
+            if len(circles):
+                d = np.linalg.norm(points[:, None, :] - circles[None, :, :2], axis=2)
+                result = np.minimum(result, np.min(d - (circles[None, :, 2] + radius), axis=1))
+            return result
+        return circle_clearance
+    geometry = TrueGeometry(shapes)
+
+    def polygon_clearance(poses: np.ndarray) -> np.ndarray:
+        return footprint_distances(geometry, footprint, poses)
+    return polygon_clearance
+
+
+def _circle_polygon_clearance(obstacles: Sequence[ConvexPolygon], points: np.ndarray,
+                              robot_radius: float) -> np.ndarray:
+    """Return the round robot's clearance from polygons (-1 - radius with the centre inside).
+
+    The expression compute_metrics has always used, kept as it was so circle results stay
+    identical to the last bit.
+    """
+    distances = np.min(np.stack([o.distance(points) for o in obstacles]), axis=0)
+    inside = np.zeros(len(points), dtype=bool)
+    for o in obstacles:
+        inside |= o.contains(points)
+    return np.where(inside, -1.0, distances) - robot_radius
 
 
 
@@ -55,8 +123,9 @@ def compute_metrics(
     rows: np.ndarray,
     *,
     goal: np.ndarray,
-    obstacles: Sequence[ConvexPolygon],
+    obstacles: Sequence[Shape],
     robot_radius: float = 0.0,
+    footprint: Footprint | None = None,
     reference_length: float | None = None,
     solver_failures: int = 0,
     lyapunov_ok: Sequence[bool | None] = (),
@@ -68,15 +137,28 @@ def compute_metrics(
     Args:
         rows: (n, 9) trajectory rows (t, x, y, theta, v, omega, s, V_N, solve_ms).
         goal: target pose (x, y, theta).
-        obstacles: the obstacles as described (not inflated).
+        obstacles: the obstacles as described (not inflated): polygons, and `Circle`s for
+            exact disks (e.g. ``world.physical_shapes()``).
         robot_radius: clearance is measured from the robot's circle, not its centre.
+        footprint: the robot's shape, replacing robot_radius (a polygon is placed at each
+            row's x, y, theta); see `footprint_clearance` for what the clearance means.
         reference_length: length of the reference path, reported beside the run's own.
         solver_failures: steps without a verified solver solution.
         lyapunov_ok: per step, whether V_N decreased as the theorem says (None: no check).
         position_tolerance: metres, for "reached".
         heading_tolerance: radians, for "reached".
 
+    Raises:
+        ValueError: robot_radius is neither 0 nor the footprint's covering radius (as in
+            `World`, where robot_radius is derived from a footprint): which one counts
+            would be a guess.
+
     """
+    if footprint is not None and robot_radius not in (0.0, footprint.radius):
+        msg = (f'robot_radius {robot_radius:g} contradicts the footprint (covering radius '
+               f'{footprint.radius:g}); give only the footprint')
+        raise ValueError(msg)
+    robot = footprint if footprint is not None else Footprint.circle(robot_radius)
     rows = np.atleast_2d(np.asarray(rows, dtype=float))
     goal = np.asarray(goal, dtype=float)
     if rows.size == 0:
@@ -94,13 +176,10 @@ def compute_metrics(
     end = (first + 1) if first is not None else len(rows)
     path_length = float(np.sum(np.linalg.norm(np.diff(xy[:end], axis=0), axis=1)))
     if obstacles:
-        distances = np.min(np.stack([o.distance(xy) for o in obstacles]), axis=0)
-        inside = np.zeros(len(xy), dtype=bool)
-        for o in obstacles:
-            inside |= o.contains(xy)
-        clearance = np.where(inside, -1.0, distances) - robot_radius
-        min_clearance = float(np.min(clearance))
-        collision = bool(np.any(inside) or min_clearance < 0)
+        poses = rows[:, [COL['x'], COL['y'], COL['theta']]]
+        min_clearance = float(np.min(footprint_clearance(obstacles, robot)(poses)))
+        # a centre inside a polygon has clearance -1 - radius < 0: no separate test needed
+        collision = bool(min_clearance < 0)
     else:
         min_clearance, collision = math.inf, False
     median, p95, worst = _finite_stats(rows[:, COL['solve_ms']])

@@ -31,11 +31,21 @@ The node holds the TRUE world (``world_file``: known and unknown obstacles, disk
 scans are deterministic under ``publish_clock``) it casts a simulated laser from the robot's
 pose and publishes ``scan`` (sensor_msgs/LaserScan in ``child_frame_id``, the laser at the
 robot's origin facing forward, stamped like the odometry of the same pose; ``inf`` where a
-beam hits nothing, per REP 117). Each tick it checks the robot's disk (``robot_radius``, or
-the world's if larger) against the true world and counts contact EPISODES (entering contact
-counts one; staying in contact does not): ``simulator/contacts`` (std_msgs/UInt32, latched)
-carries the count, published at start with 0 and again at every new contact, and the first
-contact is logged as an ERROR.
+beam hits nothing, per REP 117). Each tick it checks the robot's TRUE footprint at its pose
+(x, y, theta) against the true world and counts contact EPISODES (entering contact counts one;
+staying in contact does not): ``simulator/contacts`` (std_msgs/UInt32, latched) carries the
+count, published at start with 0 and again at every new contact, and the first contact is
+logged as an ERROR.
+
+The footprint, first that applies (Nav2's names; a polygon wins over a radius, as in Nav2):
+
+1. the ``footprint`` parameter, a convex polygon ``"[[x, y], ...]"`` (robot frame, x forward);
+2. the world file's ``footprint``, when it has a polygon;
+3. a circle of the larger of ``robot_radius`` and the world's ``robot_radius``.
+
+So a world that describes its robot is simulated with that robot unless the parameter says
+otherwise, and ``robot_radius`` (which closed_loop sets from the world's covering radius) never
+turns a polygon back into its circumscribed circle.
 """
 
 from __future__ import annotations
@@ -57,6 +67,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import LaserScan
 from std_msgs.msg import UInt32
 
+from mpc_local_planner.core.footprint import Footprint, parse_footprint
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.perception.laser import contact, SimulatedLaser, TrueGeometry
 from mpc_local_planner.perception.scan_obstacles import Scan
@@ -90,7 +101,8 @@ MAX_SCAN_BEAMS = 10_000
 # Tolerance when counting scan periods in ticks (rate / scan.rate need not be an integer).
 _TICK_EPS = 1e-9
 _SCAN_PARAMETERS = frozenset({'scan.fov', 'scan.beams', 'scan.range_max', 'scan.noise_std',
-                              'scan.seed', 'robot_radius'})
+                              'scan.seed'})
+_FOOTPRINT_PARAMETERS = frozenset({'footprint', 'robot_radius'})
 
 SUMMARY = ('Integrate a unicycle driven by cmd_vel (Twist, or TwistStamped with '
            'enable_stamped_cmd_vel) with saturation; publish odom, and clock with '
@@ -126,8 +138,14 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "can touch: a path, or a name in the package's config/ or config/worlds/; "
                   "'' = an empty world; read once at start", read_only=True),
     ParameterSpec('robot_radius', 0.0,
-                  "radius of the robot's disk for contacts (m); the larger of this and the "
-                  "world's robot_radius counts", float_range=(0.0, 10.0)),
+                  "radius of the robot's disk for contacts (m) when no polygon footprint "
+                  "applies; the larger of this and the world's robot_radius counts",
+                  float_range=(0.0, 10.0)),
+    ParameterSpec('footprint', '',
+                  'the robot\'s convex polygon for contacts, Nav2\'s form "[[x, y], ...]" in '
+                  "the robot frame (x forward); '' or '[]' = the world file's footprint if it "
+                  'has one, else the circle of robot_radius. Precedence: this parameter, then '
+                  "the world's footprint, then robot_radius"),
     ParameterSpec('scan.rate', 10.0,
                   'laser scans per second of simulated time (at most one per tick, so at '
                   'most rate)', float_range=(0.01, 1000.0)),
@@ -168,6 +186,14 @@ def validate_simulator_parameters(values: dict[str, Any]) -> str | None:
     if beams is not None and (isinstance(beams, bool) or not isinstance(beams, int)
                               or not 2 <= beams <= MAX_SCAN_BEAMS):
         return f'scan.beams must be an integer from 2 to {MAX_SCAN_BEAMS}, got {beams!r}'
+    footprint = values.get('footprint')
+    if footprint is not None:
+        if not isinstance(footprint, str):
+            return f'footprint must be a string "[[x, y], ...]", got {footprint!r}'
+        try:
+            parse_footprint(footprint)
+        except ValueError as err:
+            return f'footprint: {err}'
     seed = values.get('scan.seed')
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
         return f'scan.seed must be an integer >= 0, got {seed!r}'
@@ -225,6 +251,7 @@ class UnicycleSimulatorNode(Node):
         self._world = _load_true_world(str(self.get_parameter('world_file').value))
         self._geometry = TrueGeometry.from_world(self._world) if self._world else TrueGeometry(
             [])
+        self._footprint = self._read_footprint()
         # scan periods elapsed since the last scan, advanced by scan.rate / rate per tick:
         # scans follow the simulation's steps, not the wall clock
         self._scan_phase = 0.0
@@ -264,16 +291,32 @@ class UnicycleSimulatorNode(Node):
             self._make_timer()
         if names & _SCAN_PARAMETERS:
             self._laser = self._make_laser()
+        if names & _FOOTPRINT_PARAMETERS:
+            self._footprint = self._read_footprint()
 
     def _read_model(self) -> Unicycle:
         return Unicycle(v_max=float(self.get_parameter('v_max').value),
                         omega_max=float(self.get_parameter('omega_max').value))
 
+    def _read_footprint(self) -> Footprint:
+        """Return the footprint contacts are counted with (precedence: module docstring)."""
+        # validated by parameters_callback: parsing cannot fail here
+        footprint = parse_footprint(str(self.get_parameter('footprint').value))
+        source = 'the footprint parameter'
+        world = self._world
+        if footprint.is_circle and world is not None and world.footprint is not None \
+                and not world.footprint.is_circle:
+            footprint, source = world.footprint, f'the world {world.name!r}'
+        if footprint.is_circle:
+            return Footprint.circle(max(float(self.get_parameter('robot_radius').value),
+                                        world.robot_radius if world else 0.0))
+        self.get_logger().info(
+            f'contacts counted with the polygon {footprint.vertices.tolist()} from {source}')
+        return footprint
+
     def _make_laser(self) -> SimulatedLaser:
         noise = float(self.get_parameter('scan.noise_std').value)
         seed = int(self.get_parameter('scan.seed').value)
-        self._radius = max(float(self.get_parameter('robot_radius').value),
-                           self._world.robot_radius if self._world else 0.0)
         return SimulatedLaser(self._geometry, fov=float(self.get_parameter('scan.fov').value),
                               beams=int(self.get_parameter('scan.beams').value),
                               range_min=SCAN_RANGE_MIN,
@@ -310,8 +353,13 @@ class UnicycleSimulatorNode(Node):
 
     @property
     def robot_radius(self) -> float:
-        """The radius of the disk checked for contacts (m)."""
-        return self._radius
+        """The radius of the disk checked for contacts (m); a polygon's covering radius."""
+        return self._footprint.radius
+
+    @property
+    def footprint(self) -> Footprint:
+        """The robot's shape checked for contacts (a circle or a convex polygon)."""
+        return self._footprint
 
     def _now(self) -> float:
         if self.get_parameter('publish_clock').value:
@@ -378,16 +426,18 @@ class UnicycleSimulatorNode(Node):
 
 
     def _check_contact(self) -> None:
-        """Count a contact episode when the robot's disk starts touching the true world."""
-        touching = contact(self._geometry, float(self._state[0]), float(self._state[1]),
-                           self._radius)
+        """Count a contact episode when the robot's footprint starts touching the true world."""
+        x, y, theta = (float(v) for v in self._state[:3])
+        touching = contact(self._geometry, x, y, self._footprint, theta)
         if touching and not self._in_contact:
             self._contacts += 1
             self._contacts_pub.publish(UInt32(data=self._contacts))
-            where = f'({self._state[0]:.3f}, {self._state[1]:.3f})'
+            where = f'({x:.3f}, {y:.3f}, heading {theta:.3f} rad)'
             if self._contacts == 1:
+                robot = (f'radius {self._footprint.radius:g} m' if self._footprint.is_circle
+                         else f'footprint {self._footprint.vertices.tolist()}')
                 self.get_logger().error(
-                    f'contact: the robot (radius {self._radius:g} m) touches an obstacle at '
+                    f'contact: the robot ({robot}) touches an obstacle at '
                     f'{where}, {self._sim_time:.2f} s simulated')
             else:
                 self.get_logger().warning(

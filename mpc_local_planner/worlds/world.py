@@ -21,6 +21,13 @@ experiments never care where a scenario came from:
 - BARN JSON (Perille et al. 2020, as converted under ``data/barn``): cylinders of one radius,
   approximated by circumscribed octagons so that avoiding the polygon avoids the cylinder.
 
+The robot's shape is either ``robot_radius`` (a round robot) or ``footprint`` (a convex polygon
+in the robot frame, x forward: a list of [x, y] or Nav2's string form ``"[[x, y], ...]"``). A
+file gives one or the other, never both: Nav2 silently ignores robot_radius when a footprint is
+set, and a world file that says two things about the robot's size is more likely a mistake than
+an intention. With a polygon, `World.robot_radius` is its circumscribed radius (the disk that
+covers the robot), so that code which only knows disks stays on the safe side.
+
 A world may also hold ``unknown_obstacles``: things that exist in the simulated world (the
 laser sees them, the robot can hit them) but in no map and in no node's prior knowledge, so
 that perception has something to discover. ``World.true_shapes`` keeps the exact geometry of
@@ -43,10 +50,12 @@ import numpy as np
 import yaml
 
 from mpc_local_planner.core.errors import WorldError
+from mpc_local_planner.core.footprint import Footprint, parse_footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon
 
 __all__ = [
     'BARN_MARGIN',
+    'BARN_ROBOT_RADIUS',
     'Circle',
     'Shape',
     'World',
@@ -58,6 +67,8 @@ __all__ = [
 
 #: Margin (metres) added around the cylinders, start and goal to make a BARN world's bounds.
 BARN_MARGIN = 1.0
+#: The round robot a BARN world assumes when neither robot_radius nor footprint is given.
+BARN_ROBOT_RADIUS = 0.2
 
 _YAML_KEYS = frozenset(
     {
@@ -66,6 +77,7 @@ _YAML_KEYS = frozenset(
         'start',
         'goal',
         'robot_radius',
+        'footprint',
         'path',
         'goal_tolerance',
         'time_limit',
@@ -121,7 +133,8 @@ class World:
             (the planner adds a clearance, the MPC a collision margin).
         start: (3,) start pose x, y, theta.
         goal: (3,) goal pose x, y, theta.
-        robot_radius: Radius of the disk that covers the robot, metres.
+        robot_radius: Radius of the disk that covers the robot, metres: the circle's radius,
+            or the polygon footprint's circumscribed radius (derived from ``footprint``).
         path: Name of an analytic reference path (e.g. ``'paper_sinusoid'``), or None when the
             path comes from the global planner.
         goal_tolerance: Distance to the goal that counts as arrival, when the world sets one.
@@ -132,6 +145,10 @@ class World:
             as `Circle`). Empty means the polygons themselves are exact; use `physical_shapes`.
             It describes the world, not a representation of it, so replacing ``obstacles`` by
             a merged or simplified set leaves it valid.
+        footprint: The robot's true shape, what contacts and clearances are measured from.
+            None when constructing means a circle of ``robot_radius``; after construction it is
+            always a `Footprint`. A polygon sets ``robot_radius`` to its circumscribed radius
+            (a different nonzero robot_radius is refused: the two would disagree).
 
     """
 
@@ -146,6 +163,27 @@ class World:
     time_limit: float | None = None
     unknown_obstacles: tuple[ConvexPolygon, ...] = ()
     true_shapes: tuple[Shape, ...] = ()
+    footprint: Footprint | None = None
+
+    def __post_init__(self) -> None:
+        """Make ``footprint`` and ``robot_radius`` describe the same robot.
+
+        One source of truth for the robot's size: consumers that only know disks read
+        robot_radius, the exact checks read footprint, and they must not disagree.
+
+        Raises:
+            ValueError: A footprint whose radius contradicts a nonzero robot_radius.
+
+        """
+        footprint = self.footprint
+        if footprint is None:
+            object.__setattr__(self, 'footprint', Footprint.circle(self.robot_radius))
+            return
+        if self.robot_radius not in (0.0, footprint.radius):
+            msg = (f'robot_radius {self.robot_radius:g} contradicts the footprint, whose '
+                   f'covering radius is {footprint.radius:g}; give only the footprint')
+            raise ValueError(msg)
+        object.__setattr__(self, 'robot_radius', float(footprint.radius))
 
     def physical_shapes(self) -> tuple[Shape, ...]:
         """Return the exact shapes of everything the laser sees and the robot can touch.
@@ -204,8 +242,8 @@ def world_from_dict(data: Any, *, name: str, source: str | None = None) -> World
 
     Args:
         data: The parsed mapping with ``bounds``, ``obstacles``, ``start``, ``goal`` and the
-            optional ``path``, ``robot_radius``, ``goal_tolerance``, ``time_limit``,
-            ``unknown_obstacles``.
+            optional ``path``, ``robot_radius`` or ``footprint`` (not both),
+            ``goal_tolerance``, ``time_limit``, ``unknown_obstacles``.
         name: Name of the world.
         source: Where the data came from, for error messages (defaults to the name).
 
@@ -234,6 +272,10 @@ def world_from_dict(data: Any, *, name: str, source: str | None = None) -> World
     start = _vector(data['start'], 3, 'start', where)
     goal = _vector(data['goal'], 3, 'goal', where)
     robot_radius = _number(data.get('robot_radius', 0.0), 'robot_radius', where, minimum=0.0)
+    footprint = _footprint(data.get('footprint'), where)
+    if footprint is not None and 'robot_radius' in data:
+        _fail(where, 'give either robot_radius (a round robot) or footprint (a polygon, whose '
+                     'covering radius is derived), not both')
     path = data.get('path')
     if path is not None and (not isinstance(path, str) or not path):
         _fail(where, f'path must be the name of an analytic path, got {path!r}')
@@ -247,6 +289,7 @@ def world_from_dict(data: Any, *, name: str, source: str | None = None) -> World
         start=start,
         goal=goal,
         robot_radius=robot_radius,
+        footprint=footprint,
         path=path,
         goal_tolerance=goal_tolerance,
         time_limit=time_limit,
@@ -255,7 +298,8 @@ def world_from_dict(data: Any, *, name: str, source: str | None = None) -> World
     )
 
 
-def load_barn_world(path: str | Path, *, robot_radius: float = 0.2, sides: int = 8) -> World:
+def load_barn_world(path: str | Path, *, robot_radius: float | None = None, sides: int = 8,
+                    footprint: Footprint | None = None) -> World:
     """Load a BARN world converted to JSON.
 
     Cylinders become regular polygons circumscribed about them (conservative: outside the
@@ -266,8 +310,11 @@ def load_barn_world(path: str | Path, *, robot_radius: float = 0.2, sides: int =
 
     Args:
         path: The ``world_NNN.json`` file.
-        robot_radius: Radius of the robot's covering disk (BARN's Jackal: about 0.2 to 0.33 m).
+        robot_radius: Radius of a round robot (BARN's Jackal: about 0.2 to 0.33 m); None
+            means `BARN_ROBOT_RADIUS` unless a footprint is given.
         sides: Number of sides of the polygon that replaces each cylinder.
+        footprint: The robot's true shape (e.g. `JACKAL`, as the challenge scores contacts);
+            exclusive with robot_radius, like the YAML keys.
 
     Returns:
         The validated world, named after the file's stem, with the file's goal tolerance and
@@ -275,11 +322,13 @@ def load_barn_world(path: str | Path, *, robot_radius: float = 0.2, sides: int =
 
     Raises:
         FileNotFoundError: If the file does not exist.
-        WorldError: If the file is malformed.
+        WorldError: If the file is malformed, or both robot_radius and footprint are given.
 
     """
     path = Path(path)
     where = str(path)
+    if footprint is not None and robot_radius is not None:
+        _fail(where, 'give either robot_radius or footprint, not both')
     if not path.is_file():
         msg = f'world file not found: {path}'
         raise FileNotFoundError(msg)
@@ -298,7 +347,11 @@ def load_barn_world(path: str | Path, *, robot_radius: float = 0.2, sides: int =
     radius = _number(data['cylinder_radius'], 'cylinder_radius', where, minimum=0.0)
     if radius == 0.0:
         _fail(where, 'cylinder_radius must be > 0')
-    robot_radius = _number(robot_radius, 'robot_radius', where, minimum=0.0)
+    if footprint is None:
+        radius_given = BARN_ROBOT_RADIUS if robot_radius is None else robot_radius
+        robot_radius = _number(radius_given, 'robot_radius', where, minimum=0.0)
+    else:
+        robot_radius = footprint.radius
     cylinders = data['cylinders']
     if not isinstance(cylinders, list):
         _fail(where, f'cylinders must be a list of [x, y], got {type(cylinders).__name__}')
@@ -326,6 +379,7 @@ def load_barn_world(path: str | Path, *, robot_radius: float = 0.2, sides: int =
         start=start,
         goal=goal,
         robot_radius=robot_radius,
+        footprint=footprint,
         path=None,
         goal_tolerance=_optional_positive(data.get('goal_tolerance'), 'goal_tolerance', where),
         time_limit=_optional_positive(data.get('time_limit_s'), 'time_limit_s', where),
@@ -406,6 +460,28 @@ def _bounds(value: Any, where: str) -> tuple[float, float, float, float]:
     if not (xmin < xmax and ymin < ymax):
         _fail(where, f'bounds must be [xmin, xmax, ymin, ymax] with min < max, got {value!r}')
     return (xmin, xmax, ymin, ymax)
+
+
+def _footprint(value: Any, where: str) -> Footprint | None:
+    """Parse ``footprint``: a list of [x, y] or Nav2's string ``"[[x, y], ...]"``.
+
+    Returns None for a missing or empty footprint (``[]``, ``''``, ``'[]'``, as Nav2 reads
+    them): the robot is then the circle of robot_radius.
+    """
+    if value is None:
+        return None
+    if not isinstance(value, (str, list)):
+        _fail(where, f'footprint must be a list of [x, y] or a string "[[x, y], ...]", '
+                     f'got {value!r}')
+    if isinstance(value, list):  # checked like every other list of numbers in a world
+        value = [_vector(v, 2, f'footprint[{i}]', where).tolist() for i, v in enumerate(value)]
+    try:
+        footprint = parse_footprint(value)
+    except ValueError as err:
+        problem = str(err)
+    else:
+        return None if footprint.is_circle else footprint
+    _fail(where, f'footprint: {problem}')
 
 
 def _obstacles(

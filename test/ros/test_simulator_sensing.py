@@ -14,7 +14,8 @@
 """unicycle_simulator sees the true world: a laser on ``scan``, contacts on ``simulator/contacts``.
 
 The simulator owns simulated time (publish_clock), so scan stamps and rates are checked in
-simulated seconds: deterministic, whatever the machine's load.
+simulated seconds: deterministic, whatever the machine's load. Contacts are counted with the
+robot's true footprint: the ``footprint`` parameter, else the world's, else robot_radius.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 from std_msgs.msg import UInt32
 
+from mpc_local_planner.core.footprint import Footprint, JACKAL, parse_footprint
 from mpc_local_planner.ros.conversions import stamp_to_seconds, twist_from_u
 from mpc_local_planner.ros.qos import CONTACTS_QOS, SCAN_QOS
 from mpc_local_planner.ros.unicycle_simulator_node import (
@@ -43,6 +45,8 @@ from mpc_local_planner.ros.unicycle_simulator_node import (
 
 pytestmark = pytest.mark.slow  # topics over DDS
 
+ROOT = Path(__file__).resolve().parents[2]
+NARROW_GAP = ROOT / 'config' / 'worlds' / 'narrow_gap.yaml'  # a 0.6 m gap in a wall at x = 2
 # Wall seconds before a condition counts as never reached.
 TIMEOUT = 30.0
 RATE = 50.0  # simulator ticks per simulated second
@@ -137,6 +141,84 @@ def test_the_world_robot_radius_counts_when_it_is_larger(ros, tmp_path) -> None:
     world.write_text(box_world(tmp_path).read_text() + 'robot_radius: 0.3\n')
     sim = simulator(ros, world, robot_radius=0.1)
     assert sim.robot_radius == 0.3
+
+
+# 0.64 m wide: wider than the gap, where the Jackal (0.43 m) fits
+WIDE = '[[0.3, 0.32], [-0.3, 0.32], [-0.3, -0.32], [0.3, -0.32]]'
+
+
+@pytest.mark.parametrize(('footprint', 'expected'), [('', 0), (WIDE, 1)],
+                         ids=['world Jackal', 'wide parameter'])
+def test_contacts_through_the_narrow_gap_are_counted_with_the_true_footprint(
+        ros, footprint: str, expected: int) -> None:
+    # robot_radius as closed_loop sets it (the world's covering radius): that circle would
+    # touch the gap's sides, but a polygon footprint takes precedence
+    sim = simulator(ros, NARROW_GAP, cmd_timeout=0.0, footprint=footprint,
+                    robot_radius=JACKAL.radius, initial_pose=[1.2, 0.0, 0.0])
+    probe = ros.probe()
+    counts: list[int] = []
+    probe.create_subscription(UInt32, CONTACTS_TOPIC, lambda m: counts.append(m.data),
+                              CONTACTS_QOS)
+    polygon = parse_footprint(footprint).vertices if footprint else JACKAL.vertices
+    np.testing.assert_allclose(sim.footprint.vertices, polygon)
+    assert ros.spin_until(lambda: counts == [0], timeout=TIMEOUT)
+
+    def drive_to(x: float) -> bool:
+        probe.cmd_pub.publish(twist_from_u([0.3, 0.0]))
+        return sim.state[0] >= x
+
+    # straight through the gap (the wall spans x from 1.9 to 2.1) and out the other side
+    assert ros.spin_until(lambda: drive_to(2.8), timeout=TIMEOUT)
+    probe.cmd_pub.publish(twist_from_u([0.0, 0.0]))
+    assert ros.spin_until(lambda: counts[-1:] == [expected], timeout=TIMEOUT)
+    t = sim.sim_time
+    assert ros.spin_until(lambda: sim.sim_time > t + 0.5, timeout=TIMEOUT)
+    assert sim.contacts == expected and counts == list(range(expected + 1))
+    assert sim.state[1] == 0.0 and sim.state[2] == 0.0  # it really drove straight
+    errors = probe.log_lines('unicycle_simulator', Log.ERROR)
+    assert len(errors) == expected
+    if expected:
+        assert 'contact' in errors[0] and 'footprint [[0.3, 0.32]' in errors[0]
+
+
+def test_footprint_precedence_parameter_then_world_then_robot_radius(ros, tmp_path) -> None:
+    box = box_world(tmp_path)
+    parameter = simulator(ros, NARROW_GAP, footprint=WIDE, robot_radius=0.5)
+    np.testing.assert_allclose(parameter.footprint.vertices, parse_footprint(WIDE).vertices)
+    world = simulator(ros, NARROW_GAP, footprint='[]', robot_radius=0.5)
+    np.testing.assert_allclose(world.footprint.vertices, JACKAL.vertices)
+    assert world.robot_radius == JACKAL.radius
+    radius = simulator(ros, box, robot_radius=0.25)
+    assert radius.footprint == Footprint.circle(0.25) and radius.robot_radius == 0.25
+    polygon_in_a_world_without_one = simulator(ros, box, footprint=str(JACKAL.vertices.tolist()))
+    np.testing.assert_allclose(polygon_in_a_world_without_one.footprint.vertices,
+                               JACKAL.vertices)
+
+    # at run time: a valid footprint replaces the polygon, '' falls back to the world's
+    [result] = parameter.set_parameters([Parameter('footprint', value='[[0.1, 0.1], [-0.1, '
+                                                   '0.1], [0.0, -0.1]]')])
+    assert result.successful and len(parameter.footprint.vertices) == 3
+    [result] = parameter.set_parameters([Parameter('footprint', value='')])
+    assert result.successful
+    np.testing.assert_allclose(parameter.footprint.vertices, JACKAL.vertices)
+    [result] = radius.set_parameters([Parameter('robot_radius', value=0.35)])
+    assert result.successful and radius.footprint == Footprint.circle(0.35)
+
+
+BAD_FOOTPRINTS = ['[[0.2, 0.1], [-0.2, 0.1]]', '[[0.2, 0.1], [0, 0], [-0.2, 0.1], [0, -0.3]]',
+                  '[[0.2, 0.1], [-0.2, 0.1]', 'wide']
+
+
+@pytest.mark.parametrize('value', BAD_FOOTPRINTS,
+                         ids=['two vertices', 'not convex', 'unclosed', 'a word'])
+def test_bad_footprints_are_refused_at_start_and_at_run_time(ros, value: str) -> None:
+    with pytest.raises(ParameterException, match='footprint'):
+        UnicycleSimulatorNode(context=ros.context,
+                              parameter_overrides=[Parameter('footprint', value=value)])
+    sim = ros.add(UnicycleSimulatorNode(context=ros.context))
+    [result] = sim.set_parameters([Parameter('footprint', value=value)])
+    assert not result.successful and 'footprint' in result.reason
+    assert sim.get_parameter('footprint').value == '' and sim.footprint == Footprint.circle(0.0)
 
 
 BAD_SCAN_PARAMETERS = [('scan.beams', 0), ('scan.beams', -5), ('scan.fov', 0.0),

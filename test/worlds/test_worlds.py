@@ -26,9 +26,12 @@ import pytest
 import yaml
 
 from mpc_local_planner.core.errors import WorldError
+from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.obstacles import ConvexPolygon, min_clearance
+from mpc_local_planner.perception.laser import contact, TrueGeometry
 from mpc_local_planner.worlds.data_files import BARN_DIR
 from mpc_local_planner.worlds.world import (
+    BARN_ROBOT_RADIUS,
     Circle,
     load_barn_world,
     load_world,
@@ -63,7 +66,7 @@ def write_yaml(tmp_path: Path, data: Any, name: str = 'world.yaml') -> Path:
 
 
 @pytest.mark.parametrize('name', ['paper_obstacle', 'corridor_turn', 'rrt_cluttered',
-                                  'unknown_box'])
+                                  'unknown_box', 'narrow_gap'])
 def test_every_shipped_world_loads_with_start_and_goal_in_free_space(name: str) -> None:
     world = load_world(WORLDS / f'{name}.yaml')
 
@@ -115,6 +118,100 @@ def test_rrt_cluttered_world_blocks_the_straight_line_but_leaves_half_metre_gaps
                 min_clearance([first], second.vertices), min_clearance([second], first.vertices)
             )
             assert gap >= 0.5
+
+
+def test_narrow_gap_lets_the_jackal_through_straight_but_not_its_circumscribed_circle() -> None:
+    world = load_world(WORLDS / 'narrow_gap.yaml')
+    lower, upper = sorted(world.obstacles, key=lambda o: o.vertices[:, 1].min())
+    (x0, y0), (x1, y1) = lower.vertices.min(axis=0), lower.vertices.max(axis=0)
+    (u0, v0), (u1, v1) = upper.vertices.min(axis=0), upper.vertices.max(axis=0)
+    # one wall (same x range) from the bottom bound to the top bound, open between y1 and v0
+    assert (x0, x1) == (u0, u1)
+    assert y0 == world.bounds[2] and v1 == world.bounds[3]
+    assert v0 - y1 == pytest.approx(0.60)
+    assert world.start[0] < x0 and world.goal[0] > x1  # start on one side, goal on the other
+    assert 2.0 <= world.goal[0] - world.start[0] <= 6.0
+    np.testing.assert_allclose(world.footprint.vertices, JACKAL.vertices)
+    assert world.robot_radius == pytest.approx(0.3328, abs=1e-4) == JACKAL.radius
+
+    geometry = TrueGeometry.from_world(world)
+    centre = ((x0 + x1) / 2, (y1 + v0) / 2)
+    assert not contact(geometry, *centre, world.footprint, 0.0)  # heading through the gap
+    assert contact(geometry, *centre, world.robot_radius)  # the circumscribed circle touches
+    assert contact(geometry, *centre, world.footprint, math.pi / 4)  # its diagonal does not
+    # driving straight from start to goal touches nothing, and the footprint is free at both
+    line = np.linspace(world.start, world.goal, 400)
+    assert not any(contact(geometry, x, y, world.footprint, theta) for x, y, theta in line)
+
+
+def test_yaml_world_footprint_is_a_polygon_in_either_form_and_empty_means_the_circle(
+        tmp_path: Path) -> None:
+    jackal = JACKAL.vertices.tolist()
+    as_list = load_world(write_yaml(tmp_path, valid_world() | {'footprint': jackal}))
+    as_string = world_from_dict(valid_world() | {'footprint': str(jackal)}, name='nav2')
+    clockwise = world_from_dict(valid_world() | {'footprint': jackal[::-1]}, name='cw')
+
+    for world in (as_list, as_string, clockwise):
+        np.testing.assert_allclose(world.footprint.vertices, JACKAL.vertices)
+        assert world.robot_radius == JACKAL.radius  # the covering disk, derived
+    for empty in ([], '', '[]'):
+        world = world_from_dict(valid_world() | {'footprint': empty, 'robot_radius': 0.15},
+                                name='round')
+        assert world.footprint == Footprint.circle(0.15) and world.robot_radius == 0.15
+    # no footprint at all: the circle of robot_radius (0 by default)
+    assert world_from_dict(valid_world(), name='plain').footprint == Footprint.circle(0.0)
+
+
+@pytest.mark.parametrize(('footprint', 'match'), [
+    ([[0.2, 0.1], [-0.2, 0.1]], r'footprint: .*at least 3'),
+    ([[0.2, 0.1], [0.0, 0.0], [-0.2, 0.1], [0.0, -0.3]], 'footprint: .*not convex'),
+    ([[0.2, 0.1], [True, 0.1], [0.0, -0.2]], r'footprint\[1\]\[0\] must be a number'),
+    ([[0.2, 0.1], [-0.2], [0.0, -0.2]], r'footprint\[1\] must be a list of 2'),
+    ('[[0.2, 0.1], [-0.2, 0.1]', 'footprint: .*not of the form'),
+    ('0.3', 'footprint: .*not of the form'),
+    (0.3, 'footprint must be a list of'),
+])
+def test_malformed_footprint_raises_world_error_naming_it(tmp_path: Path, footprint: Any,
+                                                         match: str) -> None:
+    path = write_yaml(tmp_path, valid_world() | {'footprint': footprint}, 'bad_robot.yaml')
+
+    with pytest.raises(WorldError, match=match) as info:
+        load_world(path)
+
+    assert 'bad_robot.yaml' in str(info.value)
+
+
+def test_yaml_world_refuses_both_robot_radius_and_a_footprint() -> None:
+    data = valid_world() | {'footprint': JACKAL.vertices.tolist(), 'robot_radius': 0.2}
+
+    with pytest.raises(WorldError, match='either robot_radius .* or footprint'):
+        world_from_dict(data, name='both')
+
+
+def test_world_built_in_code_keeps_footprint_and_robot_radius_consistent() -> None:
+    fields = {'name': 'code', 'bounds': (0.0, 1.0, 0.0, 1.0), 'obstacles': (),
+              'start': np.zeros(3), 'goal': np.ones(3)}
+
+    assert World(**fields, robot_radius=0.3).footprint == Footprint.circle(0.3)
+    jackal = World(**fields, footprint=JACKAL)
+    assert jackal.footprint is JACKAL and jackal.robot_radius == JACKAL.radius
+    assert World(**fields, robot_radius=JACKAL.radius, footprint=JACKAL).footprint is JACKAL
+    with pytest.raises(ValueError, match='robot_radius 0.2 contradicts the footprint'):
+        World(**fields, robot_radius=0.2, footprint=JACKAL)
+    with pytest.raises(ValueError, match='contradicts'):
+        World(**fields, robot_radius=0.2, footprint=Footprint.circle(0.3))
+
+
+def test_barn_world_takes_a_footprint_instead_of_the_default_radius() -> None:
+    path = BARN / 'world_000.json'
+
+    default = load_barn_world(path)
+    assert default.footprint == Footprint.circle(BARN_ROBOT_RADIUS) == Footprint.circle(0.2)
+    jackal = load_barn_world(path, footprint=JACKAL)
+    assert jackal.footprint is JACKAL and jackal.robot_radius == JACKAL.radius
+    assert len(jackal.true_shapes) == len(default.true_shapes)
+    with pytest.raises(WorldError, match='either robot_radius or footprint'):
+        load_barn_world(path, robot_radius=0.2, footprint=JACKAL)
 
 
 def test_yaml_world_parses_boxes_polygons_circles_and_optional_fields(tmp_path: Path) -> None:

@@ -1,0 +1,146 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Tests of the run metrics' clearance: the round robot as before, the polygon exactly."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mpc_local_planner.core.footprint import Footprint, JACKAL
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.evaluation.metrics import compute_metrics, footprint_clearance
+from mpc_local_planner.evaluation.rollout import circle_clearance, polygon_clearance
+from mpc_local_planner.evaluation.trajectory import trajectory_row
+from mpc_local_planner.worlds.world import Circle, load_world
+
+ROOT = Path(__file__).resolve().parents[2]
+NARROW_GAP = ROOT / 'config' / 'worlds' / 'narrow_gap.yaml'
+GAP_HALF_WIDTH = 0.30
+
+
+def rows_along(poses: np.ndarray) -> np.ndarray:
+    """Trajectory rows through the poses, one every 0.1 s."""
+    return np.array([trajectory_row(0.1 * k, pose) for k, pose in enumerate(poses)])
+
+
+def old_circle_clearance(rows: np.ndarray, obstacles: list[ConvexPolygon],
+                         robot_radius: float) -> tuple[float, bool]:
+    """The clearance compute_metrics computed before footprints, copied as it was."""
+    xy = rows[:, [1, 2]]
+    distances = np.min(np.stack([o.distance(xy) for o in obstacles]), axis=0)
+    inside = np.zeros(len(xy), dtype=bool)
+    for o in obstacles:
+        inside |= o.contains(xy)
+    clearance = np.where(inside, -1.0, distances) - robot_radius
+    min_clearance = float(np.min(clearance))
+    return min_clearance, bool(np.any(inside) or min_clearance < 0)
+
+
+def test_circle_clearance_and_collision_are_unchanged_to_the_last_bit() -> None:
+    rng = np.random.default_rng(5)
+    cases = {'inside': 0, 'grazing': 0, 'free': 0}
+    for _ in range(60):
+        obstacles = [ConvexPolygon.from_vertices(rng.uniform(-1.0, 1.0, size=2)
+                                                 + rng.uniform(-0.3, 0.3, size=(5, 2)))
+                     for _ in range(3)]
+        poses = np.column_stack([rng.uniform(-2.0, 2.0, size=(6, 2)),
+                                 rng.uniform(-3.0, 3.0, 6)])
+        rows = rows_along(poses)
+        radius = float(rng.choice([0.0, 0.1, 0.3]))
+
+        metrics = compute_metrics(rows, goal=np.zeros(3), obstacles=obstacles,
+                                  robot_radius=radius)
+        expected, collision = old_circle_clearance(rows, obstacles, radius)
+        assert metrics['min_clearance'] == expected  # exactly, not approximately
+        assert metrics['collision'] is collision
+        same = compute_metrics(rows, goal=np.zeros(3), obstacles=obstacles,
+                               footprint=Footprint.circle(radius))
+        assert same['min_clearance'] == expected and same['collision'] is collision
+        cases['inside' if expected <= -1.0 else 'grazing' if expected < 0 else 'free'] += 1
+    assert min(cases.values()) >= 5, cases  # every convention is exercised
+
+
+def test_footprint_clearance_of_a_circle_is_the_rollouts_clearance() -> None:
+    rng = np.random.default_rng(8)
+    points = rng.uniform(-2.0, 2.0, size=(500, 2))
+    poses = np.column_stack([points, rng.uniform(-3.0, 3.0, 500)])
+    boxes = [ConvexPolygon.from_box(-0.5, -0.5, 0.2, 0.4), ConvexPolygon.from_box(1, 1, 2, 1.5)]
+    centres = rng.uniform(-2.0, 2.0, size=(7, 2))
+    cylinders = [Circle(x, y, 0.15) for x, y in centres]
+
+    for radius in (0.0, 0.2):
+        robot = Footprint.circle(radius)
+        np.testing.assert_array_equal(footprint_clearance(boxes, robot)(poses),
+                                      polygon_clearance(boxes, radius)(points))
+        np.testing.assert_array_equal(footprint_clearance(cylinders, robot)(points),
+                                      circle_clearance(centres, 0.15, radius)(points))
+        both = footprint_clearance(boxes + cylinders, robot)(poses)
+        np.testing.assert_array_equal(both, np.minimum(
+            polygon_clearance(boxes, radius)(points),
+            circle_clearance(centres, 0.15, radius)(points)))
+    assert np.all(np.isinf(footprint_clearance([], JACKAL)(poses)))
+
+
+def test_the_jackal_through_the_narrow_gap_keeps_its_clearance_and_its_circle_does_not() -> None:
+    world = load_world(NARROW_GAP)
+    straight = rows_along(np.linspace(world.start, world.goal, 81))
+    shapes = world.physical_shapes()
+
+    polygon = compute_metrics(straight, goal=world.goal, obstacles=shapes,
+                              footprint=world.footprint)
+    assert polygon['collision'] is False
+    assert polygon['min_clearance'] == pytest.approx(GAP_HALF_WIDTH - 0.215)
+    assert polygon['reached'] is True
+    circle = compute_metrics(straight, goal=world.goal, obstacles=shapes,
+                             robot_radius=world.robot_radius)
+    assert circle['collision'] is True
+    assert circle['min_clearance'] == pytest.approx(GAP_HALF_WIDTH - JACKAL.radius)
+    # the same positions turned 45 degrees: the heading is in the rows, and the diagonal hits
+    turned = straight.copy()
+    turned[:, 3] = math.pi / 4
+    diagonal = compute_metrics(turned, goal=world.goal, obstacles=shapes,
+                               footprint=world.footprint)
+    assert diagonal['collision'] is True and diagonal['min_clearance'] < 0.0
+    # robot_radius equal to the footprint's covering radius (as World keeps it) is no conflict
+    assert compute_metrics(straight, goal=world.goal, obstacles=shapes,
+                           robot_radius=world.robot_radius,
+                           footprint=world.footprint) == polygon
+
+
+def test_polygon_clearance_from_cylinders_and_boxes_is_the_exact_signed_distance() -> None:
+    shapes = [Circle(0.5, 0.0, 0.1), ConvexPolygon.from_box(-1.0, 0.3, 1.0, 0.6)]
+    clearance = footprint_clearance(shapes, JACKAL)
+
+    poses = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, math.pi / 2], [0.2, 0.0, 0.0]])
+    np.testing.assert_allclose(clearance(poses), [
+        0.3 - 0.215,  # the box beside, nearer than the cylinder ahead (0.5 - 0.1 - 0.254)
+        0.3 - 0.254,  # turned, its half-length faces the box (the cylinder: 0.5 - 0.1 - 0.215)
+        0.5 - 0.2 - 0.1 - 0.254,  # 0.2 m ahead, its front is 0.054 m into the cylinder
+    ], atol=1e-12)
+    with pytest.raises(ValueError, match=r'\(n, 3\)'):
+        clearance(poses[:, :2])  # a polygon needs the heading
+
+
+def test_compute_metrics_refuses_a_robot_radius_that_contradicts_the_footprint() -> None:
+    rows = rows_along(np.zeros((3, 3)))
+    box = [ConvexPolygon.from_box(1.0, 1.0, 2.0, 2.0)]
+
+    with pytest.raises(ValueError, match='robot_radius 0.2 contradicts the footprint'):
+        compute_metrics(rows, goal=np.zeros(3), obstacles=box, robot_radius=0.2,
+                        footprint=JACKAL)
