@@ -43,6 +43,7 @@ __all__ = [
     'points_along',
     'remaining_polyline',
     'simplify_polyline',
+    'waypoints_to_poses',
     'wrap_angle',
 ]
 
@@ -439,3 +440,15 @@ def points_along(waypoints: np.ndarray, spacing: float) -> tuple[np.ndarray, np.
     frac = step / np.maximum(counts[seg] - 1, 1)
     start = np.concatenate([[0.0], np.cumsum(length)[:-1]])
     return pts[seg] + frac[:, None] * delta[seg], start[seg] + frac * length[seg]
+
+
+def waypoints_to_poses(waypoints: np.ndarray, start_yaw: float, goal_yaw: float) -> np.ndarray:
+    """Return (M, 3) poses: each waypoint heads along its outgoing segment.
+
+    The first pose keeps the robot's yaw and the last the goal's, so that a controller
+    turns in place at the ends (as `WaypointPath.from_poses` reads them).
+    """
+    pts = np.asarray(waypoints, dtype=float)[:, :2]
+    directions = np.arctan2(np.diff(pts[:, 1]), np.diff(pts[:, 0]))
+    yaw = np.concatenate([[start_yaw], directions[1:], [goal_yaw]])
+    return np.column_stack([pts, yaw])

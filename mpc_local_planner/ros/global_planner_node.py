@@ -80,7 +80,7 @@ from mpc_local_planner.core.diagnostics import (
     PlanTrigger,
 )
 from mpc_local_planner.core.errors import PlanningError
-from mpc_local_planner.core.paths import analytic_path, remaining_polyline
+from mpc_local_planner.core.paths import analytic_path, remaining_polyline, waypoints_to_poses
 from mpc_local_planner.core.planner import path_length, PlannerConfig, RrtStarPlanner
 from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.perception.pose_history import PoseHistory
@@ -111,7 +111,7 @@ from mpc_local_planner.ros.throttle import ProblemThrottle
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world, World
 
-__all__ = ['GlobalPlannerNode', 'PARAMETERS', 'SUMMARY', 'main', 'waypoints_to_poses']
+__all__ = ['GlobalPlannerNode', 'PARAMETERS', 'SUMMARY', 'main']
 
 
 # Poses of a published analytic path (enough for RViz and for a polyline controller).
@@ -184,18 +184,6 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'configure and activate at start; false = wait for a lifecycle manager (or '
                   '`ros2 lifecycle set`)', read_only=True),
 )
-
-
-def waypoints_to_poses(waypoints: np.ndarray, start_yaw: float, goal_yaw: float) -> np.ndarray:
-    """Return (M, 3) poses: each waypoint heads along its outgoing segment.
-
-    The first pose keeps the robot's yaw and the last the goal's, so that a controller
-    turns in place at the ends (as `WaypointPath.from_poses` reads them).
-    """
-    pts = np.asarray(waypoints, dtype=float)
-    directions = np.arctan2(np.diff(pts[:, 1]), np.diff(pts[:, 0]))
-    yaw = np.concatenate([[start_yaw], directions[1:], [goal_yaw]])
-    return np.column_stack([pts, yaw])
 
 
 def _check_laser_pose(pose: list[float]) -> str | None:

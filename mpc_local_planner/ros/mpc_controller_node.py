@@ -74,7 +74,6 @@ from mpc_local_planner.core.controller import (
     ControlOutput,
     MpcController,
     Reason,
-    within_faces,
 )
 from mpc_local_planner.core.diagnostics import (
     CONTROLLER_DIAGNOSTICS_TOPIC,
@@ -83,9 +82,9 @@ from mpc_local_planner.core.diagnostics import (
 )
 from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
+from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path
-from mpc_local_planner.perception.grids import grid_rectangles
+from mpc_local_planner.perception.local_obstacles import LocalObstacles
 from mpc_local_planner.perception.pose_history import PoseHistory
 from mpc_local_planner.perception.scan_obstacles import MAX_BEAMS, ObstacleMemory, validate_scan
 from mpc_local_planner.ros.conversions import (
@@ -390,16 +389,12 @@ class MpcControllerNode(ManagedNode):
         self._steps_since_markers = 0
         # the last ODOM_HISTORY_S seconds of odometry, to place each scan where it was taken
         self._odom_history = PoseHistory(ODOM_HISTORY_S)
-        # the laser's obstacles: the memory, its polygons fitted to the NLP's faces, when
-        # the latest valid scan was taken (None: none yet) and its stamp
-        self._memory: ObstacleMemory | None = None
-        self._scan_obstacles: ObstacleSet = ObstacleSet([])
+        # the map's and the laser's obstacles (the scan memory inside), when the latest valid
+        # scan was taken (None: none yet) and its stamp, the latest valid map
+        self._local: LocalObstacles | None = None
         self._scan_time: float | None = None
         self._scan_stamp: float | None = None
-        # the latest valid map and its rectangles near the robot, by window cell
         self._grid = None
-        self._map_window: tuple | None = None
-        self._map_obstacles: list[ConvexPolygon] = []
         self.blockage = Blockage()
         self.last_output: ControlOutput | None = None
         self.control_steps = 0
@@ -434,8 +429,10 @@ class MpcControllerNode(ManagedNode):
         self._sources = sources
         self._world_obstacles = list(obstacles)
         self._forget_inputs()
-        if 'scan' in sources:
-            self._memory = ObstacleMemory(float(values['obstacle_memory']))
+        self._local = LocalObstacles(
+            config.faces_per_obstacle,
+            memory=ObstacleMemory(float(values['obstacle_memory'])) if 'scan' in sources
+            else None)
         if values['analytic_path']:
             self._prepare()
         self._stamped = bool(values['enable_stamped_cmd_vel'])
@@ -590,8 +587,9 @@ class MpcControllerNode(ManagedNode):
                 self._plan_problem = None  # the plan topic is ignored from now on
             if 'step' in names and self._timer is not None:
                 self._make_timer()
-            if 'obstacle_memory' in names and self._memory is not None:
-                self._memory.ttl = float(values['obstacle_memory'])
+            if ('obstacle_memory' in names and self._local is not None
+                    and self._local.memory is not None):
+                self._local.memory.ttl = float(values['obstacle_memory'])
         except Exception as err:  # validated above: a bug, but keep running
             self.get_logger().error(f'could not apply {sorted(names)}: {err}')
             return
@@ -647,7 +645,8 @@ class MpcControllerNode(ManagedNode):
             msg: the scan, or its CDR bytes as the raw subscription delivers them.
 
         """
-        if self._memory is None:
+        memory = self._local.memory if self._local is not None else None
+        if memory is None:
             return  # 'scan' is not a source (or not configured)
         receipt = self._now()
         try:
@@ -660,17 +659,16 @@ class MpcControllerNode(ManagedNode):
             if self._scan_stamp is not None and stamp < self._scan_stamp:
                 if self._scan_stamp - stamp <= ODOM_HISTORY_S:
                     return  # out of order: the memory holds a newer view already
-                self._memory.clear()  # the clock jumped back
+                memory.clear()  # the clock jumped back
             laser = [float(v) for v in self.get_parameter('laser_pose').value]
-            self._memory.update(scan, pose, laser_pose=laser)
+            memory.update(scan, pose, laser_pose=laser)
         except Exception as err:  # ScanError mostly; never leave a callback
             problem = str(err) or type(err).__name__
             if self._problems.report('scan'):
                 self.get_logger().error(f'invalid scan: {problem}; scan dropped (cmd_vel is '
                                         'zero once the scan is stale)')
             return
-        faces = self.controller.config.faces_per_obstacle
-        self._scan_obstacles = ObstacleSet(within_faces(self._memory.obstacles(), faces))
+        self._local.scan_updated()
         self._scan_stamp = stamp
         self._scan_time = min(stamp, receipt)
         if self._problems.resolve('scan'):
@@ -720,7 +718,8 @@ class MpcControllerNode(ManagedNode):
                                         'one, if any, stays in force)')
             return
         self._grid = grid
-        self._map_window = None
+        if self._local is not None:
+            self._local.occupancy = grid
         self._problems.resolve('map')
         self.get_logger().info(f'new map: {grid.width} x {grid.height} cells of '
                                f'{grid.resolution:g} m')
@@ -734,21 +733,8 @@ class MpcControllerNode(ManagedNode):
     def _update_obstacles(self) -> None:
         """Hand the obstacles in force to the controller: world + map + scan memory."""
         sensed: list[ConvexPolygon] = []
-        position = self._state[:2] if self._state is not None else None
-        radius = self._sensing_radius()
-        if self._grid is not None and position is not None:
-            grid = self._grid
-            rows, cols = grid.world_to_cell(position)
-            window = (id(grid), int(rows), int(cols), radius)
-            if window != self._map_window:
-                faces = self.controller.config.faces_per_obstacle
-                self._map_obstacles = within_faces(
-                    grid_rectangles(grid, centre=position, radius=radius), faces)
-                self._map_window = window
-            sensed += self._map_obstacles
-        if len(self._scan_obstacles) and position is not None:
-            chosen, _ = self._scan_obstacles.near(position[None, :], radius)
-            sensed += [self._scan_obstacles.obstacles[i] for i in sorted(chosen)]
+        if self._local is not None and self._state is not None:
+            sensed = self._local.near(self._state[:2], self._sensing_radius())
         self.controller.set_obstacles(self._world_obstacles + sensed)
 
     def plan_callback(self, msg: Path | bytes) -> None:

@@ -1,0 +1,97 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""What the controller avoids near the robot: the map's cells as rectangles, the laser's memory.
+
+The controller node and the ROS-free rollout assemble their obstacles here, the same way:
+the occupied cells of the map within a radius of the robot, merged into rectangles
+(`grid_rectangles`, recomputed only when the robot enters another cell), plus the obstacles
+the scan memory holds within that radius; every polygon fitted to the NLP's faces and rid of
+needle corners (`within_faces`). The radius is what the horizon can reach plus the inflation
+and a margin: nothing farther can matter to the next solve.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+from mpc_local_planner.core.controller import within_faces
+from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
+from mpc_local_planner.perception.grids import grid_rectangles
+from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
+from mpc_local_planner.worlds.map_files import OccupancyMap
+
+__all__ = ['LocalObstacles']
+
+
+class LocalObstacles:
+    """The map's and the laser's obstacles near the robot, as the MPC takes them.
+
+    Args:
+        faces: Largest number of faces of an obstacle (the NLP's faces_per_obstacle).
+        occupancy: The static map, or None.
+        memory: The scan memory, or None (the laser is not a source).
+
+    """
+
+    def __init__(self, faces: int, *, occupancy: OccupancyMap | None = None,
+                 memory: ObstacleMemory | None = None) -> None:
+        self.faces = int(faces)
+        self.memory = memory
+        self._occupancy = occupancy
+        self._window: tuple | None = None
+        self._map_obstacles: list[ConvexPolygon] = []
+        self._scan_obstacles = ObstacleSet([])
+
+    @property
+    def occupancy(self) -> OccupancyMap | None:
+        """The static map in force."""
+        return self._occupancy
+
+    @occupancy.setter
+    def occupancy(self, occupancy: OccupancyMap | None) -> None:
+        self._occupancy = occupancy
+        self._window = None
+
+    def scan_updated(self) -> None:
+        """Take the memory's obstacles in after it changed (fitted once per scan)."""
+        polygons = self.memory.obstacles() if self.memory is not None else []
+        self._scan_obstacles = ObstacleSet(within_faces(polygons, self.faces))
+
+    def near(self, position: Sequence[float], radius: float) -> list[ConvexPolygon]:
+        """Return the map's rectangles and the remembered obstacles within radius of position.
+
+        Args:
+            position: (x, y) of the robot, map frame.
+            radius: Distance of interest, metres.
+
+        """
+        centre = np.asarray(position, dtype=float).reshape(-1)[:2]
+        found: list[ConvexPolygon] = []
+        if self._occupancy is not None and math.isfinite(radius):
+            rows, cols = self._occupancy.world_to_cell(centre[None, :])
+            window = (int(rows[0]), int(cols[0]), float(radius))
+            if window != self._window:
+                self._map_obstacles = within_faces(
+                    grid_rectangles(self._occupancy, centre=centre, radius=radius), self.faces)
+                self._window = window
+            found += self._map_obstacles
+        if len(self._scan_obstacles):
+            chosen, _ = self._scan_obstacles.near(centre[None, :], radius)
+            found += [self._scan_obstacles.obstacles[i] for i in sorted(chosen)]
+        return found
