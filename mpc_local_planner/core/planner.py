@@ -12,18 +12,55 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Global planner: OMPL's RRT* in the plane, over inflated obstacles or an inflated grid.
+"""Global planner: OMPL's RRT* in the plane, over obstacles or a grid, for a circle or a polygon.
 
 The paper feeds the MPC an unsmoothed RRT* polyline: the MPC tracks the path's steady states
-and copes with the corners itself, so the planner only has to be collision free. It plans for
-a point in R^2 among obstacles grown by the robot radius plus a clearance, and checks each
-tree edge exactly (segment against convex polygon) rather than by sampling along it, so no
-thin obstacle corner slips between two samples.
+and copes with the corners itself, so the planner only has to be collision free. For a round
+robot (``robot_radius``, the fast special case) it plans for a point in R^2 among obstacles
+grown by the robot radius plus a clearance, and checks each tree edge exactly (segment
+against convex polygon) rather than by sampling along it, so no thin obstacle corner slips
+between two samples.
 
 On a grid (`RrtStarPlanner.on_grid`: an occupancy grid inflated by a distance transform, as
 perception's ``PlanningGrid`` keeps it from a map and scans), a state is checked by its
 cell, and an edge exactly too: every cell it passes through must be free (not samples along
 it, which could clip the corner of a blocked cell); the plane sampled is the grid's extent.
+
+A convex polygon footprint (``PlannerConfig.footprint``, e.g. the BARN Jackal, 0.508 m x
+0.430 m) turns the paper's Assumption 1 into a statement about poses: every pose g_p(s) of the
+path the controller follows must keep the polygon ``clearance`` away from the obstacles. A
+waypoint path's poses (core/paths.py) are straight segments driven at the segment's heading
+and turns in place: at each corner, at the start (from the robot's heading to the first
+segment) and at the goal (to the goal's heading). Of the two options, planning in SE(2) and
+checking these poses, this module checks the poses, and still plans in the plane:
+
+- an intermediate RRT* state is valid where the circumscribed disc (``Footprint.radius``)
+  grown by the clearance is free: the robot can turn there to any heading, so the corner's
+  turn is clear whatever the next segment;
+- a motion a -> b is valid where the polygon driven straight at heading atan2(b - a) is:
+  that swept region is the convex hull of the polygon at a and at b (a Minkowski sum with
+  the segment), checked exactly against polygons (convex-convex separation, then the exact
+  distance) and, on a grid, against the raw occupied cells (each by its centre, with half the
+  cell's diagonal added, so the check is conservative);
+- the start and the goal are valid where the polygon at their actual heading is, and the
+  turns in place there are part of the motions out of the start and into the goal: each
+  endpoint's reachable headings are found once per plan by rotating the polygon in fine
+  steps (grown by r_c dtheta / 2, the most a point moves between two samples).
+
+Why not SE(2): the path the controller follows (WaypointPath) derives every heading from the
+positions (each segment at its direction, turns in place between them), so headings sampled
+by an SE(2) planner would be discarded, or would need another path model and a 3-D search;
+the checks above are exact for the path actually followed, keep RRT* 2-D with the same
+sampling as the paper's planner, and leave the circle case untouched. The price: no corner
+is placed where the robot could not turn fully, so a passage narrower than the circumscribed
+circle (a 0.60 m gap for the Jackal, whose circle needs 0.67 m) is crossed by one straight
+motion between states outside it, which RRT* has to sample aligned with the gap (a narrow
+passage, as for any sampling planner: more iterations, or another seed, where it misses).
+
+After solving, `RrtStarPlanner.path_problem` checks every pose of the final path again,
+turns included, and a path that fails is refused with a PlanningError that says where (with
+``simplify``, a simplified path that fails gives way to RRT*'s own first: OMPL's simplifier
+can keep an edge the motion validator refused, with only a warning).
 
 Runs are reproducible: OMPL's global seed is set before each plan, and termination is by an
 iteration count (the paper's figure uses 1000) with a wall-clock limit only as a safeguard.
@@ -44,6 +81,7 @@ from ompl import geometric as og
 from ompl import util as ou
 
 from mpc_local_planner.core.errors import PlanningError
+from mpc_local_planner.core.footprint import Footprint, parse_footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
 
 __all__ = [
@@ -60,6 +98,47 @@ _MAX_SEED = 2**32 - 2
 # OMPL's RNG seed and log level are process-wide: one plan at a time.
 _OMPL_LOCK = threading.Lock()
 
+# Consecutive waypoints closer than this are one point, and turns smaller than this (rad) no
+# turn: the tolerances WaypointPath (core/paths.py) builds its turn-in-place knots with.
+_SAME_POINT = 1e-6
+_NO_TURN = 1e-9
+# A turn in place is checked at sampled headings, each polygon grown by r_c * step / 2 (the
+# farthest a footprint point moves to the nearest sample): the step is chosen so that this
+# over-approximation is at most _TURN_TOLERANCE metres (and the step at most _MAX_TURN_STEP).
+_TURN_TOLERANCE = 0.002
+_MAX_TURN_STEP = 0.05
+
+
+def _footprint_vertices(value: object) -> tuple[tuple[float, float], ...]:
+    """Return a footprint setting as hashable vertices (() for a round robot).
+
+    Accepts vertices [[x, y], ...], Nav2's string form, or a polygon `Footprint`; a polygon
+    is validated (convex, with an interior) by `Footprint.polygon`.
+
+    Raises:
+        ValueError: If it is not a convex polygon, or a round `Footprint` (whose radius is
+            ``robot_radius``'s job).
+
+    """
+    if value is None:
+        return ()
+    if isinstance(value, Footprint):
+        if value.vertices is None:
+            msg = 'a round robot is given by robot_radius, not a circle Footprint'
+            raise ValueError(msg)
+        vertices = value.vertices
+    elif isinstance(value, str):
+        parsed = parse_footprint(value)
+        if parsed.vertices is None:
+            return ()
+        vertices = parsed.vertices
+    else:
+        if len(value) == 0:  # type: ignore[arg-type]
+            return ()
+        Footprint.polygon(value)  # type: ignore[arg-type]  # refuses what is not convex
+        vertices = np.asarray(value, dtype=float)  # kept as given
+    return tuple((float(x), float(y)) for x, y in np.asarray(vertices, dtype=float))
+
 
 @dataclass(frozen=True)
 class PlannerConfig:
@@ -73,11 +152,16 @@ class PlannerConfig:
         seed: Seed of OMPL's random number generator (any value in [0, 2**32 - 2]).
         range: RRT*'s maximum extension per iteration in metres; 0 lets OMPL choose (a fifth
             of the space's extent).
-        robot_radius: Radius of the disk covering the robot, metres.
-        clearance: Extra inflation beyond robot_radius, metres: room for the MPC to cut the
-            polyline's corners and for its own collision margin.
+        robot_radius: Radius of the disk covering the robot, metres (without a footprint).
+        clearance: Extra room beyond the robot, metres: room for the MPC to cut the
+            polyline's corners and for its own collision margin. With a footprint, the
+            distance every pose of the path keeps from the obstacles.
         simplify: Shortcut and smooth the path with OMPL's simplifier. Off by default: the
             paper's point is that the MPC does not need a smoothed path.
+        footprint: The robot's convex polygon in its own frame, ((x, y), ...), x forward
+            (Nav2's ``footprint``; its string form, a list of pairs or a polygon `Footprint`
+            are accepted and stored as a tuple, so the config stays hashable). Empty: a
+            circle of robot_radius. A polygon takes precedence over robot_radius, as in Nav2.
 
     """
 
@@ -88,6 +172,7 @@ class PlannerConfig:
     robot_radius: float = 0.0
     clearance: float = 0.1
     simplify: bool = False
+    footprint: tuple[tuple[float, float], ...] = ()
 
     def __post_init__(self) -> None:
         """Refuse settings that OMPL would misread or silently ignore."""
@@ -104,13 +189,31 @@ class PlannerConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 problems.append(f'{name} must be >= 0 and finite, got {value}')
+        try:
+            object.__setattr__(self, 'footprint', _footprint_vertices(self.footprint))
+        except (TypeError, ValueError) as err:
+            problems.append(f'footprint must be a convex polygon [[x, y], ...] or empty: {err}')
         if problems:
             msg = 'invalid PlannerConfig: ' + '; '.join(problems)
             raise ValueError(msg)
 
     @property
+    def robot_footprint(self) -> Footprint:
+        """The robot the planner plans for: the polygon, or a circle of robot_radius."""
+        if self.footprint:
+            return Footprint.polygon(self.footprint)
+        return Footprint.circle(self.robot_radius)
+
+    @property
     def inflation(self) -> float:
-        """Distance by which the planner grows every obstacle, metres."""
+        """Distance by which the planner grows the obstacles where the robot may turn, metres.
+
+        robot_radius + clearance for a circle; for a polygon its circumscribed radius +
+        clearance (the disc an intermediate waypoint needs free, and the least inflation of
+        the grid `RrtStarPlanner.on_grid` accepts).
+        """
+        if self.footprint:
+            return self.robot_footprint.radius + self.clearance
         return self.robot_radius + self.clearance
 
 
@@ -169,7 +272,7 @@ def grid_bounds(grid: FreeSpaceGrid) -> tuple[float, float, float, float]:
 
 
 class _Space:
-    """Where the robot's reference point may be: the queries the planner makes.
+    """Where a round robot's reference point may be: the queries the planner makes.
 
     Two kinds: inflated polygons (exact segment tests) and an inflated grid. Holds only
     NumPy data and plain callables: it must not reference OMPL objects, or the reference
@@ -246,32 +349,456 @@ def _grid_space(grid: FreeSpaceGrid) -> _Space:
     return _Space(point_free=point_free, segment_free=segment_free, collision=collision)
 
 
-class _ExactMotionValidator(ob.MotionValidator):
-    """OMPL motion validator that tests each edge exactly against the inflated obstacles.
+# ----------------------------------------------------------------------- footprint geometry
+# Private helpers for the polygon footprint; they could move to core/footprint.py.
 
-    Polygons: segment against polygon; a grid: every cell the segment passes through.
+def _wrap(angle: float) -> float:
+    """Wrap an angle to [-pi, pi), exactly as core/paths.py's wrap_angle turns corners."""
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def _place(local: np.ndarray, xy: np.ndarray, headings: np.ndarray) -> np.ndarray:
+    """Return (T, K, 2) world vertices of the footprint at xy, one polygon per heading."""
+    c = np.cos(headings)[:, None]
+    s = np.sin(headings)[:, None]
+    x, y = local[None, :, 0], local[None, :, 1]
+    return np.stack([xy[0] + c * x - s * y, xy[1] + s * x + c * y], axis=-1)
+
+
+def _sweep(polygon: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Return the counter-clockwise vertices of what a convex polygon covers translated by d.
+
+    The Minkowski sum of the polygon with the segment [0, d], i.e. the convex hull of the
+    polygon and its translate, without a general hull: the edges facing d (outward normal
+    . d > 0) come from the translate, the others from the polygon, and each vertex between
+    the two groups appears twice (at 0 and at d). Edges parallel to d leave collinear
+    vertices, which the checks accept.
+    """
+    edges = np.concatenate([polygon[1:], polygon[:1]]) - polygon
+    front = edges[:, 1] * d[0] - edges[:, 0] * d[1] > 0.0  # normal (e_y, -e_x) faces d
+    before = np.concatenate([front[-1:], front[:-1]])  # the edge that ends at each vertex
+    first = polygon + np.where(before[:, None], d, 0.0)
+    second = polygon + np.where(front[:, None], d, 0.0)
+    pairs = np.stack([first, second], axis=1)  # (K, 2, 2)
+    keep = np.column_stack([np.ones(len(polygon), dtype=bool), before != front])
+    return pairs[keep]
+
+
+def _edge_distances(points: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Return (..., P, S) distances of points (..., P, 2) to segments (..., S, 2), broadcast."""
+    seg = ends - starts
+    rel = points[..., :, None, :] - starts[..., None, :, :]
+    length2 = np.maximum(np.sum(seg * seg, axis=-1), 1e-300)[..., None, :]
+    t = np.clip(np.sum(rel * seg[..., None, :, :], axis=-1) / length2, 0.0, 1.0)
+    off = rel - t[..., None] * seg[..., None, :, :]
+    return np.hypot(off[..., 0], off[..., 1])
+
+
+def _outward_normals(polygons: np.ndarray) -> np.ndarray:
+    """Return (..., M, 2) unit outward normals of counter-clockwise polygons' edges."""
+    edges = np.roll(polygons, -1, axis=-2) - polygons
+    normals = np.stack([edges[..., 1], -edges[..., 0]], axis=-1)
+    return normals / np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-300)
+
+
+class _PolygonObstacles:
+    """Convex obstacles as padded arrays for the footprint's exact queries (no inflation).
+
+    A footprint pose is in collision when the polygon grown by a distance meets an obstacle,
+    i.e. when their distance is at most that distance (touching counts, as grazing does for
+    the round robot). Separating axes give a lower bound on the distance that settles most
+    pairs; the rest get the exact distance of convex polygons (vertex to edge, both ways).
     """
 
-    def __init__(self, si: ob.SpaceInformation, space: _Space) -> None:
+    def __init__(self, obstacles: Sequence[ConvexPolygon]) -> None:
+        count = len(obstacles)
+        faces = max((o.num_faces for o in obstacles), default=1)
+        self._vertices = np.zeros((count, faces, 2))
+        self._A = np.zeros((count, faces, 2))
+        self._b = np.zeros((count, faces))
+        for i, o in enumerate(obstacles):
+            rows = np.minimum(np.arange(faces), o.num_faces - 1)  # pad with the last face
+            self._vertices[i] = o.vertices[rows]
+            self._A[i], self._b[i] = o.A[rows], o.b[rows]
+        self._low = self._vertices.min(axis=1) if count else np.zeros((0, 2))
+        self._high = self._vertices.max(axis=1) if count else np.zeros((0, 2))
+
+    def _near(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+        """Return the indices of obstacles whose bounding box meets [low, high]."""
+        return np.flatnonzero(np.all((self._low <= high) & (self._high >= low), axis=1))
+
+    def any_near(self, low: np.ndarray, high: np.ndarray, grow: float) -> bool:
+        """Say whether an obstacle may be within grow of the box [low, high] (a quick test)."""
+        return bool(np.any((self._low[:, 0] <= high[0] + grow)
+                           & (self._high[:, 0] >= low[0] - grow)
+                           & (self._low[:, 1] <= high[1] + grow)
+                           & (self._high[:, 1] >= low[1] - grow)))
+
+    def polygons_hit(self, polygons: np.ndarray, grow: float) -> np.ndarray:
+        """Return, per (T, M, 2) counter-clockwise polygon, the first obstacle within grow (-1).
+
+        Args:
+            polygons: Convex polygons in the map frame.
+            grow: Distance the polygons are grown by (the clearance), metres.
+
+        """
+        hits = np.full(len(polygons), -1, dtype=np.int64)
+        near = self._near(polygons.min(axis=(0, 1)) - grow, polygons.max(axis=(0, 1)) + grow)
+        if not len(near):
+            return hits
+        verts, A, b = self._vertices[near], self._A[near], self._b[near]
+        # separation along the obstacles' normals: max_f (min_m a_f . r_m - b_f)
+        along_theirs = np.max(
+            np.einsum('nfk,tmk->tnfm', A, polygons).min(axis=3) - b[None], axis=2)
+        # and along the polygons' own normals (their own extent by the max, robustly)
+        normals = _outward_normals(polygons)
+        own = np.einsum('tmk,tjk->tmj', normals, polygons).max(axis=2)  # (T, M)
+        theirs = np.einsum('tmk,nfk->tnmf', normals, verts).min(axis=3)  # (T, N, M)
+        separation = np.maximum(along_theirs, np.max(theirs - own[:, None, :], axis=2))
+        hit = separation <= 0.0  # overlapping or touching
+        close = ~hit & (separation <= grow)
+        if np.any(close):
+            ends = np.roll(verts, -1, axis=1)
+            mine = _edge_distances(polygons[:, None], verts[None], ends[None])  # (T, N, M, F)
+            yours = _edge_distances(verts[None], polygons[:, None],
+                                    np.roll(polygons, -1, axis=1)[:, None])  # (T, N, F, M)
+            distance = np.minimum(mine.min(axis=(2, 3)), yours.min(axis=(2, 3)))
+            hit |= close & (distance <= grow)
+        found = hit.any(axis=1)
+        hits[found] = near[np.argmax(hit[found], axis=1)]
+        return hits
+
+    def disc_hit(self, xy: np.ndarray, radius: float) -> int:
+        """Return the first obstacle within radius of the point xy (exact distance), or -1."""
+        near = self._near(xy - radius, xy + radius)
+        if not len(near):
+            return -1
+        verts = self._vertices[near]
+        inside = np.max(np.einsum('nfk,k->nf', self._A[near], xy) - self._b[near], axis=1) <= 0
+        distance = _edge_distances(xy[None, None], verts, np.roll(verts, -1, axis=1))
+        hit = inside | (distance.min(axis=(1, 2)) <= radius)
+        return int(near[np.argmax(hit)]) if hit.any() else -1
+
+    def state_free(self, xy: np.ndarray, radius: float) -> bool:
+        """Say whether the disc of radius about xy is free (the turn-anywhere test)."""
+        return self.disc_hit(xy, radius) < 0
+
+    def describe(self, index: int) -> str:
+        """Name what `polygons_hit` or `disc_hit` found."""
+        return f'obstacle {index}'
+
+
+class _GridObstacles:
+    """A snapshot of a grid for the footprint's queries: raw occupied cells, and blocked ones.
+
+    A polygon grown by a distance is in collision when the centre of an occupied cell (not
+    inflated) is within that distance plus half the cell's diagonal: every point of such a
+    cell may be that close, so the check is conservative by at most half a diagonal. The
+    turn-anywhere test of an intermediate state is the grid's own inflated layer, by the
+    state's cell (``blocked``, inflated by at least the circumscribed radius + clearance).
+    Outside the grid is free. A snapshot, so that scans arriving during a plan do not change
+    the answers halfway.
+    """
+
+    def __init__(self, grid: FreeSpaceGrid) -> None:
+        occupancy = grid.map
+        self._map = occupancy
+        self._occupied = np.array(grid.occupied, dtype=bool)
+        self._blocked = np.array(grid.blocked, dtype=bool)
+        x0, y0, yaw = (float(v) for v in occupancy.origin)
+        self._origin = np.array([x0, y0])
+        c, s = math.cos(yaw), math.sin(yaw)
+        self._rotation = np.array([[c, -s], [s, c]])  # world offset @ R = grid coordinates
+        self._res = float(occupancy.resolution)
+        self._half_diagonal = self._res * math.sqrt(0.5)
+
+    def _to_grid(self, points: np.ndarray) -> np.ndarray:
+        """Return map-frame points in the grid's frame (metres from its lower-left corner)."""
+        return (points - self._origin) @ self._rotation
+
+    def _cells_near(self, low: np.ndarray, high: np.ndarray,
+                    margin: float) -> tuple[np.ndarray, np.ndarray]:
+        """Return (flat indices, (Q, 2) centres in the grid frame) of occupied cells near a box.
+
+        The box [low, high] (grid frame) grown by margin; only cells inside the grid.
+        """
+        height, width = self._occupied.shape
+        c0 = max(int(math.floor((low[0] - margin) / self._res)), 0)
+        c1 = min(int(math.floor((high[0] + margin) / self._res)) + 1, width)
+        r0 = max(int(math.floor((low[1] - margin) / self._res)), 0)
+        r1 = min(int(math.floor((high[1] + margin) / self._res)) + 1, height)
+        if c0 >= c1 or r0 >= r1:
+            return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
+        rows, cols = np.nonzero(self._occupied[r0:r1, c0:c1])
+        rows, cols = rows + r0, cols + c0
+        centres = np.column_stack([cols + 0.5, rows + 0.5]) * self._res
+        return rows * width + cols, centres
+
+    def any_near(self, low: np.ndarray, high: np.ndarray, grow: float) -> bool:
+        """Say whether an occupied cell may be within grow of the box [low, high] (map frame)."""
+        corners = self._to_grid(np.array([low, [high[0], low[1]], high, [low[0], high[1]]]))
+        cells, _ = self._cells_near(corners.min(axis=0), corners.max(axis=0),
+                                    grow + self._half_diagonal)
+        return len(cells) > 0
+
+    def polygons_hit(self, polygons: np.ndarray, grow: float) -> np.ndarray:
+        """Return, per (T, M, 2) polygon, the first occupied cell (flat index) near it, or -1."""
+        hits = np.full(len(polygons), -1, dtype=np.int64)
+        local = self._to_grid(polygons)
+        margin = grow + self._half_diagonal
+        cells, centres = self._cells_near(local.min(axis=(0, 1)), local.max(axis=(0, 1)),
+                                          margin)
+        if not len(cells):
+            return hits
+        normals = _outward_normals(local)
+        own = np.einsum('tmk,tmk->tm', normals, local)  # each edge's support (convex)
+        outside = np.max(np.einsum('tmk,qk->tqm', normals, centres) - own[:, None], axis=2)
+        hit = outside <= 0.0  # a centre inside the polygon
+        close = ~hit & (outside <= margin)
+        if np.any(close):
+            distance = _edge_distances(centres[None], local, np.roll(local, -1, axis=1))
+            hit |= close & (distance.min(axis=2) <= margin)
+        found = hit.any(axis=1)
+        hits[found] = cells[np.argmax(hit[found], axis=1)]
+        return hits
+
+    def disc_hit(self, xy: np.ndarray, radius: float) -> int:
+        """Return the first occupied cell whose centre is within radius + half a diagonal."""
+        local = self._to_grid(xy)
+        margin = radius + self._half_diagonal
+        cells, centres = self._cells_near(local, local, margin)
+        hit = np.hypot(*(centres - local).T) <= margin
+        return int(cells[np.argmax(hit)]) if hit.any() else -1
+
+    def state_free(self, xy: np.ndarray, radius: float) -> bool:
+        """Say whether xy's cell is free in the inflated layer (radius: the grid's own)."""
+        rows, cols = self._map.world_to_cell(xy)
+        if not self._map.contains_cell(rows, cols):
+            return True
+        return not bool(self._blocked[rows, cols])
+
+    def describe(self, index: int) -> str:
+        """Name the cell `polygons_hit` or `disc_hit` found."""
+        row, col = divmod(int(index), self._occupied.shape[1])
+        return f'the occupied cell (row {row}, column {col})'
+
+
+@dataclass(frozen=True)
+class _TurnRange:
+    """The turns in place that are clear at a position, from a heading: [low, high] radians.
+
+    low <= 0 <= high (clockwise, counter-clockwise); +-inf where any turn is clear. A turn
+    by delta (wrapped, the short way, as a path turns) is clear iff low <= delta <= high.
+    """
+
+    low: float
+    high: float
+    low_hit: str = ''
+    high_hit: str = ''
+
+    def allows(self, delta: float) -> bool:
+        """Say whether turning by delta radians is clear."""
+        return abs(delta) <= _NO_TURN or self.low <= delta <= self.high
+
+    def why(self, delta: float) -> str:
+        """Say why turning by delta is not clear (call only when `allows` says no)."""
+        limit, hit = (self.high, self.high_hit) if delta > 0 else (self.low, self.low_hit)
+        side = 'counter-clockwise' if delta > 0 else 'clockwise'
+        return (f'the footprint meets {hit} when turned {side} by more than {abs(limit):.3g} '
+                f'of the {abs(delta):.3g} rad')
+
+
+class _FootprintChecks:
+    """The pose checks of a convex polygon footprint against one set of obstacles.
+
+    Three queries make the planner's rules (see the module docstring): a state where the
+    robot can turn to any heading (its circumscribed disc grown by the clearance is free),
+    a straight motion (the swept polygon grown by the clearance), the clear turns at a
+    position (sampled headings). Holds only NumPy data (no OMPL objects).
+    """
+
+    def __init__(self, footprint: Footprint, clearance: float,
+                 obstacles: _PolygonObstacles | _GridObstacles) -> None:
+        assert footprint.vertices is not None
+        self.local = footprint.vertices
+        self.radius = footprint.radius
+        self.clearance = clearance
+        self.obstacles = obstacles
+        # the largest disc about the reference point inside the polygon at every heading
+        offsets = np.einsum('ij,ij->i', _outward_normals(self.local), self.local)
+        self.inner = float(offsets.min()) if offsets.min() > 0.0 else None
+        step = min(_MAX_TURN_STEP, 2.0 * _TURN_TOLERANCE / max(self.radius, 1e-12))
+        self.turn_samples = math.ceil(math.pi / step)
+        self.turn_step = math.pi / self.turn_samples
+        self.turn_grow = clearance + self.radius * self.turn_step / 2.0
+
+    def state_free(self, xy: np.ndarray) -> bool:
+        """Say whether the robot can turn in place at xy to any heading."""
+        return self.obstacles.state_free(xy, self.radius + self.clearance)
+
+    def pose_problem(self, xy: np.ndarray, heading: float | None) -> str | None:
+        """Say why the footprint at (xy, heading) is in collision, or None if it is clear.
+
+        Without a heading: the disc the polygon covers at every heading (necessary only).
+        """
+        if heading is None:
+            if self.inner is None:
+                return None
+            hit = self.obstacles.disc_hit(xy, self.inner + self.clearance)
+            if hit < 0:
+                return None
+            return (f'in collision: the disc of {self.inner:.3g} m the footprint covers at any '
+                    f'heading meets {self.obstacles.describe(hit)} grown by the clearance '
+                    f'{self.clearance:g} m')
+        hit = int(self.obstacles.polygons_hit(_place(self.local, xy, np.array([heading])),
+                                              self.clearance)[0])
+        if hit < 0:
+            return None
+        return (f'in collision: the footprint at heading {heading:.3g} rad meets '
+                f'{self.obstacles.describe(hit)} grown by the clearance {self.clearance:g} m')
+
+    def sweep_hit(self, a: np.ndarray, b: np.ndarray) -> int:
+        """Return what the footprint driven straight from a to b meets (-1: nothing)."""
+        d = b - a
+        c, s = d / math.hypot(d[0], d[1])  # the heading's cosine and sine
+        polygon = self.local @ np.array([[c, s], [-s, c]]) + a
+        low, high = polygon.min(axis=0), polygon.max(axis=0)
+        if not self.obstacles.any_near(np.minimum(low, low + d), np.maximum(high, high + d),
+                                       self.clearance):
+            return -1  # most motions: nothing near the swept box
+        return int(self.obstacles.polygons_hit(_sweep(polygon, d)[None], self.clearance)[0])
+
+    def turn_range(self, xy: np.ndarray, heading: float) -> _TurnRange:
+        """Return the turns in place that are clear at xy from heading.
+
+        Any turn where the circumscribed disc is free; otherwise the polygon at headings
+        turn_step apart on both sides, each grown by turn_grow (covering the headings half a
+        step either side), up to the first sample in collision.
+        """
+        if self.state_free(xy):
+            return _TurnRange(-math.inf, math.inf)
+        steps = np.arange(self.turn_samples + 1) * self.turn_step
+        headings = heading + np.concatenate([steps, -steps[1:]])
+        hits = self.obstacles.polygons_hit(_place(self.local, xy, headings), self.turn_grow)
+        sides = (hits[:self.turn_samples + 1], np.concatenate([hits[:1],
+                                                               hits[self.turn_samples + 1:]]))
+        limits: list[float] = []
+        names: list[str] = []
+        for side in sides:
+            blocked = np.flatnonzero(side >= 0)
+            if not len(blocked):
+                limits.append(math.inf)
+                names.append('')
+                continue
+            k = int(blocked[0])
+            limits.append(max(k - 0.5, 0.0) * self.turn_step)
+            names.append(self.obstacles.describe(int(side[k])) +
+                         f' grown by the clearance {self.clearance:g} m')
+        return _TurnRange(low=-limits[1], high=limits[0], low_hit=names[1], high_hit=names[0])
+
+
+class _FootprintPlan:
+    """One plan's state and motion rules for a polygon footprint (OMPL's callbacks use it).
+
+    The start and the goal were checked before (`RrtStarPlanner.check_endpoint`); the turns
+    in place there are part of the motions out of the start and into the goal. Counts the
+    motions refused for those turns alone, so that a failed plan can say so.
+    """
+
+    def __init__(self, checks: _FootprintChecks, start: tuple[np.ndarray, float | None],
+                 goal: tuple[np.ndarray, float | None]) -> None:
+        self.checks = checks
+        (self.start_xy, self.start_heading), (self.goal_xy, self.goal_heading) = start, goal
+        self.start_turns = (None if self.start_heading is None
+                            else checks.turn_range(self.start_xy, self.start_heading))
+        self.goal_turns = (None if self.goal_heading is None
+                           else checks.turn_range(self.goal_xy, self.goal_heading))
+        self.start_turn_refusals = 0
+        self.goal_turn_refusals = 0
+        # RRT* asks about the same states again and again (rewiring): remember the answers
+        self._turnable: dict[tuple[float, float], bool] = {}
+
+    def _is(self, xy: np.ndarray, endpoint: np.ndarray) -> bool:
+        return bool(xy[0] == endpoint[0] and xy[1] == endpoint[1])
+
+    def _can_turn(self, xy: np.ndarray) -> bool:
+        key = (float(xy[0]), float(xy[1]))
+        free = self._turnable.get(key)
+        if free is None:
+            free = self._turnable[key] = self.checks.state_free(xy)
+        return free
+
+    def state_valid(self, xy: np.ndarray) -> bool:
+        """A state: the start or goal as checked, elsewhere where the robot can turn."""
+        if self._is(xy, self.start_xy) or self._is(xy, self.goal_xy):
+            return True
+        return self._can_turn(xy)
+
+    def motion_valid(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """A straight motion a -> b, with the turns at the start and the goal it implies."""
+        d = b - a
+        if math.hypot(d[0], d[1]) <= _SAME_POINT:
+            return self.state_valid(a) and self.state_valid(b)
+        heading = math.atan2(d[1], d[0])
+        if self._is(a, self.start_xy):
+            if (self.start_turns is not None and self.start_heading is not None
+                    and not self.start_turns.allows(_wrap(heading - self.start_heading))):
+                self.start_turn_refusals += 1
+                return False
+        elif not self._can_turn(a):  # a corner (OMPL's simplifier makes new ones too)
+            return False
+        if self._is(b, self.goal_xy):
+            if (self.goal_turns is not None and self.goal_heading is not None
+                    and not self.goal_turns.allows(-_wrap(self.goal_heading - heading))):
+                self.goal_turn_refusals += 1
+                return False
+        elif not self._can_turn(b):
+            return False
+        return self.checks.sweep_hit(a, b) < 0
+
+    def failure_hint(self) -> str:
+        """Say which endpoint turns refused motions, for the message of a failed plan."""
+        hints = []
+        for label, turns, count in (('start', self.start_turns, self.start_turn_refusals),
+                                    ('goal', self.goal_turns, self.goal_turn_refusals)):
+            if turns is not None and count:
+                hints.append(f'{count} motions {"out of" if label == "start" else "into"} the '
+                             f'{label} were refused because the footprint cannot turn in place '
+                             f'there by more than {turns.high:.3g} rad counter-clockwise or '
+                             f'{-turns.low:.3g} rad clockwise of the {label} heading')
+        return ('; ' + '; '.join(hints)) if hints else ''
+
+
+class _ExactMotionValidator(ob.MotionValidator):
+    """OMPL motion validator that tests each edge exactly, by a plain callable.
+
+    Round robot: segment against inflated polygon, or every cell the segment passes through;
+    polygon footprint: the swept polygon and the turns at the start and goal
+    (`_FootprintPlan.motion_valid`).
+    """
+
+    def __init__(self, si: ob.SpaceInformation,
+                 motion_free: Callable[[np.ndarray, np.ndarray], bool]) -> None:
         super().__init__(si)
-        self._segment_free = space.segment_free
+        self._motion_free = motion_free
 
     def checkMotion(self, s1: ob.State, s2: ob.State, *args: object) -> bool:
         """Return True if the straight motion from s1 to s2 is collision free (OMPL's name)."""
         a = np.array([s1[0], s1[1]])
         b = np.array([s2[0], s2[1]])
-        return self._segment_free(a, b)
+        return self._motion_free(a, b)
 
 
 class _StateValidity:
-    """State validity callable: inside the bounds and free (outside the inflated obstacles).
+    """State validity callable: inside the bounds and free by a plain callable.
 
     A plain callable holding only NumPy data: it must not reference OMPL objects, or the
     reference cycle through C++ would keep them alive past the plan.
     """
 
-    def __init__(self, space: _Space, bounds: tuple[float, float, float, float]):
-        self._point_free = space.point_free
+    def __init__(self, state_free: Callable[[np.ndarray], bool],
+                 bounds: tuple[float, float, float, float]):
+        self._state_free = state_free
         self._bounds = bounds
 
     def __call__(self, state: ob.State) -> bool:
@@ -279,7 +806,7 @@ class _StateValidity:
         xmin, xmax, ymin, ymax = self._bounds
         if not (xmin <= x <= xmax and ymin <= y <= ymax):
             return False
-        return self._point_free(np.array([x, y]))
+        return self._state_free(np.array([x, y]))
 
 
 def _check_bounds(bounds: Sequence[float]) -> tuple[float, float, float, float]:
@@ -289,6 +816,17 @@ def _check_bounds(bounds: Sequence[float]) -> tuple[float, float, float, float]:
         msg = f'bounds must be finite (xmin, xmax, ymin, ymax) with min < max, got {bounds}'
         raise ValueError(msg)
     return xmin, xmax, ymin, ymax
+
+
+def _distinct(points: np.ndarray) -> np.ndarray:
+    """Drop consecutive points within _SAME_POINT of the previous one (as WaypointPath)."""
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(points, axis=0), axis=1)
+                           > _SAME_POINT])
+    return points[keep]
+
+
+def _xy(point: np.ndarray) -> str:
+    return f'({point[0]:g}, {point[1]:g})'
 
 
 @contextlib.contextmanager
@@ -307,12 +845,21 @@ class RrtStarPlanner:
 
     `on_grid` builds one over an inflated occupancy grid instead; it reads the grid at
     each plan, so cells that scans mark or clear between two plans count at the next one.
+    With ``config.footprint`` the robot is that convex polygon and every pose of the path
+    (segments and turns in place) is checked; otherwise it is a circle of robot_radius.
 
     Args:
-        obstacles: The obstacles as described (not inflated); the planner inflates them by
-            ``config.robot_radius + config.clearance``.
-        bounds: (xmin, xmax, ymin, ymax) of the plane the planner samples.
+        obstacles: The obstacles as described (not inflated); for a round robot the planner
+            inflates them by ``config.robot_radius + config.clearance``.
+        bounds: (xmin, xmax, ymin, ymax) of the plane the planner samples (where the robot's
+            reference point may be).
         config: Planner settings.
+
+    Attributes:
+        obstacles: The obstacles as given.
+        inflated_obstacles: The obstacles grown by ``config.inflation``: what a round
+            robot's reference point avoids. With a polygon footprint the planner checks the
+            polygon exactly against ``obstacles`` instead.
 
     Raises:
         ValueError: If the bounds are empty or not finite.
@@ -329,11 +876,15 @@ class RrtStarPlanner:
         self.config = config
         self.bounds = _check_bounds(bounds)
         self.grid: FreeSpaceGrid | None = None
+        self.footprint = config.robot_footprint
+        self.obstacles = tuple(obstacles)
         self.inflated_obstacles = tuple(
             obstacle.inflate(config.inflation) for obstacle in obstacles
         )
         self._obstacles = ObstacleSet(self.inflated_obstacles)
         self._space = _polygon_space(self._obstacles, config.inflation)
+        self._polygon_checks = None if self.footprint.is_circle else _FootprintChecks(
+            self.footprint, config.clearance, _PolygonObstacles(self.obstacles))
 
     @classmethod
     def on_grid(
@@ -347,7 +898,9 @@ class RrtStarPlanner:
 
         The grid carries its own inflation (perception's ``PlanningGrid(map,
         inflation=config.inflation)``); the planner does not inflate it again, and refuses
-        a grid inflated by less than robot_radius + clearance.
+        a grid inflated by less than ``config.inflation``. With a polygon footprint the
+        inflated layer serves the states (where the robot turns), and the motions and the
+        endpoints' poses are checked against the raw occupied cells.
 
         Args:
             grid: The inflated grid (kept by reference: later scans count at the next plan).
@@ -361,8 +914,10 @@ class RrtStarPlanner:
         """
         inflation = float(grid.inflation)
         if not inflation >= config.inflation - 1e-9:
-            msg = (f'the grid is inflated by {inflation:g} m, less than robot_radius + '
-                   f'clearance = {config.inflation:g} m')
+            what = ('robot_radius + clearance' if not config.footprint
+                    else "the footprint's circumscribed radius + clearance")
+            msg = (f'the grid is inflated by {inflation:g} m, less than {what} = '
+                   f'{config.inflation:g} m')
             raise ValueError(msg)
         planner = cls([], grid_bounds(grid) if bounds is None else bounds, config=config)
         planner.grid = grid
@@ -373,35 +928,96 @@ class RrtStarPlanner:
         """Plan a collision-free polyline from start to goal.
 
         Args:
-            start: Start pose (x, y[, theta]); only x, y are used.
-            goal: Goal pose (x, y[, theta]); only x, y are used.
+            start: Start pose (x, y[, theta]); for a round robot only x, y are used. With a
+                footprint, theta is the robot's heading: the path first turns in place
+                from it (no turn if theta is not given).
+            goal: Goal pose (x, y[, theta]); with a footprint the path ends turning in
+                place to theta (if given).
 
         Returns:
             (M, 2) waypoints, M >= 2, with the first equal to start[:2] and the last equal to
-            goal[:2]; every segment clears the inflated obstacles (or the inflated grid).
+            goal[:2]; every segment clears the inflated obstacles (or the inflated grid); with
+            a footprint, every pose of the path, turns in place included, keeps the
+            clearance (`path_problem` finds nothing).
 
         Raises:
-            PlanningError: If start or goal is out of bounds or in collision, or if RRT* finds
-                no exact solution within the iterations and the time limit.
+            PlanningError: If start or goal is out of bounds or in collision, if RRT* finds
+                no exact solution within the iterations and the time limit, or (footprint)
+                if the path it finds fails `path_problem`.
 
         """
-        start_xy = self.check_endpoint(start, 'start')
-        goal_xy = self.check_endpoint(goal, 'goal')
-        if self._space.segment_free(start_xy, goal_xy):
-            # RRT* would converge to this segment anyway; skip the sampling.
-            return np.vstack([start_xy, goal_xy])
+        checks = self._footprint_checks()  # on a grid: one snapshot for the whole plan
+        start_xy, start_heading = self._endpoint(start, 'start', checks)
+        goal_xy, goal_heading = self._endpoint(goal, 'goal', checks)
+        if checks is None:
+            if self._space.segment_free(start_xy, goal_xy):
+                # RRT* would converge to this segment anyway; skip the sampling.
+                return np.vstack([start_xy, goal_xy])
+            with _OMPL_LOCK, _ompl_log_level(ou.LOG_WARN):
+                waypoints = self._solve(start_xy, goal_xy, self._space.point_free,
+                                        self._space.segment_free, lambda: '')[0]
+            waypoints[0] = start_xy
+            waypoints[-1] = goal_xy
+            return waypoints
+        direct = np.vstack([start_xy, goal_xy])
+        if self._footprint_problem(checks, direct, start_heading, goal_heading) is None:
+            return direct
+        rules = _FootprintPlan(checks, (start_xy, start_heading), (goal_xy, goal_heading))
         with _OMPL_LOCK, _ompl_log_level(ou.LOG_WARN):
-            waypoints = self._solve(start_xy, goal_xy)
-        waypoints[0] = start_xy
-        waypoints[-1] = goal_xy
-        return waypoints
+            candidates = self._solve(start_xy, goal_xy, rules.state_valid, rules.motion_valid,
+                                     rules.failure_hint)
+        # The simplified path first, then RRT*'s own: OMPL's simplifier may keep an edge
+        # the validator refused (it warns "may slightly touch on an invalid region").
+        problem = None
+        for waypoints in candidates:
+            waypoints[0] = start_xy
+            waypoints[-1] = goal_xy
+            problem = self._footprint_problem(checks, waypoints, start_heading, goal_heading)
+            if problem is None:
+                return waypoints
+        msg = f'RRT* found a path that the footprint cannot follow, refused: {problem}'
+        raise PlanningError(msg)
+
+    def path_problem(self, waypoints: np.ndarray, *, start_heading: float | None = None,
+                     goal_heading: float | None = None) -> str | None:
+        """Say why the robot cannot follow a waypoint path, or None if every pose is clear.
+
+        The path as core/paths.py's WaypointPath makes it: turn in place from start_heading
+        to the first segment (if given), drive each segment at its heading, turn in place
+        at each corner the short way, turn to goal_heading at the end (if given). Round
+        robot: every segment against the inflated obstacles (or grid), as the planner checks
+        its edges. Footprint: every straight segment exactly (the swept polygon), every
+        turn at headings a fine step apart grown to cover the headings between them (a
+        turn where the circumscribed disc is free is clear at once), each grown by the
+        clearance; consecutive waypoints within 1e-6 m count as one.
+
+        Args:
+            waypoints: (M, 2) positions (further columns are ignored).
+            start_heading: The robot's heading at the first waypoint, radians.
+            goal_heading: The heading to end with, radians.
+
+        Returns:
+            None if the path is clear, else what is in collision, and where.
+
+        """
+        points = np.atleast_2d(np.asarray(waypoints, dtype=float))[:, :2]
+        checks = self._footprint_checks()
+        if checks is None:
+            for i, (a, b) in enumerate(zip(points[:-1], points[1:], strict=True)):
+                if not self._space.segment_free(a, b):
+                    return (f'segment {i} from {_xy(a)} to {_xy(b)} meets the obstacles grown '
+                            f'by {self.config.inflation:g} m (robot_radius + clearance)')
+            return None
+        return self._footprint_problem(checks, points, start_heading, goal_heading)
 
     def check_endpoint(self, pose: np.ndarray, label: str) -> np.ndarray:
         """Return pose[:2] after checking it is finite, in bounds and clear of the obstacles.
 
-        Clear of the obstacles as the planner grows them (robot_radius + clearance): a start
-        or goal that passes this may still be walled off, but one that fails it can never
-        be planned to.
+        Round robot: clear of the obstacles as the planner grows them (robot_radius +
+        clearance). Footprint: the polygon at the pose's heading, grown by the clearance,
+        is clear (without a heading, the disc it covers at every heading). A start or goal
+        that passes this may still be walled off, but one that fails it can never be
+        planned to.
 
         Args:
             pose: (x, y[, theta]).
@@ -411,7 +1027,13 @@ class RrtStarPlanner:
             PlanningError: saying why the pose cannot be planned from or to.
 
         """
-        xy = np.asarray(pose, dtype=float).reshape(-1)[:2]
+        return self._endpoint(pose, label, self._footprint_checks())[0]
+
+    def _endpoint(self, pose: np.ndarray, label: str,
+                  checks: _FootprintChecks | None) -> tuple[np.ndarray, float | None]:
+        """Check a start or goal (see `check_endpoint`); return its x, y and heading."""
+        values = np.asarray(pose, dtype=float).reshape(-1)
+        xy = values[:2]
         if len(xy) != 2 or not np.all(np.isfinite(xy)):
             msg = f'{label} must hold finite x and y, got {pose!r}'
             raise PlanningError(msg)
@@ -419,14 +1041,95 @@ class RrtStarPlanner:
         if not (xmin <= xy[0] <= xmax and ymin <= xy[1] <= ymax):
             msg = f'{label} ({xy[0]:g}, {xy[1]:g}) is outside the bounds {self.bounds}'
             raise PlanningError(msg)
-        collision = self._space.collision(xy)
-        if collision is not None:
-            msg = f'{label} ({xy[0]:g}, {xy[1]:g}) is {collision}'
+        if checks is None:
+            collision = self._space.collision(xy)
+            if collision is not None:
+                msg = f'{label} ({xy[0]:g}, {xy[1]:g}) is {collision}'
+                raise PlanningError(msg)
+            return xy, None
+        heading = float(values[2]) if len(values) > 2 else None
+        if heading is not None and not math.isfinite(heading):
+            msg = f'{label} heading must be finite, got {pose!r}'
             raise PlanningError(msg)
-        return xy
+        problem = checks.pose_problem(xy, heading)
+        if problem is not None:
+            msg = f'{label} ({xy[0]:g}, {xy[1]:g}) is {problem}'
+            raise PlanningError(msg)
+        return xy, heading
 
-    def _solve(self, start_xy: np.ndarray, goal_xy: np.ndarray) -> np.ndarray:
-        """Run OMPL's RRT*; the caller holds the lock (OMPL's seed is process-wide)."""
+    def _footprint_checks(self) -> _FootprintChecks | None:
+        """Return the footprint's checks (on a grid: of the grid now), None for a circle."""
+        if self.footprint.is_circle:
+            return None
+        if self.grid is None:
+            return self._polygon_checks
+        return _FootprintChecks(self.footprint, self.config.clearance,
+                                _GridObstacles(self.grid))
+
+    @staticmethod
+    def _footprint_problem(checks: _FootprintChecks, waypoints: np.ndarray,
+                           start_heading: float | None, goal_heading: float | None) -> str | None:
+        """Check every pose of a waypoint path for a polygon footprint (see `path_problem`).
+
+        The same queries as the planner's motions (`_FootprintPlan`), so a path RRT* built
+        passes: segments by the swept polygon, turns by `_FootprintChecks.turn_range` (from
+        the start heading, from the incoming heading at a corner, and from the goal heading
+        backwards at the goal).
+        """
+        points = _distinct(np.atleast_2d(np.asarray(waypoints, dtype=float))[:, :2])
+        if len(points) == 1:  # a turn in place only
+            if start_heading is None or goal_heading is None:
+                return None
+            delta = _wrap(goal_heading - start_heading)
+            turns = checks.turn_range(points[0], start_heading)
+            if turns.allows(delta):
+                return None
+            return (f'turning in place at {_xy(points[0])} from heading {start_heading:.3g} to '
+                    f'{goal_heading:.3g} rad: {turns.why(delta)}')
+        # math.atan2, as the planner's motions compute it (bit for bit the same headings)
+        headings = [math.atan2(b[1] - a[1], b[0] - a[0])
+                    for a, b in zip(points[:-1], points[1:], strict=True)]
+        if start_heading is not None:
+            delta = _wrap(headings[0] - start_heading)
+            turns = checks.turn_range(points[0], start_heading)
+            if not turns.allows(delta):
+                return (f'turning in place at the start {_xy(points[0])} from heading '
+                        f'{start_heading:.3g} to {headings[0]:.3g} rad: {turns.why(delta)}')
+        for i, (a, b) in enumerate(zip(points[:-1], points[1:], strict=True)):
+            hit = checks.sweep_hit(a, b)
+            if hit >= 0:
+                return (f'segment {i} from {_xy(a)} to {_xy(b)}: the footprint driven along it '
+                        f'at heading {headings[i]:.3g} rad meets '
+                        f'{checks.obstacles.describe(hit)} grown by the clearance '
+                        f'{checks.clearance:g} m')
+            if i == 0:
+                continue
+            delta = _wrap(headings[i] - headings[i - 1])
+            if abs(delta) <= _NO_TURN:
+                continue
+            turns = checks.turn_range(a, headings[i - 1])
+            if not turns.allows(delta):
+                return (f'turning in place at waypoint {i} {_xy(a)} from heading '
+                        f'{headings[i - 1]:.3g} to {headings[i]:.3g} rad: {turns.why(delta)}')
+        if goal_heading is not None:
+            delta = _wrap(goal_heading - headings[-1])
+            turns = checks.turn_range(points[-1], goal_heading)
+            if not turns.allows(-delta):
+                return (f'turning in place at the goal {_xy(points[-1])} from heading '
+                        f'{headings[-1]:.3g} to the goal heading {goal_heading:.3g} rad: '
+                        f'{turns.why(-delta)}')
+        return None
+
+    def _solve(self, start_xy: np.ndarray, goal_xy: np.ndarray,
+               state_free: Callable[[np.ndarray], bool],
+               motion_free: Callable[[np.ndarray, np.ndarray], bool],
+               failure_hint: Callable[[], str]) -> list[np.ndarray]:
+        """Run OMPL's RRT*; the caller holds the lock (OMPL's seed is process-wide).
+
+        Returns:
+            The (M, 2) path: with ``simplify``, the simplified one and then RRT*'s own.
+
+        """
         config = self.config
         with _ompl_log_level(ou.LOG_NONE):
             # OMPL logs an error when reseeding after its first use, yet reseeds all the same
@@ -444,8 +1147,8 @@ class RrtStarPlanner:
 
         setup = og.SimpleSetup(space)
         info = setup.getSpaceInformation()
-        setup.setStateValidityChecker(_StateValidity(self._space, self.bounds))
-        info.setMotionValidator(_ExactMotionValidator(info, self._space))
+        setup.setStateValidityChecker(_StateValidity(state_free, self.bounds))
+        info.setMotionValidator(_ExactMotionValidator(info, motion_free))
 
         start_state = space.allocState()
         goal_state = space.allocState()
@@ -474,9 +1177,17 @@ class RrtStarPlanner:
                 f'RRT* found no collision-free path from ({start_xy[0]:g}, {start_xy[1]:g}) '
                 f'to ({goal_xy[0]:g}, {goal_xy[1]:g}) in {count()} iterations '
                 f'(limit {limit}, time limit {config.time_limit:g} s): {status.asString()}'
+                f'{failure_hint()}'
             )
             raise PlanningError(msg)
+        paths = [self._states(setup)]
         if config.simplify:
             setup.simplifySolution()
+            paths.insert(0, self._states(setup))
+        return paths
+
+    @staticmethod
+    def _states(setup: og.SimpleSetup) -> np.ndarray:
+        """Return the solution path's states as (M, 2) points."""
         states = setup.getSolutionPath().getStates()
         return np.array([[state[0], state[1]] for state in states], dtype=float)

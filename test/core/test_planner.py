@@ -212,6 +212,18 @@ def test_check_endpoint_refuses_a_goal_inside_an_obstacle_as_the_planner_inflate
         planner.check_endpoint(np.array([1.15, 0.5, 0.0]), 'goal')  # outside the raw box
 
 
+def test_path_problem_of_a_round_robot_names_the_segment_that_meets_an_obstacle() -> None:
+    box = ConvexPolygon.from_box(0.0, 0.0, 1.0, 1.0)
+    planner = RrtStarPlanner([box], (-2.0, 3.0, -2.0, 3.0),
+                             config=PlannerConfig(robot_radius=0.1, clearance=0.1))
+    around = np.array([[-0.5, -0.5], [1.5, -0.5], [1.5, 1.5]])
+
+    assert planner.path_problem(around, start_heading=2.0, goal_heading=-1.0) is None
+    assert planner.path_problem(around + [0.0, 0.35]) == (
+        'segment 0 from (-0.5, -0.15) to (1.5, -0.15) meets the obstacles grown by 0.2 m '
+        '(robot_radius + clearance)')
+
+
 def test_path_length_sums_segment_lengths() -> None:
     assert path_length(np.array([[0.0, 0.0], [3.0, 4.0], [3.0, 5.0]])) == pytest.approx(6.0)
     assert path_length(np.array([[0.0, 0.0, 1.0], [0.0, 2.0, 2.0]])) == pytest.approx(2.0)
