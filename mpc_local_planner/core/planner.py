@@ -216,6 +216,25 @@ class PlannerConfig:
             return self.robot_footprint.radius + self.clearance
         return self.robot_radius + self.clearance
 
+    @property
+    def block_margin(self) -> float:
+        """Distance to an occupied cell that blocks the rest of a plan, metres.
+
+        The robot's inscribed radius (its radius for a circle) plus half the clearance: a
+        re-planner re-plans when a newly seen obstacle has eaten more than half of the
+        clearance the plan was made with. A fresh plan keeps the full clearance, so it is
+        never blocked at once; half is what the MPC's own margin (a few cm) and its grown
+        corners need (they reach (sqrt(2) - 1) r beyond the rounded clearance of a box).
+        """
+        footprint = self.robot_footprint
+        if footprint.is_circle:
+            return footprint.radius + 0.5 * self.clearance
+        vertices = footprint.vertices
+        edges = np.roll(vertices, -1, axis=0) - vertices
+        cross = np.abs(edges[:, 0] * vertices[:, 1] - edges[:, 1] * vertices[:, 0])
+        inscribed = float(np.min(cross / np.hypot(edges[:, 0], edges[:, 1])))
+        return inscribed + 0.5 * self.clearance
+
 
 def path_length(waypoints: np.ndarray) -> float:
     """Return the length of the polyline through the waypoints ((M, 2) or (M, 3): x, y used)."""

@@ -340,7 +340,8 @@ class PlanningGrid:
         A robot may stand inside the inflation (the planner's clearance is wider than the
         controller's margin), where no plan can start; a re-plan starts from here instead.
         Free means not blocked; the straight segment to it must stay farther than margin
-        (the robot's radius) from every occupied cell.
+        from every occupied cell, or, for a robot already closer than margin, never come
+        closer than the robot already is.
 
         Args:
             position: (x, y) of the robot, map frame.
@@ -361,6 +362,8 @@ class PlanningGrid:
             return None
         centres = self.map.cell_to_world(rows + r0, cols + c0)
         distance = np.hypot(*(centres - origin).T)
+        if self.map.contains_cell(np.array([row]), np.array([col]))[0]:
+            margin = min(margin, float(self.distance[row, col]) - 1e-9)
         for k in np.argsort(distance, kind='stable'):
             if distance[k] > within:
                 break

@@ -41,12 +41,13 @@ beams pass through, placed with the odometry pose nearest to its stamp; a malfor
 dropped with one throttled error.
 
 Re-planning (``replan_check_rate``, 2 Hz by default): the rest of the plan in force, from the
-robot's projection onto it, is checked against the grid; when the robot following it would
-come within robot_radius of an occupied cell (an obstacle the map did not have, marked by
-the laser), the goal is planned again from the current odometry, and with ``replan_period``
-> 0 also periodically. A new plan replaces the old on ``plan``; the controller follows it from
-the robot's projection. ``planner/diagnostics`` says what triggered each plan and counts the
-re-plans; a failed re-plan is a warning and the plan in force stays.
+robot's projection onto it, is checked against the grid; when it comes within the robot's
+inscribed radius plus half the clearance of an occupied cell (an obstacle the map did not
+have, marked by the laser), the goal is planned again from the current odometry, and with
+``replan_period`` > 0 also periodically. A new plan replaces the old on ``plan``; the
+controller follows it from the robot's projection. ``planner/diagnostics`` says what
+triggered each plan and counts the re-plans; a failed re-plan is a warning and the plan in
+force stays.
 
 A goal it cannot plan to (inside an inflated obstacle, walled off, out of bounds, not
 finite, in another frame), or a start in collision, is logged as an error and nothing is
@@ -80,6 +81,7 @@ from mpc_local_planner.core.diagnostics import (
     PlanTrigger,
 )
 from mpc_local_planner.core.errors import PlanningError
+from mpc_local_planner.core.footprint import parse_footprint
 from mpc_local_planner.core.paths import analytic_path, remaining_polyline, waypoints_to_poses
 from mpc_local_planner.core.planner import path_length, PlannerConfig, RrtStarPlanner
 from mpc_local_planner.perception.grids import PlanningGrid
@@ -165,6 +167,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('robot_radius', _DEFAULTS.robot_radius,
                   "robot radius (m); the larger of this and the world's is used",
                   float_range=(0.0, 10.0)),
+    ParameterSpec('footprint', '',
+                  "the robot's convex polygon in base_link, Nav2's form \"[[x, y], ...]\"; '' = "
+                  "the world file's footprint, or a circle of robot_radius"),
     ParameterSpec('clearance', _DEFAULTS.clearance,
                   'extra obstacle inflation beyond the radius (m)', float_range=(0.0, 10.0)),
     ParameterSpec('simplify', _DEFAULTS.simplify, "shortcut the path with OMPL's simplifier"),
@@ -174,8 +179,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('frame_id', 'map', 'frame of the plan'),
     ParameterSpec('replan_check_rate', 2.0,
                   'how often (Hz) the rest of the plan is checked against the grid (map plus '
-                  'scans); a plan an obstacle comes within robot_radius + clearance / 2 of is '
-                  're-planned from the current odometry; 0 = never (read at activate)',
+                  "scans); a plan an obstacle comes within the robot's inscribed radius + "
+                  'clearance / 2 of is re-planned from the current odometry; 0 = never (read '
+                  'at activate)',
                   float_range=(0.0, 100.0)),
     ParameterSpec('replan_period', 0.0,
                   're-plan the goal in force this often (s) even when the plan is clear; 0 = '
@@ -378,6 +384,11 @@ class GlobalPlannerNode(ManagedNode):
                     load_world(resolve_data_file(str(parameter.value)))
                 except Exception as err:  # any failure to load refuses it
                     reasons.append(str(err) or type(err).__name__)
+            elif parameter.name == 'footprint':
+                try:
+                    parse_footprint(str(parameter.value))
+                except ValueError as err:
+                    reasons.append(str(err))
             elif parameter.name == 'analytic_path' and parameter.value:
                 try:
                     analytic_path(str(parameter.value))
@@ -451,6 +462,11 @@ class GlobalPlannerNode(ManagedNode):
         values['simplify'] = bool(values['simplify'])
         for key in ('time_limit', 'range', 'clearance'):
             values[key] = float(values[key])
+        footprint = parse_footprint(str(self.get_parameter('footprint').value))
+        if footprint.is_circle and self._world is not None:
+            footprint = self._world.footprint
+        if not footprint.is_circle:
+            values['footprint'] = tuple(map(tuple, footprint.vertices.tolist()))
         return PlannerConfig(**values)
 
     def _make_planner(self) -> RrtStarPlanner | None:
@@ -609,10 +625,11 @@ class GlobalPlannerNode(ManagedNode):
     def check_plan(self) -> None:
         """Re-plan the goal in force when the rest of its plan is blocked, or periodically.
 
-        Blocked means that the robot following the rest of the plan (from its projection onto
-        it) would come within robot_radius of a cell the grid now holds as occupied: an
-        obstacle the map did not have, seen by the laser. The world file's obstacles do not
-        change, so without use_map only replan_period re-plans.
+        Blocked means that the rest of the plan (from the robot's projection onto it) comes
+        within PlannerConfig.block_margin (the robot's inscribed radius plus half the
+        clearance) of a cell the grid now holds as occupied: an obstacle the map did not
+        have, seen by the laser, eats into the clearance the plan was made with. The world
+        file's obstacles do not change, so without use_map only replan_period re-plans.
         """
         if (not self._active or self._goal is None or self.last_plan is None
                 or self._state is None or self._planner is None or self._pending_goal is not None
@@ -621,7 +638,7 @@ class GlobalPlannerNode(ManagedNode):
         rest = remaining_polyline(self.last_plan, self._state)
         blocked_at = None
         if self._grid is not None:
-            blocked_at = self._grid.first_within(rest, self._planner.config.robot_radius)
+            blocked_at = self._grid.first_within(rest, self._planner.config.block_margin)
         period = float(self.get_parameter('replan_period').value)
         if blocked_at is not None:
             self.get_logger().info(f'the plan is blocked {blocked_at:.2f} m ahead: re-planning')
@@ -675,7 +692,7 @@ class GlobalPlannerNode(ManagedNode):
             if trigger is PlanTrigger.GOAL or self._grid is None:
                 raise
             escape = self._grid.escape_point(start, within=ESCAPE_DISTANCE,
-                                             margin=self._planner.config.robot_radius)
+                                             margin=self._planner.config.block_margin)
             if escape is None:
                 raise
             return np.vstack([start[:2], self._planner.plan(escape, goal)])
