@@ -267,8 +267,9 @@ def rollout(
         goal: the goal pose (x, y, theta).
         h: the step length, seconds.
         rule: when to stop.
-        clearance: points (n, 2) -> clearance of the robot from the true obstacles (<= 0 is
-            contact), or None to ignore collisions (measure them from the rows instead).
+        clearance: poses (n, 3) -> clearance of the robot's footprint from the true
+            obstacles (<= 0 is contact), or None to ignore collisions (measure them from the
+            rows instead).
 
     Returns:
         The outcome, the rows and the controller's answers.
@@ -301,7 +302,7 @@ def rollout(
         steps.append(answer)
         rows.append(trajectory_row(t, x, u, s=answer.s, value=answer.value,
                                    solve_ms=answer.solve_time_s * 1e3))
-        if clearance is not None and clearance(x[None, :2])[0] <= 0.0:
+        if clearance is not None and clearance(x[None, :3])[0] <= 0.0:
             outcome = Outcome.COLLISION
             break
         if rule.reached(x, goal):
@@ -319,13 +320,14 @@ def rollout(
 
 
 def polygon_clearance(obstacles: Sequence[ConvexPolygon], robot_radius: float) -> Clearance:
-    """Return points (n, 2) -> clearance of a robot circle from convex polygons (m).
+    """Return poses (n, 2+) -> clearance of a robot circle from convex polygons (m).
 
     A centre inside a polygon has clearance -1 - robot_radius; no obstacles: inf.
     """
     obstacles = tuple(obstacles)
 
     def clearance(points: np.ndarray) -> np.ndarray:
+        points = np.asarray(points, dtype=float)[:, :2]
         if not obstacles:
             return np.full(len(points), math.inf)
         distance = np.min(np.stack([o.distance(points) for o in obstacles]), axis=0)
@@ -337,11 +339,12 @@ def polygon_clearance(obstacles: Sequence[ConvexPolygon], robot_radius: float) -
 
 
 def circle_clearance(centres: np.ndarray, radius: float, robot_radius: float) -> Clearance:
-    """Return points (n, 2) -> clearance of a robot circle from circles (BARN's cylinders)."""
+    """Return poses (n, 2+) -> clearance of a robot circle from circles (BARN's cylinders)."""
     centres = np.asarray(centres, dtype=float).reshape(-1, 2)
     gap = radius + robot_radius
 
     def clearance(points: np.ndarray) -> np.ndarray:
+        points = np.asarray(points, dtype=float)[:, :2]
         if len(centres) == 0:
             return np.full(len(points), math.inf)
         d = np.linalg.norm(points[:, None, :] - centres[None, :, :], axis=2)

@@ -1,0 +1,351 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""The navigation stack without DDS: laser, perception, a re-planning planner, a local controller.
+
+What ``closed_loop --sensing`` runs over DDS, in one process and deterministically, so that
+suites of hundreds of worlds are affordable. Every control step (`Navigator.step`, the
+rollout's controller):
+
+1. the simulated laser scans the true world (known and unknown obstacles) from the pose;
+2. the scan goes into the planner's grid (map plus scans, `PlanningGrid`) and into the
+   controller's obstacle memory (`ObstacleMemory`);
+3. every ``replan_check_period`` the planner checks the rest of its plan as the
+   global_planner node does (re-planned from the pose when the robot following it would come
+   within its radius of an occupied cell), and the first plan is made at the first step;
+4. the local controller gets the map's and the memory's obstacles near the robot
+   (`LocalObstacles`, as the controller node assembles them) and answers.
+
+The local controllers are adapters (`LocalController`): the paper's MPC through the same
+`MpcController` the node runs, the tracking MPC (it tracks the goal, not the plan), pure
+pursuit (it follows the plan and ignores obstacles) and the DWA. All see the same scans and
+follow the same re-planned paths.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import math
+import time
+from typing import Any, Protocol, Sequence
+
+import numpy as np
+
+from mpc_local_planner.core.controller import MpcController, Reason
+from mpc_local_planner.core.errors import PlanningError
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.paths import remaining_polyline, waypoints_to_poses
+from mpc_local_planner.core.planner import RrtStarPlanner
+from mpc_local_planner.evaluation.rollout import ControlStep
+from mpc_local_planner.perception.grids import PlanningGrid
+from mpc_local_planner.perception.laser import JACKAL_FOV, SimulatedLaser
+from mpc_local_planner.perception.local_obstacles import LocalObstacles
+from mpc_local_planner.perception.raycast import TrueGeometry
+from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
+from mpc_local_planner.worlds.map_files import OccupancyMap
+
+__all__ = [
+    'LocalController',
+    'MpcLocal',
+    'NavigationSettings',
+    'Navigator',
+    'PathFollowerLocal',
+    'TrackingLocal',
+]
+
+
+@dataclass(frozen=True)
+class NavigationSettings:
+    """The sensing and re-planning settings (the nodes' defaults).
+
+    Attributes:
+        beams: Laser beams per scan (the simulator's scan.beams).
+        fov: Laser field of view, radians (the Jackal's 270 degrees).
+        range_max: Laser range, metres.
+        memory_ttl: How long the controller remembers what the laser saw, seconds.
+        replan_check_period: Seconds between two checks of the rest of the plan (the
+            planner's 1 / replan_check_rate).
+        sensing_margin: Obstacles farther than the controller's reach plus this are left out.
+        escape_distance: How far a re-plan may start from a robot standing within the
+            planner's clearance (see PlanningGrid.escape_point).
+        sense: The laser is on. Off, nothing but the map is known: no scans, no re-plans.
+        block_margin: The rest of the plan is blocked when it comes within this of an
+            occupied cell; None: the planner's (PlannerConfig.block_margin, as the
+            global_planner node checks).
+
+    """
+
+    beams: int = 720
+    fov: float = JACKAL_FOV
+    range_max: float = 10.0
+    memory_ttl: float = 5.0
+    replan_check_period: float = 0.5
+    sensing_margin: float = 0.5
+    escape_distance: float = 1.0
+    sense: bool = True
+    block_margin: float | None = None
+
+
+class LocalController(Protocol):
+    """What the navigator needs of a local controller."""
+
+    reach: float  # metres: obstacles farther from the robot cannot matter to the next step
+
+    def follow(self, poses: np.ndarray) -> None:
+        """Follow a new plan of (M, 3) poses from the robot's projection onto it."""
+
+    def avoid(self, obstacles: Sequence[ConvexPolygon]) -> None:
+        """Take the obstacles in force (as sensed, not inflated)."""
+
+    def command(self, x: np.ndarray, t: float) -> ControlStep:
+        """Return the input for state x at time t."""
+
+
+class MpcLocal:
+    """The paper's MPC through `MpcController`, as the controller node runs it."""
+
+    def __init__(self, controller: MpcController) -> None:
+        self.controller = controller
+        model, config = controller.model, controller.config
+        v_max = float(model.u_max[0])
+        self.reach = v_max * config.horizon * config.step + config.inflation(v_max)
+
+    def follow(self, poses: np.ndarray) -> None:
+        """Set the plan (s restarts at the projection)."""
+        self.controller.set_plan(poses)
+
+    def avoid(self, obstacles: Sequence[ConvexPolygon]) -> None:
+        """Set the obstacles (the MPC grows them itself)."""
+        self.controller.set_obstacles(obstacles)
+
+    def command(self, x: np.ndarray, t: float) -> ControlStep:
+        """Compute the command as the node does (stop reasons give a zero input)."""
+        output = self.controller.compute(x, t)
+        solution = output.solution
+        if solution is None:
+            return ControlStep(u=output.u, success=output.reason is Reason.GOAL_REACHED,
+                               solve_time_s=0.0, detail=output)
+        return ControlStep(
+            u=output.u, s=float(solution.s), value=float(solution.value),
+            solve_time_s=float(solution.solve_time_s),
+            success=output.reason is Reason.TRACKING, lyapunov_ok=solution.lyapunov_ok,
+            prediction=solution.x_pred, detail=output)
+
+
+class TrackingLocal:
+    """The tracking MPC baseline: it tracks the goal (a target), so plans do not reach it."""
+
+    def __init__(self, mpc: Any) -> None:
+        self.mpc = mpc
+        model, config = mpc.model, mpc.config
+        v_max = float(model.u_max[0])
+        self.reach = v_max * config.horizon * config.step + config.inflation(v_max)
+
+    def follow(self, poses: np.ndarray) -> None:
+        """Ignore the plan: the baseline knows only its target."""
+
+    def avoid(self, obstacles: Sequence[ConvexPolygon]) -> None:
+        """Set the obstacles."""
+        self.mpc.set_obstacles(obstacles)
+
+    def command(self, x: np.ndarray, t: float) -> ControlStep:
+        """Solve and apply what the MPC applies."""
+        solution = self.mpc.solve(x)
+        return ControlStep(
+            u=np.asarray(solution.u0, dtype=float), value=float(solution.value),
+            solve_time_s=float(solution.solve_time_s), success=bool(solution.success),
+            lyapunov_ok=solution.lyapunov_ok, prediction=solution.x_pred, detail=solution)
+
+
+class PathFollowerLocal:
+    """A controller made for each plan, with ``command(x) -> u`` (pure pursuit, DWA).
+
+    Args:
+        make: waypoints (M, 2) -> the controller for that plan.
+        reach: How far obstacles matter to it, metres (0: it ignores obstacles).
+        uses_obstacles: Hand it the obstacles (its ``set_obstacles``) at every step.
+
+    """
+
+    def __init__(self, make: Any, *, reach: float = 0.0, uses_obstacles: bool = False) -> None:
+        self._make = make
+        self.reach = float(reach)
+        self._uses_obstacles = uses_obstacles
+        self.follower: Any = None
+        self._obstacles: list[ConvexPolygon] = []
+
+    def follow(self, poses: np.ndarray) -> None:
+        """Make the controller for the new plan."""
+        self.follower = self._make(np.asarray(poses, dtype=float)[:, :2])
+        if self._uses_obstacles:
+            self.follower.set_obstacles(self._obstacles)
+
+    def avoid(self, obstacles: Sequence[ConvexPolygon]) -> None:
+        """Hand the obstacles on, if it uses them."""
+        self._obstacles = list(obstacles)
+        if self._uses_obstacles and self.follower is not None:
+            self.follower.set_obstacles(self._obstacles)
+
+    def command(self, x: np.ndarray, t: float) -> ControlStep:
+        """Return its command (zero without a plan), timed."""
+        if self.follower is None:
+            return ControlStep(u=np.zeros(2), solve_time_s=0.0)
+        start = time.perf_counter()
+        u = np.asarray(self.follower.command(x), dtype=float)
+        return ControlStep(u=u, solve_time_s=time.perf_counter() - start)
+
+
+@dataclass
+class NavigationLog:
+    """What the navigator did, for metrics and figures.
+
+    Attributes:
+        plans: (time, (M, 2) waypoints, trigger) of every plan published.
+        replan_failures: re-plans that found no path (the plan in force stayed).
+        plan_seconds: wall time of every planning attempt.
+        control_seconds: wall time of each control step's perception and controller (what the
+            controller node does per step: memory update, obstacle assembly, solve).
+        sensed: (time, obstacles the controller avoided) every snapshot_period.
+
+    """
+
+    plans: list[tuple[float, np.ndarray, str]] = field(default_factory=list)
+    replan_failures: int = 0
+    plan_seconds: list[float] = field(default_factory=list)
+    control_seconds: list[float] = field(default_factory=list)
+    sensed: list[tuple[float, list[ConvexPolygon]]] = field(default_factory=list)
+
+    @property
+    def replans(self) -> int:
+        """Plans after the first."""
+        return max(len(self.plans) - 1, 0)
+
+
+class Navigator:
+    """The rollout's controller: laser, grid and memory, re-planning planner, local controller.
+
+    Args:
+        local: The local controller.
+        geometry: The true world (known and unknown obstacles) the laser scans.
+        grid: The planner's grid (the map the robot is given, empty for no prior map),
+            inflated by the planner's robot_radius + clearance.
+        planner: The planner on that grid (RrtStarPlanner.on_grid(grid, ...)).
+        goal: The goal pose (x, y, theta).
+        h: Control period, seconds.
+        faces: Faces per obstacle the local controller takes (the NLP's).
+        known_map: The map the controller takes rectangles from (None: no prior map).
+        settings: Sensing and re-planning settings.
+        snapshot_period: Seconds between two records of the sensed obstacles (figures).
+
+    """
+
+    def __init__(self, local: LocalController, geometry: TrueGeometry, grid: PlanningGrid,
+                 planner: RrtStarPlanner, goal: np.ndarray, *, h: float, faces: int = 8,
+                 known_map: OccupancyMap | None = None,
+                 settings: NavigationSettings | None = None,
+                 snapshot_period: float = 2.0) -> None:
+        self.local = local
+        self.settings = settings or NavigationSettings()
+        self.grid = grid
+        self.planner = planner
+        self.goal = np.asarray(goal, dtype=float)
+        self.h = float(h)
+        self.laser = SimulatedLaser(geometry, fov=self.settings.fov, beams=self.settings.beams,
+                                    range_max=self.settings.range_max)
+        self.memory = ObstacleMemory(self.settings.memory_ttl)
+        self.obstacles = LocalObstacles(faces, occupancy=known_map, memory=self.memory)
+        self.log = NavigationLog()
+        self._snapshot_period = float(snapshot_period)
+        self._plan: np.ndarray | None = None
+        self._checked = -math.inf
+        self._k = 0
+
+    @property
+    def _block_margin(self) -> float:
+        margin = self.settings.block_margin
+        return self.planner.config.block_margin if margin is None else float(margin)
+
+    @property
+    def plan(self) -> np.ndarray | None:
+        """The plan in force, (M, 2) waypoints."""
+        return self._plan
+
+    def step(self, x: np.ndarray) -> ControlStep:
+        """Sense, re-plan if needed, and answer for the state x (the rollout's call).
+
+        Raises:
+            PlanningError: if no first plan can be made (the rollout stops the run).
+
+        """
+        t = self._k * self.h
+        self._k += 1
+        scan = self.laser.scan(x, stamp=t) if self.settings.sense else None
+        if scan is not None:
+            self.grid.add_scan(scan, x)
+        if self._plan is None:
+            self._replan(x, t, 'goal')
+            self._checked = t
+        elif scan is not None and (
+                t - self._checked >= self.settings.replan_check_period - 1e-9):
+            self._checked = t
+            rest = remaining_polyline(self._plan, x)
+            if self.grid.first_within(rest, self._block_margin) is not None:
+                self._replan(x, t, 'blocked')
+        started = time.perf_counter()
+        if scan is not None:
+            self.memory.update(scan, x)
+            self.obstacles.scan_updated()
+        nearby = self.obstacles.near(x[:2], self.local.reach + self.settings.sensing_margin)
+        self.local.avoid(nearby)
+        answer = self.local.command(np.asarray(x, dtype=float), t)
+        self.log.control_seconds.append(time.perf_counter() - started)
+        if not self.log.sensed or t >= self.log.sensed[-1][0] + self._snapshot_period:
+            self.log.sensed.append((t, list(nearby)))
+        return answer
+
+    def _replan(self, x: np.ndarray, t: float, trigger: str) -> None:
+        """Plan from x to the goal and hand the plan to the local controller.
+
+        Raises:
+            PlanningError: for the first plan; a failed re-plan keeps the plan in force.
+
+        """
+        started = time.perf_counter()
+        try:
+            waypoints = self._plan_from(x, trigger)
+        except PlanningError:
+            self.log.plan_seconds.append(time.perf_counter() - started)
+            if trigger == 'goal':
+                raise
+            self.log.replan_failures += 1
+            return
+        self.log.plan_seconds.append(time.perf_counter() - started)
+        self._plan = waypoints
+        self.log.plans.append((t, waypoints, trigger))
+        self.local.follow(waypoints_to_poses(waypoints, float(x[2]), float(self.goal[2])))
+
+    def _plan_from(self, x: np.ndarray, trigger: str) -> np.ndarray:
+        """Plan from x, or (a re-plan) from the nearest clear point the robot can reach."""
+        try:
+            return self.planner.plan(x, self.goal)
+        except PlanningError:
+            if trigger == 'goal':
+                raise
+            escape = self.grid.escape_point(x, within=self.settings.escape_distance,
+                                            margin=self._block_margin)
+            if escape is None:
+                raise
+            return np.vstack([np.asarray(x, dtype=float)[:2],
+                              self.planner.plan(escape, self.goal)])
