@@ -21,8 +21,11 @@ value refused at run time is refused for the same reason as in a script.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
+from functools import cached_property
 import math
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Sequence
+
+from mpc_local_planner.core.footprint import Footprint, parse_footprint
 
 __all__ = ['CostWeights', 'MpcConfig', 'STRUCTURAL_FIELDS', 'validate_mpc_config']
 
@@ -72,10 +75,19 @@ class MpcConfig:
         weight_omega: stage-cost weight of omega^p.
         offset_weight: V_o(1 - s) = offset_weight (1 - s)^2.
         cost_exponent: p, 4 in the paper: with 2 the unicycle violates Assumption 3.
-        robot_radius: obstacles are inflated by it (a circular footprint).
+        robot_radius: obstacles are inflated by it (a circular footprint; ignored when
+            footprint is a polygon).
+        footprint: the robot's convex polygon in the robot frame (x forward), as ((x, y), ...)
+            in either orientation; empty: a circle of robot_radius. With a polygon, the NLP
+            separates the polygon from each obstacle exactly (the dual condition of Zhang,
+            Liniger and Borrelli) with a clearance that follows the motion, instead of
+            inflating the obstacles. Stored as a tuple so that the settings stay hashable and
+            comparable with != (lists are converted); see robot_footprint.
         collision_margin: extra inflation so that the continuous motion between two samples
-            stays clear; None means v_max h / 2 (half the longest step).
-        farkas_margin: the Farkas constraint asks (A p - b)^T mu >= this (metres).
+            stays clear; None means v_max h / 2 (half the longest step) for a circle, and
+            none for a polygon (its NLP asks for a clearance that follows the motion).
+        farkas_margin: the Farkas constraint asks (A p - b)^T mu >= this (metres); a polygon's
+            dual bound asks for this plus the motion's h/2 (|v| + r_c |omega|).
         obstacle_slots: with adaptive_slots False, obstacles the solver holds at once (grows,
             with a rebuild, when more are within reach); with adaptive_slots, the count
             prepare() builds in advance.
@@ -85,7 +97,8 @@ class MpcConfig:
         tolerance: solver and verification tolerance.
         activation_distance: obstacles within this distance of the candidate trajectory get
             Farkas multipliers in the NLP; the others within reach are checked and added
-            when a solution comes within half of it (None: v_max h / 2).
+            when a solution comes within half of it (None: v_max h / 2). For a polygon, the
+            distance is what its exact clearance exceeds the clearance the motion needs by.
         adaptive_slots: build the NLP for the obstacles actually within reach (a small cache
             of NLPs keyed by their count and face count) instead of fixed, padded slots.
         compile: compile the NLP's functions to C with the system compiler ($CC or gcc), in
@@ -104,6 +117,7 @@ class MpcConfig:
     offset_weight: float = 1000.0
     cost_exponent: int = 4
     robot_radius: float = 0.0
+    footprint: tuple[tuple[float, float], ...] = ()
     collision_margin: float | None = None
     farkas_margin: float = 1e-4
     obstacle_slots: int = 4
@@ -117,15 +131,42 @@ class MpcConfig:
     solver_options: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
 
     def __post_init__(self) -> None:
+        # frozen: normalise with object.__setattr__, so that a list (from YAML, a ROS
+        # parameter) or an array still gives a hashable, comparable tuple of floats
+        object.__setattr__(self, 'footprint', _as_vertex_tuple(self.footprint))
         problems = validate_mpc_config(self)
         if problems:
             msg = 'invalid MPC configuration: ' + '; '.join(problems)
             raise ValueError(msg)
 
+    @cached_property
+    def robot_footprint(self) -> Footprint:
+        """The robot's shape: Footprint.polygon(footprint), or a circle of robot_radius."""
+        if self.footprint:
+            return Footprint.polygon(self.footprint)
+        return Footprint.circle(self.robot_radius)
+
     def inflation(self, v_max: float) -> float:
-        """Return the distance obstacles are grown by: robot radius plus collision margin."""
+        """Return the distance obstacles are grown by.
+
+        A circle: robot radius plus collision margin (v_max h / 2 by default, the longest
+        half step). A polygon: collision_margin only (0 by default), because its NLP asks for
+        a clearance that follows the motion instead (see formulation.formulate).
+        """
+        if self.footprint:
+            return 0.0 if self.collision_margin is None else self.collision_margin
         margin = v_max * self.step / 2 if self.collision_margin is None else self.collision_margin
         return self.robot_radius + margin
+
+    def reach(self, v_max: float) -> float:
+        """Return how far from the robot's origin an obstacle (as described) can matter.
+
+        The origin moves at most v_max h N within the horizon; obstacles are grown by
+        inflation(); a polygon's points are up to its circumscribed radius r_c from the
+        origin (inflation() no longer covers the body then).
+        """
+        body = self.robot_footprint.radius if self.footprint else 0.0
+        return v_max * self.step * self.horizon + self.inflation(v_max) + body
 
     def cost_weights(self) -> CostWeights:
         """Return the cost weights by name (the solver reads them as a parameter)."""
@@ -142,8 +183,27 @@ class MpcConfig:
 STRUCTURAL_FIELDS = frozenset(
     {'horizon', 'step', 'cost_exponent', 'farkas_margin', 'obstacle_slots',
      'faces_per_obstacle', 'solver', 'max_iterations', 'tolerance', 'solver_options',
-     'adaptive_slots', 'compile'}
+     'adaptive_slots', 'compile', 'footprint'}
 )
+
+
+def _as_vertex_tuple(value: Any) -> Any:
+    """Return footprint vertices as a tuple of (float, float); anything else unchanged.
+
+    Nav2's string form "[[x, y], ...]" is read too. What cannot be read as pairs of numbers
+    is left as it is, for validate_mpc_config to refuse with a reason.
+    """
+    if value is None:
+        return ()
+    try:
+        if isinstance(value, str):
+            shape = parse_footprint(value)
+            return () if shape.is_circle else tuple(
+                (float(x), float(y)) for x, y in shape.vertices)
+        pairs: Sequence[Any] = list(value)
+        return tuple((float(x), float(y)) for x, y in pairs)
+    except (TypeError, ValueError):
+        return value
 
 
 def validate_mpc_config(config: MpcConfig) -> list[str]:
@@ -166,6 +226,14 @@ def validate_mpc_config(config: MpcConfig) -> list[str]:
         problems.append(f'cost_exponent must be 2 or 4, got {config.cost_exponent}')
     if not config.robot_radius >= 0:
         problems.append(f'robot_radius must be >= 0, got {config.robot_radius}')
+    if not isinstance(config.footprint, tuple):  # what _as_vertex_tuple could not read
+        problems.append(f'footprint must be a sequence of (x, y) vertices, got '
+                        f'{config.footprint!r}')
+    elif config.footprint:
+        try:
+            Footprint.polygon(config.footprint)
+        except ValueError as err:
+            problems.append(f'footprint {config.footprint!r} is invalid: {err}')
     if config.collision_margin is not None and not config.collision_margin >= 0:
         problems.append(f'collision_margin must be >= 0, got {config.collision_margin}')
     if not config.farkas_margin > 0:

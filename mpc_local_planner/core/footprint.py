@@ -31,6 +31,8 @@ from typing import Sequence
 import numpy as np
 import yaml
 
+from mpc_local_planner.core.obstacles import ConvexPolygon
+
 __all__ = ['CIRCLE', 'Footprint', 'JACKAL', 'parse_footprint']
 
 # Smallest turn (cross product, m^2) between consecutive edges that counts as a corner.
@@ -102,18 +104,50 @@ class Footprint:
         """A round robot (the fast special case: exact with a single inflation)."""
         return self.vertices is None
 
+    @property
+    def body(self) -> ConvexPolygon:
+        """The polygon in the robot frame as {y : G y <= g} with unit rows (G = A, g = b).
+
+        The MPC's exact separation of robot and obstacle is written with these half-planes.
+
+        Raises:
+            ValueError: for a circle (it has no faces; obstacles are inflated instead).
+
+        """
+        if self.vertices is None:
+            msg = 'a round footprint has no faces: obstacles are inflated by its radius'
+            raise ValueError(msg)
+        return ConvexPolygon.from_vertices(self.vertices)
+
+    def at_poses(self, poses: np.ndarray) -> np.ndarray:
+        """Return the vertices at each pose, (M, V, 2), counter-clockwise; one NumPy expression.
+
+        Args:
+            poses: (M, >= 3) poses (x, y, theta, ...); further columns are ignored.
+
+        """
+        poses = np.atleast_2d(np.asarray(poses, dtype=float))
+        local = self._outline()
+        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+        x = c[:, None] * local[None, :, 0] - s[:, None] * local[None, :, 1]
+        y = s[:, None] * local[None, :, 0] + c[:, None] * local[None, :, 1]
+        return np.stack([x + poses[:, :1], y + poses[:, 1:2]], axis=-1)
+
+    def _outline(self) -> np.ndarray:
+        """The polygon, or for a circle the 16-gon circumscribing it (drawing only)."""
+        if self.vertices is not None:
+            return self.vertices
+        angles = np.linspace(0.0, 2 * np.pi, 16, endpoint=False)
+        scale = self.radius / math.cos(math.pi / 16)
+        return scale * np.column_stack([np.cos(angles), np.sin(angles)])
+
     def at(self, pose: Sequence[float]) -> np.ndarray:
         """Return the polygon's vertices at pose (x, y, theta) in the world frame.
 
         For a circle, a 16-gon circumscribing it (for drawing, e.g. RViz's PolygonStamped).
         """
         x, y, theta = (float(v) for v in pose[:3])
-        if self.vertices is None:
-            angles = np.linspace(0.0, 2 * np.pi, 16, endpoint=False)
-            scale = self.radius / math.cos(math.pi / 16)
-            local = scale * np.column_stack([np.cos(angles), np.sin(angles)])
-        else:
-            local = self.vertices
+        local = self._outline()
         c, s = math.cos(theta), math.sin(theta)
         return local @ np.array([[c, s], [-s, c]]) + np.array([x, y])
 

@@ -19,6 +19,11 @@ linear condition on a multiplier vector); the planner and the checks need point 
 Rows of A are kept at unit norm so that A p - b is the signed distance of p to each face's
 line: inflation and margins are then in metres.
 
+Polygons against polygons (a robot's footprint at many poses against many obstacles) have one
+exact, vectorised signed distance here (`polygon_separation`): what verifies a plan of a
+robot with a polygonal footprint, and the direction from which the MPC's warm-start
+multipliers are built (`face_weights`).
+
 Segments against polygons have one clipper here (`ObstacleSet.segment_hits`, Cyrus-Beck,
 vectorised over segments and obstacles); its `grazing` argument says whether a segment that
 only touches a boundary counts. The planner counts it (its tree edges must keep the full
@@ -37,10 +42,12 @@ __all__ = [
     'ConvexPolygon',
     'ObstacleSet',
     'convex_hull',
+    'face_weights',
     'first_blocked_segment',
     'GRAZE_TOLERANCE',
     'min_clearance',
     'point_in_any',
+    'polygon_separation',
     'segment_collides',
 ]
 
@@ -201,9 +208,14 @@ class ObstacleSet:
         count = len(self.obstacles)
         self._A = np.zeros((count, faces, 2))
         self._b = np.full((count, faces), -np.inf)
+        # vertices padded by repeating the last one: the extra edges have zero length and the
+        # last padded vertex closes the polygon to vertex 0, so every real edge is kept
+        self._V = np.zeros((count, faces, 2))
         for i, o in enumerate(self.obstacles):
             rows = np.minimum(np.arange(faces), o.num_faces - 1)
             self._A[i], self._b[i] = o.A[rows], o.b[rows]
+            self._V[i] = o.vertices[rows]
+        self._E = self._V[:, (np.arange(faces) + 1) % faces] - self._V  # edge f: f to f + 1
 
     def __len__(self) -> int:
         return len(self.obstacles)
@@ -213,6 +225,7 @@ class ObstacleSet:
         chosen = ObstacleSet.__new__(ObstacleSet)
         chosen.obstacles = [self.obstacles[i] for i in indices]
         chosen._A, chosen._b = self._A[indices], self._b[indices]
+        chosen._V, chosen._E = self._V[indices], self._E[indices]
         return chosen
 
     def signed_distance_lower_bound(self, points: np.ndarray) -> np.ndarray:
@@ -336,3 +349,126 @@ def min_clearance(obstacles: Sequence[ConvexPolygon], points: np.ndarray) -> flo
     if not obstacles or len(pts) == 0:
         return math.inf
     return float(min(np.min(obstacle.distance(pts)) for obstacle in obstacles))
+
+
+# Squared edge length below which an edge counts as a point (padded, repeated vertices).
+_POINT_EDGE = 1e-24
+# Distance below which two polygons count as touching: the direction is then taken from the
+# separating axis, not from the (vanishing) vector between the closest points.
+_TOUCH_DISTANCE = 1e-12
+
+
+def polygon_separation(polygons: np.ndarray, obstacles: ObstacleSet
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Return the exact signed distance of each polygon to each obstacle, and its direction.
+
+    Disjoint convex polygons: the closest pair of points always has a vertex of one of them,
+    so the distance is the least vertex-to-edge distance, both ways. Overlapping ones: the
+    separating-axis theorem; for polygons the shortest separating translation is along a face
+    normal of one of them (the Minkowski difference's faces are theirs), so minus the
+    penetration depth is the largest separation along those normals. Both cases are one
+    NumPy expression over polygons, obstacles, vertices and faces (no Python loop), because
+    the MPC asks this for every predicted pose against every reachable obstacle, several
+    times per control step.
+
+    Args:
+        polygons: (M, V, 2) counter-clockwise vertices of M convex polygons (a robot's
+            footprint at M poses); (V, 2) for one.
+        obstacles: K convex obstacles.
+
+    Returns:
+        (M, K) signed distances: the Euclidean distance between the sets when disjoint,
+        minus the penetration depth when they overlap (0 when touching); and (M, K, 2) unit
+        directions w from the obstacle towards the polygon with
+        min_{q in polygon} w.q - max_{o in obstacle} w.o equal to that signed distance (the
+        closest-point direction when disjoint, the separating axis otherwise).
+
+    """
+    P = np.asarray(polygons, dtype=float)
+    if P.ndim == 2:
+        P = P[None]
+    m_count, k_count, v_count = P.shape[0], len(obstacles), P.shape[1]
+    if m_count == 0 or k_count == 0:
+        return np.zeros((m_count, k_count)), np.zeros((m_count, k_count, 2))
+    # x and y as separate (M, K, V, F) arrays (polygons, obstacles, polygon vertices,
+    # obstacle faces): einsum on these small shapes cost several times more
+    px, py = P[:, None, :, None, 0], P[:, None, :, None, 1]
+    Q, E = obstacles._V, obstacles._E
+    qx, qy = Q[None, :, None, :, 0], Q[None, :, None, :, 1]
+    edges = P[:, (np.arange(v_count) + 1) % v_count] - P  # (M, V, 2): vertex v to v + 1
+    ex, ey = edges[:, None, :, None, 0], edges[:, None, :, None, 1]
+    length = np.sqrt(ex * ex + ey * ey)
+    nx, ny = ey / length, -ex / length  # outward normals (counter-clockwise)
+
+    # separating axes: how far the polygon lies beyond each obstacle face (min over its
+    # vertices), and the obstacle beyond each polygon face (the direction from the obstacle
+    # to the polygon is then -n)
+    ax, ay = obstacles._A[None, :, None, :, 0], obstacles._A[None, :, None, :, 1]
+    beyond_obstacle = np.min(ax * px + ay * py, axis=2) - obstacles._b[None]  # (M, K, F)
+    beyond_polygon = np.min(nx * (qx - px) + ny * (qy - py), axis=3)  # (M, K, V)
+    f_best = np.argmax(beyond_obstacle, axis=2)
+    v_best = np.argmax(beyond_polygon, axis=2)
+    s_obstacle = np.max(beyond_obstacle, axis=2)
+    s_polygon = np.max(beyond_polygon, axis=2)
+    from_obstacle = s_obstacle >= s_polygon
+    separation = np.where(from_obstacle, s_obstacle, s_polygon)
+    m_index, k_index = np.arange(m_count)[:, None], np.arange(k_count)[None, :]
+    axis = np.where(from_obstacle[..., None], obstacles._A[k_index, f_best],
+                    -np.stack([nx[m_index, 0, v_best, 0], ny[m_index, 0, v_best, 0]], -1))
+
+    # disjoint: polygon vertices to obstacle edges, obstacle vertices to polygon edges; each
+    # gap vector points from the obstacle's point to the polygon's
+    fx, fy = E[None, :, None, :, 0], E[None, :, None, :, 1]
+    rx, ry = px - qx, py - qy  # (M, K, V, F): obstacle vertex f to polygon vertex v
+    t = np.clip((rx * fx + ry * fy) / np.maximum(fx * fx + fy * fy, _POINT_EDGE), 0.0, 1.0)
+    gx_a, gy_a = rx - t * fx, ry - t * fy
+    t = np.clip(-(rx * ex + ry * ey) / np.maximum(length * length, _POINT_EDGE), 0.0, 1.0)
+    gx_b, gy_b = rx + t * ex, ry + t * ey  # polygon edge v's nearest point minus vertex f
+    gx = np.concatenate([gx_a, gx_b], axis=2).reshape(m_count * k_count, -1)
+    gy = np.concatenate([gy_a, gy_b], axis=2).reshape(m_count * k_count, -1)
+    squared = gx * gx + gy * gy
+    nearest = np.argmin(squared, axis=1)
+    rows = np.arange(m_count * k_count)
+    gap = np.stack([gx[rows, nearest], gy[rows, nearest]], axis=-1).reshape(m_count, k_count, 2)
+    distance = np.sqrt(squared[rows, nearest]).reshape(m_count, k_count)
+
+    disjoint = separation > 0.0
+    signed = np.where(disjoint, distance, separation)
+    use_gap = disjoint & (distance > _TOUCH_DISTANCE)
+    direction = np.where(use_gap[..., None],
+                         gap / np.where(use_gap, distance, 1.0)[..., None], axis)
+    return signed, direction
+
+
+def face_weights(normals: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Write each direction as a nonnegative combination of at most two adjacent face normals.
+
+    The outward normals of a convex polygon's two faces at a vertex span that vertex's normal
+    cone, and the cones of all vertices cover the plane; so any direction w is
+    alpha a_i + beta a_{i+1} with alpha, beta >= 0 for the vertex where the polygon's support
+    point in direction w is. Those are the multipliers that make the duality bound of two
+    polygons exact (see formulation.dual_multipliers).
+
+    Args:
+        normals: (n, 2) unit outward normals of a convex polygon, counter-clockwise (face i
+            and face i + 1 meet at a vertex; face n - 1 and face 0 too).
+        directions: (M, 2) directions.
+
+    Returns:
+        (M, n) nonnegative weights, at most two nonzero per row (adjacent faces), with
+        weights @ normals equal to directions (up to rounding).
+
+    """
+    a = np.asarray(normals, dtype=float)
+    w = np.atleast_2d(np.asarray(directions, dtype=float))
+    nxt = np.roll(a, -1, axis=0)
+    turn = a[:, 0] * nxt[:, 1] - a[:, 1] * nxt[:, 0]  # > 0: consecutive normals turn left
+    # w = alpha a_i + beta a_{i+1}: cross(a_i, w) = beta turn_i, cross(w, a_{i+1}) = alpha turn_i
+    beta = (a[None, :, 0] * w[:, None, 1] - a[None, :, 1] * w[:, None, 0]) / turn
+    alpha = (w[:, None, 0] * nxt[None, :, 1] - w[:, None, 1] * nxt[None, :, 0]) / turn
+    best = np.argmax(np.minimum(alpha, beta), axis=1)  # the cone w is most inside of
+    rows = np.arange(len(w))
+    weights = np.zeros((len(w), len(a)))
+    weights[rows, best] = np.maximum(alpha[rows, best], 0.0)
+    weights[rows, (best + 1) % len(a)] += np.maximum(beta[rows, best], 0.0)
+    return weights

@@ -53,3 +53,24 @@ def test_the_polygon_at_a_pose_is_rotated_then_translated() -> None:
     assert np.any(np.all(np.isclose(corners, [1.0 - 0.215, 2.0 + 0.254]), axis=1))
     circle = Footprint.circle(0.2).at([0.0, 0.0, 0.0])
     assert np.all(np.linalg.norm(circle, axis=1) >= 0.2)
+
+
+def test_the_body_is_the_polygon_as_unit_half_planes_in_the_robot_frame() -> None:
+    body = JACKAL.body
+    np.testing.assert_allclose(np.linalg.norm(body.A, axis=1), 1.0)
+    # the origin is 0.254 from the front and back faces and 0.215 from the sides
+    np.testing.assert_allclose(np.sort(body.b), [0.215, 0.215, 0.254, 0.254])
+    assert np.all(body.contains(JACKAL.vertices, margin=1e-12))
+    assert not body.contains(np.array([[0.26, 0.0]]))[0]
+    with pytest.raises(ValueError, match='no faces'):
+        _ = Footprint.circle(0.2).body
+
+
+def test_the_polygon_at_many_poses_matches_one_pose_at_a_time() -> None:
+    poses = np.array([[1.0, 2.0, 0.3], [-1.0, 0.5, -2.0], [0.0, 0.0, math.pi]])
+    corners = JACKAL.at_poses(poses)
+    assert corners.shape == (3, 4, 2)
+    for pose, expected in zip(poses, corners, strict=True):
+        np.testing.assert_allclose(JACKAL.at(pose), expected, atol=1e-12)
+    # extra state columns (a bicycle's steering angle) are ignored
+    np.testing.assert_allclose(JACKAL.at_poses(np.column_stack([poses, np.ones(3)])), corners)

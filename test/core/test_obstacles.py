@@ -7,10 +7,12 @@ import pytest
 
 from mpc_local_planner.core.obstacles import (
     ConvexPolygon,
+    face_weights,
     first_blocked_segment,
     min_clearance,
     ObstacleSet,
     point_in_any,
+    polygon_separation,
     segment_collides,
 )
 
@@ -154,3 +156,123 @@ def test_first_blocked_segment_names_the_first_obstacle_and_its_first_segment() 
     assert first_blocked_segment(boxes, along, grazing=True) == (0, 0)
     # extra columns (yaw) are ignored
     assert first_blocked_segment(boxes, np.column_stack([along, np.zeros(2)])) is None
+
+
+# ----------------------------------------------------------------------------- polygon pairs
+def random_polygon(rng: np.random.Generator, centre_spread: float = 1.0,
+                   sides: int | None = None) -> ConvexPolygon:
+    """A random convex polygon: points on a stretched circle at sorted random angles."""
+    sides = int(rng.integers(3, 9)) if sides is None else sides
+    angles = np.sort(rng.uniform(0.0, 2 * np.pi, sides))
+    radius = rng.uniform(0.1, 1.0)
+    stretch = rng.uniform(0.3, 1.5)
+    centre = rng.uniform(-centre_spread, centre_spread, 2)
+    return ConvexPolygon.from_vertices(
+        centre + radius * np.column_stack([stretch * np.cos(angles), np.sin(angles)]))
+
+
+def minkowski_signed_distance(polygon: ConvexPolygon, obstacle: ConvexPolygon) -> float:
+    """Brute force: the polygons meet iff the origin is in their difference P - O.
+
+    P - O is the hull of all vertex differences; outside it the signed distance is the
+    origin's Euclidean distance to it, inside minus the distance to its nearest face.
+    """
+    difference = ConvexPolygon.from_vertices(
+        (polygon.vertices[:, None, :] - obstacle.vertices[None, :, :]).reshape(-1, 2))
+    origin = np.zeros((1, 2))
+    if difference.contains(origin)[0]:
+        return float(difference.signed_distance_lower_bound(origin)[0])
+    return float(difference.distance(origin)[0])
+
+
+def sampled_distance(polygon: ConvexPolygon, obstacle: ConvexPolygon) -> float:
+    """Brute force for disjoint polygons: points along each outline to the other polygon.
+
+    ConvexPolygon.distance is an exact point query; the closest pair of two disjoint convex
+    polygons has a vertex of one of them, and the vertices are among the samples, so the
+    least of these distances is the exact one (samples between vertices can only be
+    further).
+    """
+    def outline(vertices: np.ndarray) -> np.ndarray:
+        t = np.linspace(0.0, 1.0, 25)[None, :, None]
+        return (vertices[:, None] + t * (np.roll(vertices, -1, axis=0) - vertices)[:, None]
+                ).reshape(-1, 2)
+    return float(min(np.min(obstacle.distance(outline(polygon.vertices))),
+                     np.min(polygon.distance(outline(obstacle.vertices)))))
+
+
+def test_polygon_separation_is_the_exact_signed_distance_of_random_pairs() -> None:
+    rng = np.random.default_rng(11)
+    overlapping = disjoint = 0
+    for _ in range(150):
+        polygons = [random_polygon(rng, sides=5) for _ in range(3)]
+        obstacles = [random_polygon(rng) for _ in range(4)]  # 3 to 8 faces: padded
+        signed, direction = polygon_separation(np.array([p.vertices for p in polygons]),
+                                               ObstacleSet(obstacles))
+        assert signed.shape == (3, 4) and direction.shape == (3, 4, 2)
+        for m, polygon in enumerate(polygons):
+            for k, obstacle in enumerate(obstacles):
+                expected = minkowski_signed_distance(polygon, obstacle)
+                assert signed[m, k] == pytest.approx(expected, abs=1e-12)
+                # the direction is unit and separates by exactly that much
+                w = direction[m, k]
+                assert np.linalg.norm(w) == pytest.approx(1.0, abs=1e-12)
+                along = np.min(polygon.vertices @ w) - np.max(obstacle.vertices @ w)
+                assert along == pytest.approx(signed[m, k], abs=1e-12)
+                overlapping += expected < 0
+                disjoint += expected > 0
+    assert overlapping > 100 and disjoint > 100  # both cases were exercised
+
+
+def test_polygon_separation_of_disjoint_pairs_agrees_with_sampled_outlines() -> None:
+    rng = np.random.default_rng(12)
+    checked = 0
+    while checked < 20:
+        polygon, obstacle = random_polygon(rng, 2.0), random_polygon(rng, 2.0)
+        signed, _ = polygon_separation(polygon.vertices, ObstacleSet([obstacle]))
+        if signed[0, 0] <= 0:
+            continue
+        assert signed[0, 0] == pytest.approx(sampled_distance(polygon, obstacle), abs=1e-12)
+        checked += 1
+
+
+def test_polygon_separation_of_a_rectangle_beside_a_box() -> None:
+    box = ObstacleSet([ConvexPolygon.from_box(0.0, 0.0, 1.0, 1.0)])
+    rectangle = np.array([[1.2, 0.2], [1.6, 0.2], [1.6, 0.4], [1.2, 0.4]])
+    signed, direction = polygon_separation(rectangle, box)
+    assert signed[0, 0] == pytest.approx(0.2)
+    np.testing.assert_allclose(direction[0, 0], [1.0, 0.0], atol=1e-12)
+    # corner to corner: the distance is between the vertices, not along a face normal
+    diagonal = rectangle + np.array([0.0, 1.0])
+    signed, direction = polygon_separation(diagonal, box)
+    assert signed[0, 0] == pytest.approx(np.hypot(0.2, 0.2))
+    np.testing.assert_allclose(direction[0, 0], [np.sqrt(0.5), np.sqrt(0.5)], atol=1e-12)
+    # 0.05 into the box's right face: minus the penetration depth
+    signed, _ = polygon_separation(rectangle - np.array([0.25, 0.0]), box)
+    assert signed[0, 0] == pytest.approx(-0.05)
+    # no obstacles, no polygons
+    assert polygon_separation(rectangle, ObstacleSet([]))[0].shape == (1, 0)
+    assert polygon_separation(np.zeros((0, 4, 2)), box)[0].shape == (0, 1)
+
+
+def test_face_weights_write_any_direction_with_two_adjacent_faces() -> None:
+    rng = np.random.default_rng(13)
+    for _ in range(20):
+        polygon = random_polygon(rng)
+        angles = rng.uniform(0.0, 2 * np.pi, 50)
+        directions = np.column_stack([np.cos(angles), np.sin(angles)])
+        weights = face_weights(polygon.A, directions)
+        assert np.all(weights >= 0.0)
+        np.testing.assert_allclose(weights @ polygon.A, directions, atol=1e-12)
+        n = polygon.num_faces
+        for row in weights:
+            used = np.flatnonzero(row > 0)
+            assert len(used) <= 2
+            if len(used) == 2:  # neighbours, possibly across the wrap-around
+                assert (used[1] - used[0]) % n in (1, n - 1)
+            # the faces used are those through the support point in that direction
+            vertex = polygon.vertices[np.argmax(polygon.vertices @ (row @ polygon.A))]
+            np.testing.assert_allclose(polygon.A[used] @ vertex, polygon.b[used], atol=1e-12)
+    # a face normal itself is that face alone
+    box = ConvexPolygon.from_box(0.0, 0.0, 1.0, 1.0)
+    np.testing.assert_allclose(face_weights(box.A, box.A), np.eye(4), atol=1e-12)

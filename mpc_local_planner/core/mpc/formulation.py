@@ -25,8 +25,26 @@ problem (6) (`eq:mpcOpt`, lines (6a) to (6h)):
     (6e)  x_s = f(x_s, u_s)                       (a steady state: g_p gives one, with u_s = 0)
     (6f)  g(x_s) = p(s),  s in [0, 1]             (together: x_N = g_p(s))
     (6g)  (x_l, u_l) in Z                         (box bounds on states and inputs)
-    (6h)  B(x_l) and O_i disjoint, l = 1..N       via Farkas, (8): mu >= 0, sum(mu) = 1,
-                                                  (A p_l - b)^T mu >= farkas_margin
+    (6h)  B(x_l) and O_i disjoint, l = 1..N       a circle: via Farkas, (8): mu >= 0,
+                                                  sum(mu) = 1, (A p_l - b)^T mu >= farkas_margin
+                                                  on obstacles inflated by the radius;
+                                                  a polygon: the exact dual condition below
+
+A polygonal footprint B = {y : G y <= g} (robot frame, unit rows) placed at x_l is
+R(theta_l) B + p_l; it keeps the distance d from the obstacle {q : A q <= b} iff there are
+lambda >= 0 (obstacle faces) and mu >= 0 (robot faces) with (Zhang, Liniger and Borrelli,
+"Optimization-based collision avoidance", IEEE TCST 2021):
+
+    (A p_l - b)^T lambda - g^T mu >= d,   G^T mu + R(theta_l)^T A^T lambda = 0,
+    ||A^T lambda||_2^2 <= 1.
+
+For any feasible multipliers the left side is at most the distance (weak duality), and at the
+best ones it is the distance; dual_multipliers() builds those from the closest points. The
+clearance d follows the motion: over a step with inputs u every point of the body moves at
+most (|p'| + r_c |theta'|) h (r_c the farthest vertex), so a sample at least half that away
+from an obstacle on both its steps keeps the continuous motion clear (see sweep_rate()).
+x_0 is measured, not constrained (as for the circle): the first half of the first step relies
+on the clearance the previous plan gave x_0 as its x_1, sized for that plan's inputs.
 
 The measured state, the weights, the obstacles and the path are solver *parameters*, so the
 NLP is built once per obstacle shape and a control step only fills in numbers.
@@ -46,14 +64,28 @@ import numpy as np
 
 from mpc_local_planner.core.config import CostWeights, MpcConfig
 from mpc_local_planner.core.models import RobotModel
-from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.obstacles import (
+    ConvexPolygon,
+    face_weights,
+    ObstacleSet,
+    polygon_separation,
+)
 from mpc_local_planner.core.paths import ReferencePath
 
 __all__ = [
-    'Formulation', 'Layout', 'TerminalCondition', 'feasible_multipliers', 'formulate',
-    'obstacle_parameters', 'parameter_vector', 'path_terminal', 'stage_cost',
-    'symbolic_weights',
+    'Formulation', 'Layout', 'SWEEP_SMOOTHING', 'TerminalCondition', 'dual_multipliers',
+    'feasible_multipliers', 'formulate', 'obstacle_parameters', 'parameter_vector',
+    'path_terminal', 'stage_cost', 'sweep_rate', 'symbolic_weights',
 ]
+
+# eps of the smooth |z| ~ sqrt(z^2 + eps^2) in the NLP's motion-dependent clearance (m/s and
+# rad/s). It is never below |z|, so the NLP is never less careful than the exact check; it is
+# at most eps above it, h/2 eps (1 + r_c) = 1.3 mm of clearance for the Jackal at h = 0.2 s;
+# and its minimum is at z = 0, so stopping (u_N = 0) never asks for more clearance than
+# moving (the shifted candidate stays feasible). Its curvature 1 / eps at z = 0 is what the
+# solver pays for: with 1e-3 fatrop and IPOPT both ran out of iterations driving straight
+# (omega near 0) through a gap with the clearance active; 1e-2 solved every step.
+SWEEP_SMOOTHING = 1e-2
 
 
 def symbolic_weights(vector: ca.SX) -> CostWeights:
@@ -129,13 +161,44 @@ def path_terminal(model: RobotModel, path: ReferencePath) -> TerminalCondition:
                              steady_state=steady_state, condition=condition)
 
 
+def sweep_rate(model: RobotModel, radius: float, smoothing: float | None = None
+               ) -> ca.Function:
+    """Return the speed bound of every point of the body, |p'| + radius |theta'|, of (x, u).
+
+    A body point at y (robot frame, |y| <= radius) moves at p' + theta' J R(theta) y, so no
+    point moves faster than this; over a step of length h with constant rates, no point moves
+    further than h times it. The rates are the model's own (model.rhs), constant over a step
+    for the unicycle; a model whose heading rate changes within a step (the bicycle's
+    steering) is taken at the step's start.
+
+    Args:
+        model: the robot model.
+        radius: the footprint's farthest vertex from the robot's origin (r_c).
+        smoothing: None: the exact |.| (for checks); eps: sqrt(z^2 + eps^2) instead of |z|,
+            never below |z| and smooth (for the NLP's derivatives).
+
+    """
+    x, u = ca.SX.sym('x', model.nx), ca.SX.sym('u', model.nu)
+    rates = model.rhs(x, u)
+    speed2 = rates[0] ** 2 + rates[1] ** 2
+    turn = rates[model.angle_index]
+    eps2 = 0.0 if smoothing is None else smoothing ** 2
+    if smoothing is None:
+        value = ca.sqrt(speed2) + radius * ca.fabs(turn)
+    else:
+        value = ca.sqrt(speed2 + eps2) + radius * ca.sqrt(turn ** 2 + eps2)
+    return ca.Function('sweep_rate', [x, u], [value])
+
+
 class Layout(NamedTuple):
     """Indices of each variable in the NLP's decision vector w."""
 
     x: np.ndarray  # (N+1, nx) the states x_0..x_N
     r: np.ndarray  # (N+1, nr) the copies of the reference r (s, or the steady state)
     u: np.ndarray  # (N, nu) the inputs u_0..u_{N-1}
-    mu: np.ndarray  # (N, slots * faces) the Farkas multipliers of steps 1..N
+    mu: np.ndarray  # (N, slots * block) the multipliers of steps 1..N (see Formulation)
+    # (N, 1) the sweep rate of the step before x_1..x_N (polygon), (N, 0) for a circle
+    c: np.ndarray = np.zeros((0, 0), dtype=int)
 
 
 @dataclass(frozen=True)
@@ -148,6 +211,12 @@ class Formulation:
             nu, ng).
         slots: obstacles the NLP holds.
         faces: half-planes per obstacle slot.
+        robot_faces: faces of the polygonal footprint (0 for a circle). Each slot's block of
+            multipliers is its faces' Farkas mu (circle), or its faces' lambda followed by
+            the robot's faces' mu (polygon).
+        sweep_fn: the smoothed sweep_rate(x, u) the polygon's NLP carries from one stage to
+            the next, mapped over the N steps (columns x_0..x_{N-1}, u_0..u_{N-1}); None for
+            a circle.
         lbw: lower bounds of w.
         ubw: upper bounds of w.
         lbg: lower bounds of the constraints.
@@ -169,14 +238,29 @@ class Formulation:
     layout: Layout
     cost_fn: ca.Function
     g_fn: ca.Function
+    robot_faces: int = 0
+    sweep_fn: ca.Function | None = None
+
+    @property
+    def block(self) -> int:
+        """Multipliers per obstacle slot and stage."""
+        return self.faces + self.robot_faces
 
     def pack(self, x: np.ndarray, r: np.ndarray, u: np.ndarray, mu: np.ndarray) -> np.ndarray:
-        """Return the decision vector w holding states, reference, inputs and multipliers."""
+        """Return the decision vector w holding states, reference, inputs and multipliers.
+
+        The polygon's carried sweep rates are computed here from x and u, so that the
+        gap-closing constraints of a rolled-out plan hold exactly.
+        """
         w = np.zeros(self.lbw.shape[0])
         w[self.layout.x] = x
         w[self.layout.r] = r
         w[self.layout.u] = u
         w[self.layout.mu] = mu.reshape(self.layout.mu.shape)
+        if self.sweep_fn is not None:
+            rates = self.sweep_fn(np.asarray(x[:-1], dtype=float).T,
+                                  np.asarray(u, dtype=float).T)
+            w[self.layout.c[:, 0]] = np.asarray(rates).reshape(-1)
         return w
 
 
@@ -188,11 +272,16 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
     z_l = (x_l, r_l): the reference r is copied along the horizon (r_{l+1} = r_l) so that each
     stage cost l(x_l - x_s(r_l), ...) only touches its own stage. Constraints, per stage l:
     the gap-closing z_{l+1} = (f(x_l, u_l), r_l), then the stage's own constraints (x_0 = x(k)
-    at l = 0, the Farkas rows of x_l at l >= 1, the terminal condition at l = N).
+    at l = 0, the collision rows of x_l at l >= 1, the terminal condition at l = N).
+
+    With a polygonal footprint (config.footprint), z_l = (x_l, r_l, c_l) for l >= 1 carries
+    c_l = sweep_rate(x_{l-1}, u_{l-1}) too: the clearance at x_l must cover the step before
+    it and the step after it, and a stage's constraints may only touch its own variables.
+    mu_l then holds, per slot, the lambda of its faces and the mu of the robot's faces.
 
     Args:
         model: the robot model (f, bounds Z, steady states).
-        config: horizon N, step h, cost exponent and Farkas margin.
+        config: horizon N, step h, cost exponent, Farkas margin and footprint.
         terminal: the terminal condition and offset cost (path_terminal for the paper).
         slots: obstacles the NLP holds.
         faces: half-planes per obstacle.
@@ -204,9 +293,22 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
     n, nx, nu = config.horizon, model.nx, model.nu
     nr = terminal.dim
     nz = nx + nr
-    nm = faces * slots
+    footprint = config.robot_footprint
+    polygon = not footprint.is_circle
+    if polygon:
+        body = footprint.body  # {y : G y <= g}, unit rows, robot frame
+        G, g_body = ca.DM(body.A), ca.DM(body.b)
+        robot_faces = body.num_faces
+        sweep = sweep_rate(model, footprint.radius, SWEEP_SMOOTHING)
+    else:
+        robot_faces = 0
+        sweep = None
+    nc = 1 if polygon else 0  # the carried sweep rate of z_1..z_N
+    block = faces + robot_faces
+    nm = block * slots
     f = model.discrete(config.step)  # RK4 over one step h
     stage = stage_cost(model, config.cost_exponent)
+    half_step = config.step / 2
 
     # ---- parameters: the measured state, the weights, the obstacles, the path (or target)
     x_k = ca.SX.sym('x0', nx)
@@ -221,7 +323,7 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
         b_list.append(obs[base + 2 * faces:base + 3 * faces])
 
     # ---- decision variables, stage by stage
-    Z = [ca.SX.sym(f'z{k}', nz) for k in range(n + 1)]
+    Z = [ca.SX.sym(f'z{k}', nz + (nc if k >= 1 else 0)) for k in range(n + 1)]
     U = [ca.SX.sym(f'u{k}', nu) for k in range(n)]  # u_N = u_s is a constant, (6d)-(6e)
     MU = [None] + [ca.SX.sym(f'mu{k}', nm) for k in range(1, n + 1)]
     order: list[ca.SX] = []
@@ -232,7 +334,7 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
         if k >= 1:
             order.append(MU[k])
     w = ca.vertcat(*order)
-    layout = _layout(w.numel(), n, nx, nz, nu, nm)
+    layout = _layout(w.numel(), n, nx, nz, nu, nm, nc)
 
     g, lbg, ubg = [], [], []
     ng_stage = []
@@ -246,16 +348,24 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
 
     cost = 0
     for k in range(n + 1):
-        x_l, r_l = Z[k][:nx], Z[k][nx:]
+        x_l, r_l = Z[k][:nx], Z[k][nx:nz]
         if k < n:
             # (6a), cost (5): + l(x_l - x_s, u_l - u_s)
             cost = cost + stage(x_l, U[k], terminal.steady_state(r_l, p_path), w_weights)
-            # (6c): x_{l+1} = f(x_l, u_l); and r_{l+1} = r_l (one reference)
-            add(Z[k + 1] - ca.vertcat(f(x_l, U[k]), r_l), 0.0, 0.0)
+            # (6c): x_{l+1} = f(x_l, u_l); and r_{l+1} = r_l (one reference); a polygon also
+            # carries this step's sweep rate to the next stage
+            carried = [sweep(x_l, U[k])] if polygon else []
+            add(Z[k + 1] - ca.vertcat(f(x_l, U[k]), r_l, *carried), 0.0, 0.0)
         rows = 0
         if k == 0:
             # (6b): x_0 = x(k)
             rows += add(x_l - x_k, 0.0, 0.0)
+        elif polygon:
+            rows += _polygon_rows(add, x_l, model.angle_index, MU[k], A_list, b_list, faces,
+                                  G, g_body, config.farkas_margin,
+                                  # the step before x_l, and the one after it (u_N = 0: none)
+                                  [half_step * Z[k][nz]]
+                                  + ([half_step * sweep(x_l, U[k])] if k < n else []))
         else:
             # (6h) via Farkas (8), l = 1..N: p_l is outside {A p <= b} iff some mu >= 0 with
             # sum(mu) = 1 has (A p_l - b)^T mu > 0 (without sum(mu) = 1, mu = 0 would do)
@@ -276,8 +386,9 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
             cost = cost + weights.offset * offset_cost
         ng_stage.append(rows)
 
-    # (6g): (x_l, u_l) in Z; r in its range (s in [0, 1]); mu >= 0 (8)
-    lbw, ubw = np.zeros(w.numel()), np.zeros(w.numel())
+    # (6g): (x_l, u_l) in Z; r in its range (s in [0, 1]); multipliers >= 0 (8); the carried
+    # sweep rates are free (their gap-closing rows fix them)
+    lbw, ubw = np.full(w.numel(), -np.inf), np.full(w.numel(), np.inf)
     for k in range(n + 1):
         lbw[layout.x[k]], ubw[layout.x[k]] = model.x_min, model.x_max
         lbw[layout.r[k]], ubw[layout.r[k]] = terminal.lower, terminal.upper
@@ -290,7 +401,7 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
     params = ca.vertcat(x_k, w_weights, obs, p_path)
     structure = {
         'N': n,
-        'nx': [nz] * (n + 1),
+        'nx': [nz] + [nz + nc] * n,
         'nu': [nu] + [nu + nm] * (n - 1) + [nm] if n > 1 else [nu, nm],
         'ng': ng_stage,
     }
@@ -300,18 +411,52 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
         lbg=np.concatenate(lbg), ubg=np.concatenate(ubg), layout=layout,
         cost_fn=ca.Function('cost', [w, params], [cost]),
         g_fn=ca.Function('g', [w, params], [g_all]),
+        robot_faces=robot_faces, sweep_fn=None if sweep is None else sweep.map(n),
     )
 
 
-def _layout(size: int, n: int, nx: int, nz: int, nu: int, nm: int) -> Layout:
-    """Return the indices of x, r, u and mu in the stage-wise decision vector."""
+def _polygon_rows(add: Callable[[ca.SX, float, float], int], x_l: ca.SX, angle: int,
+                  multipliers: ca.SX, A_list: list[ca.SX], b_list: list[ca.SX], faces: int,
+                  G: ca.DM, g_body: ca.DM, margin: float, sweeps: list[ca.SX]) -> int:
+    """Add (6h) for a polygonal footprint at x_l against every slot; return the row count.
+
+    Per slot, with w = A^T lambda (the separating direction, from obstacle to robot):
+    (A p - b)^T lambda - g^T mu - sweep >= margin for each sweep (the clearance covers the
+    motion of both adjacent steps), G^T mu + R(theta)^T w = 0, and |w|^2 <= 1. An empty slot
+    (A = 0, b = -1) is satisfied by lambda_0 >= margin + sweep, mu = 0.
+    """
+    p, theta = x_l[0:2], x_l[angle]
+    cos, sin = ca.cos(theta), ca.sin(theta)
+    robot_faces = G.shape[0]
+    rows = 0
+    for j in range(len(A_list)):
+        base = j * (faces + robot_faces)
+        lam = multipliers[base:base + faces]
+        mu = multipliers[base + faces:base + faces + robot_faces]
+        direction = ca.mtimes(A_list[j].T, lam)  # A^T lambda, in the world frame
+        value = ca.dot(p, direction) - ca.dot(b_list[j], lam) - ca.dot(g_body, mu)
+        for sweep in sweeps:
+            rows += add(value - sweep, margin, ca.inf)
+        # R(theta)^T A^T lambda: the direction in the robot frame
+        local = ca.vertcat(cos * direction[0] + sin * direction[1],
+                           -sin * direction[0] + cos * direction[1])
+        rows += add(ca.mtimes(G.T, mu) + local, 0.0, 0.0)
+        rows += add(ca.sumsqr(direction), -ca.inf, 1.0)
+    return rows
+
+
+def _layout(size: int, n: int, nx: int, nz: int, nu: int, nm: int, nc: int = 0) -> Layout:
+    """Return the indices of x, r, u, mu and the carried sweep rates in w."""
     index = np.arange(size)
-    xs, rs, us, mus = [], [], [], []
+    xs, rs, us, mus, cs = [], [], [], [], []
     offset = 0
     for k in range(n + 1):
         xs.append(index[offset:offset + nx])
         rs.append(index[offset + nx:offset + nz])
         offset += nz
+        if k >= 1:
+            cs.append(index[offset:offset + nc])
+            offset += nc
         if k < n:
             us.append(index[offset:offset + nu])
             offset += nu
@@ -319,7 +464,7 @@ def _layout(size: int, n: int, nx: int, nz: int, nu: int, nm: int) -> Layout:
             mus.append(index[offset:offset + nm])
             offset += nm
     return Layout(x=np.array(xs), r=np.array(rs), u=np.array(us),
-                  mu=np.array(mus).reshape(n, nm))
+                  mu=np.array(mus).reshape(n, nm), c=np.array(cs, dtype=int).reshape(n, nc))
 
 
 def parameter_vector(x0: np.ndarray, weights: CostWeights, obstacles: np.ndarray,
@@ -373,3 +518,56 @@ def feasible_multipliers(x: np.ndarray, selected: Sequence[ConvexPolygon], slots
             face = np.zeros(n, dtype=int)
         mu[np.arange(n), j, face] = 1.0
     return mu.reshape(-1)
+
+
+def dual_multipliers(x: np.ndarray, body: ConvexPolygon, selected: Sequence[ConvexPolygon],
+                     slots: int, faces: int, angle: int = 2,
+                     directions: np.ndarray | None = None) -> np.ndarray:
+    """Return the polygon's multipliers at which each dual bound is the exact distance.
+
+    With w the unit direction from the obstacle to the robot of their closest points
+    (obstacles.polygon_separation), lambda writes w = A^T lambda with the (at most two)
+    obstacle faces at its support point in direction w, and mu writes -R^T w = G^T mu with the
+    robot's faces at its support point in direction -w (obstacles.face_weights). Then
+    G^T mu + R^T A^T lambda = 0, |A^T lambda| = 1, and the bound (A p - b)^T lambda - g^T mu
+    equals w . (q* - o*) for the two support points: the distance when they are disjoint, and
+    minus the penetration depth (w a separating axis) when they overlap, the least violation.
+
+    Args:
+        x: (N+1, nx) states; the poses of steps 1..N get multipliers.
+        body: the footprint in the robot frame (Footprint.body).
+        selected: the obstacles of the slots (the rest are empty: lambda_0 = 1 clears them).
+        slots: obstacle slots of the NLP.
+        faces: half-planes per slot (an obstacle's padded faces, copies of its last one,
+            get 0).
+        angle: index of the heading in the state.
+        directions: (N, len(selected), 2) the directions of polygon_separation for the poses
+            x_1..x_N, when the caller has them already (computed here otherwise).
+
+    Returns:
+        The flat multipliers in the order of Layout.mu: per stage and slot, lambda then mu.
+
+    """
+    x = np.asarray(x, dtype=float)
+    n = x.shape[0] - 1
+    robot_faces = body.num_faces
+    values = np.zeros((n, slots, faces + robot_faces))
+    cos, sin = np.cos(x[1:, angle]), np.sin(x[1:, angle])
+    real = list(selected[:slots])
+    if directions is None:
+        local = body.vertices
+        corners = np.stack([cos[:, None] * local[None, :, 0] - sin[:, None] * local[None, :, 1],
+                            sin[:, None] * local[None, :, 0] + cos[:, None] * local[None, :, 1]],
+                           axis=-1) + x[1:, None, :2]
+        _, directions = polygon_separation(corners, ObstacleSet(real))
+    for j in range(slots):
+        if j < len(real):
+            w = directions[:, j]
+            values[:, j, :real[j].num_faces] = face_weights(real[j].A, w)
+            # -R(theta)^T w, the robot's side of the same separating direction
+            turned = -np.column_stack([cos * w[:, 0] + sin * w[:, 1],
+                                       -sin * w[:, 0] + cos * w[:, 1]])
+            values[:, j, faces:] = face_weights(body.A, turned)
+        else:
+            values[:, j, 0] = 1.0
+    return values.reshape(-1)

@@ -28,6 +28,12 @@ again. A solution of the smaller problem that clears every reachable obstacle is
 for the full one too (the full feasible set is a subset), so nothing is given up but
 variables that could not have been active.
 
+A round robot is a point among obstacles inflated by its radius (and the collision margin).
+A polygonal footprint (config.footprint) is checked exactly instead: the signed distance
+between the polygon at each predicted pose and each obstacle (obstacles.polygon_separation)
+must be at least the clearance the motion needs, farkas_margin + h/2 (|v| + r_c |omega|) for
+both steps next to the pose (exact |.| here; the NLP's smooth one is never smaller).
+
 The NLP itself is formulation.py (problem (6)); the solvers and their compilation are
 backends.py.
 """
@@ -47,15 +53,17 @@ from mpc_local_planner.core.config import MpcConfig, STRUCTURAL_FIELDS
 from mpc_local_planner.core.models import RobotModel
 from mpc_local_planner.core.mpc.backends import build_nlp, Nlp, run_solver
 from mpc_local_planner.core.mpc.formulation import (
+    dual_multipliers,
     feasible_multipliers,
     formulate,
     obstacle_parameters,
     parameter_vector,
     path_terminal,
     stage_cost,
+    sweep_rate,
     TerminalCondition,
 )
-from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
+from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
 from mpc_local_planner.core.paths import ReferencePath, wrap_angle
 
 __all__ = ['Decision', 'MpcBase', 'MpcSolution', 'PathReferenceMPC', 'Plan', 'PlanSource',
@@ -69,6 +77,8 @@ LYAPUNOV_TOLERANCE = 1e-6
 MAX_CACHED_NLPS = 32
 # Re-solves with more obstacles when a solution came too close to one left out of the NLP.
 MAX_ACTIVATION_ROUNDS = 3
+# Plans whose polygon clearances are memoised within a step (the candidate, the solutions).
+MAX_CACHED_PLANS = 8
 
 
 class PlanSource(str, Enum):
@@ -236,6 +246,7 @@ class MpcBase(ABC):
                  obstacles: Sequence[ConvexPolygon] = ()) -> None:
         self._model = model
         self._config = config or MpcConfig()
+        self._use_footprint()
         self._raw_obstacles: list[ConvexPolygon] = []
         self._inflated: list[ConvexPolygon] = []
         self._slots = self._config.obstacle_slots
@@ -282,6 +293,7 @@ class MpcBase(ABC):
         old = self._config
         self._config = config
         if any(getattr(old, name) != getattr(config, name) for name in STRUCTURAL_FIELDS):
+            self._use_footprint()
             self._nlps.clear()
             self._slots = max(self._slots, config.obstacle_slots)
             self._stage_fn = stage_cost(self._model, config.cost_exponent)
@@ -307,6 +319,17 @@ class MpcBase(ABC):
         self._inflated = [o.inflate(inflation) for o in self._raw_obstacles]
         self._obstacle_set = ObstacleSet(self._inflated)
         self._last_active = ()
+
+    def _use_footprint(self) -> None:
+        """Set up the geometry of config.footprint (nothing for a round robot)."""
+        footprint = self._config.robot_footprint
+        self._body: ConvexPolygon | None = None if footprint.is_circle else footprint.body
+        # r_c: no point of the body is further from the robot's origin
+        self._body_radius = 0.0 if footprint.is_circle else footprint.radius
+        self._sweep_exact = sweep_rate(self._model, self._body_radius)
+        self._sweep_maps: dict[int, ca.Function] = {}
+        self._geometry: dict[bytes, dict[int, tuple[ConvexPolygon, np.ndarray, np.ndarray]]] = {}
+        self._clearance_memo: dict[bytes, np.ndarray] = {}
 
     def reset(self) -> None:
         """Forget the previous solution (warm start, candidate, Lyapunov history)."""
@@ -355,7 +378,7 @@ class MpcBase(ABC):
         c = self._config
         terminal = self._terminal_condition()
         return (c.horizon, c.step, c.cost_exponent, c.farkas_margin, c.faces_per_obstacle,
-                c.solver, c.max_iterations, c.tolerance, c.compile,
+                c.solver, c.max_iterations, c.tolerance, c.compile, c.footprint,
                 tuple(sorted((k, repr(v)) for k, v in c.solver_options.items())),
                 terminal.family, terminal.num_params)
 
@@ -422,7 +445,12 @@ class MpcBase(ABC):
 
     def _multipliers(self, x: np.ndarray, selected: list[ConvexPolygon],
                      nlp: Nlp) -> np.ndarray:
+        """Return multipliers that are feasible for the states x wherever x is clear."""
         form = nlp.formulation
+        if self._body is not None:
+            _, directions = self._separation(x, selected[:form.slots])
+            return dual_multipliers(x, self._body, selected, form.slots, form.faces,
+                                    self._model.angle_index, directions[1:])
         return feasible_multipliers(x, selected, form.slots, form.faces)
 
     # ----------------------------------------------------------------- obstacles in reach
@@ -430,9 +458,13 @@ class MpcBase(ABC):
         return float(np.max(np.abs(self._model.u_max[:1])))
 
     def _reachable(self, x0: np.ndarray) -> ObstacleSet:
-        """Return the inflated obstacles the horizon can reach, nearest first."""
+        """Return the inflated obstacles the horizon can reach, nearest first.
+
+        A polygon's points stay within r_c of the robot's origin, so it reaches r_c further
+        (between the samples too: no point can touch an obstacle beyond this).
+        """
         c = self._config
-        reach = self._speed_bound() * c.step * c.horizon + 1e-3
+        reach = self._speed_bound() * c.step * c.horizon + self._body_radius + 1e-3
         chosen, _ = self._obstacle_set.near(x0[None, :2], reach)
         return self._obstacle_set.subset(chosen)
 
@@ -445,11 +477,88 @@ class MpcBase(ABC):
         # up to 22 and built 4x as many NLP shapes
         return 0.5 * self._speed_bound() * c.step
 
-    def _near_trajectory(self, x: np.ndarray, reachable: ObstacleSet,
+    def _near_trajectory(self, x: np.ndarray, u: np.ndarray, reachable: ObstacleSet,
                          distance: float) -> list[ConvexPolygon]:
-        """Return the reachable obstacles within distance of the positions x, nearest first."""
-        chosen, _ = reachable.near(x[:, :2], distance)
-        return [reachable.obstacles[i] for i in chosen]
+        """Return the reachable obstacles within distance of the plan (x, u), nearest first.
+
+        A circle: of the positions x. A polygon: whose clearance from the polygon at some
+        pose x_l exceeds what the motion needs there by at most distance (exact distances,
+        after a cheap bound has left out those further than r_c + distance + that).
+        """
+        if self._body is None:
+            chosen, _ = reachable.near(x[:, :2], distance)
+            return [reachable.obstacles[i] for i in chosen]
+        if not len(reachable):
+            return []
+        # x_0 is not constrained: only its Farkas margin, as for a circle
+        required = np.concatenate([[self._config.farkas_margin], self._required_clearance(x, u)])
+        bound = (reachable.signed_distance_lower_bound(x[:, :2]) - self._body_radius
+                 - required[:, None])
+        near = [reachable.obstacles[i]
+                for i in np.flatnonzero(np.min(bound, axis=0) <= distance)]
+        signed, _ = self._separation(x, near)
+        slack = np.min(signed - required[:, None], axis=0, initial=np.inf)
+        chosen = np.flatnonzero(slack <= distance)
+        order = np.argsort(slack[chosen], kind='stable')
+        return [near[i] for i in chosen[order]]
+
+    # ----------------------------------------------------------------- the polygon footprint
+    def _separation(self, x: np.ndarray, obstacles: Sequence[ConvexPolygon]
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """Return polygon_separation of the polygon at every pose of x, (N+1, K) and (N+1, K, 2).
+
+        Memoised per plan and obstacle (a step asks about the same candidate and the same
+        solution several times: for the obstacles near it, its verification, its
+        multipliers), so each pair is computed once; emptied at every solve(). An entry holds
+        its obstacle, so that no other object can take over its id() meanwhile.
+        """
+        body = self._body
+        assert body is not None  # only called for a polygonal footprint
+        x = np.asarray(x, dtype=float)
+        key = x.tobytes()
+        if key not in self._geometry and len(self._geometry) >= MAX_CACHED_PLANS:
+            self._geometry.pop(next(iter(self._geometry)))  # the oldest
+        entry = self._geometry.setdefault(key, {})
+        missing = list({id(o): o for o in obstacles if id(o) not in entry}.values())
+        if missing:
+            angle = x[:, self._model.angle_index]
+            cos, sin = np.cos(angle)[:, None], np.sin(angle)[:, None]
+            local = body.vertices
+            corners = np.stack([cos * local[:, 0] - sin * local[:, 1] + x[:, :1],
+                                sin * local[:, 0] + cos * local[:, 1] + x[:, 1:2]], axis=-1)
+            signed, direction = polygon_separation(corners, ObstacleSet(missing))
+            for j, o in enumerate(missing):
+                entry[id(o)] = (o, signed[:, j], direction[:, j])
+        if not obstacles:
+            return np.zeros((len(x), 0)), np.zeros((len(x), 0, 2))
+        columns = [entry[id(o)] for o in obstacles]
+        return (np.stack([c[1] for c in columns], axis=1),
+                np.stack([c[2] for c in columns], axis=1))
+
+    def _required_clearance(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Return the clearance x_1..x_N need: farkas_margin + h/2 of the faster adjacent step.
+
+        Over a step every point of the body moves at most h sweep_rate(x_l, u_l) (exact |.|
+        here); a pose at least half of that from an obstacle on both of its steps keeps the
+        continuous motion between the samples clear. After x_N, u_N = 0: no motion.
+        """
+        x, u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
+        key = x.tobytes() + u.tobytes()
+        required = self._clearance_memo.get(key)
+        if required is not None:
+            return required
+        n = len(u)
+        rate_map = self._sweep_maps.get(n)
+        if rate_map is None:
+            rate_map = self._sweep_maps[n] = self._sweep_exact.map(n)
+        rates = np.asarray(rate_map(x[:-1].T, u.T)).reshape(-1)
+        after = np.append(rates[1:], 0.0)
+        c = self._config
+        required = c.farkas_margin + c.step / 2 * np.maximum(rates, after)
+        if len(self._clearance_memo) >= MAX_CACHED_PLANS:
+            self._clearance_memo.pop(next(iter(self._clearance_memo)))  # the oldest
+        self._clearance_memo[key] = required
+        return required
 
     # ----------------------------------------------------------------- the candidate
     def _unwrap(self, x: np.ndarray) -> np.ndarray:
@@ -515,16 +624,35 @@ class MpcBase(ABC):
         viol = np.maximum(form.lbg - g, 0) + np.maximum(g - form.ubg, 0)
         viol_w = np.maximum(form.lbw - w, 0) + np.maximum(w - form.ubw, 0)
         worst = max(np.max(viol, initial=0.0), np.max(viol_w, initial=0.0))
-        return max(float(worst), self._penetration(w[form.layout.x[1:, :2]], obstacles))
+        return max(float(worst),
+                   self._penetration(w[form.layout.x], w[form.layout.u], obstacles))
 
-    def _penetration(self, positions: np.ndarray, obstacles: ObstacleSet) -> float:
-        """Return how far the positions fall short of the Farkas margin (0 when all clear)."""
-        depth = self._config.farkas_margin - obstacles.signed_distance_lower_bound(positions)
+    def _penetration(self, x: np.ndarray, u: np.ndarray, obstacles: ObstacleSet) -> float:
+        """Return how far the plan's poses x_1..x_N fall short of their clearance (0: clear).
+
+        A circle: the positions against the inflated obstacles, by the Farkas margin. A
+        polygon: the exact distance of the polygon at each pose against the clearance its
+        motion needs (_required_clearance); the exact distances are computed only for the
+        obstacles a cheap bound (r_c around the positions) cannot clear.
+        """
+        if self._body is None:
+            depth = (self._config.farkas_margin
+                     - obstacles.signed_distance_lower_bound(x[1:, :2]))
+            return float(np.max(depth, initial=0.0))
+        if not len(obstacles):
+            return 0.0
+        required = self._required_clearance(x, u)[:, None]
+        bound = obstacles.signed_distance_lower_bound(x[1:, :2]) - self._body_radius
+        unclear = [obstacles.obstacles[i]
+                   for i in np.flatnonzero(np.any(bound < required, axis=0))]
+        if not unclear:
+            return 0.0
+        depth = required - self._separation(x, unclear)[0][1:]
         return float(np.max(depth, initial=0.0))
 
-    def _collision_free(self, x: np.ndarray, obstacles: ObstacleSet) -> bool:
-        """Say whether the positions x[1:] clear every given (inflated) obstacle."""
-        return self._penetration(x[1:, :2], obstacles) <= 0.0
+    def _collision_free(self, plan: Plan, obstacles: ObstacleSet) -> bool:
+        """Say whether the plan's poses x[1:] clear every given (inflated) obstacle."""
+        return self._penetration(plan.x, plan.u, obstacles) <= 0.0
 
     def _run_solver(self, nlp: Nlp, w0: np.ndarray, params: np.ndarray,
                     active: ObstacleSet, solver: ca.Function | None = None) -> SolveAttempt:
@@ -569,7 +697,7 @@ class MpcBase(ABC):
                               reachable: ObstacleSet) -> _Rounds:
         """Solve with the obstacles near the candidate; add those the solution came near."""
         activation = self._activation_distance()
-        active = self._near_trajectory(candidate.x, reachable, activation)
+        active = self._near_trajectory(candidate.x, candidate.u, reachable, activation)
         iterations, seconds = 0, 0.0
         for round_ in range(MAX_ACTIVATION_ROUNDS + 1):
             nlp, params = self._prepare_nlp(active, x0)
@@ -585,13 +713,14 @@ class MpcBase(ABC):
             seconds += attempt.seconds
             if not attempt.verified:
                 break
-            positions = attempt.w[nlp.formulation.layout.x]
-            missed = [o for o in self._near_trajectory(positions, reachable, activation / 2)
+            layout = nlp.formulation.layout
+            states, inputs = attempt.w[layout.x], attempt.w[layout.u]
+            missed = [o for o in self._near_trajectory(states, inputs, reachable, activation / 2)
                       if not any(o is a for a in active)]
             if not missed:
                 break
             if round_ == MAX_ACTIVATION_ROUNDS:
-                if self._penetration(positions[1:, :2], reachable) > FEASIBILITY_TOLERANCE:
+                if self._penetration(states, inputs, reachable) > FEASIBILITY_TOLERANCE:
                     attempt = attempt._replace(
                         verified=False,
                         status=f'{attempt.status} (hits an obstacle left out of the NLP)')
@@ -616,6 +745,8 @@ class MpcBase(ABC):
             msg = f'state must be {self._model.nx} finite numbers, got {x}'
             raise ValueError(msg)
         self._terminal_parameters()  # RuntimeError without a path (or target)
+        self._geometry.clear()  # the memos hold this step's plans only
+        self._clearance_memo.clear()
         x0 = self._unwrap(x)
         reachable = self._reachable(x0)
         candidate = self._candidate(x0)
@@ -626,7 +757,7 @@ class MpcBase(ABC):
             solver_verified=attempt.verified, solver_value=attempt.value,
             candidate_ok=result.candidate_ok, candidate_value=result.candidate_value,
             has_previous_plan=self._plan is not None,
-            candidate_collision_free=self._collision_free(candidate.x, reachable))
+            candidate_collision_free=self._collision_free(candidate, reachable))
         if decision is Decision.SOLVER:
             self._failures = 0
         elif decision.is_failure:
