@@ -30,11 +30,20 @@ node reads the world's obstacles: the planner plans on the map and the scans (``
 (``obstacle_sources: [map, scan]``); a world without a map is then refused, since nothing
 would know its known obstacles.
 
+The robot's shape: ``footprint:="[[x, y], ...]"`` (Nav2's form, base_link, a convex polygon)
+is given to the simulator (contacts of the true shape), the planner and the controller, over
+their parameter files and the world's; empty (the default), each node takes the footprint of
+its parameter file, else the world's polygon, else its robot_radius. With ``sensing:=true``
+the planner and the controller no longer read the world, so the launch file hands them the
+world's polygon itself (unless their parameter file sets one). An invalid footprint is
+refused at launch, with the reason.
+
 Checked statically only: ``launch`` and ``launch_ros`` are not installable from PyPI, so the
 tests compile this file and check the executables and files it names (test/ros/test_launch.py).
 """
 
 import os
+from typing import TYPE_CHECKING
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchContext, LaunchDescription
@@ -42,6 +51,9 @@ from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
+
+if TYPE_CHECKING:
+    from mpc_local_planner.worlds.world import World
 
 PACKAGE = 'mpc_local_planner'
 
@@ -70,6 +82,50 @@ def _radius(params_file: str, node: str, world_radius: float) -> float:
         return world_radius  # no such file or entry: the node's default (0) is smaller
 
 
+def _file_footprint(params_file: str, node: str) -> str:
+    """Return the footprint one node's params file sets ('' if none or unreadable)."""
+    import yaml
+
+    try:
+        with open(params_file, encoding='utf-8') as stream:
+            values = yaml.safe_load(stream)[node]['ros__parameters']
+        return str(values.get('footprint', '') or '').strip()
+    except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError):
+        return ''
+
+
+def _robot(footprint: str, world: 'World', params_file: str, node: str,
+           sensing: bool) -> dict[str, str]:
+    """Return the footprint parameter a node gets from the launch file ({} = none given).
+
+    The footprint argument wins; with sensing, a node without the world (planner,
+    controller) gets its params file's polygon, else the world's.
+    """
+    if footprint:
+        return {'footprint': footprint}
+    if not sensing or _file_footprint(params_file, node) or world.footprint.is_circle:
+        return {}
+    return {'footprint': str(world.footprint.vertices.tolist())}
+
+
+def _check_footprint(text: str) -> str:
+    """Return the footprint argument stripped ('' = none), or refuse it with the reason."""
+    from mpc_local_planner.core.footprint import parse_footprint
+
+    text = text.strip()
+    if not text:
+        return ''
+    try:
+        shape = parse_footprint(text)
+    except ValueError as err:
+        msg = f'footprint:={text}: {err}'
+        raise RuntimeError(msg) from None
+    if shape.is_circle:
+        msg = f'footprint:={text}: give a convex polygon "[[x, y], ...]" (or leave it empty)'
+        raise RuntimeError(msg)
+    return text
+
+
 def _nodes(context: LaunchContext) -> list[Node]:
     """Read the world once the arguments are known, and start the nodes for it."""
     from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -82,6 +138,7 @@ def _nodes(context: LaunchContext) -> list[Node]:
     world = load_world(world_file)
     use_sim_time = arg('use_sim_time').lower() == 'true'
     sensing = arg('sensing').lower() == 'true'
+    footprint = _check_footprint(arg('footprint'))
     common = {'use_sim_time': use_sim_time}
     map_file = _map_file(arg('map'), world.name)
     if sensing and map_file is None:
@@ -111,14 +168,21 @@ def _nodes(context: LaunchContext) -> list[Node]:
                  'world_file': world_file, 'robot_radius': float(world.robot_radius),
                  # no TF here (tf2 is not installable): the simulated odometry is ground truth
                  # in the map frame, so RViz (fixed frame map) shows it as it is
-                 'frame_id': 'map'}]),
+                 'frame_id': 'map',
+                 **_robot(footprint, world, arg('simulator_params'), 'unicycle_simulator',
+                          False)}]),
         Node(package=PACKAGE, executable='global_planner', name='global_planner',
              output='screen',
              parameters=[arg('planner_params'), common, {
-                 **planner_world, 'goal': [float(v) for v in world.goal]}]),
+                 **planner_world, 'goal': [float(v) for v in world.goal],
+                 **_robot(footprint, world, arg('planner_params'), 'global_planner',
+                          sensing)}]),
         Node(package=PACKAGE, executable='mpc_controller', name='mpc_controller',
              output='screen',
-             parameters=[arg('controller_params'), common, controller_world]),
+             parameters=[arg('controller_params'), common, {
+                 **controller_world,
+                 **_robot(footprint, world, arg('controller_params'), 'mpc_controller',
+                          sensing)}]),
         Node(package=PACKAGE, executable='bag_recorder', name='bag_recorder',
              output='screen', condition=IfCondition(arg('record')),
              parameters=[arg('recorder_params'), common, {'output': arg('bag')}]),
@@ -139,6 +203,11 @@ def generate_launch_description() -> LaunchDescription:
                               description='true: the planner and the controller know only the '
                                           "map and the simulator's laser scans (unknown "
                                           'obstacles are found by the laser)'),
+        DeclareLaunchArgument('footprint', default_value='',
+                              description="the robot's convex polygon, Nav2's form "
+                                          '"[[x, y], ...]" in base_link, for the simulator, '
+                                          "the planner and the controller; empty: each node's "
+                                          "parameter file, else the world's footprint"),
         DeclareLaunchArgument('use_sim_time', default_value='true',
                               description='the simulator drives /clock; every node follows it'),
         DeclareLaunchArgument('real_time_factor', default_value='1.0',

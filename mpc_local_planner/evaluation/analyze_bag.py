@@ -25,7 +25,14 @@ parameter; closed_loop sets it), or from ``--world``, which takes precedence. A 
 records no world, analysed without ``--world``, is refused: clearance and collisions against
 a guessed world would be wrong.
 
-Usage: ``analyze_bag BAG --out DIR [--world WORLD]``.
+Clearance and collision are measured as the simulator counts contacts: the world's exact
+shapes (known and unknown obstacles, circles as circles) against the robot's TRUE footprint
+at each pose (its polygon turned with the heading, or its circle): the world's ``footprint``
+or ``robot_radius``, or ``--footprint`` (Nav2's "[[x, y], ...]"), which takes precedence.
+``metrics.json`` says which footprint was used (``footprint``), and the figure draws it at a
+few poses of the run.
+
+Usage: ``analyze_bag BAG --out DIR [--world WORLD] [--footprint "[[x, y], ...]"]``.
 """
 
 from __future__ import annotations
@@ -49,10 +56,11 @@ from mpc_local_planner.core.diagnostics import (
     ControllerDiagnostics,
     Key,
 )
+from mpc_local_planner.core.footprint import Footprint, parse_footprint
 from mpc_local_planner.core.mpc import PlanSource
 from mpc_local_planner.worlds.world import load_world, World
 
-__all__ = ['BagRun', 'analyze', 'main', 'read_run', 'recorded_world']
+__all__ = ['BagRun', 'analyze', 'describe_footprint', 'main', 'read_run', 'recorded_world']
 
 
 class BagRun(NamedTuple):
@@ -194,15 +202,29 @@ def recorded_world(bag: str | Path) -> World | None:
         return load_world(path)
 
 
+def describe_footprint(footprint: Footprint) -> dict[str, Any]:
+    """Return the footprint as metrics.json reports it (what clearance was measured from).
+
+    ``{'shape': 'circle', 'radius': r}`` or ``{'shape': 'polygon', 'vertices': [[x, y], ...],
+    'radius': r}`` (r: the circumscribed radius), vertices counter-clockwise in the robot
+    frame, as Nav2's footprint parameter takes them.
+    """
+    if footprint.is_circle:
+        return {'shape': 'circle', 'radius': float(footprint.radius)}
+    return {'shape': 'polygon', 'vertices': footprint.vertices.tolist(),
+            'radius': float(footprint.radius)}
+
+
 def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None = None,
-            title: str = '', position_tolerance: float = 0.05,
-            heading_tolerance: float = 0.1,
+            footprint: Footprint | None = None, title: str = '',
+            position_tolerance: float = 0.05, heading_tolerance: float = 0.1,
             extra: dict[str, Any] | None = None) -> dict[str, Any]:
     """Write trajectory.csv, metrics.json and trajectory.png of a bag into out.
 
     The goal is the last pose of the plan (else the world's goal); the obstacles are the
-    world's: world_file if given, else the world the bag records. extra is merged into the
-    metrics.
+    world's exact shapes (known and unknown): world_file if given, else the world the bag
+    records. Clearance is measured from footprint if given, else the world's footprint (its
+    polygon, or its circle). extra is merged into the metrics.
 
     Returns:
         The metrics (also written to metrics.json).
@@ -237,14 +259,16 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
     if run.plan is not None and len(run.plan) > 1:
         reference_length = float(np.sum(np.linalg.norm(np.diff(run.plan[:, :2], axis=0),
                                                        axis=1)))
+    robot = footprint if footprint is not None else world.footprint
     metrics = compute_metrics(
-        run.rows, goal=np.asarray(goal, dtype=float), obstacles=list(world.obstacles),
-        robot_radius=world.robot_radius, reference_length=reference_length,
+        run.rows, goal=np.asarray(goal, dtype=float), obstacles=list(world.physical_shapes()),
+        footprint=robot, reference_length=reference_length,
         solver_failures=run.solver_failures, lyapunov_ok=run.lyapunov_ok,
         position_tolerance=position_tolerance, heading_tolerance=heading_tolerance)
     metrics['controller_goal_reached'] = run.goal_reached
     metrics['messages'] = run.counts
     metrics['world_name'] = world.name
+    metrics['footprint'] = describe_footprint(robot)
     metrics.update(extra or {})
     write_trajectory_csv(out / 'trajectory.csv', run.rows)
     (out / 'metrics.json').write_text(json.dumps(metrics, indent=2, default=_json_default) + '\n',
@@ -252,7 +276,7 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
     step = max(1, len(run.predictions) // 8)
     plot_runs(out / 'trajectory.png', world=world, reference=run.plan,
               runs=[('mpc_controller', run.rows)], predictions=run.predictions[::step],
-              title=title or f'{Path(bag).name}')
+              title=title or f'{Path(bag).name}', footprint=robot)
     return metrics
 
 
@@ -282,7 +306,16 @@ def summary(metrics: dict[str, Any]) -> str:
         f"{fmt('solve_ms_p95', '', 1)}/{fmt('solve_ms_max', ' ms', 1)}   "
         f"V_N violations: {metrics.get('lyapunov_violations')}   "
         f"solver failures: {metrics.get('solver_failures')}   steps: {metrics.get('steps')}",
+        *([f'clearance measured from the footprint: {_footprint_text(metrics["footprint"])}']
+          if metrics.get('footprint') else []),
     ])
+
+
+def _footprint_text(footprint: dict[str, Any]) -> str:
+    """Return describe_footprint's record as a few words."""
+    if footprint.get('shape') == 'polygon':
+        return f"polygon {footprint.get('vertices')}"
+    return f"circle of radius {footprint.get('radius')} m"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -293,9 +326,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--world', default=None,
                         help='world file with the obstacles (default: the world the bag '
                              'records; a bag that records none needs this)')
+    parser.add_argument('--footprint', default=None,
+                        help="the robot's convex polygon that clearance is measured from, "
+                             "Nav2's form '[[x, y], ...]' (robot frame, x forward; default: "
+                             "the world's footprint or robot_radius)")
     args = parser.parse_args(argv)
     try:
-        metrics = analyze(args.bag, args.out, world_file=args.world)
+        footprint = None
+        if args.footprint is not None:
+            footprint = parse_footprint(args.footprint)
+            if footprint.is_circle:
+                msg = f'--footprint {args.footprint!r}: give a polygon "[[x, y], ...]"'
+                raise ValueError(msg)
+        metrics = analyze(args.bag, args.out, world_file=args.world, footprint=footprint)
     except (FileNotFoundError, ValueError) as err:
         print(f'analyze_bag: {err}', file=sys.stderr)
         return 2

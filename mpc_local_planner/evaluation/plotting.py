@@ -16,6 +16,10 @@
 
 Uses matplotlib's object API with the Agg canvas, never pyplot's global state, so plots can
 be drawn from worker processes and node threads without a display.
+
+With a footprint, the robot's shape (its polygon, or its circle) is drawn at a few poses of
+each run: a line says where the reference point went, not whether the corners of a
+rectangular robot cleared an obstacle; the outlines show it.
 """
 
 from __future__ import annotations
@@ -30,11 +34,13 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Polygon, Rectangle
 import numpy as np
 
+from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.evaluation.trajectory import TRAJECTORY_INDEX as COL
 from mpc_local_planner.worlds.world import World
 
-__all__ = ['CONTROLLER_COLOURS', 'draw_sensed', 'draw_unknown_obstacles', 'draw_world',
-           'plot_runs', 'plot_world_panels', 'WorldPanel']
+__all__ = ['CONTROLLER_COLOURS', 'FOOTPRINT_GID', 'FOOTPRINT_INSTANTS', 'draw_footprints',
+           'draw_sensed', 'draw_unknown_obstacles', 'draw_world', 'footprint_rows', 'plot_runs',
+           'plot_world_panels', 'WorldPanel']
 
 RUN_COLOURS = ('tab:blue', 'tab:red', 'tab:green', 'tab:purple', 'tab:orange', 'tab:brown',
                'tab:pink', 'tab:olive', 'tab:cyan')
@@ -60,14 +66,23 @@ UNKNOWN_STYLE = {'facecolor': (1.0, 0.65, 0.0, 0.25), 'edgecolor': 'tab:orange',
                  'hatch': '///', 'linewidth': 1.2}
 # Outlines of what the robot sensed, one colour per instant (early light, late dark).
 SENSED_COLOURS = ('tab:cyan', 'tab:green', 'tab:purple', 'tab:brown', 'tab:pink', 'tab:olive')
+# The footprint is drawn at this many evenly spaced rows of a run, plus its last row.
+FOOTPRINT_INSTANTS = 6
+# The gid of every footprint patch (figures and tests find them by it).
+FOOTPRINT_GID = 'footprint'
 
 
 def draw_world(ax: object, world: World) -> None:
-    """Draw the obstacles (and their robot-radius inflation), start and goal."""
+    """Draw the obstacles, start and goal; for a round robot, its radius' inflation too.
+
+    A polygon robot's obstacles are not grown by a radius (the MPC separates the polygon
+    exactly), so no inflated outline is drawn for it: draw_footprints shows the robot.
+    """
+    round_robot = world.footprint is None or world.footprint.is_circle
     for i, obstacle in enumerate(world.obstacles):
         ax.add_patch(Polygon(obstacle.vertices, closed=True, facecolor='0.55',
                              edgecolor='0.2', label='obstacle' if i == 0 else None))
-        if world.robot_radius > 0:
+        if round_robot and world.robot_radius > 0:
             grown = obstacle.inflate(world.robot_radius)
             ax.add_patch(Polygon(grown.vertices, closed=True, fill=False, linestyle=':',
                                  edgecolor='0.4', label='inflated' if i == 0 else None))
@@ -100,6 +115,54 @@ def draw_sensed(ax: object, snapshots: Sequence[tuple[float, Sequence[np.ndarray
                                  label=f'sensed at {when:.1f} s' if j == 0 else None))
 
 
+def footprint_rows(count: int, instants: int = FOOTPRINT_INSTANTS) -> list[int]:
+    """Return the row indices the footprint is drawn at: instants evenly spaced, and the last.
+
+    Evenly spaced from the first row, so the start is shown; the last row is always added
+    (where the run ended: at the target, or stopped in front of an obstacle).
+    """
+    if count <= 0:
+        return []
+    spaced = np.linspace(0, count - 1, max(instants, 0), endpoint=False)
+    return sorted({int(round(i)) for i in spaced} | {count - 1})
+
+
+def draw_footprints(ax: object, footprint: Footprint, rows: np.ndarray, *,
+                    colour: object = 'tab:blue', label: str | None = 'robot footprint',
+                    instants: int = FOOTPRINT_INSTANTS) -> list[object]:
+    """Draw the robot's shape at a few poses of a run (see footprint_rows); return the patches.
+
+    A polygon is placed at each row's x, y, theta; a circle at its x, y. A circle of radius
+    0 (a point robot) draws nothing. Every patch has gid FOOTPRINT_GID.
+
+    Args:
+        ax: the axes.
+        footprint: the robot's true shape.
+        rows: (n, 9) trajectory rows (t, x, y, theta, ...).
+        colour: edge colour (the run's).
+        label: legend label of the first patch (None: no legend entry).
+        instants: evenly spaced poses drawn, besides the last.
+
+    """
+    rows = np.atleast_2d(np.asarray(rows, dtype=float))
+    if footprint.radius <= 0 or rows.size == 0:
+        return []
+    style = {'facecolor': (0.5, 0.5, 0.5, 0.12), 'edgecolor': colour, 'linewidth': 1.0,
+             'zorder': REFERENCE_ZORDER - 1}
+    patches = []
+    for k, index in enumerate(footprint_rows(len(rows), instants)):
+        pose = rows[index, [COL['x'], COL['y'], COL['theta']]]
+        name = label if k == 0 else None
+        if footprint.is_circle:
+            patch = Circle((pose[0], pose[1]), footprint.radius, label=name, **style)
+        else:
+            patch = Polygon(footprint.at(pose), closed=True, label=name, **style)
+        patch.set_gid(FOOTPRINT_GID)
+        ax.add_patch(patch)
+        patches.append(patch)
+    return patches
+
+
 def _run_styles(count: int) -> list[dict[str, object]]:
     """Return a distinct (colour, linestyle, linewidth) per run."""
     styles = []
@@ -118,6 +181,7 @@ def _draw_runs(
     runs: Sequence[tuple[str, np.ndarray]],
     predictions: Sequence[np.ndarray],
     extra_paths: Sequence[tuple[str, np.ndarray]],
+    footprint: Footprint | None = None,
 ) -> None:
     draw_world(ax, world)
     for label, points in extra_paths:
@@ -127,10 +191,14 @@ def _draw_runs(
         ax.plot(prediction[:, 0], prediction[:, 1], '-', color='tab:orange', linewidth=0.8,
                 alpha=0.8, label='predicted horizons' if i == 0 else None)
         ax.plot(prediction[-1, 0], prediction[-1, 1], 'x', color='tab:orange', markersize=4)
-    for style, (label, rows) in zip(_run_styles(len(runs)), runs, strict=True):
+    for i, (style, (label, rows)) in enumerate(zip(_run_styles(len(runs)), runs,
+                                                   strict=True)):
         ax.plot(rows[:, COL['x']], rows[:, COL['y']], label=label, **style)
         ax.plot(rows[-1, COL['x']], rows[-1, COL['y']], 'o', color=style['color'],
                 markersize=5)
+        if footprint is not None:
+            draw_footprints(ax, footprint, rows, colour=style['color'],
+                            label='robot footprint' if i == 0 else None)
     if reference is not None:
         ax.plot(reference[:, 0], reference[:, 1], '--', color='black', linewidth=1.0,
                 zorder=REFERENCE_ZORDER, label='reference path p(s)')
@@ -152,7 +220,8 @@ def plot_runs(
     zoom: tuple[float, float, float, float] | None = None,
     show_unknown: bool = False,
     sensed: Sequence[tuple[float, Sequence[np.ndarray]]] = (),
-) -> None:
+    footprint: Footprint | None = None,
+) -> Figure:
     """Draw one figure of the world with reference path, runs and predicted horizons.
 
     Each run gets its own colour, linestyle and (with many runs) width; the reference path
@@ -171,6 +240,11 @@ def plot_runs(
         show_unknown: also draw the world's unknown obstacles, hatched orange.
         sensed: (simulated time, (K, 2) outlines) of what the robot knew at a few instants,
             drawn dashed, one colour per instant.
+        footprint: the robot's shape, drawn at FOOTPRINT_INSTANTS poses of each run and at
+            its last (e.g. ``world.footprint``); None draws none.
+
+    Returns:
+        The figure (already written), so that callers and tests can inspect its artists.
 
     """
     panels = 1 if zoom is None else 2
@@ -178,7 +252,7 @@ def plot_runs(
     FigureCanvasAgg(fig)
     axes = [fig.add_subplot(1, panels, i + 1) for i in range(panels)]
     for ax in axes:
-        _draw_runs(ax, world, reference, runs, predictions, extra_paths)
+        _draw_runs(ax, world, reference, runs, predictions, extra_paths, footprint)
         if show_unknown:
             draw_unknown_obstacles(ax, world)
         draw_sensed(ax, sensed)
@@ -197,6 +271,7 @@ def plot_runs(
     axes[-1].legend(fontsize=7, **LEGEND_OUTSIDE)
     fig.tight_layout()
     fig.savefig(path_png, bbox_inches='tight')
+    return fig
 
 
 class WorldPanel(NamedTuple):

@@ -50,6 +50,23 @@ Re-planning is the planner's own: with ``--sensing`` it checks the rest of its p
 the map and the scans (``replan_check_rate``) and plans anew from the robot's pose when an
 obstacle the map did not have blocks it. ``metrics.json`` reports the planner's count of
 re-plans in ``replans``.
+
+The robot is the world's (its ``footprint`` polygon, or its ``robot_radius`` circle), or the
+one ``--footprint`` (Nav2's "[[x, y], ...]") or ``--robot-radius`` says. That one robot
+reaches every node, with or without ``--sensing``: each of simulator, planner and controller
+gets it as its ``footprint`` parameter (and ``robot_radius``), so that the simulator counts
+contacts of the true shape, the planner plans for it and the MPC keeps it clear. An option
+that changes the robot writes the run's world (the world file with that robot) to
+``--out``/world/, which the nodes read and the bag records, so that ``analyze_bag`` later
+measures the same robot; ``metrics.json`` says which footprint was used (``footprint``,
+``footprint_source``), and the figure draws it at a few poses.
+
+For a polygon the planner's clearance is POLYGON_CLEARANCE (0.05 m) instead of its default
+(0.1 m): the planner checks the polygon at every pose of the path, turns included, so the
+clearance is room for the MPC, not for the shape; 0.05 m exceeds the MPC's own motion
+clearance on a straight segment at full speed (h v_max / 2 = 0.031 m), and leaves a 0.60 m
+gap open to the 0.43 m wide Jackal (narrow_gap). ``--param global_planner.clearance:=X``
+(any node's parameter, as ``-p`` would give it) overrides it.
 """
 
 from __future__ import annotations
@@ -77,6 +94,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import UInt32
 from visualization_msgs.msg import Marker, MarkerArray
+import yaml
 
 from mpc_local_planner.core.diagnostics import (
     CONTROLLER_DIAGNOSTICS_TOPIC,
@@ -85,6 +103,7 @@ from mpc_local_planner.core.diagnostics import (
     PlannerDiagnostics,
 )
 from mpc_local_planner.core.errors import PlanningError
+from mpc_local_planner.core.footprint import Footprint, parse_footprint
 from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
 from mpc_local_planner.evaluation.analyze_bag import analyze, read_run, summary
 from mpc_local_planner.evaluation.plotting import plot_runs
@@ -107,9 +126,10 @@ from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.map_files import rasterize_world, save_map
 from mpc_local_planner.worlds.world import load_world, World
 
-__all__ = ['EXIT_NO_PLAN', 'LoopOptions', 'LoopResult', 'MAP_RESOLUTION', 'check_plannable',
-           'flush_recording', 'main', 'node_command', 'node_parameters', 'recorder_topics',
-           'run_closed_loop', 'spawn_node', 'write_known_map']
+__all__ = ['EXIT_NO_PLAN', 'LoopOptions', 'LoopResult', 'MAP_RESOLUTION', 'POLYGON_CLEARANCE',
+           'check_plannable', 'flush_recording', 'footprint_parameter', 'main', 'node_command',
+           'node_parameters', 'parse_parameter', 'recorder_topics', 'run_closed_loop',
+           'run_world', 'spawn_node', 'write_known_map']
 
 DEFAULT_WORLD = DEFAULT_WORLD_FILE
 # Exit code when no plan can come (as for invalid options: the run was misconfigured).
@@ -136,6 +156,8 @@ RAW_NAMESPACE = 'raw'
 # simulated seconds; the figure shows SENSED_SNAPSHOTS of them, spread over the run.
 SNAPSHOT_PERIOD = 2.0
 SENSED_SNAPSHOTS = 4
+# The planner's clearance (m) for a polygon robot (see the module docstring).
+POLYGON_CLEARANCE = 0.05
 
 MODULES = {
     'map_server': 'mpc_local_planner.ros.map_server_node',
@@ -159,6 +181,10 @@ class LoopOptions:
     respawn: bool = False
     seed: int = 0
     sensing: bool = False
+    # the robot, instead of the world's: a polygon (Nav2's "[[x, y], ...]") or a circle
+    footprint: str | None = None
+    robot_radius: float | None = None
+    # node -> parameter -> value, applied last (over what closed_loop chooses)
     extra_parameters: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
@@ -174,51 +200,111 @@ class LoopResult:
     success: bool
 
 
+def footprint_parameter(footprint: Footprint) -> str:
+    """Return the footprint parameter for a robot: Nav2's "[[x, y], ...]", '' for a circle."""
+    if footprint.is_circle:
+        return ''
+    return '[' + ', '.join(f'[{x!r}, {y!r}]' for x, y in footprint.vertices.tolist()) + ']'
+
+
 def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
                     map_file: Path | None = None) -> dict[str, dict[str, Any]]:
     """Return each node's parameter values for a run (use_sim_time included).
 
     The simulator always gets the true world (for the laser and the contacts). With
     options.sensing the planner and the controller get no world file: they see the map
-    (map_file, which map_server serves) and the scans.
+    (map_file, which map_server serves) and the scans. The robot (world.footprint: pass the
+    run's world, see run_world) reaches all three as ``footprint`` and ``robot_radius``, in
+    every mode; for a polygon the planner's clearance is POLYGON_CLEARANCE.
+    options.extra_parameters come last.
 
     Raises:
-        ValueError: if --path analytic names no path of the world, or sensing lacks map_file.
+        ValueError: if --path analytic names no path of the world, sensing lacks map_file,
+            or extra parameters name a node that does not run.
 
     """
     analytic = world.path if options.path == 'analytic' else ''
     if options.path == 'analytic' and not world.path:
         msg = f'--path analytic: the world {world.name} names no analytic path (use --path rrt)'
         raise ValueError(msg)
+    # the robot, said to every node: the simulator counts its contacts, the planner plans
+    # for it and the MPC keeps it clear; never left to each node's reading of the world
+    robot = {'footprint': footprint_parameter(world.footprint),
+             'robot_radius': float(world.robot_radius)}
     params: dict[str, dict[str, Any]] = {
         'global_planner': {
             'use_sim_time': True, 'world_file': str(world_file),
             'goal': [float(v) for v in world.goal], 'seed': int(options.seed),
-            'analytic_path': analytic,
+            'analytic_path': analytic, **robot,
         },
         'mpc_controller': {
             'use_sim_time': True, 'world_file': str(world_file), 'analytic_path': analytic,
+            **robot,
         },
         'unicycle_simulator': {
             'publish_clock': True, 'real_time_factor': float(options.rtf),
             'initial_pose': [float(v) for v in world.start],
-            'world_file': str(world_file), 'robot_radius': float(world.robot_radius),
+            'world_file': str(world_file), **robot,
         },
     }
+    if not world.footprint.is_circle:
+        params['global_planner']['clearance'] = POLYGON_CLEARANCE
     if options.sensing:
         if map_file is None:
             msg = '--sensing needs the map of the known obstacles (map_file)'
             raise ValueError(msg)
         params['map_server'] = {'use_sim_time': True, 'yaml_filename': str(map_file)}
-        # without a world file they cannot take the robot's radius from it
-        radius = float(world.robot_radius)
-        params['global_planner'].update(use_map=True, use_scan=True, world_file='',
-                                        robot_radius=radius)
-        params['mpc_controller'].update(obstacle_sources=['map', 'scan'], world_file='',
-                                        robot_radius=radius)
+        params['global_planner'].update(use_map=True, use_scan=True, world_file='')
+        params['mpc_controller'].update(obstacle_sources=['map', 'scan'], world_file='')
     for name, extra in options.extra_parameters.items():
-        params.setdefault(name, {}).update(extra)
+        if name not in params:  # map_server: only with --sensing
+            msg = f'parameters for {name}, which does not run here (map_server needs --sensing)'
+            raise ValueError(msg)
+        params[name].update(extra)
     return params
+
+
+def run_world(options: LoopOptions, world_file: Path, world: World,
+              folder: Path) -> tuple[Path, World, str]:
+    """Return the run's world file, its world and where its robot comes from.
+
+    Without --footprint or --robot-radius: the world file itself ('the world'). With one:
+    the world file with its robot replaced, written to folder/<world name>.yaml, so that
+    every node reads the same robot and the bag records it (the name stays the world's).
+
+    Raises:
+        ValueError: both options given, an invalid footprint or radius, or a BARN JSON world
+            (its format holds no robot).
+
+    """
+    if options.footprint is None and options.robot_radius is None:
+        return world_file, world, 'the world'
+    if options.footprint is not None and options.robot_radius is not None:
+        msg = 'give either --footprint (a polygon) or --robot-radius (a circle), not both'
+        raise ValueError(msg)
+    if options.footprint is not None:
+        robot = parse_footprint(options.footprint)
+        if robot.is_circle:
+            msg = (f'--footprint {options.footprint!r}: give a polygon "[[x, y], ...]" (a '
+                   'round robot: --robot-radius)')
+            raise ValueError(msg)
+        source, key, value = '--footprint', 'footprint', robot.vertices.tolist()
+    else:
+        robot = Footprint.circle(float(options.robot_radius))
+        source, key, value = '--robot-radius', 'robot_radius', robot.radius
+    if world_file.suffix.lower() not in ('.yaml', '.yml'):
+        msg = (f'{source}: {world_file.name} is not a YAML world (a BARN world holds no '
+               'robot); write one with the robot instead')
+        raise ValueError(msg)
+    data = yaml.safe_load(world_file.read_text(encoding='utf-8'))
+    data = {k: v for k, v in data.items() if k not in ('footprint', 'robot_radius')}
+    data[key] = value
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f'{world.name}.yaml'
+    path.write_text(f'# closed_loop: {world_file} with the robot of {source}\n'
+                    + yaml.safe_dump(data, sort_keys=False, default_flow_style=None),
+                    encoding='utf-8')
+    return path, load_world(path), source
 
 
 def _ros_arg(name: str, value: Any) -> str:
@@ -230,7 +316,13 @@ def _ros_arg(name: str, value: Any) -> str:
     elif isinstance(value, float):
         text = repr(value)
     elif isinstance(value, str):
-        text = f"'{value}'" if value == '' else value
+        # ROS reads a -p value as YAML: quote a string that would read as something else
+        # ('' as nothing, a footprint "[[x, y], ...]" as a nested list)
+        try:
+            plain = yaml.safe_load(value) == value
+        except yaml.YAMLError:
+            plain = False
+        text = value if plain else "'" + value.replace("'", "''") + "'"
     else:
         text = str(value)
     return f'{name}:={text}'
@@ -354,8 +446,10 @@ def flush_recording(executor: Executor, recorder: BagRecorderNode, monitor: _Mon
 def check_plannable(world: World, planner_parameters: dict[str, Any]) -> None:
     """Refuse a start or goal that no plan can reach: inside an obstacle as the planner grows it.
 
-    The planner grows every obstacle by robot_radius (the larger of its parameter and the
-    world's) plus clearance, as the global_planner node will with these parameters.
+    For a round robot the planner grows every obstacle by robot_radius (the larger of its
+    parameter and the world's) plus clearance; for a polygon (the footprint parameter's,
+    else the world's) it checks the polygon at the pose's heading grown by the clearance, as
+    the global_planner node will with these parameters.
 
     Raises:
         PlanningError: saying which pose is in which inflated obstacle (or out of bounds).
@@ -365,8 +459,13 @@ def check_plannable(world: World, planner_parameters: dict[str, Any]) -> None:
     radius = max(float(planner_parameters.get('robot_radius', defaults.robot_radius)),
                  world.robot_radius)
     clearance = float(planner_parameters.get('clearance', defaults.clearance))
+    footprint = parse_footprint(str(planner_parameters.get('footprint', '')))
+    if footprint.is_circle:
+        footprint = world.footprint
+    polygon = () if footprint.is_circle else tuple(map(tuple, footprint.vertices.tolist()))
     planner = RrtStarPlanner(world.obstacles, world.bounds,
-                             config=PlannerConfig(robot_radius=radius, clearance=clearance))
+                             config=PlannerConfig(robot_radius=radius, clearance=clearance,
+                                                  footprint=polygon))
     for label, pose in (('start', world.start), ('goal', world.goal)):
         try:
             planner.check_endpoint(pose, label)
@@ -386,14 +485,16 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
             none (the run ends at once; the bag is kept, not analysed).
 
     """
-    world_file = resolve_data_file(options.world)
-    world = load_world(world_file)
+    source_file = resolve_data_file(options.world)
+    world = load_world(source_file)
     if not options.rtf > 0:
         msg = f'--rtf must be > 0, got {options.rtf}'
         raise ValueError(msg)
     if options.respawn and not options.separate_processes:
         msg = '--respawn needs --separate-processes'
         raise ValueError(msg)
+    world_file, world, robot_source = run_world(options, source_file, world,
+                                                Path(options.out) / 'world')
     params = node_parameters(options, world_file, world,
                              map_file=Path(options.out) / 'map' / f'{world.name}.yaml')
     if options.path == 'rrt':
@@ -475,9 +576,11 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
                 'separate_processes': options.separate_processes, 'rtf': options.rtf,
                 'respawns': respawns, 'sensing': options.sensing,
                 'contacts': monitor.contacts, 'replans': monitor.replans,
-                'path_source': options.path, 'world': str(world_file)}
+                'path_source': options.path, 'world': str(source_file),
+                'world_file': str(world_file), 'footprint_source': robot_source}
+    shape = '' if world.footprint.is_circle else ', polygon footprint'
     title = (f'{world.name}: {options.path} path, rtf {options.rtf:g}'
-             + (', sensing' if options.sensing else ''))
+             + (', sensing' if options.sensing else '') + shape)
     metrics = analyze(bag, out, extra=run_info, title=title)
     if options.sensing or world.unknown_obstacles:
         _plot_sensing(bag, out / 'trajectory.png', world, monitor.sensed, title)
@@ -496,7 +599,7 @@ def _plot_sensing(bag: Path, png: Path, world: World,
                                                         min(SENSED_SNAPSHOTS, len(sensed)))})
     plot_runs(png, world=world, reference=run.plan, runs=[('mpc_controller', run.rows)],
               predictions=run.predictions[::step], title=title, show_unknown=True,
-              sensed=[sensed[i] for i in picks] if sensed else ())
+              sensed=[sensed[i] for i in picks] if sensed else (), footprint=world.footprint)
 
 
 def _create_nodes(params: dict[str, dict[str, Any]], context: Context) -> list[Node]:
@@ -596,6 +699,28 @@ def _stop_children(children: list[subprocess.Popen]) -> None:
             child.wait()
 
 
+def parse_parameter(text: str) -> tuple[str, str, Any]:
+    """Return (node, name, value) of ``NODE.NAME:=VALUE`` (the value read as YAML, as -p does).
+
+    Raises:
+        ValueError: text is not of that form, or NODE is none of closed_loop's nodes.
+
+    """
+    key, sep, value = text.partition(':=')
+    node, dot, name = key.partition('.')
+    if not sep or not dot or not name:
+        msg = f'--param {text!r}: expected NODE.NAME:=VALUE, e.g. global_planner.clearance:=0.05'
+        raise ValueError(msg)
+    if node not in MODULES:
+        msg = f'--param {text!r}: unknown node {node!r}, expected one of {sorted(MODULES)}'
+        raise ValueError(msg)
+    try:
+        parsed = yaml.safe_load(value) if value else ''
+    except yaml.YAMLError:
+        parsed = value
+    return node, name, '' if parsed is None else parsed
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the closed loop from the command line; exit 0 iff the target was reached safely."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -628,12 +753,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--respawn', action='store_true',
                         help='with --separate-processes: start a node process that exits '
                              'again instead of ending the run (a restart drill)')
+    robot = parser.add_mutually_exclusive_group()
+    robot.add_argument('--footprint', default=None,
+                       help="the robot's convex polygon instead of the world's, Nav2's form "
+                            "'[[x, y], ...]' (robot frame, x forward), for every node")
+    robot.add_argument('--robot-radius', type=float, default=None,
+                       help="a round robot of this radius (m) instead of the world's, for "
+                            'every node')
+    parser.add_argument('--param', action='append', default=[], metavar='NODE.NAME:=VALUE',
+                        help="a node's parameter, applied last (repeatable), e.g. "
+                             f'global_planner.clearance:=0.05; NODE is one of {sorted(MODULES)}')
     args = parser.parse_args(argv)
-    options = LoopOptions(world=args.world, out=args.out, path=args.path, rtf=args.rtf,
-                          timeout=args.timeout, time_limit=args.time_limit, seed=args.seed,
-                          separate_processes=args.separate_processes, respawn=args.respawn,
-                          sensing=args.sensing)
     try:
+        extra: dict[str, dict[str, Any]] = {}
+        for text in args.param:
+            node, name, value = parse_parameter(text)
+            extra.setdefault(node, {})[name] = value
+        options = LoopOptions(world=args.world, out=args.out, path=args.path, rtf=args.rtf,
+                              timeout=args.timeout, time_limit=args.time_limit,
+                              seed=args.seed, separate_processes=args.separate_processes,
+                              respawn=args.respawn, sensing=args.sensing,
+                              footprint=args.footprint, robot_radius=args.robot_radius,
+                              extra_parameters=extra)
         result = run_closed_loop(options, ros_args=ros_args)
     except PlanningError as err:
         print(f'closed_loop: {err}', file=sys.stderr, flush=True)

@@ -39,6 +39,14 @@ oldest pose kept, a newer one the latest), clustered into convex pieces and reme
 ``obstacle_memory`` seconds). A plan through an obstacle is followed: the MPC stops in front
 of it or goes around, and the diagnostics say ``path_blocked`` and ``blocked_at``.
 
+The robot's shape, Nav2's precedence (as the simulator and the planner apply it): the
+``footprint`` parameter's convex polygon (``"[[x, y], ...]"``, base_link), else the world
+file's footprint if it is a polygon, else a circle of ``robot_radius`` (the larger of the
+parameter and the world's). A circle grows the obstacles by its radius; a polygon is kept
+apart from each obstacle exactly by the NLP. ``mpc/footprint`` shows that shape at the
+latest odometry pose, and sensed obstacles are handed over within ``MpcConfig.reach`` (which
+counts a polygon's circumscribed radius) plus SENSING_MARGIN.
+
 Refused input (odometry with NaN, inf or a zero quaternion; a plan that is empty, too short,
 too long, not finite or in another frame) makes the command zero until valid input comes,
 with one error per problem in the log (throttled) and the problem in the diagnostics. A
@@ -80,7 +88,7 @@ from mpc_local_planner.core.diagnostics import (
     ControllerDiagnostics,
     Level,
 )
-from mpc_local_planner.core.footprint import Footprint
+from mpc_local_planner.core.footprint import Footprint, parse_footprint
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path
@@ -125,7 +133,8 @@ from mpc_local_planner.worlds.world import load_world
 
 __all__ = ['DEFAULTS', 'EXIT_INVALID_PARAMETERS', 'FOOTPRINT_TOPIC', 'MpcControllerNode',
            'OBSTACLE_SOURCES', 'OBSTACLES_TOPIC', 'PARAMETERS', 'build_settings',
-           'check_sensing', 'log_line', 'main']
+           'check_sensing', 'load_obstacles', 'load_robot', 'log_line', 'main',
+           'robot_footprint']
 
 # Seconds between two error logs of an input problem that persists.
 ERROR_THROTTLE_S = 2.0
@@ -149,8 +158,9 @@ BASE_FRAME = 'base_link'
 OBSTACLE_SOURCES = ('world', 'scan', 'map')
 # Seconds of odometry kept to find the pose at a scan's stamp.
 ODOM_HISTORY_S = 2.0
-# Metres beyond the horizon's reach (v_max N h) plus the inflation within which map cells
-# and remembered scan obstacles are handed to the MPC.
+# Metres beyond the horizon's reach (MpcConfig.reach: v_max N h, the inflation and a
+# polygon's circumscribed radius) within which map cells and remembered scan obstacles are
+# handed to the MPC.
 SENSING_MARGIN = 0.5
 # A serialised scan larger than this (both arrays at MAX_BEAMS float32, plus a header with
 # a long frame id) is refused before it is decoded.
@@ -197,8 +207,14 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('offset_weight', float(_CONFIG.offset_weight),
                   'offset cost weight of (1 - s)^2; next solve', float_range=(1e-6, 1e9)),
     ParameterSpec('robot_radius', float(_CONFIG.robot_radius),
-                  "obstacle inflation and footprint radius (m); the larger of this and the "
-                  "world's is used", float_range=(0.0, 10.0)),
+                  "the round robot's radius (m), obstacles are inflated by it; the larger of "
+                  "this and the world's is used; ignored when a polygon footprint applies",
+                  float_range=(0.0, 10.0)),
+    ParameterSpec('footprint', '',
+                  "the robot's convex polygon in base_link (x forward), Nav2's form "
+                  "\"[[x, y], [x, y], ...]\"; the MPC separates it from each obstacle exactly; "
+                  "'' = the world file's footprint if it has a polygon, else a circle of "
+                  f'robot_radius; {_SHAPE}'),
     ParameterSpec('collision_margin',
                   _AUTO_MARGIN if _CONFIG.collision_margin is None
                   else float(_CONFIG.collision_margin),
@@ -259,30 +275,70 @@ it solves for the latest odom (nav_msgs/Odometry) along the latest plan (nav_msg
 transient_local; or an analytic path) and publishes cmd_vel (geometry_msgs/Twist, or
 TwistStamped with enable_stamped_cmd_vel), local_plan (the prediction), mpc/diagnostics,
 mpc/obstacles (visualization_msgs/MarkerArray: the obstacles raw, grown, and those active in
-the NLP) and mpc/footprint (geometry_msgs/PolygonStamped). Obstacles come from the world file,
+the NLP) and mpc/footprint (geometry_msgs/PolygonStamped: the footprint parameter's polygon,
+else the world's, else the circle of robot_radius). Obstacles come from the world file,
 scan (sensor_msgs/LaserScan) and map (nav_msgs/OccupancyGrid), as obstacle_sources says.
 Invalid input, and a stale scan when the laser is a source, stops the robot (zero cmd_vel)
 until valid input comes. With autostart false it waits unconfigured for a
 lifecycle manager; deactivate publishes one zero cmd_vel."""
 
 
-def load_obstacles(world_file: str) -> tuple[list[ConvexPolygon], float]:
-    """Return the obstacles and robot radius of a world file ('' = no obstacles)."""
+def load_robot(world_file: str) -> tuple[list[ConvexPolygon], Footprint]:
+    """Return the obstacles and the robot's footprint of a world file.
+
+    '' means no world: no obstacles and a circle of radius 0 (the parameters decide).
+    """
     if not world_file:
-        return [], 0.0
+        return [], Footprint.circle(0.0)
     world = load_world(resolve_data_file(world_file))
-    return list(world.obstacles), float(world.robot_radius)
+    return list(world.obstacles), world.footprint
 
 
-def build_settings(values: dict[str, Any], *, world_radius: float = 0.0
+def load_obstacles(world_file: str) -> tuple[list[ConvexPolygon], float]:
+    """Return the obstacles and robot radius of a world file ('' = no obstacles).
+
+    For a polygon footprint the radius is its circumscribed one (see `World.robot_radius`).
+    """
+    obstacles, footprint = load_robot(world_file)
+    return obstacles, float(footprint.radius)
+
+
+def robot_footprint(parameter: str, world_footprint: Footprint | None = None
+                    ) -> tuple[tuple[float, float], ...]:
+    """Return the polygon the footprint parameter and the world give (() for a circle).
+
+    Nav2's precedence, as the simulator and the planner apply it: the parameter's polygon,
+    else the world's polygon, else a round robot (robot_radius).
+
+    Raises:
+        ValueError: the parameter is not Nav2's "[[x, y], ...]" form of a convex polygon,
+            with the reason (too few vertices, not convex, ...).
+
+    """
+    try:
+        shape = parse_footprint(str(parameter))
+    except ValueError as err:
+        msg = f'footprint {parameter!r}: {err}'
+        raise ValueError(msg) from None
+    if shape.is_circle and world_footprint is not None:
+        shape = world_footprint
+    if shape.is_circle:
+        return ()
+    return tuple((float(x), float(y)) for x, y in shape.vertices)
+
+
+def build_settings(values: dict[str, Any], *, world_radius: float = 0.0,
+                   world_footprint: Footprint | None = None
                    ) -> tuple[MpcConfig, Unicycle, ControllerSettings]:
     """Turn parameter values into the controller's settings.
 
-    The robot radius in force is the larger of the parameter and the world's.
+    The robot radius in force is the larger of the parameter and the world's; the footprint
+    is the parameter's polygon, else the world's polygon, else that circle (see
+    robot_footprint).
 
     Raises:
         ValueError: with every reason the values are invalid (validate_mpc_config's rules,
-            the model's and the controller's).
+            the footprint's, the model's and the controller's).
 
     """
     mpc_kwargs = {field: values[name] for name, field in _MPC_FIELDS.items()}
@@ -294,6 +350,7 @@ def build_settings(values: dict[str, Any], *, world_radius: float = 0.0
     margin = float(values['collision_margin'])
     mpc_kwargs['collision_margin'] = None if margin < 0 else margin
     mpc_kwargs['robot_radius'] = max(float(values['robot_radius']), world_radius)
+    mpc_kwargs['footprint'] = robot_footprint(values['footprint'], world_footprint)
     config = MpcConfig(**mpc_kwargs)  # raises ValueError with validate_mpc_config's reasons
     model = Unicycle(**{name: float(values[name]) for name in _MODEL_FIELDS})
     settings = ControllerSettings(**{k: float(values[k]) for k in _SETTINGS_FIELDS},
@@ -354,7 +411,7 @@ class MpcControllerNode(ManagedNode):
     @destroy_on_failure
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('mpc_controller', **kwargs)
-        self._world_cache: dict[str, tuple[list[ConvexPolygon], float]] = {}
+        self._world_cache: dict[str, tuple[list[ConvexPolygon], Footprint]] = {}
         self.controller: MpcController | None = None
         self._cmd_pub = None
         self._local_plan_pub = None
@@ -415,9 +472,10 @@ class MpcControllerNode(ManagedNode):
             self._world_cache.pop(world_file, None)  # read it again: it may have changed
             check_sensing(values)
             sources = frozenset(values['obstacle_sources'])
-            world_obstacles, radius = self._load_world(world_file)
+            world_obstacles, world_footprint = self._load_world(world_file)
             obstacles = world_obstacles if 'world' in sources else []
-            config, model, settings = build_settings(values, world_radius=radius)
+            config, model, settings = build_settings(
+                values, world_radius=world_footprint.radius, world_footprint=world_footprint)
             check_obstacles(obstacles, config)
             controller = MpcController(model, config, obstacles=obstacles, settings=settings)
             if values['analytic_path']:
@@ -458,9 +516,12 @@ class MpcControllerNode(ManagedNode):
         if 'map' in sources:
             self._map_sub = self.create_subscription(OccupancyGrid, 'map', self.map_callback,
                                                      MAP_QOS)
+        shape = config.robot_footprint
+        robot = (f'a circle of radius {shape.radius:g} m' if shape.is_circle
+                 else f'the footprint {shape.vertices.tolist()}')
         self.get_logger().info(f'configured: {len(obstacles)} obstacles from the world, '
                                f'sources {sorted(sources)}, horizon {config.horizon}, step '
-                               f'{config.step:g} s')
+                               f'{config.step:g} s, the robot {robot}')
         return super().on_configure(state)
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -541,9 +602,10 @@ class MpcControllerNode(ManagedNode):
             values[parameter.name] = parameter.value
         return values
 
-    def _load_world(self, world_file: str) -> tuple[list[ConvexPolygon], float]:
+    def _load_world(self, world_file: str) -> tuple[list[ConvexPolygon], Footprint]:
+        """Return a world file's obstacles and footprint (cached; configure reads it anew)."""
         if world_file not in self._world_cache:
-            self._world_cache[world_file] = load_obstacles(world_file)
+            self._world_cache[world_file] = load_robot(world_file)
         return self._world_cache[world_file]
 
     def parameters_callback(self, parameters: list[Parameter]) -> SetParametersResult:
@@ -551,8 +613,9 @@ class MpcControllerNode(ManagedNode):
         try:
             values = self._values(parameters)
             check_sensing(values)
-            obstacles, radius = self._load_world(str(values['world_file']))
-            config, _, _ = build_settings(values, world_radius=radius)
+            obstacles, footprint = self._load_world(str(values['world_file']))
+            config, _, _ = build_settings(values, world_radius=footprint.radius,
+                                          world_footprint=footprint)
             if 'world' in values['obstacle_sources']:
                 check_obstacles(obstacles, config)
             if values['analytic_path']:
@@ -572,8 +635,9 @@ class MpcControllerNode(ManagedNode):
             return
         try:
             values = self._values()
-            obstacles, radius = self._load_world(values['world_file'])
-            config, model, settings = build_settings(values, world_radius=radius)
+            obstacles, footprint = self._load_world(values['world_file'])
+            config, model, settings = build_settings(values, world_radius=footprint.radius,
+                                                     world_footprint=footprint)
             # one thread runs every callback: never between two halves of a solve; the
             # obstacles in force are handed over at the next control step
             if 'world_file' in names:
@@ -725,10 +789,14 @@ class MpcControllerNode(ManagedNode):
                                f'{grid.resolution:g} m')
 
     def _sensing_radius(self) -> float:
-        """Return how far from the robot sensed obstacles matter (reach, inflation, margin)."""
+        """Return how far from the robot sensed obstacles matter (reach plus a margin).
+
+        MpcConfig.reach: the horizon's travel, the inflation and, for a polygon, the
+        circumscribed radius (a polygon's obstacles are not grown by the body, so the
+        inflation alone would leave out those its corners can hit).
+        """
         config, model = self.controller.config, self.controller.model
-        v_max = float(model.u_max[0])
-        return v_max * config.horizon * config.step + config.inflation(v_max) + SENSING_MARGIN
+        return config.reach(float(model.u_max[0])) + SENSING_MARGIN
 
     def _update_obstacles(self) -> None:
         """Hand the obstacles in force to the controller: world + map + scan memory."""
@@ -836,9 +904,10 @@ class MpcControllerNode(ManagedNode):
             self._diag_pub.publish(self._diagnostics(output, now))
             self._publish_obstacles(output, frame, stamp)
             if self._state is not None:
-                footprint = Footprint.circle(self.controller.config.robot_radius)
+                # the shape the MPC keeps clear: the polygon, or the circle as a 16-gon
                 self._footprint_pub.publish(polygon_stamped(
-                    footprint.at(self._state), frame_id=frame, stamp=stamp))
+                    self.controller.config.robot_footprint.at(self._state), frame_id=frame,
+                    stamp=stamp))
         except Exception as err:  # a message that cannot be built: keep controlling
             self.get_logger().warning(f'could not publish: {err}', throttle_duration_sec=1.0)
         self._log(output)

@@ -27,6 +27,7 @@ from rosbags.typesys import get_typestore, Stores
 
 from mpc_local_planner.core.controller import ControlOutput, Reason
 from mpc_local_planner.core.diagnostics import BagKey, ControllerDiagnostics
+from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.mpc import PlanSource
 from mpc_local_planner.core.obstacles import min_clearance
 from mpc_local_planner.evaluation.analyze_bag import analyze, main, read_run, recorded_world
@@ -36,15 +37,16 @@ from mpc_local_planner.worlds.world import load_world
 RRT_WORLD = resolve_data_file('rrt_cluttered')
 
 
-def steps(count: int, *, arrive: bool) -> list[ControllerDiagnostics]:
-    """Control steps along y = 1.65, between rrt_cluttered's obstacles."""
+def steps(count: int, *, arrive: bool, start: tuple[float, float] = (0.0, 1.65)
+          ) -> list[ControllerDiagnostics]:
+    """Control steps along +x from start (by default between rrt_cluttered's obstacles)."""
     records = []
     for i in range(count):
         last = arrive and i == count - 1
         output = ControlOutput(np.array([0.0 if last else 0.3, 0.0]), None,
                                Reason.GOAL_REACHED if last else Reason.TRACKING)
         record = ControllerDiagnostics.from_output(
-            output, state=np.array([0.1 * i, 1.65, 0.0]), state_time=0.2 * i,
+            output, state=np.array([start[0] + 0.1 * i, start[1], 0.0]), state_time=0.2 * i,
             failures_total=0)
         records.append(record._replace(source=PlanSource.SOLVER, s=i / count, value=1.0,
                                        solve_ms=2.0))
@@ -122,3 +124,31 @@ def test_a_bag_with_nothing_to_analyse_is_refused_not_crashed(tmp_path: Path) ->
     write_bag(bag, [], world_file=RRT_WORLD)
     with pytest.raises(ValueError, match='nothing to analyse'):
         analyze(bag, tmp_path / 'out')
+
+
+NARROW_GAP = resolve_data_file('narrow_gap')
+
+
+def test_clearance_is_the_true_footprints_and_the_metrics_say_which(tmp_path: Path) -> None:
+    # straight through the 0.60 m gap: the 0.43 m wide Jackal keeps 0.085 m to each side;
+    # its circumscribed circle (0.333 m) would overlap the wall
+    bag = tmp_path / 'bag'
+    write_bag(bag, steps(20, arrive=True, start=(1.0, 0.0)), world_file=NARROW_GAP)
+    metrics = analyze(bag, tmp_path / 'out')
+    assert metrics['min_clearance'] == pytest.approx(0.085)
+    assert metrics['collision'] is False
+    assert metrics['footprint']['shape'] == 'polygon'
+    np.testing.assert_allclose(metrics['footprint']['vertices'], JACKAL.vertices)
+    on_disk = json.loads((tmp_path / 'out' / 'metrics.json').read_text())
+    assert on_disk['footprint'] == metrics['footprint']
+    # --footprint takes precedence: a rectangle 0.70 m wide does not fit the gap
+    wide = '[[0.25, 0.35], [-0.25, 0.35], [-0.25, -0.35], [0.25, -0.35]]'
+    assert main([str(bag), '--out', str(tmp_path / 'wide'), '--footprint', wide]) == 1
+    wide_metrics = json.loads((tmp_path / 'wide' / 'metrics.json').read_text())
+    assert wide_metrics['collision'] is True and wide_metrics['min_clearance'] < 0
+    np.testing.assert_allclose(np.abs(wide_metrics['footprint']['vertices']),
+                               [[0.25, 0.35]] * 4)
+    assert main([str(bag), '--out', str(tmp_path / 'bad'), '--footprint', '[[0, 0]]']) == 2
+    # a round robot's record
+    round_metrics = analyze(bag, tmp_path / 'round', world_file=RRT_WORLD)
+    assert round_metrics['footprint'] == {'shape': 'circle', 'radius': 0.1}

@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 import json
 from pathlib import Path
 
@@ -23,10 +24,12 @@ import numpy as np
 import pytest
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+import yaml
 
 from mpc_local_planner.core.controller import ControlOutput, Reason
 from mpc_local_planner.core.diagnostics import ControllerDiagnostics
 from mpc_local_planner.core.errors import PlanningError
+from mpc_local_planner.core.footprint import Footprint, JACKAL, parse_footprint
 from mpc_local_planner.core.mpc import PlanSource
 from mpc_local_planner.core.paths import wrap_angle
 from mpc_local_planner.evaluation.analyze_bag import read_run
@@ -39,9 +42,13 @@ from mpc_local_planner.ros.closed_loop import (
     flush_recording,
     LoopOptions,
     main,
+    node_command,
     node_parameters,
+    parse_parameter,
+    POLYGON_CLEARANCE,
     recorder_topics,
     run_closed_loop,
+    run_world,
     write_known_map,
 )
 from mpc_local_planner.ros.qos import DIAGNOSTICS_QOS
@@ -279,3 +286,164 @@ def test_a_run_with_a_contact_fails_and_reports_it(tmp_path) -> None:
     assert code == 1
     metrics = json.loads((tmp_path / 'out' / 'metrics.json').read_text())
     assert metrics['contacts'] >= 1
+
+
+# ------------------------------------------------------------------ the robot's footprint
+NARROW_GAP_FILE = resolve_data_file('narrow_gap.yaml')
+NARROW_GAP = load_world(NARROW_GAP_FILE)  # the Jackal's rectangle, a 0.60 m gap
+JACKAL_TEXT = '[[0.254, 0.215], [-0.254, 0.215], [-0.254, -0.215], [0.254, -0.215]]'
+
+
+@pytest.mark.parametrize('sensing', [False, True])
+def test_the_worlds_footprint_reaches_every_node_in_every_mode(tmp_path, sensing) -> None:
+    params = node_parameters(LoopOptions(path='rrt', sensing=sensing), NARROW_GAP_FILE,
+                             NARROW_GAP, map_file=tmp_path / 'map.yaml')
+    for name in ('unicycle_simulator', 'global_planner', 'mpc_controller'):
+        shape = parse_footprint(params[name]['footprint'])
+        np.testing.assert_allclose(shape.vertices, JACKAL.vertices, err_msg=name)
+        assert params[name]['robot_radius'] == pytest.approx(JACKAL.radius)
+    # the planner's clearance leaves the gap open: 0.43 m + 2 x 0.05 m < 0.60 m
+    assert params['global_planner']['clearance'] == POLYGON_CLEARANCE == 0.05
+    # a round robot: no polygon, the planner's own clearance
+    plain = node_parameters(LoopOptions(path='rrt'), UNKNOWN_BOX_FILE, UNKNOWN_BOX)
+    assert all(plain[name]['footprint'] == '' for name in
+               ('unicycle_simulator', 'global_planner', 'mpc_controller'))
+    assert 'clearance' not in plain['global_planner']
+    # --param comes last, over closed_loop's choice
+    node, name, value = parse_parameter('global_planner.clearance:=0.02')
+    tight = node_parameters(LoopOptions(path='rrt', extra_parameters={node: {name: value}}),
+                            NARROW_GAP_FILE, NARROW_GAP)
+    assert tight['global_planner']['clearance'] == 0.02
+
+
+def test_param_reads_its_value_as_ros_does_and_refuses_what_it_cannot_place() -> None:
+    assert parse_parameter('mpc_controller.obstacle_sources:=[map, scan]') == (
+        'mpc_controller', 'obstacle_sources', ['map', 'scan'])
+    assert parse_parameter("mpc_controller.footprint:=''") == ('mpc_controller', 'footprint', '')
+    assert parse_parameter('global_planner.simplify:=true')[2] is True
+    for bad, reason in (('clearance:=0.05', 'NODE.NAME:=VALUE'),
+                        ('global_planner.clearance=0.05', 'NODE.NAME:=VALUE'),
+                        ('planner.clearance:=0.05', "unknown node 'planner'")):
+        with pytest.raises(ValueError, match=reason):
+            parse_parameter(bad)
+    # a node that does not run gets none (map_server runs with --sensing only)
+    with pytest.raises(ValueError, match='map_server needs --sensing'):
+        node_parameters(LoopOptions(path='rrt', extra_parameters={'map_server': {'x': 1}}),
+                        NARROW_GAP_FILE, NARROW_GAP)
+
+
+def test_a_footprint_on_the_command_line_of_a_node_process_stays_a_string() -> None:
+    # ROS reads each -p value as YAML: unquoted, "[[x, y], ...]" would be a nested list
+    command = node_command('mpc_controller', {'footprint': JACKAL_TEXT, 'world_file': '',
+                                              'analytic_path': 'paper_sinusoid'})
+    values = dict(arg.split(':=', 1) for arg in command if ':=' in arg)
+    assert yaml.safe_load(values['footprint']) == JACKAL_TEXT
+    assert yaml.safe_load(values['world_file']) == ''
+    assert values['analytic_path'] == 'paper_sinusoid'
+
+
+def test_a_robot_option_writes_the_runs_world_with_that_robot(tmp_path) -> None:
+    circle = LoopOptions(world='narrow_gap', robot_radius=0.333)
+    path, world, source = run_world(circle, NARROW_GAP_FILE, NARROW_GAP, tmp_path / 'world')
+    assert source == '--robot-radius' and path == tmp_path / 'world' / 'narrow_gap.yaml'
+    assert world.footprint.is_circle and world.robot_radius == 0.333
+    assert world.name == 'narrow_gap' and len(world.obstacles) == len(NARROW_GAP.obstacles)
+    assert load_world(path).robot_radius == 0.333  # what the nodes and the bag read
+    jackal = LoopOptions(footprint=JACKAL_TEXT)
+    path, world, source = run_world(jackal, WORLD_FILE, WORLD, tmp_path / 'paper')
+    assert source == '--footprint' and path.parent == tmp_path / 'paper'
+    np.testing.assert_allclose(world.footprint.vertices, JACKAL.vertices)
+    assert world.path == WORLD.path
+    # without an option the world file itself
+    assert run_world(LoopOptions(), WORLD_FILE, WORLD, tmp_path / 'none')[:2] == (WORLD_FILE,
+                                                                                  WORLD)
+    assert not (tmp_path / 'none').exists()
+    for options, reason in ((LoopOptions(footprint=JACKAL_TEXT, robot_radius=0.2), 'not both'),
+                            (LoopOptions(footprint='[]'), 'give a polygon'),
+                            (LoopOptions(footprint='[[0, 0], [1, 1]]'), 'at least 3'),
+                            (LoopOptions(robot_radius=-0.1), 'robot_radius must be')):
+        with pytest.raises(ValueError, match=reason):
+            run_world(options, WORLD_FILE, WORLD, tmp_path / 'bad')
+
+
+def test_robot_options_on_the_command_line_are_checked_before_anything_starts(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / 'out'
+    assert main(['--world', 'narrow_gap', '--path', 'rrt', '--out', str(out),
+                 '--footprint', '[[0.3, 0.2], [-0.3, 0.2], [0.0, 0.0], [-0.3, -0.2], '
+                 '[0.3, -0.2]]']) == 2
+    assert 'not convex' in capsys.readouterr().err
+    assert main(['--world', 'narrow_gap', '--path', 'rrt', '--out', str(out),
+                 '--param', 'nobody.x:=1']) == 2
+    assert "unknown node 'nobody'" in capsys.readouterr().err
+    assert not (out / 'bag').exists()
+
+
+def test_the_start_check_uses_the_footprint_the_planner_will_use() -> None:
+    # a goal in the gap, heading along it: the Jackal fits (0.215 + 0.05 < 0.30 m to each
+    # side), its circumscribed circle (0.333 m) does not
+    in_gap = replace(NARROW_GAP, goal=np.array([2.0, 0.0, 0.0]))
+    check_plannable(in_gap, {'clearance': POLYGON_CLEARANCE})
+    across = replace(NARROW_GAP, goal=np.array([2.0, 0.0, np.pi / 2]))
+    with pytest.raises(PlanningError, match='goal'):
+        check_plannable(across, {'clearance': POLYGON_CLEARANCE})
+    # the footprint parameter wins over the world's: a circle-like octagon does not fit
+    octagon = [[0.333 * np.cos(a), 0.333 * np.sin(a)]
+               for a in np.linspace(0, 2 * np.pi, 8, endpoint=False)]
+    with pytest.raises(PlanningError, match='goal'):
+        check_plannable(in_gap, {'clearance': POLYGON_CLEARANCE,
+                                 'footprint': str(np.round(octagon, 4).tolist())})
+
+
+def check_footprint_run(out: Path, world, vertices: np.ndarray, source: str) -> dict:
+    metrics = json.loads((out / 'metrics.json').read_text())
+    assert metrics['reached'] is True and metrics['stop_reason'] == 'goal reached', metrics
+    assert metrics['contacts'] == 0 and metrics['collision'] is False
+    assert metrics['footprint']['shape'] == 'polygon'
+    np.testing.assert_allclose(metrics['footprint']['vertices'], vertices)
+    assert metrics['footprint_source'] == source
+    # clearance of the rectangle turned with the heading, not of its centre or its circle
+    rows = read_trajectory_csv(out / 'trajectory.csv')
+    robot = Footprint.polygon(vertices)
+    corners = robot.at_poses(rows[:, 1:4])
+    for obstacle in world.obstacles:
+        assert not np.any(obstacle.contains(corners.reshape(-1, 2)))
+    assert 0 < metrics['min_clearance'] < 0.2
+    return metrics
+
+
+@pytest.mark.slow
+def test_the_jackal_drives_through_the_narrow_gap_its_circle_would_not_pass(tmp_path) -> None:
+    code = main(['--world', 'narrow_gap', '--path', 'rrt', '--out', str(tmp_path),
+                 '--rtf', '4', '--timeout', '120'])
+    assert code == 0
+    metrics = check_footprint_run(tmp_path, NARROW_GAP, JACKAL.vertices, 'the world')
+    rows = read_trajectory_csv(tmp_path / 'trajectory.csv')
+    assert rows[0, 1] < 1.9 and rows[-1, 1] > 2.1  # through the wall's gap
+    # in the gap the rectangle has at most (0.60 - 0.43) / 2 m to each side
+    assert metrics['min_clearance'] <= 0.085 + 1e-6
+
+
+@pytest.mark.slow
+def test_the_jackals_circumscribed_circle_ends_the_run_at_once_with_no_path(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(['--world', 'narrow_gap', '--path', 'rrt', '--out', str(tmp_path / 'out'),
+                 '--robot-radius', f'{JACKAL.radius:.3f}', '--timeout', '600',
+                 '--time-limit', '3600'])
+    assert code == EXIT_NO_PLAN
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1, err
+    assert err.startswith('closed_loop: narrow_gap: no plan came: no plan to (4, 0)')
+    assert 'RRT* found no collision-free path' in err
+    assert not (tmp_path / 'out' / 'metrics.json').exists()
+
+
+@pytest.mark.slow
+def test_the_jackal_goes_around_the_papers_box_on_an_rrt_plan(tmp_path) -> None:
+    code = main(['--world', 'paper_obstacle', '--path', 'rrt', '--out', str(tmp_path),
+                 '--footprint', JACKAL_TEXT, '--rtf', '4', '--timeout', '120'])
+    assert code == 0
+    check_footprint_run(tmp_path, WORLD, JACKAL.vertices, '--footprint')
+    # the bag records the run's world: analysed again, the same robot
+    assert load_world(tmp_path / 'world' / 'paper_obstacle.yaml').footprint.vertices.shape == (
+        4, 2)

@@ -401,3 +401,56 @@ def test_rviz_config_is_yaml_with_the_map_frame_and_a_goal_tool_on_goal_pose() -
     assert map_display['Topic']['Value'] == '/map'
     assert map_display['Topic']['Durability Policy'] == 'Transient Local'
     assert map_display['Topic']['Reliability Policy'] == 'Reliable'
+
+
+JACKAL_TEXT = '[[0.254, 0.215], [-0.254, 0.215], [-0.254, -0.215], [0.254, -0.215]]'
+
+
+@pytest.mark.slow
+def test_the_footprint_argument_reaches_simulator_planner_and_controller(
+        monkeypatch: pytest.MonkeyPatch, ros: Any, tmp_path: Path) -> None:
+    ros.tmp_path = tmp_path
+    simulation = ROOT / 'launch' / 'simulation.launch.py'
+    arguments, nodes = _describe(simulation, monkeypatch)
+    assert arguments['footprint'] == ''
+    robot_nodes = ('unicycle_simulator', 'global_planner', 'mpc_controller')
+    # empty: nothing over the parameter files (each node reads its file, then the world)
+    values = {n.kwargs['executable']: _parameter_values(n, {}) for n in nodes}
+    assert not any('footprint' in values[name] for name in robot_nodes)
+    for sensing in ('false', 'true'):
+        _, nodes = _describe(simulation, monkeypatch, {'footprint': JACKAL_TEXT,
+                                                       'world': 'unknown_box',
+                                                       'sensing': sensing})
+        values = {n.kwargs['executable']: _parameter_values(n, {}) for n in nodes}
+        for name in robot_nodes:
+            assert values[name]['footprint'] == JACKAL_TEXT, (name, sensing)
+        assert 'footprint' not in values['map_server']
+    # and each of them declares it
+    for name in robot_nodes:
+        assert 'footprint' in _declared_parameters(name, ros), name
+
+
+def test_with_sensing_the_worlds_footprint_is_handed_to_the_nodes_that_do_not_read_it(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    simulation = ROOT / 'launch' / 'simulation.launch.py'
+    _, nodes = _describe(simulation, monkeypatch, {'world': 'narrow_gap', 'sensing': 'true'})
+    values = {n.kwargs['executable']: _parameter_values(n, {}) for n in nodes}
+    jackal = yaml.safe_load(JACKAL_TEXT)
+    for name in ('global_planner', 'mpc_controller'):
+        assert values[name]['world_file'] == ''
+        assert yaml.safe_load(values[name]['footprint']) == jackal, name
+    # the simulator reads the world's footprint itself
+    assert values['unicycle_simulator']['world_file'].endswith('narrow_gap.yaml')
+    assert 'footprint' not in values['unicycle_simulator']
+
+
+@pytest.mark.parametrize(('footprint', 'reason'), [
+    ('[[0, 0], [1, 1]]', 'at least 3'),
+    ('[[0.3, 0.2], [-0.3, 0.2], [0.0, 0.0], [-0.3, -0.2], [0.3, -0.2]]', 'not convex'),
+    ('[]', 'give a convex polygon'),
+])
+def test_an_invalid_footprint_argument_is_refused_at_launch_with_the_reason(
+        monkeypatch: pytest.MonkeyPatch, footprint: str, reason: str) -> None:
+    with pytest.raises(RuntimeError, match=reason):
+        _describe(ROOT / 'launch' / 'simulation.launch.py', monkeypatch,
+                  {'footprint': footprint})

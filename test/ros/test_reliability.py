@@ -471,6 +471,11 @@ def test_invalid_parameters_refuse_to_start_with_a_reason_on_stderr_and_exit_cod
         'v_max 0': ('mpc_controller', 'v_max:=0.0', 'v_max out of range'),
         'missing world': ('mpc_controller', 'world_file:=/no/such/world.yaml', 'not found'),
         'malformed world': ('mpc_controller', f'world_file:={malformed}', 'not valid YAML'),
+        'footprint not convex': ('mpc_controller',
+                                 "footprint:='[[0.3, 0.2], [-0.3, 0.2], [0.0, 0.0], "
+                                 "[-0.3, -0.2], [0.3, -0.2]]'", 'not convex'),
+        'footprint of two points': ('mpc_controller', "footprint:='[[0, 0], [1, 1]]'",
+                                    'at least 3'),
         'planner, missing world': ('global_planner', 'world_file:=/no/such/world.yaml',
                                    'not found'),
         'planner, malformed world': ('global_planner', f'world_file:={malformed}',
@@ -516,6 +521,8 @@ def test_invalid_parameters_at_run_time_are_refused_with_a_reason_and_the_node_r
         ('world_file', str(tmp_path / 'no_such.yaml'), 'not found'),
         ('world_file', str(tmp_path / 'malformed.yaml'), 'not valid YAML'),
         ('world_file', str(tmp_path / 'decagon.yaml'), 'more than faces_per_obstacle'),
+        ('footprint', '[[0.1, 0.1], [0.2, 0.2], [0.3, 0.3]]', 'collinear'),
+        ('footprint', 'a rectangle', 'not of the form'),
     ]
     for name, value, reason in cases:
         before = node.get_parameter(name).value
