@@ -220,11 +220,14 @@ class PlannerConfig:
     def block_margin(self) -> float:
         """Distance to an occupied cell that blocks the rest of a plan, metres.
 
-        The robot's inscribed radius (its radius for a circle) plus half the clearance: a
-        re-planner re-plans when a newly seen obstacle has eaten more than half of the
-        clearance the plan was made with. A fresh plan keeps the full clearance, so it is
-        never blocked at once; half is what the MPC's own margin (a few cm) and its grown
-        corners need (they reach (sqrt(2) - 1) r beyond the rounded clearance of a box).
+        A circle: its radius plus half the clearance: a re-planner re-plans when a newly seen
+        obstacle has eaten more than half of the clearance the plan was made with. A fresh
+        plan keeps the full clearance, so it is never blocked at once; half is what the MPC's
+        own margin (a few cm) and its grown corners need (they reach (sqrt(2) - 1) r beyond
+        the rounded clearance of a box). A polygon: its inscribed radius, a blockage the
+        robot would certainly touch: its plans are checked pose by pose with the swept
+        polygon, and through a gap barely wider than the robot (narrow_gap: 0.085 m to
+        spare) any part of the clearance would count the gap itself as a blockage.
         """
         footprint = self.robot_footprint
         if footprint.is_circle:
@@ -232,8 +235,7 @@ class PlannerConfig:
         vertices = footprint.vertices
         edges = np.roll(vertices, -1, axis=0) - vertices
         cross = np.abs(edges[:, 0] * vertices[:, 1] - edges[:, 1] * vertices[:, 0])
-        inscribed = float(np.min(cross / np.hypot(edges[:, 0], edges[:, 1])))
-        return inscribed + 0.5 * self.clearance
+        return float(np.min(cross / np.hypot(edges[:, 0], edges[:, 1])))
 
 
 def path_length(waypoints: np.ndarray) -> float:

@@ -41,9 +41,10 @@ beams pass through, placed with the odometry pose nearest to its stamp; a malfor
 dropped with one throttled error.
 
 Re-planning (``replan_check_rate``, 2 Hz by default): the rest of the plan in force, from the
-robot's projection onto it, is checked against the grid; when it comes within the robot's
-inscribed radius plus half the clearance of an occupied cell (an obstacle the map did not
-have, marked by the laser), the goal is planned again from the current odometry, and with
+robot's projection onto it, is checked against the grid; when it comes within
+PlannerConfig.block_margin of an occupied cell (a round robot's radius plus half the
+clearance, a polygon's inscribed radius: an obstacle the map did not have, marked by the
+laser), the goal is planned again from the current odometry, and with
 ``replan_period`` > 0 also periodically. A new plan replaces the old on ``plan``; the
 controller follows it from the robot's projection. ``planner/diagnostics`` says what
 triggered each plan and counts the re-plans; a failed re-plan is a warning and the plan in
@@ -179,9 +180,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('frame_id', 'map', 'frame of the plan'),
     ParameterSpec('replan_check_rate', 2.0,
                   'how often (Hz) the rest of the plan is checked against the grid (map plus '
-                  "scans); a plan an obstacle comes within the robot's inscribed radius + "
-                  'clearance / 2 of is re-planned from the current odometry; 0 = never (read '
-                  'at activate)',
+                  'scans); a plan an obstacle comes within robot_radius + clearance / 2 of (a '
+                  'polygon: its inscribed radius) is re-planned from the current odometry; 0 = '
+                  'never (read at activate)',
                   float_range=(0.0, 100.0)),
     ParameterSpec('replan_period', 0.0,
                   're-plan the goal in force this often (s) even when the plan is clear; 0 = '
@@ -626,9 +627,9 @@ class GlobalPlannerNode(ManagedNode):
         """Re-plan the goal in force when the rest of its plan is blocked, or periodically.
 
         Blocked means that the rest of the plan (from the robot's projection onto it) comes
-        within PlannerConfig.block_margin (the robot's inscribed radius plus half the
-        clearance) of a cell the grid now holds as occupied: an obstacle the map did not
-        have, seen by the laser, eats into the clearance the plan was made with. The world
+        within PlannerConfig.block_margin (a round robot's radius plus half the clearance, a
+        polygon's inscribed radius) of a cell the grid now holds as occupied: an obstacle the
+        map did not have, seen by the laser. The world
         file's obstacles do not change, so without use_map only replan_period re-plans.
         """
         if (not self._active or self._goal is None or self.last_plan is None
