@@ -14,7 +14,14 @@
 
 """Evidence at scale: the paper's MPC beside baselines on random worlds and BARN worlds.
 
-``python -m mpc_local_planner.evaluation.evaluate --suite {random,barn} --out DIR --jobs K``
+``python -m mpc_local_planner.evaluation.evaluate --suite {random,barn,unknown,worlds}
+--out DIR --jobs K``
+
+With sensing (``--suite unknown``, ``--suite worlds --sensing``, ``--suite barn --sensing``)
+every run is the navigation stack of `sensing_suites` (laser, obstacle memory, re-planning
+planner, local controller; ``--robot circle|jackal``); see that module for the suites. The
+suites below are the easier "known map" setting: every obstacle known, the reference path
+planned once.
 
 - random: ``--count`` worlds from ``--seed``: random convex obstacles between start (0, 0, 0)
   and goal (6, 0, 0), the first one across the straight line; the reference path from RRT*
@@ -97,11 +104,16 @@ __all__ = [
     'Task',
 ]
 
-CONTROLLERS = ('proposed', 'tracking', 'pure_pursuit')
+CONTROLLERS = ('proposed', 'tracking', 'pure_pursuit', 'dwa')
+# The known-map suites run the first three (DWA runs with sensing, on re-planned paths).
+KNOWN_MAP_CONTROLLERS = ('proposed', 'tracking', 'pure_pursuit')
+SUITES = ('random', 'barn', 'unknown', 'worlds')
 CSV_COLUMNS = (
     'controller', 'world', 'success', 'collision', 'time', 'path_length', 'min_clearance',
     'solve_ms_median', 'solve_ms_max', 'barn_score', 'assumption_1', 'reference_length',
     'final_distance', 'steps', 'stop_reason', 'planner_clearance', 'solver_failures', 'v_max',
+    'robot', 'sensing', 'contacts', 'replans', 'replan_failures', 'step_ms_median',
+    'step_ms_max', 'plan_s_max', 'name',
 )
 DEFAULT_BARN_DIR = BARN_DIR
 ROBOT_RADIUS = 0.2
@@ -134,6 +146,14 @@ class Task:
     barn_dir: str = ''
     trajectory_dir: str = ''
     merge: bool = False
+    sensing: bool = False
+    robot: str = 'circle'
+    world_file: str = ''
+
+    @property
+    def navigation(self) -> bool:
+        """Run through the navigation stack (laser, re-planning) rather than a fixed path."""
+        return self.sensing or self.suite in ('unknown', 'worlds')
 
 
 @dataclass
@@ -371,8 +391,9 @@ def _controller(task: Task, scenario: Scenario, model: Unicycle,
 def _empty_row(task: Task, scenario: Scenario | None, reason: str) -> dict[str, Any]:
     row = dict.fromkeys(CSV_COLUMNS, '')
     row.update(controller=task.controller, world=task.world, success=False, collision=False,
-               stop_reason=reason, v_max=task.v_max)
+               stop_reason=reason, v_max=task.v_max, robot=task.robot, sensing=task.sensing)
     if scenario is not None:
+        row['name'] = scenario.name
         row.update(assumption_1=scenario.assumption_1,
                    planner_clearance=scenario.planner_clearance)
         if scenario.barn_path_length is not None:
@@ -380,8 +401,66 @@ def _empty_row(task: Task, scenario: Scenario | None, reason: str) -> dict[str, 
     return row
 
 
+def run_navigation_task(task: Task) -> dict[str, Any]:
+    """Run one world x controller through the navigation stack; return its runs.csv row."""
+    from dataclasses import replace
+
+    from mpc_local_planner.evaluation import sensing_suites as suites
+    from mpc_local_planner.worlds.world import load_world
+
+    robot = suites.ROBOTS[task.robot]
+    barn_length = None
+    if task.suite == 'unknown':
+        world = suites.unknown_world(task.world, task.seed, robot=robot)
+    elif task.suite == 'worlds':
+        world = load_world(task.world_file)
+        world = replace(world, footprint=robot.footprint, robot_radius=0.0)
+    else:
+        path = Path(task.barn_dir) / f'world_{task.world:03d}.json'
+        world = suites.barn_sensing_world(path, robot)
+        barn_length = float(json.loads(path.read_text(encoding='utf-8'))['barn_path_length'])
+    row = dict.fromkeys(CSV_COLUMNS, '')
+    row.update(controller=task.controller, world=task.world, name=world.name,
+               robot=task.robot, sensing=task.sensing or task.suite == 'unknown',
+               v_max=robot.v_max)
+    try:
+        result = suites.run_navigation(world, task.controller, robot,
+                                       sensing=bool(row['sensing']), seed=task.seed)
+    except PlanningError as err:
+        row.update(success=False, collision=False, stop_reason=f'no plan: {err}',
+                   barn_score=0.0 if barn_length is not None else '')
+        return row
+    run = result.run
+    data = run.rows
+    goal = np.asarray(world.goal, dtype=float)
+    metrics = compute_metrics(data, goal=goal, obstacles=(),
+                              solver_failures=run.solver_failures)
+    if task.trajectory_dir:
+        folder = Path(task.trajectory_dir)
+        folder.mkdir(parents=True, exist_ok=True)
+        write_trajectory_csv(folder / f'{task.controller}_{task.world:03d}.csv', data)
+        plans = result.navigator.log.plans if result.navigator is not None else []
+        for number, (_, waypoints, _) in enumerate(plans):
+            np.savetxt(folder / f'plan_{task.controller}_{task.world:03d}_{number}.csv',
+                       waypoints, delimiter=',', header='x,y', comments='')
+    row.update(
+        success=run.reached, collision=result.contacts > 0, time=run.end_time,
+        path_length=metrics['path_length'], min_clearance=result.min_clearance,
+        solve_ms_median=metrics['solve_ms_median'], solve_ms_max=metrics['solve_ms_max'],
+        final_distance=math.hypot(data[-1, 1] - goal[0], data[-1, 2] - goal[1]),
+        steps=len(data), solver_failures=run.solver_failures,
+        stop_reason=run.outcome.value + (f': {run.note}' if run.note else ''),
+        **suites.result_fields(result))
+    if barn_length is not None:
+        row['barn_score'] = barn_score(run.reached, run.end_time if run.reached else None,
+                                       barn_length)
+    return row
+
+
 def run_task(task: Task) -> dict[str, Any]:
     """Run one world x controller in closed loop and return its runs.csv row."""
+    if task.navigation:
+        return run_navigation_task(task)
     model = Unicycle(v_max=task.v_max, omega_max=task.omega_max)
     config = MpcConfig().with_changes(robot_radius=ROBOT_RADIUS)
     margin = config.inflation(model.v_max) - ROBOT_RADIUS
@@ -420,7 +499,10 @@ def run_task(task: Task) -> dict[str, Any]:
         solve_ms_median=metrics['solve_ms_median'], solve_ms_max=metrics['solve_ms_max'],
         reference_length=ref_len,
         final_distance=math.hypot(data[-1, 1] - goal[0], data[-1, 2] - goal[1]),
-        steps=len(data), solver_failures=run.solver_failures)
+        steps=len(data), solver_failures=run.solver_failures,
+        contacts=int(run.outcome is Outcome.COLLISION or min_clear <= 0.0), replans=0,
+        step_ms_median=float(np.median(run.step_times)) * 1e3 if len(run.step_times) else '',
+        step_ms_max=float(np.max(run.step_times)) * 1e3 if len(run.step_times) else '')
     if scenario.barn_path_length is not None:
         row['barn_score'] = barn_score(success, success_time, scenario.barn_path_length)
     return row
@@ -454,12 +536,16 @@ def summarize(rows: list[dict[str, Any]], *, suite: str, title: str = '') -> str
     lines = [f'# {title or suite} suite', '']
     worlds = sorted({int(r['world']) for r in rows})
     a1 = {int(r['world']) for r in rows if _true(r['assumption_1'])}
-    lines.append(f'Worlds: {len(worlds)}; reference path satisfies Assumption 1 in '
-                 f'{len(a1 & set(worlds))} of them.')
+    if a1:
+        lines.append(f'Worlds: {len(worlds)}; reference path satisfies Assumption 1 in '
+                     f'{len(a1 & set(worlds))} of them.')
+    else:
+        lines.append(f'Worlds: {len(worlds)}; paths planned and re-planned during the runs '
+                     '(Assumption 1 is not checked ahead).')
     lines.append('')
-    head = ['controller', 'runs', 'success', 'rate', 'collisions', 'success (Assumption 1)',
-            'median time [s]', 'median path [m]', 'median solve [ms]', 'p95 of medians [ms]',
-            'max solve [ms]']
+    head = ['controller', 'runs', 'success', 'rate', 'contacts', 'success (Assumption 1)',
+            're-plans', 'median time [s]', 'median path [m]', 'median step [ms]',
+            'max step [ms]', 'median solve [ms]', 'p95 of medians [ms]', 'max solve [ms]']
     if suite == 'barn':
         head.append('mean BARN score')
     lines += ['| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)]
@@ -473,11 +559,17 @@ def summarize(rows: list[dict[str, Any]], *, suite: str, title: str = '') -> str
         paths = _floats(ok, 'path_length')
         med = _floats(mine, 'solve_ms_median')
         worst = _floats(mine, 'solve_ms_max')
+        step_med = _floats(mine, 'step_ms_median')
+        step_max = _floats(mine, 'step_ms_max')
+        replans = _floats(mine, 'replans')
         cells = [
             name, str(len(mine)), str(len(ok)), f'{len(ok) / max(1, len(mine)):.1%}',
             str(sum(_true(r['collision']) for r in mine)), f'{len(ok_a1)}/{len(mine_a1)}',
+            str(int(np.sum(replans))) if len(replans) else '-',
             _fmt(float(np.median(times)) if len(times) else None, 1),
             _fmt(float(np.median(paths)) if len(paths) else None, 2),
+            _fmt(float(np.median(step_med)) if len(step_med) else None, 2),
+            _fmt(float(np.max(step_max)) if len(step_max) else None, 1),
             _fmt(float(np.median(med)) if len(med) else None, 2),
             _fmt(float(np.percentile(med, 95)) if len(med) else None, 2),
             _fmt(float(np.max(worst)) if len(worst) else None, 1),
@@ -609,12 +701,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the suite and write runs.csv and summary.md."""
     parser = argparse.ArgumentParser(prog='python -m mpc_local_planner.evaluation.evaluate',
                                      description=__doc__.split('\n\n')[0])
-    parser.add_argument('--suite', choices=('random', 'barn'), required=True)
-    parser.add_argument('--count', type=int, default=200, help='random worlds')
+    parser.add_argument('--suite', choices=SUITES, required=True)
+    parser.add_argument('--count', type=int, default=200, help='random or unknown worlds')
+    parser.add_argument('--sensing', action='store_true',
+                        help='barn, worlds: laser only for what the map lacks (barn: no prior '
+                        'map), with the re-planning planner (unknown: always)')
+    parser.add_argument('--robot', choices=('circle', 'jackal'), default='circle',
+                        help='with sensing: a 0.2 m circle at 0.31 m/s, or the BARN Jackal '
+                        '(its rectangle and the challenge speed limits)')
+    parser.add_argument('--world-dir', type=Path, default=None,
+                        help='worlds: the folder of world YAML files')
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--worlds', default='0-99', help='BARN worlds, e.g. 0-99 or 3,7,10-12')
     parser.add_argument('--barn-dir', type=Path, default=DEFAULT_BARN_DIR)
-    parser.add_argument('--controllers', default=','.join(CONTROLLERS))
+    parser.add_argument('--controllers', default=None,
+                        help=f'comma-separated, of {",".join(CONTROLLERS)} (default: all the '
+                        'suite runs; the known-map suites have no dwa)')
     parser.add_argument('--v-max', type=float, default=0.31)
     parser.add_argument('--omega-max', type=float, default=1.9)
     parser.add_argument('--out', type=Path, required=True)
@@ -636,12 +738,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(target)
         return 0
 
-    controllers = [c.strip() for c in args.controllers.split(',') if c.strip()]
-    unknown = sorted(set(controllers) - set(CONTROLLERS))
+    navigation = args.sensing or args.suite in ('unknown', 'worlds')
+    if args.sensing and args.suite == 'random':
+        parser.error('--sensing: use --suite unknown for random worlds with unknown obstacles')
+    if args.robot != 'circle' and not navigation:
+        parser.error('--robot jackal needs the navigation stack: add --sensing')
+    allowed = CONTROLLERS if navigation else KNOWN_MAP_CONTROLLERS
+    controllers = ([c.strip() for c in args.controllers.split(',') if c.strip()]
+                   if args.controllers else list(allowed))
+    unknown = sorted(set(controllers) - set(allowed))
     if unknown:
-        parser.error(f'unknown controllers {unknown}; choose from {CONTROLLERS}')
-    if args.suite == 'random':
+        parser.error(f'unknown controllers {unknown} for this suite; choose from {allowed}')
+    world_files: list[str] = []
+    if args.suite in ('random', 'unknown'):
         worlds = list(range(args.count))
+        barn_dir = ''
+    elif args.suite == 'worlds':
+        if args.world_dir is None or not args.world_dir.is_dir():
+            parser.error('--suite worlds needs --world-dir DIR (a folder of world YAML files)')
+        world_files = sorted(str(f) for f in args.world_dir.glob('*.yaml'))
+        if not world_files:
+            parser.error(f'no *.yaml world files in {args.world_dir}')
+        worlds = list(range(len(world_files)))
         barn_dir = ''
     else:
         worlds = _parse_worlds(args.worlds)
@@ -652,14 +770,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     trajectories = str(args.out / 'trajectories') if args.save_trajectories else ''
     tasks = [Task(args.suite, w, c, args.seed, args.v_max, args.omega_max, barn_dir,
-                  trajectories, args.merge) for w in worlds for c in controllers]
+                  trajectories, args.merge, sensing=args.sensing, robot=args.robot,
+                  world_file=world_files[w] if world_files else '')
+             for w in worlds for c in controllers]
     for var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
         os.environ[var] = '1'
 
     csv_path = args.out / 'runs.csv'
     summary_path = args.out / 'summary.md'
-    title = (f'{args.suite} (seed {args.seed}, v_max {args.v_max:g} m/s, '
-             f'omega_max {args.omega_max:g} rad/s{", merged walls" if args.merge else ""})')
+    if navigation:
+        from mpc_local_planner.evaluation.sensing_suites import ROBOTS
+
+        robot = ROBOTS[args.robot]
+        title = (f'{args.suite} with sensing (laser, re-planning; seed {args.seed}, '
+                 f'{args.robot} robot, v_max {robot.v_max:g} m/s, omega_max '
+                 f'{robot.omega_max:g} rad/s'
+                 + (', no prior map' if args.suite == 'barn' else '') + ')')
+    else:
+        title = (f'{args.suite}, known map (seed {args.seed}, v_max {args.v_max:g} m/s, '
+                 f'omega_max {args.omega_max:g} rad/s{", merged walls" if args.merge else ""})')
     rows: list[dict[str, Any]] = []
     started = time.monotonic()
     with open(csv_path, 'w', newline='') as stream:
@@ -671,8 +800,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             writer.writerow(row)
             stream.flush()
             elapsed = time.monotonic() - started
-            print(f"[{len(rows)}/{len(tasks)}] {elapsed:6.0f} s  {row['controller']:12s} "
-                  f"world {int(row['world']):3d}: "
+            done = int(30 * len(rows) / max(len(tasks), 1))
+            print(f"[{'#' * done}{'.' * (30 - done)}] {len(rows)}/{len(tasks)} "
+                  f"{elapsed:6.0f} s  {row['controller']:12s} world {int(row['world']):3d}: "
                   f"{'ok' if row['success'] else 'FAIL'} ({row['stop_reason']})",
                   file=sys.stderr, flush=True)
             if len(rows) % 10 == 0:

@@ -23,8 +23,9 @@ rollout's controller):
 2. the scan goes into the planner's grid (map plus scans, `PlanningGrid`) and into the
    controller's obstacle memory (`ObstacleMemory`);
 3. every ``replan_check_period`` the planner checks the rest of its plan as the
-   global_planner node does (re-planned from the pose when the robot following it would come
-   within its radius of an occupied cell), and the first plan is made at the first step;
+   global_planner node does (`PlannerConfig.block_margin`) and re-plans from the pose; the
+   first plan is made at the first step, on the map alone (before the first scan), as the
+   node plans a goal that comes before the laser has shown anything;
 4. the local controller gets the map's and the memory's obstacles near the robot
    (`LocalObstacles`, as the controller node assembles them) and answers.
 
@@ -118,9 +119,7 @@ class MpcLocal:
 
     def __init__(self, controller: MpcController) -> None:
         self.controller = controller
-        model, config = controller.model, controller.config
-        v_max = float(model.u_max[0])
-        self.reach = v_max * config.horizon * config.step + config.inflation(v_max)
+        self.reach = controller.config.reach(float(controller.model.u_max[0]))
 
     def follow(self, poses: np.ndarray) -> None:
         """Set the plan (s restarts at the projection)."""
@@ -149,9 +148,7 @@ class TrackingLocal:
 
     def __init__(self, mpc: Any) -> None:
         self.mpc = mpc
-        model, config = mpc.model, mpc.config
-        v_max = float(model.u_max[0])
-        self.reach = v_max * config.horizon * config.step + config.inflation(v_max)
+        self.reach = mpc.config.reach(float(mpc.model.u_max[0]))
 
     def follow(self, poses: np.ndarray) -> None:
         """Ignore the plan: the baseline knows only its target."""
@@ -170,7 +167,10 @@ class TrackingLocal:
 
 
 class PathFollowerLocal:
-    """A controller made for each plan, with ``command(x) -> u`` (pure pursuit, DWA).
+    """A path follower with ``command(x) -> u`` (pure pursuit, DWA).
+
+    Made for the first plan; later plans go to its ``set_path`` when it has one (the DWA
+    keeps its current velocity across plans), else a new one is made (pure pursuit).
 
     Args:
         make: waypoints (M, 2) -> the controller for that plan.
@@ -187,8 +187,12 @@ class PathFollowerLocal:
         self._obstacles: list[ConvexPolygon] = []
 
     def follow(self, poses: np.ndarray) -> None:
-        """Make the controller for the new plan."""
-        self.follower = self._make(np.asarray(poses, dtype=float)[:, :2])
+        """Hand the new plan over, or make the controller for it."""
+        waypoints = np.asarray(poses, dtype=float)[:, :2]
+        if self.follower is not None and callable(getattr(self.follower, 'set_path', None)):
+            self.follower.set_path(waypoints)
+            return
+        self.follower = self._make(waypoints)
         if self._uses_obstacles:
             self.follower.set_obstacles(self._obstacles)
 
@@ -291,13 +295,13 @@ class Navigator:
         """
         t = self._k * self.h
         self._k += 1
+        if self._plan is None:  # the goal comes first, planned on the map alone
+            self._replan(x, t, 'goal')
+            self._checked = t
         scan = self.laser.scan(x, stamp=t) if self.settings.sense else None
         if scan is not None:
             self.grid.add_scan(scan, x)
-        if self._plan is None:
-            self._replan(x, t, 'goal')
-            self._checked = t
-        elif scan is not None and (
+        if scan is not None and (
                 t - self._checked >= self.settings.replan_check_period - 1e-9):
             self._checked = t
             rest = remaining_polyline(self._plan, x)

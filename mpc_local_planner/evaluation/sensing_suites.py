@@ -1,0 +1,349 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""Suites with sensing: obstacles the map lacks, BARN as the challenge runs it, world files.
+
+Every run goes through `navigation.Navigator` (laser, obstacle memory, the planner's grid
+with re-planning, the local controller), so the controllers compared see the same scans and
+follow the same kind of re-planned paths:
+
+- ``unknown``: random worlds whose planned route is crossed by one to three
+  ``unknown_obstacles``; the planner starts from the map of the known ones, the laser shows
+  the rest (`unknown_world`).
+- ``barn`` with ``--sensing``: no prior map (the planner starts from an empty grid), the
+  laser only, the robot's true footprint (``--robot jackal``: the Jackal's rectangle and
+  the challenge's speed limits), success within the world's goal tolerance (1 m) before its
+  time limit (100 s) with no contact of the true footprint with the true cylinders.
+- ``worlds``: every world YAML of a folder, known and unknown obstacles as the files say.
+
+Without ``--sensing`` (``worlds`` only) the laser is off: the controller and the planner know
+the map of the known obstacles and nothing else.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit, PurePursuitConfig
+from mpc_local_planner.core.baselines.tracking_mpc import TrackingMPC
+from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.controller import ControllerSettings, MpcController
+from mpc_local_planner.core.errors import PlanningError
+from mpc_local_planner.core.footprint import Footprint, JACKAL
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
+from mpc_local_planner.evaluation.metrics import footprint_clearance
+from mpc_local_planner.evaluation.navigation import (
+    LocalController,
+    MpcLocal,
+    NavigationSettings,
+    Navigator,
+    PathFollowerLocal,
+    TrackingLocal,
+)
+from mpc_local_planner.evaluation.rollout import Outcome, Rollout, rollout, StopRule
+from mpc_local_planner.perception.grids import PlanningGrid
+from mpc_local_planner.perception.raycast import TrueGeometry
+from mpc_local_planner.worlds.map_files import OccupancyMap, rasterize_world
+from mpc_local_planner.worlds.world import load_barn_world, World
+
+__all__ = [
+    'MAP_RESOLUTION',
+    'Robot',
+    'ROBOTS',
+    'SensingResult',
+    'run_navigation',
+    'unknown_world',
+]
+
+# The grid the planner and the controller's map rectangles use, metres per cell.
+MAP_RESOLUTION = 0.05
+# Planner clearance beyond the robot (the MPC cuts corners within it).
+PLANNER_CLEARANCE = 0.1
+PLANNER_ITERATIONS = 1500
+PLANNER_RANGE = 0.5
+PATH_CAPACITY = 128
+# Unknown suite: the workspace, start, goal, success tolerance.
+UNKNOWN_BOUNDS = (-1.0, 7.0, -3.0, 3.0)
+UNKNOWN_START = np.array([0.0, 0.0, 0.0])
+UNKNOWN_GOAL = np.array([6.0, 0.0, 0.0])
+GOAL_TOLERANCE = 0.1
+# NLPs built before the first run: obstacle counts 0..PREPARED_SLOTS (more are built mid-run).
+PREPARED_SLOTS = 6
+UNKNOWN_ATTEMPTS = 50
+
+
+@dataclass(frozen=True)
+class Robot:
+    """A robot the suites drive: its true footprint and speed limits.
+
+    Attributes:
+        name: ``circle`` or ``jackal``.
+        footprint: The true shape (contacts are measured from it; the MPC and the planner
+            take it as it is).
+        v_max: Largest forward speed, m/s.
+        omega_max: Largest turn rate, rad/s.
+
+    """
+
+    name: str
+    footprint: Footprint
+    v_max: float
+    omega_max: float
+
+
+ROBOTS = {
+    'circle': Robot('circle', Footprint.circle(0.2), v_max=0.31, omega_max=1.9),
+    # The BARN challenge's Jackal: its rectangle; speed limits of the challenge's baseline
+    # configuration (see docs/results.md for where they come from).
+    'jackal': Robot('jackal', JACKAL, v_max=0.5, omega_max=1.57),
+}
+
+
+def _vertices(footprint: Footprint) -> tuple[tuple[float, float], ...]:
+    if footprint.is_circle:
+        return ()
+    return tuple((float(x), float(y)) for x, y in footprint.vertices)
+
+
+def _random_polygon(rng: np.random.Generator, cx: float, cy: float, low: float,
+                    high: float) -> ConvexPolygon:
+    sides = int(rng.integers(3, 7))
+    angles = np.sort(rng.uniform(0.0, 2.0 * math.pi, sides))
+    radii = rng.uniform(low, high, sides)
+    return ConvexPolygon.from_vertices(
+        np.column_stack([cx + radii * np.cos(angles), cy + radii * np.sin(angles)]))
+
+
+def _grid_planner(occupancy: OccupancyMap, robot: Robot, bounds: tuple[float, float, float, float],
+                  seed: int) -> tuple[PlanningGrid, RrtStarPlanner]:
+    """Return the planner's grid of a map and the RRT* planner on it (the navigator's)."""
+    config = PlannerConfig(
+        iterations=PLANNER_ITERATIONS, seed=seed, range=PLANNER_RANGE,
+        robot_radius=robot.footprint.radius if robot.footprint.is_circle else 0.0,
+        footprint=_vertices(robot.footprint), clearance=PLANNER_CLEARANCE)
+    grid = PlanningGrid(occupancy, inflation=config.inflation)
+    return grid, RrtStarPlanner.on_grid(grid, config=config, bounds=bounds)
+
+
+def unknown_world(index: int, seed: int, *, robot: Robot | None = None) -> World:
+    """Return world `index` of the unknown suite seeded by `seed` (reproducible).
+
+    Two to four known random polygons between start (0, 0, 0) and goal (6, 0, 0). The
+    navigator's own first plan (RRT* on the map of the known ones, planner seed 0, as
+    `run_navigation` plans it) is computed, and one to three unknown polygons are put on it
+    (centred on the route, between 25 % and 80 % of its length), so every world's first plan
+    runs into something the map lacks. A draw is kept when start and goal are clear of
+    everything by a margin and a path exists in the true world (RRT* on the known and
+    unknown obstacles together), so that every world can be solved.
+    """
+    robot = robot or ROBOTS['circle']
+    rng = np.random.default_rng([seed, index, 7])
+    clear = robot.footprint.radius + 0.5
+    ends = np.array([UNKNOWN_START[:2], UNKNOWN_GOAL[:2]])
+    for _ in range(UNKNOWN_ATTEMPTS):
+        known = [_random_polygon(rng, float(rng.uniform(1.3, 4.7)),
+                                 float(rng.uniform(-2.2, 2.2)), 0.25, 0.6)
+                 for _ in range(int(rng.integers(2, 5)))]
+        if any(np.any(o.distance(ends) < clear) for o in known):
+            continue
+        world = World(name=f'unknown_{index:03d}', bounds=UNKNOWN_BOUNDS,
+                      obstacles=tuple(known), start=UNKNOWN_START.copy(),
+                      goal=UNKNOWN_GOAL.copy(), footprint=robot.footprint,
+                      goal_tolerance=GOAL_TOLERANCE)
+        try:
+            route = _grid_planner(rasterize_world(world, MAP_RESOLUTION), robot,
+                                  world.bounds, 0)[1].plan(world.start, world.goal)
+        except PlanningError:
+            continue
+        lengths = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(route, axis=0).T))])
+        unknown = []
+        for fraction in np.sort(rng.uniform(0.25, 0.8, int(rng.integers(1, 4)))):
+            at = fraction * lengths[-1]
+            k = min(int(np.searchsorted(lengths, at, side='right')) - 1, len(route) - 2)
+            t = (at - lengths[k]) / max(lengths[k + 1] - lengths[k], 1e-12)
+            centre = route[k] + t * (route[k + 1] - route[k])
+            unknown.append(_random_polygon(rng, float(centre[0]), float(centre[1]), 0.2, 0.45))
+        if any(np.any(o.distance(ends) < clear) for o in unknown):
+            continue
+        config = PlannerConfig(iterations=PLANNER_ITERATIONS, seed=index, range=PLANNER_RANGE,
+                               robot_radius=robot.footprint.radius,
+                               clearance=PLANNER_CLEARANCE)
+        try:
+            RrtStarPlanner(known + unknown, UNKNOWN_BOUNDS, config=config).plan(
+                UNKNOWN_START, UNKNOWN_GOAL)
+        except PlanningError:
+            continue
+        return replace(world, unknown_obstacles=tuple(unknown),
+                       time_limit=max(60.0, 4.0 * float(lengths[-1]) / robot.v_max))
+    msg = f'unknown world {index} (seed {seed}): no solvable draw in {UNKNOWN_ATTEMPTS}'
+    raise RuntimeError(msg)
+
+
+def barn_sensing_world(path: str | Path, robot: Robot) -> World:
+    """Return a BARN world for the challenge's conditions: every cylinder unknown to the map."""
+    world = load_barn_world(path, footprint=robot.footprint) if not robot.footprint.is_circle \
+        else load_barn_world(path, robot_radius=robot.footprint.radius)
+    return replace(world, obstacles=(), unknown_obstacles=world.obstacles,
+                   true_shapes=world.physical_shapes())
+
+
+def _empty_map(bounds: tuple[float, float, float, float]) -> OccupancyMap:
+    """Return an all-unknown grid over bounds (the planner's start without a prior map)."""
+    xmin, xmax, ymin, ymax = bounds
+    width = int(math.ceil((xmax - xmin) / MAP_RESOLUTION))
+    height = int(math.ceil((ymax - ymin) / MAP_RESOLUTION))
+    return OccupancyMap(np.full((height, width), -1, dtype=np.int8), MAP_RESOLUTION,
+                        (xmin, ymin, 0.0))
+
+
+# Per process: one MPC per (controller, robot), reused across runs so that its NLPs are built
+# and compiled once, before the first run (a robot builds them at start-up, not mid-run).
+_MPC_CACHE: dict[tuple[str, str], Any] = {}
+
+
+def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True) -> Any:
+    """Return the cached MpcController or TrackingMPC for the robot, reset for a new run."""
+    key = (name, robot.name, robot.v_max, robot.omega_max, prepare)
+    mpc = _MPC_CACHE.get(key)
+    if mpc is None:
+        model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max)
+        config = MpcConfig(robot_radius=robot.footprint.radius if robot.footprint.is_circle
+                           else 0.0, footprint=_vertices(robot.footprint))
+        if name == 'proposed':
+            settings = ControllerSettings(goal_tolerance=0.05, goal_heading_tolerance=math.pi,
+                                          capacity=PATH_CAPACITY)
+            mpc = MpcController(model, config, settings=settings)
+            mpc.set_plan(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))  # the NLPs' path family
+            core = mpc.mpc
+        else:
+            mpc = TrackingMPC(model, config, target=world.goal)
+            core = mpc
+        if prepare:
+            _prepare(core)
+        _MPC_CACHE[key] = mpc
+    if name == 'proposed':
+        mpc.clear_path()
+        mpc.set_obstacles([])
+        mpc.mpc.reset()
+    else:
+        mpc.set_target(world.goal)
+        mpc.set_obstacles([])
+        mpc.reset()
+    return mpc
+
+
+def _prepare(mpc: Any) -> None:
+    """Build (and compile) the NLPs for up to PREPARED_SLOTS boxes or octagons in reach."""
+    box = ConvexPolygon.from_box(100.0, 100.0, 101.0, 101.0)
+    octagon = ConvexPolygon.from_circle(100.0, 100.0, 1.0, sides=8)
+    for shape in (box, octagon):
+        mpc.set_obstacles([shape] * PREPARED_SLOTS)
+        mpc.prepare(PREPARED_SLOTS)
+    mpc.set_obstacles([])
+    mpc.wait_compiled()
+
+
+def _local_controller(name: str, robot: Robot, world: World, *,
+                      prepare: bool = True) -> LocalController:
+    """Return the named local controller for the robot."""
+    if name == 'proposed':
+        return MpcLocal(_mpc(name, robot, world, prepare=prepare))
+    if name == 'tracking':
+        return TrackingLocal(_mpc(name, robot, world, prepare=prepare))
+    tolerance = 0.5 * float(world.goal_tolerance or GOAL_TOLERANCE)
+    if name == 'pure_pursuit':
+        pursuit = PurePursuitConfig(v_max=robot.v_max, omega_max=robot.omega_max,
+                                    goal_tolerance=min(0.03, tolerance))
+        return PathFollowerLocal(lambda waypoints: PurePursuit(waypoints, pursuit))
+    if name == 'dwa':
+        from mpc_local_planner.core.baselines.dwa import Dwa, DwaConfig
+
+        dwa = DwaConfig(max_vel_x=robot.v_max, max_vel_theta=robot.omega_max,
+                        footprint=robot.footprint, xy_goal_tolerance=min(0.03, tolerance))
+        reach = robot.v_max * dwa.sim_time + robot.footprint.radius + dwa.inflation_radius
+        return PathFollowerLocal(lambda waypoints: Dwa(waypoints, dwa), reach=reach,
+                                 uses_obstacles=True)
+    msg = f'unknown controller {name!r}'
+    raise ValueError(msg)
+
+
+@dataclass
+class SensingResult:
+    """A navigation run and what it needs for its row."""
+
+    run: Rollout
+    navigator: Navigator | None
+    contacts: int
+    min_clearance: float
+    note: str = ''
+
+
+def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool = True,
+                   seed: int = 0, h: float = 0.2, prepare: bool = True) -> SensingResult:
+    """Drive robot through world with the named controller, perception and re-planning.
+
+    Args:
+        world: Known obstacles (the planner's map) and unknown ones (only the laser sees).
+        controller: ``proposed``, ``tracking``, ``pure_pursuit`` or ``dwa``.
+        robot: Its footprint and speed limits (the world's own footprint is not used).
+        sensing: The laser is on (scans mark the planner's grid and fill the controller's
+            memory); off, only the map of the known obstacles is known.
+        seed: The planner's seed.
+        h: Control period, seconds.
+        prepare: Build and compile the MPC's NLPs before the run (once per process), as a
+            robot does at start-up; off, they are built when first needed (mid-run: slow
+            first steps), which is enough for tests that do not time steps.
+
+    """
+    known = rasterize_world(world, MAP_RESOLUTION) if world.obstacles else \
+        _empty_map(world.bounds)
+    grid, planner = _grid_planner(known, robot, world.bounds, seed)
+    local = _local_controller(controller, robot, world, prepare=prepare)
+    settings = NavigationSettings(sense=sensing)
+    navigator = Navigator(local, TrueGeometry(world.physical_shapes()), grid, planner,
+                          world.goal, h=h, known_map=known if world.obstacles else None,
+                          settings=settings)
+    clearance = footprint_clearance(world.physical_shapes(), robot.footprint)
+    rule = StopRule(time_limit=float(world.time_limit or 100.0),
+                    position_tolerance=float(world.goal_tolerance or GOAL_TOLERANCE))
+    model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max)
+    run = rollout(navigator, model, world.start, world.goal, h=h, rule=rule,
+                  clearance=clearance)
+    closest = float(np.min(clearance(run.rows[:, 1:4])))
+    return SensingResult(run=run, navigator=navigator,
+                         contacts=int(run.outcome is Outcome.COLLISION or closest <= 0.0),
+                         min_clearance=closest)
+
+
+def result_fields(result: SensingResult) -> dict[str, Any]:
+    """Return the runs.csv fields a navigation run adds."""
+    log = result.navigator.log if result.navigator is not None else None
+    control = np.asarray(log.control_seconds if log else [], dtype=float) * 1e3
+    plans = np.asarray(log.plan_seconds if log else [], dtype=float)
+    return {
+        'contacts': result.contacts,
+        'replans': log.replans if log else 0,
+        'replan_failures': log.replan_failures if log else 0,
+        'step_ms_median': float(np.median(control)) if len(control) else math.nan,
+        'step_ms_max': float(np.max(control)) if len(control) else math.nan,
+        'plan_s_max': float(np.max(plans)) if len(plans) else math.nan,
+    }

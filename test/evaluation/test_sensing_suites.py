@@ -1,0 +1,110 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""The navigation stack without DDS and the suites with sensing (laser, re-planning)."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+
+import numpy as np
+import pytest
+
+from mpc_local_planner.core.footprint import JACKAL
+from mpc_local_planner.evaluation import evaluate
+from mpc_local_planner.evaluation import sensing_suites as suites
+from mpc_local_planner.evaluation.rollout import Outcome
+from mpc_local_planner.worlds.data_files import resolve_data_file
+from mpc_local_planner.worlds.world import load_world
+
+CIRCLE = suites.ROBOTS['circle']
+
+
+def along(route: np.ndarray) -> np.ndarray:
+    """Return points along a polyline (200 per segment)."""
+    return np.concatenate([np.linspace(a, b, 200)
+                           for a, b in zip(route[:-1], route[1:], strict=True)])
+
+
+def test_unknown_worlds_are_reproducible_and_their_first_plan_meets_an_unknown_obstacle() -> None:
+    world = suites.unknown_world(0, 0)
+    again = suites.unknown_world(0, 0)
+    assert 1 <= len(world.unknown_obstacles) <= 3
+    assert all(np.allclose(a.vertices, b.vertices)
+               for a, b in zip(world.unknown_obstacles, again.unknown_obstacles, strict=True))
+    # the navigator's first plan, on the map of the known obstacles only, crosses one
+    known = suites.rasterize_world(world, suites.MAP_RESOLUTION)
+    _, planner = suites._grid_planner(known, CIRCLE, world.bounds, 0)
+    route = planner.plan(world.start, world.goal)
+    assert any(np.any(o.contains(along(route))) for o in world.unknown_obstacles)
+
+
+@pytest.mark.parametrize('controller', ['proposed', 'dwa'])
+def test_the_laser_reveals_what_the_map_lacks_and_the_planner_replans_around_it(
+        controller: str) -> None:
+    world = load_world(resolve_data_file('unknown_box.yaml'))
+    result = suites.run_navigation(world, controller, CIRCLE, prepare=False)
+    assert result.run.outcome is Outcome.REACHED, result.run.note
+    assert result.contacts == 0 and result.min_clearance > 0.0
+    log = result.navigator.log
+    assert log.replans >= 1 and log.plans[1][2] == 'blocked'
+    # the first plan (the map alone) runs through the box, the last one does not
+    box = world.unknown_obstacles[0]
+    first, last = log.plans[0][1], log.plans[-1][1]
+    assert np.any(box.contains(along(first))) and not np.any(box.contains(along(last)))
+    assert log.sensed and len(log.control_seconds) == len(result.run.steps)
+
+
+def test_without_sensing_the_unknown_box_is_hit() -> None:
+    world = load_world(resolve_data_file('unknown_box.yaml'))
+    result = suites.run_navigation(world, 'pure_pursuit', CIRCLE, sensing=False,
+                                   prepare=False)
+    assert result.run.outcome is Outcome.COLLISION and result.contacts == 1
+    assert result.navigator.log.replans == 0
+
+
+def test_barn_for_the_challenge_knows_no_obstacle_beforehand() -> None:
+    robot = dataclasses.replace(suites.ROBOTS['jackal'])
+    world = suites.barn_sensing_world(evaluate.DEFAULT_BARN_DIR / 'world_000.json', robot)
+    assert world.obstacles == () and len(world.unknown_obstacles) > 50
+    assert np.allclose(world.footprint.vertices, JACKAL.vertices)
+    assert any(type(shape).__name__ == 'Circle' for shape in world.physical_shapes())
+
+
+def test_the_unknown_suite_writes_contacts_replans_and_step_times(tmp_path) -> None:
+    code = evaluate.main(['--suite', 'unknown', '--count', '1', '--controllers',
+                          'pure_pursuit,dwa', '--out', str(tmp_path)])
+    assert code == 0
+    with open(tmp_path / 'runs.csv', newline='') as stream:
+        rows = list(csv.DictReader(stream))
+    assert [r['controller'] for r in rows] == ['pure_pursuit', 'dwa']
+    for row in rows:
+        assert row['sensing'] == 'True' and row['robot'] == 'circle'
+        assert int(row['replans']) >= 1 and row['contacts'] in ('0', '1')
+        assert float(row['step_ms_max']) >= float(row['step_ms_median']) > 0.0
+    summary = (tmp_path / 'summary.md').read_text()
+    assert 're-plans' in summary and 'max step [ms]' in summary and '| dwa |' in summary
+
+
+def test_suite_options_are_checked(tmp_path) -> None:
+    with pytest.raises(SystemExit):
+        evaluate.main(['--suite', 'random', '--sensing', '--out', str(tmp_path)])
+    with pytest.raises(SystemExit):
+        evaluate.main(['--suite', 'barn', '--robot', 'jackal', '--out', str(tmp_path)])
+    with pytest.raises(SystemExit):
+        evaluate.main(['--suite', 'barn', '--controllers', 'dwa', '--out', str(tmp_path)])
+    with pytest.raises(SystemExit):
+        evaluate.main(['--suite', 'worlds', '--out', str(tmp_path)])
