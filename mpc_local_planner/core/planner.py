@@ -83,6 +83,7 @@ from ompl import util as ou
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
+from mpc_local_planner.core.paths import remaining_polyline
 
 __all__ = [
     'FreeSpaceGrid',
@@ -217,21 +218,15 @@ class PlannerConfig:
         return self.robot_radius + self.clearance
 
     @property
-    def block_margin(self) -> float:
-        """Distance to an occupied cell that blocks the rest of a plan, metres.
+    def inscribed_radius(self) -> float:
+        """The largest disc about the robot's origin inside its footprint, metres.
 
-        A circle: its radius plus half the clearance: a re-planner re-plans when a newly seen
-        obstacle has eaten more than half of the clearance the plan was made with. A fresh
-        plan keeps the full clearance, so it is never blocked at once; half is what the MPC's
-        own margin (a few cm) and its grown corners need (they reach (sqrt(2) - 1) r beyond
-        the rounded clearance of a box). A polygon: its inscribed radius, a blockage the
-        robot would certainly touch: its plans are checked pose by pose with the swept
-        polygon, and through a gap barely wider than the robot (narrow_gap: 0.085 m to
-        spare) any part of the clearance would count the gap itself as a blockage.
+        What a re-plan that starts from a robot inside the inflation keeps from the
+        obstacles on its first, short segment (PlanningGrid.escape_point).
         """
         footprint = self.robot_footprint
         if footprint.is_circle:
-            return footprint.radius + 0.5 * self.clearance
+            return footprint.radius
         vertices = footprint.vertices
         edges = np.roll(vertices, -1, axis=0) - vertices
         cross = np.abs(edges[:, 0] * vertices[:, 1] - edges[:, 1] * vertices[:, 0])
@@ -1030,6 +1025,36 @@ class RrtStarPlanner:
                             f'by {self.config.inflation:g} m (robot_radius + clearance)')
             return None
         return self._footprint_problem(checks, points, start_heading, goal_heading)
+
+    def rest_problem(self, plan: np.ndarray, position: Sequence[float]) -> str | None:
+        """Say why the rest of a plan no longer passes this planner's check, or None.
+
+        The re-planning test, the same rule plans are made with (path_problem): the rest of
+        the plan from the robot's projection onto it, where obstacles marked since (the
+        laser's) may now violate the clearance. Its first config.inflation metres are left
+        out: a robot passing an obstacle may stand within the planner's clearance of it
+        (the MPC keeps a smaller margin), and a plan made from there starts there; judging
+        that stretch would re-plan at every check while the robot passes.
+
+        Args:
+            plan: (M, 2+) waypoints of the plan in force.
+            position: (x, y) of the robot.
+
+        Returns:
+            None if the rest is clear, else what is in collision, and where.
+
+        """
+        rest = remaining_polyline(plan, position)
+        if len(rest) < 2:
+            return None
+        lengths = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(rest, axis=0).T))])
+        skip = self.config.inflation
+        if lengths[-1] <= skip:
+            return None
+        k = int(np.searchsorted(lengths, skip, side='right')) - 1
+        t = (skip - lengths[k]) / max(lengths[k + 1] - lengths[k], 1e-12)
+        start = rest[k] + t * (rest[k + 1] - rest[k])
+        return self.path_problem(np.vstack([start, rest[k + 1:]]))
 
     def check_endpoint(self, pose: np.ndarray, label: str) -> np.ndarray:
         """Return pose[:2] after checking it is finite, in bounds and clear of the obstacles.

@@ -23,7 +23,7 @@ rollout's controller):
 2. the scan goes into the planner's grid (map plus scans, `PlanningGrid`) and into the
    controller's obstacle memory (`ObstacleMemory`);
 3. every ``replan_check_period`` the planner checks the rest of its plan as the
-   global_planner node does (`PlannerConfig.block_margin`) and re-plans from the pose; the
+   global_planner node does (`RrtStarPlanner.rest_problem`) and re-plans from the pose; the
    first plan is made at the first step, on the map alone (before the first scan), as the
    node plans a goal that comes before the laser has shown anything;
 4. the local controller gets the map's and the memory's obstacles near the robot
@@ -37,7 +37,7 @@ follow the same re-planned paths.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 import time
 from typing import Any, Protocol, Sequence
@@ -47,7 +47,7 @@ import numpy as np
 from mpc_local_planner.core.controller import MpcController, Reason
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.obstacles import ConvexPolygon
-from mpc_local_planner.core.paths import remaining_polyline, waypoints_to_poses
+from mpc_local_planner.core.paths import waypoints_to_poses
 from mpc_local_planner.core.planner import RrtStarPlanner
 from mpc_local_planner.evaluation.rollout import ControlStep
 from mpc_local_planner.perception.grids import PlanningGrid
@@ -82,9 +82,6 @@ class NavigationSettings:
         escape_distance: How far a re-plan may start from a robot standing within the
             planner's clearance (see PlanningGrid.escape_point).
         sense: The laser is on. Off, nothing but the map is known: no scans, no re-plans.
-        block_margin: The rest of the plan is blocked when it comes within this of an
-            occupied cell; None: the planner's (PlannerConfig.block_margin, as the
-            global_planner node checks).
 
     """
 
@@ -96,7 +93,6 @@ class NavigationSettings:
     sensing_margin: float = 0.5
     escape_distance: float = 1.0
     sense: bool = True
-    block_margin: float | None = None
 
 
 class LocalController(Protocol):
@@ -277,11 +273,6 @@ class Navigator:
         self._k = 0
 
     @property
-    def _block_margin(self) -> float:
-        margin = self.settings.block_margin
-        return self.planner.config.block_margin if margin is None else float(margin)
-
-    @property
     def plan(self) -> np.ndarray | None:
         """The plan in force, (M, 2) waypoints."""
         return self._plan
@@ -304,8 +295,7 @@ class Navigator:
         if scan is not None and (
                 t - self._checked >= self.settings.replan_check_period - 1e-9):
             self._checked = t
-            rest = remaining_polyline(self._plan, x)
-            if self.grid.first_within(rest, self._block_margin) is not None:
+            if self.planner.rest_problem(self._plan, x) is not None:
                 self._replan(x, t, 'blocked')
         started = time.perf_counter()
         if scan is not None:
@@ -341,15 +331,22 @@ class Navigator:
         self.local.follow(waypoints_to_poses(waypoints, float(x[2]), float(self.goal[2])))
 
     def _plan_from(self, x: np.ndarray, trigger: str) -> np.ndarray:
-        """Plan from x, or (a re-plan) from the nearest clear point the robot can reach."""
+        """Plan from x, or (a re-plan) from the nearest clear point the robot can reach.
+
+        After failed re-plans the seed moves on by their count, as the global_planner node
+        does: the same seed on the same grid would fail the same way.
+        """
+        planner = self.planner
+        if self.log.replan_failures:
+            config = replace(planner.config, seed=planner.config.seed + self.log.replan_failures)
+            planner = RrtStarPlanner.on_grid(self.grid, config=config, bounds=planner.bounds)
         try:
-            return self.planner.plan(x, self.goal)
+            return planner.plan(x, self.goal)
         except PlanningError:
             if trigger == 'goal':
                 raise
             escape = self.grid.escape_point(x, within=self.settings.escape_distance,
-                                            margin=self._block_margin)
+                                            margin=planner.config.inscribed_radius)
             if escape is None:
                 raise
-            return np.vstack([np.asarray(x, dtype=float)[:2],
-                              self.planner.plan(escape, self.goal)])
+            return np.vstack([np.asarray(x, dtype=float)[:2], planner.plan(escape, self.goal)])

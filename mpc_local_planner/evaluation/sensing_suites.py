@@ -76,9 +76,11 @@ __all__ = [
 
 # The grid the planner and the controller's map rectangles use, metres per cell.
 MAP_RESOLUTION = 0.05
-# Planner clearance beyond the robot (the MPC cuts corners within it).
+# Planner clearance beyond the robot (the MPC cuts corners within it): a round robot's, and a
+# polygon's (checked pose by pose, it needs less; BARN's gaps are cut for the Jackal).
 PLANNER_CLEARANCE = 0.1
-PLANNER_ITERATIONS = 1500
+POLYGON_CLEARANCE = 0.05
+PLANNER_ITERATIONS = 3000
 PLANNER_RANGE = 0.5
 PATH_CAPACITY = 128
 # Unknown suite: the workspace, start, goal, success tolerance.
@@ -89,6 +91,7 @@ GOAL_TOLERANCE = 0.1
 # NLPs built before the first run: obstacle counts 0..PREPARED_SLOTS (more are built mid-run).
 PREPARED_SLOTS = 6
 UNKNOWN_ATTEMPTS = 50
+STALL_SECONDS = 20.0
 
 
 @dataclass(frozen=True)
@@ -139,7 +142,8 @@ def _grid_planner(occupancy: OccupancyMap, robot: Robot, bounds: tuple[float, fl
     config = PlannerConfig(
         iterations=PLANNER_ITERATIONS, seed=seed, range=PLANNER_RANGE,
         robot_radius=robot.footprint.radius if robot.footprint.is_circle else 0.0,
-        footprint=_vertices(robot.footprint), clearance=PLANNER_CLEARANCE)
+        footprint=_vertices(robot.footprint),
+        clearance=PLANNER_CLEARANCE if robot.footprint.is_circle else POLYGON_CLEARANCE)
     grid = PlanningGrid(occupancy, inflation=config.inflation)
     return grid, RrtStarPlanner.on_grid(grid, config=config, bounds=bounds)
 
@@ -323,8 +327,11 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
                           world.goal, h=h, known_map=known if world.obstacles else None,
                           settings=settings)
     clearance = footprint_clearance(world.physical_shapes(), robot.footprint)
+    # a robot may wait in front of an obstacle for a re-plan: standing still ends a run after
+    # STALL_SECONDS, not the rollout's default 5 s
     rule = StopRule(time_limit=float(world.time_limit or 100.0),
-                    position_tolerance=float(world.goal_tolerance or GOAL_TOLERANCE))
+                    position_tolerance=float(world.goal_tolerance or GOAL_TOLERANCE),
+                    stall_steps=int(STALL_SECONDS / h))
     model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max)
     run = rollout(navigator, model, world.start, world.goal, h=h, rule=rule,
                   clearance=clearance)

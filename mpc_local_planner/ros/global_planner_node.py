@@ -41,10 +41,9 @@ beams pass through, placed with the odometry pose nearest to its stamp; a malfor
 dropped with one throttled error.
 
 Re-planning (``replan_check_rate``, 2 Hz by default): the rest of the plan in force, from the
-robot's projection onto it, is checked against the grid; when it comes within
-PlannerConfig.block_margin of an occupied cell (a round robot's radius plus half the
-clearance, a polygon's inscribed radius: an obstacle the map did not have, marked by the
-laser), the goal is planned again from the current odometry, and with
+robot's projection onto it, is checked against the grid with the rule plans are made with
+(RrtStarPlanner.rest_problem); when an obstacle the map did not have, marked by the laser,
+violates its clearance, the goal is planned again from the current odometry, and with
 ``replan_period`` > 0 also periodically. A new plan replaces the old on ``plan``; the
 controller follows it from the robot's projection. ``planner/diagnostics`` says what
 triggered each plan and counts the re-plans; a failed re-plan is a warning and the plan in
@@ -83,7 +82,7 @@ from mpc_local_planner.core.diagnostics import (
 )
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import parse_footprint
-from mpc_local_planner.core.paths import analytic_path, remaining_polyline, waypoints_to_poses
+from mpc_local_planner.core.paths import analytic_path, waypoints_to_poses
 from mpc_local_planner.core.planner import path_length, PlannerConfig, RrtStarPlanner
 from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.perception.pose_history import PoseHistory
@@ -180,9 +179,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('frame_id', 'map', 'frame of the plan'),
     ParameterSpec('replan_check_rate', 2.0,
                   'how often (Hz) the rest of the plan is checked against the grid (map plus '
-                  'scans); a plan an obstacle comes within robot_radius + clearance / 2 of (a '
-                  'polygon: its inscribed radius) is re-planned from the current odometry; 0 = '
-                  'never (read at activate)',
+                  'scans) with the rule plans are made with; a blocked plan is re-planned from '
+                  'the current odometry; 0 = never (read at activate)',
                   float_range=(0.0, 100.0)),
     ParameterSpec('replan_period', 0.0,
                   're-plan the goal in force this often (s) even when the plan is clear; 0 = '
@@ -626,23 +624,20 @@ class GlobalPlannerNode(ManagedNode):
     def check_plan(self) -> None:
         """Re-plan the goal in force when the rest of its plan is blocked, or periodically.
 
-        Blocked means that the rest of the plan (from the robot's projection onto it) comes
-        within PlannerConfig.block_margin (a round robot's radius plus half the clearance, a
-        polygon's inscribed radius) of a cell the grid now holds as occupied: an obstacle the
-        map did not have, seen by the laser. The world
+        Blocked means that the rest of the plan (from the robot's projection onto it, less
+        its first stretch: RrtStarPlanner.rest_problem) no longer passes the check plans are
+        made with: an obstacle the map did not have, marked by the laser, now violates the
+        clearance. The world
         file's obstacles do not change, so without use_map only replan_period re-plans.
         """
         if (not self._active or self._goal is None or self.last_plan is None
                 or self._state is None or self._planner is None or self._pending_goal is not None
                 or self.get_parameter('analytic_path').value):
             return
-        rest = remaining_polyline(self.last_plan, self._state)
-        blocked_at = None
-        if self._grid is not None:
-            blocked_at = self._grid.first_within(rest, self._planner.config.block_margin)
+        problem = self._planner.rest_problem(self.last_plan, self._state)
         period = float(self.get_parameter('replan_period').value)
-        if blocked_at is not None:
-            self.get_logger().info(f'the plan is blocked {blocked_at:.2f} m ahead: re-planning')
+        if problem is not None:
+            self.get_logger().info(f'the rest of the plan is blocked ({problem}): re-planning')
             self._plan_to(self._goal, PlanTrigger.BLOCKED)
         elif period > 0.0 and self._now() - self._plan_time >= period:
             self._plan_to(self._goal, PlanTrigger.PERIODIC)
@@ -693,7 +688,7 @@ class GlobalPlannerNode(ManagedNode):
             if trigger is PlanTrigger.GOAL or self._grid is None:
                 raise
             escape = self._grid.escape_point(start, within=ESCAPE_DISTANCE,
-                                             margin=self._planner.config.block_margin)
+                                             margin=self._planner.config.inscribed_radius)
             if escape is None:
                 raise
             return np.vstack([start[:2], self._planner.plan(escape, goal)])
