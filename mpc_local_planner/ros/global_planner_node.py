@@ -59,6 +59,7 @@ supervisor such as closed_loop learns that no plan will come.
 
 from __future__ import annotations
 
+from dataclasses import replace
 import math
 import sys
 from typing import Any
@@ -236,6 +237,7 @@ class GlobalPlannerNode(ManagedNode):
         self.last_plan: np.ndarray | None = None
         self.plan_count = 0
         self.replan_count = 0
+        self._replan_failures = 0  # consecutive failed re-plans (their count moves the seed on)
         self._goal: np.ndarray | None = None  # the goal of the plan in force
         self._plan_time = 0.0  # when the plan in force was published (node clock, s)
         self._check_timer: Any = None
@@ -660,9 +662,12 @@ class GlobalPlannerNode(ManagedNode):
             elif self._problems.report('replan'):
                 self.get_logger().warning(f'{trigger} re-plan failed: {detail}; the plan in '
                                           'force stays')
+            if trigger is not PlanTrigger.GOAL:
+                self._replan_failures += 1
             self._report(PlannerDiagnostics(planned=False, detail=detail, trigger=trigger,
                                             replans=self.replan_count))
             return
+        self._replan_failures = 0
         if trigger is PlanTrigger.GOAL:
             self._goal = goal
         else:
@@ -679,19 +684,24 @@ class GlobalPlannerNode(ManagedNode):
         in front of an obstacle it has just seen may stand within robot_radius + clearance
         of it, where no plan can start. A re-plan then starts from the nearest clear cell
         the robot can drive straight to (PlanningGrid.escape_point, within ESCAPE_DISTANCE),
-        and the plan begins with that short segment.
+        and the plan begins with that short segment. After failed re-plans the seed moves on
+        by their count: the same seed on the same grid would fail the same way.
         """
         assert self._planner is not None
+        planner = self._planner
+        if self._replan_failures and trigger is not PlanTrigger.GOAL and self._grid is not None:
+            config = replace(planner.config, seed=planner.config.seed + self._replan_failures)
+            planner = RrtStarPlanner.on_grid(self._grid, config=config, bounds=planner.bounds)
         try:
-            return self._planner.plan(start, goal)
+            return planner.plan(start, goal)
         except PlanningError:
             if trigger is PlanTrigger.GOAL or self._grid is None:
                 raise
             escape = self._grid.escape_point(start, within=ESCAPE_DISTANCE,
-                                             margin=self._planner.config.inscribed_radius)
+                                             margin=planner.config.inscribed_radius)
             if escape is None:
                 raise
-            return np.vstack([start[:2], self._planner.plan(escape, goal)])
+            return np.vstack([start[:2], planner.plan(escape, goal)])
 
     def _publish_analytic(self) -> None:
         _, poses = analytic_path(str(self.get_parameter('analytic_path').value)).sample(
