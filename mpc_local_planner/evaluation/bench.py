@@ -26,14 +26,23 @@ goal): a simulated 720-beam scan; scan -> obstacles and the obstacle memory's up
 the whole control step with scan obstacles (memory update, obstacles set, MPC solve, N = 10)
 in a ROS-free closed loop along the world's RRT* path.
 
-Usage: ``python -m mpc_local_planner.evaluation.bench [--quick] [--skip-dds] [--out FILE]``.
+Polygon footprint (the Jackal, core/footprint.JACKAL, N = 10): the whole control step in the
+same closed loop, along an RRT* plan made for the footprint, on the paper's box (start and
+goal as in the paper; the paper's sinusoid itself crosses the box for the Jackal's rectangle,
+an Assumption 1 violation for that path) and on BARN world 0, with scan obstacles (the
+perception rows' step) and with the world's obstacles known (the MPC's step alone).
+
+Usage: ``python -m mpc_local_planner.evaluation.bench [--quick] [--skip-dds] [--out FILE]
+[--sections ...]``.
 """
 
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 import json
 import math
+import os
 import platform
 import sys
 import time
@@ -50,6 +59,7 @@ from mpc_local_planner.core.controller import (
     within_faces,
 )
 from mpc_local_planner.core.errors import PlanningError
+from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC
 from mpc_local_planner.core.obstacles import ConvexPolygon
@@ -60,10 +70,11 @@ from mpc_local_planner.perception.laser import contact, SimulatedLaser
 from mpc_local_planner.perception.raycast import TrueGeometry
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory, scan_to_obstacles
 from mpc_local_planner.worlds.data_files import BARN_DIR
-from mpc_local_planner.worlds.world import load_barn_world, World
+from mpc_local_planner.worlds.world import load_barn_world, paper_world, World
 
 __all__ = [
     'barn_line_poses',
+    'bench_footprint',
     'bench_laser',
     'bench_scan_control',
     'bench_scan_obstacles',
@@ -94,6 +105,18 @@ SWEEP_SPEED = 0.5  # m/s
 TARGET_LASER_MS = 2.0
 TARGET_SCAN_OBSTACLES_MS = 2.0
 TARGET_CONTROL_STEP_MS = 5.0
+# Clearance (m) of the RRT* plans the control-step rows follow (for a polygon: of every pose).
+PLAN_CLEARANCE = 0.05
+# Polygon footprint rows (the "polygon footprint" issue): the Jackal at N = 10, held to these
+# targets (medians).
+# 'barn_map' is BARN world 0 with its obstacles known (no laser): the MPC's step without the
+# perception's share, which 'barn' (scan obstacles, as the perception rows) includes.
+FOOTPRINT_SCENARIOS = ('paper', 'barn', 'barn_map')
+FOOTPRINT_HORIZON = 10
+TARGET_FOOTPRINT_SOLVE_MS = 2.0
+TARGET_FOOTPRINT_STEP_MS = TARGET_CONTROL_STEP_MS
+# What main() can run, in this order (dds also needs no --skip-dds).
+SECTIONS = ('horizons', 'obstacles', 'rrt', 'perception', 'footprint', 'dds')
 
 
 def paper_obstacle() -> ConvexPolygon:
@@ -408,14 +431,26 @@ def bench_scan_obstacles(poses: int) -> dict[str, Any]:
             'target_ms': TARGET_SCAN_OBSTACLES_MS}
 
 
-def _barn_reference(world: World) -> tuple[np.ndarray, str]:
-    """Return (M, 3) poses of an RRT* path of the world (or its straight line) and its kind."""
+def _reference(world: World, footprint: Footprint | None = None) -> tuple[np.ndarray, str]:
+    """Return (M, 3) poses of an RRT* path of the world (or its straight line) and its kind.
+
+    With a polygon footprint the plan is made for it (RrtStarPlanner checks every pose of the
+    path, turns in place included, to keep PLAN_CLEARANCE): the MPC's Assumption 1 asks
+    the followed path to be clear for the robot's actual shape, and a plan for a disc says
+    nothing about a rectangle's corners.
+    """
+    robot: dict[str, Any] = ({'robot_radius': world.robot_radius} if footprint is None
+                             else {'footprint': footprint})
     config = PlannerConfig(iterations=3000, time_limit=30.0, seed=0, range=0.5,
-                           robot_radius=world.robot_radius, clearance=0.05)
+                           clearance=PLAN_CLEARANCE, **robot)
     try:
         points = RrtStarPlanner(world.obstacles, world.bounds, config=config).plan(
             world.start, world.goal)
         kind = f'RRT* ({len(points)} waypoints)'
+        if footprint is not None:
+            length = float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
+            kind = (f'RRT* plan for the footprint ({len(points)} waypoints, {length:.2f} m, '
+                    f'clearance {PLAN_CLEARANCE:g} m)')
     except PlanningError:
         points = np.array([world.start[:2], world.goal[:2]])
         kind = 'straight start-goal line (RRT* found no path)'
@@ -424,48 +459,75 @@ def _barn_reference(world: World) -> tuple[np.ndarray, str]:
     return np.column_stack([points, yaw]), kind
 
 
-def _scan_control_run(world: World, poses: np.ndarray, steps: int,
-                      controller: MpcController) -> dict[str, Any]:
+def _control_run(world: World, poses: np.ndarray, steps: int, controller: MpcController,
+                 *, sensing: bool = True) -> dict[str, Any]:
+    """Drive the plan in closed loop for at most steps control steps; return what was timed.
+
+    sensing: obstacles come from the simulated laser through the obstacle memory, and the
+    timed step includes the memory's update and set_obstacles (a robot without a map does
+    that work every step); else the controller keeps the obstacles it was built with (the
+    world's, known) and the timed step is MpcController.compute alone. Contacts are checked
+    with the world's footprint at the robot's heading (exact for a polygon).
+    """
     model = controller.model
     config = controller.config
-    laser = SimulatedLaser(TrueGeometry.from_world(world), beams=LASER_BEAMS)
-    geometry = laser.geometry
+    geometry = TrueGeometry.from_world(world)
+    laser = SimulatedLaser(geometry, beams=LASER_BEAMS) if sensing else None
     memory = ObstacleMemory(OBSTACLE_TTL)
     controller.set_plan(poses)
-    reach = float(model.u_max[0]) * config.step * config.horizon + config.inflation(
-        float(model.u_max[0])) + 0.5
+    # config.reach covers a polygon's circumscribed radius too; 0.5 m more so that an
+    # obstacle is known before the horizon can reach it
+    reach = config.reach(float(model.u_max[0])) + 0.5
     x = np.array(world.start, dtype=float)
-    update_ms, solve_ms, step_ms, in_memory, in_reach = [], [], [], [], []
-    contacts, reached, failures = 0, False, 0
+    update_ms, set_solve_ms, step_ms, nlp_ms = [], [], [], []
+    in_memory, in_reach, active = [], [], []
+    contacts, reached, failures, timeouts = 0, False, 0, 0
     for k in range(steps):
         t = k * config.step
-        scan = laser.scan(x, stamp=t)
+        scan = laser.scan(x, stamp=t) if laser is not None else None
         start = time.perf_counter()
-        memory.update(scan, x)
-        nearby = within_faces(memory.obstacles(x[:2], reach), config.faces_per_obstacle)
+        if scan is not None:
+            memory.update(scan, x)
+            nearby = within_faces(memory.obstacles(x[:2], reach), config.faces_per_obstacle)
         middle = time.perf_counter()
-        controller.set_obstacles(nearby)
+        if scan is not None:
+            controller.set_obstacles(nearby)
         output = controller.compute(x, t)
         end = time.perf_counter()
         update_ms.append(1e3 * (middle - start))
-        solve_ms.append(1e3 * (end - middle))
+        set_solve_ms.append(1e3 * (end - middle))
         step_ms.append(1e3 * (end - start))
-        in_memory.append(len(memory))
-        in_reach.append(len(nearby))
-        failures += int(output.solution is not None and not output.solution.success)
+        solution = output.solution
+        if scan is not None:
+            in_memory.append(len(memory))
+            in_reach.append(len(nearby))
+        elif solution is not None:
+            in_reach.append(solution.obstacles_in_reach)
+        if solution is not None:
+            nlp_ms.append(1e3 * solution.solve_time_s)
+            active.append(solution.obstacles_active)
+            failures += int(not solution.success)
+            # MpcSolution.timed_out: the step's solving ran out of config.solve_budget()
+            timeouts += int(getattr(solution, 'timed_out', False))
         if output.reason is Reason.GOAL_REACHED:
             reached = True
             break
         x = model.step(x, output.u, config.step)
-        contacts += int(contact(geometry, float(x[0]), float(x[1]), world.robot_radius))
+        contacts += int(contact(geometry, float(x[0]), float(x[1]), world.footprint,
+                                float(x[2])))
     goal_distance = float(np.hypot(x[0] - world.goal[0], x[1] - world.goal[1]))
     return {'steps': len(step_ms), 'step_ms': stats(step_ms),
-            'memory_update_ms': stats(update_ms), 'set_and_solve_ms': stats(solve_ms),
-            'remembered_median': float(np.median(in_memory)),
-            'in_reach_median': float(np.median(in_reach)), 'in_reach_max': int(max(in_reach)),
+            'memory_update_ms': stats(update_ms), 'set_and_solve_ms': stats(set_solve_ms),
+            'solve_ms': stats(nlp_ms),
+            'remembered_median': float(np.median(in_memory)) if in_memory else 0.0,
+            'in_reach_median': float(np.median(in_reach)) if in_reach else 0.0,
+            'in_reach_max': int(max(in_reach, default=0)),
+            'active_median': float(np.median(active)) if active else 0.0,
+            'active_max': int(max(active, default=0)),
             'reached': reached, 'goal_distance': goal_distance,
             'heading_error': abs(float(wrap_angle(x[2] - world.goal[2]))),
-            'contact_steps': contacts, 'not_solved_steps': failures}
+            'contact_steps': contacts, 'not_solved_steps': failures,
+            'timed_out_steps': timeouts}
 
 
 def bench_scan_control(steps: int) -> dict[str, Any]:
@@ -479,26 +541,131 @@ def bench_scan_control(steps: int) -> dict[str, Any]:
     the timed run meets.
     """
     world = _barn_world()
-    poses, kind = _barn_reference(world)
+    poses, kind = _reference(world)
     config = MpcConfig(horizon=10, step=STEP, robot_radius=world.robot_radius)
     settings = ControllerSettings(goal_tolerance=0.1, goal_heading_tolerance=math.pi,
                                   capacity=2 * len(poses) + 1)
     controller = MpcController(Unicycle(), config, settings=settings)
-    _scan_control_run(world, poses, steps, controller)  # builds the NLPs it meets
+    _control_run(world, poses, steps, controller)  # builds the NLPs it meets
     controller.mpc.wait_compiled()
     controller.clear_path()
-    result = _scan_control_run(world, poses, steps, controller)
+    result = _control_run(world, poses, steps, controller)
     return {'world': BARN_WORLD, 'horizon': config.horizon, 'solver': config.solver,
             'reference': kind, 'target_ms': TARGET_CONTROL_STEP_MS, **result}
+
+
+def _footprint_world(scenario: str, footprint: Footprint) -> World:
+    """Return the scenario's world with the robot's shape set to footprint."""
+    if scenario == 'paper':
+        return replace(paper_world(), footprint=footprint, robot_radius=0.0)
+    if scenario in ('barn', 'barn_map'):
+        return load_barn_world(BARN_DIR / BARN_WORLD, footprint=footprint)
+    msg = f'unknown footprint scenario {scenario!r}; expected one of {FOOTPRINT_SCENARIOS}'
+    raise ValueError(msg)
+
+
+def bench_footprint(scenario: str, steps: int, *, footprint: Footprint = JACKAL,
+                    compile_functions: bool = True) -> dict[str, Any]:
+    """Time the control step of a polygon footprint, N = 10, along an RRT* plan made for it.
+
+    scenario 'paper': the paper's box, start and goal; the obstacles are known (set once, as
+    in the paper's rows) and the timed step is MpcController.compute. The paper's sinusoid
+    is not the reference: it crosses the box for the Jackal's rectangle (Assumption 1 fails
+    for that path: the MPC stops in front of the box, and its solves there are slow), so the
+    path is an RRT* plan for the footprint (PLAN_CLEARANCE) between the same poses.
+    scenario 'barn': BARN world 0 with scan obstacles, the same timed step as
+    bench_scan_control (memory update, set_obstacles, compute), along the world's RRT* plan
+    for the footprint. 'barn_map': the same world and plan with its obstacles known (set
+    once) and the step MpcController.compute, as on the paper's box: what the MPC costs
+    without the perception's share.
+
+    A first, untimed run along the same plan builds the NLPs it meets; with
+    compile_functions it also waits for their compilation (gcc, about a minute per NLP
+    shape on a loaded two-core machine, cached on disk: slow the first time only), which is
+    set-up, not a step's work. The solve time is MpcSolution.solve_time_s (the NLP solver
+    calls); the step time is the whole timed step.
+    """
+    world = _footprint_world(scenario, footprint)
+    poses, kind = _reference(world, footprint)
+    vertices = tuple((float(px), float(py)) for px, py in np.asarray(footprint.vertices))
+    config = MpcConfig(horizon=FOOTPRINT_HORIZON, step=STEP, footprint=vertices,
+                       compile=compile_functions)
+    # the paper's rows stop within REACHED_POSITION and REACHED_HEADING; BARN scores the
+    # position only, as bench_scan_control does
+    tolerances = ((REACHED_POSITION, REACHED_HEADING) if scenario == 'paper'
+                  else (0.1, math.pi))
+    settings = ControllerSettings(goal_tolerance=tolerances[0],
+                                  goal_heading_tolerance=tolerances[1],
+                                  capacity=2 * len(poses) + 1)
+    sensing = scenario == 'barn'
+    known = () if sensing else world.obstacles
+    controller = MpcController(Unicycle(), config, obstacles=known, settings=settings)
+    started = time.perf_counter()
+    _control_run(world, poses, steps, controller, sensing=sensing)  # builds the NLPs
+    controller.mpc.wait_compiled()
+    warmup_s = time.perf_counter() - started
+    controller.clear_path()
+    result = _control_run(world, poses, steps, controller, sensing=sensing)
+    label = {'paper': "paper's box, RRT* for it", 'barn': 'BARN world 0, scans, RRT* for it',
+             'barn_map': 'BARN world 0, map, RRT* for it'}[scenario]
+    return {'scenario': scenario, 'label': label,
+            'world': 'paper_obstacle' if scenario == 'paper' else BARN_WORLD,
+            'footprint': [list(v) for v in vertices], 'horizon': config.horizon,
+            'solver': config.solver if not compile_functions else f'{config.solver}+compiled',
+            'obstacles': 'scan' if sensing else 'known', 'reference': kind,
+            'max_steps': steps, 'warmup_s': warmup_s,
+            'target_solve_ms': TARGET_FOOTPRINT_SOLVE_MS,
+            'target_step_ms': TARGET_FOOTPRINT_STEP_MS,
+            'solve_verdict': _verdict(result['solve_ms'], TARGET_FOOTPRINT_SOLVE_MS),
+            'step_verdict': _verdict(result['step_ms'], TARGET_FOOTPRINT_STEP_MS),
+            **result}
+
+
+def _verdict(figures: dict[str, float], target: float) -> str:
+    """Say whether the median meets the target, as every target row of the tables does."""
+    return 'met' if figures['median'] <= target else 'MISSED'
+
+
+FOOTPRINT_HEADER = (
+    '| scenario (Jackal, N = 10)        | steps | goal | solve ms |  p95 ms  |  max ms  '
+    '| <= 2 ms | step ms  |  max ms  | <= 5 ms | nsv |\n'
+    '|----------------------------------|-------|------|----------|----------|----------'
+    '|---------|----------|----------|---------|-----|')
+
+
+def _footprint_lines(rows: Sequence[dict[str, Any]]) -> list[str]:
+    """Return the footprint table: a row per scenario, then a line of context for each."""
+    lines = FOOTPRINT_HEADER.split('\n')
+    for r in rows:
+        s, w = r['solve_ms'], r['step_ms']
+        lines.append(
+            f"| {r['label']:<32} | {r['steps']:>5} | {'yes' if r['reached'] else 'NO':>4} "
+            f"| {s['median']:8.3f} | {s['p95']:8.3f} | {s['max']:8.3f} "
+            f"| {r['solve_verdict']:<7} | {w['median']:8.3f} | {w['max']:8.3f} "
+            f"| {r['step_verdict']:<7} | {r['not_solved_steps']:>3} |")
+    for r in rows:
+        if r['obstacles'] == 'scan':
+            obstacles = (f"scan obstacles: the step is memory update (median "
+                         f"{r['memory_update_ms']['median']:.3f} ms) + set_obstacles and "
+                         f"compute (median {r['set_and_solve_ms']['median']:.3f} ms)")
+        else:
+            obstacles = 'known obstacles: the step is MpcController.compute'
+        lines.append(
+            f"{r['scenario']}: {r['solver']}, {obstacles}; along the {r['reference']}; "
+            f"{r['steps']} of at most {r['max_steps']} steps, "
+            f"{'goal reached' if r['reached'] else 'goal not reached'} "
+            f"({r['goal_distance']:.3f} m from it), in reach median {r['in_reach_median']:g} "
+            f"(max {r['in_reach_max']}), in the NLP median {r['active_median']:g} "
+            f"(max {r['active_max']}), {r['contact_steps']} steps in contact, "
+            f"{r['timed_out_steps']} out of time budget; untimed warm-up "
+            f"{r['warmup_s']:.1f} s (NLP builds and compilation).")
+    return lines
 
 
 def _perception_lines(laser: dict[str, Any], scan: dict[str, Any],
                       control: dict[str, Any]) -> list[str]:
     def cell(figures: dict[str, float]) -> str:
         return (f"{figures['median']:7.3f} | {figures['p95']:7.3f} | {figures['max']:7.3f}")
-
-    def verdict(figures: dict[str, float], target: float) -> str:
-        return 'met' if figures['median'] <= target else 'MISSED'
 
     rows = [
         ('simulated scan (720 beams)', laser['scan_ms'], laser['target_ms']),
@@ -514,7 +681,7 @@ def _perception_lines(laser: dict[str, Any], scan: dict[str, Any],
              '--------|']
     for name, figures, target in rows:
         goal = f'{target:9.1f}' if math.isfinite(target) else ' ' * 9
-        mark = verdict(figures, target) if math.isfinite(target) else ''
+        mark = _verdict(figures, target) if math.isfinite(target) else ''
         lines.append(f'| {name:<28} | {cell(figures)} | {goal} | {mark:<6} |')
     lines.append(
         f"scans: {scan['scans']} poses along the start-goal line, one scan per "
@@ -551,73 +718,111 @@ HEADER = ('| backend          |   N | obs | reach | active | solve ms |  p95 ms 
           '|-------|----------|--------|-----|--------|-----|')
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run the benchmark, print the table and write JSON."""
+def main(argv: Sequence[str] | None = None, *, footprint_compile: bool = True,
+         footprint_steps: int | None = None) -> int:
+    """Run the benchmark, print the tables and write JSON.
+
+    footprint_compile: compile the footprint rows' NLPs with gcc (as a robot would run
+    them); False times the interpreted functions, and footprint_steps caps each footprint
+    row's steps: a test uses both to check the rows' form without waiting minutes for gcc.
+    """
     parser = argparse.ArgumentParser(prog='mpc_bench', description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true',
-                        help='fewer steps, N = 10 and 40 only, 50 scans and 60 control steps')
+                        help='fewer steps, N = 10 and 40 only, 50 scans and 60 control steps '
+                             '(also per footprint row)')
     parser.add_argument('--skip-dds', action='store_true', help='skip the ROS 2 measurement')
     parser.add_argument('--out', default='bench.json', help='JSON output file')
     parser.add_argument('--backends', nargs='*', default=list(SOLVERS),
                         help='backends to time (default: all)')
+    parser.add_argument('--sections', nargs='*', choices=SECTIONS, default=list(SECTIONS),
+                        help='tables to measure (default: all; dds also needs no --skip-dds)')
     args = parser.parse_args(argv)
+    sections = set(args.sections)
 
     max_steps = 60 if args.quick else 250
     horizons = (10, 40) if args.quick else HORIZONS
     results: dict[str, Any] = {
         'machine': {'python': sys.version.split()[0], 'casadi': ca.__version__,
-                    'platform': platform.platform()},
+                    'platform': platform.platform(), 'cpus': os.cpu_count(),
+                    'load_average_before': list(os.getloadavg())},
         'command': 'mpc_bench ' + ' '.join(sys.argv[1:] if argv is None else argv),
-        'horizons': [], 'obstacles': [],
     }
     paper = [paper_obstacle()]
     variants = [(b, True) for b in args.backends] + [('ipopt', False)] * ('ipopt' in args.backends)
     variants += [('fatrop', False)] * ('fatrop' in args.backends)
-    print(f'closed loop on the paper scenario, h = {STEP} s, medians over the steps; '
-          'nsv = steps without a verified solver solution', flush=True)
-    print(f'x peer = median solve time of {PEER!r} / median solve time of the row; {PEER!r} '
-          f'is the same OCP in {OptiMpc.LABEL} (shifted primal and multipliers)', flush=True)
-    print(HEADER, flush=True)
-    for n in horizons:
-        peer = closed_loop(PEER, n, paper, max_steps=max_steps)
-        for backend, compiled in variants:
-            r = closed_loop(backend, n, paper, max_steps=max_steps, compile_functions=compiled)
-            r['ratio_to_peer'] = peer['solve_ms']['median'] / r['solve_ms']['median']
-            results['horizons'].append(r)
-            print(_row(r, peer), flush=True)
-        results['horizons'].append(peer)
-        print(_row(peer, peer), flush=True)
-    print("\nN = 10 with more obstacles (reach: most obstacles within the horizon's reach at "
-          'once, all checked; active: most held in the NLP at once)')
-    print(HEADER, flush=True)
-    path = paper_sinusoid()
-    for count in OBSTACLE_COUNTS:
-        obstacles = paper + extra_obstacles(count - 1, path)
-        peer = closed_loop(PEER, 10, obstacles, max_steps=max_steps)
-        for backend, compiled in variants:
-            r = closed_loop(backend, 10, obstacles, max_steps=max_steps,
-                            compile_functions=compiled)
-            r['ratio_to_peer'] = peer['solve_ms']['median'] / r['solve_ms']['median']
-            results['obstacles'].append(r)
-            print(_row(r, peer), flush=True)
-        results['obstacles'].append(peer)
-        print(_row(peer, peer), flush=True)
+    if 'horizons' in sections:
+        results['horizons'] = []
+        print(f'closed loop on the paper scenario, h = {STEP} s, medians over the steps; '
+              'nsv = steps without a verified solver solution', flush=True)
+        print(f'x peer = median solve time of {PEER!r} / median solve time of the row; '
+              f'{PEER!r} is the same OCP in {OptiMpc.LABEL} (shifted primal and multipliers)',
+              flush=True)
+        print(HEADER, flush=True)
+        for n in horizons:
+            peer = closed_loop(PEER, n, paper, max_steps=max_steps)
+            for backend, compiled in variants:
+                r = closed_loop(backend, n, paper, max_steps=max_steps,
+                                compile_functions=compiled)
+                r['ratio_to_peer'] = peer['solve_ms']['median'] / r['solve_ms']['median']
+                results['horizons'].append(r)
+                print(_row(r, peer), flush=True)
+            results['horizons'].append(peer)
+            print(_row(peer, peer), flush=True)
+    if 'obstacles' in sections:
+        results['obstacles'] = []
+        print("\nN = 10 with more obstacles (reach: most obstacles within the horizon's reach "
+              'at once, all checked; active: most held in the NLP at once)')
+        print(HEADER, flush=True)
+        path = paper_sinusoid()
+        for count in OBSTACLE_COUNTS:
+            obstacles = paper + extra_obstacles(count - 1, path)
+            peer = closed_loop(PEER, 10, obstacles, max_steps=max_steps)
+            for backend, compiled in variants:
+                r = closed_loop(backend, 10, obstacles, max_steps=max_steps,
+                                compile_functions=compiled)
+                r['ratio_to_peer'] = peer['solve_ms']['median'] / r['solve_ms']['median']
+                results['obstacles'].append(r)
+                print(_row(r, peer), flush=True)
+            results['obstacles'].append(peer)
+            print(_row(peer, peer), flush=True)
 
-    rrt = bench_rrt(3 if args.quick else 10)
-    results['rrt'] = rrt
-    print(f"\nRRT* 1000 iterations on rrt_cluttered.yaml: median {rrt['plan_ms']['median']:.1f} ms"
-          f", p95 {rrt['plan_ms']['p95']:.1f} ms over {rrt['plans']} seeds", flush=True)
+    if 'rrt' in sections:
+        rrt = bench_rrt(3 if args.quick else 10)
+        results['rrt'] = rrt
+        print(f"\nRRT* 1000 iterations on rrt_cluttered.yaml: median "
+              f"{rrt['plan_ms']['median']:.1f} ms, p95 {rrt['plan_ms']['p95']:.1f} ms over "
+              f"{rrt['plans']} seeds", flush=True)
 
-    poses = 50 if args.quick else 200
-    laser = bench_laser(poses)
-    scan = bench_scan_obstacles(poses)
-    control = bench_scan_control(60 if args.quick else 400)
-    results['perception'] = {'laser': laser, 'scan_obstacles': scan, 'control_step': control}
-    print('\nperception and the control step with scan obstacles, ms (median, p95, max)')
-    for line in _perception_lines(laser, scan, control):
-        print(line, flush=True)
+    if 'perception' in sections:
+        poses = 50 if args.quick else 200
+        laser = bench_laser(poses)
+        scan = bench_scan_obstacles(poses)
+        control = bench_scan_control(60 if args.quick else 400)
+        results['perception'] = {'laser': laser, 'scan_obstacles': scan,
+                                 'control_step': control}
+        print('\nperception and the control step with scan obstacles, ms (median, p95, max)')
+        for line in _perception_lines(laser, scan, control):
+            print(line, flush=True)
 
-    if not args.skip_dds:
+    if 'footprint' in sections:
+        # --quick: 60 steps a row, short of the goals (the Jackal needs about 80 steps on the
+        # paper's box and 170 on BARN world 0), so 'goal' says NO there
+        steps = dict.fromkeys(FOOTPRINT_SCENARIOS, 60 if args.quick else 400)
+        steps['paper'] = 60 if args.quick else 250
+        if footprint_steps is not None:
+            steps = dict.fromkeys(steps, footprint_steps)
+        print(f'\npolygon footprint: the Jackal (core/footprint.JACKAL, '
+              f'{_extent(JACKAL)}), N = {FOOTPRINT_HORIZON}, ms over the timed run after an '
+              f'untimed warm-up; targets: solve median <= {TARGET_FOOTPRINT_SOLVE_MS:g} ms, '
+              f'whole step median <= {TARGET_FOOTPRINT_STEP_MS:g} ms; nsv = steps without a '
+              'verified solver solution', flush=True)
+        rows = [bench_footprint(scenario, steps[scenario], compile_functions=footprint_compile)
+                for scenario in FOOTPRINT_SCENARIOS]
+        results['footprint'] = rows
+        for line in _footprint_lines(rows):
+            print(line, flush=True)
+
+    if 'dds' in sections and not args.skip_dds:
         # the one part that needs rclpy, hence in ros/ and imported only when it runs
         from mpc_local_planner.ros.latency_bench import measure_controller_latency
 
@@ -625,10 +830,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         results['dds'] = dds
         print(dds['summary'], flush=True)
 
+    results['machine']['load_average_after'] = list(os.getloadavg())
+    print('\nload average (1, 5, 15 min) before: '
+          + ', '.join(f'{v:.2f}' for v in results['machine']['load_average_before'])
+          + '; after: ' + ', '.join(f'{v:.2f}' for v in results['machine']['load_average_after'])
+          + f" on {results['machine']['cpus']} CPUs", flush=True)
     with open(args.out, 'w', encoding='utf-8') as f:
         json.dump(results, f, indent=2)
     print(f'\nwrote {args.out}')
     return 0
+
+
+def _extent(footprint: Footprint) -> str:
+    """Say a footprint's size as length x width (m), for the table's title."""
+    vertices = np.asarray(footprint.vertices)
+    length, width = np.ptp(vertices, axis=0)
+    return f'{length:.3f} m x {width:.3f} m'
 
 
 if __name__ == '__main__':
