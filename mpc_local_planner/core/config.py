@@ -104,6 +104,14 @@ class MpcConfig:
         compile: compile the NLP's functions to C with the system compiler ($CC or gcc), in
             the background, cached on disk (see mpc.compile_cache_dir); until it is done, or
             if it fails (a logged warning), the interpreted functions are used.
+        max_solve_time: wall-time budget of one control step's solving, in seconds, from the
+            start of the MPC's solve(); None means step / 2 (see solve_budget()). The first NLP
+            solve gets what is left of it (an NLP built mid-step has used its share); the
+            retries (other starts, the IPOPT fallback, further constraint-generation rounds)
+            run only while some is left; once it is spent the verified shifted candidate is
+            applied (or the robot stops), and the step counts as timed out
+            (MpcSolution.timed_out). Not structural: the solvers get the time left at each
+            call, nothing is rebuilt.
         solver_options: extra options passed to casadi.nlpsol (override the defaults).
 
     """
@@ -128,6 +136,7 @@ class MpcConfig:
     activation_distance: float | None = None
     adaptive_slots: bool = True
     compile: bool = True
+    max_solve_time: float | None = None
     solver_options: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -167,6 +176,14 @@ class MpcConfig:
         """
         body = self.robot_footprint.radius if self.footprint else 0.0
         return v_max * self.step * self.horizon + self.inflation(v_max) + body
+
+    def solve_budget(self) -> float:
+        """Return the seconds one control step may spend solving: max_solve_time, or step / 2.
+
+        Half the period by default, so that a step that uses all of it still leaves the other
+        half for verification, sensing and publishing before the next one is due.
+        """
+        return self.step / 2 if self.max_solve_time is None else float(self.max_solve_time)
 
     def cost_weights(self) -> CostWeights:
         """Return the cost weights by name (the solver reads them as a parameter)."""
@@ -250,4 +267,10 @@ def validate_mpc_config(config: MpcConfig) -> list[str]:
         problems.append(f'max_iterations must be >= 1, got {config.max_iterations}')
     if not config.tolerance > 0:
         problems.append(f'tolerance must be > 0, got {config.tolerance}')
+    budget = config.max_solve_time
+    # a non-finite float is already refused above, for every field alike
+    if budget is not None and (isinstance(budget, bool) or not isinstance(budget, (int, float))
+                               or (math.isfinite(budget) and not budget > 0)):
+        problems.append(f'max_solve_time must be None or a number > 0 (seconds), '
+                        f'got {budget!r}')
     return problems

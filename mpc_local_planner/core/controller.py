@@ -31,6 +31,8 @@ Safety rules kept here (see the README's "Safety behaviours"):
   obstacles (and before the first one, there is no scan: the robot does not drive blind);
 - the proof's shifted candidate is applied for at most N consecutive solver failures: its
   inputs run out after N shifts, and then the robot stops;
+- a step's solving is bounded by the MPC's budget (MpcConfig.max_solve_time): past it the
+  shifted candidate is applied (a failure as above), and `timeouts` counts those steps;
 - every command is finite and within the model's bounds, else it is zero.
 """
 
@@ -277,6 +279,7 @@ class MpcController:
         self._path: ReferencePath | None = None
         self._solved_last_step = False
         self._solver_failures = 0
+        self._timeouts = 0
         # the plan as a polyline (x, y) for path_blockage, and the segment of the robot's
         # latest projection onto it (projections only move forward along a plan)
         self._polyline: np.ndarray | None = None
@@ -328,6 +331,18 @@ class MpcController:
         grow in the diagnostics.
         """
         return self._solver_failures
+
+    @property
+    def timeouts(self) -> int:
+        """Control steps since construction whose solving ran out of its time budget.
+
+        Counted from MpcSolution.timed_out: the budget (MpcConfig.max_solve_time, half the
+        period by default) cut a solve or left a retry out. Such a step applies the verified
+        shifted candidate (counted in solver_failures too), or rarely a solver plan found
+        before the cut; a count that grows says the machine is too slow (or too loaded) for
+        the period.
+        """
+        return self._timeouts
 
     def update_config(self, config: MpcConfig) -> None:
         """Use new MPC settings from the next solve on (a shape change rebuilds there)."""
@@ -566,6 +581,8 @@ class MpcController:
         self._solved_last_step = True
         if not solution.success:
             self._solver_failures += 1
+        if solution.timed_out:
+            self._timeouts += 1
         source = PlanSource(solution.source)
         if source is PlanSource.STOP:
             return ControlOutput(zero, solution, Reason.STOP)

@@ -71,6 +71,7 @@ class Key(Enum):
     SOURCE = 'source'  # 'solver', 'candidate', 'stop'; '' when the MPC did not run
     FAILURES = 'failures'  # consecutive steps without a fresh solver solution
     FAILURES_TOTAL = 'failures_total'
+    TIMEOUTS_TOTAL = 'timeouts_total'  # steps whose solving ran out of its time budget
     LYAPUNOV_OK = 'lyapunov_ok'  # V_N decreased as the theorem says ('' = not checked)
     ITERATIONS = 'iterations'
     REASON = 'reason'  # a Reason's value
@@ -138,6 +139,7 @@ class ControllerDiagnostics(NamedTuple):
     source: PlanSource | None = None
     failures: int = 0
     failures_total: int = 0
+    timeouts_total: int = 0
     lyapunov_ok: bool | None = None
     iterations: int = 0
     reason: Reason | None = None
@@ -155,7 +157,8 @@ class ControllerDiagnostics(NamedTuple):
     @classmethod
     def from_output(cls, output: ControlOutput, *, state: np.ndarray | None,
                     state_time: float | None, failures_total: int,
-                    blockage: Blockage | None = None) -> ControllerDiagnostics:
+                    blockage: Blockage | None = None,
+                    timeouts_total: int = 0) -> ControllerDiagnostics:
         """Describe a control step.
 
         Args:
@@ -165,6 +168,8 @@ class ControllerDiagnostics(NamedTuple):
             failures_total: the controller's count of steps without a fresh solution.
             blockage: where the remaining plan is blocked (MpcController.path_blockage);
                 None: not blocked.
+            timeouts_total: the controller's count of steps that ran out of solve time
+                (MpcController.timeouts).
 
         """
         sol = output.solution
@@ -177,6 +182,7 @@ class ControllerDiagnostics(NamedTuple):
             source=PlanSource(sol.source) if sol else None,
             failures=int(sol.failures) if sol else 0,
             failures_total=int(failures_total),
+            timeouts_total=int(timeouts_total),
             lyapunov_ok=None if sol is None or sol.lyapunov_ok is None else bool(sol.lyapunov_ok),
             iterations=int(sol.iterations) if sol else 0,
             reason=output.reason,

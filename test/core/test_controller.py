@@ -33,6 +33,9 @@ from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world, paper_world
 
 WORLD = paper_world()
+# Time enough for any solve: these tests are about the controller's decisions, not about the
+# solve time budget (test_mpc_budget.py), and must not depend on how loaded the machine is.
+CONFIG = MpcConfig(max_solve_time=3600.0)
 # A plan around the paper's box (above it), headings as the planner sends them.
 PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
                  [2.5, 0.0, WORLD.goal[2]]])
@@ -40,11 +43,11 @@ PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
 
 @pytest.fixture(scope='module')
 def controller() -> MpcController:
-    return MpcController(Unicycle(), MpcConfig(), obstacles=WORLD.obstacles)
+    return MpcController(Unicycle(), CONFIG, obstacles=WORLD.obstacles)
 
 
 def test_without_a_plan_the_command_is_zero_with_a_reason(controller: MpcController) -> None:
-    fresh = MpcController(obstacles=WORLD.obstacles)
+    fresh = MpcController(config=CONFIG, obstacles=WORLD.obstacles)
     out = fresh.compute(WORLD.start, 0.0)
     assert out.reason is Reason.NO_PLAN
     assert out.solution is None
@@ -98,7 +101,7 @@ def test_a_non_finite_state_gives_zero_as_invalid_odometry_with_the_problem_as_d
 
 
 def test_an_exception_in_the_solve_gives_zero_with_the_error_reason_and_its_message() -> None:
-    controller = MpcController(obstacles=WORLD.obstacles)
+    controller = MpcController(config=CONFIG, obstacles=WORLD.obstacles)
     controller.set_plan(PLAN)
 
     def broken(state: np.ndarray) -> None:
@@ -135,7 +138,7 @@ def test_bad_plans_are_refused_and_the_old_one_kept(controller: MpcController,
 
 
 def test_a_dense_plan_is_simplified_to_fit_the_capacity() -> None:
-    controller = MpcController(settings=ControllerSettings(capacity=16))
+    controller = MpcController(config=CONFIG, settings=ControllerSettings(capacity=16))
     t = np.linspace(0.0, 1.0, 2000)
     poses = np.column_stack([2.5 * t, 1.1 * np.sin(np.pi * t), np.zeros_like(t)])
     path = controller.set_plan(poses)
@@ -159,7 +162,7 @@ def test_a_new_horizon_takes_effect_at_the_next_solve(controller: MpcController)
 
 
 def test_new_velocity_bounds_bound_the_command() -> None:
-    controller = MpcController(obstacles=WORLD.obstacles)
+    controller = MpcController(config=CONFIG, obstacles=WORLD.obstacles)
     controller.set_path(analytic_path('paper_sinusoid'))
     controller.set_model(Unicycle(v_max=0.1, omega_max=0.5))
     out = controller.compute(WORLD.start, 0.0)
@@ -182,7 +185,7 @@ def test_world_files_resolve_by_name_and_missing_ones_raise() -> None:
 
 
 def test_a_plan_through_an_obstacle_is_followed_and_reported_blocked_where_it_enters() -> None:
-    controller = MpcController(obstacles=WORLD.obstacles)
+    controller = MpcController(config=CONFIG, obstacles=WORLD.obstacles)
     straight = np.array([WORLD.start, WORLD.goal])
     path = controller.set_plan(straight)  # no longer refused
     assert controller.path is path
@@ -202,7 +205,7 @@ def test_a_plan_through_an_obstacle_is_followed_and_reported_blocked_where_it_en
 
 
 def test_a_clear_plan_is_not_blocked_and_the_distance_counts_from_the_projection() -> None:
-    controller = MpcController(obstacles=WORLD.obstacles)
+    controller = MpcController(config=CONFIG, obstacles=WORLD.obstacles)
     controller.set_plan(PLAN)
     blockage = controller.path_blockage(WORLD.start)
     assert not blockage.blocked and np.isnan(blockage.at)
@@ -215,7 +218,7 @@ def test_a_clear_plan_is_not_blocked_and_the_distance_counts_from_the_projection
 
 
 def test_with_the_scan_a_source_no_scan_or_a_stale_one_gives_zero() -> None:
-    controller = MpcController(obstacles=WORLD.obstacles,
+    controller = MpcController(config=CONFIG, obstacles=WORLD.obstacles,
                                settings=ControllerSettings(scan_timeout=0.5))
     controller.set_plan(PLAN)
     out = controller.compute(WORLD.start, 10.0, state_time=10.0, scan_required=True)
@@ -232,7 +235,7 @@ def test_with_the_scan_a_source_no_scan_or_a_stale_one_gives_zero() -> None:
 
 
 def test_new_obstacles_keep_the_warm_start_and_the_lyapunov_history() -> None:
-    controller = MpcController(obstacles=WORLD.obstacles)
+    controller = MpcController(config=CONFIG, obstacles=WORLD.obstacles)
     controller.set_path(analytic_path('paper_sinusoid'))
     first = controller.compute(WORLD.start, 0.0)
     state = first.solution.x_pred[1]

@@ -13,13 +13,16 @@ from mpc_local_planner.core.paths import paper_sinusoid, WaypointPath
 from mpc_local_planner.evaluation.experiments import run_closed_loop
 
 BOX = ConvexPolygon.from_box(1.0, -1.0, 1.5, 1.0)
+# Time enough for any solve: these closed loops test the MPC's behaviour, which must not
+# depend on how loaded the machine is (the solve time budget: test_mpc_budget.py).
+CONFIG = MpcConfig(max_solve_time=3600.0)
 
 
 @pytest.fixture(scope='module')
 def proposed_run():
     path = paper_sinusoid()
     model = Unicycle()
-    controller = PathReferenceMPC(model, MpcConfig(), obstacles=[BOX], path=path)
+    controller = PathReferenceMPC(model, CONFIG, obstacles=[BOX], path=path)
     return run_closed_loop(controller, model, path.start, goal=path.goal, obstacles=[BOX],
                            label='proposed', max_time=40.0)
 
@@ -28,7 +31,7 @@ def proposed_run():
 def baseline_run():
     path = paper_sinusoid()
     model = Unicycle()
-    controller = TrackingMPC(model, MpcConfig(), obstacles=[BOX], target=path.goal)
+    controller = TrackingMPC(model, CONFIG, obstacles=[BOX], target=path.goal)
     return run_closed_loop(controller, model, path.start, goal=path.goal, obstacles=[BOX],
                            label='baseline', max_time=40.0)
 
@@ -86,11 +89,11 @@ def test_solve_without_a_path_says_so() -> None:
 
 def test_measured_heading_is_unwrapped_to_the_prediction() -> None:
     path = WaypointPath(np.array([[0.0, 0.0], [2.0, 0.0]]), start_heading=np.pi - 0.05)
-    controller = PathReferenceMPC(Unicycle(), MpcConfig(), path=path)
+    controller = PathReferenceMPC(Unicycle(), CONFIG, path=path)
     first = controller.solve(np.array([0.0, 0.0, np.pi - 0.05]))
     # the same pose reported on the other branch (-pi + ...) must give the same command
     second_a = controller.solve(first.x_pred[1])
-    controller_b = PathReferenceMPC(Unicycle(), MpcConfig(), path=path)
+    controller_b = PathReferenceMPC(Unicycle(), CONFIG, path=path)
     controller_b.solve(np.array([0.0, 0.0, np.pi - 0.05]))
     wrapped = first.x_pred[1].copy()
     wrapped[2] -= 2 * np.pi
@@ -114,7 +117,7 @@ def test_default_backend_reaches_the_target_when_the_sampling_time_jitters(seed)
     # must not be the only thing between the robot and a permanent stop
     path = paper_sinusoid()
     model = Unicycle()
-    controller = PathReferenceMPC(model, MpcConfig(), obstacles=[BOX], path=path)
+    controller = PathReferenceMPC(model, CONFIG, obstacles=[BOX], path=path)
     rng = np.random.default_rng(seed)
     x = path.start.copy()
     stops = 0
@@ -137,14 +140,14 @@ def _paper_run(config: MpcConfig, label: str):
 
 def test_obstacles_left_out_of_the_nlp_are_added_when_the_solution_comes_near() -> None:
     """Constraint generation: with no obstacle active up front, the box still is avoided."""
-    run = _paper_run(MpcConfig(activation_distance=0.0), 'lazy')
+    run = _paper_run(CONFIG.with_changes(activation_distance=0.0), 'lazy')
     assert run.metrics['reached']
     assert run.metrics['min_clearance'] > 0.0
     assert run.metrics['lyapunov_violations'] == 0
 
 
 def test_lazy_obstacles_give_the_closed_loop_of_all_obstacles_in_the_nlp(proposed_run) -> None:
-    run = _paper_run(MpcConfig(activation_distance=10.0), 'eager')
+    run = _paper_run(CONFIG.with_changes(activation_distance=10.0), 'eager')
     assert run.metrics['reached']
     assert run.metrics['path_length'] == pytest.approx(
         proposed_run.metrics['path_length'], rel=1e-3)
@@ -153,7 +156,8 @@ def test_lazy_obstacles_give_the_closed_loop_of_all_obstacles_in_the_nlp(propose
 def test_without_a_solver_the_shifted_candidate_is_applied_until_it_runs_out(
         monkeypatch: pytest.MonkeyPatch) -> None:
     path, model, horizon = paper_sinusoid(), Unicycle(), 6
-    controller = PathReferenceMPC(model, MpcConfig(horizon=horizon), obstacles=[BOX], path=path)
+    controller = PathReferenceMPC(model, CONFIG.with_changes(horizon=horizon), obstacles=[BOX],
+                                  path=path)
     x = path.start.copy()
     for _ in range(3):
         verified = controller.solve(x)

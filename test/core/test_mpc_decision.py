@@ -25,10 +25,10 @@ from mpc_local_planner.core.mpc import decide, Decision, PlanSource
 
 def choose(*, verified: bool = True, value: float = 1.0, candidate_ok: bool = True,
            candidate_value: float = 2.0, previous: bool = True,
-           clear: bool = True) -> Decision:
+           clear: bool = True, timed_out: bool = False) -> Decision:
     return decide(solver_verified=verified, solver_value=value, candidate_ok=candidate_ok,
                   candidate_value=candidate_value, has_previous_plan=previous,
-                  candidate_collision_free=clear)
+                  candidate_collision_free=clear, timed_out=timed_out)
 
 
 def test_a_verified_solution_cheaper_than_the_candidate_is_applied() -> None:
@@ -61,6 +61,27 @@ def test_the_verified_candidate_is_applied_when_the_solver_fails() -> None:
     assert decision is Decision.CANDIDATE_SOLVER_FAILED
     assert decision.source is PlanSource.CANDIDATE
     assert decision.is_failure
+
+
+def test_the_verified_candidate_is_applied_when_the_time_ran_out_before_a_solution() -> None:
+    decision = choose(verified=False, value=math.inf, candidate_value=2.0, timed_out=True)
+    assert decision is Decision.CANDIDATE_TIMEOUT
+    assert decision.source is PlanSource.CANDIDATE
+    assert decision.is_failure
+    assert 'shifted candidate' in decision.value and 'budget' in decision.value
+
+
+def test_running_out_of_time_changes_nothing_once_a_verified_solution_is_there() -> None:
+    assert choose(value=1.0, candidate_value=2.0, timed_out=True) is Decision.SOLVER
+    assert choose(value=3.0, candidate_value=2.0, timed_out=True) is Decision.CANDIDATE_CHEAPER
+    assert choose(value=5.0, candidate_ok=False, timed_out=True) is Decision.SOLVER
+
+
+def test_an_unverified_candidate_is_judged_alike_whether_or_not_the_time_ran_out() -> None:
+    unverified = {'verified': False, 'value': math.inf, 'candidate_ok': False, 'timed_out': True}
+    assert choose(**unverified) is Decision.CANDIDATE_OFF_PREDICTION
+    assert choose(**unverified, previous=False) is Decision.STOP
+    assert choose(**unverified, clear=False) is Decision.STOP
 
 
 def test_the_clear_candidate_off_the_prediction_is_applied_after_a_previous_plan() -> None:

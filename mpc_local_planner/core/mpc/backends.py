@@ -19,12 +19,22 @@ and IPOPT (the reference, and the fallback when fatrop fails) get the same NLP. 
 config.compile the NLP's functions are generated as C, compiled by gcc in a daemon thread and
 kept on disk (compile_cache_dir()), so that a restarted controller loads them at once; until
 the library is there, CasADi's interpreted functions run.
+
+Each solver call can be given a time limit (run_solver's time_limit: what is left of the
+control step's budget, MpcConfig.max_solve_time). IPOPT is stopped by an iteration callback
+that reads the limit of the call in progress (its own max_wall_time option is fixed when the
+solver is built). Fatrop has no time limit (CasADi refuses max_wall_time and max_cpu_time for
+it: "Fatrop option not supported") and calls no iteration callback, so its iterations are
+bounded instead: from the time per iteration measured on this NLP, a call that could not
+finish config.max_iterations iterations within its limit runs a copy of the solver with
+fewer (ITERATION_LEVELS, built on first use from the compiled library; until that is loaded,
+the full solver runs, and only the retries after it are bounded).
 """
 
 from __future__ import annotations
 
 from concurrent.futures import Future
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import hashlib
 import logging
 import math
@@ -43,7 +53,7 @@ from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.mpc.formulation import Formulation
 
 __all__ = ['Nlp', 'SolverRun', 'backend_options', 'build_nlp', 'compile_cache_dir',
-           'run_solver']
+           'iteration_levels', 'run_solver']
 
 _LOG = logging.getLogger(__name__)
 
@@ -51,6 +61,19 @@ _LOG = logging.getLogger(__name__)
 COMPILE_FLAGS = ('-O2', '-fPIC', '-shared')
 # One compilation at a time (the machine may have two cores and a control loop to run).
 _COMPILE_LOCK = threading.Lock()
+# Iteration limits of the copies a call with little time left runs instead of the full solver
+# (fatrop: no time limit of its own), as fractions of config.max_iterations: halving keeps the
+# copies few (one per level and NLP, built when first needed) and wastes at most half of what
+# the time left would allow.
+ITERATION_LEVELS = (0.5, 0.25, 0.125, 0.0625)
+# Fewer iterations than this are not worth a call: from the warm start a solve typically
+# takes 5 to 20 (the limited call still runs, so that the time per iteration stays measured).
+MIN_ITERATIONS = 8
+# How fast the measured time per iteration follows a faster sample (a slower one is taken at
+# once): a load spike makes the next calls careful, and they relax over some ten calls.
+ITERATION_TIME_DECAY = 0.9
+# IPOPT's status when the iteration callback stopped it.
+_USER_STOP = 'User_Requested_Stop'
 
 
 def _ipopt_options(config: MpcConfig) -> dict[str, Any]:
@@ -112,6 +135,50 @@ def backend_options(config: MpcConfig, structure: dict) -> tuple[str, dict[str, 
     return plugin, options
 
 
+class _Deadline(ca.Callback):
+    """IPOPT's iteration callback: asks the solver to stop once the clock passes `at`.
+
+    One per NLP (its inputs are the solver's outputs, sized by the NLP), shared by the IPOPT
+    solvers of that NLP; run_solver sets `at` for the call in progress and clears it after.
+    """
+
+    def __init__(self, problem: dict) -> None:
+        ca.Callback.__init__(self)
+        nx, ng, npar = (int(problem[k].numel()) for k in ('x', 'g', 'p'))
+        self._sizes = {'x': nx, 'f': 1, 'g': ng, 'lam_x': nx, 'lam_g': ng, 'lam_p': npar}
+        self.at = math.inf  # time.perf_counter() seconds
+        self.construct('mpc_deadline', {})
+
+    def get_n_in(self) -> int:
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self) -> int:
+        return 1
+
+    def get_name_in(self, i: int) -> str:
+        return ca.nlpsol_out(i)
+
+    def get_name_out(self, i: int) -> str:
+        return 'stop'
+
+    def get_sparsity_in(self, i: int) -> ca.Sparsity:
+        return ca.Sparsity.dense(self._sizes[ca.nlpsol_out(i)], 1)
+
+    def eval(self, arg: list) -> list:
+        return [1.0 if time.perf_counter() > self.at else 0.0]
+
+
+def iteration_levels(max_iterations: int) -> list[int]:
+    """Return the iteration limits a time-limited call may use, largest (the full one) first."""
+    levels = [max_iterations]
+    for fraction in ITERATION_LEVELS:
+        level = int(max_iterations * fraction)
+        if level < MIN_ITERATIONS:
+            break
+        levels.append(level)
+    return levels
+
+
 @dataclass
 class Nlp:
     """One formulation with its solver, its IPOPT fallback and its compilation state."""
@@ -126,12 +193,74 @@ class Nlp:
     pending: Future | None = None  # a compilation running in the background
     fallback: ca.Function | None = None  # IPOPT on the same NLP, when the backend fails
     fallback_factory: Callable[[], ca.Function] | None = None
+    deadline: _Deadline | None = None  # stops this NLP's IPOPT solvers (see run_solver)
+    library: Path | None = None  # the compiled functions, once the solver uses them
+    max_iterations: int = 0  # the solver's iteration limit
+    # the primary solver with fewer iterations (fatrop: see run_solver), by limit
+    limited: dict[int, ca.Function] = field(default_factory=dict)
+    # seconds per iteration measured on this NLP's primary solver (0: not yet measured)
+    iteration_time: float = 0.0
 
     def fallback_solver(self) -> ca.Function | None:
         """Return the IPOPT fallback, building it the first time it is needed."""
         if self.fallback is None and self.fallback_factory is not None:
             self.fallback = self.fallback_factory()
         return self.fallback
+
+    @property
+    def has_fallback(self) -> bool:
+        """There is an IPOPT fallback (built or not yet)."""
+        return self.fallback is not None or self.fallback_factory is not None
+
+    @property
+    def fallback_build_time(self) -> float:
+        """Return the seconds getting the fallback will take: 0 once built.
+
+        Until then, the time this NLP's own solver took to build: IPOPT on the same problem
+        takes about as long (0.6 to 1.3 times, measured on the paper's and BARN's NLPs).
+        """
+        return 0.0 if self.fallback is not None else self.build_time_s
+
+    def solver_within(self, seconds: float) -> tuple[ca.Function, int]:
+        """Return the primary solver, or a copy with fewer iterations that fits in seconds.
+
+        The full solver unless it is fatrop (IPOPT stops on time itself: its iteration
+        callback), when the time per iteration is not measured yet, or when max_iterations of
+        it fit; else the copy of the largest level
+        of iteration_levels() that fits (the smallest if none does). Copies are built from
+        the compiled library (a few ms, once per level); before there is one, the full
+        solver runs: an interpreted copy costs tens of ms to build, more than it would save.
+
+        Returns:
+            The solver and its iteration limit.
+
+        """
+        full = self.max_iterations
+        if self.plugin != 'fatrop' or self.iteration_time <= 0.0 or full <= 0:
+            return self.solver, full
+        fit = seconds / self.iteration_time
+        if fit >= full:
+            return self.solver, full
+        levels = iteration_levels(full)
+        limit = next((level for level in levels if level <= fit), levels[-1])
+        if limit == full:
+            return self.solver, full
+        solver = self.limited.get(limit)
+        if solver is None:
+            if self.library is None:
+                return self.solver, full
+            solver = self.limited[limit] = ca.nlpsol(
+                f'mpc_{limit}', self.plugin, str(self.library),
+                _with_iteration_limit(self.options, limit))
+        return solver, limit
+
+    def record_iterations(self, seconds: float, iterations: int) -> None:
+        """Update the time per iteration from a call of the primary solver (or its copies)."""
+        if iterations <= 0 or not math.isfinite(seconds):
+            return
+        sample = seconds / iterations
+        decayed = ITERATION_TIME_DECAY * self.iteration_time + (1 - ITERATION_TIME_DECAY) * sample
+        self.iteration_time = sample if self.iteration_time <= 0.0 else max(sample, decayed)
 
     def finish_compilation(self, *, wait: bool = False) -> None:
         """Swap in the compiled solver once its background compilation is done.
@@ -148,9 +277,25 @@ class Nlp:
             library = future.result()
             self.solver = ca.nlpsol('mpc', self.plugin, str(library), self.options)
             self.compiled = True
+            self.library = library
         except Exception as err:  # any failure falls back to the interpreter
             _LOG.warning('compiling the MPC NLP failed, using the interpreted functions: %s',
                          err)
+
+
+def _with_iteration_limit(options: dict[str, Any], limit: int) -> dict[str, Any]:
+    """Return a copy of a fatrop solver's options with another iteration limit."""
+    limited = dict(options)
+    limited['fatrop'] = {**options.get('fatrop', {}), 'max_iter': limit}
+    return limited
+
+
+def _iteration_limit(plugin: str, options: dict[str, Any], default: int) -> int:
+    """Return the iteration limit the options give the plugin (config.solver_options may)."""
+    inner = options.get(plugin, {})
+    if isinstance(inner, dict) and 'max_iter' in inner:
+        return int(inner['max_iter'])
+    return int(options.get(f'{plugin}.max_iter', default))
 
 
 def build_nlp(formulation: Formulation, config: MpcConfig) -> Nlp:
@@ -158,14 +303,19 @@ def build_nlp(formulation: Formulation, config: MpcConfig) -> Nlp:
     start = time.perf_counter()
     problem, structure = formulation.problem, formulation.structure
     plugin, options = backend_options(config, structure)
+    deadline = _Deadline(problem)
+    if plugin == 'ipopt':
+        options.setdefault('iteration_callback', deadline)
     nlp = Nlp(formulation=formulation, solver=ca.nlpsol('mpc', plugin, problem, options),
-              backend=config.solver, plugin=plugin, options=options)
+              backend=config.solver, plugin=plugin, options=options, deadline=deadline,
+              max_iterations=_iteration_limit(plugin, options, config.max_iterations))
     if config.solver != 'ipopt':
         # a structure-exploiting backend is fast but less robust far from its warm start
         # (seen: fatrop failing near the box's corner under timing jitter); IPOPT, the
         # reference, gets the same problem before the controller gives up. Built on first
         # use: building it with every NLP doubled the start-up time.
         fb_plugin, fb_options = backend_options(config.with_changes(solver='ipopt'), structure)
+        fb_options.setdefault('iteration_callback', deadline)
         nlp.fallback_factory = lambda: ca.nlpsol('mpc_fallback', fb_plugin, problem, fb_options)
     if config.compile:
         _start_compilation(nlp)
@@ -181,23 +331,58 @@ class SolverRun(NamedTuple):
     success: bool  # the solver reported success and w is finite
     status: str  # the solver's return status
     iterations: int
-    seconds: float  # wall time of the call
+    seconds: float  # wall time of the call (and of building a limited copy for it)
+    cut: bool = False  # the time limit stopped it (or left no time to start) before success
 
 
 def run_solver(nlp: Nlp, w0: np.ndarray, params: np.ndarray,
-               solver: ca.Function | None = None) -> SolverRun:
-    """Solve the NLP from w0 with its solver (or the given one, e.g. the fallback)."""
-    solver = nlp.solver if solver is None else solver
+               solver: ca.Function | None = None, *,
+               time_limit: float = math.inf) -> SolverRun:
+    """Solve the NLP from w0 with its solver (or the given one, e.g. the fallback).
+
+    Args:
+        nlp: the NLP.
+        w0: the initial guess.
+        params: the parameter vector.
+        solver: the solver to call instead of the NLP's own (the IPOPT fallback).
+        time_limit: seconds the call may take. None left (<= 0): no call, a cut run that
+            returns w0. IPOPT is stopped by its iteration callback once the limit passes (one
+            iteration late at most); the NLP's own fatrop runs a copy with fewer iterations
+            when its measured time per iteration says the full limit would not fit
+            (Nlp.solver_within): not exact, but bounded.
+
+    """
+    if not time_limit > 0.0:
+        return SolverRun(w=np.asarray(w0, dtype=float).reshape(-1), value=math.inf,
+                         success=False, status='not started: no time left', iterations=0,
+                         seconds=0.0, cut=True)
     form = nlp.formulation
     start = time.perf_counter()
-    result = solver(x0=w0, p=params, lbx=form.lbw, ubx=form.ubw, lbg=form.lbg, ubg=form.ubg)
-    seconds = time.perf_counter() - start
+    limit = None
+    if solver is None:
+        solver, limit = nlp.solver_within(time_limit)  # may build a limited copy: timed too
+    if nlp.deadline is not None:
+        nlp.deadline.at = start + time_limit
+    called = time.perf_counter()
+    try:
+        result = solver(x0=w0, p=params, lbx=form.lbw, ubx=form.ubw, lbg=form.lbg,
+                        ubg=form.ubg)
+    finally:
+        if nlp.deadline is not None:
+            nlp.deadline.at = math.inf
+    end = time.perf_counter()
     stats = solver.stats()
     w_opt = np.asarray(result['x']).reshape(-1)
     success = bool(stats.get('success', False)) and bool(np.all(np.isfinite(w_opt)))
+    status = str(stats.get('return_status', 'unknown'))
+    iterations = int(stats.get('iter_count', 0))
+    if limit is not None:
+        nlp.record_iterations(end - called, iterations)
+    limited = limit is not None and limit < nlp.max_iterations
+    cut = not success and (status == _USER_STOP or (limited and iterations >= limit))
     return SolverRun(w=w_opt, value=float(result['f']) if success else math.inf,
-                     success=success, status=str(stats.get('return_status', 'unknown')),
-                     iterations=int(stats.get('iter_count', 0)), seconds=seconds)
+                     success=success, status=status, iterations=iterations,
+                     seconds=end - start, cut=cut)
 
 
 # ----------------------------------------------------------------------------- compilation
@@ -218,6 +403,7 @@ def _start_compilation(nlp: Nlp) -> None:
         if library.exists():
             nlp.solver = ca.nlpsol('mpc', nlp.plugin, str(library), nlp.options)
             nlp.compiled = True
+            nlp.library = library
             return
         nlp.pending = _submit_compilation(source, library)
     except Exception as err:  # any failure falls back to the interpreter

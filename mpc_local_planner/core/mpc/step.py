@@ -34,6 +34,16 @@ between the polygon at each predicted pose and each obstacle (obstacles.polygon_
 must be at least the clearance the motion needs, farkas_margin + h/2 (|v| + r_c |omega|) for
 both steps next to the pose (exact |.| here; the NLP's smooth one is never smaller).
 
+A step's solving is bounded in wall time: config.solve_budget() (max_solve_time, half the
+period by default), counted from the start of solve(). The first NLP solve gets what is left
+of it when it starts (an NLP built mid-step has spent its share: prepare() builds them
+ahead); the retries (a second start, the IPOPT fallback, further constraint-generation rounds)
+run only while some is left. Once it is spent, decide() applies the verified shifted candidate
+(CANDIDATE_TIMEOUT), or stops if there is none, and the solution says so
+(MpcSolution.timed_out). Nothing unverified is ever applied: the budget only decides how hard
+the step tries to beat the candidate. How closely a solver keeps to its share is backends.py's
+(run_solver): IPOPT to an iteration, fatrop to its measured time per iteration.
+
 The NLP itself is formulation.py (problem (6)); the solvers and their compilation are
 backends.py.
 """
@@ -44,7 +54,8 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from enum import Enum
 import math
-from typing import NamedTuple, Sequence
+import time
+from typing import Callable, NamedTuple, Sequence
 
 import casadi as ca
 import numpy as np
@@ -99,6 +110,7 @@ class Decision(Enum):
     CANDIDATE_CHEAPER = 'candidate cheaper than solver solution'
     CANDIDATE_SOLVER_FAILED = 'applied the shifted candidate'
     CANDIDATE_OFF_PREDICTION = 'applied the shifted candidate; off the prediction'
+    CANDIDATE_TIMEOUT = 'applied the shifted candidate; solve time budget spent'
     STOP = 'no feasible candidate: stopping'
 
     @property
@@ -118,7 +130,7 @@ class Decision(Enum):
 
 def decide(*, solver_verified: bool, solver_value: float, candidate_ok: bool,
            candidate_value: float, has_previous_plan: bool,
-           candidate_collision_free: bool) -> Decision:
+           candidate_collision_free: bool, timed_out: bool = False) -> Decision:
     """Choose what is applied: the solver's plan, the shifted candidate, or a stop.
 
     Args:
@@ -130,11 +142,15 @@ def decide(*, solver_verified: bool, solver_value: float, candidate_ok: bool,
             one step ago.
         candidate_collision_free: the candidate's rollout from the measured state clears
             every reachable obstacle.
+        timed_out: the step's solve time budget ran out before its solving was done.
 
     Returns:
         SOLVER when the solver's plan is verified and not costlier than a verified candidate
-        (with LYAPUNOV_TOLERANCE); else the candidate: CANDIDATE_CHEAPER or
-        CANDIDATE_SOLVER_FAILED when it is verified; CANDIDATE_OFF_PREDICTION when it is not
+        (with LYAPUNOV_TOLERANCE), whether or not time ran out; else the candidate:
+        CANDIDATE_CHEAPER when it is verified and beats a verified solution,
+        CANDIDATE_TIMEOUT when it is verified and the solver gave no verified solution in
+        the time, CANDIDATE_SOLVER_FAILED when it is verified and the solver gave none with
+        time to spare; CANDIDATE_OFF_PREDICTION when it is not
         (the measured state left the prediction, so it no longer ends on the path) but it
         follows a previous plan and is collision-free (the shift runs out after N steps,
         all u_s, which stops the robot); else STOP.
@@ -144,7 +160,9 @@ def decide(*, solver_verified: bool, solver_value: float, candidate_ok: bool,
     if solver_verified and solver_value <= bound + LYAPUNOV_TOLERANCE * (1 + abs(bound)):
         return Decision.SOLVER
     if candidate_ok:
-        return Decision.CANDIDATE_CHEAPER if solver_verified else Decision.CANDIDATE_SOLVER_FAILED
+        if solver_verified:
+            return Decision.CANDIDATE_CHEAPER
+        return Decision.CANDIDATE_TIMEOUT if timed_out else Decision.CANDIDATE_SOLVER_FAILED
     if has_previous_plan and candidate_collision_free:
         return Decision.CANDIDATE_OFF_PREDICTION
     return Decision.STOP
@@ -161,7 +179,8 @@ class MpcSolution(NamedTuple):
         value: V_N, the cost of what is applied (the Lyapunov function).
         success: the applied plan is the solver's (source is PlanSource.SOLVER).
         status: the solver's return status, and why the candidate was used or the robot stops.
-        solve_time_s: wall time of the NLP solves.
+        solve_time_s: wall time of the NLP solves (the solver calls; solve() as a whole, with
+            its verification and any NLP built mid-step, is bounded by the budget: timed_out).
         iterations: solver iterations.
         source: the solver's plan, the proof's shifted candidate, or a stop.
         lyapunov_ok: V_N(x_k) <= V_N(x_{k-1}) - l(x_{k-1}, u_{k-1}) + tolerance, or None at
@@ -172,6 +191,10 @@ class MpcSolution(NamedTuple):
         obstacles_active: those the NLP held as Farkas constraints (see MpcBase.solve()).
         rounds: NLP solves this step (more than one when obstacles had to be added).
         solver_verified: the solver returned a verified solution, applied or not.
+        timed_out: the step's budget (config.solve_budget()) ran out before its solving was
+            done: a solve was cut or not started, or a retry or a constraint-generation round
+            was left out. What is applied is verified all the same (the solver's plan only if
+            it cleared every reachable obstacle), else the robot stops.
 
     """
 
@@ -191,6 +214,7 @@ class MpcSolution(NamedTuple):
     obstacles_active: int = 0
     rounds: int = 1
     solver_verified: bool = False
+    timed_out: bool = False
 
 
 class SolveAttempt(NamedTuple):
@@ -215,6 +239,32 @@ class _Rounds(NamedTuple):
     attempt: SolveAttempt  # the last round's, with the iterations and time of all rounds
     active: list[ConvexPolygon]
     rounds: int
+
+
+class _Budget:
+    """What is left of one control step's solve time, and whether the step ran out of it."""
+
+    def __init__(self, seconds: float, clock: Callable[[], float]) -> None:
+        self._clock = clock
+        self._deadline = clock() + seconds
+        self.timed_out = False  # some solving was cut or left out for lack of time
+
+    def remaining(self) -> float:
+        """Return the seconds left (<= 0 when spent)."""
+        return self._deadline - self._clock()
+
+    def allows(self, seconds: float = 0.0) -> bool:
+        """Say whether there is time for more solving; if not, the step has timed out.
+
+        Args:
+            seconds: what the work takes before it can be cut (a build), if known.
+
+        Ask only where work would otherwise run: a no means it is left out.
+        """
+        if self.remaining() > seconds:
+            return True
+        self.timed_out = True
+        return False
 
 
 @dataclass
@@ -242,9 +292,13 @@ class MpcBase(ABC):
 
     """
 
+    # The clock of the solve budget (seconds); a test may give an instance a fake one.
+    clock: Callable[[], float] = staticmethod(time.perf_counter)
+
     def __init__(self, model: RobotModel, config: MpcConfig | None = None, *,
                  obstacles: Sequence[ConvexPolygon] = ()) -> None:
         self._model = model
+        self._budget = _Budget(math.inf, self.clock)  # solve() starts one per step
         self._config = config or MpcConfig()
         self._use_footprint()
         self._raw_obstacles: list[ConvexPolygon] = []
@@ -413,13 +467,17 @@ class MpcBase(ABC):
     def prepare(self, max_obstacles: int | None = None) -> None:
         """Build the NLPs for 0..max_obstacles obstacles in reach, so no control step waits.
 
+        Their IPOPT fallbacks too: a step builds one only if the build fits in what is left of
+        its budget, so a fallback not built ahead may never be there when it is needed.
+
         Args:
             max_obstacles: the largest count to prepare (config.obstacle_slots by default).
 
         """
         count = self._config.obstacle_slots if max_obstacles is None else max_obstacles
         for k in range(count + 1):
-            self._nlp_for(*self._slot_shape(self._inflated[:k] if self._inflated else []))
+            nlp = self._nlp_for(*self._slot_shape(self._inflated[:k] if self._inflated else []))
+            nlp.fallback_solver()
 
     def wait_compiled(self) -> None:
         """Block until the background compilations of the built NLPs are done (or failed)."""
@@ -656,8 +714,14 @@ class MpcBase(ABC):
 
     def _run_solver(self, nlp: Nlp, w0: np.ndarray, params: np.ndarray,
                     active: ObstacleSet, solver: ca.Function | None = None) -> SolveAttempt:
-        """Solve from w0 (with the NLP's solver, or the given one) and verify the answer."""
-        run = run_solver(nlp, w0, params, solver)
+        """Solve from w0 (with the NLP's solver, or the given one) and verify the answer.
+
+        The solver gets what is left of the step's budget; a call cut by it (or not started)
+        marks the step as timed out.
+        """
+        run = run_solver(nlp, w0, params, solver, time_limit=self._budget.remaining())
+        if run.cut:
+            self._budget.timed_out = True
         verified = (run.success
                     and self._violation(run.w, params, active, nlp) <= FEASIBILITY_TOLERANCE)
         return SolveAttempt(verified=verified, w=run.w, value=run.value if verified else math.inf,
@@ -667,29 +731,45 @@ class MpcBase(ABC):
                   x0: np.ndarray, active: list[ConvexPolygon]) -> SolveAttempt:
         """Solve from the candidate; on failure retry from other starts and with IPOPT.
 
-        The returned attempt counts the iterations and time of every try.
+        The retries run only while the step's budget lasts, most promising first. After a
+        plan: IPOPT from the candidate. Without one (from rest): "stay put" zeroes every
+        derivative of the quartic cost, and the solvers may stall there; a start rolled out
+        along the path usually converges, so IPOPT (the robust one) tries that first, then
+        the backend, then IPOPT from the candidate (a backend that failed from one start
+        mostly fails from the other too, and a failing fatrop runs all its iterations: half
+        the budget on BARN's NLPs). The fallback is built on first use only if its build
+        (which cannot be cut) fits in what is left: prepare() builds it ahead. The returned
+        attempt counts the iterations and time of every try.
         """
         active_set = ObstacleSet(active)
+        budget = self._budget
         best = self._run_solver(nlp, w_candidate, params, active_set)
         iterations, seconds = best.iterations, best.seconds
-        guess = None
-        if not best.verified and self._plan is None:
-            # "stay put" zeroes every derivative of the quartic cost, and IPOPT may stall
-            # there; a second start rolled out along the path usually converges
+        if best.verified:
+            return best
+        tries = [(w_candidate, True)]  # (start, with IPOPT)
+        if self._plan is None:
             guess = self._pack(self._guided_guess(x0, active, nlp), nlp)
-            best = self._run_solver(nlp, guess, params, active_set)
-            iterations += best.iterations
-            seconds += best.seconds
-        fallback = None if best.verified else nlp.fallback_solver()
-        if fallback is not None:
-            starts = [w_candidate] if guess is None else [w_candidate, guess]
-            for w_start in starts:
-                retry = self._run_solver(nlp, w_start, params, active_set, fallback)
-                iterations += retry.iterations
-                seconds += retry.seconds
-                if retry.verified:
-                    best = retry._replace(status=f'{retry.status} (IPOPT fallback)')
-                    break
+            tries = [(guess, True), (guess, False), (w_candidate, True)]
+        for w_start, with_ipopt in tries:
+            solver = None
+            if with_ipopt:
+                if not nlp.has_fallback:
+                    continue  # IPOPT is the backend: its retry is the one without
+                if not budget.allows(nlp.fallback_build_time):
+                    continue
+                solver = nlp.fallback_solver()
+            elif not budget.allows():
+                break
+            retry = self._run_solver(nlp, w_start, params, active_set, solver)
+            iterations += retry.iterations
+            seconds += retry.seconds
+            if retry.verified:
+                best = retry if solver is None else retry._replace(
+                    status=f'{retry.status} (IPOPT fallback)')
+                break
+            if solver is None:
+                best = retry
         return best._replace(iterations=iterations, seconds=seconds)
 
     # ----------------------------------------------------------------- constraint generation
@@ -719,7 +799,9 @@ class MpcBase(ABC):
                       if not any(o is a for a in active)]
             if not missed:
                 break
-            if round_ == MAX_ACTIVATION_ROUNDS:
+            # no further round at the limit, or without time for it: the solution stands if
+            # it clears every reachable obstacle (feasible for the full problem, then)
+            if round_ == MAX_ACTIVATION_ROUNDS or not self._budget.allows():
                 if self._penetration(states, inputs, reachable) > FEASIBILITY_TOLERANCE:
                     attempt = attempt._replace(
                         verified=False,
@@ -735,11 +817,15 @@ class MpcBase(ABC):
     def solve(self, x: np.ndarray) -> MpcSolution:
         """Compute the input for the measured state x.
 
+        Takes at most about config.solve_budget() seconds of solving (see the module's note):
+        past it the verified shifted candidate is applied, and the solution is timed_out.
+
         Raises:
             ValueError: if x is not a finite state of the model's size.
             RuntimeError: if no path (or target) has been set.
 
         """
+        self._budget = budget = _Budget(self._config.solve_budget(), self.clock)
         x = np.asarray(x, dtype=float).reshape(-1)
         if x.shape != (self._model.nx,) or not np.all(np.isfinite(x)):
             msg = f'state must be {self._model.nx} finite numbers, got {x}'
@@ -757,14 +843,16 @@ class MpcBase(ABC):
             solver_verified=attempt.verified, solver_value=attempt.value,
             candidate_ok=result.candidate_ok, candidate_value=result.candidate_value,
             has_previous_plan=self._plan is not None,
-            candidate_collision_free=self._collision_free(candidate, reachable))
+            candidate_collision_free=self._collision_free(candidate, reachable),
+            timed_out=budget.timed_out)
         if decision is Decision.SOLVER:
             self._failures = 0
         elif decision.is_failure:
             self._failures += 1
         status = f'{attempt.status} ({decision.value})' if decision.value else attempt.status
         if decision is Decision.STOP:
-            return self._stop(x0, status, attempt, len(reachable), len(result.active))
+            return self._stop(x0, status, attempt, len(reachable), len(result.active),
+                              timed_out=budget.timed_out)
         if decision is Decision.SOLVER:
             w, layout = attempt.w, result.nlp.formulation.layout
             plan = Plan(x=w[layout.x], u=w[layout.u], s=self._progress_of(w[layout.r[-1]]),
@@ -792,10 +880,11 @@ class MpcBase(ABC):
             source=decision.source, lyapunov_ok=lyapunov_ok, failures=self._failures,
             obstacles_in_reach=len(reachable), obstacles_active=len(result.active),
             rounds=result.rounds, solver_verified=attempt.verified,
+            timed_out=budget.timed_out,
         )
 
     def _stop(self, x0: np.ndarray, status: str, attempt: SolveAttempt, in_reach: int,
-              active: int) -> MpcSolution:
+              active: int, *, timed_out: bool = False) -> MpcSolution:
         """No verified plan: command the steady-state input (stand still) and start over."""
         n = self._config.horizon
         _, u_s = self._model.steady_state(x0[:3])
@@ -808,7 +897,7 @@ class MpcBase(ABC):
             s=math.nan, value=math.nan, success=False, status=status,
             solve_time_s=attempt.seconds, iterations=attempt.iterations,
             source=PlanSource.STOP, lyapunov_ok=None, failures=failures,
-            obstacles_in_reach=in_reach, obstacles_active=active,
+            obstacles_in_reach=in_reach, obstacles_active=active, timed_out=timed_out,
         )
 
 
