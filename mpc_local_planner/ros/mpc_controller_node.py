@@ -220,6 +220,10 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   else float(_CONFIG.collision_margin),
                   'extra inflation (m) against corner cutting between samples; '
                   '-1 = v_max step / 2', float_range=(-1.0, 10.0)),
+    ParameterSpec('max_solve_time', _AUTO_MARGIN,
+                  "wall-time budget (s) of one control step's solving; past it the verified "
+                  'shifted candidate is applied (counted in timeouts_total); -1 = step / 2',
+                  float_range=(-1.0, 60.0)),
     ParameterSpec('world_file', DEFAULT_WORLD_FILE,
                   "world YAML/JSON with the obstacles (a path, or a name in the package's "
                   "config/ or config/worlds/); '' = none; read again at each configure"),
@@ -349,6 +353,8 @@ def build_settings(values: dict[str, Any], *, world_radius: float = 0.0,
         mpc_kwargs[key] = float(mpc_kwargs[key])
     margin = float(values['collision_margin'])
     mpc_kwargs['collision_margin'] = None if margin < 0 else margin
+    budget = float(values['max_solve_time'])
+    mpc_kwargs['max_solve_time'] = None if budget <= 0 else budget
     mpc_kwargs['robot_radius'] = max(float(values['robot_radius']), world_radius)
     mpc_kwargs['footprint'] = robot_footprint(values['footprint'], world_footprint)
     config = MpcConfig(**mpc_kwargs)  # raises ValueError with validate_mpc_config's reasons
@@ -969,7 +975,8 @@ class MpcControllerNode(ManagedNode):
     def _diagnostics(self, output: ControlOutput, now: float) -> DiagnosticArray:
         record = ControllerDiagnostics.from_output(
             output, state=self._state, state_time=self._state_time,
-            failures_total=self.controller.solver_failures, blockage=self.blockage)
+            failures_total=self.controller.solver_failures, blockage=self.blockage,
+            timeouts_total=self.controller.timeouts)
         status = DiagnosticStatus()
         status.name = f'{self.get_name()}: MPC'
         status.hardware_id = self.get_fully_qualified_name()

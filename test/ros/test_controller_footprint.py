@@ -172,3 +172,10 @@ def test_map_obstacles_a_polygons_corner_can_reach_are_handed_to_the_mpc(ros) ->
                    for o in node.controller.obstacles)
 
     assert ros.spin_until(sees_block, timeout=30.0)
+
+
+def test_max_solve_time_reaches_the_mpc_config_and_minus_one_means_half_the_step() -> None:
+    config, _, _ = build_settings({**DEFAULTS, 'max_solve_time': 0.05})
+    assert config.max_solve_time == 0.05 and config.solve_budget() == 0.05
+    config, _, _ = build_settings(dict(DEFAULTS))
+    assert config.max_solve_time is None and config.solve_budget() == DEFAULTS['step'] / 2
