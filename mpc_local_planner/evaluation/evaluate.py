@@ -739,6 +739,22 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help='only draw these worlds (e.g. 0,10,50) of an earlier run of the '
                         'suite with --save-trajectories in OUT, then exit')
     args = parser.parse_args(argv)
+    if args.plot and (args.sensing or args.suite in ('unknown', 'worlds')):
+        from dataclasses import replace
+
+        from mpc_local_planner.evaluation import sensing_suites as suites
+
+        if args.suite != 'barn':
+            parser.error('--plot with sensing draws BARN worlds (--suite barn --sensing)')
+        robot = suites.ROBOTS[args.robot]
+        robot = replace(robot, v_max=args.v_max or robot.v_max,
+                        omega_max=args.omega_max or robot.omega_max)
+        controller = (args.controllers or 'proposed').split(',')[0]
+        panels = [(f'BARN world {w}', suites.barn_sensing_world(
+            args.barn_dir / f'world_{w:03d}.json', robot)) for w in _parse_worlds(args.plot)]
+        print(suites.plot_navigation_runs(args.out / 'barn_sensing_runs.png', panels,
+                                          controller, robot, seed=args.seed))
+        return 0
     if args.plot:
         try:
             target = plot_suite_runs(args.out, args.suite, _parse_worlds(args.plot),

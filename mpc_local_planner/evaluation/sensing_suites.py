@@ -354,3 +354,72 @@ def result_fields(result: SensingResult) -> dict[str, Any]:
         'step_ms_max': float(np.max(control)) if len(control) else math.nan,
         'plan_s_max': float(np.max(plans)) if len(plans) else math.nan,
     }
+
+
+def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controller: str,
+                         robot: Robot, *, seed: int = 0, prepare: bool = True) -> Path:
+    """Draw laser-only runs: the true obstacles, what was sensed, every plan, the footprint.
+
+    Each world is run again (the runs are deterministic) with the navigator's log at hand:
+    the true obstacles grey (the cylinders as circles), the obstacles the controller avoided
+    at a few instants dashed, every plan the planner made (the first dotted, the re-plans
+    thin), and the trajectory with the robot's footprint at a few poses.
+
+    Args:
+        target: The PNG to write.
+        worlds: (title, world) per panel.
+        controller: The local controller to run.
+        robot: Its footprint and speed limits.
+        seed: The planner's seed.
+        prepare: Build the MPC's NLPs before the runs (see run_navigation).
+
+    Returns:
+        target.
+
+    """
+    import matplotlib
+
+    matplotlib.use('Agg')
+    from matplotlib.patches import Circle as CirclePatch
+    from matplotlib.patches import Polygon as PolygonPatch
+    import matplotlib.pyplot as plt
+
+    from mpc_local_planner.evaluation.plotting import draw_footprints, draw_sensed
+    from mpc_local_planner.worlds.world import Circle
+
+    fig, axes = plt.subplots(1, len(worlds), figsize=(3.0 * len(worlds), 6.5), squeeze=False)
+    for ax, (title, world) in zip(axes[0], worlds, strict=True):
+        result = run_navigation(world, controller, robot, seed=seed, prepare=prepare)
+        for shape in world.physical_shapes():
+            if isinstance(shape, Circle):
+                ax.add_patch(CirclePatch((shape.x, shape.y), shape.radius, color='0.6'))
+            else:
+                ax.add_patch(PolygonPatch(shape.vertices, closed=True, color='0.6'))
+        log = result.navigator.log
+        picks = np.linspace(0, len(log.sensed) - 1, min(3, len(log.sensed))).astype(int)
+        draw_sensed(ax, [(log.sensed[i][0], [o.vertices for o in log.sensed[i][1]])
+                         for i in sorted(set(picks.tolist()))])
+        for k, (_, plan, _) in enumerate(log.plans):
+            ax.plot(plan[:, 0], plan[:, 1], ':' if k == 0 else '-', color='tab:green',
+                    linewidth=1.2 if k == 0 else 0.7,
+                    label=('first plan' if k == 0 else
+                           're-plans' if k == 1 else None))
+        rows = result.run.rows
+        ax.plot(rows[:, 1], rows[:, 2], color='tab:blue', linewidth=1.5, label=controller)
+        draw_footprints(ax, robot.footprint, rows)
+        ax.plot(*world.goal[:2], '*', color='black', markersize=10)
+        ax.set_title(f'{title}\n{result.run.outcome.value} in {result.run.end_time:.1f} s, '
+                     f'{log.replans} re-plans', fontsize=8)
+        ax.set_aspect('equal')
+        xmin, xmax, ymin, ymax = world.bounds
+        ax.set_xlim(xmin, xmax)
+        ax.set_ylim(ymin, ymax)
+        ax.tick_params(labelsize=7)
+    axes[0][0].legend(fontsize=6, loc='lower left')
+    fig.suptitle(f'Laser only: {controller}, {robot.name} robot ({robot.v_max:g} m/s)',
+                 fontsize=10)
+    fig.tight_layout()
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(target, dpi=110)
+    plt.close(fig)
+    return target

@@ -108,3 +108,10 @@ def test_suite_options_are_checked(tmp_path) -> None:
         evaluate.main(['--suite', 'barn', '--controllers', 'dwa', '--out', str(tmp_path)])
     with pytest.raises(SystemExit):
         evaluate.main(['--suite', 'worlds', '--out', str(tmp_path)])
+
+
+def test_the_figure_draws_the_sensed_obstacles_every_plan_and_the_footprint(tmp_path) -> None:
+    world = load_world(resolve_data_file('unknown_box.yaml'))
+    target = suites.plot_navigation_runs(tmp_path / 'runs.png', [('unknown box', world)],
+                                         'proposed', CIRCLE, prepare=False)
+    assert target.is_file() and target.stat().st_size > 10_000
