@@ -41,6 +41,7 @@ __all__ = [
     'distinct_waypoints',
     'paper_sinusoid',
     'points_along',
+    'project_ahead',
     'remaining_polyline',
     'simplify_polyline',
     'waypoints_to_poses',
@@ -452,3 +453,34 @@ def waypoints_to_poses(waypoints: np.ndarray, start_yaw: float, goal_yaw: float)
     directions = np.arctan2(np.diff(pts[:, 1]), np.diff(pts[:, 0]))
     yaw = np.concatenate([[start_yaw], directions[1:], [goal_yaw]])
     return np.column_stack([pts, yaw])
+
+
+def project_ahead(points: np.ndarray, progress: float, position: np.ndarray,
+                  ahead: float) -> float:
+    """Return the arc length of the polyline's point nearest position, not behind progress.
+
+    A follower's projection: only the stretch from progress to ``ahead`` plus the distance
+    to the path beyond it is searched, so that a path folding back on itself is not skipped,
+    and progress never decreases.
+
+    Args:
+        points: (M, 2) vertices, M >= 2, consecutive ones distinct.
+        progress: The arc length reached so far, metres.
+        position: (2,) the robot's position.
+        ahead: How far beyond progress (plus the distance to the path) to look, metres.
+
+    """
+    pts = np.asarray(points, dtype=float)[:, :2]
+    segments = np.diff(pts, axis=0)
+    lengths = np.hypot(segments[:, 0], segments[:, 1])
+    arc = np.concatenate([[0.0], np.cumsum(lengths)[:-1]])
+    rel = np.asarray(position, dtype=float)[:2] - pts[:-1]
+    t = np.clip(np.sum(rel * segments, axis=1) / lengths**2, 0.0, 1.0)
+    closest = pts[:-1] + t[:, None] * segments
+    dist = np.hypot(*(closest - np.asarray(position, dtype=float)[:2]).T)
+    s = arc + t * lengths
+    window = progress + ahead + float(np.min(dist)) + 1e-9
+    valid = (s >= progress - 1e-9) & (s <= window)
+    if not np.any(valid):
+        return float(progress)
+    return float(max(progress, s[int(np.argmin(np.where(valid, dist, np.inf)))]))

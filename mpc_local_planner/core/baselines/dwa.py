@@ -64,7 +64,7 @@ import numpy as np
 
 from mpc_local_planner.core.footprint import CIRCLE, Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
-from mpc_local_planner.core.paths import distinct_waypoints, wrap_angle
+from mpc_local_planner.core.paths import distinct_waypoints, project_ahead, wrap_angle
 
 __all__ = ['Dwa', 'DwaConfig']
 
@@ -596,14 +596,4 @@ class Dwa:
         As pure pursuit does: only within one local goal distance (plus the distance to the
         path) ahead, so that a path folding back on itself is not skipped.
         """
-        rel = p - self._pts[:-1]
-        t = np.clip(np.sum(rel * self._seg, axis=1) / self._seg_len**2, 0.0, 1.0)
-        closest = self._pts[:-1] + t[:, None] * self._seg
-        dist = np.linalg.norm(closest - p, axis=1)
-        s = self._cum[:-1] + t * self._seg_len
-        window = self._progress + self.config.local_goal_distance + float(np.min(dist)) + 1e-9
-        valid = (s >= self._progress - 1e-9) & (s <= window)
-        if not np.any(valid):
-            return self._progress
-        dist = np.where(valid, dist, np.inf)
-        return float(max(self._progress, s[int(np.argmin(dist))]))
+        return project_ahead(self._pts, self._progress, p, self.config.local_goal_distance)

@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 
-from mpc_local_planner.core.paths import distinct_waypoints, wrap_angle
+from mpc_local_planner.core.paths import distinct_waypoints, project_ahead, wrap_angle
 
 __all__ = ['PurePursuit', 'PurePursuitConfig']
 
@@ -106,19 +106,7 @@ class PurePursuit:
 
     def _project(self, p: np.ndarray) -> float:
         """Closest arc length to p among the points not behind the current progress."""
-        rel = p - self._pts[:-1]
-        t = np.clip(np.sum(rel * self._seg, axis=1) / self._seg_len**2, 0.0, 1.0)
-        closest = self._pts[:-1] + t[:, None] * self._seg
-        dist = np.linalg.norm(closest - p, axis=1)
-        s = self._cum[:-1] + t * self._seg_len
-        # Only look ahead of the current progress, and not further than one lookahead plus
-        # the distance to the path (so a path folding back on itself is not skipped).
-        window = self._progress + self.config.lookahead + float(np.min(dist)) + 1e-9
-        valid = (s >= self._progress - 1e-9) & (s <= window)
-        if not np.any(valid):
-            return self._progress
-        dist = np.where(valid, dist, np.inf)
-        return float(max(self._progress, s[int(np.argmin(dist))]))
+        return project_ahead(self._pts, self._progress, p, self.config.lookahead)
 
     def command(self, x: np.ndarray) -> np.ndarray:
         """Return the input [v, omega] for the pose x = (x, y, theta)."""
