@@ -387,10 +387,10 @@ def _controller(task: Task, scenario: Scenario, model: Unicycle,
     # its candidate trajectory (constraint generation, see mpc.py)
     mpc.set_obstacles(scenario.obstacles)
     if key not in _PREPARED:
-        # build (and compile) the NLPs before the first run, as a robot does at start-up:
-        # built mid-step they would cost that step its time budget
+        # build the NLPs before the first run, as a robot does at start-up: built mid-step
+        # they would cost that step its time budget (their compilation goes on in the
+        # background, as in the node: waiting for it takes minutes on a fresh machine)
         mpc.prepare(PREPARED_SLOTS)
-        mpc.wait_compiled()
         _PREPARED.add(key)
     mpc.reset()
     return MpcAdapter(mpc)
