@@ -70,7 +70,8 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 import contextlib
-from dataclasses import dataclass
+import copy
+from dataclasses import dataclass, replace
 import math
 import threading
 from typing import Any, Protocol
@@ -86,6 +87,7 @@ from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
 from mpc_local_planner.core.paths import remaining_polyline
 
 __all__ = [
+    'EscapeGrid',
     'FreeSpaceGrid',
     'PlannerConfig',
     'RrtStarPlanner',
@@ -222,15 +224,13 @@ class PlannerConfig:
         """The largest disc about the robot's origin inside its footprint, metres.
 
         What a re-plan that starts from a robot inside the inflation keeps from the
-        obstacles on its first, short segment (PlanningGrid.escape_point).
+        obstacles on its first, short segment (PlanningGrid.escape_point). For a polygon,
+        its faces' distances from the origin (Footprint.body, unit rows).
         """
         footprint = self.robot_footprint
         if footprint.is_circle:
             return footprint.radius
-        vertices = footprint.vertices
-        edges = np.roll(vertices, -1, axis=0) - vertices
-        cross = np.abs(edges[:, 0] * vertices[:, 1] - edges[:, 1] * vertices[:, 0])
-        return float(np.min(cross / np.hypot(edges[:, 0], edges[:, 1])))
+        return float(np.min(footprint.body.b))
 
 
 def path_length(waypoints: np.ndarray) -> float:
@@ -272,6 +272,14 @@ class FreeSpaceGrid(Protocol):
 
     def is_free(self, points: np.ndarray) -> np.ndarray:
         """Say, per (N, 2) point, whether it is free after inflation."""
+
+
+class EscapeGrid(Protocol):
+    """A grid that finds where a robot inside the inflation can start a plan from."""
+
+    def escape_point(self, position: Sequence[float], *, within: float,
+                     margin: float) -> np.ndarray | None:
+        """Return the nearest clear point the robot can drive straight to, or None."""
 
 
 def grid_bounds(grid: FreeSpaceGrid) -> tuple[float, float, float, float]:
@@ -1025,6 +1033,38 @@ class RrtStarPlanner:
                             f'by {self.config.inflation:g} m (robot_radius + clearance)')
             return None
         return self._footprint_problem(checks, points, start_heading, goal_heading)
+
+    def replan(self, start: np.ndarray, goal: np.ndarray, *, failures: int = 0,
+               grid: EscapeGrid | None = None, escape_distance: float = 1.0) -> np.ndarray:
+        """Plan again from where the robot is (global_planner and the navigator both do).
+
+        After failures failed re-plans the seed moves on by their count: the same seed on
+        the same grid would fail the same way. The MPC keeps a smaller margin than the
+        planner's clearance, so a robot that stopped in front of an obstacle it has just
+        seen may stand within the clearance, where no plan can start; with a grid, the plan
+        then starts from the nearest clear cell the robot can drive straight to (within
+        escape_distance, never closer to an obstacle than inscribed_radius or than the robot
+        already is) and begins with that short segment.
+
+        Raises:
+            PlanningError: as plan() does, when no escape helps either.
+
+        """
+        planner = self
+        if failures:
+            planner = copy.copy(self)
+            planner.config = replace(self.config,
+                                     seed=(self.config.seed + failures) % (_MAX_SEED + 1))
+        try:
+            return planner.plan(start, goal)
+        except PlanningError:
+            if grid is None:
+                raise
+            escape = grid.escape_point(start, within=escape_distance,
+                                       margin=self.config.inscribed_radius)
+            if escape is None:
+                raise
+            return np.vstack([np.asarray(start, dtype=float)[:2], planner.plan(escape, goal)])
 
     def rest_problem(self, plan: np.ndarray, position: Sequence[float]) -> str | None:
         """Say why the rest of a plan no longer passes this planner's check, or None.

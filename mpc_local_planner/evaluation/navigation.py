@@ -37,7 +37,7 @@ follow the same re-planned paths.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 import math
 import time
 from typing import Any, Protocol, Sequence
@@ -331,22 +331,9 @@ class Navigator:
         self.local.follow(waypoints_to_poses(waypoints, float(x[2]), float(self.goal[2])))
 
     def _plan_from(self, x: np.ndarray, trigger: str) -> np.ndarray:
-        """Plan from x, or (a re-plan) from the nearest clear point the robot can reach.
-
-        After failed re-plans the seed moves on by their count, as the global_planner node
-        does: the same seed on the same grid would fail the same way.
-        """
-        planner = self.planner
-        if self.log.replan_failures:
-            config = replace(planner.config, seed=planner.config.seed + self.log.replan_failures)
-            planner = RrtStarPlanner.on_grid(self.grid, config=config, bounds=planner.bounds)
-        try:
-            return planner.plan(x, self.goal)
-        except PlanningError:
-            if trigger == 'goal':
-                raise
-            escape = self.grid.escape_point(x, within=self.settings.escape_distance,
-                                            margin=planner.config.inscribed_radius)
-            if escape is None:
-                raise
-            return np.vstack([np.asarray(x, dtype=float)[:2], planner.plan(escape, self.goal)])
+        """Plan the goal from x; re-plans follow RrtStarPlanner.replan, as the node's do."""
+        if trigger == 'goal':
+            return self.planner.plan(x, self.goal)
+        return self.planner.replan(x, self.goal, failures=self.log.replan_failures,
+                                   grid=self.grid,
+                                   escape_distance=self.settings.escape_distance)

@@ -59,7 +59,6 @@ supervisor such as closed_loop learns that no plan will come.
 
 from __future__ import annotations
 
-from dataclasses import replace
 import math
 import sys
 from typing import Any
@@ -678,30 +677,12 @@ class GlobalPlannerNode(ManagedNode):
 
     def _plan_from(self, start: np.ndarray, goal: np.ndarray,
                    trigger: PlanTrigger) -> np.ndarray:
-        """Plan from start; a re-plan on the grid may start from a nearby clear point.
-
-        The MPC keeps a smaller margin than the planner's clearance, so a robot that stopped
-        in front of an obstacle it has just seen may stand within robot_radius + clearance
-        of it, where no plan can start. A re-plan then starts from the nearest clear cell
-        the robot can drive straight to (PlanningGrid.escape_point, within ESCAPE_DISTANCE),
-        and the plan begins with that short segment. After failed re-plans the seed moves on
-        by their count: the same seed on the same grid would fail the same way.
-        """
+        """Plan a goal from start; re-plans follow RrtStarPlanner.replan (seed, escape)."""
         assert self._planner is not None
-        planner = self._planner
-        if self._replan_failures and trigger is not PlanTrigger.GOAL and self._grid is not None:
-            config = replace(planner.config, seed=planner.config.seed + self._replan_failures)
-            planner = RrtStarPlanner.on_grid(self._grid, config=config, bounds=planner.bounds)
-        try:
-            return planner.plan(start, goal)
-        except PlanningError:
-            if trigger is PlanTrigger.GOAL or self._grid is None:
-                raise
-            escape = self._grid.escape_point(start, within=ESCAPE_DISTANCE,
-                                             margin=planner.config.inscribed_radius)
-            if escape is None:
-                raise
-            return np.vstack([start[:2], planner.plan(escape, goal)])
+        if trigger is PlanTrigger.GOAL:
+            return self._planner.plan(start, goal)
+        return self._planner.replan(start, goal, failures=self._replan_failures,
+                                    grid=self._grid, escape_distance=ESCAPE_DISTANCE)
 
     def _publish_analytic(self) -> None:
         _, poses = analytic_path(str(self.get_parameter('analytic_path').value)).sample(

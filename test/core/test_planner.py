@@ -360,3 +360,15 @@ def test_grid_bounds_cover_a_rotated_grid() -> None:
     grid = PlanningGrid(occupancy, inflation=0.0)
 
     np.testing.assert_allclose(grid_bounds(grid), (0.0, 1.0, 2.0, 4.0), atol=1e-12)
+
+
+def test_replan_after_failures_plans_with_the_seed_moved_on_and_keeps_its_own() -> None:
+    world = load_world(WORLDS / 'rrt_cluttered.yaml')
+    options = {'iterations': 1000, 'time_limit': 60.0}
+    planner = planner_for(world, seed=7, **options)
+    moved = planner.replan(world.start, world.goal, failures=1)
+    np.testing.assert_array_equal(
+        moved, planner_for(world, seed=8, **options).plan(world.start, world.goal))
+    assert planner.config.seed == 7
+    np.testing.assert_array_equal(planner.replan(world.start, world.goal),
+                                  planner.plan(world.start, world.goal))
