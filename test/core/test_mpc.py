@@ -177,3 +177,28 @@ def test_without_a_solver_the_shifted_candidate_is_applied_until_it_runs_out(
         expected = verified.u_pred[k] if k < horizon else np.zeros(2)
         np.testing.assert_allclose(solution.u0, expected, atol=1e-12)
         x = model.step(x, solution.u0, 0.2)
+
+
+# A plan of BARN world 0 as the re-planning planner made it, and where the Jackal (1 m/s,
+# 2 rad/s) stood when every solve failed with the polyline's kinked corners: the horizon's
+# reach ends at a corner, so the optimal s sits on a knot where g_p has no derivative.
+BARN_0_PLAN = np.array([
+    [-2.758, 5.317], [-2.998, 5.701], [-3.1, 5.919], [-3.296, 6.379], [-3.438, 6.809],
+    [-3.401, 7.182], [-3.154, 7.578], [-2.94, 7.966], [-2.669, 8.292], [-2.424, 8.728],
+    [-2.436, 8.995], [-2.463, 9.384], [-2.644, 9.819], [-2.559, 10.243], [-2.548, 10.445],
+    [-2.531, 10.915], [-2.487, 11.357], [-2.488, 11.639], [-2.464, 12.029], [-2.347, 12.412],
+    [-2.346, 12.648], [-2.25, 13.0]])
+BARN_0_STALL = np.array([-2.87439976, 7.96106054, 1.25414747])
+
+
+@pytest.mark.parametrize('solver', ['fatrop', 'ipopt'])
+def test_a_cold_start_whose_reach_ends_at_a_plan_corner_is_solved(solver: str) -> None:
+    path = WaypointPath(BARN_0_PLAN, start_heading=1.931, goal_heading=1.571)
+    config = MpcConfig(solver=solver, compile=False, max_solve_time=3600.0,
+                       footprint=((0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215),
+                                  (0.254, -0.215)))
+    mpc = PathReferenceMPC(Unicycle(v_max=1.0, omega_max=2.0), config, path=path)
+    solution = mpc.solve(BARN_0_STALL)
+    assert solution.source is PlanSource.SOLVER, solution.status
+    assert solution.u0[0] > 0.5  # on its way, not creeping
+    assert solution.s > path.project(BARN_0_STALL) + 0.1

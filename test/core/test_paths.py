@@ -80,3 +80,50 @@ def test_too_many_segments_are_refused_and_simplification_fixes_it() -> None:
     simple = simplify_polyline(points, 0.01)
     assert len(simple) < 10
     WaypointPath(simple, capacity=64)
+
+
+def _distance_to_polyline(points, polyline):
+    a, b = polyline[:-1], polyline[1:]
+    ab = b - a
+    t = np.clip(np.einsum('nkd,kd->nk', points[:, None] - a[None], ab)
+                / np.maximum(np.sum(ab ** 2, axis=1), 1e-300), 0.0, 1.0)
+    closest = a[None] + t[..., None] * ab[None]
+    return np.min(np.linalg.norm(points[:, None] - closest, axis=2), axis=1)
+
+
+def test_rounded_corners_keep_the_positions_on_the_polyline_and_the_ends_exact() -> None:
+    waypoints = np.array([[0, 0], [1, 0], [1.2, 0.9], [0.1, 1.4], [0.1, 2.0]])
+    path = WaypointPath(waypoints, start_heading=-1.0, goal_heading=3.0, smoothing=0.1)
+    sharp = WaypointPath(waypoints, start_heading=-1.0, goal_heading=3.0, smoothing=1e-9)
+    s, poses = path.sample(4001)
+    assert np.max(_distance_to_polyline(poses[:, :2], waypoints)) < 1e-12
+    np.testing.assert_allclose(path.start, [0.0, 0.0, -1.0], atol=1e-12)
+    np.testing.assert_allclose(path.goal[:2], [0.1, 2.0], atol=1e-12)
+    assert path.goal[2] == pytest.approx(sharp.goal[2])
+    # the same poses as the sharp polyline away from the knots; near them, within
+    # smoothing / 4 of path parameter (position along the path, or turn_length * heading)
+    away = np.min(np.abs(s[:, None] - sharp._s_knots[None, 1:-1]), axis=1) > 0.2
+    np.testing.assert_allclose(poses[away], sharp.pose(s[away]), atol=1e-12)
+    scale = np.array([1.0, 1.0, 0.25])
+    assert np.max(np.abs(poses - sharp.pose(s)) * scale) <= 0.1 / 4 + 1e-12
+
+
+def test_rounded_path_is_differentiable_at_its_knots() -> None:
+    waypoints = np.array([[0, 0], [1, 0], [1, 1]])
+    path = WaypointPath(waypoints, start_heading=0.0)
+    sharp = WaypointPath(waypoints, start_heading=0.0, smoothing=1e-9)
+    s = ca.SX.sym('s')
+    slope = ca.Function('dp', [s], [ca.jacobian(path.symbolic(s, ca.DM(path.parameters())), s)])
+    for knot in sharp._s_knots[1:-1]:  # straight -> turn in place, turn -> straight
+        left, right = (np.asarray(slope(knot + d)).ravel() for d in (-1e-9, 1e-9))
+        np.testing.assert_allclose(left, right, atol=1e-6)
+        # the polyline itself has a kink there: its one-sided slopes differ
+        jump = (sharp.pose(knot + 1e-4) - sharp.pose(knot)) - (sharp.pose(knot)
+                                                              - sharp.pose(knot - 1e-4))
+        assert np.max(np.abs(jump)) / 1e-4 > 1.0
+
+
+@pytest.mark.parametrize('smoothing', [0.0, -0.1, float('nan')])
+def test_bad_smoothing_is_refused(smoothing) -> None:
+    with pytest.raises(ValueError, match='smoothing'):
+        WaypointPath(np.array([[0, 0], [1, 0]]), smoothing=smoothing)
