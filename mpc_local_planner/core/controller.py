@@ -468,13 +468,14 @@ class MpcController:
     def prepare(self) -> None:
         """Build the NLPs a run will need now, so that no control step waits for a build.
 
-        Uses the MPC's prepare() when it has one (adaptive obstacle slots); else solves
-        nothing and the first control step builds.
+        Uses the MPC's prepare() when it has one: up to config.obstacle_slots obstacles in
+        reach, boxes and sensed polygons alike (the laser's obstacles come later); else
+        solves nothing and the first control step builds.
         """
         prepare = getattr(self._mpc, 'prepare', None)
         if prepare is None or self._path is None:
             return
-        prepare(min(len(self._obstacles), self._config.obstacle_slots))
+        prepare(self._config.obstacle_slots)
 
     def clear_path(self) -> None:
         """Forget the plan: the controller commands zero until a new one comes."""

@@ -257,12 +257,7 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True) -> Any:
 
 def _prepare(mpc: Any) -> None:
     """Build (and compile) the NLPs for up to PREPARED_SLOTS boxes or octagons in reach."""
-    box = ConvexPolygon.from_box(100.0, 100.0, 101.0, 101.0)
-    octagon = ConvexPolygon.from_circle(100.0, 100.0, 1.0, sides=8)
-    for shape in (box, octagon):
-        mpc.set_obstacles([shape] * PREPARED_SLOTS)
-        mpc.prepare(PREPARED_SLOTS)
-    mpc.set_obstacles([])
+    mpc.prepare(PREPARED_SLOTS)
     mpc.wait_compiled()
 
 

@@ -303,7 +303,7 @@ def test_the_controller_counts_timeouts_and_the_diagnostics_publish_the_count() 
 def test_ipopt_is_stopped_at_its_time_limit() -> None:
     mpc = paper_mpc(solver='ipopt', horizon=3)
     x0 = mpc.path.start
-    nlp, params = mpc._prepare_nlp([], x0)
+    nlp, params, _ = mpc._prepare_nlp([], x0)
     w0 = mpc._pack(mpc._guided_guess(x0, [], nlp), nlp)
     untimed = run_solver(nlp, w0, params)
     assert untimed.success and not untimed.cut
@@ -319,7 +319,7 @@ def test_ipopt_is_stopped_at_its_time_limit() -> None:
 def test_the_ipopt_fallback_is_stopped_at_its_time_limit() -> None:
     mpc = paper_mpc(horizon=3)  # fatrop, with IPOPT as its fallback
     x0 = mpc.path.start
-    nlp, params = mpc._prepare_nlp([], x0)
+    nlp, params, _ = mpc._prepare_nlp([], x0)
     w0 = mpc._pack(mpc._guided_guess(x0, [], nlp), nlp)
     stopped = run_solver(nlp, w0, params, nlp.fallback_solver(), time_limit=1e-9)
     assert stopped.cut and stopped.status == 'User_Requested_Stop'
@@ -335,7 +335,7 @@ def test_fatrop_gets_fewer_iterations_when_the_full_limit_would_not_fit(
     x0 = np.array([0.0, 0.0, 0.944])  # on the path's start, heading 0.5 mrad off
     mpc.prepare(0)
     mpc.wait_compiled()
-    nlp, params = mpc._prepare_nlp([], x0)
+    nlp, params, _ = mpc._prepare_nlp([], x0)
     assert nlp.compiled and nlp.library is not None
     candidate = mpc._candidate(x0)
     candidate.mu = mpc._multipliers(candidate.x, [], nlp)
@@ -359,7 +359,7 @@ def test_fatrop_gets_fewer_iterations_when_the_full_limit_would_not_fit(
 
 def test_the_time_per_iteration_rises_at_once_and_falls_slowly() -> None:
     mpc = paper_mpc(horizon=3)
-    nlp, _ = mpc._prepare_nlp([], mpc.path.start)
+    nlp, _, _ = mpc._prepare_nlp([], mpc.path.start)
     nlp.iteration_time = 0.0
     nlp.record_iterations(0.01, 10)
     assert nlp.iteration_time == pytest.approx(1e-3)
@@ -370,3 +370,46 @@ def test_the_time_per_iteration_rises_at_once_and_falls_slowly() -> None:
     before = nlp.iteration_time
     nlp.record_iterations(0.5, 0)  # no iterations: no sample
     assert nlp.iteration_time == before
+
+
+# ----------------------------------------------------------------------------- NLP shapes
+# within the horizon's reach of the start (0.62 m), beside and behind the paper's path
+THREE_BOXES = [ConvexPolygon.from_box(0.4, -0.3, 0.6, 0.0),
+               ConvexPolygon.from_box(-0.1, 0.4, 0.1, 0.6),
+               ConvexPolygon.from_box(-0.6, -0.2, -0.4, 0.2)]
+
+
+def test_a_prepared_step_never_builds_an_nlp_shape_and_holds_the_nearest_obstacles(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # every obstacle in reach is active: three, but only shapes for up to one are prepared
+    config = MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT, activation_distance=5.0)
+    mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
+    mpc.prepare(1)
+    prepared = set(mpc._nlps)
+    started: list[tuple[int, int]] = []
+    real_build = mpc._build_in_background
+    monkeypatch.setattr(mpc, '_build_in_background', started.append)
+    x = mpc.path.start.copy()
+    solution = mpc.solve(x)
+    assert set(mpc._nlps) == prepared  # nothing was built within the step
+    assert started == [(3, 4)]  # the shape it wanted is built in the background instead
+    assert len(mpc.last_active_obstacles) == 1  # the nearest one held
+    assert solution.source is not PlanSource.STOP
+    plan = np.asarray(solution.x_pred)
+    for box in mpc.inflated_obstacles:  # and the plan checked against all three
+        assert not np.any(box.contains(plan[1:, :2]))
+    # once the background build is in, the steps hold all three
+    monkeypatch.setattr(mpc, '_build_in_background', real_build)
+    real_build((3, 4))
+    mpc.wait_built()
+    assert (3, 4) in mpc._nlps
+    mpc.solve(mpc.model.step(x, solution.u0, H))
+    assert len(mpc.last_active_obstacles) == 3
+
+
+def test_before_prepare_a_step_builds_the_shape_it_needs() -> None:
+    config = MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT, activation_distance=5.0)
+    mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
+    mpc.solve(mpc.path.start)
+    assert (3, 4) in mpc._nlps
+    assert len(mpc.last_active_obstacles) == 3

@@ -51,9 +51,11 @@ backends.py.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from concurrent.futures import Future
 from dataclasses import dataclass
 from enum import Enum
 import math
+import threading
 import time
 from typing import Callable, NamedTuple, Sequence
 
@@ -306,6 +308,9 @@ class MpcBase(ABC):
         self._slots = self._config.obstacle_slots
         self._nlps: dict[tuple[int, int], Nlp] = {}
         self._structure_key: tuple | None = None
+        # after prepare(), shapes not built are built in the background, never in a step
+        self._prepared = False
+        self._builds: dict[tuple[int, int], tuple[tuple, Future]] = {}
         self._last_nlp: Nlp | None = None
         self._last_active: tuple[ConvexPolygon, ...] = ()
         self._rollouts: dict[tuple[float, int], ca.Function] = {}
@@ -349,6 +354,7 @@ class MpcBase(ABC):
         if any(getattr(old, name) != getattr(config, name) for name in STRUCTURAL_FIELDS):
             self._use_footprint()
             self._nlps.clear()
+            self._prepared = False  # the new shapes are built as steps need them
             self._slots = max(self._slots, config.obstacle_slots)
             self._stage_fn = stage_cost(self._model, config.cost_exponent)
             self.reset()
@@ -448,36 +454,111 @@ class MpcBase(ABC):
         faces = min(c.faces_per_obstacle, 4 * math.ceil(faces / 4)) if faces > 4 else faces
         return len(selected), max(faces, 3)
 
-    def _nlp_for(self, slots: int, faces: int) -> Nlp:
-        """Return the NLP for this obstacle shape, built (or fetched from the cache) now."""
+    def _current_nlps(self) -> dict[tuple[int, int], Nlp]:
+        """Return the built NLPs of the current structure, with the background builds done."""
         key = self._structure()
         if key != self._structure_key:
             self._nlps.clear()
             self._structure_key = key
-        nlp = self._nlps.get((slots, faces))
+        for shape, (built_for, future) in list(self._builds.items()):
+            if future.done():
+                del self._builds[shape]
+                if built_for == key and future.exception() is None:
+                    self._store(shape, future.result())
+        return self._nlps
+
+    def _store(self, shape: tuple[int, int], nlp: Nlp) -> None:
+        if len(self._nlps) >= MAX_CACHED_NLPS:
+            self._nlps.pop(next(iter(self._nlps)))  # the oldest
+        self._nlps[shape] = nlp
+
+    def _build(self) -> Callable[[int, int], Nlp]:
+        """Return the builder of an NLP shape for the settings in force (a thread may run it)."""
+        model, config, terminal = self._model, self._config, self._terminal_condition()
+        return lambda slots, faces: build_nlp(formulate(model, config, terminal, slots, faces),
+                                              config)
+
+    def _nlp_for(self, slots: int, faces: int) -> Nlp:
+        """Return the NLP for this obstacle shape, built (or fetched from the cache) now."""
+        nlp = self._current_nlps().get((slots, faces))
         if nlp is None:
-            if len(self._nlps) >= MAX_CACHED_NLPS:
-                self._nlps.pop(next(iter(self._nlps)))
-            formulation = formulate(self._model, self._config, self._terminal_condition(),
-                                    slots, faces)
-            nlp = build_nlp(formulation, self._config)
-            self._nlps[(slots, faces)] = nlp
+            nlp = self._build()(slots, faces)
+            self._store((slots, faces), nlp)
         return nlp
+
+    def _nlp_holding(self, active: list[ConvexPolygon]
+                     ) -> tuple[Nlp, list[ConvexPolygon]]:
+        """Return an NLP for the active obstacles and the ones it holds, built or not.
+
+        Before prepare(), the shape is built now (a first step, a test). After it, a control
+        step never builds one: building a polygon NLP with more obstacles than were prepared
+        took 1.1 s in a BARN run, five control periods. The smallest built NLP with room for
+        them holds them (a padded slot is empty); if none has, the largest one holds the
+        nearest (a solution is then checked against every reachable obstacle, as when the
+        activation rounds run out), and the shape is built in a background thread for the
+        steps after.
+        """
+        shape = self._slot_shape(active)
+        nlps = self._current_nlps()
+        if shape in nlps or not self._prepared:
+            return self._nlp_for(*shape), active
+        roomy = [s for s in nlps if s[0] >= shape[0] and s[1] >= shape[1]]
+        self._build_in_background(shape)
+        if roomy:
+            return nlps[min(roomy)], active
+        faces_ok = [s for s in nlps if s[1] >= shape[1]]
+        if not faces_ok:
+            return self._nlp_for(*shape), active  # nothing prepared for these faces
+        largest = max(faces_ok)
+        return nlps[largest], active[:largest[0]]
+
+    def _build_in_background(self, shape: tuple[int, int]) -> None:
+        """Start building an NLP shape in a daemon thread (once per shape)."""
+        if shape in self._builds:
+            return
+        future: Future = Future()
+        build = self._build()
+
+        def work() -> None:
+            try:
+                future.set_result(build(*shape))
+            except BaseException as err:  # a failed build is dropped; the step goes on
+                future.set_exception(err)
+
+        self._builds[shape] = (self._structure(), future)
+        threading.Thread(target=work, name='mpc_nlp_build', daemon=True).start()
+
+    def wait_built(self) -> None:
+        """Block until the NLP shapes being built in the background are built."""
+        for _, future in list(self._builds.values()):
+            future.exception()  # waits
+        self._current_nlps()
 
     def prepare(self, max_obstacles: int | None = None) -> None:
         """Build the NLPs for 0..max_obstacles obstacles in reach, so no control step waits.
 
-        Their IPOPT fallbacks too: a step builds one only if the build fits in what is left of
-        its budget, so a fallback not built ahead may never be there when it is needed.
+        With adaptive slots, for boxes (4 faces), for polygons of faces_per_obstacle (what
+        sensed obstacles become) and for the face counts of the obstacles set now: an NLP
+        holds obstacles with fewer faces too. Their IPOPT fallbacks too: a step builds one
+        only if the build fits in what is left of its budget, so a fallback not built ahead
+        may never be there when it is needed. From then on a control step builds no NLP
+        (see _nlp_holding).
 
         Args:
             max_obstacles: the largest count to prepare (config.obstacle_slots by default).
 
         """
-        count = self._config.obstacle_slots if max_obstacles is None else max_obstacles
-        for k in range(count + 1):
-            nlp = self._nlp_for(*self._slot_shape(self._inflated[:k] if self._inflated else []))
-            nlp.fallback_solver()
+        c = self._config
+        count = c.obstacle_slots if max_obstacles is None else max_obstacles
+        if c.adaptive_slots:
+            faces = sorted({4, c.faces_per_obstacle}
+                           | {self._slot_shape([o])[1] for o in self._inflated})
+            shapes = [(0, 0)] + [(k, f) for k in range(1, count + 1) for f in faces]
+        else:
+            shapes = [self._slot_shape(self._inflated[:count])]
+        for shape in shapes:
+            self._nlp_for(*shape).fallback_solver()
+        self._prepared = True
 
     def wait_compiled(self) -> None:
         """Block until the background compilations of the built NLPs are done (or failed)."""
@@ -485,18 +566,18 @@ class MpcBase(ABC):
             nlp.finish_compilation(wait=True)
 
     def _prepare_nlp(self, active: list[ConvexPolygon], x0: np.ndarray
-                     ) -> tuple[Nlp, np.ndarray]:
-        """Return the NLP holding the active obstacles and its parameter vector."""
+                     ) -> tuple[Nlp, np.ndarray, list[ConvexPolygon]]:
+        """Return the NLP for the active obstacles, its parameters and the ones it holds."""
         if not self._config.adaptive_slots and len(active) > self._slots:
             self._slots = len(active)  # grow: rebuilt below, between two control steps
-        nlp = self._nlp_for(*self._slot_shape(active))
+        nlp, held = self._nlp_holding(active)
         nlp.finish_compilation()
         self._last_nlp = nlp
         form = nlp.formulation
         params = parameter_vector(x0, self._config.cost_weights(),
-                                  obstacle_parameters(active, form.slots, form.faces),
+                                  obstacle_parameters(held, form.slots, form.faces),
                                   self._terminal_parameters())
-        return nlp, params
+        return nlp, params, held
 
     def _pack(self, plan: Plan, nlp: Nlp) -> np.ndarray:
         return nlp.formulation.pack(plan.x, self._reference_value(plan), plan.u, plan.mu)
@@ -775,20 +856,24 @@ class MpcBase(ABC):
     # ----------------------------------------------------------------- constraint generation
     def _generate_constraints(self, x0: np.ndarray, candidate: Plan,
                               reachable: ObstacleSet) -> _Rounds:
-        """Solve with the obstacles near the candidate; add those the solution came near."""
+        """Solve with the obstacles near the candidate; add those the solution came near.
+
+        The NLP may hold fewer than asked for (_nlp_holding: no shape is built within a
+        prepared step); the solution is then checked against every reachable obstacle.
+        """
         activation = self._activation_distance()
         active = self._near_trajectory(candidate.x, candidate.u, reachable, activation)
         iterations, seconds = 0, 0.0
         for round_ in range(MAX_ACTIVATION_ROUNDS + 1):
-            nlp, params = self._prepare_nlp(active, x0)
-            candidate.mu = self._multipliers(candidate.x, active, nlp)
+            nlp, params, held = self._prepare_nlp(active, x0)
+            candidate.mu = self._multipliers(candidate.x, held, nlp)
             w_candidate = self._pack(candidate, nlp)
             # the candidate must clear every reachable obstacle, not only the active ones
             candidate_ok = (self._violation(w_candidate, params, reachable, nlp)
                             <= FEASIBILITY_TOLERANCE)
             candidate_value = (float(nlp.formulation.cost_fn(w_candidate, params))
                                if candidate_ok else math.inf)
-            attempt = self._optimise(nlp, w_candidate, params, x0, active)
+            attempt = self._optimise(nlp, w_candidate, params, x0, held)
             iterations += attempt.iterations
             seconds += attempt.seconds
             if not attempt.verified:
@@ -796,12 +881,14 @@ class MpcBase(ABC):
             layout = nlp.formulation.layout
             states, inputs = attempt.w[layout.x], attempt.w[layout.u]
             missed = [o for o in self._near_trajectory(states, inputs, reachable, activation / 2)
-                      if not any(o is a for a in active)]
+                      if not any(o is a for a in held)]
             if not missed:
                 break
-            # no further round at the limit, or without time for it: the solution stands if
-            # it clears every reachable obstacle (feasible for the full problem, then)
-            if round_ == MAX_ACTIVATION_ROUNDS or not self._budget.allows():
+            # no further round at the limit, without time for it, or without an NLP with
+            # room for more: the solution stands if it clears every reachable obstacle
+            # (feasible for the full problem, then)
+            if (round_ == MAX_ACTIVATION_ROUNDS or len(held) < len(active)
+                    or not self._budget.allows()):
                 if self._penetration(states, inputs, reachable) > FEASIBILITY_TOLERANCE:
                     attempt = attempt._replace(
                         verified=False,
@@ -811,7 +898,7 @@ class MpcBase(ABC):
         return _Rounds(nlp=nlp, params=params, w_candidate=w_candidate,
                        candidate_ok=candidate_ok, candidate_value=candidate_value,
                        attempt=attempt._replace(iterations=iterations, seconds=seconds),
-                       active=active, rounds=round_ + 1)
+                       active=held, rounds=round_ + 1)
 
     # ----------------------------------------------------------------- the step
     def solve(self, x: np.ndarray) -> MpcSolution:
