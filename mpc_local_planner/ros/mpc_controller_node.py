@@ -60,7 +60,6 @@ reason on stderr (so does a configure that fails, with autostart).
 
 from __future__ import annotations
 
-import math
 import sys
 from typing import Any
 
@@ -75,10 +74,8 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import MarkerArray
 
-from mpc_local_planner.core.config import MpcConfig, SOLVERS
 from mpc_local_planner.core.controller import (
     Blockage,
-    ControllerSettings,
     ControlOutput,
     MpcController,
     Reason,
@@ -88,8 +85,7 @@ from mpc_local_planner.core.diagnostics import (
     ControllerDiagnostics,
     Level,
 )
-from mpc_local_planner.core.footprint import Footprint, parse_footprint
-from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path
 from mpc_local_planner.perception.local_obstacles import LocalObstacles
@@ -112,11 +108,17 @@ from mpc_local_planner.ros.conversions import (
     twist_stamped_from_u,
 )
 from mpc_local_planner.ros.lifecycle import ManagedNode
+from mpc_local_planner.ros.mpc_controller_parameters import (
+    build_settings,
+    check_obstacles,
+    check_sensing,
+    DEFAULTS,
+    load_robot,
+    PARAMETERS,
+)
 from mpc_local_planner.ros.node_main import destroy_on_failure, EXIT_INVALID_PARAMETERS, run_node
 from mpc_local_planner.ros.parameters import (
     declare_parameters,
-    DEFAULT_WORLD_FILE,
-    ParameterSpec,
 )
 from mpc_local_planner.ros.qos import (
     CMD_VEL_QOS,
@@ -128,13 +130,9 @@ from mpc_local_planner.ros.qos import (
     SCAN_QOS,
 )
 from mpc_local_planner.ros.throttle import ProblemThrottle
-from mpc_local_planner.worlds.data_files import resolve_data_file
-from mpc_local_planner.worlds.world import load_world
 
-__all__ = ['DEFAULTS', 'EXIT_INVALID_PARAMETERS', 'FOOTPRINT_TOPIC', 'MpcControllerNode',
-           'OBSTACLE_SOURCES', 'OBSTACLES_TOPIC', 'PARAMETERS', 'build_settings',
-           'check_sensing', 'load_obstacles', 'load_robot', 'log_line', 'main',
-           'robot_footprint']
+__all__ = ['EXIT_INVALID_PARAMETERS', 'FOOTPRINT_TOPIC', 'MpcControllerNode',
+           'OBSTACLES_TOPIC', 'log_line', 'main']
 
 # Seconds between two error logs of an input problem that persists.
 ERROR_THROTTLE_S = 2.0
@@ -152,10 +150,6 @@ MARKER_STYLE = {
     'grown': ((1.0, 0.6, 0.0, 0.8), 0.015),  # inflated by robot radius + collision margin
     'active': ((0.9, 0.0, 0.0, 1.0), 0.04),  # held in the NLP at the last solve
 }
-# The frame of a TwistStamped cmd_vel.
-BASE_FRAME = 'base_link'
-# What obstacle_sources may list.
-OBSTACLE_SOURCES = ('world', 'scan', 'map')
 # Seconds of odometry kept to find the pose at a scan's stamp.
 ODOM_HISTORY_S = 2.0
 # Metres beyond the horizon's reach (MpcConfig.reach: v_max N h, the inflation and a
@@ -165,113 +159,6 @@ SENSING_MARGIN = 0.5
 # A serialised scan larger than this (both arrays at MAX_BEAMS float32, plus a header with
 # a long frame id) is refused before it is decoded.
 MAX_SCAN_BYTES = 2 * 4 * MAX_BEAMS + 4096
-
-# Parameter -> field of MpcConfig, Unicycle and ControllerSettings.
-_MPC_FIELDS = {
-    'horizon': 'horizon', 'step': 'step', 'weights.position': 'weight_position',
-    'weights.heading': 'weight_heading', 'weights.v': 'weight_v', 'weights.omega': 'weight_omega',
-    'offset_weight': 'offset_weight', 'robot_radius': 'robot_radius', 'solver': 'solver',
-    'max_iterations': 'max_iterations',
-}
-_MODEL_FIELDS = ('v_max', 'omega_max')
-_SETTINGS_FIELDS = ('goal_tolerance', 'goal_heading_tolerance', 'odom_timeout',
-                    'scan_timeout')
-# collision_margin None (v_max step / 2) is -1 as a parameter: a double cannot be None.
-_AUTO_MARGIN = -1.0
-# The defaults come from the dataclasses (the paper's values), the single source.
-_CONFIG, _MODEL, _SETTINGS = MpcConfig(), Unicycle(), ControllerSettings()
-_SHAPE = 'changes the NLP shape: rebuilt before the next solve'
-_WEIGHT = (0.0, 1e6)
-
-# The node's parameters: declared from this table, and listed by ``mpc_controller --help``
-# (config/mpc_controller.yaml mirrors the defaults).
-PARAMETERS: tuple[ParameterSpec, ...] = (
-    ParameterSpec('horizon', int(_CONFIG.horizon), f'prediction steps N; {_SHAPE}',
-                  int_range=(1, 200)),
-    ParameterSpec('step', float(_CONFIG.step),
-                  f'sampling time h (s of ROS time) and control period; {_SHAPE}',
-                  float_range=(0.01, 5.0)),
-    ParameterSpec('v_max', float(_MODEL.v_max),
-                  'speed bound |v| (m/s); rebuilds the NLP before the next solve',
-                  float_range=(0.001, 10.0)),
-    ParameterSpec('omega_max', float(_MODEL.omega_max),
-                  'turn-rate bound |omega| (rad/s); rebuilds the NLP', float_range=(0.001, 50.0)),
-    ParameterSpec('weights.position', float(_CONFIG.weight_position),
-                  'stage weight of dx^4 and dy^4; next solve', float_range=_WEIGHT),
-    ParameterSpec('weights.heading', float(_CONFIG.weight_heading),
-                  'stage weight of dtheta^4; next solve', float_range=_WEIGHT),
-    ParameterSpec('weights.v', float(_CONFIG.weight_v), 'stage weight of v^4; next solve',
-                  float_range=_WEIGHT),
-    ParameterSpec('weights.omega', float(_CONFIG.weight_omega),
-                  'stage weight of omega^4; next solve', float_range=_WEIGHT),
-    ParameterSpec('offset_weight', float(_CONFIG.offset_weight),
-                  'offset cost weight of (1 - s)^2; next solve', float_range=(1e-6, 1e9)),
-    ParameterSpec('robot_radius', float(_CONFIG.robot_radius),
-                  "the round robot's radius (m), obstacles are inflated by it; the larger of "
-                  "this and the world's is used; ignored when a polygon footprint applies",
-                  float_range=(0.0, 10.0)),
-    ParameterSpec('footprint', '',
-                  "the robot's convex polygon in base_link (x forward), Nav2's form "
-                  "\"[[x, y], [x, y], ...]\"; the MPC separates it from each obstacle exactly; "
-                  "'' = the world file's footprint if it has a polygon, else a circle of "
-                  f'robot_radius; {_SHAPE}'),
-    ParameterSpec('collision_margin',
-                  _AUTO_MARGIN if _CONFIG.collision_margin is None
-                  else float(_CONFIG.collision_margin),
-                  'extra inflation (m) against corner cutting between samples; '
-                  '-1 = v_max step / 2', float_range=(-1.0, 10.0)),
-    ParameterSpec('max_solve_time', _AUTO_MARGIN,
-                  "wall-time budget (s) of one control step's solving; past it the verified "
-                  'shifted candidate is applied (counted in timeouts_total); -1 = step / 2',
-                  float_range=(-1.0, 60.0)),
-    ParameterSpec('world_file', DEFAULT_WORLD_FILE,
-                  "world YAML/JSON with the obstacles (a path, or a name in the package's "
-                  "config/ or config/worlds/); '' = none; read again at each configure"),
-    ParameterSpec('analytic_path', '',
-                  "follow this analytic path (e.g. 'paper_sinusoid') instead of the plan "
-                  "topic; '' = use plan"),
-    ParameterSpec('solver', str(_CONFIG.solver), f'NLP solver, one of {SOLVERS}'),
-    ParameterSpec('max_iterations', int(_CONFIG.max_iterations),
-                  f'solver iterations per solve; {_SHAPE}', int_range=(1, 100000)),
-    ParameterSpec('goal_tolerance', float(_SETTINGS.goal_tolerance),
-                  'distance to the end of the plan that counts as arrived (m): then cmd_vel '
-                  'is zero', float_range=(1e-4, 10.0)),
-    ParameterSpec('goal_heading_tolerance', float(_SETTINGS.goal_heading_tolerance),
-                  'heading error that counts as arrived (rad)', float_range=(1e-4, math.pi)),
-    ParameterSpec('odom_timeout', float(_SETTINGS.odom_timeout),
-                  'odometry older than this (s) is stale: cmd_vel is zero',
-                  float_range=(0.001, 3600.0)),
-    ParameterSpec('max_plan_poses', int(_SETTINGS.max_plan_poses),
-                  'a plan with more poses is refused (cmd_vel is zero until a valid plan '
-                  'comes)', int_range=(2, 10_000_000)),
-    ParameterSpec('frame_id', 'map',
-                  'frame of local_plan, mpc/obstacles and mpc/footprint, and the frame a plan '
-                  'must be in'),
-    ParameterSpec('obstacle_sources', ['world'],
-                  "what the controller avoids, any of 'world' (world_file's obstacles), "
-                  "'scan' (the laser, remembered for obstacle_memory s) and 'map' (the map's "
-                  'occupied cells near the robot); read at configure'),
-    ParameterSpec('laser_pose', [0.0, 0.0, 0.0],
-                  "the laser's [x, y, yaw] in the robot frame (m, m, rad); next scan"),
-    ParameterSpec('obstacle_memory', 5.0,
-                  'seconds an obstacle seen by the laser is remembered (unless a later beam '
-                  'passes through it); next scan', float_range=(0.01, 3600.0)),
-    ParameterSpec('scan_timeout', float(_SETTINGS.scan_timeout),
-                  "with 'scan' a source, a scan older than this (s) is stale: cmd_vel is zero "
-                  '(and before the first scan)', float_range=(0.001, 3600.0)),
-    ParameterSpec('base_frame_id', BASE_FRAME,
-                  'the robot frame: scans must be in it (laser_pose says where the laser '
-                  'sits), and a TwistStamped cmd_vel is in it'),
-    ParameterSpec('enable_stamped_cmd_vel', False,
-                  'publish cmd_vel as geometry_msgs/TwistStamped (frame base_link) instead of '
-                  "Twist (Nav2's name); read at configure"),
-    ParameterSpec('autostart', True,
-                  'configure and activate at start; false = wait for a lifecycle manager '
-                  '(or ros2 lifecycle set)', read_only=True),
-)
-
-# Parameter defaults by name.
-DEFAULTS: dict[str, Any] = {spec.name: spec.default for spec in PARAMETERS}
 
 _SUMMARY = """\
 The MPC of Lorenzen et al. (a lifecycle node): every `step` seconds of ROS time while active,
@@ -285,117 +172,6 @@ scan (sensor_msgs/LaserScan) and map (nav_msgs/OccupancyGrid), as obstacle_sourc
 Invalid input, and a stale scan when the laser is a source, stops the robot (zero cmd_vel)
 until valid input comes. With autostart false it waits unconfigured for a
 lifecycle manager; deactivate publishes one zero cmd_vel."""
-
-
-def load_robot(world_file: str) -> tuple[list[ConvexPolygon], Footprint]:
-    """Return the obstacles and the robot's footprint of a world file.
-
-    '' means no world: no obstacles and a circle of radius 0 (the parameters decide).
-    """
-    if not world_file:
-        return [], Footprint.circle(0.0)
-    world = load_world(resolve_data_file(world_file))
-    return list(world.obstacles), world.footprint
-
-
-def load_obstacles(world_file: str) -> tuple[list[ConvexPolygon], float]:
-    """Return the obstacles and robot radius of a world file ('' = no obstacles).
-
-    For a polygon footprint the radius is its circumscribed one (see `World.robot_radius`).
-    """
-    obstacles, footprint = load_robot(world_file)
-    return obstacles, float(footprint.radius)
-
-
-def robot_footprint(parameter: str, world_footprint: Footprint | None = None
-                    ) -> tuple[tuple[float, float], ...]:
-    """Return the polygon the footprint parameter and the world give (() for a circle).
-
-    Nav2's precedence, as the simulator and the planner apply it: the parameter's polygon,
-    else the world's polygon, else a round robot (robot_radius).
-
-    Raises:
-        ValueError: the parameter is not Nav2's "[[x, y], ...]" form of a convex polygon,
-            with the reason (too few vertices, not convex, ...).
-
-    """
-    try:
-        shape = parse_footprint(str(parameter))
-    except ValueError as err:
-        msg = f'footprint {parameter!r}: {err}'
-        raise ValueError(msg) from None
-    if shape.is_circle and world_footprint is not None:
-        shape = world_footprint
-    if shape.is_circle:
-        return ()
-    return tuple((float(x), float(y)) for x, y in shape.vertices)
-
-
-def build_settings(values: dict[str, Any], *, world_radius: float = 0.0,
-                   world_footprint: Footprint | None = None
-                   ) -> tuple[MpcConfig, Unicycle, ControllerSettings]:
-    """Turn parameter values into the controller's settings.
-
-    The robot radius in force is the larger of the parameter and the world's; the footprint
-    is the parameter's polygon, else the world's polygon, else that circle (see
-    robot_footprint).
-
-    Raises:
-        ValueError: with every reason the values are invalid (validate_mpc_config's rules,
-            the footprint's, the model's and the controller's).
-
-    """
-    mpc_kwargs = {field: values[name] for name, field in _MPC_FIELDS.items()}
-    mpc_kwargs['horizon'] = int(mpc_kwargs['horizon'])
-    mpc_kwargs['max_iterations'] = int(mpc_kwargs['max_iterations'])
-    for key in ('step', 'weight_position', 'weight_heading', 'weight_v', 'weight_omega',
-                'offset_weight'):
-        mpc_kwargs[key] = float(mpc_kwargs[key])
-    margin = float(values['collision_margin'])
-    mpc_kwargs['collision_margin'] = None if margin < 0 else margin
-    budget = float(values['max_solve_time'])
-    mpc_kwargs['max_solve_time'] = None if budget <= 0 else budget
-    mpc_kwargs['robot_radius'] = max(float(values['robot_radius']), world_radius)
-    mpc_kwargs['footprint'] = robot_footprint(values['footprint'], world_footprint)
-    config = MpcConfig(**mpc_kwargs)  # raises ValueError with validate_mpc_config's reasons
-    model = Unicycle(**{name: float(values[name]) for name in _MODEL_FIELDS})
-    settings = ControllerSettings(**{k: float(values[k]) for k in _SETTINGS_FIELDS},
-                                  max_plan_poses=int(values['max_plan_poses']))
-    return config, model, settings
-
-
-def check_obstacles(obstacles: list[ConvexPolygon], config: MpcConfig) -> None:
-    """Raise ValueError if an obstacle has more faces than the NLP's slots hold.
-
-    The MPC would raise the same from set_obstacles, but in the post-set callback, where
-    the change can no longer be refused.
-    """
-    for index, obstacle in enumerate(obstacles):
-        if obstacle.num_faces > config.faces_per_obstacle:
-            msg = (f'obstacle {index} has {obstacle.num_faces} faces, more than '
-                   f'faces_per_obstacle ({config.faces_per_obstacle})')
-            raise ValueError(msg)
-
-
-def check_sensing(values: dict[str, Any]) -> None:
-    """Raise ValueError if obstacle_sources or laser_pose is not usable.
-
-    obstacle_sources must list only OBSTACLE_SOURCES (each at most once); laser_pose must be
-    three finite numbers.
-    """
-    sources = list(values['obstacle_sources'])
-    unknown = [s for s in sources if s not in OBSTACLE_SOURCES]
-    if unknown:
-        msg = f'obstacle_sources: unknown {unknown}, expected any of {list(OBSTACLE_SOURCES)}'
-        raise ValueError(msg)
-    if len(set(sources)) != len(sources):
-        msg = f'obstacle_sources lists a source twice: {sources}'
-        raise ValueError(msg)
-    pose = list(values['laser_pose'])
-    if len(pose) != 3 or not all(isinstance(v, (int, float)) and math.isfinite(v)
-                                 for v in pose):
-        msg = f'laser_pose must be three finite numbers [x, y, yaw], got {pose}'
-        raise ValueError(msg)
 
 
 def _same(a: tuple, b: tuple) -> bool:

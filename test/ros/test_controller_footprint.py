@@ -31,11 +31,10 @@ from rclpy.parameter import Parameter
 
 from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.ros.conversions import yaw_to_quaternion
-from mpc_local_planner.ros.mpc_controller_node import (
+from mpc_local_planner.ros.mpc_controller_node import FOOTPRINT_TOPIC, MpcControllerNode
+from mpc_local_planner.ros.mpc_controller_parameters import (
     build_settings,
     DEFAULTS,
-    FOOTPRINT_TOPIC,
-    MpcControllerNode,
     robot_footprint,
 )
 from mpc_local_planner.ros.node_main import autostart

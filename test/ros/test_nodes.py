@@ -47,11 +47,8 @@ from mpc_local_planner.ros.conversions import (
     yaw_to_quaternion,
 )
 from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
-from mpc_local_planner.ros.mpc_controller_node import (
-    load_obstacles,
-    log_line,
-    MpcControllerNode,
-)
+from mpc_local_planner.ros.mpc_controller_node import log_line, MpcControllerNode
+from mpc_local_planner.ros.mpc_controller_parameters import load_obstacles
 from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.qos import (
     CMD_VEL_QOS,
@@ -335,7 +332,7 @@ def test_shipped_params_files_mirror_the_defaults_the_nodes_take_from_the_datacl
     import yaml
 
     from mpc_local_planner.core.planner import PlannerConfig
-    from mpc_local_planner.ros.mpc_controller_node import DEFAULTS
+    from mpc_local_planner.ros.mpc_controller_parameters import DEFAULTS
     from mpc_local_planner.worlds.data_files import resolve_data_file
 
     def flat(values: dict, prefix: str = '') -> dict:
