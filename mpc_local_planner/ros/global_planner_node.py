@@ -279,7 +279,7 @@ class GlobalPlannerNode(ManagedNode):
             self._planner = self._make_planner()
         except Exception as err:  # a world that vanished since it was validated, a bad config
             self.get_logger().error(f'configure failed: {err}')
-            self._release()
+            self.release()
             return TransitionCallbackReturn.FAILURE
         self._configured = True
         self._plan_pub = self.create_lifecycle_publisher(Path, 'plan', PLAN_QOS)
@@ -324,39 +324,18 @@ class GlobalPlannerNode(ManagedNode):
         self.get_logger().info('inactive: goals are not planned until activated')
         return super().on_deactivate(state)
 
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Free the planner and the world; destroy the publishers and subscriptions."""
-        self._release()
-        self.get_logger().info('cleaned up')
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Release everything, from whichever state the node is in."""
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Release everything after a failed transition (back to unconfigured)."""
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-
     def _destroy_check_timer(self) -> None:
-        if self._check_timer is not None:
-            self.destroy_timer(self._check_timer)
-            self._check_timer = None
+        self.destroy_entities(self._check_timer)
+        self._check_timer = None
 
-    def _release(self) -> None:
+    def release(self) -> None:
+        """Stop planning; destroy the publishers and subscriptions; drop planner and world."""
         self._active = False
         self._destroy_check_timer()
         self._goal = None
         self._configured = False
-        for publisher in (self._plan_pub, self._diag_pub):
-            if publisher is not None:
-                self.destroy_lifecycle_publisher(publisher)
-        for subscription in (self._odom_sub, self._goal_sub, self._map_sub, self._scan_sub):
-            if subscription is not None:
-                self.destroy_subscription(subscription)
+        self.destroy_entities(self._plan_pub, self._diag_pub, self._odom_sub, self._goal_sub,
+                              self._map_sub, self._scan_sub)
         self._plan_pub = self._diag_pub = None
         self._odom_sub = self._goal_sub = self._map_sub = self._scan_sub = None
         self._planner = None

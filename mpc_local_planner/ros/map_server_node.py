@@ -182,19 +182,9 @@ class MapServerNode(ManagedNode):
             self._map_pub.publish(self._map_msg)
         return result
 
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+    def release(self) -> None:
         """Forget the map and destroy the publisher."""
-        self._release()
-        return super().on_cleanup(state)
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Release the map and the publisher."""
-        self._release()
-        return super().on_shutdown(state)
-
-    def _release(self) -> None:
-        if self._map_pub is not None:
-            self.destroy_lifecycle_publisher(self._map_pub)
+        self.destroy_entities(self._map_pub)
         self._map_pub = None
         self._map_msg = None
 

@@ -321,23 +321,11 @@ class MpcControllerNode(ManagedNode):
         self.get_logger().info('inactive: cmd_vel zero once, then silent')
         return super().on_deactivate(state)
 
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Free the NLP (the controller) and destroy publishers, subscriptions and timer."""
-        self._release()
-        self.get_logger().info('cleaned up: the NLP is freed')
-        return super().on_cleanup(state)
-
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Stop the robot if active, then clean up."""
+        """Stop the robot if active, then release everything (ManagedNode)."""
         if self._timer is not None:
             self._stop_robot()
-        self._release()
         return super().on_shutdown(state)
-
-    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Clean up after a transition raised, so that the node can be configured again."""
-        self._release()
-        return super().on_error(state)
 
     def destroy_node(self) -> None:
         """Drop the controller (and its NLP) with the node."""
@@ -354,21 +342,16 @@ class MpcControllerNode(ManagedNode):
             self.get_logger().warning(f'could not publish a zero cmd_vel: {err}')
 
     def _destroy_timer(self) -> None:
-        if self._timer is not None:
-            self.destroy_timer(self._timer)
-            self._timer = None
+        self.destroy_entities(self._timer)
+        self._timer = None
 
-    def _release(self) -> None:
-        """Destroy the timer, subscriptions and publishers, and drop the controller."""
-        self._destroy_timer()
-        for sub in (self._odom_sub, self._plan_sub, self._scan_sub, self._map_sub):
-            if sub is not None:
-                self.destroy_subscription(sub)
+    def release(self) -> None:
+        """Destroy the timer, subscriptions and publishers, and drop the controller (its NLPs)."""
+        self.destroy_entities(self._timer, self._odom_sub, self._plan_sub, self._scan_sub,
+                              self._map_sub, self._cmd_pub, self._local_plan_pub,
+                              self._diag_pub, self._obstacles_pub, self._footprint_pub)
+        self._timer = None
         self._odom_sub = self._plan_sub = self._scan_sub = self._map_sub = None
-        for pub in (self._cmd_pub, self._local_plan_pub, self._diag_pub, self._obstacles_pub,
-                    self._footprint_pub):
-            if pub is not None:
-                self.destroy_lifecycle_publisher(pub)
         self._cmd_pub = self._local_plan_pub = self._diag_pub = None
         self._obstacles_pub = self._footprint_pub = None
         self.controller = None  # the MPC and its NLPs go with it
