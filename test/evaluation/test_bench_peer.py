@@ -23,11 +23,11 @@ from mpc_local_planner.core.paths import paper_sinusoid
 from mpc_local_planner.evaluation.bench import (
     closed_loop,
     HEADER,
-    OptiMpc,
     paper_obstacle,
     PEER,
     STEP,
 )
+from mpc_local_planner.evaluation.opti_peer import OptiMpc
 
 
 def test_peer_drives_the_paper_scenario_as_the_package_mpc_does() -> None:
