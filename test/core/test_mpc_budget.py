@@ -387,8 +387,8 @@ def test_a_prepared_step_never_builds_an_nlp_shape_and_holds_the_nearest_obstacl
     mpc.prepare(1)
     prepared = set(mpc._nlps)
     started: list[tuple[int, int]] = []
-    real_build = mpc._build_in_background
-    monkeypatch.setattr(mpc, '_build_in_background', started.append)
+    real_build = mpc._shapes.build_in_background
+    monkeypatch.setattr(mpc._shapes, 'build_in_background', started.append)
     x = mpc.path.start.copy()
     solution = mpc.solve(x)
     assert set(mpc._nlps) == prepared  # nothing was built within the step
@@ -399,7 +399,7 @@ def test_a_prepared_step_never_builds_an_nlp_shape_and_holds_the_nearest_obstacl
     for box in mpc.inflated_obstacles:  # and the plan checked against all three
         assert not np.any(box.contains(plan[1:, :2]))
     # once the background build is in, the steps hold all three
-    monkeypatch.setattr(mpc, '_build_in_background', real_build)
+    monkeypatch.setattr(mpc._shapes, 'build_in_background', real_build)
     real_build((3, 4))
     mpc.wait_built()
     assert (3, 4) in mpc._nlps

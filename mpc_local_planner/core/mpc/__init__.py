@@ -15,19 +15,14 @@
 
 """The paper's MPC (problem (6)) and its guard.
 
-formulation.py is problem (6), backends.py runs it (solvers, compiled functions), step.py is
-one control step (the proof's candidate, verification, constraint generation, decision).
+formulation.py is problem (6), backends.py runs it (solvers, compiled functions),
+nlp_shapes.py keeps one NLP per obstacle shape, step.py is one control step (the proof's
+candidate, verification, constraint generation), decision.py its guard (what is applied).
 """
 
 from mpc_local_planner.core.mpc.backends import compile_cache_dir
-from mpc_local_planner.core.mpc.step import (
-    decide,
-    Decision,
-    MpcBase,
-    MpcSolution,
-    PathReferenceMPC,
-    PlanSource,
-)
+from mpc_local_planner.core.mpc.decision import decide, Decision, PlanSource
+from mpc_local_planner.core.mpc.step import MpcBase, MpcSolution, PathReferenceMPC
 
 __all__ = [
     'Decision',

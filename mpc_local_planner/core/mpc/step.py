@@ -51,11 +51,8 @@ backends.py.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from concurrent.futures import Future
 from dataclasses import dataclass
-from enum import Enum
 import math
-import threading
 import time
 from typing import Callable, NamedTuple, Sequence
 
@@ -65,6 +62,12 @@ import numpy as np
 from mpc_local_planner.core.config import MpcConfig, STRUCTURAL_FIELDS
 from mpc_local_planner.core.models import RobotModel
 from mpc_local_planner.core.mpc.backends import build_nlp, Nlp, run_solver
+from mpc_local_planner.core.mpc.decision import (
+    decide,
+    Decision,
+    LYAPUNOV_TOLERANCE,
+    PlanSource,
+)
 from mpc_local_planner.core.mpc.formulation import (
     dual_multipliers,
     feasible_multipliers,
@@ -76,6 +79,7 @@ from mpc_local_planner.core.mpc.formulation import (
     sweep_rate,
     TerminalCondition,
 )
+from mpc_local_planner.core.mpc.nlp_shapes import NlpShapes
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
 from mpc_local_planner.core.paths import ReferencePath, wrap_angle
 
@@ -84,90 +88,10 @@ __all__ = ['Decision', 'MpcBase', 'MpcSolution', 'PathReferenceMPC', 'Plan', 'Pl
 
 # Constraint-violation bound for accepting a solution or a candidate (metres, rad, m/s).
 FEASIBILITY_TOLERANCE = 1e-5
-# Slack on the closed-loop decrease check, relative to V_N plus an absolute floor.
-LYAPUNOV_TOLERANCE = 1e-6
-# NLPs kept per MPC, keyed by (obstacle slots, faces): building one takes tens of ms.
-MAX_CACHED_NLPS = 32
 # Re-solves with more obstacles when a solution came too close to one left out of the NLP.
 MAX_ACTIVATION_ROUNDS = 3
 # Plans whose polygon clearances are memoised within a step (the candidate, the solutions).
 MAX_CACHED_PLANS = 8
-
-
-class PlanSource(str, Enum):
-    """Where the applied plan comes from (a str, so logs and diagnostics read the value)."""
-
-    SOLVER = 'solver'  # the NLP solver's verified solution
-    CANDIDATE = 'candidate'  # the proof's shifted solution of the previous step
-    STOP = 'stop'  # no verified plan: the steady-state input, the robot stands still
-
-    def __str__(self) -> str:
-        return self.value
-
-
-class Decision(Enum):
-    """What a control step applies, and why (the value is the note added to the status)."""
-
-    SOLVER = ''
-    CANDIDATE_CHEAPER = 'candidate cheaper than solver solution'
-    CANDIDATE_SOLVER_FAILED = 'applied the shifted candidate'
-    CANDIDATE_OFF_PREDICTION = 'applied the shifted candidate; off the prediction'
-    CANDIDATE_TIMEOUT = 'applied the shifted candidate; solve time budget spent'
-    STOP = 'no feasible candidate: stopping'
-
-    @property
-    def source(self) -> PlanSource:
-        """The plan this decision applies."""
-        if self is Decision.SOLVER:
-            return PlanSource.SOLVER
-        if self is Decision.STOP:
-            return PlanSource.STOP
-        return PlanSource.CANDIDATE
-
-    @property
-    def is_failure(self) -> bool:
-        """The solver gave no verified plan that is applied or beaten by the candidate."""
-        return self not in (Decision.SOLVER, Decision.CANDIDATE_CHEAPER)
-
-
-def decide(*, solver_verified: bool, solver_value: float, candidate_ok: bool,
-           candidate_value: float, has_previous_plan: bool,
-           candidate_collision_free: bool, timed_out: bool = False) -> Decision:
-    """Choose what is applied: the solver's plan, the shifted candidate, or a stop.
-
-    Args:
-        solver_verified: the solver's solution passed verification.
-        solver_value: its cost V_N.
-        candidate_ok: the shifted candidate passed verification (it ends on the path).
-        candidate_value: its cost (ignored unless candidate_ok).
-        has_previous_plan: there is a previous plan, so the candidate's inputs were verified
-            one step ago.
-        candidate_collision_free: the candidate's rollout from the measured state clears
-            every reachable obstacle.
-        timed_out: the step's solve time budget ran out before its solving was done.
-
-    Returns:
-        SOLVER when the solver's plan is verified and not costlier than a verified candidate
-        (with LYAPUNOV_TOLERANCE), whether or not time ran out; else the candidate:
-        CANDIDATE_CHEAPER when it is verified and beats a verified solution,
-        CANDIDATE_TIMEOUT when it is verified and the solver gave no verified solution in
-        the time, CANDIDATE_SOLVER_FAILED when it is verified and the solver gave none with
-        time to spare; CANDIDATE_OFF_PREDICTION when it is not
-        (the measured state left the prediction, so it no longer ends on the path) but it
-        follows a previous plan and is collision-free (the shift runs out after N steps,
-        all u_s, which stops the robot); else STOP.
-
-    """
-    bound = candidate_value if candidate_ok else math.inf
-    if solver_verified and solver_value <= bound + LYAPUNOV_TOLERANCE * (1 + abs(bound)):
-        return Decision.SOLVER
-    if candidate_ok:
-        if solver_verified:
-            return Decision.CANDIDATE_CHEAPER
-        return Decision.CANDIDATE_TIMEOUT if timed_out else Decision.CANDIDATE_SOLVER_FAILED
-    if has_previous_plan and candidate_collision_free:
-        return Decision.CANDIDATE_OFF_PREDICTION
-    return Decision.STOP
 
 
 class MpcSolution(NamedTuple):
@@ -306,11 +230,7 @@ class MpcBase(ABC):
         self._raw_obstacles: list[ConvexPolygon] = []
         self._inflated: list[ConvexPolygon] = []
         self._slots = self._config.obstacle_slots
-        self._nlps: dict[tuple[int, int], Nlp] = {}
-        self._structure_key: tuple | None = None
-        # after prepare(), shapes not built are built in the background, never in a step
-        self._prepared = False
-        self._builds: dict[tuple[int, int], tuple[tuple, Future]] = {}
+        self._shapes = NlpShapes(self._structure, self._build)
         self._last_nlp: Nlp | None = None
         self._last_active: tuple[ConvexPolygon, ...] = ()
         self._rollouts: dict[tuple[float, int], ca.Function] = {}
@@ -353,8 +273,7 @@ class MpcBase(ABC):
         self._config = config
         if any(getattr(old, name) != getattr(config, name) for name in STRUCTURAL_FIELDS):
             self._use_footprint()
-            self._nlps.clear()
-            self._prepared = False  # the new shapes are built as steps need them
+            self._shapes.clear()  # the new shapes are built as steps need them
             self._slots = max(self._slots, config.obstacle_slots)
             self._stage_fn = stage_cost(self._model, config.cost_exponent)
             self.reset()
@@ -454,85 +373,30 @@ class MpcBase(ABC):
         faces = min(c.faces_per_obstacle, 4 * math.ceil(faces / 4)) if faces > 4 else faces
         return len(selected), max(faces, 3)
 
-    def _current_nlps(self) -> dict[tuple[int, int], Nlp]:
-        """Return the built NLPs of the current structure, with the background builds done."""
-        key = self._structure()
-        if key != self._structure_key:
-            self._nlps.clear()
-            self._structure_key = key
-        for shape, (built_for, future) in list(self._builds.items()):
-            if future.done():
-                del self._builds[shape]
-                if built_for == key and future.exception() is None:
-                    self._store(shape, future.result())
-        return self._nlps
-
-    def _store(self, shape: tuple[int, int], nlp: Nlp) -> None:
-        if len(self._nlps) >= MAX_CACHED_NLPS:
-            self._nlps.pop(next(iter(self._nlps)))  # the oldest
-        self._nlps[shape] = nlp
-
     def _build(self) -> Callable[[int, int], Nlp]:
         """Return the builder of an NLP shape for the settings in force (a thread may run it)."""
         model, config, terminal = self._model, self._config, self._terminal_condition()
         return lambda slots, faces: build_nlp(formulate(model, config, terminal, slots, faces),
                                               config)
 
+    @property
+    def _nlps(self) -> dict[tuple[int, int], Nlp]:
+        """The NLPs built for the settings in force, by shape (slots, faces)."""
+        return self._shapes.built()
+
     def _nlp_for(self, slots: int, faces: int) -> Nlp:
         """Return the NLP for this obstacle shape, built (or fetched from the cache) now."""
-        nlp = self._current_nlps().get((slots, faces))
-        if nlp is None:
-            nlp = self._build()(slots, faces)
-            self._store((slots, faces), nlp)
-        return nlp
+        return self._shapes.get((slots, faces))
 
     def _nlp_holding(self, active: list[ConvexPolygon]
                      ) -> tuple[Nlp, list[ConvexPolygon]]:
-        """Return an NLP for the active obstacles and the ones it holds, built or not.
-
-        Before prepare(), the shape is built now (a first step, a test). After it, a control
-        step never builds one: building a polygon NLP with more obstacles than were prepared
-        took 1.1 s in a BARN run, five control periods. The smallest built NLP with room for
-        them holds them (a padded slot is empty); if none has, the largest one holds the
-        nearest (a solution is then checked against every reachable obstacle, as when the
-        activation rounds run out), and the shape is built in a background thread for the
-        steps after.
-        """
-        shape = self._slot_shape(active)
-        nlps = self._current_nlps()
-        if shape in nlps or not self._prepared:
-            return self._nlp_for(*shape), active
-        roomy = [s for s in nlps if s[0] >= shape[0] and s[1] >= shape[1]]
-        self._build_in_background(shape)
-        if roomy:
-            return nlps[min(roomy)], active
-        faces_ok = [s for s in nlps if s[1] >= shape[1]]
-        if not faces_ok:
-            return self._nlp_for(*shape), active  # nothing prepared for these faces
-        largest = max(faces_ok)
-        return nlps[largest], active[:largest[0]]
-
-    def _build_in_background(self, shape: tuple[int, int]) -> None:
-        """Start building an NLP shape in a daemon thread (once per shape)."""
-        if shape in self._builds:
-            return
-        future: Future = Future()
-        build = self._build()
-
-        def work() -> None:
-            try:
-                future.set_result(build(*shape))
-            except BaseException as err:  # a failed build is dropped; the step goes on
-                future.set_exception(err)
-
-        self._builds[shape] = (self._structure(), future)
-        threading.Thread(target=work, name='mpc_nlp_build', daemon=True).start()
+        """Return an NLP for the active obstacles and the ones it holds (see NlpShapes.hold)."""
+        nlp, count = self._shapes.hold(self._slot_shape(active))
+        return nlp, active[:count]
 
     def wait_built(self) -> None:
         """Block until the NLP shapes being built in the background are built."""
-        for _, future in list(self._builds.values()):
-            future.exception()  # waits
-        self._current_nlps()
+        self._shapes.wait_built()
 
     def prepare(self, max_obstacles: int | None = None) -> None:
         """Build the NLPs for 0..max_obstacles obstacles in reach, so no control step waits.
@@ -558,7 +422,7 @@ class MpcBase(ABC):
             shapes = [self._slot_shape(self._inflated[:count])]
         for shape in shapes:
             self._nlp_for(*shape).fallback_solver()
-        self._prepared = True
+        self._shapes.prepared = True
 
     def wait_compiled(self) -> None:
         """Block until the background compilations of the built NLPs are done (or failed)."""

@@ -1,0 +1,106 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The guard of a control step: which plan is applied, the solver's, the candidate, or none.
+
+The proof's argument (Theorem 1 of the paper) holds if the applied plan is never costlier than
+the shifted candidate of the previous one: decide() takes the solver's verified solution only
+then, else the candidate, and stops the robot when neither is verified.
+"""
+
+from __future__ import annotations
+
+from enum import Enum
+import math
+
+__all__ = ['Decision', 'LYAPUNOV_TOLERANCE', 'PlanSource', 'decide']
+
+# Slack on the closed-loop decrease check, relative to V_N plus an absolute floor.
+LYAPUNOV_TOLERANCE = 1e-6
+
+
+class PlanSource(str, Enum):
+    """Where the applied plan comes from (a str, so logs and diagnostics read the value)."""
+
+    SOLVER = 'solver'  # the NLP solver's verified solution
+    CANDIDATE = 'candidate'  # the proof's shifted solution of the previous step
+    STOP = 'stop'  # no verified plan: the steady-state input, the robot stands still
+
+    def __str__(self) -> str:
+        return self.value
+
+
+class Decision(Enum):
+    """What a control step applies, and why (the value is the note added to the status)."""
+
+    SOLVER = ''
+    CANDIDATE_CHEAPER = 'candidate cheaper than solver solution'
+    CANDIDATE_SOLVER_FAILED = 'applied the shifted candidate'
+    CANDIDATE_OFF_PREDICTION = 'applied the shifted candidate; off the prediction'
+    CANDIDATE_TIMEOUT = 'applied the shifted candidate; solve time budget spent'
+    STOP = 'no feasible candidate: stopping'
+
+    @property
+    def source(self) -> PlanSource:
+        """The plan this decision applies."""
+        if self is Decision.SOLVER:
+            return PlanSource.SOLVER
+        if self is Decision.STOP:
+            return PlanSource.STOP
+        return PlanSource.CANDIDATE
+
+    @property
+    def is_failure(self) -> bool:
+        """The solver gave no verified plan that is applied or beaten by the candidate."""
+        return self not in (Decision.SOLVER, Decision.CANDIDATE_CHEAPER)
+
+
+def decide(*, solver_verified: bool, solver_value: float, candidate_ok: bool,
+           candidate_value: float, has_previous_plan: bool,
+           candidate_collision_free: bool, timed_out: bool = False) -> Decision:
+    """Choose what is applied: the solver's plan, the shifted candidate, or a stop.
+
+    Args:
+        solver_verified: the solver's solution passed verification.
+        solver_value: its cost V_N.
+        candidate_ok: the shifted candidate passed verification (it ends on the path).
+        candidate_value: its cost (ignored unless candidate_ok).
+        has_previous_plan: there is a previous plan, so the candidate's inputs were verified
+            one step ago.
+        candidate_collision_free: the candidate's rollout from the measured state clears
+            every reachable obstacle.
+        timed_out: the step's solve time budget ran out before its solving was done.
+
+    Returns:
+        SOLVER when the solver's plan is verified and not costlier than a verified candidate
+        (with LYAPUNOV_TOLERANCE), whether or not time ran out; else the candidate:
+        CANDIDATE_CHEAPER when it is verified and beats a verified solution,
+        CANDIDATE_TIMEOUT when it is verified and the solver gave no verified solution in
+        the time, CANDIDATE_SOLVER_FAILED when it is verified and the solver gave none with
+        time to spare; CANDIDATE_OFF_PREDICTION when it is not
+        (the measured state left the prediction, so it no longer ends on the path) but it
+        follows a previous plan and is collision-free (the shift runs out after N steps,
+        all u_s, which stops the robot); else STOP.
+
+    """
+    bound = candidate_value if candidate_ok else math.inf
+    if solver_verified and solver_value <= bound + LYAPUNOV_TOLERANCE * (1 + abs(bound)):
+        return Decision.SOLVER
+    if candidate_ok:
+        if solver_verified:
+            return Decision.CANDIDATE_CHEAPER
+        return Decision.CANDIDATE_TIMEOUT if timed_out else Decision.CANDIDATE_SOLVER_FAILED
+    if has_previous_plan and candidate_collision_free:
+        return Decision.CANDIDATE_OFF_PREDICTION
+    return Decision.STOP
