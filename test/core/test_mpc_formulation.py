@@ -16,6 +16,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -30,7 +32,7 @@ from mpc_local_planner.core.mpc.formulation import (
     stage_cost,
 )
 from mpc_local_planner.core.obstacles import ConvexPolygon
-from mpc_local_planner.core.paths import paper_sinusoid
+from mpc_local_planner.core.paths import paper_sinusoid, WaypointPath
 
 BOX = ConvexPolygon.from_box(1.0, -1.0, 1.5, 1.0)
 
@@ -93,3 +95,37 @@ def test_the_stage_sizes_match_the_variables_and_constraints() -> None:
                                        + layout.mu.size)
     dynamics_rows = config.horizon * (model.nx + 1)
     assert sum(structure['ng']) + dynamics_rows == form.lbg.shape[0]
+
+
+def test_a_waypoint_path_is_evaluated_once_its_steady_state_carried_along_the_horizon() -> None:
+    model, config = Unicycle(), MpcConfig(horizon=4)
+    path = WaypointPath(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]), capacity=16)
+    form = formulate(model, config, path_terminal(model, path), slots=1, faces=4)
+    layout, structure = form.layout, form.structure
+    assert layout.xs.shape == (config.horizon + 1, model.nx)
+    assert sum(structure['nx']) + sum(structure['nu']) == form.lbw.shape[0] == (
+        layout.x.size + layout.r.size + layout.xs.size + layout.u.size + layout.mu.size)
+    # a plan at rest on the path is feasible, with the carried x_s = g_p(s) at every stage
+    s = 0.4
+    x = np.tile(path.pose(s), (config.horizon + 1, 1))
+    mu = feasible_multipliers(x, [BOX], form.slots, form.faces)
+    w = form.pack(x, np.array([s]), np.zeros((config.horizon, model.nu)), mu,
+                  steady=path.pose(s))
+    params = parameter_vector(x[0], config.cost_weights(),
+                              obstacle_parameters([BOX], form.slots, form.faces),
+                              path.parameters())
+    g = np.asarray(form.g_fn(w, params)).reshape(-1)
+    assert np.all(g >= form.lbg - 1e-9) and np.all(g <= form.ubg + 1e-9)
+    assert float(form.cost_fn(w, params)) == pytest.approx(1000.0 * (1 - s) ** 2)
+    # a wrong copy of x_s violates the terminal stage's rows
+    w[layout.xs] += 0.1
+    g = np.asarray(form.g_fn(w, params)).reshape(-1)
+    assert np.any(np.abs(g - np.clip(g, form.lbg, form.ubg)) > 0.05)
+    # the path appears once in the NLP, not in every stage cost
+    terminal = path_terminal(model, path)
+    copied = formulate(model, config, dataclasses.replace(terminal, carried=False), slots=1,
+                       faces=4)
+    assert form.g_fn.n_instructions() + form.cost_fn.n_instructions() < (
+        copied.g_fn.n_instructions() + copied.cost_fn.n_instructions()) / 2
+    with pytest.raises(ValueError, match='steady state'):
+        form.pack(x, np.array([s]), np.zeros((config.horizon, model.nu)), mu)

@@ -48,7 +48,7 @@ def target_terminal(model: RobotModel) -> TerminalCondition:
     def steady_state(r: ca.SX, params: ca.SX) -> ca.SX:
         return r
 
-    def condition(x_n: ca.SX, r: ca.SX, params: ca.SX,
+    def condition(x_n: ca.SX, steady: ca.SX, r: ca.SX, params: ca.SX,
                   weights: CostWeights) -> tuple[ca.SX, ca.SX]:
         # x_N = x_s, and x_s is a steady state: x_s = g(pose of x_s)
         x_s, _ = model.steady_state(r[:3])

@@ -117,7 +117,11 @@ class TerminalCondition:
     """How the prediction ends, (6d)-(6f), and what the offset cost measures.
 
     The artificial steady state is parametrised by a reference variable r (the path progress
-    s in the paper) that is a decision variable, copied along the horizon.
+    s in the paper) that is a decision variable, copied along the horizon. With ``carried``
+    the steady state x_s(r) is copied along the horizon too, as a stage state, and evaluated
+    once, at the last stage: a waypoint path's p(s) (hundreds of operations at the capacity
+    of 128 segments) would otherwise be written into every stage cost, which made the
+    generated C code 11 MB per NLP and its compilation four minutes.
 
     Attributes:
         family: key of the symbolic structure: NLPs are rebuilt when it changes.
@@ -126,8 +130,9 @@ class TerminalCondition:
         lower: lower bound of r.
         upper: upper bound of r.
         steady_state: (r, params) -> the artificial steady state x_s(r).
-        condition: (x_N, r, params, weights) -> (residual that must be 0, offset cost without
-            its weight).
+        condition: (x_N, x_s, r, params, weights) -> (residual that must be 0, offset cost
+            without its weight); x_s is steady_state(r) (or the carried copy of it).
+        carried: copy x_s(r) along the horizon instead of evaluating it at every stage.
 
     """
 
@@ -137,7 +142,8 @@ class TerminalCondition:
     lower: np.ndarray
     upper: np.ndarray
     steady_state: Callable[[ca.SX, ca.SX], ca.SX]
-    condition: Callable[[ca.SX, ca.SX, ca.SX, CostWeights], tuple[ca.SX, ca.SX]]
+    condition: Callable[[ca.SX, ca.SX, ca.SX, ca.SX, CostWeights], tuple[ca.SX, ca.SX]]
+    carried: bool = False
 
 
 def path_terminal(model: RobotModel, path: ReferencePath) -> TerminalCondition:
@@ -151,14 +157,17 @@ def path_terminal(model: RobotModel, path: ReferencePath) -> TerminalCondition:
         x_s, _ = model.steady_state(path.symbolic(r[0], params))
         return x_s
 
-    def condition(x_n: ca.SX, r: ca.SX, params: ca.SX,
+    def condition(x_n: ca.SX, x_s: ca.SX, r: ca.SX, params: ca.SX,
                   weights: CostWeights) -> tuple[ca.SX, ca.SX]:
         # (6d): x_N = x_s = g_p(s); V_o(1 - s) = (1 - s)^2
-        return x_n - steady_state(r, params), (1 - r[0]) ** 2
+        return x_n - x_s, (1 - r[0]) ** 2
 
     return TerminalCondition(family=path.family, dim=1, num_params=path.num_params,
                              lower=np.zeros(1), upper=np.ones(1),
-                             steady_state=steady_state, condition=condition)
+                             steady_state=steady_state, condition=condition,
+                             # a parametrised path (waypoints) is costly to evaluate, a
+                             # closed-form one (the paper's sinusoid) is not
+                             carried=path.num_params > 0)
 
 
 def sweep_rate(model: RobotModel, radius: float, smoothing: float | None = None
@@ -195,6 +204,8 @@ class Layout(NamedTuple):
 
     x: np.ndarray  # (N+1, nx) the states x_0..x_N
     r: np.ndarray  # (N+1, nr) the copies of the reference r (s, or the steady state)
+    # (N+1, nx) the copies of the steady state x_s(r) (TerminalCondition.carried), else (N+1, 0)
+    xs: np.ndarray
     u: np.ndarray  # (N, nu) the inputs u_0..u_{N-1}
     mu: np.ndarray  # (N, slots * block) the multipliers of steps 1..N (see Formulation)
     # (N, 1) the sweep rate of the step before x_1..x_N (polygon), (N, 0) for a circle
@@ -246,15 +257,22 @@ class Formulation:
         """Multipliers per obstacle slot and stage."""
         return self.faces + self.robot_faces
 
-    def pack(self, x: np.ndarray, r: np.ndarray, u: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    def pack(self, x: np.ndarray, r: np.ndarray, u: np.ndarray, mu: np.ndarray,
+             steady: np.ndarray | None = None) -> np.ndarray:
         """Return the decision vector w holding states, reference, inputs and multipliers.
 
         The polygon's carried sweep rates are computed here from x and u, so that the
-        gap-closing constraints of a rolled-out plan hold exactly.
+        gap-closing constraints of a rolled-out plan hold exactly; a carried steady state
+        is the given x_s(r) at every stage (required then).
         """
         w = np.zeros(self.lbw.shape[0])
         w[self.layout.x] = x
         w[self.layout.r] = r
+        if self.layout.xs.size:
+            if steady is None:
+                msg = 'this formulation carries the steady state: pack needs it'
+                raise ValueError(msg)
+            w[self.layout.xs] = np.asarray(steady, dtype=float).reshape(1, -1)
         w[self.layout.u] = u
         w[self.layout.mu] = mu.reshape(self.layout.mu.shape)
         if self.sweep_fn is not None:
@@ -292,7 +310,8 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
     """
     n, nx, nu = config.horizon, model.nx, model.nu
     nr = terminal.dim
-    nz = nx + nr
+    ns = nx if terminal.carried else 0  # the carried steady state
+    nz = nx + nr + ns
     footprint = config.robot_footprint
     polygon = not footprint.is_circle
     if polygon:
@@ -334,7 +353,7 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
         if k >= 1:
             order.append(MU[k])
     w = ca.vertcat(*order)
-    layout = _layout(w.numel(), n, nx, nz, nu, nm, nc)
+    layout = _layout(w.numel(), n, nx, nr, nz, nu, nm, nc)
 
     g, lbg, ubg = [], [], []
     ng_stage = []
@@ -348,13 +367,14 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
 
     cost = 0
     for k in range(n + 1):
-        x_l, r_l = Z[k][:nx], Z[k][nx:nz]
+        x_l, r_l = Z[k][:nx], Z[k][nx:nx + nr]
+        x_s = Z[k][nx + nr:nz] if ns else terminal.steady_state(r_l, p_path)
         if k < n:
             # (6a), cost (5): + l(x_l - x_s, u_l - u_s)
-            cost = cost + stage(x_l, U[k], terminal.steady_state(r_l, p_path), w_weights)
-            # (6c): x_{l+1} = f(x_l, u_l); and r_{l+1} = r_l (one reference); a polygon also
-            # carries this step's sweep rate to the next stage
-            carried = [sweep(x_l, U[k])] if polygon else []
+            cost = cost + stage(x_l, U[k], x_s, w_weights)
+            # (6c): x_{l+1} = f(x_l, u_l); and r_{l+1} = r_l (one reference, and its steady
+            # state when carried); a polygon also carries this step's sweep rate
+            carried = ([x_s] if ns else []) + ([sweep(x_l, U[k])] if polygon else [])
             add(Z[k + 1] - ca.vertcat(f(x_l, U[k]), r_l, *carried), 0.0, 0.0)
         rows = 0
         if k == 0:
@@ -376,8 +396,11 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
                             config.farkas_margin, ca.inf)
                 rows += add(ca.sum1(mu), 1.0, 1.0)
         if k == n:
+            if ns:
+                # the carried copies are x_s(r): evaluated here only
+                rows += add(x_s - terminal.steady_state(r_l, p_path), 0.0, 0.0)
             # (6d)-(6f): the terminal condition, and (6a): + weights.offset V_o
-            residual, offset_cost = terminal.condition(x_l, r_l, p_path, weights)
+            residual, offset_cost = terminal.condition(x_l, x_s, r_l, p_path, weights)
             # drop entries that are identically zero (a free steady state): an empty
             # Jacobian row makes the KKT system singular and the solver wanders off
             kept = [residual[i] for i in range(residual.numel()) if not residual[i].is_zero()]
@@ -445,14 +468,16 @@ def _polygon_rows(add: Callable[[ca.SX, float, float], int], x_l: ca.SX, angle: 
     return rows
 
 
-def _layout(size: int, n: int, nx: int, nz: int, nu: int, nm: int, nc: int = 0) -> Layout:
-    """Return the indices of x, r, u, mu and the carried sweep rates in w."""
+def _layout(size: int, n: int, nx: int, nr: int, nz: int, nu: int, nm: int,
+            nc: int = 0) -> Layout:
+    """Return the indices of x, r, the carried x_s, u, mu and the carried sweep rates in w."""
     index = np.arange(size)
-    xs, rs, us, mus, cs = [], [], [], [], []
+    xs, rs, ss, us, mus, cs = [], [], [], [], [], []
     offset = 0
     for k in range(n + 1):
         xs.append(index[offset:offset + nx])
-        rs.append(index[offset + nx:offset + nz])
+        rs.append(index[offset + nx:offset + nx + nr])
+        ss.append(index[offset + nx + nr:offset + nz])
         offset += nz
         if k >= 1:
             cs.append(index[offset:offset + nc])
@@ -463,8 +488,9 @@ def _layout(size: int, n: int, nx: int, nz: int, nu: int, nm: int, nc: int = 0) 
         if k >= 1:
             mus.append(index[offset:offset + nm])
             offset += nm
-    return Layout(x=np.array(xs), r=np.array(rs), u=np.array(us),
-                  mu=np.array(mus).reshape(n, nm), c=np.array(cs, dtype=int).reshape(n, nc))
+    return Layout(x=np.array(xs), r=np.array(rs), xs=np.array(ss, dtype=int).reshape(n + 1, -1),
+                  u=np.array(us), mu=np.array(mus).reshape(n, nm),
+                  c=np.array(cs, dtype=int).reshape(n, nc))
 
 
 def parameter_vector(x0: np.ndarray, weights: CostWeights, obstacles: np.ndarray,

@@ -444,7 +444,9 @@ class MpcBase(ABC):
         return nlp, params, held
 
     def _pack(self, plan: Plan, nlp: Nlp) -> np.ndarray:
-        return nlp.formulation.pack(plan.x, self._reference_value(plan), plan.u, plan.mu)
+        form = nlp.formulation
+        steady = self._terminal_state(plan.s) if form.layout.xs.size else None
+        return form.pack(plan.x, self._reference_value(plan), plan.u, plan.mu, steady)
 
     def _multipliers(self, x: np.ndarray, selected: list[ConvexPolygon],
                      nlp: Nlp) -> np.ndarray:
