@@ -16,12 +16,14 @@
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 import pytest
 
 from mpc_local_planner.core.config import MpcConfig, SOLVERS
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.mpc import PathReferenceMPC, PlanSource
+from mpc_local_planner.core.mpc import backends, PathReferenceMPC, PlanSource
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import paper_sinusoid
 
@@ -82,3 +84,20 @@ def test_compilation_failure_falls_back_to_the_interpreter(
     assert sol.source == PlanSource.SOLVER
     assert mpc.backend == 'fatrop'
     assert 'compiling the MPC NLP failed' in caplog.text
+
+
+def test_processes_wanting_the_same_library_compile_it_once(tmp_path, monkeypatch) -> None:
+    runs: list[str] = []
+
+    def compiler(source: str, library):
+        runs.append(source)
+        library.write_text('built')  # what gcc would leave
+        return library
+
+    monkeypatch.setattr(backends, '_run_compiler', compiler)
+    library = tmp_path / 'mpc_nlp_test.so'
+    # each call opens the lock file itself, as another process would
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        results = list(pool.map(lambda _: backends._compile('int f;', library), range(2)))
+    assert results == [library, library]
+    assert runs == ['int f;']  # the second found the library when its turn came

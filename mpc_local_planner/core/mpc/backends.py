@@ -35,6 +35,7 @@ from __future__ import annotations
 
 from concurrent.futures import Future
 from dataclasses import dataclass, field
+import fcntl
 import hashlib
 import logging
 import math
@@ -449,8 +450,21 @@ def _submit_compilation(source: str, library: Path) -> Future:
 
 
 def _compile(source: str, library: Path) -> Path:
-    """Compile source into library (atomically: a half-written file is never loaded)."""
+    """Compile source into library (atomically: a half-written file is never loaded).
+
+    Processes that want the same library (an evaluation's workers, two nodes) take turns on
+    a lock file beside it: the first compiles, the others find the library when their turn
+    comes instead of running gcc on the same source at the same time.
+    """
     library.parent.mkdir(parents=True, exist_ok=True)
+    with open(library.with_suffix('.lock'), 'w') as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file is closed
+        if library.exists():
+            return library
+        return _run_compiler(source, library)
+
+
+def _run_compiler(source: str, library: Path) -> Path:
     compiler = os.environ.get('CC', 'gcc')
     with tempfile.TemporaryDirectory(dir=library.parent) as tmp:
         c_file = Path(tmp) / 'mpc_nlp.c'
