@@ -202,3 +202,31 @@ def test_a_cold_start_whose_reach_ends_at_a_plan_corner_is_solved(solver: str) -
     assert solution.source is PlanSource.SOLVER, solution.status
     assert solution.u0[0] > 0.5  # on its way, not creeping
     assert solution.s > path.project(BARN_0_STALL) + 0.1
+
+
+# BARN world 2 at 1 m/s: the Jackal at rest beside five sensed boxes, its plan the first one
+# (the start-goal line, before any scan). fatrop failed there from every start, and its failing
+# first try spent every step's budget: the robot stood still for good.
+BARN_2_STALL = np.array([-2.31264, 5.19817, 1.61895])
+BARN_2_BOXES = [ConvexPolygon.from_vertices(np.array(v)) for v in (
+    [[-1.976, 5.592], [-1.725, 5.465], [-1.671, 5.573], [-1.921, 5.7]],
+    [[-2.577, 7.559], [-2.574, 7.236], [-2.534, 7.236], [-2.537, 7.559]],
+    [[-2.573, 6.512], [-2.588, 6.169], [-2.548, 6.168], [-2.533, 6.511]],
+    [[-2.547, 7.274], [-2.69, 7.231], [-2.675, 7.182], [-2.532, 7.225]],
+    [[-2.562, 6.218], [-2.83, 6.206], [-2.827, 6.141], [-2.559, 6.153]])]
+
+
+def test_a_cold_start_among_obstacles_tries_the_cold_ipopt_first_and_is_solved() -> None:
+    path = WaypointPath(np.array([[-2.25, 3.0], [-2.25, 13.0]]), start_heading=1.57,
+                        goal_heading=np.pi / 2, capacity=128)
+    config = MpcConfig(compile=False, max_solve_time=3600.0,
+                       footprint=((0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215),
+                                  (0.254, -0.215)))
+    mpc = PathReferenceMPC(Unicycle(v_max=1.0, omega_max=2.0), config, obstacles=BARN_2_BOXES,
+                           path=path)
+    solution = mpc.solve(BARN_2_STALL)
+    assert solution.source is PlanSource.SOLVER, solution.status
+    assert '(IPOPT cold start)' in solution.status
+    assert solution.u0[0] > 0.5
+    # no failing fatrop run of 200 iterations came first
+    assert solution.iterations < config.max_iterations

@@ -403,10 +403,10 @@ class MpcBase(ABC):
 
         With adaptive slots, for boxes (4 faces), for polygons of faces_per_obstacle (what
         sensed obstacles become) and for the face counts of the obstacles set now: an NLP
-        holds obstacles with fewer faces too. Their IPOPT fallbacks too: a step builds one
-        only if the build fits in what is left of its budget, so a fallback not built ahead
-        may never be there when it is needed. From then on a control step builds no NLP
-        (see _nlp_holding).
+        holds obstacles with fewer faces too. Their IPOPTs too (fallback, cold start): a step
+        builds one only if the build fits in what is left of its budget, so one not built
+        ahead may never be there when it is needed. From then on a control step builds no
+        NLP (see _nlp_holding).
 
         Args:
             max_obstacles: the largest count to prepare (config.obstacle_slots by default).
@@ -421,7 +421,10 @@ class MpcBase(ABC):
         else:
             shapes = [self._slot_shape(self._inflated[:count])]
         for shape in shapes:
-            self._nlp_for(*shape).fallback_solver()
+            nlp = self._nlp_for(*shape)
+            nlp.fallback_solver()
+            if shape[0]:
+                nlp.cold_solver()
         self._shapes.prepared = True
 
     def wait_compiled(self) -> None:
@@ -675,48 +678,69 @@ class MpcBase(ABC):
                             status=run.status, iterations=run.iterations, seconds=run.seconds)
 
     def _optimise(self, nlp: Nlp, w_candidate: np.ndarray, params: np.ndarray,
-                  x0: np.ndarray, active: list[ConvexPolygon]) -> SolveAttempt:
+                  x0: np.ndarray, active: list[ConvexPolygon],
+                  previous: Plan | None = None) -> SolveAttempt:
         """Solve from the candidate; on failure retry from other starts and with IPOPT.
 
-        The retries run only while the step's budget lasts, most promising first. After a
-        plan: IPOPT from the candidate. Without one (from rest): "stay put" zeroes every
-        derivative of the quartic cost, and the solvers may stall there; a start rolled out
-        along the path usually converges, so IPOPT (the robust one) tries that first, then
-        the backend, then IPOPT from the candidate (a backend that failed from one start
-        mostly fails from the other too, and a failing fatrop runs all its iterations: half
-        the budget on BARN's NLPs). The fallback is built on first use only if its build
-        (which cannot be cut) fits in what is left: prepare() builds it ahead. The returned
-        attempt counts the iterations and time of every try.
+        The tries run only while the step's budget lasts (the first always runs), most
+        promising first:
+
+        - after a plan: the backend from the candidate, then IPOPT from it;
+        - without one (from rest), with obstacles in the NLP: IPOPT with cold-start options
+          from the previous activation round's solution (else a start rolled out along the
+          path), then the backend and IPOPT from the candidate. At the seven BARN stalls at
+          1 m/s fatrop failed from every start in six, IPOPT converged from nearly all;
+          the robot stood still because fatrop's failing first try spent each step's budget;
+        - without one and without obstacles: the backend from the candidate ("stay put"
+          zeroes every derivative of the quartic cost, and solvers may stall there), then
+          from the rolled-out start IPOPT and the backend, then IPOPT from the candidate.
+
+        An IPOPT not built yet is built only if its build (which cannot be cut) fits in what
+        is left: prepare() builds them ahead. The returned attempt counts the iterations and
+        time of every try.
         """
         active_set = ObstacleSet(active)
         budget = self._budget
-        best = self._run_solver(nlp, w_candidate, params, active_set)
-        iterations, seconds = best.iterations, best.seconds
-        if best.verified:
-            return best
-        tries = [(w_candidate, True)]  # (start, with IPOPT)
-        if self._plan is None:
+        if self._plan is not None:
+            tries = [(w_candidate, 'backend'), (w_candidate, 'fallback')]
+        elif active:
+            if previous is not None:
+                previous.mu = self._multipliers(previous.x, active, nlp)
+                start = self._pack(previous, nlp)
+            else:
+                start = self._pack(self._guided_guess(x0, active, nlp), nlp)
+            tries = [(start, 'cold'), (w_candidate, 'backend'), (w_candidate, 'fallback')]
+        else:
             guess = self._pack(self._guided_guess(x0, active, nlp), nlp)
-            tries = [(guess, True), (guess, False), (w_candidate, True)]
-        for w_start, with_ipopt in tries:
+            tries = [(w_candidate, 'backend'), (guess, 'fallback'), (guess, 'backend'),
+                     (w_candidate, 'fallback')]
+        best: SolveAttempt | None = None
+        iterations, seconds = 0, 0.0
+        for index, (w_start, kind) in enumerate(tries):
             solver = None
-            if with_ipopt:
+            if kind == 'cold':
+                if index > 0 and not budget.allows(nlp.cold_build_time):
+                    continue
+                solver = nlp.cold_solver()
+            elif kind == 'fallback':
                 if not nlp.has_fallback:
                     continue  # IPOPT is the backend: its retry is the one without
                 if not budget.allows(nlp.fallback_build_time):
                     continue
                 solver = nlp.fallback_solver()
-            elif not budget.allows():
+            elif index > 0 and not budget.allows():
                 break
-            retry = self._run_solver(nlp, w_start, params, active_set, solver)
-            iterations += retry.iterations
-            seconds += retry.seconds
-            if retry.verified:
-                best = retry if solver is None else retry._replace(
-                    status=f'{retry.status} (IPOPT fallback)')
+            attempt = self._run_solver(nlp, w_start, params, active_set, solver)
+            iterations += attempt.iterations
+            seconds += attempt.seconds
+            if attempt.verified:
+                label = {'backend': '', 'fallback': ' (IPOPT fallback)',
+                         'cold': ' (IPOPT cold start)'}[kind]
+                best = attempt._replace(status=attempt.status + label)
                 break
-            if solver is None:
-                best = retry
+            if best is None or kind == 'backend':
+                best = attempt
+        assert best is not None  # the first try always runs
         return best._replace(iterations=iterations, seconds=seconds)
 
     # ----------------------------------------------------------------- constraint generation
@@ -730,6 +754,7 @@ class MpcBase(ABC):
         activation = self._activation_distance()
         active = self._near_trajectory(candidate.x, candidate.u, reachable, activation)
         iterations, seconds = 0, 0.0
+        previous: Plan | None = None  # the last round's solution, a start for the next
         for round_ in range(MAX_ACTIVATION_ROUNDS + 1):
             nlp, params, held = self._prepare_nlp(active, x0)
             candidate.mu = self._multipliers(candidate.x, held, nlp)
@@ -739,7 +764,7 @@ class MpcBase(ABC):
                             <= FEASIBILITY_TOLERANCE)
             candidate_value = (float(nlp.formulation.cost_fn(w_candidate, params))
                                if candidate_ok else math.inf)
-            attempt = self._optimise(nlp, w_candidate, params, x0, held)
+            attempt = self._optimise(nlp, w_candidate, params, x0, held, previous)
             iterations += attempt.iterations
             seconds += attempt.seconds
             if not attempt.verified:
@@ -761,6 +786,8 @@ class MpcBase(ABC):
                         status=f'{attempt.status} (hits an obstacle left out of the NLP)')
                 break
             active = active + missed
+            previous = Plan(x=states, u=inputs, s=self._progress_of(attempt.w[layout.r[-1]]),
+                            mu=np.zeros(0), value=math.inf)
         return _Rounds(nlp=nlp, params=params, w_candidate=w_candidate,
                        candidate_ok=candidate_ok, candidate_value=candidate_value,
                        attempt=attempt._replace(iterations=iterations, seconds=seconds),
