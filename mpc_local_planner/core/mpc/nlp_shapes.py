@@ -120,9 +120,12 @@ class NlpShapes:
         def work() -> None:
             try:
                 nlp = build(*shape)
-                # handed over compiled (config.compile): interpreted, a polygon NLP with many
-                # obstacles ran fatrop's 200 iterations in 2.4 s (fatrop's iterations are
-                # bounded from the compiled library only, see backends)
+                # with its IPOPTs (a step builds one only if the build fits its budget) and
+                # compiled (config.compile): interpreted, a polygon NLP with many obstacles
+                # ran fatrop's 200 iterations in 2.4 s (fatrop's iterations are bounded from
+                # the compiled library only, see backends)
+                nlp.fallback_solver()
+                nlp.cold_solver()
                 nlp.finish_compilation(wait=True)
                 future.set_result(nlp)
             except BaseException as err:  # a failed build is dropped; the steps go on

@@ -682,8 +682,8 @@ class MpcBase(ABC):
                   previous: Plan | None = None) -> SolveAttempt:
         """Solve from the candidate; on failure retry from other starts and with IPOPT.
 
-        The tries run only while the step's budget lasts (the first always runs), most
-        promising first:
+        The tries run only while the step's budget lasts (the first run of the backend
+        always does), most promising first:
 
         - after a plan: the backend from the candidate, then IPOPT from it;
         - without one (from rest), with obstacles in the NLP: IPOPT with cold-start options
@@ -716,11 +716,11 @@ class MpcBase(ABC):
                      (w_candidate, 'fallback')]
         best: SolveAttempt | None = None
         iterations, seconds = 0, 0.0
-        for index, (w_start, kind) in enumerate(tries):
+        for w_start, kind in tries:
             solver = None
             if kind == 'cold':
-                if index > 0 and not budget.allows(nlp.cold_build_time):
-                    continue
+                if not budget.allows(nlp.cold_build_time):
+                    continue  # then the backend from the candidate comes first
                 solver = nlp.cold_solver()
             elif kind == 'fallback':
                 if not nlp.has_fallback:
@@ -728,7 +728,7 @@ class MpcBase(ABC):
                 if not budget.allows(nlp.fallback_build_time):
                     continue
                 solver = nlp.fallback_solver()
-            elif index > 0 and not budget.allows():
+            elif best is not None and not budget.allows():
                 break
             attempt = self._run_solver(nlp, w_start, params, active_set, solver)
             iterations += attempt.iterations
@@ -740,7 +740,7 @@ class MpcBase(ABC):
                 break
             if best is None or kind == 'backend':
                 best = attempt
-        assert best is not None  # the first try always runs
+        assert best is not None  # the first backend try always runs
         return best._replace(iterations=iterations, seconds=seconds)
 
     # ----------------------------------------------------------------- constraint generation
