@@ -77,38 +77,29 @@ ITERATION_TIME_DECAY = 0.9
 _USER_STOP = 'User_Requested_Stop'
 
 
-def _ipopt_options(config: MpcConfig) -> dict[str, Any]:
-    return {
-        'ipopt.print_level': 0,
-        'ipopt.sb': 'yes',
-        'ipopt.max_iter': config.max_iterations,
-        'ipopt.tol': config.tolerance,
-        'ipopt.acceptable_tol': 1e-6,
-        # the initial guess is the proof's candidate, feasible by construction: keep the
-        # interior-point iterates near it instead of pushing them off the bounds
-        'ipopt.bound_push': 1e-8,
-        'ipopt.bound_frac': 1e-8,
-        'ipopt.mu_init': 1e-4,
-    }
+def _ipopt_options(config: MpcConfig, *, cold: bool = False) -> dict[str, Any]:
+    """Return IPOPT's options: from the proof's candidate (warm), or from an infeasible start.
 
-
-def _cold_ipopt_options(config: MpcConfig) -> dict[str, Any]:
-    """IPOPT's options from a start that is not feasible (the robot at rest, no plan).
-
-    The warm-start settings above hold the iterates near the start; from an infeasible one
-    that slows IPOPT down. Measured at the seven BARN stalls at 1 m/s (polygon NLPs with 2 to
-    5 obstacles, the robot at rest): IPOPT's default bound push and mu_init 1e-2 converged
-    from every start in 23 to 138 iterations, about half of the warm settings' count, where
-    fatrop failed in six of the seven from every start.
+    Warm: the initial guess is the candidate, feasible by construction, so the interior-point
+    iterates are kept near it instead of being pushed off the bounds. Cold (the robot at
+    rest, no plan): those settings slow IPOPT down; at the seven BARN stalls at 1 m/s
+    (polygon NLPs with 2 to 5 obstacles) IPOPT's default bound push with mu_init 1e-2
+    converged from every start in 23 to 138 iterations, about half of the warm settings'
+    count, where fatrop failed in six of the seven from every start.
     """
-    return {
+    options = {
         'ipopt.print_level': 0,
         'ipopt.sb': 'yes',
         'ipopt.max_iter': config.max_iterations,
         'ipopt.tol': config.tolerance,
         'ipopt.acceptable_tol': 1e-6,
-        'ipopt.mu_init': 1e-2,
     }
+    if cold:
+        options['ipopt.mu_init'] = 1e-2
+    else:
+        options.update({'ipopt.bound_push': 1e-8, 'ipopt.bound_frac': 1e-8,
+                        'ipopt.mu_init': 1e-4})
+    return options
 
 
 def _fatrop_options(config: MpcConfig, structure: dict) -> dict[str, Any]:
@@ -350,8 +341,8 @@ def build_nlp(formulation: Formulation, config: MpcConfig) -> Nlp:
         fb_plugin, fb_options = backend_options(config.with_changes(solver='ipopt'), structure)
         fb_options.setdefault('iteration_callback', deadline)
         nlp.fallback_factory = lambda: ca.nlpsol('mpc_fallback', fb_plugin, problem, fb_options)
-    cold_options = {**_cold_ipopt_options(config), 'print_time': False, 'error_on_fail': False,
-                    'iteration_callback': deadline}
+    cold_options = {**_ipopt_options(config, cold=True), 'print_time': False,
+                    'error_on_fail': False, 'iteration_callback': deadline}
     nlp.cold_factory = lambda: ca.nlpsol('mpc_cold', 'ipopt', problem, cold_options)
     if config.compile:
         _start_compilation(nlp)
