@@ -413,3 +413,16 @@ def test_before_prepare_a_step_builds_the_shape_it_needs() -> None:
     mpc.solve(mpc.path.start)
     assert (3, 4) in mpc._nlps
     assert len(mpc.last_active_obstacles) == 3
+
+
+def test_a_shape_never_solved_is_bounded_by_its_siblings_time_per_iteration() -> None:
+    config = MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT, activation_distance=5.0)
+    mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
+    mpc.prepare(3)
+    one, three = mpc._nlps[(1, 4)], mpc._nlps[(3, 4)]
+    one.iteration_time = 0.002
+    assert three.iteration_time == 0.0
+    mpc._prepare_nlp(THREE_BOXES, mpc.path.start)
+    size = three.formulation.lbw.shape[0] / one.formulation.lbw.shape[0]
+    assert size > 1.0
+    assert three.iteration_time == pytest.approx(0.002 * size)

@@ -439,6 +439,9 @@ class MpcBase(ABC):
             self._slots = len(active)  # grow: rebuilt below, between two control steps
         nlp, held = self._nlp_holding(active)
         nlp.finish_compilation()
+        if nlp.iteration_time <= 0.0:
+            # never solved: its fatrop is bounded by its siblings' time per iteration
+            nlp.iteration_time = self._shapes.iteration_time_estimate(nlp)
         self._last_nlp = nlp
         form = nlp.formulation
         params = parameter_vector(x0, self._config.cost_weights(),
