@@ -83,9 +83,10 @@ def _ipopt_options(config: MpcConfig, *, cold: bool = False) -> dict[str, Any]:
     Warm: the initial guess is the candidate, feasible by construction, so the interior-point
     iterates are kept near it instead of being pushed off the bounds. Cold (the robot at
     rest, no plan): those settings slow IPOPT down; at the seven BARN stalls at 1 m/s
-    (polygon NLPs with 2 to 5 obstacles) IPOPT's default bound push with mu_init 1e-2
-    converged from every start in 23 to 138 iterations, about half of the warm settings'
-    count, where fatrop failed in six of the seven from every start.
+    (polygon NLPs with 2 to 5 obstacles, three starts each) IPOPT's default bound push with
+    mu_init 1e-2 converged in 20 of the 21 solves, in 22 to 138 iterations, mostly about
+    half of the warm settings' count, where fatrop failed in six of the seven from every
+    start.
     """
     options = {
         'ipopt.print_level': 0,
