@@ -568,6 +568,24 @@ def _perception_lines(laser: dict[str, Any], scan: dict[str, Any],
     return lines
 
 
+def _beside_peer(horizon: int, obstacles: list[ConvexPolygon],
+                 variants: Sequence[tuple[str, bool]], max_steps: int) -> list[dict[str, Any]]:
+    """Run the peer and each (backend, compiled) variant in closed loop; print their rows.
+
+    Returns the variants' results, each with its ratio to the peer, then the peer's.
+    """
+    peer = closed_loop(PEER, horizon, obstacles, max_steps=max_steps)
+    rows = []
+    for backend, compiled in variants:
+        r = closed_loop(backend, horizon, obstacles, max_steps=max_steps,
+                        compile_functions=compiled)
+        r['ratio_to_peer'] = peer['solve_ms']['median'] / r['solve_ms']['median']
+        rows.append(r)
+        print(_row(r, peer), flush=True)
+    print(_row(peer, peer), flush=True)
+    return rows + [peer]
+
+
 def _row(r: dict[str, Any], peer: dict[str, Any] | None) -> str:
     s = r['solve_ms']
     ratio = peer['solve_ms']['median'] / s['median'] if peer else math.nan
@@ -626,15 +644,7 @@ def main(argv: Sequence[str] | None = None, *, footprint_compile: bool = True,
               flush=True)
         print(HEADER, flush=True)
         for n in horizons:
-            peer = closed_loop(PEER, n, paper, max_steps=max_steps)
-            for backend, compiled in variants:
-                r = closed_loop(backend, n, paper, max_steps=max_steps,
-                                compile_functions=compiled)
-                r['ratio_to_peer'] = peer['solve_ms']['median'] / r['solve_ms']['median']
-                results['horizons'].append(r)
-                print(_row(r, peer), flush=True)
-            results['horizons'].append(peer)
-            print(_row(peer, peer), flush=True)
+            results['horizons'] += _beside_peer(n, paper, variants, max_steps)
     if 'obstacles' in sections:
         results['obstacles'] = []
         print("\nN = 10 with more obstacles (reach: most obstacles within the horizon's reach "
@@ -643,15 +653,7 @@ def main(argv: Sequence[str] | None = None, *, footprint_compile: bool = True,
         path = paper_sinusoid()
         for count in OBSTACLE_COUNTS:
             obstacles = paper + extra_obstacles(count - 1, path)
-            peer = closed_loop(PEER, 10, obstacles, max_steps=max_steps)
-            for backend, compiled in variants:
-                r = closed_loop(backend, 10, obstacles, max_steps=max_steps,
-                                compile_functions=compiled)
-                r['ratio_to_peer'] = peer['solve_ms']['median'] / r['solve_ms']['median']
-                results['obstacles'].append(r)
-                print(_row(r, peer), flush=True)
-            results['obstacles'].append(peer)
-            print(_row(peer, peer), flush=True)
+            results['obstacles'] += _beside_peer(10, obstacles, variants, max_steps)
 
     if 'rrt' in sections:
         rrt = bench_rrt(3 if args.quick else 10)
