@@ -90,7 +90,8 @@ class MpcConfig:
             dual bound asks for this plus the motion's h/2 (|v| + r_c |omega|).
         obstacle_slots: with adaptive_slots False, obstacles the solver holds at once (grows,
             with a rebuild, when more are within reach); with adaptive_slots, the count
-            prepare() builds in advance.
+            prepare() builds in advance, and the most a step holds once prepared (the
+            nearest; its solution is checked against all obstacles in reach).
         faces_per_obstacle: half-planes per obstacle slot (larger polygons are refused).
         solver: NLP backend, one of SOLVERS.
         max_iterations: solver iteration limit per solve.

@@ -88,10 +88,9 @@ UNKNOWN_BOUNDS = (-1.0, 7.0, -3.0, 3.0)
 UNKNOWN_START = np.array([0.0, 0.0, 0.0])
 UNKNOWN_GOAL = np.array([6.0, 0.0, 0.0])
 GOAL_TOLERANCE = 0.1
-# NLPs built before the first run: obstacle counts 0..PREPARED_SLOTS. More are built in a
-# background thread when a step needs them, which slows the steps meanwhile (CasADi holds
-# Python's lock while it builds: single steps of 1-2 s at 2 m/s on BARN with 6 prepared,
-# where the horizon reaches 4 m and holds up to 10 cylinders).
+# NLPs built before the first run: obstacle counts 0..PREPARED_SLOTS. With more active, a
+# step's NLP holds the nearest PREPARED_SLOTS (at 2 m/s on BARN the horizon reaches 4 m and
+# up to 11 cylinders were active).
 PREPARED_SLOTS = 10
 UNKNOWN_ATTEMPTS = 50
 STALL_SECONDS = 20.0

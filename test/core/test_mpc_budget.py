@@ -386,25 +386,19 @@ def test_a_prepared_step_never_builds_an_nlp_shape_and_holds_the_nearest_obstacl
     mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
     mpc.prepare(1)
     prepared = set(mpc._nlps)
-    started: list[tuple[int, int]] = []
-    real_build = mpc._shapes.build_in_background
-    monkeypatch.setattr(mpc._shapes, 'build_in_background', started.append)
+    formulated: list[tuple] = []
+    monkeypatch.setattr(step_module, 'formulate', lambda *args: formulated.append(args))
     x = mpc.path.start.copy()
-    solution = mpc.solve(x)
-    assert set(mpc._nlps) == prepared  # nothing was built within the step
-    assert started == [(3, 4)]  # the shape it wanted is built in the background instead
-    assert len(mpc.last_active_obstacles) == 1  # the nearest one held
-    assert solution.source is not PlanSource.STOP
-    plan = np.asarray(solution.x_pred)
-    for box in mpc.inflated_obstacles:  # and the plan checked against all three
-        assert not np.any(box.contains(plan[1:, :2]))
-    # once the background build is in, the steps hold all three
-    monkeypatch.setattr(mpc._shapes, 'build_in_background', real_build)
-    real_build((3, 4))
-    mpc.wait_built()
-    assert (3, 4) in mpc._nlps
-    mpc.solve(mpc.model.step(x, solution.u0, H))
-    assert len(mpc.last_active_obstacles) == 3
+    for _ in range(3):  # nothing is built, step after step
+        solution = mpc.solve(x)
+        assert set(mpc._nlps) == prepared
+        assert len(mpc.last_active_obstacles) == 1  # the nearest one held
+        assert solution.source is not PlanSource.STOP
+        plan = np.asarray(solution.x_pred)
+        for box in mpc.inflated_obstacles:  # and the plan checked against all three
+            assert not np.any(box.contains(plan[1:, :2]))
+        x = mpc.model.step(x, solution.u0, H)
+    assert formulated == []
 
 
 def test_before_prepare_a_step_builds_the_shape_it_needs() -> None:

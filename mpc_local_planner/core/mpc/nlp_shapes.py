@@ -18,16 +18,16 @@
 Problem (6) holds a fixed number of obstacle slots of a fixed number of faces; each shape is
 its own NLP (built in tens of ms to a second, compiled by gcc in minutes). Before an MPC is
 prepared a control step builds the shape it needs (a first step, a test); after prepare()
-it never does: building a polygon NLP with more obstacles than were prepared took 1.1 s in a
-BARN run, five control periods. The step then gets the smallest built NLP with room for its
-obstacles (an unused slot is padded empty), or the largest one, which holds the nearest of
-them, and the shape is built in a background thread for the steps after.
+no step builds one, in its own thread or another: building a polygon NLP with more obstacles
+than were prepared took 1.1 s in a BARN run, five control periods, and built in a background
+thread it still cost the steps meanwhile up to 0.5 s (CasADi holds Python's lock while it
+builds). The step gets the smallest prepared NLP with room for its obstacles (an unused slot
+is padded empty), or the largest one, which holds the nearest of them; the MPC checks its
+solution against all of them.
 """
 
 from __future__ import annotations
 
-from concurrent.futures import Future
-import threading
 from typing import Callable
 
 from mpc_local_planner.core.mpc.backends import Nlp
@@ -41,14 +41,12 @@ Shape = tuple[int, int]  # (obstacle slots, faces per obstacle)
 
 
 class NlpShapes:
-    """The built NLPs of the settings in force, by shape, and those being built.
+    """The built NLPs of the settings in force, by shape.
 
     Args:
         structure: returns what the NLPs' structure depends on (the settings); when it
             changes, every NLP built before is dropped.
-        builder: returns a function that builds a shape for the settings in force (called
-            on the caller's thread, so that a background build uses the settings of when it
-            was asked for).
+        builder: returns a function that builds a shape for the settings in force.
 
     """
 
@@ -58,8 +56,7 @@ class NlpShapes:
         self._builder = builder
         self._nlps: dict[Shape, Nlp] = {}
         self._key: tuple | None = None
-        self._builds: dict[Shape, tuple[tuple, Future]] = {}
-        # set by the MPC's prepare(): from then on hold() builds nothing itself
+        # set by the MPC's prepare(): from then on hold() builds nothing
         self.prepared = False
 
     def clear(self) -> None:
@@ -68,16 +65,11 @@ class NlpShapes:
         self.prepared = False
 
     def built(self) -> dict[Shape, Nlp]:
-        """Return the NLPs of the current settings, with the finished background builds."""
+        """Return the NLPs of the current settings."""
         key = self._structure()
         if key != self._key:
             self._nlps.clear()
             self._key = key
-        for shape, (built_for, future) in list(self._builds.items()):
-            if future.done():
-                del self._builds[shape]
-                if built_for == key and future.exception() is None:
-                    self._store(shape, future.result())
         return self._nlps
 
     def get(self, shape: Shape) -> Nlp:
@@ -93,14 +85,12 @@ class NlpShapes:
 
         Not prepared, or the shape built: that NLP, all of them. Else the smallest built NLP
         with room for them (all of them), or the largest with faces enough for them (the
-        first as many as its slots), while the shape is built in the background; only if no
-        NLP has faces enough is the shape built now.
+        first as many as its slots); only if no NLP has faces enough is the shape built now.
         """
         slots, faces = shape
         nlps = self.built()
         if shape in nlps or not self.prepared:
             return self.get(shape), slots
-        self.build_in_background(shape)
         roomy = [s for s in nlps if s[0] >= slots and s[1] >= faces]
         if roomy:
             return nlps[min(roomy)], slots
@@ -109,36 +99,6 @@ class NlpShapes:
             return self.get(shape), slots
         largest = max(enough_faces)
         return nlps[largest], largest[0]
-
-    def build_in_background(self, shape: Shape) -> None:
-        """Start building a shape in a daemon thread (once per shape)."""
-        if shape in self._builds:
-            return
-        future: Future = Future()
-        build = self._builder()
-
-        def work() -> None:
-            try:
-                nlp = build(*shape)
-                # with its IPOPTs (a step builds one only if the build fits its budget) and
-                # compiled (config.compile): interpreted, a polygon NLP with many obstacles
-                # ran fatrop's 200 iterations in 2.4 s (fatrop's iterations are bounded from
-                # the compiled library only, see backends)
-                nlp.fallback_solver()
-                nlp.cold_solver()
-                nlp.finish_compilation(wait=True)
-                future.set_result(nlp)
-            except BaseException as err:  # a failed build is dropped; the steps go on
-                future.set_exception(err)
-
-        self._builds[shape] = (self._structure(), future)
-        threading.Thread(target=work, name='mpc_nlp_build', daemon=True).start()
-
-    def wait_built(self) -> None:
-        """Block until the shapes being built in the background are built (or failed)."""
-        for _, future in list(self._builds.values()):
-            future.exception()  # waits
-        self.built()
 
     def iteration_time_estimate(self, nlp: Nlp) -> float:
         """Estimate a never-solved NLP's seconds per iteration from the solved ones (0: none).

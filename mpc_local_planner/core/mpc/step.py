@@ -374,7 +374,7 @@ class MpcBase(ABC):
         return len(selected), max(faces, 3)
 
     def _build(self) -> Callable[[int, int], Nlp]:
-        """Return the builder of an NLP shape for the settings in force (a thread may run it)."""
+        """Return the builder of an NLP shape for the settings in force."""
         model, config, terminal = self._model, self._config, self._terminal_condition()
         return lambda slots, faces: build_nlp(formulate(model, config, terminal, slots, faces),
                                               config)
@@ -394,10 +394,6 @@ class MpcBase(ABC):
         nlp, count = self._shapes.hold(self._slot_shape(active))
         return nlp, active[:count]
 
-    def wait_built(self) -> None:
-        """Block until the NLP shapes being built in the background are built."""
-        self._shapes.wait_built()
-
     def prepare(self, max_obstacles: int | None = None) -> None:
         """Build the NLPs for 0..max_obstacles obstacles in reach, so no control step waits.
 
@@ -406,7 +402,8 @@ class MpcBase(ABC):
         holds obstacles with fewer faces too. Their IPOPTs too (fallback, cold start): a step
         builds one only if the build fits in what is left of its budget, so one not built
         ahead may never be there when it is needed. From then on a control step builds no
-        NLP (see _nlp_holding).
+        NLP, in any thread (see NlpShapes): with more obstacles active than max_obstacles,
+        the NLP holds the nearest ones and the solution is checked against all of them.
 
         Args:
             max_obstacles: the largest count to prepare (config.obstacle_slots by default).
