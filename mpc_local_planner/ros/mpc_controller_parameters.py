@@ -48,7 +48,7 @@ _MPC_FIELDS = {
     'horizon': 'horizon', 'step': 'step', 'weights.position': 'weight_position',
     'weights.heading': 'weight_heading', 'weights.v': 'weight_v', 'weights.omega': 'weight_omega',
     'offset_weight': 'offset_weight', 'robot_radius': 'robot_radius', 'solver': 'solver',
-    'max_iterations': 'max_iterations',
+    'max_iterations': 'max_iterations', 'obstacle_slots': 'obstacle_slots',
 }
 _MODEL_FIELDS = ('v_max', 'omega_max')
 _SETTINGS_FIELDS = ('goal_tolerance', 'goal_heading_tolerance', 'odom_timeout',
@@ -110,6 +110,11 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('solver', str(_CONFIG.solver), f'NLP solver, one of {SOLVERS}'),
     ParameterSpec('max_iterations', int(_CONFIG.max_iterations),
                   f'solver iterations per solve; {_SHAPE}', int_range=(1, 100000)),
+    ParameterSpec('obstacle_slots', int(_CONFIG.obstacle_slots),
+                  'the most obstacles one solve holds, the nearest (its solution is checked '
+                  'against all in reach): the NLPs for 0..this many are built with each plan, '
+                  'so that no control step builds one; a change rebuilds them as steps need '
+                  'them', int_range=(0, 64)),
     ParameterSpec('goal_tolerance', float(_SETTINGS.goal_tolerance),
                   'distance to the end of the plan that counts as arrived (m): then cmd_vel '
                   'is zero', float_range=(1e-4, 10.0)),
@@ -212,6 +217,7 @@ def build_settings(values: dict[str, Any], *, world_radius: float = 0.0,
     mpc_kwargs = {field: values[name] for name, field in _MPC_FIELDS.items()}
     mpc_kwargs['horizon'] = int(mpc_kwargs['horizon'])
     mpc_kwargs['max_iterations'] = int(mpc_kwargs['max_iterations'])
+    mpc_kwargs['obstacle_slots'] = int(mpc_kwargs['obstacle_slots'])
     for key in ('step', 'weight_position', 'weight_heading', 'weight_v', 'weight_omega',
                 'offset_weight'):
         mpc_kwargs[key] = float(mpc_kwargs[key])
