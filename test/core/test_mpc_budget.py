@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import casadi as ca
 import numpy as np
 import pytest
 
@@ -33,7 +34,7 @@ from mpc_local_planner.core.diagnostics import ControllerDiagnostics
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import Decision, PathReferenceMPC, PlanSource
 from mpc_local_planner.core.mpc import step as step_module
-from mpc_local_planner.core.mpc.backends import iteration_levels, run_solver
+from mpc_local_planner.core.mpc.backends import iteration_levels, run_solver, stage_size
 from mpc_local_planner.core.mpc.step import SolveAttempt
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import paper_sinusoid
@@ -420,3 +421,62 @@ def test_a_shape_never_solved_is_bounded_by_its_siblings_time_per_iteration() ->
     size = three.formulation.lbw.shape[0] / one.formulation.lbw.shape[0]
     assert size > 1.0
     assert three.iteration_time == pytest.approx(0.002 * size)
+
+
+# ----------------------------------------------------------------------------- big stages
+def test_shapes_with_stages_beyond_the_fatrop_limit_are_solved_by_ipopt() -> None:
+    # the paper's MPC: a stage of 6 variables, 4 more per box (its faces' multipliers)
+    config = MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT, activation_distance=5.0,
+                       fatrop_stage_limit=10)
+    mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
+    small, big = mpc._nlp_for(1, 4), mpc._nlp_for(2, 4)
+    assert stage_size(small.formulation.structure) == 10
+    assert (small.plugin, small.has_fallback) == ('fatrop', True)
+    assert stage_size(big.formulation.structure) == 14
+    assert (big.plugin, big.has_fallback) == ('ipopt', False)  # IPOPT is its own fallback
+    solution = mpc.solve(mpc.path.start)  # three boxes held: a stage of 18
+    assert solution.success and mpc.backend == 'ipopt'
+    assert solution.obstacles_active == 3
+
+
+# ----------------------------------------------------------------------------- continuing
+real_run_solver = run_solver
+
+
+def solver_cut_after(iterations: int):
+    """A run_solver whose budget stops every call after so many IPOPT iterations."""
+
+    def run(nlp, w0, params, solver=None, time_limit=math.inf):
+        limited = ca.nlpsol('cut', 'ipopt', nlp.formulation.problem, {
+            'ipopt.print_level': 0, 'print_time': False, 'ipopt.sb': 'yes',
+            'ipopt.max_iter': iterations, 'error_on_fail': False})
+        result = real_run_solver(nlp, w0, params, limited)
+        return result._replace(cut=not result.success)
+
+    return run
+
+
+def test_a_solve_the_budget_cut_goes_on_at_the_next_step_while_the_robot_stands_still(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # from rest among three boxes the solve takes more iterations than a step's budget
+    # allows (here 10 a try): the step applies the candidate (stand still), and the next one
+    # goes on from where the cut try stopped and finishes; started over, it never does (the
+    # continuation is primal only: with 9 or fewer a try neither finishes)
+    def steps_to_move(continuing: bool) -> int | None:
+        config = MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT,
+                           activation_distance=5.0)
+        mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES,
+                               path=paper_sinusoid())
+        monkeypatch.setattr(step_module, 'run_solver', solver_cut_after(10))
+        if not continuing:
+            monkeypatch.setattr(step_module, 'CONTINUE_TOLERANCE', -1.0)
+        x = mpc.path.start.copy()
+        for step in range(12):
+            solution = mpc.solve(x)  # x stays: the candidate at rest is standing still
+            if solution.success:
+                return step
+            assert solution.timed_out and not np.any(solution.u0)
+        return None
+
+    assert steps_to_move(continuing=True) == 1  # cut at first, then finished
+    assert steps_to_move(continuing=False) is None  # starting over never finishes
