@@ -480,3 +480,28 @@ def test_a_solve_the_budget_cut_goes_on_at_the_next_step_while_the_robot_stands_
 
     assert steps_to_move(continuing=True) == 1  # cut at first, then finished
     assert steps_to_move(continuing=False) is None  # starting over never finishes
+
+
+def test_after_a_stand_still_plan_the_next_step_starts_as_from_rest(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # a step from rest that does not solve applies the stand-still candidate; the step after
+    # it must try IPOPT's cold start first, as from rest, not the warm tries from that
+    # candidate (fatrop failed from it at every step after a re-plan at 2 m/s on BARN)
+    config = MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT, activation_distance=5.0)
+    mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
+    kinds: list[str] = []
+
+    def failing(nlp, w0, params, active, solver=None):
+        kinds.append('backend' if solver is None else 'cold' if solver is nlp.cold
+                     else 'fallback')
+        return SolveAttempt(verified=False, w=np.asarray(w0, dtype=float), value=math.inf,
+                            status='injected failure', iterations=1, seconds=0.0)
+
+    monkeypatch.setattr(mpc, '_run_solver', failing)
+    x = mpc.path.start.copy()
+    first = mpc.solve(x)
+    assert not first.success and not np.any(first.u_pred)  # the stand-still candidate
+    assert kinds[0] == 'cold'
+    kinds.clear()
+    mpc.solve(x)
+    assert kinds[0] == 'cold'

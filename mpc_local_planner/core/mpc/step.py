@@ -703,8 +703,10 @@ class MpcBase(ABC):
         The tries run only while the step's budget lasts (the first run of the backend
         always does), most promising first:
 
-        - after a plan: the backend from the candidate, then IPOPT from it;
-        - without one (from rest), with obstacles in the NLP: IPOPT with cold-start options
+        - after a plan that moves: the backend from the candidate, then IPOPT from it;
+        - without one, or after a plan that stands still (a step from rest that did not
+          solve applied it; from it fatrop failed and spent the budget at every step after a
+          re-plan at 2 m/s on BARN), with obstacles in the NLP: IPOPT with cold-start options
           from the previous activation round's solution (else a start rolled out along the
           path), then the backend and IPOPT from the candidate. At the seven BARN stalls at
           1 m/s fatrop failed from every start in six, IPOPT converged from nearly all;
@@ -725,7 +727,7 @@ class MpcBase(ABC):
         """
         active_set = ObstacleSet(active)
         budget = self._budget
-        if self._plan is not None:
+        if self._plan is not None and np.any(self._plan.u):
             tries = [(w_candidate, 'backend'), (w_candidate, 'fallback')]
         elif active:
             if previous is not None:
