@@ -33,7 +33,6 @@ import subprocess
 import sys
 
 import pytest
-import yaml
 
 from mpc_local_planner.ros.parameters import ParameterSpec
 
@@ -135,49 +134,3 @@ def test_bag_recorder_refuses_an_existing_output_folder_in_one_line(tmp_path) ->
     assert 'exists' in result.stderr and 'Traceback' not in result.stderr
     assert list((tmp_path / 'bag').iterdir()) == []  # nothing written into it
 
-
-NODE_CONFIGS = {'bag_recorder': 'bag_recorder_node', 'global_planner': 'global_planner_node',
-                'mpc_controller': 'mpc_controller_parameters',
-                'unicycle_simulator': 'unicycle_simulator_node'}
-
-
-def flattened(params: dict, prefix: str = '') -> dict:
-    """Return ros__parameters with nested groups as dotted names (weights.position)."""
-    flat = {}
-    for key, value in params.items():
-        if isinstance(value, dict):
-            flat.update(flattened(value, f'{prefix}{key}.'))
-        else:
-            flat[f'{prefix}{key}'] = value
-    return flat
-
-
-def declared(node: str) -> tuple[dict, dict]:
-    """Return config/<node>.yaml's parameters (dotted names) and the node's table by name."""
-    path = SETUP_PY.parent / 'config' / f'{node}.yaml'
-    given = flattened(yaml.safe_load(path.read_text())[node]['ros__parameters'])
-    table = import_module(f'mpc_local_planner.ros.{NODE_CONFIGS[node]}').PARAMETERS
-    return given, {spec.name: spec for spec in table}
-
-
-@pytest.mark.parametrize('node', sorted(NODE_CONFIGS))
-def test_each_config_file_sets_only_declared_parameters_with_their_types(node: str) -> None:
-    # ROS ignores a key no node declares: a misspelt one would silently do nothing
-    given, specs = declared(node)
-    assert set(given) <= set(specs), f'undeclared: {sorted(set(given) - set(specs))}'
-    for name, value in given.items():
-        default = specs[name].default
-        expected = default if isinstance(default, type) else type(default)
-        if hasattr(default, 'value'):  # a Parameter.Type: no default, a value of that type
-            continue
-        assert isinstance(value, expected), f'{name}: {value!r} is not a {expected.__name__}'
-
-
-def test_the_controller_config_file_gives_every_parameter_its_default() -> None:
-    # mpc_controller.yaml is the paper's values, the node's defaults: users copy and tune it
-    given, specs = declared('mpc_controller')
-    missing = sorted(set(specs) - set(given))
-    assert not missing, f'mpc_controller.yaml leaves out {missing}'
-    for name, value in given.items():
-        assert value == specs[name].default, f'{name}: {value!r}, the node says ' \
-            f'{specs[name].default!r}'

@@ -328,11 +328,10 @@ def test_planner_refuses_a_malformed_goal(ros) -> None:
     assert 'goal must be [x, y, theta]' in result.reason
 
 
-def test_shipped_params_files_mirror_the_defaults_the_nodes_take_from_the_dataclasses() -> None:
+def shipped_params(name: str) -> dict:
+    """Return config/<name>.yaml's parameters, groups flattened to dotted names."""
     import yaml
 
-    from mpc_local_planner.core.planner import PlannerConfig
-    from mpc_local_planner.ros.mpc_controller_parameters import DEFAULTS
     from mpc_local_planner.worlds.data_files import resolve_data_file
 
     def flat(values: dict, prefix: str = '') -> dict:
@@ -344,18 +343,42 @@ def test_shipped_params_files_mirror_the_defaults_the_nodes_take_from_the_datacl
                 out[prefix + key] = value
         return out
 
-    def params(name: str) -> dict:
-        text = resolve_data_file(f'{name}.yaml').read_text()
-        return flat(yaml.safe_load(text)[name]['ros__parameters'])
+    text = resolve_data_file(f'{name}.yaml').read_text()
+    return flat(yaml.safe_load(text)[name]['ros__parameters'])
 
-    controller = params('mpc_controller')
-    assert controller == {k: v for k, v in DEFAULTS.items() if k in controller}
+
+def test_shipped_params_files_mirror_the_defaults_the_nodes_take_from_the_dataclasses() -> None:
+    from mpc_local_planner.core.planner import PlannerConfig
+    from mpc_local_planner.ros.mpc_controller_parameters import DEFAULTS
+
+    controller = shipped_params('mpc_controller')
+    assert controller == DEFAULTS  # every parameter, each with its default
     assert MpcConfig().horizon == DEFAULTS['horizon'] and Unicycle().v_max == DEFAULTS['v_max']
-    planner = params('global_planner')
+    planner = shipped_params('global_planner')
     defaults = PlannerConfig()
     for field in ('iterations', 'time_limit', 'seed', 'range', 'robot_radius', 'clearance',
                   'simplify'):
         assert planner[field] == getattr(defaults, field), field
+
+
+@pytest.mark.parametrize(('name', 'module'), [
+    ('bag_recorder', 'bag_recorder_node'), ('global_planner', 'global_planner_node'),
+    ('mpc_controller', 'mpc_controller_parameters'),
+    ('unicycle_simulator', 'unicycle_simulator_node')])
+def test_shipped_params_files_set_only_declared_parameters_with_their_types(
+        name: str, module: str) -> None:
+    # ROS ignores a key no node declares: a misspelt one would silently do nothing
+    from importlib import import_module
+
+    given = shipped_params(name)
+    specs = {spec.name: spec for spec in
+             import_module(f'mpc_local_planner.ros.{module}').PARAMETERS}
+    assert set(given) <= set(specs), f'undeclared: {sorted(set(given) - set(specs))}'
+    for key, value in given.items():
+        default = specs[key].default
+        if isinstance(default, type) or hasattr(default, 'value'):
+            continue  # no default (a Parameter.Type): nothing to compare the type with
+        assert isinstance(value, type(default)), f'{key}: {value!r} is not a {type(default)}'
 
 
 @pytest.mark.parametrize(('name', 'node_class'), [
