@@ -50,6 +50,7 @@ from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
+from mpc_local_planner.evaluation.known_map_worlds import RANDOM_BOUNDS, RANDOM_GOAL, RANDOM_START
 from mpc_local_planner.evaluation.metrics import footprint_clearance
 from mpc_local_planner.evaluation.navigation import (
     LocalController,
@@ -83,10 +84,8 @@ POLYGON_CLEARANCE = 0.05
 PLANNER_ITERATIONS = 3000
 PLANNER_RANGE = 0.5
 PATH_CAPACITY = 128
-# Unknown suite: the workspace, start, goal, success tolerance.
-UNKNOWN_BOUNDS = (-1.0, 7.0, -3.0, 3.0)
-UNKNOWN_START = np.array([0.0, 0.0, 0.0])
-UNKNOWN_GOAL = np.array([6.0, 0.0, 0.0])
+# Unknown suite: the random suite's workspace, start and goal; its success tolerance.
+UNKNOWN_BOUNDS, UNKNOWN_START, UNKNOWN_GOAL = RANDOM_BOUNDS, RANDOM_START, RANDOM_GOAL
 GOAL_TOLERANCE = 0.1
 # NLPs built before the first run: obstacle counts 0..PREPARED_SLOTS. With more active, a
 # step's NLP holds the nearest PREPARED_SLOTS (at 2 m/s on BARN the horizon reaches 4 m and
