@@ -505,3 +505,27 @@ def test_after_a_stand_still_plan_the_next_step_starts_as_from_rest(
     kinds.clear()
     mpc.solve(x)
     assert kinds[0] == 'cold'
+
+
+def test_a_cut_solve_goes_on_after_a_step_that_stopped_the_robot(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # off the path no stand-still candidate is feasible: a step that does not solve stops
+    # (and starts over); the robot stands still, so the cut solve still goes on next step
+    # (world 43 at 2 m/s on BARN stood still for good without it)
+    config = MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT, activation_distance=5.0)
+    mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
+    cut = solver_cut_after(10)
+    starts: list[np.ndarray] = []
+
+    def recording(nlp, w0, params, solver=None, time_limit=math.inf):
+        starts.append(np.array(w0, dtype=float))
+        return cut(nlp, w0, params, solver, time_limit)
+
+    monkeypatch.setattr(step_module, 'run_solver', recording)
+    x = mpc.path.start + np.array([0.0, 0.05, 0.0])
+    assert mpc.solve(x).source is PlanSource.STOP
+    unfinished = mpc._unfinished
+    assert unfinished is not None
+    starts.clear()
+    mpc.solve(x)
+    assert any(np.array_equal(start, unfinished.w) for start in starts)

@@ -903,9 +903,10 @@ class MpcBase(ABC):
         n = self._config.horizon
         _, u_s = self._model.steady_state(x0[:3])
         u_s = np.asarray(u_s, dtype=float).reshape(-1)
-        failures = self._failures
+        failures, unfinished = self._failures, self._unfinished
         self.reset()
-        self._failures = failures
+        # the robot stands still: a solve the budget cut goes on at the next step
+        self._failures, self._unfinished = failures, unfinished
         return MpcSolution(
             u0=u_s, x_pred=np.tile(x0, (n + 1, 1)), u_pred=np.tile(u_s, (n, 1)),
             s=math.nan, value=math.nan, success=False, status=status,
