@@ -46,14 +46,14 @@ class NlpShapes:
     Args:
         structure: returns what the NLPs' structure depends on (the settings); when it
             changes, every NLP built before is dropped.
-        builder: returns a function that builds a shape for the settings in force.
+        build: builds the NLP of a shape (slots, faces) for the settings in force.
 
     """
 
     def __init__(self, structure: Callable[[], tuple],
-                 builder: Callable[[], Callable[[int, int], Nlp]]) -> None:
+                 build: Callable[[int, int], Nlp]) -> None:
         self._structure = structure
-        self._builder = builder
+        self._build = build
         self._nlps: dict[Shape, Nlp] = {}
         self._key: tuple | None = None
         # set by the MPC's prepare(): from then on hold() builds nothing
@@ -76,7 +76,7 @@ class NlpShapes:
         """Return the NLP of this shape, built now if it is not yet."""
         nlp = self.built().get(shape)
         if nlp is None:
-            nlp = self._builder()(*shape)
+            nlp = self._build(*shape)
             self._store(shape, nlp)
         return nlp
 

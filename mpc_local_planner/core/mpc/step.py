@@ -390,11 +390,11 @@ class MpcBase(ABC):
         faces = min(c.faces_per_obstacle, 4 * math.ceil(faces / 4)) if faces > 4 else faces
         return len(selected), max(faces, 3)
 
-    def _build(self) -> Callable[[int, int], Nlp]:
-        """Return the builder of an NLP shape for the settings in force."""
-        model, config, terminal = self._model, self._config, self._terminal_condition()
-        return lambda slots, faces: build_nlp(formulate(model, config, terminal, slots, faces),
-                                              config)
+    def _build(self, slots: int, faces: int) -> Nlp:
+        """Build the NLP of an obstacle shape for the settings in force."""
+        terminal = self._terminal_condition()
+        return build_nlp(formulate(self._model, self._config, terminal, slots, faces),
+                         self._config)
 
     @property
     def _nlps(self) -> dict[tuple[int, int], Nlp]:
