@@ -29,11 +29,12 @@ planned once (their worlds are built in `known_map_worlds`).
   Assumption 1 (every segment clear of the obstacles inflated as the MPC inflates them:
   robot radius plus collision margin; start and goal clear). Success: within
   RANDOM_GOAL_TOLERANCE of the goal position, with no collision, before the time limit.
-- barn: the BARN worlds ``--worlds`` (e.g. 0-99) from ``--barn-dir``: robot radius 0.2 m,
+- barn: the BARN worlds ``--worlds`` (e.g. 0-99,200-299) from ``--barn-dir``: robot radius 0.2 m,
   success as the challenge defines it (within the file's goal tolerance of the goal before
   its time limit, no contact). Contact is measured from the exact cylinders (circles), not
-  the octagons the MPC and the planner use. Score: success * t_opt / clip(t, 2 t_opt,
-  8 t_opt), t_opt = barn_path_length / 2.
+  the octagons the MPC and the planner use. Score: the challenge's, success * t_opt /
+  clip(t, 2 t_opt, 8 t_opt), t_opt = barn_path_length / 2, with the full reference path
+  (start -> path file -> goal; see barn_score).
 
 Controllers: ``proposed`` (PathReferenceMPC on the RRT* WaypointPath), ``tracking`` (the
 TrackingMPC baseline, target only) and ``pure_pursuit`` (lookahead pure pursuit of the same
@@ -142,7 +143,13 @@ class Task:
 
 
 def barn_score(success: bool, time_s: float | None, barn_path_length: float) -> float:
-    """Return the BARN challenge's score of one run."""
+    """Return the BARN challenge's score of one run.
+
+    The challenge's formula: success * t_opt / clip(t, 2 t_opt, 8 t_opt), with
+    t_opt = barn_path_length / 2 and barn_path_length the FULL reference path (start -> the
+    world's path file -> goal, as the challenge's run.py adds the two legs). A successful run
+    faster than 2 t_opt scores the cap, 0.5.
+    """
     if not success or time_s is None:
         return 0.0
     t_opt = barn_path_length / 2.0

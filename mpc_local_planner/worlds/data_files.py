@@ -31,7 +31,7 @@ import sys
 __all__ = ['BARN_DIR', 'PACKAGE_NAME', 'config_roots', 'resolve_data_file']
 
 PACKAGE_NAME = 'mpc_local_planner'
-# The BARN worlds 0-99 shipped with the package (MIT notice in the same folder).
+# The BARN worlds 0-99 and 200-299 shipped with the package (MIT notice in the same folder).
 BARN_DIR = Path(__file__).resolve().parent.parent / 'data' / 'barn'
 # Suffixes tried when a name is given without one (``--world rrt_cluttered``).
 _SUFFIXES = ('', '.yaml', '.yml')
