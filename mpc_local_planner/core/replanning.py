@@ -1,0 +1,286 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The re-planning policy, once: the global_planner node and the Navigator both adapt it.
+
+`Replanner` holds the plan in force, its goal and the counts, and decides; it has no clock
+(the caller passes ``now`` in seconds, its own clock's) and no ROS. The policy:
+
+- **A new goal** is planned at once from the robot's pose (``RrtStarPlanner.plan``). A plan
+  replaces the plan in force, and its goal the goal in force. A goal that cannot be planned
+  to leaves the plan in force, and its goal, in force (the caller reports the error).
+- **Checks** come every ``check_period`` seconds (0 = never: no check, so no re-plan of any
+  kind), counted from the last check or from the last new goal's plan (which was just made
+  on the grid in force). A check earlier than ``check_period - slack`` is not due and does
+  nothing: a timer's ticks may come a little early or late, a simulation's steps land on the
+  period exactly.
+- **Blocked**: at a check, the rest of the plan in force (from the robot's projection onto
+  it, less its first stretch) is judged with the rule plans are made with
+  (``RrtStarPlanner.rest_problem``); if it fails, the goal in force is re-planned from the
+  robot's pose.
+- **Periodic**: otherwise, with ``replan_period`` > 0, the goal in force is re-planned at the
+  first check at least ``replan_period`` seconds after the plan in force was made.
+- **Re-plans** go through ``RrtStarPlanner.replan``: from the robot's pose, or from the
+  nearest clear point within ``escape_distance`` when the robot stands within the clearance.
+- **Failures**: a failed re-plan keeps the plan in force (and is checked again at the next
+  check). Consecutive failed re-plans move the planner's seed on by their count (the same
+  seed on the same grid would fail the same way); any plan made, for a goal or a re-plan,
+  resets that count to 0. A failed goal neither counts nor resets.
+- **Counts**, for logs and metrics: ``plans`` (every plan made), ``replans`` (re-plans
+  made), ``replan_failures`` (re-plans that failed, in all) and ``consecutive_failures``
+  (the seed's offset).
+
+An error of the planner other than PlanningError is a failed attempt too (the node must not
+die of it); the result carries it, and a caller that wants to stop on bugs re-raises it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+import math
+import time
+from typing import NamedTuple, Protocol, Sequence, TYPE_CHECKING
+
+import numpy as np
+
+from mpc_local_planner.core.diagnostics import PlanTrigger
+
+if TYPE_CHECKING:
+    from mpc_local_planner.core.planner import EscapeGrid
+
+__all__ = [
+    'ReplanDecision',
+    'Replanner',
+    'ReplanningPlanner',
+    'ReplanOutcome',
+    'ReplanSettings',
+    'TIME_EPSILON',
+]
+
+# Seconds: times computed as k * h by a simulation land on a period up to rounding.
+TIME_EPSILON = 1e-9
+
+
+class ReplanningPlanner(Protocol):
+    """What the re-planner needs of a planner (RrtStarPlanner has it)."""
+
+    def plan(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """Return (M, 2) waypoints from start to goal; raise PlanningError if none."""
+
+    def replan(self, start: np.ndarray, goal: np.ndarray, *, failures: int = 0,
+               grid: EscapeGrid | None = None, escape_distance: float = 1.0) -> np.ndarray:
+        """Plan again from where the robot is, the seed moved on by failures."""
+
+    def rest_problem(self, plan: np.ndarray, position: Sequence[float]) -> str | None:
+        """Say why the rest of the plan no longer passes the planner's check, or None."""
+
+
+@dataclass(frozen=True)
+class ReplanSettings:
+    """When the plan in force is checked and re-planned.
+
+    Attributes:
+        check_period: Seconds between two checks of the rest of the plan (the node's
+            1 / replan_check_rate); 0 = never checked, never re-planned.
+        replan_period: Re-plan the goal in force this often (seconds) even when the plan
+            is clear; 0 = only when blocked or for a new goal (the node's default).
+        escape_distance: How far a re-plan may start from a robot standing within the
+            planner's clearance (RrtStarPlanner.replan).
+        slack: How much earlier than check_period a check still counts as due, seconds.
+
+    """
+
+    check_period: float = 0.5
+    replan_period: float = 0.0
+    escape_distance: float = 1.0
+    slack: float = TIME_EPSILON
+
+    def __post_init__(self) -> None:
+        """Refuse negative or non-finite periods."""
+        for name in ('check_period', 'replan_period', 'escape_distance', 'slack'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                problem = f'{name} must be finite and >= 0, got {value}'
+                raise ValueError(problem)
+
+    @classmethod
+    def from_rate(cls, check_rate: float, **kwargs: float) -> ReplanSettings:
+        """Return the settings for a check rate in Hz (0 = never), as the node declares it.
+
+        The node's checks come from a timer at that rate, whose ticks may come late: a
+        check up to half a period early still counts as due.
+        """
+        period = 1.0 / check_rate if check_rate > 0.0 else 0.0
+        kwargs.setdefault('slack', 0.5 * period)
+        return cls(check_period=period, **kwargs)
+
+
+class ReplanOutcome(Enum):
+    """What a call of the re-planner did."""
+
+    NOT_DUE = 'not due'  # no check due (or checks off, or nothing to check): nothing done
+    CLEAR = 'clear'  # checked: the plan in force stays (clear, and no periodic re-plan due)
+    PLANNED = 'planned'  # a new plan (for a goal, or a re-plan): it is now in force
+    FAILED = 'failed'  # planning failed: the plan in force (if any) stays
+
+
+class ReplanDecision(NamedTuple):
+    """The outcome of a call, for the adapter to convert (publish, follow, log).
+
+    Attributes:
+        outcome: What was done.
+        trigger: What asked for a plan (None when none was asked for).
+        waypoints: The new plan's (M, 2) waypoints when PLANNED, else None.
+        start: The robot's pose (x, y, theta) the plan was asked from, else None.
+        goal: The goal planned to, else None.
+        problem: Why the rest of the plan was blocked (trigger BLOCKED), else None.
+        error: The planner's exception when FAILED, else None.
+        planning_s: Wall time the planning attempt took (a measurement, not the policy's
+            time), seconds; 0 without one.
+
+    """
+
+    outcome: ReplanOutcome
+    trigger: PlanTrigger | None = None
+    waypoints: np.ndarray | None = None
+    start: np.ndarray | None = None
+    goal: np.ndarray | None = None
+    problem: str | None = None
+    error: Exception | None = None
+    planning_s: float = 0.0
+
+    @property
+    def attempted(self) -> bool:
+        """Whether the planner was asked for a plan."""
+        return self.outcome in (ReplanOutcome.PLANNED, ReplanOutcome.FAILED)
+
+
+class Replanner:
+    """The re-planning policy (see the module's docstring) around a planner.
+
+    The planner and the grid are passed at every call: the node replaces its planner when a
+    map comes or a parameter changes.
+
+    Args:
+        settings: When to check and re-plan.
+
+    """
+
+    def __init__(self, settings: ReplanSettings | None = None) -> None:
+        self.settings = settings or ReplanSettings()
+        self._plan: np.ndarray | None = None
+        self._goal: np.ndarray | None = None
+        self._plan_time = -math.inf
+        self._checked = -math.inf
+        self.plans = 0
+        self.replans = 0
+        self.replan_failures = 0
+        self.consecutive_failures = 0
+
+    @property
+    def plan(self) -> np.ndarray | None:
+        """The (M, 2) waypoints of the plan in force, or None."""
+        return self._plan
+
+    @property
+    def goal(self) -> np.ndarray | None:
+        """The goal of the plan in force, or None."""
+        return self._goal
+
+    def drop_plan(self) -> None:
+        """Forget the plan and goal in force (nothing is checked until a new goal's plan).
+
+        The counts stay.
+        """
+        self._plan = None
+        self._goal = None
+        self._plan_time = -math.inf
+
+    def plan_goal(self, planner: ReplanningPlanner, start: np.ndarray, goal: np.ndarray, *,
+                  now: float) -> ReplanDecision:
+        """Plan a new goal from start; on success the plan and goal are in force.
+
+        Args:
+            planner: The planner in force.
+            start: The robot's pose (x, y, theta).
+            goal: The goal pose (x, y, theta).
+            now: The caller's time, seconds.
+
+        Returns:
+            PLANNED with the waypoints, or FAILED with the error (the plan in force stays).
+
+        """
+        return self._attempt(planner, start, goal, PlanTrigger.GOAL, now=now)
+
+    def check(self, planner: ReplanningPlanner, start: np.ndarray, *, now: float,
+              grid: EscapeGrid | None = None) -> ReplanDecision:
+        """Check the plan in force if a check is due, and re-plan it when it must be.
+
+        Args:
+            planner: The planner in force (its grid has the latest scans).
+            start: The robot's pose (x, y, theta).
+            now: The caller's time, seconds.
+            grid: The grid a re-plan may escape on (None: no escape).
+
+        Returns:
+            NOT_DUE, CLEAR, or the re-plan's PLANNED or FAILED (trigger BLOCKED or PERIODIC).
+
+        """
+        settings = self.settings
+        if (settings.check_period <= 0.0 or self._plan is None or self._goal is None
+                or now - self._checked < settings.check_period - settings.slack):
+            return ReplanDecision(ReplanOutcome.NOT_DUE)
+        self._checked = now
+        problem = planner.rest_problem(self._plan, start)
+        if problem is not None:
+            return self._attempt(planner, start, self._goal, PlanTrigger.BLOCKED, now=now,
+                                 grid=grid, problem=problem)
+        if (settings.replan_period > 0.0
+                and now - self._plan_time >= settings.replan_period - TIME_EPSILON):
+            return self._attempt(planner, start, self._goal, PlanTrigger.PERIODIC, now=now,
+                                 grid=grid)
+        return ReplanDecision(ReplanOutcome.CLEAR)
+
+    def _attempt(self, planner: ReplanningPlanner, start: np.ndarray, goal: np.ndarray,
+                 trigger: PlanTrigger, *, now: float, grid: EscapeGrid | None = None,
+                 problem: str | None = None) -> ReplanDecision:
+        start = np.array(start, dtype=float)
+        goal = np.array(goal, dtype=float)
+        started = time.perf_counter()
+        try:
+            if trigger is PlanTrigger.GOAL:
+                waypoints = planner.plan(start, goal)
+            else:
+                waypoints = planner.replan(start, goal, failures=self.consecutive_failures,
+                                           grid=grid,
+                                           escape_distance=self.settings.escape_distance)
+        except Exception as err:  # PlanningError; a bug too: the caller decides
+            seconds = time.perf_counter() - started
+            if trigger is not PlanTrigger.GOAL:
+                self.replan_failures += 1
+                self.consecutive_failures += 1
+            return ReplanDecision(ReplanOutcome.FAILED, trigger, start=start, goal=goal,
+                                  problem=problem, error=err, planning_s=seconds)
+        seconds = time.perf_counter() - started
+        waypoints = np.asarray(waypoints, dtype=float)
+        self._plan, self._goal, self._plan_time = waypoints, goal, now
+        if trigger is PlanTrigger.GOAL:
+            self._checked = now
+        else:
+            self.replans += 1
+        self.plans += 1
+        self.consecutive_failures = 0
+        return ReplanDecision(ReplanOutcome.PLANNED, trigger, waypoints=waypoints, start=start,
+                              goal=goal, problem=problem, planning_s=seconds)
