@@ -17,12 +17,15 @@
 
 formulation.py is problem (6), backends.py runs it (solvers, compiled functions),
 nlp_shapes.py keeps one NLP per obstacle shape, step.py is one control step (the proof's
-candidate, verification, constraint generation), decision.py its guard (what is applied).
+candidate, verification, constraint generation), tries.py the solver strategy of its NLP
+solves (which start with which solver, in which order), decision.py its guard (what is
+applied).
 """
 
 from mpc_local_planner.core.mpc.backends import compile_cache_dir
 from mpc_local_planner.core.mpc.decision import decide, Decision, PlanSource
 from mpc_local_planner.core.mpc.step import MpcBase, MpcSolution, PathReferenceMPC
+from mpc_local_planner.core.mpc.tries import Situation, Solver, solver_tries, Start, Try
 
 __all__ = [
     'Decision',
@@ -30,6 +33,11 @@ __all__ = [
     'MpcSolution',
     'PathReferenceMPC',
     'PlanSource',
+    'Situation',
+    'Solver',
+    'Start',
+    'Try',
     'compile_cache_dir',
     'decide',
+    'solver_tries',
 ]

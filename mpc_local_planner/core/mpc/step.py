@@ -38,11 +38,13 @@ A step's solving is bounded in wall time: config.solve_budget() (max_solve_time,
 period by default), counted from the start of solve(). The first NLP solve gets what is left
 of it when it starts (an NLP built mid-step has spent its share: prepare() builds them
 ahead); the retries (a second start, the IPOPT fallback, further constraint-generation rounds)
-run only while some is left. Once it is spent, decide() applies the verified shifted candidate
-(CANDIDATE_TIMEOUT), or stops if there is none, and the solution says so
-(MpcSolution.timed_out). Nothing unverified is ever applied: the budget only decides how hard
-the step tries to beat the candidate. How closely a solver keeps to its share is backends.py's
-(run_solver): IPOPT to an iteration, fatrop to its measured time per iteration.
+run only while some is left. Which tries an NLP solve makes, in which order, is tries.py's
+table (solver_tries); _optimise only makes them. Once the budget is spent, decide() applies
+the verified shifted candidate (CANDIDATE_TIMEOUT), or stops if there is none, and the
+solution says so (MpcSolution.timed_out). Nothing unverified is ever applied: the budget
+only decides how hard the step tries to beat the candidate. How closely a solver keeps to its
+share is backends.py's (run_solver): IPOPT to an iteration, fatrop to its measured time per
+iteration.
 
 The NLP itself is formulation.py (problem (6)); the solvers and their compilation are
 backends.py.
@@ -80,6 +82,7 @@ from mpc_local_planner.core.mpc.formulation import (
     TerminalCondition,
 )
 from mpc_local_planner.core.mpc.nlp_shapes import NlpShapes
+from mpc_local_planner.core.mpc.tries import Situation, Solver, solver_tries, Start, Try
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
 from mpc_local_planner.core.paths import ReferencePath, wrap_angle
 
@@ -124,6 +127,8 @@ class MpcSolution(NamedTuple):
             done: a solve was cut or not started, or a retry or a constraint-generation round
             was left out. What is applied is verified all the same (the solver's plan only if
             it cleared every reachable obstacle), else the robot stops.
+        tries: the solver tries the step made, in order, over all its rounds (see tries.py:
+            solver_tries() gives them; the budget may leave some out).
 
     """
 
@@ -144,6 +149,7 @@ class MpcSolution(NamedTuple):
     rounds: int = 1
     solver_verified: bool = False
     timed_out: bool = False
+    tries: tuple[Try, ...] = ()
 
 
 class SolveAttempt(NamedTuple):
@@ -164,7 +170,7 @@ class _Unfinished(NamedTuple):
     nlp: Nlp
     x0: np.ndarray
     w: np.ndarray
-    kind: str  # which of _optimise's tries it was
+    solver: Solver  # the solver of the try that was cut
 
 
 class _Rounds(NamedTuple):
@@ -206,6 +212,24 @@ class _Budget:
         return False
 
 
+def _solver_of(nlp: Nlp, solver: Solver) -> ca.Function | None:
+    """Return the solver function a try runs (None: the NLP's own), building it if need be."""
+    if solver is Solver.IPOPT_FALLBACK:
+        return nlp.fallback_solver()
+    if solver is Solver.IPOPT_COLD:
+        return nlp.cold_solver()
+    return None
+
+
+def _build_time(nlp: Nlp, solver: Solver) -> float:
+    """Return the seconds getting the solver of a try takes before it can run (0: built)."""
+    if solver is Solver.IPOPT_FALLBACK:
+        return nlp.fallback_build_time
+    if solver is Solver.IPOPT_COLD:
+        return nlp.cold_build_time
+    return 0.0
+
+
 @dataclass
 class Plan:
     """A predicted trajectory with everything needed to shift it (s is nan without a path)."""
@@ -238,6 +262,7 @@ class MpcBase(ABC):
                  obstacles: Sequence[ConvexPolygon] = ()) -> None:
         self._model = model
         self._budget = _Budget(math.inf, self.clock)  # solve() starts one per step
+        self._tries: list[Try] = []  # the tries of the step in progress
         self._config = config or MpcConfig()
         self._use_footprint()
         self._raw_obstacles: list[ConvexPolygon] = []
@@ -698,81 +723,64 @@ class MpcBase(ABC):
     def _optimise(self, nlp: Nlp, w_candidate: np.ndarray, params: np.ndarray,
                   x0: np.ndarray, active: list[ConvexPolygon],
                   previous: Plan | None = None) -> SolveAttempt:
-        """Solve from the candidate; on failure retry from other starts and with IPOPT.
+        """Make the tries solver_tries() gives for this situation; keep the best.
 
-        The tries run only while the step's budget lasts (the first run of the backend
-        always does), most promising first:
+        The tries run in order while the step's budget lasts, and stop at the first verified
+        solution. The first backend try always runs (with what is left, maybe nothing: then
+        it is a cut run that returns its start); any other only if the budget allows it, the
+        build of an IPOPT not built yet included (a build cannot be cut: prepare() builds
+        them ahead). The returned attempt counts the iterations and time of every try, and
+        is the verified one, else the last backend try's (else the first try's).
 
-        - after a plan that moves: the backend from the candidate, then IPOPT from it;
-        - without one, or after a plan that stands still (a step from rest that did not
-          solve applied it; from it fatrop failed and spent the budget at every step after a
-          re-plan at 2 m/s on BARN), with obstacles in the NLP: IPOPT with cold-start options
-          from the previous activation round's solution (else a start rolled out along the
-          path), then the backend and IPOPT from the candidate. At the seven BARN stalls at
-          1 m/s fatrop failed from every start in six, IPOPT converged from nearly all;
-          the robot stood still because fatrop's failing first try spent each step's budget;
-        - without one and without obstacles: the backend from the candidate ("stay put"
-          zeroes every derivative of the quartic cost, and solvers may stall there), then
-          from the rolled-out start IPOPT and the backend, then IPOPT from the candidate.
-
-        An IPOPT not built yet is built only if its build (which cannot be cut) fits in what
-        is left: prepare() builds them ahead. The returned attempt counts the iterations and
-        time of every try.
-
-        A try the budget cut is continued first at the next step, from its last iterate, if
-        the state has not moved (the robot stood still on the candidate) and the same NLP
-        comes up. Without that a solve longer than the budget started over at every step and
-        never finished: at 2 m/s on BARN, from rest with 10 cylinders held, IPOPT needs about
-        105 iterations (200 ms) and had 100 ms, and the robot stood still for good.
+        A try the budget cut is kept (_Unfinished) for the next step to go on with, if the
+        same NLP comes up there and the state has not moved (see tries.py).
         """
-        active_set = ObstacleSet(active)
-        budget = self._budget
-        if self._plan is not None and np.any(self._plan.u):
-            tries = [(w_candidate, 'backend'), (w_candidate, 'fallback')]
-        elif active:
-            if previous is not None:
-                previous.mu = self._multipliers(previous.x, active, nlp)
-                start = self._pack(previous, nlp)
-            else:
-                start = self._pack(self._guided_guess(x0, active, nlp), nlp)
-            tries = [(start, 'cold'), (w_candidate, 'backend'), (w_candidate, 'fallback')]
-        else:
-            guess = self._pack(self._guided_guess(x0, active, nlp), nlp)
-            tries = [(w_candidate, 'backend'), (guess, 'fallback'), (guess, 'backend'),
-                     (w_candidate, 'fallback')]
         unfinished = self._unfinished
+        continuation: _Unfinished | None = None
         if unfinished is not None and unfinished.nlp is nlp:
             self._unfinished = None  # continued once, or moved away from
             if np.max(np.abs(unfinished.x0 - x0)) <= CONTINUE_TOLERANCE:
-                tries.insert(0, (unfinished.w, unfinished.kind))
+                continuation = unfinished
+        situation = Situation(
+            plan_moves=self._plan is not None and bool(np.any(self._plan.u)),
+            obstacles_active=bool(active), previous_round=previous is not None,
+            has_fallback=nlp.has_fallback,
+            continuation=continuation.solver if continuation is not None else None)
+        starts: dict[Start, np.ndarray] = {Start.CANDIDATE: w_candidate}
+        if continuation is not None:
+            starts[Start.CONTINUATION] = continuation.w
+
+        def start_of(start: Start) -> np.ndarray:
+            if start not in starts:
+                if start is Start.PREVIOUS_ROUND:
+                    assert previous is not None
+                    previous.mu = self._multipliers(previous.x, active, nlp)
+                    plan = previous
+                else:
+                    plan = self._guided_guess(x0, active, nlp)
+                starts[start] = self._pack(plan, nlp)
+            return starts[start]
+
+        active_set = ObstacleSet(active)
         best: SolveAttempt | None = None
         iterations, seconds = 0, 0.0
-        for w_start, kind in tries:
-            solver = None
-            if kind == 'cold':
-                if not budget.allows(nlp.cold_build_time):
-                    continue  # then the backend from the candidate comes first
-                solver = nlp.cold_solver()
-            elif kind == 'fallback':
-                if not nlp.has_fallback:
-                    continue  # IPOPT is the backend: its retry is the one without
-                if not budget.allows(nlp.fallback_build_time):
-                    continue
-                solver = nlp.fallback_solver()
-            elif best is not None and not budget.allows():
-                break
-            attempt = self._run_solver(nlp, w_start, params, active_set, solver)
+        for attempt_try in solver_tries(situation):
+            kind = attempt_try.solver
+            first_backend = best is None and kind is Solver.BACKEND
+            if not first_backend and not self._budget.allows(_build_time(nlp, kind)):
+                continue
+            self._tries.append(attempt_try)
+            attempt = self._run_solver(nlp, start_of(attempt_try.start), params, active_set,
+                                       _solver_of(nlp, kind))
             iterations += attempt.iterations
             seconds += attempt.seconds
             if (attempt.cut and not attempt.verified and attempt.iterations > 0
                     and np.all(np.isfinite(attempt.w))):
                 self._unfinished = _Unfinished(nlp, x0.copy(), attempt.w, kind)
             if attempt.verified:
-                label = {'backend': '', 'fallback': ' (IPOPT fallback)',
-                         'cold': ' (IPOPT cold start)'}[kind]
-                best = attempt._replace(status=attempt.status + label)
+                best = attempt._replace(status=attempt.status + kind.label)
                 break
-            if best is None or kind == 'backend':
+            if best is None or kind is Solver.BACKEND:
                 best = attempt
         assert best is not None  # the first backend try always runs
         return best._replace(iterations=iterations, seconds=seconds)
@@ -840,6 +848,7 @@ class MpcBase(ABC):
 
         """
         self._budget = budget = _Budget(self._config.solve_budget(), self.clock)
+        self._tries = []
         x = np.asarray(x, dtype=float).reshape(-1)
         if x.shape != (self._model.nx,) or not np.all(np.isfinite(x)):
             msg = f'state must be {self._model.nx} finite numbers, got {x}'
@@ -894,7 +903,7 @@ class MpcBase(ABC):
             source=decision.source, lyapunov_ok=lyapunov_ok, failures=self._failures,
             obstacles_in_reach=len(reachable), obstacles_active=len(result.active),
             rounds=result.rounds, solver_verified=attempt.verified,
-            timed_out=budget.timed_out,
+            timed_out=budget.timed_out, tries=tuple(self._tries),
         )
 
     def _stop(self, x0: np.ndarray, status: str, attempt: SolveAttempt, in_reach: int,
@@ -913,6 +922,7 @@ class MpcBase(ABC):
             solve_time_s=attempt.seconds, iterations=attempt.iterations,
             source=PlanSource.STOP, lyapunov_ok=None, failures=failures,
             obstacles_in_reach=in_reach, obstacles_active=active, timed_out=timed_out,
+            tries=tuple(self._tries),
         )
 
 

@@ -1,0 +1,132 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The solver strategy of one NLP solve as a table: a situation in, the ordered tries out.
+
+A try is a start (where the solver begins) and a solver (the NLP's backend, or one of its two
+IPOPTs). solver_tries() is pure: it says which tries are worth making, most promising first,
+and nothing else. step.py's loop (MpcBase._optimise) makes them in that order while the
+step's budget lasts and stops at the first verified solution, as Nav2 MPPI's fallback does.
+
+The order, and why:
+
+- after a plan that moves: the backend from the candidate, then the IPOPT fallback from it;
+- without one, or after a plan that stands still (a step from rest that did not solve applied
+  it; from it fatrop failed and spent the budget at every step after a re-plan at 2 m/s on
+  BARN), with obstacles in the NLP: IPOPT with cold-start options from the previous
+  constraint-generation round's solution (else from the start rolled out along the path),
+  then the backend and the fallback from the candidate. At the seven BARN stalls at 1 m/s
+  fatrop failed from every start in six, IPOPT converged from nearly all; the robot stood
+  still because fatrop's failing first try spent each step's budget;
+- without one and without obstacles: the backend from the candidate ("stay put" zeroes every
+  derivative of the quartic cost, and solvers may stall there), then from the rolled-out
+  start the fallback and the backend, then the fallback from the candidate.
+
+A try the budget cut at the last step goes on first, from its last iterate, with the same
+solver (Start.CONTINUATION), when the step may continue it (same NLP, same state: the robot
+stood still meanwhile). Without that a solve longer than the budget started over at every
+step and never finished: at 2 m/s on BARN, from rest with 10 cylinders held, IPOPT needs
+about 105 iterations (200 ms) and had 100 ms, and the robot stood still for good.
+
+An NLP whose backend is IPOPT has no fallback: its fallback tries are left out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import enum
+from typing import NamedTuple
+
+__all__ = ['Situation', 'Solver', 'Start', 'Try', 'solver_tries']
+
+
+class Start(enum.Enum):
+    """Where a try starts the solver."""
+
+    CANDIDATE = 'candidate'  # the proof's shifted candidate: feasible by construction
+    PREVIOUS_ROUND = 'previous round'  # the last constraint-generation round's solution
+    GUIDED = 'guided'  # rolled out along the path at half speed: infeasible, informative
+    CONTINUATION = 'continuation'  # the last iterate of the try the budget cut last step
+
+
+class Solver(enum.Enum):
+    """Which solver of the NLP a try runs."""
+
+    BACKEND = 'backend'  # config.solver (or IPOPT for a shape beyond fatrop_stage_limit)
+    IPOPT_FALLBACK = 'IPOPT fallback'  # IPOPT with the warm-start options
+    IPOPT_COLD = 'IPOPT cold start'  # IPOPT with the cold-start options
+
+    @property
+    def label(self) -> str:
+        """Return what a status solved by this solver gets appended ('' for the backend)."""
+        return '' if self is Solver.BACKEND else f' ({self.value})'
+
+
+class Try(NamedTuple):
+    """One solve: from a start, with a solver."""
+
+    start: Start
+    solver: Solver
+
+
+@dataclass(frozen=True, kw_only=True)
+class Situation:
+    """What the choice of tries depends on.
+
+    Attributes:
+        plan_moves: the plan in force commands some motion (a stand-still plan, as applied
+            after a step from rest that did not solve, counts as none).
+        obstacles_active: the NLP holds obstacles (Farkas constraints).
+        previous_round: the last constraint-generation round's solution is there (a start
+            for this round).
+        has_fallback: the NLP has an IPOPT fallback (its backend is not IPOPT).
+        continuation: the solver of a try the budget cut at the last step that this solve
+            may go on with (same NLP, same state), or None.
+
+    """
+
+    plan_moves: bool
+    obstacles_active: bool
+    previous_round: bool = False
+    has_fallback: bool = True
+    continuation: Solver | None = None
+
+
+def solver_tries(situation: Situation) -> tuple[Try, ...]:
+    """Return the tries to make in this situation, most promising first.
+
+    Args:
+        situation: the plan in force, the NLP and what there is to start from.
+
+    Returns:
+        The tries in order. There is always a backend try: the loop makes the first one
+        whatever is left of the budget, so that a step always has an answer.
+
+    """
+    candidate = Start.CANDIDATE
+    if situation.plan_moves:
+        tries = [Try(candidate, Solver.BACKEND), Try(candidate, Solver.IPOPT_FALLBACK)]
+    elif situation.obstacles_active:
+        start = Start.PREVIOUS_ROUND if situation.previous_round else Start.GUIDED
+        tries = [Try(start, Solver.IPOPT_COLD), Try(candidate, Solver.BACKEND),
+                 Try(candidate, Solver.IPOPT_FALLBACK)]
+    else:
+        guided = Start.GUIDED
+        tries = [Try(candidate, Solver.BACKEND), Try(guided, Solver.IPOPT_FALLBACK),
+                 Try(guided, Solver.BACKEND), Try(candidate, Solver.IPOPT_FALLBACK)]
+    if situation.continuation is not None:
+        tries.insert(0, Try(Start.CONTINUATION, situation.continuation))
+    if not situation.has_fallback:
+        tries = [t for t in tries if t.solver is not Solver.IPOPT_FALLBACK]
+    return tuple(tries)
