@@ -22,10 +22,12 @@ rollout's controller):
 1. the simulated laser scans the true world (known and unknown obstacles) from the pose;
 2. the scan goes into the planner's grid (map plus scans, `PlanningGrid`) and into the
    controller's obstacle memory (`ObstacleMemory`);
-3. every ``replan_check_period`` the planner checks the rest of its plan as the
-   global_planner node does (`RrtStarPlanner.rest_problem`) and re-plans from the pose; the
-   first plan is made at the first step, on the map alone (before the first scan), as the
-   node plans a goal that comes before the laser has shown anything;
+3. the planner follows the global_planner node's re-planning policy, through the same
+   `Replanner` (core/replanning.py): every ``replan_check_period`` it checks the rest of its
+   plan (`RrtStarPlanner.rest_problem`) and re-plans from the pose when it is blocked (and
+   every ``replan_period``, if set); the first plan is made at the first step, on the map
+   alone (before the first scan), as the node plans a goal that comes before the laser has
+   shown anything;
 4. the local controller gets the map's and the memory's obstacles near the robot
    (`LocalObstacles`, as the controller node assembles them) and answers.
 
@@ -38,17 +40,23 @@ follow the same re-planned paths.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-import math
 import time
 from typing import Any, Protocol, Sequence
 
 import numpy as np
 
 from mpc_local_planner.core.controller import MpcController, Reason
+from mpc_local_planner.core.diagnostics import PlanTrigger
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import waypoints_to_poses
 from mpc_local_planner.core.planner import RrtStarPlanner
+from mpc_local_planner.core.replanning import (
+    ReplanDecision,
+    Replanner,
+    ReplanOutcome,
+    ReplanSettings,
+)
 from mpc_local_planner.evaluation.rollout import ControlStep
 from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.perception.laser import JACKAL_FOV, SimulatedLaser
@@ -71,6 +79,9 @@ __all__ = [
 class NavigationSettings:
     """The sensing and re-planning settings (the nodes' defaults).
 
+    The re-planning ones map onto the node's (`replan_settings`): replan_check_period is
+    1 / replan_check_rate, replan_period is replan_period, and sense off is a check rate of 0.
+
     Attributes:
         beams: Laser beams per scan (the simulator's scan.beams).
         fov: Laser field of view, radians (the Jackal's 270 degrees).
@@ -78,6 +89,8 @@ class NavigationSettings:
         memory_ttl: How long the controller remembers what the laser saw, seconds.
         replan_check_period: Seconds between two checks of the rest of the plan (the
             planner's 1 / replan_check_rate).
+        replan_period: Re-plan the goal this often (seconds) even when the plan is clear;
+            0 = only when blocked (the node's replan_period and its default).
         sensing_margin: Obstacles farther than the controller's reach plus this are left out.
         escape_distance: How far a re-plan may start from a robot standing within the
             planner's clearance (see PlanningGrid.escape_point).
@@ -90,9 +103,20 @@ class NavigationSettings:
     range_max: float = 10.0
     memory_ttl: float = 5.0
     replan_check_period: float = 0.5
+    replan_period: float = 0.0
     sensing_margin: float = 0.5
     escape_distance: float = 1.0
     sense: bool = True
+
+    def replan_settings(self) -> ReplanSettings:
+        """Return the re-planner's settings (without sensing the grid never changes: no checks).
+
+        The navigator's steps land on the check period (k * h), so a check is due only once
+        the whole period has passed, as the node's timer ticks once a period.
+        """
+        return ReplanSettings(
+            check_period=self.replan_check_period if self.sense else 0.0,
+            replan_period=self.replan_period, escape_distance=self.escape_distance)
 
 
 class LocalController(Protocol):
@@ -213,7 +237,8 @@ class NavigationLog:
 
     Attributes:
         plans: (time, (M, 2) waypoints, trigger) of every plan published.
-        replan_failures: re-plans that found no path (the plan in force stayed).
+        replan_failures: re-plans that found no path (the plan in force stayed): the
+            re-planner's count.
         plan_seconds: wall time of every planning attempt.
         control_seconds: wall time of each control step's perception and controller (what the
             controller node does per step: memory update, obstacle assembly, solve).
@@ -267,15 +292,14 @@ class Navigator:
         self.memory = ObstacleMemory(self.settings.memory_ttl)
         self.obstacles = LocalObstacles(faces, occupancy=known_map, memory=self.memory)
         self.log = NavigationLog()
+        self.replanner = Replanner(self.settings.replan_settings())
         self._snapshot_period = float(snapshot_period)
-        self._plan: np.ndarray | None = None
-        self._checked = -math.inf
         self._k = 0
 
     @property
     def plan(self) -> np.ndarray | None:
         """The plan in force, (M, 2) waypoints."""
-        return self._plan
+        return self.replanner.plan
 
     def step(self, x: np.ndarray) -> ControlStep:
         """Sense, re-plan if needed, and answer for the state x (the rollout's call).
@@ -286,17 +310,12 @@ class Navigator:
         """
         t = self._k * self.h
         self._k += 1
-        if self._plan is None:  # the goal comes first, planned on the map alone
-            self._replan(x, t, 'goal')
-            self._checked = t
+        if self.replanner.plan is None:  # the goal comes first, planned on the map alone
+            self._adopt(self.replanner.plan_goal(self.planner, x, self.goal, now=t), x, t)
         scan = self.laser.scan(x, stamp=t) if self.settings.sense else None
         if scan is not None:
             self.grid.add_scan(scan, x)
-        if scan is not None and (
-                t - self._checked >= self.settings.replan_check_period - 1e-9):
-            self._checked = t
-            if self.planner.rest_problem(self._plan, x) is not None:
-                self._replan(x, t, 'blocked')
+        self._adopt(self.replanner.check(self.planner, x, now=t, grid=self.grid), x, t)
         started = time.perf_counter()
         if scan is not None:
             self.memory.update(scan, x)
@@ -309,31 +328,26 @@ class Navigator:
             self.log.sensed.append((t, list(nearby)))
         return answer
 
-    def _replan(self, x: np.ndarray, t: float, trigger: str) -> None:
-        """Plan from x to the goal and hand the plan to the local controller.
+    def _adopt(self, decision: ReplanDecision, x: np.ndarray, t: float) -> None:
+        """Log the re-planner's decision and hand a new plan to the local controller.
 
         Raises:
             PlanningError: for the first plan; a failed re-plan keeps the plan in force.
+            Exception: a planner error other than PlanningError (a bug stops the run).
 
         """
-        started = time.perf_counter()
-        try:
-            waypoints = self._plan_from(x, trigger)
-        except PlanningError:
-            self.log.plan_seconds.append(time.perf_counter() - started)
-            if trigger == 'goal':
-                raise
-            self.log.replan_failures += 1
+        if decision.attempted:
+            self.log.plan_seconds.append(decision.planning_s)
+        self.log.replan_failures = self.replanner.replan_failures
+        if decision.outcome is ReplanOutcome.FAILED:
+            assert decision.error is not None
+            if decision.trigger is PlanTrigger.GOAL or not isinstance(decision.error,
+                                                                       PlanningError):
+                raise decision.error
             return
-        self.log.plan_seconds.append(time.perf_counter() - started)
-        self._plan = waypoints
-        self.log.plans.append((t, waypoints, trigger))
-        self.local.follow(waypoints_to_poses(waypoints, float(x[2]), float(self.goal[2])))
-
-    def _plan_from(self, x: np.ndarray, trigger: str) -> np.ndarray:
-        """Plan the goal from x; re-plans follow RrtStarPlanner.replan, as the node's do."""
-        if trigger == 'goal':
-            return self.planner.plan(x, self.goal)
-        return self.planner.replan(x, self.goal, failures=self.log.replan_failures,
-                                   grid=self.grid,
-                                   escape_distance=self.settings.escape_distance)
+        if decision.outcome is not ReplanOutcome.PLANNED:
+            return
+        assert decision.waypoints is not None and decision.trigger is not None
+        self.log.plans.append((t, decision.waypoints, decision.trigger.value))
+        self.local.follow(waypoints_to_poses(decision.waypoints, float(x[2]),
+                                             float(self.goal[2])))
