@@ -47,7 +47,8 @@ violates its clearance, the goal is planned again from the current odometry, and
 ``replan_period`` > 0 also periodically. A new plan replaces the old on ``plan``; the
 controller follows it from the robot's projection. ``planner/diagnostics`` says what
 triggered each plan and counts the re-plans; a failed re-plan is a warning and the plan in
-force stays.
+force stays. The policy (when to check, consecutive failures moving the seed on) is
+core/replanning.py's `Replanner`, which the evaluation's Navigator runs too.
 
 A goal it cannot plan to (inside an inflated obstacle, walled off, out of bounds, not
 finite, in another frame), or a start in collision, is logged as an error and nothing is
@@ -59,6 +60,7 @@ supervisor such as closed_loop learns that no plan will come.
 
 from __future__ import annotations
 
+from dataclasses import replace
 import math
 import sys
 from typing import Any
@@ -84,6 +86,12 @@ from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import parse_footprint
 from mpc_local_planner.core.paths import analytic_path, waypoints_to_poses
 from mpc_local_planner.core.planner import path_length, PlannerConfig, RrtStarPlanner
+from mpc_local_planner.core.replanning import (
+    ReplanDecision,
+    Replanner,
+    ReplanOutcome,
+    ReplanSettings,
+)
 from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.perception.pose_history import PoseHistory
 from mpc_local_planner.ros.conversions import (
@@ -235,10 +243,8 @@ class GlobalPlannerNode(ManagedNode):
         self._problems = ProblemThrottle()
         self.last_plan: np.ndarray | None = None
         self.plan_count = 0
-        self.replan_count = 0
-        self._replan_failures = 0  # consecutive failed re-plans (their count moves the seed on)
-        self._goal: np.ndarray | None = None  # the goal of the plan in force
-        self._plan_time = 0.0  # when the plan in force was published (node clock, s)
+        # the re-planning policy: the goal and plan in force, failures, counts (node clock, s)
+        self.replanner = Replanner(self._replan_settings())
         self._check_timer: Any = None
         self.map_count = 0
         self.scan_count = 0
@@ -259,6 +265,18 @@ class GlobalPlannerNode(ManagedNode):
     def is_active(self) -> bool:
         """Whether the node is active: it plans and publishes."""
         return self._active
+
+    @property
+    def replan_count(self) -> int:
+        """Re-plans published (blocked or periodic), the re-planner's count."""
+        return self.replanner.replans
+
+    def _replan_settings(self) -> ReplanSettings:
+        """Return the re-planner's settings: replan_check_rate and replan_period."""
+        return ReplanSettings.from_rate(
+            float(self.get_parameter('replan_check_rate').value),
+            replan_period=float(self.get_parameter('replan_period').value),
+            escape_distance=ESCAPE_DISTANCE)
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Load the world, build the planner, create the publishers and subscriptions.
@@ -308,9 +326,10 @@ class GlobalPlannerNode(ManagedNode):
             return result
         self._active = True
         self.get_logger().info('active')
-        rate = float(self.get_parameter('replan_check_rate').value)
-        if rate > 0.0:
-            self._check_timer = self.create_timer(1.0 / rate, self.check_plan)
+        self.replanner.settings = self._replan_settings()
+        period = self.replanner.settings.check_period
+        if period > 0.0:
+            self._check_timer = self.create_timer(period, self.check_plan)
         if self.get_parameter('analytic_path').value:
             self._publish_analytic()
         else:
@@ -332,7 +351,7 @@ class GlobalPlannerNode(ManagedNode):
         """Stop planning; destroy the publishers and subscriptions; drop planner and world."""
         self._active = False
         self._destroy_check_timer()
-        self._goal = None
+        self.replanner.drop_plan()
         self._configured = False
         self.destroy_entities(self._plan_pub, self._diag_pub, self._odom_sub, self._goal_sub,
                               self._map_sub, self._scan_sub)
@@ -407,6 +426,10 @@ class GlobalPlannerNode(ManagedNode):
         Unconfigured, nothing is built: configure reads the parameters as they then are.
         """
         names = {p.name for p in parameters}
+        if 'replan_period' in names:  # at the next check (replan_check_rate: at activate)
+            self.replanner.settings = replace(
+                self.replanner.settings,
+                replan_period=float(self.get_parameter('replan_period').value))
         if not self._configured:
             return
         for name in ('use_map', 'use_scan'):
@@ -599,7 +622,8 @@ class GlobalPlannerNode(ManagedNode):
             self.get_logger().info('goal received: waiting for odometry', once=True)
             return
         goal, self._pending_goal = self._pending_goal, None
-        self._plan_to(goal, PlanTrigger.GOAL)
+        self._adopt(self.replanner.plan_goal(self._planner, self._state.copy(), goal,
+                                             now=self._now()))
 
     def check_plan(self) -> None:
         """Re-plan the goal in force when the rest of its plan is blocked, or periodically.
@@ -607,31 +631,31 @@ class GlobalPlannerNode(ManagedNode):
         Blocked means that the rest of the plan (from the robot's projection onto it, less
         its first stretch: RrtStarPlanner.rest_problem) no longer passes the check plans are
         made with: an obstacle the map did not have, marked by the laser, now violates the
-        clearance. The world
-        file's obstacles do not change, so without use_map only replan_period re-plans.
+        clearance. The world file's obstacles do not change, so without use_map only
+        replan_period re-plans. The decision is the re-planner's (core/replanning.py).
         """
-        if (not self._active or self._goal is None or self.last_plan is None
-                or self._state is None or self._planner is None or self._pending_goal is not None
+        if (not self._active or self._state is None or self._planner is None
+                or self._pending_goal is not None
                 or self.get_parameter('analytic_path').value):
             return
-        problem = self._planner.rest_problem(self.last_plan, self._state)
-        period = float(self.get_parameter('replan_period').value)
-        if problem is not None:
-            self.get_logger().info(f'the rest of the plan is blocked ({problem}): re-planning')
-            self._plan_to(self._goal, PlanTrigger.BLOCKED)
-        elif period > 0.0 and self._now() - self._plan_time >= period:
-            self._plan_to(self._goal, PlanTrigger.PERIODIC)
+        self._adopt(self.replanner.check(self._planner, self._state.copy(), now=self._now(),
+                                         grid=self._grid))
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def _plan_to(self, goal: np.ndarray, trigger: PlanTrigger) -> None:
-        """Plan from the current odometry to goal and publish; report why not otherwise."""
-        assert self._planner is not None and self._state is not None
-        start = self._state.copy()
-        try:
-            waypoints = self._plan_from(start, goal, trigger)
-        except Exception as err:  # PlanningError; anything else must not kill the executor
+    def _adopt(self, decision: ReplanDecision) -> None:
+        """Publish the re-planner's new plan, or log and report why there is none."""
+        if not decision.attempted:
+            return
+        assert decision.trigger is not None and decision.goal is not None
+        assert decision.start is not None
+        trigger, goal = decision.trigger, decision.goal
+        if decision.problem is not None:
+            self.get_logger().info(f'the rest of the plan is blocked ({decision.problem}): '
+                                   're-planning')
+        if decision.outcome is ReplanOutcome.FAILED:
+            err = decision.error
             cause = str(err) if isinstance(err, PlanningError) else (
                 f'planner failed: {type(err).__name__}: {err}')
             detail = f'no plan to ({goal[0]:g}, {goal[1]:g}): {cause}'
@@ -640,32 +664,19 @@ class GlobalPlannerNode(ManagedNode):
             elif self._problems.report('replan'):
                 self.get_logger().warning(f'{trigger} re-plan failed: {detail}; the plan in '
                                           'force stays')
-            if trigger is not PlanTrigger.GOAL:
-                self._replan_failures += 1
             self._report(PlannerDiagnostics(planned=False, detail=detail, trigger=trigger,
                                             replans=self.replan_count))
             return
-        self._replan_failures = 0
-        if trigger is PlanTrigger.GOAL:
-            self._goal = goal
-        else:
-            self.replan_count += 1
+        assert decision.waypoints is not None
+        if trigger is not PlanTrigger.GOAL:
             self._problems.resolve('replan')
-        poses = waypoints_to_poses(waypoints, float(start[2]), float(goal[2]))
+        poses = waypoints_to_poses(decision.waypoints, float(decision.start[2]), float(goal[2]))
         self._publish(poses, trigger)
-
-    def _plan_from(self, start: np.ndarray, goal: np.ndarray,
-                   trigger: PlanTrigger) -> np.ndarray:
-        """Plan a goal from start; re-plans follow RrtStarPlanner.replan (seed, escape)."""
-        assert self._planner is not None
-        if trigger is PlanTrigger.GOAL:
-            return self._planner.plan(start, goal)
-        return self._planner.replan(start, goal, failures=self._replan_failures,
-                                    grid=self._grid, escape_distance=ESCAPE_DISTANCE)
 
     def _publish_analytic(self) -> None:
         _, poses = analytic_path(str(self.get_parameter('analytic_path').value)).sample(
             ANALYTIC_SAMPLES)
+        self.replanner.drop_plan()  # an analytic path is not re-planned
         self._publish(poses)
 
     def _publish(self, poses: np.ndarray, trigger: PlanTrigger = PlanTrigger.GOAL) -> None:
@@ -676,7 +687,6 @@ class GlobalPlannerNode(ManagedNode):
         self.last_plan = poses
         self.plan_count += 1
         length = path_length(poses)
-        self._plan_time = self._now()
         detail = f'published a plan ({trigger}): {len(poses)} poses, {length:.2f} m'
         self.get_logger().info(detail)
         self._report(PlannerDiagnostics(planned=True, detail=detail, poses=len(poses),

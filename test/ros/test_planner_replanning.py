@@ -1,0 +1,189 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The global_planner node and the evaluation's Navigator re-plan alike (core/replanning.py).
+
+Both are driven with one scripted fake planner (blocked or not, failing or not, at given
+times) and the same times: the node's checks at its timer's ticks, the Navigator's at its
+control steps, one per check period. They must make the same decisions, ask the planner
+with the same seed offsets, and count the same.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+from rclpy.parameter import Parameter
+
+from mpc_local_planner.core.diagnostics import PlanTrigger
+from mpc_local_planner.core.errors import PlanningError
+from mpc_local_planner.core.replanning import Replanner, ReplanOutcome, ReplanSettings
+from mpc_local_planner.evaluation.navigation import NavigationSettings, Navigator
+from mpc_local_planner.evaluation.rollout import ControlStep
+from mpc_local_planner.perception.raycast import TrueGeometry
+from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
+from mpc_local_planner.ros.node_main import autostart
+
+CHECK_PERIOD = 0.5  # the node's default replan_check_rate, 2 Hz
+REPLAN_PERIOD = 2.0
+POSE = np.array([1.0, 1.0, 0.0])
+GOAL = np.array([4.0, 1.0, 0.0])
+# time of a check -> (rest blocked, planning fails); the goal is planned at 0 s
+SCRIPT = {
+    1.0: (True, True),
+    1.5: (True, True),
+    2.0: (True, False),
+    3.0: (True, True),
+    3.5: (False, True),  # clear, no periodic re-plan due (the plan is from 2 s)
+    4.0: (False, True),  # periodic, fails
+    4.5: (False, False),  # periodic, made
+    5.0: (True, True),
+}
+TIMES = [CHECK_PERIOD * k for k in range(1, 13)]
+
+
+class ScriptedPlanner:
+    """A planner that is blocked or fails when SCRIPT says so, at the time the test sets."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+        self.calls: list[tuple[float, str, int]] = []
+
+    def _path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        if SCRIPT.get(self.now, (False, False))[1]:
+            problem = f'no path at {self.now} s'
+            raise PlanningError(problem)
+        return np.array([start[:2], [2.5, 1.0 + self.now], goal[:2]])
+
+    def plan(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        self.calls.append((self.now, 'plan', 0))
+        return self._path(start, goal)
+
+    def replan(self, start: np.ndarray, goal: np.ndarray, *, failures: int = 0,
+               grid: Any = None, escape_distance: float = 1.0) -> np.ndarray:
+        self.calls.append((self.now, 'replan', failures))
+        return self._path(start, goal)
+
+    def rest_problem(self, plan: np.ndarray, position: Sequence[float]) -> str | None:
+        return 'blocked' if SCRIPT.get(self.now, (False, False))[0] else None
+
+
+def record(replanner: Replanner, decisions: list) -> None:
+    """Record (outcome, trigger) of every decision the re-planner makes."""
+    for name in ('plan_goal', 'check'):
+        method = getattr(replanner, name)
+
+        def wrapped(*args: Any, _method: Any = method, **kwargs: Any) -> Any:
+            decision = _method(*args, **kwargs)
+            if decision.outcome is not ReplanOutcome.NOT_DUE:
+                decisions.append((decision.outcome, decision.trigger))
+            return decision
+
+        setattr(replanner, name, wrapped)
+
+
+class StillLocal:
+    """A local controller that stands still and keeps the plans it is given."""
+
+    reach = 1.0
+
+    def __init__(self) -> None:
+        self.plans: list[np.ndarray] = []
+
+    def follow(self, poses: np.ndarray) -> None:
+        self.plans.append(poses)
+
+    def avoid(self, obstacles: Sequence[Any]) -> None:
+        pass
+
+    def command(self, x: np.ndarray, t: float) -> ControlStep:
+        return ControlStep(u=np.zeros(2), solve_time_s=0.0)
+
+
+class NoGrid:
+    """A grid the scans go into and nothing comes out of."""
+
+    def add_scan(self, scan: Any, pose: Sequence[float]) -> None:
+        pass
+
+
+def run_navigator() -> tuple[Navigator, ScriptedPlanner, list]:
+    planner = ScriptedPlanner()
+    settings = NavigationSettings(beams=16, replan_check_period=CHECK_PERIOD,
+                                  replan_period=REPLAN_PERIOD)
+    navigator = Navigator(StillLocal(), TrueGeometry([]), NoGrid(), planner, GOAL,
+                          h=CHECK_PERIOD, settings=settings)
+    decisions: list = []
+    record(navigator.replanner, decisions)
+    for t in [0.0, *TIMES]:
+        planner.now = t
+        navigator.step(POSE)
+    return navigator, planner, decisions
+
+
+def run_node(ros) -> tuple[GlobalPlannerNode, ScriptedPlanner, list]:
+    node = ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
+        Parameter('replan_check_rate', value=1.0 / CHECK_PERIOD),
+        Parameter('replan_period', value=REPLAN_PERIOD)]))
+    assert autostart(node) is None
+    planner = ScriptedPlanner()
+    node._planner = planner  # the test's clock and planner; the timer is never spun
+    node._now = lambda: planner.now
+    node._state = POSE.copy()
+    decisions: list = []
+    record(node.replanner, decisions)
+    node._set_goal(GOAL)
+    node._try_plan()
+    for t in TIMES:
+        planner.now = t
+        node.check_plan()
+    return node, planner, decisions
+
+
+def test_the_node_and_the_navigator_make_the_same_replanning_decisions(ros) -> None:
+    navigator, nav_planner, nav_decisions = run_navigator()
+    node, node_planner, node_decisions = run_node(ros)
+
+    assert node_decisions == nav_decisions
+    assert node_planner.calls == nav_planner.calls
+    planned, failed = ReplanOutcome.PLANNED, ReplanOutcome.FAILED
+    blocked, periodic = PlanTrigger.BLOCKED, PlanTrigger.PERIODIC
+    assert nav_decisions[:6] == [
+        (planned, PlanTrigger.GOAL), (ReplanOutcome.CLEAR, None),
+        (failed, blocked), (failed, blocked), (planned, blocked), (ReplanOutcome.CLEAR, None)]
+    assert nav_decisions[6:10] == [(failed, blocked), (ReplanOutcome.CLEAR, None),
+                                   (failed, periodic), (planned, periodic)]
+    # consecutive failures move the seed; a plan made resets them
+    assert [f for _, kind, f in nav_planner.calls if kind == 'replan'] == [0, 1, 2, 0, 1, 2,
+                                                                           0]
+
+    for replanner in (navigator.replanner, node.replanner):
+        assert (replanner.plans, replanner.replans, replanner.replan_failures) == (3, 2, 5)
+    # each adapter's counts are the re-planner's
+    assert navigator.log.replans == navigator.replanner.replans == node.replan_count
+    assert navigator.log.replan_failures == navigator.replanner.replan_failures
+    assert len(navigator.local.plans) == node.plan_count == 3
+    np.testing.assert_allclose(navigator.plan, node.last_plan[:, :2])
+
+
+def test_the_navigators_settings_map_onto_the_nodes_defaults(ros) -> None:
+    node = ros.add(GlobalPlannerNode(context=ros.context))
+    assert node.replanner.settings == ReplanSettings.from_rate(2.0, escape_distance=1.0)
+    navigation = NavigationSettings().replan_settings()
+    assert navigation.check_period == node.replanner.settings.check_period
+    assert navigation.replan_period == node.replanner.settings.replan_period == 0.0
+    assert navigation.escape_distance == node.replanner.settings.escape_distance
+    # without sensing the grid never changes: the navigator never checks (a rate of 0)
+    assert NavigationSettings(sense=False).replan_settings().check_period == 0.0
