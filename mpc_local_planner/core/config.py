@@ -27,12 +27,19 @@ from typing import Any, NamedTuple, Sequence
 
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
 
-__all__ = ['CostWeights', 'MpcConfig', 'STRUCTURAL_FIELDS', 'validate_mpc_config']
+__all__ = ['BUDGETS', 'CostWeights', 'MpcConfig', 'STRUCTURAL_FIELDS', 'validate_mpc_config']
 
 # 'fatrop' (structure-exploiting interior point) is the fastest that gives IPOPT's closed loop;
 # 'ipopt' is the reference. SQP (sqpmethod with qrqp/qpOASES/OSQP) was measured and dropped:
 # from rest, where every derivative of the quartic cost vanishes, it stops or stalls.
 SOLVERS = ('fatrop', 'ipopt')
+# What bounds a control step's solving (MpcConfig.budget): wall time, the robot's, or solver
+# iterations, the same on any machine and under any load (the evaluation's).
+BUDGETS = ('wall', 'iterations')
+# Seconds one solver iteration typically takes, to turn the wall budget into an iteration
+# allowance (MpcConfig.solve_iterations()). Measured on BARN with sensing at 2 m/s (the
+# Jackal, fatrop and IPOPT, compiled): see ITERATION_SECONDS_NOTE in docs of solve_iterations.
+ITERATION_SECONDS = 2e-3
 
 
 class CostWeights(NamedTuple):
@@ -119,7 +126,20 @@ class MpcConfig:
             run only while some is left; once it is spent the verified shifted candidate is
             applied (or the robot stops), and the step counts as timed out
             (MpcSolution.timed_out). Not structural: the solvers get the time left at each
-            call, nothing is rebuilt.
+            call, nothing is rebuilt. Used with budget 'wall' only.
+        budget: what bounds a step's solving, one of BUDGETS. 'wall' (the default, the
+            robot's): seconds of wall time, max_solve_time; what a step achieves then depends
+            on the machine and its load. 'iterations': solver iterations,
+            solve_iterations(); every try spends the iterations it made, and nothing in a
+            step reads a clock, so the same inputs give the same outputs on any machine
+            under any load (the evaluation's: runs are reproducible). CPU time would not do:
+            it too grows under contention (caches, memory bandwidth). A step then waits for
+            the background compilation of an NLP it needs (the compiled and the interpreted
+            functions may round differently), and builds of the IPOPTs mid-step are free.
+            Not structural.
+        max_solve_iterations: with budget 'iterations', the solver iterations of one
+            control step (every try and round together); None means the wall budget's
+            worth on a typical machine (see solve_iterations()).
         solver_options: extra options passed to casadi.nlpsol (override the defaults).
 
     """
@@ -146,6 +166,8 @@ class MpcConfig:
     adaptive_slots: bool = True
     compile: bool = True
     max_solve_time: float | None = None
+    budget: str = 'wall'
+    max_solve_iterations: int | None = None
     solver_options: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -193,6 +215,16 @@ class MpcConfig:
         half for verification, sensing and publishing before the next one is due.
         """
         return self.step / 2 if self.max_solve_time is None else float(self.max_solve_time)
+
+    def solve_iterations(self) -> int:
+        """Return the solver iterations one control step may make (budget 'iterations').
+
+        max_solve_iterations, or solve_budget() at ITERATION_SECONDS an iteration: what the
+        wall budget allows on a typical machine (0.1 s: 50 iterations).
+        """
+        if self.max_solve_iterations is not None:
+            return int(self.max_solve_iterations)
+        return max(1, round(self.solve_budget() / ITERATION_SECONDS))
 
     def cost_weights(self) -> CostWeights:
         """Return the cost weights by name (the solver reads them as a parameter)."""
@@ -284,4 +316,11 @@ def validate_mpc_config(config: MpcConfig) -> list[str]:
                                or (math.isfinite(budget) and not budget > 0)):
         problems.append(f'max_solve_time must be None or a number > 0 (seconds), '
                         f'got {budget!r}')
+    if config.budget not in BUDGETS:
+        problems.append(f'budget must be one of {BUDGETS}, got {config.budget!r}')
+    iterations = config.max_solve_iterations
+    if iterations is not None and (isinstance(iterations, bool)
+                                   or not isinstance(iterations, int) or iterations < 1):
+        problems.append(f'max_solve_iterations must be None or an integer >= 1, '
+                        f'got {iterations!r}')
     return problems

@@ -12,11 +12,15 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The solve time budget of a control step (MpcConfig.max_solve_time): behaviour, not speed.
+"""The solve budget of a control step (MpcConfig.budget): behaviour, not speed.
 
-Where a test needs the budget spent at a given point, the MPC gets a fake clock that the test
-moves (MpcBase.clock); a 1 us budget is spent before any solver is reached. Nothing here
-asserts how fast anything is.
+Two kinds: wall time (max_solve_time, the robot's) and solver iterations
+(max_solve_iterations, the evaluation's: the same on any machine). Where a test needs the
+wall budget spent at a given point, the MPC gets a fake clock that the test moves (the public
+MpcBase.clock); a 1 us budget is spent before any solver is reached. Where it needs the
+solver to fail, backends' run_solver is replaced by a fake one (FakeSolver), and the step
+says which tries it made (MpcSolution.tries). Which tries a situation calls for is the table
+of test_mpc_tries.py. Nothing here asserts how fast anything is.
 """
 
 from __future__ import annotations
@@ -24,7 +28,6 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import casadi as ca
 import numpy as np
 import pytest
 
@@ -32,10 +35,22 @@ from mpc_local_planner.core.config import MpcConfig, STRUCTURAL_FIELDS
 from mpc_local_planner.core.controller import MpcController, Reason
 from mpc_local_planner.core.diagnostics import ControllerDiagnostics
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.mpc import Decision, PathReferenceMPC, PlanSource
+from mpc_local_planner.core.mpc import (
+    Decision,
+    PathReferenceMPC,
+    PlanSource,
+    Solver,
+    Start,
+    Try,
+)
 from mpc_local_planner.core.mpc import step as step_module
-from mpc_local_planner.core.mpc.backends import iteration_levels, run_solver, stage_size
-from mpc_local_planner.core.mpc.step import SolveAttempt
+from mpc_local_planner.core.mpc.backends import (
+    iteration_levels,
+    Nlp,
+    run_solver,
+    SolverRun,
+    stage_size,
+)
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import paper_sinusoid
 from mpc_local_planner.evaluation.experiments import run_closed_loop
@@ -47,6 +62,8 @@ BOX = ConvexPolygon.from_box(1.0, -1.0, 1.5, 1.0)
 NO_TIME_LIMIT = 3600.0
 # Spent before the first solver call: a step does far more than 1 us of work before it.
 TINY = 1e-6
+CANDIDATE_BACKEND = Try(Start.CANDIDATE, Solver.BACKEND)
+CANDIDATE_FALLBACK = Try(Start.CANDIDATE, Solver.IPOPT_FALLBACK)
 
 
 class FakeClock:
@@ -57,6 +74,41 @@ class FakeClock:
 
     def __call__(self) -> float:
         return self.now
+
+
+def no_clock() -> float:
+    """A clock that must not be read."""
+    msg = 'the clock was read'
+    raise AssertionError(msg)
+
+
+class FakeSolver:
+    """Stands in for backends.run_solver: fails, records its calls, spends a budget.
+
+    Args:
+        clock: a fake clock it moves by `seconds` a call (none: no time passes).
+        seconds: what each call takes of the clock.
+        iterations: what each call reports (and so spends of an iteration budget).
+
+    """
+
+    def __init__(self, clock: FakeClock | None = None, seconds: float = 0.0,
+                 iterations: int = 0) -> None:
+        self.clock, self.seconds, self.iterations = clock, seconds, iterations
+        self.nlps: list[Nlp] = []
+        self.starts: list[np.ndarray] = []
+        self.limits: list[float] = []
+
+    def __call__(self, nlp: Nlp, w0: np.ndarray, params: np.ndarray, solver: Any = None, *,
+                 time_limit: float = math.inf, iteration_limit: float = math.inf) -> SolverRun:
+        self.nlps.append(nlp)
+        self.starts.append(np.array(w0, dtype=float))
+        self.limits.append(iteration_limit)
+        if self.clock is not None:
+            self.clock.now += self.seconds
+        return SolverRun(w=np.asarray(w0, dtype=float).reshape(-1), value=math.inf,
+                         success=False, status='injected failure',
+                         iterations=self.iterations, seconds=0.0)
 
 
 def paper_mpc(**changes: Any) -> PathReferenceMPC:
@@ -75,22 +127,6 @@ def drive(mpc: PathReferenceMPC, steps: int) -> tuple[np.ndarray, Any]:
     return x, solution
 
 
-def failing_solver(calls: list[str], clock: FakeClock | None = None, spend: float = 0.0,
-                   starts: list[np.ndarray] | None = None):
-    """A _run_solver that fails, records which solver (and start) it got, and takes spend s."""
-
-    def run(nlp, w0, params, active, solver=None):  # the signature of _run_solver
-        calls.append('primary' if solver is None else 'fallback')
-        if starts is not None:
-            starts.append(np.array(w0, dtype=float))
-        if clock is not None:
-            clock.now += spend
-        return SolveAttempt(verified=False, w=np.asarray(w0, dtype=float), value=math.inf,
-                            status='injected failure', iterations=0, seconds=0.0)
-
-    return run
-
-
 # ----------------------------------------------------------------------------- the setting
 def test_the_budget_is_half_the_period_unless_given_and_must_be_positive() -> None:
     assert MpcConfig().max_solve_time is None
@@ -105,14 +141,33 @@ def test_the_budget_is_half_the_period_unless_given_and_must_be_positive() -> No
         MpcConfig(max_solve_time=math.inf)
 
 
-def test_a_new_budget_rebuilds_nothing_and_keeps_the_warm_start() -> None:
-    assert 'max_solve_time' not in STRUCTURAL_FIELDS
+def test_the_budget_is_wall_time_unless_iterations_are_asked_for() -> None:
+    assert MpcConfig().budget == 'wall'
+    # the wall budget's worth: 0.1 s at 2 ms an iteration
+    assert MpcConfig(budget='iterations').solve_iterations() == 50
+    assert MpcConfig(budget='iterations', step=0.1).solve_iterations() == 25
+    assert MpcConfig(budget='iterations', max_solve_iterations=7).solve_iterations() == 7
+    with pytest.raises(ValueError, match="budget must be one of \\('wall', 'iterations'\\)"):
+        MpcConfig(budget='cpu')
+    for bad in (0, -3, 2.5, True, 'many'):
+        with pytest.raises(ValueError, match='max_solve_iterations must be None or an integer'):
+            MpcConfig(max_solve_iterations=bad)
+
+
+def test_a_new_budget_rebuilds_nothing_and_keeps_the_warm_start(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    assert not {'max_solve_time', 'budget', 'max_solve_iterations'} & STRUCTURAL_FIELDS
     mpc = paper_mpc()
     x, _ = drive(mpc, 2)
-    nlps = dict(mpc._nlps)
-    mpc.update_config(mpc.config.with_changes(max_solve_time=0.05))
-    assert mpc._nlps == nlps and mpc._plan is not None
-    assert mpc.solve(x).lyapunov_ok is not None  # the history was kept
+    formulated: list[tuple] = []
+    monkeypatch.setattr(step_module, 'formulate', lambda *args: formulated.append(args))
+    for changes in ({'max_solve_time': 0.05}, {'budget': 'iterations'},
+                    {'max_solve_iterations': 500}):
+        mpc.update_config(mpc.config.with_changes(**changes))
+        solution = mpc.solve(x)
+        assert solution.lyapunov_ok is not None  # the history was kept
+        x = mpc.model.step(x, solution.u0, H)
+    assert formulated == []  # nothing was built again
 
 
 # ----------------------------------------------------------------------------- a spent budget
@@ -127,6 +182,7 @@ def test_a_tiny_budget_cuts_the_solver_and_applies_the_verified_shifted_candidat
         assert solution.source is PlanSource.CANDIDATE and not solution.success
         assert solution.status.endswith(f'({Decision.CANDIDATE_TIMEOUT.value})')
         assert solution.iterations == 0 and solution.failures == k
+        assert solution.tries == (CANDIDATE_BACKEND,)  # not started; nothing after it
         # the proof's candidate: the last solver plan, shifted k steps
         np.testing.assert_allclose(solution.u0, last.u_pred[k], atol=1e-12)
         assert solution.lyapunov_ok
@@ -152,17 +208,15 @@ def test_the_retry_chain_is_left_out_once_the_budget_is_spent(
     mpc.clock = clock
     mpc.update_config(mpc.config.with_changes(max_solve_time=100.0))
     # with time to spare a failed solve is retried with the IPOPT fallback
-    calls: list[str] = []
-    monkeypatch.setattr(mpc, '_run_solver', failing_solver(calls))
+    monkeypatch.setattr(step_module, 'run_solver', FakeSolver())
     spare = mpc.solve(x)
-    assert calls == ['primary', 'fallback']
+    assert spare.tries == (CANDIDATE_BACKEND, CANDIDATE_FALLBACK)
     assert not spare.timed_out and spare.status.endswith(
         f'({Decision.CANDIDATE_SOLVER_FAILED.value})')
     # a failed solve that spends the budget is the step's only try
-    calls.clear()
-    monkeypatch.setattr(mpc, '_run_solver', failing_solver(calls, clock, spend=200.0))
+    monkeypatch.setattr(step_module, 'run_solver', FakeSolver(clock, seconds=200.0))
     spent = mpc.solve(mpc.model.step(x, spare.u0, H))
-    assert calls == ['primary']
+    assert spent.tries == (CANDIDATE_BACKEND,)
     assert spent.timed_out and spent.source is PlanSource.CANDIDATE
     assert spent.status.endswith(f'({Decision.CANDIDATE_TIMEOUT.value})')
 
@@ -170,23 +224,23 @@ def test_the_retry_chain_is_left_out_once_the_budget_is_spent(
 def test_without_a_plan_the_second_start_is_left_out_once_the_budget_is_spent(
         monkeypatch: pytest.MonkeyPatch) -> None:
     clock = FakeClock()
-    calls: list[str] = []
     mpc = paper_mpc(max_solve_time=100.0)
     mpc.clock = clock
-    starts: list[np.ndarray] = []
-    monkeypatch.setattr(mpc, '_run_solver', failing_solver(calls, starts=starts))
-    mpc.solve(mpc.path.start)
+    solver = FakeSolver()
+    monkeypatch.setattr(step_module, 'run_solver', solver)
+    solution = mpc.solve(mpc.path.start)
     # the candidate (stay put), then the start along the path with IPOPT and the backend,
-    # then the candidate with IPOPT
-    assert calls == ['primary', 'fallback', 'primary', 'fallback']
+    # then the candidate with IPOPT: solver_tries()'s order, each start packed once
+    assert [t.start for t in solution.tries] == [
+        Start.CANDIDATE, Start.GUIDED, Start.GUIDED, Start.CANDIDATE]
+    starts = solver.starts
     assert not np.array_equal(starts[1], starts[0])
     np.testing.assert_array_equal(starts[2], starts[1])
     np.testing.assert_array_equal(starts[3], starts[0])
-    calls.clear()
     mpc.reset()
-    monkeypatch.setattr(mpc, '_run_solver', failing_solver(calls, clock, spend=200.0))
+    monkeypatch.setattr(step_module, 'run_solver', FakeSolver(clock, seconds=200.0))
     solution = mpc.solve(mpc.path.start)
-    assert calls == ['primary']
+    assert solution.tries == (CANDIDATE_BACKEND,)
     assert solution.timed_out
 
 
@@ -197,14 +251,20 @@ def test_a_fallback_is_built_mid_step_only_if_its_build_fits_in_what_is_left(
     clock = FakeClock()
     mpc.clock = clock
     mpc.update_config(mpc.config.with_changes(max_solve_time=0.1))
-    nlp = mpc._last_nlp
-    assert nlp.fallback is None  # every solve so far succeeded: never needed
-    nlp.build_time_s = 0.5  # as if building this NLP had taken longer than the budget
-    calls: list[str] = []
-    monkeypatch.setattr(mpc, '_run_solver', failing_solver(calls))
+    solver = FakeSolver()
+    monkeypatch.setattr(step_module, 'run_solver', solver)
+    mpc.solve(x)  # finds the NLP of this state (and builds its fallback: time was left)
+    nlp = solver.nlps[0]
+    nlp.fallback = None  # as if never built
+    nlp.build_time_s = 0.5  # and building this NLP had taken longer than the budget
     solution = mpc.solve(x)
-    assert calls == ['primary'] and nlp.fallback is None
+    assert solution.tries == (CANDIDATE_BACKEND,) and nlp.fallback is None
     assert solution.timed_out and solution.source is PlanSource.CANDIDATE
+    # an iteration budget does not count builds: the fallback is built and tried
+    mpc.update_config(mpc.config.with_changes(budget='iterations'))
+    solution = mpc.solve(x)
+    assert solution.tries == (CANDIDATE_BACKEND, CANDIDATE_FALLBACK)
+    assert nlp.fallback is not None
 
 
 def test_prepare_builds_the_fallbacks_ahead() -> None:
@@ -214,7 +274,8 @@ def test_prepare_builds_the_fallbacks_ahead() -> None:
     assert all(nlp.fallback_build_time == 0.0 for nlp in mpc._nlps.values())
 
 
-def test_a_constraint_generation_round_is_left_out_once_the_budget_is_spent() -> None:
+def test_a_constraint_generation_round_is_left_out_once_the_budget_is_spent(
+        monkeypatch: pytest.MonkeyPatch) -> None:
     # nothing active up front: at step 15 the solution comes onto the box, which a second
     # round adds (found by running this scenario; the interpreted solver is deterministic)
     rounds_at = 15
@@ -228,14 +289,13 @@ def test_a_constraint_generation_round_is_left_out_once_the_budget_is_spent() ->
     clock = FakeClock()
     hurried.clock = clock
     hurried.update_config(hurried.config.with_changes(max_solve_time=100.0))
-    solve_once = hurried._run_solver
 
-    def slow_solver(*args: Any, **kwargs: Any) -> SolveAttempt:
-        attempt = solve_once(*args, **kwargs)
+    def slow_solver(*args: Any, **kwargs: Any) -> SolverRun:
+        run = run_solver(*args, **kwargs)
         clock.now += 200.0  # it took longer than the budget
-        return attempt
+        return run
 
-    hurried._run_solver = slow_solver  # type: ignore[method-assign]
+    monkeypatch.setattr(step_module, 'run_solver', slow_solver)
     solution = hurried.solve(x)
     assert solution.rounds == 1 and solution.timed_out
     # the one round's solution ran onto the box left out of its NLP: not applied
@@ -243,14 +303,48 @@ def test_a_constraint_generation_round_is_left_out_once_the_budget_is_spent() ->
     assert not np.any(hurried.inflated_obstacles[0].contains(solution.x_pred[1:, :2]))
 
 
-# ----------------------------------------------------------------------------- a generous budget
-def test_with_a_generous_budget_the_paper_run_is_the_run_without_one(
+# ----------------------------------------------------------------------------- iterations
+def test_an_iteration_budget_is_spent_by_the_iterations_made_and_never_reads_a_clock(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    """The same path, step for step, as when nothing reads the clock (the code before it)."""
+    mpc = paper_mpc()
+    x, _ = drive(mpc, 3)
+    mpc.clock = no_clock
+    mpc.update_config(mpc.config.with_changes(budget='iterations', max_solve_iterations=10))
+    # a failed try of 4 iterations leaves 6 for the fallback
+    solver = FakeSolver(iterations=4)
+    monkeypatch.setattr(step_module, 'run_solver', solver)
+    solution = mpc.solve(x)
+    assert solution.tries == (CANDIDATE_BACKEND, CANDIDATE_FALLBACK)
+    assert solver.limits == [10, 6] and solution.iterations == 8 and not solution.timed_out
+    # one of 10 leaves nothing: the step's only try
+    solver = FakeSolver(iterations=10)
+    monkeypatch.setattr(step_module, 'run_solver', solver)
+    solution = mpc.solve(mpc.model.step(x, solution.u0, H))
+    assert solution.tries == (CANDIDATE_BACKEND,) and solution.timed_out
+    assert solution.source is PlanSource.CANDIDATE
+
+
+def test_ipopt_and_fatrop_keep_to_an_iteration_budget() -> None:
+    x0 = np.array([0.0, 0.0, 0.944])  # horizon 3: 25 IPOPT or 30 fatrop iterations from it
+    for solver, spent in (('ipopt', 3), ('fatrop', iteration_levels(200)[-1] + 1)):
+        mpc = paper_mpc(solver=solver, horizon=3, budget='iterations', max_solve_iterations=3)
+        mpc.clock = no_clock
+        solution = mpc.solve(x0)
+        assert solution.timed_out and not solution.success
+        assert solution.tries == (CANDIDATE_BACKEND,)
+        # IPOPT to the iteration; fatrop to its smallest level, here an interpreted copy
+        # (it reports one iteration more than its max_iter)
+        assert solution.iterations == spent
+
+
+def test_with_a_generous_budget_the_paper_run_is_the_run_without_a_clock() -> None:
+    """The same path, step for step, as when nothing reads the clock (iterations to spare)."""
     path, model = paper_sinusoid(), Unicycle()
 
-    def run(config: MpcConfig) -> tuple[np.ndarray, list]:
+    def run(config: MpcConfig, clock: Any = None) -> tuple[np.ndarray, list]:
         mpc = PathReferenceMPC(model, config, obstacles=[BOX], path=path)
+        if clock is not None:
+            mpc.clock = clock
         solutions = []
         solve = mpc.solve
 
@@ -267,13 +361,8 @@ def test_with_a_generous_budget_the_paper_run_is_the_run_without_one(
     rows, solutions = run(MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT))
     assert not any(s.timed_out for s in solutions)
     assert all(s.source is PlanSource.SOLVER for s in solutions)
-
-    class NoBudget(step_module._Budget):
-        def remaining(self) -> float:
-            return math.inf
-
-    monkeypatch.setattr(step_module, '_Budget', NoBudget)
-    rows_without, _ = run(MpcConfig(compile=False))
+    rows_without, _ = run(MpcConfig(compile=False, budget='iterations',
+                                    max_solve_iterations=10**6), clock=no_clock)
     applied = [TRAJECTORY_INDEX[name] for name in TRAJECTORY_COLUMNS if name != 'solve_ms']
     np.testing.assert_array_equal(rows[:, applied], rows_without[:, applied])
 
@@ -315,6 +404,13 @@ def test_ipopt_is_stopped_at_its_time_limit() -> None:
     np.testing.assert_array_equal(not_started.w, w0)
     nlp.iteration_time = 1.0  # however slow its iterations: no copy with fewer of them
     assert nlp.solver_within(1e-3) == (nlp.solver, nlp.max_iterations)
+    assert nlp.solver_within(math.inf, 2) == (nlp.solver, nlp.max_iterations)
+    # an iteration limit: exactly that many (its iteration callback), whatever the time
+    counted = run_solver(nlp, w0, params, iteration_limit=2)
+    assert counted.cut and counted.iterations == 2 and counted.status == 'User_Requested_Stop'
+    assert run_solver(nlp, w0, params, iteration_limit=0).status.startswith('not started')
+    again = run_solver(nlp, w0, params)
+    assert again.success and again.iterations == untimed.iterations  # the limit was cleared
 
 
 def test_the_ipopt_fallback_is_stopped_at_its_time_limit() -> None:
@@ -325,6 +421,9 @@ def test_the_ipopt_fallback_is_stopped_at_its_time_limit() -> None:
     stopped = run_solver(nlp, w0, params, nlp.fallback_solver(), time_limit=1e-9)
     assert stopped.cut and stopped.status == 'User_Requested_Stop'
     assert nlp.deadline is not None and nlp.deadline.at == math.inf  # cleared after the call
+    counted = run_solver(nlp, w0, params, nlp.cold_solver(), iteration_limit=1)
+    assert counted.cut and counted.iterations == 1
+    assert nlp.deadline.max_iterations == math.inf
 
 
 def test_fatrop_gets_fewer_iterations_when_the_full_limit_would_not_fit(
@@ -356,6 +455,13 @@ def test_fatrop_gets_fewer_iterations_when_the_full_limit_would_not_fit(
     cut = run_solver(nlp, w0, params, time_limit=12.5)
     assert cut.cut and not cut.success and cut.iterations >= 12
     assert nlp.iteration_time < 1.0  # measured again, on the call
+    # an iteration limit picks the level within it, whatever the time per iteration
+    nlp.iteration_time = 0.0
+    assert nlp.solver_within(math.inf, 30)[1] == 25
+    assert nlp.solver_within(math.inf, 5)[1] == 12
+    assert nlp.solver_within(math.inf, 200) == (nlp.solver, 200)
+    counted = run_solver(nlp, w0, params, iteration_limit=30)
+    assert counted.cut and 25 <= counted.iterations <= 26  # fatrop reports max_iter + 1
 
 
 def test_the_time_per_iteration_rises_at_once_and_falls_slowly() -> None:
@@ -440,42 +546,27 @@ def test_shapes_with_stages_beyond_the_fatrop_limit_are_solved_by_ipopt() -> Non
 
 
 # ----------------------------------------------------------------------------- continuing
-real_run_solver = run_solver
-
-
-def solver_cut_after(iterations: int):
-    """A run_solver whose budget stops every call after so many IPOPT iterations."""
-
-    def run(nlp, w0, params, solver=None, time_limit=math.inf):
-        limited = ca.nlpsol('cut', 'ipopt', nlp.formulation.problem, {
-            'ipopt.print_level': 0, 'print_time': False, 'ipopt.sb': 'yes',
-            'ipopt.max_iter': iterations, 'error_on_fail': False})
-        result = real_run_solver(nlp, w0, params, limited)
-        return result._replace(cut=not result.success)
-
-    return run
-
-
 def test_a_solve_the_budget_cut_goes_on_at_the_next_step_while_the_robot_stands_still(
         monkeypatch: pytest.MonkeyPatch) -> None:
     # from rest among three boxes the solve takes more iterations than a step's budget
-    # allows (here 10 a try): the step applies the candidate (stand still), and the next one
-    # goes on from where the cut try stopped and finishes; started over, it never does (the
-    # continuation is primal only: with 9 or fewer a try neither finishes)
+    # allows (here 10): the step applies the candidate (stand still), and the next one goes
+    # on from where the cut try stopped and finishes; started over, it never does (the
+    # continuation is primal only: with 5 neither finishes)
     def steps_to_move(continuing: bool) -> int | None:
-        config = MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT,
-                           activation_distance=5.0)
+        config = MpcConfig(compile=False, activation_distance=5.0, budget='iterations',
+                           max_solve_iterations=10)
         mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES,
                                path=paper_sinusoid())
-        monkeypatch.setattr(step_module, 'run_solver', solver_cut_after(10))
         if not continuing:
             monkeypatch.setattr(step_module, 'CONTINUE_TOLERANCE', -1.0)
         x = mpc.path.start.copy()
         for step in range(12):
             solution = mpc.solve(x)  # x stays: the candidate at rest is standing still
             if solution.success:
+                assert solution.tries[0] == Try(Start.CONTINUATION, Solver.IPOPT_COLD)
                 return step
             assert solution.timed_out and not np.any(solution.u0)
+            assert solution.tries == (Try(Start.GUIDED, Solver.IPOPT_COLD),)
         return None
 
     assert steps_to_move(continuing=True) == 1  # cut at first, then finished
@@ -489,43 +580,22 @@ def test_after_a_stand_still_plan_the_next_step_starts_as_from_rest(
     # candidate (fatrop failed from it at every step after a re-plan at 2 m/s on BARN)
     config = MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT, activation_distance=5.0)
     mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
-    kinds: list[str] = []
-
-    def failing(nlp, w0, params, active, solver=None):
-        kinds.append('backend' if solver is None else 'cold' if solver is nlp.cold
-                     else 'fallback')
-        return SolveAttempt(verified=False, w=np.asarray(w0, dtype=float), value=math.inf,
-                            status='injected failure', iterations=1, seconds=0.0)
-
-    monkeypatch.setattr(mpc, '_run_solver', failing)
+    monkeypatch.setattr(step_module, 'run_solver', FakeSolver(iterations=1))
     x = mpc.path.start.copy()
     first = mpc.solve(x)
     assert not first.success and not np.any(first.u_pred)  # the stand-still candidate
-    assert kinds[0] == 'cold'
-    kinds.clear()
-    mpc.solve(x)
-    assert kinds[0] == 'cold'
+    assert first.tries[0].solver is Solver.IPOPT_COLD
+    assert mpc.solve(x).tries[0].solver is Solver.IPOPT_COLD
 
 
-def test_a_cut_solve_goes_on_after_a_step_that_stopped_the_robot(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_cut_solve_goes_on_after_a_step_that_stopped_the_robot() -> None:
     # off the path no stand-still candidate is feasible: a step that does not solve stops
     # (and starts over); the robot stands still, so the cut solve still goes on next step
     # (world 43 at 2 m/s on BARN stood still for good without it)
-    config = MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT, activation_distance=5.0)
+    config = MpcConfig(compile=False, activation_distance=5.0, budget='iterations',
+                       max_solve_iterations=10)
     mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
-    cut = solver_cut_after(10)
-    starts: list[np.ndarray] = []
-
-    def recording(nlp, w0, params, solver=None, time_limit=math.inf):
-        starts.append(np.array(w0, dtype=float))
-        return cut(nlp, w0, params, solver, time_limit)
-
-    monkeypatch.setattr(step_module, 'run_solver', recording)
     x = mpc.path.start + np.array([0.0, 0.05, 0.0])
-    assert mpc.solve(x).source is PlanSource.STOP
-    unfinished = mpc._unfinished
-    assert unfinished is not None
-    starts.clear()
-    mpc.solve(x)
-    assert any(np.array_equal(start, unfinished.w) for start in starts)
+    stopped = mpc.solve(x)
+    assert stopped.source is PlanSource.STOP and stopped.timed_out
+    assert mpc.solve(x).tries[0] == Try(Start.CONTINUATION, stopped.tries[-1].solver)

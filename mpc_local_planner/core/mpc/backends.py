@@ -20,15 +20,17 @@ config.compile the NLP's functions are generated as C, compiled by gcc in a daem
 kept on disk (compile_cache_dir()), so that a restarted controller loads them at once; until
 the library is there, CasADi's interpreted functions run.
 
-Each solver call can be given a time limit (run_solver's time_limit: what is left of the
-control step's budget, MpcConfig.max_solve_time). IPOPT is stopped by an iteration callback
-that reads the limit of the call in progress (its own max_wall_time option is fixed when the
-solver is built). Fatrop has no time limit (CasADi refuses max_wall_time and max_cpu_time for
-it: "Fatrop option not supported") and calls no iteration callback, so its iterations are
-bounded instead: from the time per iteration measured on this NLP, a call that could not
-finish config.max_iterations iterations within its limit runs a copy of the solver with
-fewer (ITERATION_LEVELS, built on first use from the compiled library; until that is loaded,
-the full solver runs, and only the retries after it are bounded).
+Each solver call can be given a time limit and an iteration limit (run_solver's time_limit
+and iteration_limit: what is left of the control step's budget, MpcConfig.budget). IPOPT is
+stopped by an iteration callback that reads the limits of the call in progress (its own
+max_wall_time and max_iter options are fixed when the solver is built): past the time, or
+after so many iterations exactly. Fatrop has no time limit (CasADi refuses max_wall_time and
+max_cpu_time for it: "Fatrop option not supported") and calls no iteration callback, so a call
+with little left runs a copy of the solver with a smaller max_iter (ITERATION_LEVELS):
+the largest that fits the iterations left, or the time left at the time per iteration measured
+on this NLP. The time-limited copies are built on first use from the compiled library (until
+that is loaded, the full solver runs, and only the retries after it are bounded); an iteration
+limit is always kept, by an interpreted copy if need be.
 """
 
 from __future__ import annotations
@@ -150,8 +152,10 @@ def backend_options(config: MpcConfig, structure: dict) -> tuple[str, dict[str, 
 class _Deadline(ca.Callback):
     """IPOPT's iteration callback: asks the solver to stop once the clock passes `at`.
 
-    One per NLP (its inputs are the solver's outputs, sized by the NLP), shared by the IPOPT
-    solvers of that NLP; run_solver sets `at` for the call in progress and clears it after.
+    Or once `max_iterations` iterations are done (IPOPT calls it at iteration 0 too: the
+    call after `max_iterations` stops it, and it reports as many). One per NLP (its inputs
+    are the solver's outputs, sized by the NLP), shared by the IPOPT solvers of that NLP;
+    run_solver sets the limits for the call in progress and clears them after.
     """
 
     def __init__(self, problem: dict) -> None:
@@ -159,7 +163,13 @@ class _Deadline(ca.Callback):
         nx, ng, npar = (int(problem[k].numel()) for k in ('x', 'g', 'p'))
         self._sizes = {'x': nx, 'f': 1, 'g': ng, 'lam_x': nx, 'lam_g': ng, 'lam_p': npar}
         self.at = math.inf  # time.perf_counter() seconds
+        self.max_iterations = math.inf
+        self.calls = 0  # in the call in progress
         self.construct('mpc_deadline', {})
+
+    def arm(self, at: float = math.inf, max_iterations: float = math.inf) -> None:
+        """Set the limits of the next call (the defaults clear them)."""
+        self.at, self.max_iterations, self.calls = at, max_iterations, 0
 
     def get_n_in(self) -> int:
         return ca.nlpsol_n_out()
@@ -177,7 +187,9 @@ class _Deadline(ca.Callback):
         return ca.Sparsity.dense(self._sizes[ca.nlpsol_out(i)], 1)
 
     def eval(self, arg: list) -> list:
-        return [1.0 if time.perf_counter() > self.at else 0.0]
+        self.calls += 1
+        stop = self.calls > self.max_iterations or time.perf_counter() > self.at
+        return [1.0 if stop else 0.0]
 
 
 def iteration_levels(max_iterations: int) -> list[int]:
@@ -246,24 +258,29 @@ class Nlp:
         """
         return 0.0 if self.fallback is not None else self.build_time_s
 
-    def solver_within(self, seconds: float) -> tuple[ca.Function, int]:
-        """Return the primary solver, or a copy with fewer iterations that fits in seconds.
+    def solver_within(self, seconds: float,
+                      iterations: float = math.inf) -> tuple[ca.Function, int]:
+        """Return the primary solver, or a copy with fewer iterations that fits the limits.
 
-        The full solver unless it is fatrop (IPOPT stops on time itself: its iteration
-        callback), when the time per iteration is not measured yet, or when max_iterations of
-        it fit; else the copy of the largest level
-        of iteration_levels() that fits (the smallest if none does). Copies are built from
-        the compiled library (a few ms, once per level); before there is one, the full
-        solver runs: an interpreted copy costs tens of ms to build, more than it would save.
+        The full solver unless it is fatrop (IPOPT stops itself: its iteration callback), or
+        when max_iterations of it fit: in the iterations given, and in seconds at the time
+        per iteration measured (not measured yet: no time bound). Else the copy of the
+        largest level of iteration_levels() that fits (the smallest if none does). Copies are
+        built from the compiled library (a few ms, once per level); before there is one, a
+        time-bounded call runs the full solver (an interpreted copy costs tens of ms to build,
+        more than it would save), an iteration-bounded one an interpreted copy (the
+        iteration budget is kept whatever its build costs: wall time does not count there).
 
         Returns:
             The solver and its iteration limit.
 
         """
         full = self.max_iterations
-        if self.plugin != 'fatrop' or self.iteration_time <= 0.0 or full <= 0:
+        if self.plugin != 'fatrop' or full <= 0:
             return self.solver, full
-        fit = seconds / self.iteration_time
+        fit = iterations
+        if self.iteration_time > 0.0:
+            fit = min(fit, seconds / self.iteration_time)
         if fit >= full:
             return self.solver, full
         levels = iteration_levels(full)
@@ -272,11 +289,14 @@ class Nlp:
             return self.solver, full
         solver = self.limited.get(limit)
         if solver is None:
-            if self.library is None:
+            if self.library is not None:
+                source: Any = str(self.library)
+            elif iterations < full:
+                source = self.formulation.problem
+            else:
                 return self.solver, full
             solver = self.limited[limit] = ca.nlpsol(
-                f'mpc_{limit}', self.plugin, str(self.library),
-                _with_iteration_limit(self.options, limit))
+                f'mpc_{limit}', self.plugin, source, _with_iteration_limit(self.options, limit))
         return solver, limit
 
     def record_iterations(self, seconds: float, iterations: int) -> None:
@@ -377,7 +397,7 @@ class SolverRun(NamedTuple):
 
 def run_solver(nlp: Nlp, w0: np.ndarray, params: np.ndarray,
                solver: ca.Function | None = None, *,
-               time_limit: float = math.inf) -> SolverRun:
+               time_limit: float = math.inf, iteration_limit: float = math.inf) -> SolverRun:
     """Solve the NLP from w0 with its solver (or the given one, e.g. the fallback).
 
     Args:
@@ -390,26 +410,31 @@ def run_solver(nlp: Nlp, w0: np.ndarray, params: np.ndarray,
             iteration late at most); the NLP's own fatrop runs a copy with fewer iterations
             when its measured time per iteration says the full limit would not fit
             (Nlp.solver_within): not exact, but bounded.
+        iteration_limit: iterations the call may make. None left (< 1): no call, as above.
+            IPOPT stops after exactly that many; the NLP's own fatrop runs the copy of the
+            largest iteration level within it (the smallest if none is): bounded, and the
+            same on any machine.
 
     """
-    if not time_limit > 0.0:
+    if not (time_limit > 0.0 and iteration_limit >= 1):
         return SolverRun(w=np.asarray(w0, dtype=float).reshape(-1), value=math.inf,
-                         success=False, status='not started: no time left', iterations=0,
+                         success=False, status='not started: no budget left', iterations=0,
                          seconds=0.0, cut=True)
     form = nlp.formulation
     start = time.perf_counter()
     limit = None
     if solver is None:
-        solver, limit = nlp.solver_within(time_limit)  # may build a limited copy: timed too
+        # may build a limited copy: timed too
+        solver, limit = nlp.solver_within(time_limit, iteration_limit)
     if nlp.deadline is not None:
-        nlp.deadline.at = start + time_limit
+        nlp.deadline.arm(start + time_limit, iteration_limit)
     called = time.perf_counter()
     try:
         result = solver(x0=w0, p=params, lbx=form.lbw, ubx=form.ubw, lbg=form.lbg,
                         ubg=form.ubg)
     finally:
         if nlp.deadline is not None:
-            nlp.deadline.at = math.inf
+            nlp.deadline.arm()
     end = time.perf_counter()
     stats = solver.stats()
     w_opt = np.asarray(result['x']).reshape(-1)

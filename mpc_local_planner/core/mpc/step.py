@@ -187,26 +187,46 @@ class _Rounds(NamedTuple):
 
 
 class _Budget:
-    """What is left of one control step's solve time, and whether the step ran out of it."""
+    """What is left of one control step's solving, and whether the step ran out of it.
 
-    def __init__(self, seconds: float, clock: Callable[[], float]) -> None:
+    Seconds of a clock (MpcConfig.budget 'wall'), or solver iterations ('iterations': the
+    clock is never read, so the step does the same on any machine). The other is unbounded.
+    """
+
+    def __init__(self, clock: Callable[[], float], *, seconds: float = math.inf,
+                 iterations: float = math.inf) -> None:
         self._clock = clock
-        self._deadline = clock() + seconds
-        self.timed_out = False  # some solving was cut or left out for lack of time
+        self._deadline = clock() + seconds if math.isfinite(seconds) else math.inf
+        self.iterations = iterations  # left
+        self.timed_out = False  # some solving was cut or left out for lack of budget
+
+    @classmethod
+    def of(cls, config: MpcConfig, clock: Callable[[], float]) -> _Budget:
+        """Return the budget of one step under config."""
+        if config.budget == 'iterations':
+            return cls(clock, iterations=config.solve_iterations())
+        return cls(clock, seconds=config.solve_budget())
 
     def remaining(self) -> float:
-        """Return the seconds left (<= 0 when spent)."""
+        """Return the seconds left (<= 0 when spent; inf without a time bound)."""
+        if math.isinf(self._deadline):
+            return math.inf
         return self._deadline - self._clock()
 
+    def spend(self, iterations: int) -> None:
+        """Count a solver call's iterations."""
+        self.iterations -= iterations
+
     def allows(self, seconds: float = 0.0) -> bool:
-        """Say whether there is time for more solving; if not, the step has timed out.
+        """Say whether there is budget for more solving; if not, the step has timed out.
 
         Args:
-            seconds: what the work takes before it can be cut (a build), if known.
+            seconds: what the work takes before it can be cut (a build), if known; it does
+                not count against iterations.
 
         Ask only where work would otherwise run: a no means it is left out.
         """
-        if self.remaining() > seconds:
+        if self.remaining() > seconds and self.iterations >= 1:
             return True
         self.timed_out = True
         return False
@@ -261,7 +281,7 @@ class MpcBase(ABC):
     def __init__(self, model: RobotModel, config: MpcConfig | None = None, *,
                  obstacles: Sequence[ConvexPolygon] = ()) -> None:
         self._model = model
-        self._budget = _Budget(math.inf, self.clock)  # solve() starts one per step
+        self._budget = _Budget(self.clock)  # solve() starts one per step
         self._tries: list[Try] = []  # the tries of the step in progress
         self._config = config or MpcConfig()
         self._use_footprint()
@@ -477,7 +497,8 @@ class MpcBase(ABC):
         if not self._config.adaptive_slots and len(active) > self._slots:
             self._slots = len(active)  # grow: rebuilt below, between two control steps
         nlp, held = self._nlp_holding(active)
-        nlp.finish_compilation()
+        # with an iteration budget, which functions run must not depend on timing either
+        nlp.finish_compilation(wait=self._config.budget == 'iterations')
         if nlp.iteration_time <= 0.0:
             # never solved: its fatrop is bounded by its siblings' time per iteration
             nlp.iteration_time = self._shapes.iteration_time_estimate(nlp)
@@ -711,9 +732,12 @@ class MpcBase(ABC):
         The solver gets what is left of the step's budget; a call cut by it (or not started)
         marks the step as timed out.
         """
-        run = run_solver(nlp, w0, params, solver, time_limit=self._budget.remaining())
+        budget = self._budget
+        run = run_solver(nlp, w0, params, solver, time_limit=budget.remaining(),
+                         iteration_limit=budget.iterations)
+        budget.spend(run.iterations)
         if run.cut:
-            self._budget.timed_out = True
+            budget.timed_out = True
         verified = (run.success
                     and self._violation(run.w, params, active, nlp) <= FEASIBILITY_TOLERANCE)
         return SolveAttempt(verified=verified, w=run.w, value=run.value if verified else math.inf,
@@ -847,7 +871,7 @@ class MpcBase(ABC):
             RuntimeError: if no path (or target) has been set.
 
         """
-        self._budget = budget = _Budget(self._config.solve_budget(), self.clock)
+        self._budget = budget = _Budget.of(self._config, self.clock)
         self._tries = []
         x = np.asarray(x, dtype=float).reshape(-1)
         if x.shape != (self._model.nx,) or not np.all(np.isfinite(x)):
