@@ -30,6 +30,10 @@ follow the same kind of re-planned paths:
 
 Without ``--sensing`` (``worlds`` only) the laser is off: the controller and the planner know
 the map of the known obstacles and nothing else.
+
+The MPCs bound a step's solving by solver iterations (rollout.EVALUATION_BUDGET, the wall
+budget's worth on a typical machine), so a run is the same on any machine under any load;
+``budget='wall'`` gives the robot's wall-time budget instead, on this machine as loaded now.
 """
 
 from __future__ import annotations
@@ -60,7 +64,13 @@ from mpc_local_planner.evaluation.navigation import (
     PathFollowerLocal,
     TrackingLocal,
 )
-from mpc_local_planner.evaluation.rollout import Outcome, Rollout, rollout, StopRule
+from mpc_local_planner.evaluation.rollout import (
+    EVALUATION_BUDGET,
+    Outcome,
+    Rollout,
+    rollout,
+    StopRule,
+)
 from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.perception.raycast import TrueGeometry
 from mpc_local_planner.worlds.map_files import OccupancyMap, rasterize_world
@@ -225,14 +235,15 @@ def _empty_map(bounds: tuple[float, float, float, float]) -> OccupancyMap:
 _MPC_CACHE: dict[tuple[str, str], Any] = {}
 
 
-def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True) -> Any:
+def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
+         budget: str = EVALUATION_BUDGET) -> Any:
     """Return the cached MpcController or TrackingMPC for the robot, reset for a new run."""
-    key = (name, robot.name, robot.v_max, robot.omega_max, prepare)
+    key = (name, robot.name, robot.v_max, robot.omega_max, prepare, budget)
     mpc = _MPC_CACHE.get(key)
     if mpc is None:
         model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max)
         config = MpcConfig(robot_radius=robot.footprint.radius if robot.footprint.is_circle
-                           else 0.0, footprint=_vertices(robot.footprint))
+                           else 0.0, footprint=_vertices(robot.footprint), budget=budget)
         if name == 'proposed':
             settings = ControllerSettings(goal_tolerance=0.05, goal_heading_tolerance=math.pi,
                                           capacity=PATH_CAPACITY)
@@ -262,13 +273,13 @@ def _prepare(mpc: Any) -> None:
     mpc.wait_compiled()
 
 
-def _local_controller(name: str, robot: Robot, world: World, *,
-                      prepare: bool = True) -> LocalController:
+def _local_controller(name: str, robot: Robot, world: World, *, prepare: bool = True,
+                      budget: str = EVALUATION_BUDGET) -> LocalController:
     """Return the named local controller for the robot."""
     if name == 'proposed':
-        return MpcLocal(_mpc(name, robot, world, prepare=prepare))
+        return MpcLocal(_mpc(name, robot, world, prepare=prepare, budget=budget))
     if name == 'tracking':
-        return TrackingLocal(_mpc(name, robot, world, prepare=prepare))
+        return TrackingLocal(_mpc(name, robot, world, prepare=prepare, budget=budget))
     tolerance = 0.5 * float(world.goal_tolerance or GOAL_TOLERANCE)
     if name == 'pure_pursuit':
         pursuit = PurePursuitConfig(v_max=robot.v_max, omega_max=robot.omega_max,
@@ -298,7 +309,8 @@ class SensingResult:
 
 
 def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool = True,
-                   seed: int = 0, h: float = 0.2, prepare: bool = True) -> SensingResult:
+                   seed: int = 0, h: float = 0.2, prepare: bool = True,
+                   budget: str = EVALUATION_BUDGET) -> SensingResult:
     """Drive robot through world with the named controller, perception and re-planning.
 
     Args:
@@ -312,12 +324,14 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
         prepare: Build and compile the MPC's NLPs before the run (once per process), as a
             robot does at start-up; off, they are built when first needed (mid-run: slow
             first steps), which is enough for tests that do not time steps.
+        budget: What bounds an MPC step's solving (MpcConfig.budget): 'iterations', the
+            same on any machine under any load, or 'wall', the robot's.
 
     """
     known = rasterize_world(world, MAP_RESOLUTION) if world.obstacles else \
         _empty_map(world.bounds)
     grid, planner = _grid_planner(known, robot, world.bounds, seed)
-    local = _local_controller(controller, robot, world, prepare=prepare)
+    local = _local_controller(controller, robot, world, prepare=prepare, budget=budget)
     settings = NavigationSettings(sense=sensing)
     navigator = Navigator(local, TrueGeometry(world.physical_shapes()), grid, planner,
                           world.goal, h=h, known_map=known if world.obstacles else None,

@@ -20,13 +20,17 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit
+from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.mpc import PathReferenceMPC
 from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.paths import paper_sinusoid
 from mpc_local_planner.evaluation.rollout import (
     as_controller,
     circle_clearance,
     ControlStep,
+    EVALUATION_BUDGET,
     MpcAdapter,
     Outcome,
     polygon_clearance,
@@ -175,3 +179,34 @@ def test_the_package_controllers_plug_in_through_adapters() -> None:
     assert as_controller(constant) is constant
     with pytest.raises(TypeError, match='no step'):
         as_controller(object())
+
+
+def test_the_same_rollout_twice_is_the_same_with_the_iteration_budget() -> None:
+    """What the evaluation relies on: its MPC budget reads no clock, so load changes nothing.
+
+    The allowance is tight enough to cut some steps (so the budget shapes the run), and the
+    second run's MPC has a clock that fails if read.
+    """
+    assert EVALUATION_BUDGET == 'iterations'
+    path, model = paper_sinusoid(), Unicycle()
+    box = ConvexPolygon.from_box(1.0, -1.0, 1.5, 1.0)
+    config = MpcConfig(compile=False, budget=EVALUATION_BUDGET, max_solve_iterations=12)
+
+    def unreadable() -> float:
+        msg = 'the clock was read'
+        raise AssertionError(msg)
+
+    def run(clock=None):
+        mpc = PathReferenceMPC(model, config, obstacles=[box], path=path)
+        if clock is not None:
+            mpc.clock = clock
+        return rollout(mpc, model, path.start, path.goal, h=H,
+                       rule=StopRule(time_limit=4.0, position_tolerance=0.05))
+
+    first, second = run(), run(unreadable)
+    assert any(step.detail.timed_out for step in first.steps)  # the budget did cut
+    assert first.outcome is second.outcome
+    applied = [TRAJECTORY_INDEX[name] for name in TRAJECTORY_COLUMNS if name != 'solve_ms']
+    np.testing.assert_array_equal(first.rows[:, applied], second.rows[:, applied])
+    assert ([(s.detail.status, s.detail.iterations, s.detail.tries) for s in first.steps]
+            == [(s.detail.status, s.detail.iterations, s.detail.tries) for s in second.steps])

@@ -97,6 +97,7 @@ def test_the_unknown_suite_writes_contacts_replans_and_step_times(tmp_path) -> N
         assert float(row['step_ms_max']) >= float(row['step_ms_median']) > 0.0
     summary = (tmp_path / 'summary.md').read_text()
     assert 're-plans' in summary and 'max step [ms]' in summary and '| dwa |' in summary
+    assert 'iterations budget' in summary  # reproducible: the MPCs count solver iterations
 
 
 def test_suite_options_are_checked(tmp_path) -> None:
@@ -108,6 +109,8 @@ def test_suite_options_are_checked(tmp_path) -> None:
         evaluate.main(['--suite', 'barn', '--controllers', 'dwa', '--out', str(tmp_path)])
     with pytest.raises(SystemExit):
         evaluate.main(['--suite', 'worlds', '--out', str(tmp_path)])
+    with pytest.raises(SystemExit):
+        evaluate.main(['--suite', 'unknown', '--budget', 'cpu', '--out', str(tmp_path)])
 
 
 def test_the_figure_draws_the_sensed_obstacles_every_plan_and_the_footprint(tmp_path) -> None:
