@@ -58,7 +58,7 @@ setup(
             'ros-sensor-msgs==5.3.6',
             'ros-lifecycle-msgs==2.0.3',
         ],
-        'test': ['pytest', 'hypothesis', 'ruff'],
+        'test': ['pytest', 'pytest-timeout', 'hypothesis', 'ruff'],
     },
     python_requires='>=3.10',
     zip_safe=True,

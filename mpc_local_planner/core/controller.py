@@ -93,6 +93,9 @@ class Reason(Enum):
     # (malformed scans are dropped, so only bad ones coming also ends here), or none came yet.
     STALE_SCAN = 'stale_scan'
     NO_SCAN = 'no_scan'
+    # The map is a source of obstacles and no valid map came yet: what it would show is
+    # unknown, as the scan's before the first one.
+    NO_MAP = 'no_map'
 
     @property
     def text(self) -> str:
@@ -118,6 +121,7 @@ _REASON_TEXT = {
     Reason.ERROR: 'error',
     Reason.STALE_SCAN: 'scan is stale',
     Reason.NO_SCAN: 'no scan yet',
+    Reason.NO_MAP: 'no valid map yet',
 }
 
 
@@ -534,7 +538,7 @@ class MpcController:
 
     def compute(self, state: np.ndarray | None, now: float, *,
                 state_time: float | None = None, scan_required: bool = False,
-                scan_time: float | None = None) -> ControlOutput:
+                scan_time: float | None = None, map_missing: bool = False) -> ControlOutput:
         """Return the command for the measured state at time now.
 
         Never raises: anything unexpected becomes a zero command with Reason.ERROR.
@@ -547,6 +551,8 @@ class MpcController:
                 None) or with one older than settings.scan_timeout the robot stops, as the
                 obstacles it knows may be out of date.
             scan_time: the stamp of the latest valid scan (seconds), or None.
+            map_missing: the map is a source of obstacles and no valid map has come: the
+                robot stops until one does.
 
         """
         zero = np.zeros(2)
@@ -566,6 +572,8 @@ class MpcController:
             age = now - scan_time
             if not -self.settings.scan_timeout <= age <= self.settings.scan_timeout:
                 return self._idle(Reason.STALE_SCAN)
+        if map_missing:
+            return self._idle(Reason.NO_MAP)
         try:
             x = self.check_state(state)
         except ValueError as err:

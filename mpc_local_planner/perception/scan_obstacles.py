@@ -52,10 +52,13 @@ from mpc_local_planner.perception.raycast import TrueGeometry
 
 __all__ = [
     'MAX_BEAMS',
+    'MAX_SCAN_FUTURE_S',
     'ObstacleMemory',
     'Scan',
     'ScanError',
     'ScanObstacleConfig',
+    'check_beam_count',
+    'check_scan_stamp',
     'compose_pose',
     'cluster_bounds',
     'scan_points',
@@ -65,6 +68,9 @@ __all__ = [
 
 #: More beams than this is refused: no planar laser has them, and a corrupt message might.
 MAX_BEAMS = 10_000
+#: Seconds a scan's stamp may be ahead of the receiving node's clock (clock skew between
+#: the laser's computer and this one); a scan further in the future is refused.
+MAX_SCAN_FUTURE_S = 0.2
 # Beams of slack when asking whether the current scan sees a remembered vertex.
 _VIEW_SLACK = 2
 
@@ -84,6 +90,8 @@ class Scan(NamedTuple):
         ranges: (beams,) readings; inf (or anything outside the limits) is "no return".
         intensities: (beams,) or empty.
         stamp: Time of the scan, seconds.
+        angle_max: Angle of the last beam as the message states it, or None when the scan
+            was made here (the simulated laser) and cannot disagree with its beam count.
 
     """
 
@@ -94,6 +102,7 @@ class Scan(NamedTuple):
     ranges: np.ndarray
     intensities: np.ndarray | None = None
     stamp: float = 0.0
+    angle_max: float | None = None
 
 
 @dataclass(frozen=True)
@@ -134,10 +143,14 @@ def validate_scan(scan: Scan, *, max_beams: int = MAX_BEAMS) -> None:
     Raises:
         ScanError: If an angle or limit is not finite, the increment is 0, range_max <=
             range_min, a range is NaN or negative, the intensities' length differs from the
-            ranges', there are more than max_beams beams, or the stamp is not finite.
+            ranges', there are more than max_beams beams, the stamp is not finite, or the
+            beam count disagrees with the angles (see check_beam_count).
 
     """
-    for name in ('angle_min', 'angle_increment', 'range_min', 'range_max', 'stamp'):
+    names = ('angle_min', 'angle_increment', 'range_min', 'range_max', 'stamp')
+    if scan.angle_max is not None:
+        names += ('angle_max',)
+    for name in names:
         value = getattr(scan, name)
         if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)):
             msg = f'scan {name} must be a number, got {value!r}'
@@ -174,6 +187,49 @@ def validate_scan(scan: Scan, *, max_beams: int = MAX_BEAMS) -> None:
     if abs(scan.angle_increment) * max(len(ranges) - 1, 0) > 2.0 * math.pi + 1e-6:
         msg = (f'scan covers more than a full turn ({len(ranges)} beams of '
                f'{scan.angle_increment} rad)')
+        raise ScanError(msg)
+    if scan.angle_max is not None:
+        check_beam_count(scan.angle_min, scan.angle_max, scan.angle_increment, len(ranges))
+
+
+def check_beam_count(angle_min: float, angle_max: float, angle_increment: float,
+                     beams: int) -> None:
+    """Refuse a beam count that the angles do not imply, within one increment.
+
+    The beams are at angle_min + i angle_increment, i = 0 .. beams - 1, so the last one must
+    be at angle_max. A count that is off (250 or 60 ranges where the angles imply 181), or
+    an increment whose sign does not lead from angle_min to angle_max, means the ranges
+    cannot be put at their angles: every obstacle would be placed wrong.
+
+    Raises:
+        ScanError: If the last beam's angle is more than one increment from angle_max.
+
+    """
+    last = angle_min + (beams - 1) * angle_increment
+    if abs(last - angle_max) <= abs(angle_increment) * (1.0 + 1e-6):
+        return
+    span = (angle_max - angle_min) / angle_increment
+    implied = (f'{round(span) + 1}' if span > -0.5 else
+               "none (the increment's sign leads away from angle_max)")
+    msg = (f'scan has {beams} ranges but angle_min {angle_min:.6g}, angle_max '
+           f'{angle_max:.6g} and angle_increment {angle_increment:.6g} imply {implied}')
+    raise ScanError(msg)
+
+
+def check_scan_stamp(stamp: float, now: float, *,
+                     tolerance: float = MAX_SCAN_FUTURE_S) -> None:
+    """Refuse a scan stamped in the future by more than tolerance seconds.
+
+    Placed with the latest pose, such a scan would put what the laser saw where the robot
+    was not; and stamped ahead it would keep the laser fresh after it stopped.
+
+    Raises:
+        ScanError: If stamp - now > tolerance.
+
+    """
+    if stamp - now > tolerance:
+        msg = (f'scan stamped {stamp - now:.3f} s in the future (stamp {stamp:.3f} s, now '
+               f'{now:.3f} s; at most {tolerance:g} s is accepted): are the clocks in sync?')
         raise ScanError(msg)
 
 

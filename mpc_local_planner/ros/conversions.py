@@ -369,7 +369,7 @@ def scan_from_message(msg: LaserScan) -> Scan:
                 range_min=float(msg.range_min), range_max=float(msg.range_max),
                 ranges=np.asarray(msg.ranges, dtype=np.float32),
                 intensities=np.asarray(msg.intensities, dtype=np.float32),
-                stamp=stamp_to_seconds(msg.header.stamp))
+                stamp=stamp_to_seconds(msg.header.stamp), angle_max=float(msg.angle_max))
 
 
 def grid_from_message(msg: OccupancyGrid, *, frame_id: str | None = None) -> OccupancyMap:

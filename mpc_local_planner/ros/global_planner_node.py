@@ -37,8 +37,9 @@ robot_radius + clearance with a distance transform; the plane it samples is the 
 'waiting for map'). A malformed map is refused with one throttled error and the grid in force
 stays. With ``use_scan`` too, each ``scan`` (sensor_msgs/LaserScan from the laser at
 ``laser_pose`` in the robot frame) marks the cells of its returns and clears the cells its
-beams pass through, placed with the odometry pose nearest to its stamp; a malformed scan is
-dropped with one throttled error.
+beams pass through, placed with the odometry pose nearest to its stamp; a malformed scan (a
+beam count its angles do not imply, within one increment, among others) or one stamped more
+than MAX_SCAN_FUTURE_S ahead of this node's clock is dropped with one throttled error.
 
 Re-planning (``replan_check_rate``, 2 Hz by default): the rest of the plan in force, from the
 robot's projection onto it, is checked against the grid with the rule plans are made with
@@ -94,6 +95,7 @@ from mpc_local_planner.core.replanning import (
 )
 from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.perception.pose_history import PoseHistory
+from mpc_local_planner.perception.scan_obstacles import check_scan_stamp, validate_scan
 from mpc_local_planner.ros.conversions import (
     grid_from_message,
     odometry_to_state,
@@ -555,6 +557,8 @@ class GlobalPlannerNode(ManagedNode):
                            'transform scans: laser_pose says where the laser sits)')
                 raise ValueError(problem)
             scan = scan_from_message(msg)
+            validate_scan(scan)  # before it is placed: a count the angles do not imply
+            check_scan_stamp(scan.stamp, self._now())
             pose = self._pose_at(scan.stamp)
             self._grid.add_scan(scan, pose,
                                 laser_pose=list(self.get_parameter('laser_pose').value))

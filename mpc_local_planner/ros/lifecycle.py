@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from lifecycle_msgs.msg import Transition
 from rclpy.lifecycle import (
     LifecycleNode,
     LifecyclePublisher,
@@ -43,7 +44,42 @@ class ManagedNode(LifecycleNode):
     the garbage collector: the rcl node outlives destroy_node, and when it is collected it
     unregisters the /rosout publisher of whichever node has the same name by then, whose logs
     then silently stop (seen in tests that start a node again under the same name).
+
+    A transition the current state does not have (activate while unconfigured, configure
+    while active, an unknown id) is refused: the change_state service answers
+    ``success: false``, a ``trigger_*`` call returns FAILURE, the node stays where it is and
+    says so in one warning. rclpy 7.1 instead raises RCLError out of the service callback
+    (ros2/rclpy#1209), which ends the executor's spin and so the process, with no answer to
+    the caller and, for the controller, no zero cmd_vel.
     """
+
+    def transition_available(self, transition_id: int) -> bool:
+        """Say whether the current state has a transition of this id."""
+        return any(description[0] == transition_id
+                   for description in self._state_machine.available_transitions)
+
+    def _LifecycleNodeMixin__change_state(self, transition_id: int) -> TransitionCallbackReturn:
+        """Run a transition if the current state has it; else refuse it and stay (rclpy#1209).
+
+        This overrides rclpy's private ``LifecycleNodeMixin.__change_state`` (name-mangled),
+        the one place both the change_state service and every ``trigger_*`` method go
+        through; rclpy 7.1 offers no public hook there.
+        """
+        if not self.transition_available(transition_id):
+            label = self._state_machine.current_state[1]
+            self.get_logger().warning(
+                f'transition {_transition_name(transition_id)} refused: the node is '
+                f'{label}, which has no such transition (it stays {label})')
+            return TransitionCallbackReturn.FAILURE
+        return super()._LifecycleNodeMixin__change_state(transition_id)
+
+    def trigger_shutdown(self) -> TransitionCallbackReturn:
+        """Shut down from unconfigured, inactive or active; refuse it from anywhere else."""
+        state = self._state_machine.current_state[1]
+        if state not in ('unconfigured', 'inactive', 'active'):
+            self.get_logger().warning(f'shutdown refused: the node is {state}')
+            return TransitionCallbackReturn.FAILURE
+        return super().trigger_shutdown()
 
     def release(self) -> None:
         """Free what configure made (nothing here); each transition out of it calls this."""
@@ -81,3 +117,19 @@ class ManagedNode(LifecycleNode):
         """Destroy the node and its lifecycle state machine now, not at garbage collection."""
         super().destroy_node()
         self._state_machine.destroy_when_not_in_use()
+
+    def on_exit(self) -> None:
+        """Do what must be done before the process ends (nothing here; see node_main).
+
+        Called once by run_node while the context is still up, whatever ends the spin:
+        Ctrl-C, SIGTERM or an exception. The controller publishes a zero cmd_vel here.
+        """
+
+
+def _transition_name(transition_id: int) -> str:
+    """Return a transition id's name as lifecycle_msgs/Transition spells it, or the id."""
+    for name in dir(Transition):
+        if name.startswith('TRANSITION_') and getattr(Transition, name) == transition_id:
+            return f'{name[len("TRANSITION_"):].lower()} ({transition_id})'
+    return f'{transition_id} (unknown)'
+

@@ -50,10 +50,19 @@ counts a polygon's circumscribed radius) plus SENSING_MARGIN.
 Refused input (odometry with NaN, inf or a zero quaternion; a plan that is empty, too short,
 too long, not finite or in another frame) makes the command zero until valid input comes,
 with one error per problem in the log (throttled) and the problem in the diagnostics. A
-malformed scan or grid (NaN or negative ranges, a zero increment, mismatched lengths, too
-many beams, another frame; a grid whose data is not width x height, a resolution <= 0, a
-non-finite origin) is dropped with one throttled error; with 'scan' a source, the robot
-stops until a scan comes and whenever the latest valid one is older than ``scan_timeout``.
+malformed scan or grid (NaN or negative ranges, a zero increment, mismatched lengths, a
+beam count the angles do not imply within one increment, too many beams, another frame, a
+stamp more than MAX_SCAN_FUTURE_S ahead of this node's clock; a grid whose data is not
+width x height, a resolution <= 0, a non-finite origin) is dropped with one throttled
+error; with 'scan' a source, the robot stops until a scan comes and whenever the latest
+valid one is older than ``scan_timeout``; with 'map' a source, it stops until a valid map
+has come (as before the first scan: what the map would show is unknown).
+
+A wrong lifecycle request (activate while unconfigured, an unknown transition id) is
+refused with ``success: false`` and the node stays as it is (ManagedNode). When the process
+ends for any reason it can still act on (Ctrl-C, SIGTERM, an exception), an active
+controller publishes a zero cmd_vel first (``on_exit``); a process killed outright sends
+nothing, and the base's own cmd_vel timeout must stop the robot.
 Invalid parameters are refused with a reason; at start, the process exits with code 2 and the
 reason on stderr (so does a configure that fails, with autostart).
 """
@@ -68,6 +77,7 @@ from geometry_msgs.msg import PolygonStamped, Twist, TwistStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.duration import Duration
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
@@ -90,7 +100,12 @@ from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path
 from mpc_local_planner.perception.local_obstacles import LocalObstacles
 from mpc_local_planner.perception.pose_history import PoseHistory
-from mpc_local_planner.perception.scan_obstacles import MAX_BEAMS, ObstacleMemory, validate_scan
+from mpc_local_planner.perception.scan_obstacles import (
+    check_scan_stamp,
+    MAX_BEAMS,
+    ObstacleMemory,
+    validate_scan,
+)
 from mpc_local_planner.ros.conversions import (
     delete_all_marker,
     grid_from_message,
@@ -136,6 +151,8 @@ __all__ = ['EXIT_INVALID_PARAMETERS', 'FOOTPRINT_TOPIC', 'MpcControllerNode',
 
 # Seconds between two error logs of an input problem that persists.
 ERROR_THROTTLE_S = 2.0
+# Wall seconds the exiting process waits for subscribers to acknowledge its zero cmd_vel.
+EXIT_ACK_TIMEOUT_S = 1.0
 # What the controller avoids (MarkerArray) and the robot's outline (PolygonStamped).
 OBSTACLES_TOPIC = 'mpc/obstacles'
 FOOTPRINT_TOPIC = 'mpc/footprint'
@@ -326,6 +343,21 @@ class MpcControllerNode(ManagedNode):
         if self._timer is not None:
             self._stop_robot()
         return super().on_shutdown(state)
+
+    def on_exit(self) -> None:
+        """Publish a zero cmd_vel if active: the process ends, the robot must not drive on.
+
+        Most bases hold the last command for a while (until their cmd_vel timeout).
+        """
+        if self._timer is None:
+            return
+        self._stop_robot()
+        # the process ends next: give reliable subscribers time to take the zero before the
+        # writer goes (an acknowledgement can wait for DDS's next heartbeat)
+        acked = self._cmd_pub.wait_for_all_acked(Duration(seconds=EXIT_ACK_TIMEOUT_S))
+        self.get_logger().info('exiting: cmd_vel zero' + (
+            '' if acked else f' (not acknowledged by every subscriber in '
+                             f'{EXIT_ACK_TIMEOUT_S:g} s)'))
 
     def destroy_node(self) -> None:
         """Drop the controller (and its NLP) with the node."""
@@ -531,6 +563,7 @@ class MpcControllerNode(ManagedNode):
         stamp = scan.stamp if scan.stamp > 0 else receipt
         scan = scan._replace(stamp=stamp)
         validate_scan(scan)
+        check_scan_stamp(stamp, receipt)
         return scan, stamp
 
     def map_callback(self, msg: OccupancyGrid) -> None:
@@ -651,7 +684,8 @@ class MpcControllerNode(ManagedNode):
                 self._update_obstacles()
                 output = self.controller.compute(
                     self._state, now, state_time=self._state_time,
-                    scan_required='scan' in self._sources, scan_time=self._scan_time)
+                    scan_required='scan' in self._sources, scan_time=self._scan_time,
+                    map_missing='map' in self._sources and self._grid is None)
         except Exception as err:  # compute never raises; belt and braces
             output = ControlOutput(np.zeros(2), None, Reason.ERROR, str(err))
         try:
@@ -763,7 +797,8 @@ def log_line(output: ControlOutput, *, failures: int,
         v, omega = output.u
         return Level.WARN, (f'{message}: applying its input v = {v:.3f} m/s, omega = '
                             f'{omega:.3f} rad/s (solver failures so far: {failures})')
-    if reason in (Reason.STALE_ODOM, Reason.STOP, Reason.STALE_SCAN, Reason.NO_SCAN):
+    if reason in (Reason.STALE_ODOM, Reason.STOP, Reason.STALE_SCAN, Reason.NO_SCAN,
+                  Reason.NO_MAP):
         return Level.WARN, f'{message}: cmd_vel is zero (solver failures so far: {failures})'
     if reason is Reason.GOAL_REACHED:
         position, heading = goal_error

@@ -21,7 +21,15 @@ A lifecycle node whose ``autostart`` parameter is true is configured and activat
 so ``ros2 run`` alone gives a working node; with autostart false it waits for a lifecycle
 manager (or ``ros2 lifecycle set``). A configure that fails is refused like bad parameters.
 
-Ctrl-C (SIGINT) ends the spin cleanly: no traceback, no error log, exit code 0.
+Ctrl-C (SIGINT) and SIGTERM end the spin cleanly: no traceback, no error log, exit code 0.
+Whatever ends the spin (a signal, or an exception escaping a callback), a lifecycle node's
+``on_exit`` runs first, while the context is still up: the controller publishes a zero
+cmd_vel there, so a process that ends does not leave the robot driving on its last
+command. rclpy's own signal handlers would shut the context down before any of this could
+publish, so run_node installs its own, which only ask the spin loop to stop; the loop wakes
+every SPIN_WAKE_S to see that. A process killed outright (SIGKILL, a power cut) can send
+nothing: the base's cmd_vel timeout (the simulator's ``cmd_timeout``) is the last line of
+defence.
 
 A node that cannot start with its parameters (or the files they name) says why in one line
 on stderr and exits with EXIT_INVALID_PARAMETERS instead of a traceback, so that a launch
@@ -31,23 +39,28 @@ file, a supervisor or closed_loop --respawn can tell "misconfigured" from "crash
 from __future__ import annotations
 
 import functools
+import signal
 import sys
+from types import FrameType
 from typing import Any, Callable, Sequence, TypeVar
 
 import rclpy
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
 from mpc_local_planner.ros.parameters import format_help, ParameterSpec
 
-__all__ = ['EXIT_INVALID_PARAMETERS', 'autostart', 'destroy_on_failure', 'run_node',
-           'wants_help']
+__all__ = ['EXIT_INVALID_PARAMETERS', 'StopRequest', 'autostart', 'destroy_on_failure',
+           'run_node', 'spin_until_stopped', 'wants_help']
 
 # Exit code of a node whose parameters are invalid.
 EXIT_INVALID_PARAMETERS = 2
+# Wall seconds the spin loop waits at most before it looks whether a stop was asked for.
+SPIN_WAKE_S = 0.1
 
 _Init = TypeVar('_Init', bound=Callable[..., None])
 
@@ -97,6 +110,54 @@ def autostart(node: LifecycleNode) -> str | None:
     return None
 
 
+class StopRequest:
+    """SIGINT and SIGTERM handlers that ask the spin loop to stop (and nothing else).
+
+    A second signal while the first is being handled raises KeyboardInterrupt, so a process
+    stuck in a callback can still be ended from the keyboard. ``restore()`` puts the
+    handlers that were there back.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.requested: str | None = None  # the signal's name once one came
+        self._previous = {number: signal.signal(number, self._handle)
+                          for number in self.SIGNALS}
+
+    def _handle(self, number: int, frame: FrameType | None) -> None:
+        if self.requested is not None:
+            raise KeyboardInterrupt
+        self.requested = signal.Signals(number).name
+
+    def restore(self) -> None:
+        """Reinstate the handlers that were installed before."""
+        for number, handler in self._previous.items():
+            signal.signal(number, handler)
+
+
+def spin_until_stopped(node: Node, stop: StopRequest) -> None:
+    """Spin node until a signal asks to stop or the context goes down."""
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    try:
+        while stop.requested is None and node.context.ok():
+            executor.spin_once(timeout_sec=SPIN_WAKE_S)
+    finally:
+        executor.shutdown(timeout_sec=0.0)
+
+
+def _exit_safely(node: Node) -> None:
+    """Run a lifecycle node's on_exit while the context is up; never raise."""
+    on_exit = getattr(node, 'on_exit', None)
+    if on_exit is None or not node.context.ok():
+        return
+    try:
+        on_exit()
+    except Exception as err:  # the process is ending anyway: say so, do not mask the cause
+        print(f'{node.get_name()}: on_exit failed: {err}', file=sys.stderr, flush=True)
+
+
 def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = None, *,
              summary: str = '', parameters: Sequence[ParameterSpec] = ()) -> int:
     """Print --help, or create the node (autostarting a lifecycle node) and spin it.
@@ -112,11 +173,16 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
         0, or EXIT_INVALID_PARAMETERS if creating (or configuring) the node failed on its
         parameters.
 
+    Raises:
+        Exception: whatever escaped a callback, after the node's on_exit ran.
+
     """
     if wants_help(args):
         print(format_help(name, summary, parameters), end='')
         return 0
-    rclpy.init(args=args)
+    # rclpy's handlers would shut the context down at once (no zero cmd_vel after that)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = StopRequest()
     node = None
     try:
         try:
@@ -127,17 +193,19 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
         if problem is not None:
             print(f'{name}: refusing to start: {problem}', file=sys.stderr, flush=True)
             return EXIT_INVALID_PARAMETERS
-        rclpy.spin(node)
+        spin_until_stopped(node, stop)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:
-        # Ctrl-C can shut the context down while the executor builds its wait set (rclpy 7.1
-        # then raises RCLError, not ExternalShutdownException): a clean stop all the same.
-        # With the context still up, it is a failure.
+        # A context shut down by someone else while the executor builds its wait set (rclpy
+        # 7.1 then raises RCLError, not ExternalShutdownException): a clean stop all the
+        # same. With the context still up, it is a failure.
         if rclpy.ok():
             raise
     finally:
+        stop.restore()
         if node is not None:
+            _exit_safely(node)
             node.destroy_node()
         rclpy.try_shutdown()
     return 0

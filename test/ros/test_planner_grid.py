@@ -295,3 +295,44 @@ def test_a_robot_within_the_clearance_replans_from_the_nearest_clear_point(ros) 
     # the first, short segment keeps the robot's radius; the rest the full inflation
     assert face.distance(samples(replanned[:2])).min() > ROBOT_RADIUS
     assert face.distance(samples(replanned[1:])).min() >= INFLATION - 1e-9
+
+
+def test_planner_refuses_scans_whose_beams_do_not_match_their_angles_or_from_the_future(
+        ros) -> None:
+    planner, probe = start(ros, use_scan=True)
+    probe.map_pub.publish(grid_message(np.zeros((120, 200), dtype=np.int8)))
+    assert ros.spin_until(lambda: planner.grid is not None, timeout=TIMEOUT)
+    pose = np.array([1.0, 3.0, 0.0])
+    box = ConvexPolygon.from_box(5.0, 1.5, 5.3, 4.5)
+    stamp = probe.now()
+    locate(ros, planner, probe, pose, stamp)
+
+    def cut(msg: LaserScan, count: int) -> LaserScan:
+        msg.ranges = (list(msg.ranges) * 2)[:count]
+        return msg
+
+    def backwards(msg: LaserScan) -> LaserScan:
+        msg.angle_increment = -msg.angle_increment
+        return msg
+
+    def ahead(msg: LaserScan) -> LaserScan:
+        msg.header.stamp = seconds_to_stamp(stamp + 30.0)
+        return msg
+
+    cases = [(cut(scan_message([box], pose, stamp), 800), 'scan has 800 ranges'),
+             (cut(scan_message([box], pose, stamp), 60), 'scan has 60 ranges'),
+             (backwards(scan_message([box], pose, stamp)), "increment's sign leads away"),
+             (ahead(scan_message([box], pose, stamp)), 'in the future')]
+    for bad, text in cases:
+        planner._problems.resolve('scan')  # the next problem is reported at once
+
+        def said(text: str = text) -> bool:
+            return any('scan dropped' in line and text in line
+                       for line in probe.log_lines('global_planner', Log.ERROR))
+
+        assert ros.spin_until(lambda bad=bad, said=said: probe.scan_pub.publish(bad) or said(),
+                              timeout=TIMEOUT), probe.log_lines('global_planner')
+        assert planner.scan_count == 0
+    # the same scan, right: taken
+    assert ros.spin_until(lambda: probe.scan_pub.publish(scan_message([box], pose, stamp))
+                          or planner.scan_count > 0, timeout=TIMEOUT)

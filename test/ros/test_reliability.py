@@ -30,13 +30,16 @@ import time
 from typing import Callable
 
 from geometry_msgs.msg import PoseStamped, Twist
-from nav_msgs.msg import Odometry, Path
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState, GetState
+from nav_msgs.msg import OccupancyGrid, Odometry, Path
 import numpy as np
 import pytest
 from rcl_interfaces.msg import Log
-from rclpy.lifecycle import LifecycleNode
+from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from sensor_msgs.msg import LaserScan
 
 from mpc_local_planner.core.controller import Reason
 from mpc_local_planner.core.models import Unicycle
@@ -54,8 +57,10 @@ from mpc_local_planner.ros.conversions import (
     yaw_to_quaternion,
 )
 from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
+from mpc_local_planner.ros.map_server_node import MapServerNode
 from mpc_local_planner.ros.mpc_controller_node import ERROR_THROTTLE_S, MpcControllerNode
 from mpc_local_planner.ros.node_main import autostart
+from mpc_local_planner.ros.qos import MAP_QOS, SCAN_QOS
 from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
 from mpc_local_planner.worlds.world import paper_world
 
@@ -849,3 +854,241 @@ def test_a_killed_controller_stops_the_robot_and_a_restarted_one_drives_to_the_t
     for obstacle in WORLD.obstacles:
         assert not np.any(obstacle.contains(positions))
     assert 'started again' in (tmp_path / 'logs' / 'mpc_controller.log').read_text()
+
+
+def test_sigterm_to_a_driving_controller_sends_zero_before_the_process_ends(
+        ros, tmp_path) -> None:
+    simulator = ros.add(RecordingSimulator(context=ros.context, parameter_overrides=[
+        Parameter('use_sim_time', value=True), Parameter('rate', value=SIM_RATE),
+        Parameter('cmd_timeout', value=CMD_TIMEOUT),
+        Parameter('initial_pose', value=[float(v) for v in WORLD.start])]))
+    probe = ros.probe(use_sim_time=True)
+    probe.plan_pub.publish(poses_to_path(PLAN))
+    loop = Lockstep(ros, probe, simulator, tmp_path / 'logs')
+    try:
+        loop.start_controller()
+        process = loop.controller
+
+        def driving() -> bool:
+            return bool(simulator.received) and simulator.received[-1][1][0] > 0.05
+
+        loop.run_until(lambda: driving() or loop.t > TIME_LIMIT, 'driving')
+        assert driving(), 'the controller never drove'
+        commands = len(simulator.received)
+        loop.controller = None  # it is meant to exit now
+        process.send_signal(signal.SIGTERM)
+        # time stands still: a command now can only come from the process on its way out
+        assert ros.spin_until(lambda: process.poll() is not None
+                              and len(simulator.received) > commands, timeout=HANG_GUARD)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 0, loop.log_tail()
+    np.testing.assert_array_equal(simulator.received[-1][1], [0.0, 0.0])
+    assert 'exiting: cmd_vel zero' in loop.log_tail()
+    assert 'Traceback' not in loop.log_tail()
+
+
+# ----------------------------------------------------------------------------- 7. a hostile client
+# What an outside adversarial client found over DDS: lifecycle requests out of order, scans
+# whose beams do not match their angles or are stamped in the future, a map source that
+# never delivers.
+# (transition id, name) requests that none of the states listed with them has.
+BAD_TRANSITIONS = {
+    'unconfigured': [(Transition.TRANSITION_ACTIVATE, 'activate'),
+                     (Transition.TRANSITION_DEACTIVATE, 'deactivate'),
+                     (Transition.TRANSITION_CLEANUP, 'cleanup'), (99, 'unknown id')],
+    'inactive': [(Transition.TRANSITION_CONFIGURE, 'configure'),
+                 (Transition.TRANSITION_DEACTIVATE, 'deactivate'), (99, 'unknown id')],
+    'active': [(Transition.TRANSITION_CONFIGURE, 'configure'),
+               (Transition.TRANSITION_CLEANUP, 'cleanup'),
+               (Transition.TRANSITION_ACTIVATE, 'activate'), (99, 'unknown id')],
+}
+
+
+class LifecycleClient(Node):
+    """A lifecycle manager's side of one node's change_state and get_state services."""
+
+    def __init__(self, context, target: str) -> None:
+        super().__init__('hostile_manager', context=context)
+        self.change = self.create_client(ChangeState, f'/{target}/change_state')
+        self.get = self.create_client(GetState, f'/{target}/get_state')
+
+    def call(self, ros, client, request):
+        assert ros.spin_until(client.service_is_ready)
+        future = client.call_async(request)
+        assert ros.spin_until(future.done, timeout=60.0), 'no answer: did the node die?'
+        return future.result()
+
+    def request(self, ros, transition: int) -> bool:
+        return self.call(ros, self.change,
+                         ChangeState.Request(transition=Transition(id=transition))).success
+
+    def state(self, ros) -> str:
+        return self.call(ros, self.get, GetState.Request()).current_state.label
+
+
+def refuse_all(ros, client: LifecycleClient, probe, name: str, state: str) -> None:
+    """Every request state has no transition for is answered false; the node stays put."""
+    assert client.state(ros) == state
+    for transition, label in BAD_TRANSITIONS[state]:
+        assert not client.request(ros, transition), f'{label} accepted while {state}'
+        assert client.state(ros) == state, f'{label} while {state} moved the node'
+    assert ros.spin_until(lambda: any(
+        f'the node is {state}, which has no such transition' in line
+        for line in probe.log_lines(name, Log.WARN))), probe.log_lines(name)
+
+
+MANAGED = {
+    'mpc_controller': lambda ctx: MpcControllerNode(context=ctx, parameter_overrides=[
+        Parameter('autostart', value=False)]),
+    'global_planner': lambda ctx: GlobalPlannerNode(context=ctx, parameter_overrides=[
+        Parameter('autostart', value=False),
+        Parameter('world_file', value='paper_obstacle.yaml')]),
+    'map_server': lambda ctx: MapServerNode(context=ctx, parameter_overrides=[
+        Parameter('autostart', value=False),
+        Parameter('yaml_filename', value='maps/paper_obstacle.yaml')]),
+}
+
+
+@pytest.mark.parametrize('name', sorted(MANAGED))
+def test_out_of_order_lifecycle_requests_are_refused_and_the_node_stays_in_its_state(
+        ros, name: str) -> None:
+    node = ros.add(MANAGED[name](ros.context))
+    probe = ros.probe()
+    client = ros.add(LifecycleClient(ros.context, name))
+    refuse_all(ros, client, probe, name, 'unconfigured')
+    assert client.request(ros, Transition.TRANSITION_CONFIGURE)
+    refuse_all(ros, client, probe, name, 'inactive')
+    assert client.request(ros, Transition.TRANSITION_ACTIVATE)
+    refuse_all(ros, client, probe, name, 'active')
+    assert client.request(ros, Transition.TRANSITION_DEACTIVATE)
+    assert client.request(ros, Transition.TRANSITION_CLEANUP)
+    assert client.state(ros) == 'unconfigured'
+    # the trigger_* methods a process calls go through the same gate
+    assert node.trigger_activate() == TransitionCallbackReturn.FAILURE
+    assert client.state(ros) == 'unconfigured'
+
+
+def test_a_controller_asked_for_wrong_transitions_while_driving_keeps_driving(ros) -> None:
+    node, probe, clock = start_controller(ros)
+    client = ros.add(LifecycleClient(ros.context, 'mpc_controller'))
+    refuse_all(ros, client, probe, 'mpc_controller', 'active')
+    after = len(probe.diagnostics)
+    assert clock.run_until(lambda: tracking(probe, after))
+    check_commands(probe)
+
+
+# 181 beams over the front half-plane, as a 1-degree laser sends them.
+SCAN_BEAMS = 181
+SCAN_INCREMENT = math.pi / (SCAN_BEAMS - 1)
+
+
+def free_scan(stamp: float, *, beams: int = SCAN_BEAMS, increment: float = SCAN_INCREMENT,
+              angle_min: float = -math.pi / 2, angle_max: float = math.pi / 2) -> LaserScan:
+    """A scan that sees nothing (every beam inf, REP 117's "no return"), stamped stamp."""
+    msg = LaserScan()
+    msg.header.frame_id = 'base_link'
+    msg.header.stamp = seconds_to_stamp(stamp)
+    msg.angle_min, msg.angle_max, msg.angle_increment = angle_min, angle_max, increment
+    msg.range_min, msg.range_max = 0.05, 5.0
+    msg.ranges = [math.inf] * beams
+    return msg
+
+
+BAD_SCANS = {
+    '250 beams for 181': (lambda t: free_scan(t, beams=250), 'scan has 250 ranges',
+                          'imply 181'),
+    '60 beams for 181': (lambda t: free_scan(t, beams=60), 'scan has 60 ranges', 'imply 181'),
+    'a negative increment from min to max': (
+        lambda t: free_scan(t, increment=-SCAN_INCREMENT), 'scan has 181 ranges',
+        "increment's sign leads away"),
+    'stamped 30 s in the future': (lambda t: free_scan(t + 30.0), 'in the future',
+                                   'are the clocks in sync'),
+}
+
+
+class ScanningClock(SimClock):
+    """SimClock that also publishes scan(t) on `scan` each tick (before /clock)."""
+
+    def __init__(self, ros, probe, scan_pub) -> None:
+        super().__init__(ros, probe)
+        self.scan_pub = scan_pub
+        self.scan: Callable[[float], LaserScan] | None = None
+
+    def tick(self) -> None:
+        if self.scan is not None:
+            self.scan_pub.publish(self.scan(self.t + self.dt))
+        super().tick()
+
+
+def start_sensing_controller(ros, sources: list[str]):
+    """A controller in simulated time with obstacle_sources, the probe, a scanning clock."""
+    node = started(ros.add(MpcControllerNode(context=ros.context, parameter_overrides=[
+        Parameter('use_sim_time', value=True), Parameter('obstacle_sources', value=sources)])))
+    probe = ros.probe(use_sim_time=True)
+    scan_pub = probe.create_publisher(LaserScan, 'scan', SCAN_QOS)
+    probe.map_pub = probe.create_publisher(OccupancyGrid, 'map', MAP_QOS)
+    clock = ScanningClock(ros, probe, scan_pub)
+    assert ros.spin_until(lambda: probe.plan_pub.get_subscription_count() > 0
+                          and probe.odom_pub.get_subscription_count() > 0
+                          and ('scan' not in sources or scan_pub.get_subscription_count() > 0))
+    probe.plan_pub.publish(poses_to_path(PLAN))
+    clock.odom = WORLD.start.copy()
+    return node, probe, clock
+
+
+def stands_still(probe, first: int, reason: Reason, seconds: float, clock: SimClock) -> None:
+    """For `seconds` of simulated time every step commands zero, for reason."""
+    end = clock.t + seconds
+    assert clock.run_until(lambda: clock.t >= end)
+    steps = probe.diagnostics[first:]
+    assert len(steps) >= seconds / STEP - 2, steps
+    for diag in steps:
+        np.testing.assert_array_equal(applied(diag), [0.0, 0.0])
+    assert steps[-1].step.reason is reason, steps[-1]
+    assert all(c.linear.x == 0.0 and c.angular.z == 0.0 for c in probe.cmds)
+
+
+@pytest.mark.parametrize('case', sorted(BAD_SCANS))
+def test_a_scan_the_controller_cannot_place_is_refused_with_one_error_and_the_robot_waits(
+        ros, case: str) -> None:
+    make, *texts = BAD_SCANS[case]
+    node, probe, clock = start_sensing_controller(ros, ['world', 'scan'])
+    clock.scan = make
+    began = time.monotonic()
+    stands_still(probe, 0, Reason.NO_SCAN, 3.0, clock)
+
+    def said() -> list[str]:
+        return [line for line in errors(probe, 'mpc_controller', 'invalid scan')
+                if all(text in line for text in texts)]
+
+    assert ros.spin_until(lambda: bool(said())), probe.log_lines('mpc_controller')
+    assert len(said()) <= 1 + (time.monotonic() - began) / ERROR_THROTTLE_S, said()
+    # a scan that is right: the robot drives
+    clock.scan = free_scan
+    after = len(probe.diagnostics)
+    assert clock.run_until(lambda: tracking(probe, after)), probe.diagnostics[-3:]
+
+
+def test_with_the_map_a_source_the_controller_waits_for_a_valid_map_and_says_so_once(
+        ros) -> None:
+    node, probe, clock = start_sensing_controller(ros, ['world', 'map'])
+    bad = OccupancyGrid()
+    bad.header.frame_id = 'map'
+    bad.info.width, bad.info.height, bad.info.resolution = 10, 10, 0.1
+    bad.data = [0] * 7  # not width x height
+    probe.map_pub.publish(bad)
+    stands_still(probe, 0, Reason.NO_MAP, 3.0, clock)
+    said = [line for line in probe.log_lines('mpc_controller', Log.WARN)
+            if line.startswith(Reason.NO_MAP.text)]
+    assert len(said) == 1 and 'cmd_vel is zero' in said[0], said
+    assert errors(probe, 'mpc_controller', 'invalid map')
+    good = copy.deepcopy(bad)
+    good.info.origin.position.x = good.info.origin.position.y = -5.0
+    good.info.width = good.info.height = 100
+    good.data = [0] * 10_000
+    probe.map_pub.publish(good)
+    after = len(probe.diagnostics)
+    assert clock.run_until(lambda: tracking(probe, after)), probe.diagnostics[-3:]

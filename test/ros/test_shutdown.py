@@ -79,21 +79,85 @@ def test_run_node_treats_a_failed_spin_after_ctrl_c_as_a_clean_stop(monkeypatch)
 
     from mpc_local_planner.ros import node_main
 
-    def interrupted_spin(node: RclpyNode) -> None:
-        rclpy.shutdown()  # SIGINT: the context goes down while the executor works
+    def interrupted_spin(node: RclpyNode, stop: node_main.StopRequest) -> None:
+        rclpy.shutdown()  # the context goes down while the executor works
         msg = 'failed to initialize wait set: the given context is not valid'
         raise RuntimeError(msg)
 
-    monkeypatch.setattr(node_main.rclpy, 'spin', interrupted_spin)
+    monkeypatch.setattr(node_main, 'spin_until_stopped', interrupted_spin)
     assert node_main.run_node(lambda: RclpyNode('spun'), 'spun', []) == 0
 
-    def broken_spin(node: RclpyNode) -> None:
+    def broken_spin(node: RclpyNode, stop: node_main.StopRequest) -> None:
         msg = 'a real failure'
         raise RuntimeError(msg)
 
-    monkeypatch.setattr(node_main.rclpy, 'spin', broken_spin)
+    monkeypatch.setattr(node_main, 'spin_until_stopped', broken_spin)
     with pytest.raises(RuntimeError, match='a real failure'):
         node_main.run_node(lambda: RclpyNode('spun'), 'spun', [])
+
+
+def test_an_exception_that_ends_the_process_runs_on_exit_first_while_the_context_is_up(
+) -> None:
+    import rclpy
+
+    from mpc_local_planner.ros import node_main
+    from mpc_local_planner.ros.lifecycle import ManagedNode
+
+    exits: list[bool] = []
+
+    class Failing(ManagedNode):
+        """A node whose timer raises, as a bug in a callback would."""
+
+        def __init__(self) -> None:
+            super().__init__('failing')
+            self.declare_parameter('autostart', False)
+            self.create_timer(0.01, self.fail)
+
+        def fail(self) -> None:
+            msg = 'a bug in a callback'
+            raise RuntimeError(msg)
+
+        def on_exit(self) -> None:
+            exits.append(self.context.ok())
+
+    with pytest.raises(RuntimeError, match='a bug in a callback'):
+        node_main.run_node(Failing, 'failing', [])
+    assert exits == [True]  # once, and while it could still publish
+    assert not rclpy.ok()
+
+
+def test_sigterm_ends_run_node_cleanly_through_on_exit(monkeypatch) -> None:
+    import os
+
+    import rclpy
+
+    from mpc_local_planner.ros import node_main
+    from mpc_local_planner.ros.lifecycle import ManagedNode
+
+    exits: list[bool] = []
+
+    class Terminated(ManagedNode):
+        """A node that gets SIGTERM from its supervisor after a few spins."""
+
+        def __init__(self) -> None:
+            super().__init__('terminated')
+            self.declare_parameter('autostart', False)
+            self.ticks = 0
+            self.create_timer(0.01, self.tick)
+
+        def tick(self) -> None:
+            self.ticks += 1
+            if self.ticks == 3:
+                os.kill(os.getpid(), signal.SIGTERM)
+
+        def on_exit(self) -> None:
+            exits.append(self.context.ok())
+
+    previous = signal.getsignal(signal.SIGTERM)
+    assert node_main.run_node(Terminated, 'terminated', []) == 0
+    assert exits == [True]
+    assert signal.getsignal(signal.SIGTERM) is previous  # the handlers are put back
+    assert not rclpy.ok()
 
 
 @pytest.mark.slow
