@@ -93,6 +93,7 @@ from mpc_local_planner.core.footprint_checks import (
     SAME_POINT,
     wrap_heading,
 )
+from mpc_local_planner.core.grid_search import clearance_field, pull_string, shortest_cells
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
 from mpc_local_planner.core.paths import remaining_polyline
 
@@ -426,6 +427,49 @@ def _check_bounds(bounds: Sequence[float]) -> tuple[float, float, float, float]:
     return xmin, xmax, ymin, ymax
 
 
+class _TurnCheck:
+    """The turns in place at one corner from one heading, found lazily, as `TurnRange` does.
+
+    `FootprintChecks.turn_range` allows delta iff no sampled heading k turn_step away on
+    delta's side, with (k - 1/2) turn_step < |delta|, is in collision: only those samples are
+    checked, and each side's samples once (a small turn at a tight corner costs a few
+    polygons, not a full circle).
+    """
+
+    def __init__(self, checks: FootprintChecks, xy: np.ndarray, heading: float) -> None:
+        self._checks = checks
+        self._xy = xy
+        self._heading = heading
+        self._free = checks.state_free(xy)
+        self._clear = [0, 0]  # samples known clear per side (counter-clockwise, clockwise)
+        self._blocked = [math.inf, math.inf]  # the first sample in collision per side
+
+    def allows(self, delta: float) -> bool:
+        """Say whether turning by delta radians (wrapped) is clear."""
+        if self._free or abs(delta) <= NO_TURN:
+            return True
+        checks, side = self._checks, 0 if delta > 0 else 1
+        count = min(math.ceil(abs(delta) / checks.turn_step + 0.5), checks.turn_samples + 1)
+        if count <= self._clear[side]:
+            return True
+        if self._blocked[side] < count:
+            return False
+        steps = np.arange(self._clear[side], max(count, 2 * self._clear[side]))
+        steps = steps[steps <= checks.turn_samples]
+        headings = self._heading + math.copysign(checks.turn_step, delta) * steps
+        c, s = np.cos(headings)[:, None], np.sin(headings)[:, None]
+        x, y = checks.local[None, :, 0], checks.local[None, :, 1]
+        polygons = np.stack([self._xy[0] + c * x - s * y, self._xy[1] + s * x + c * y],
+                            axis=-1)
+        hits = np.flatnonzero(checks.obstacles.polygons_hit(polygons, checks.turn_grow) >= 0)
+        if len(hits):
+            self._blocked[side] = int(steps[hits[0]])
+            self._clear[side] = int(steps[hits[0]])
+        else:
+            self._clear[side] = int(steps[-1]) + 1
+        return count <= self._clear[side]
+
+
 def _distinct(points: np.ndarray) -> np.ndarray:
     """Drop consecutive points within SAME_POINT of the previous one (as WaypointPath)."""
     keep = np.concatenate([[True], np.linalg.norm(np.diff(points, axis=0), axis=1)
@@ -561,9 +605,12 @@ class RrtStarPlanner:
             if self._space.segment_free(start_xy, goal_xy):
                 # RRT* would converge to this segment anyway; skip the sampling.
                 return np.vstack([start_xy, goal_xy])
-            with _OMPL_LOCK, _ompl_log_level(ou.LOG_WARN):
-                waypoints = self._solve(start_xy, goal_xy, self._space.point_free,
-                                        self._space.segment_free, lambda: '')[0]
+            try:
+                with _OMPL_LOCK, _ompl_log_level(ou.LOG_WARN):
+                    waypoints = self._solve(start_xy, goal_xy, self._space.point_free,
+                                            self._space.segment_free, lambda: '')[0]
+            except PlanningError as err:
+                return self._grid_fallback(str(err), None, (start_xy, None), (goal_xy, None))
             waypoints[0] = start_xy
             waypoints[-1] = goal_xy
             return waypoints
@@ -571,9 +618,13 @@ class RrtStarPlanner:
         if self._footprint_problem(checks, direct, start_heading, goal_heading) is None:
             return direct
         rules = FootprintPlan(checks, (start_xy, start_heading), (goal_xy, goal_heading))
-        with _OMPL_LOCK, _ompl_log_level(ou.LOG_WARN):
-            candidates = self._solve(start_xy, goal_xy, rules.state_valid, rules.motion_valid,
-                                     rules.failure_hint)
+        try:
+            with _OMPL_LOCK, _ompl_log_level(ou.LOG_WARN):
+                candidates = self._solve(start_xy, goal_xy, rules.state_valid,
+                                         rules.motion_valid, rules.failure_hint)
+        except PlanningError as err:
+            return self._grid_fallback(str(err), rules, (start_xy, start_heading),
+                                       (goal_xy, goal_heading))
         # The simplified path first, then RRT*'s own: OMPL's simplifier may keep an edge
         # the validator refused (it warns "may slightly touch on an invalid region").
         problem = None
@@ -584,7 +635,125 @@ class RrtStarPlanner:
             if problem is None:
                 return waypoints
         msg = f'RRT* found a path that the footprint cannot follow, refused: {problem}'
-        raise PlanningError(msg)
+        return self._grid_fallback(msg, rules, (start_xy, start_heading),
+                                   (goal_xy, goal_heading))
+
+    def _grid_fallback(self, failure: str, rules: FootprintPlan | None,
+                       start: tuple[np.ndarray, float | None],
+                       goal: tuple[np.ndarray, float | None]) -> np.ndarray:
+        """Return the grid search's path where RRT* failed; raise if there is none either.
+
+        Only on a grid (`on_grid`): over polygons the failure stands.
+
+        Raises:
+            PlanningError: RRT*'s failure, with why the grid search found nothing either.
+
+        """
+        if self.grid is None:
+            raise PlanningError(failure) from None
+        waypoints, why = self._grid_route(rules, start, goal)
+        if waypoints is None:
+            msg = f'{failure}; the grid search found no path either: {why}'
+            raise PlanningError(msg) from None
+        return waypoints
+
+    def _grid_route(self, rules: FootprintPlan | None, start: tuple[np.ndarray, float | None],
+                    goal: tuple[np.ndarray, float | None]) -> tuple[np.ndarray | None, str]:
+        """Search the grid's cells for a corridor, then keep the segments the robot can follow.
+
+        Round robot: the cells the grid does not block, each segment free of blocked cells
+        (as RRT*'s edges). Footprint: the cells where the inscribed disc grown by the
+        clearance clears every occupied cell's centre by half a cell's diagonal (necessary
+        for any heading), preferring room (core/grid_search.py); then `pull_string` keeps
+        straight segments the footprint sweeps clear with clear turns at their corners, the
+        start's and the goal's included (`path_problem`'s rules).
+
+        Returns:
+            (waypoints, '') or (None, why there is no path).
+
+        """
+        assert self.grid is not None
+        occupancy = self.grid.map
+        (start_xy, start_heading), (goal_xy, goal_heading) = start, goal
+        rows, cols = occupancy.world_to_cell(np.array([start_xy, goal_xy]))
+        if not np.all(occupancy.contains_cell(rows, cols)):
+            return None, 'the start or the goal is off the grid'
+        resolution = float(occupancy.resolution)
+        clearance = clearance_field(self.grid.occupied, resolution)
+        if rules is None:
+            threshold, blocked = self.config.inflation, np.array(self.grid.blocked, dtype=bool)
+            needs = f'cells clear of the inflation ({self.config.inflation:g} m)'
+        else:
+            threshold = (self.config.inscribed_radius + self.config.clearance
+                         + resolution * math.sqrt(0.5))
+            blocked = None
+            needs = (f'cells {threshold:.3g} m from the occupied ones (the inscribed radius, '
+                     f'the clearance and half a cell diagonal)')
+        cells = shortest_cells(clearance, threshold, (int(rows[0]), int(cols[0])),
+                               (int(rows[1]), int(cols[1])), resolution=resolution,
+                               blocked=blocked)
+        if cells is None:
+            return None, f'no {needs} connect the start and the goal'
+        points = occupancy.cell_to_world(cells[:, 0], cells[:, 1])
+        if len(points) < 2:
+            points = np.vstack([start_xy, goal_xy])
+        points[0], points[-1] = start_xy, goal_xy
+        motion_ok = (self._circle_motion(points) if rules is None
+                     else self._footprint_motion(rules, points))
+        corners = pull_string(points, motion_ok)
+        if corners is None:
+            return None, (f'{len(cells)} cells connect the start and the goal, but the robot '
+                          'cannot follow them')
+        waypoints = points[corners]
+        problem = self.path_problem(waypoints, start_heading=start_heading,
+                                    goal_heading=goal_heading)
+        if problem is not None:  # pull_string asks the same questions: a safeguard
+            return None, f'the path through the cells fails the final check: {problem}'
+        return waypoints, ''
+
+    def _circle_motion(self, points: np.ndarray) -> Callable[[int, int, int | None], bool]:
+        """Return `pull_string`'s motion check for a round robot: the segment's cells."""
+        def motion_ok(i: int, j: int, previous: int | None) -> bool:
+            return self._space.segment_free(points[i], points[j])
+        return motion_ok
+
+    @staticmethod
+    def _footprint_motion(rules: FootprintPlan,
+                          points: np.ndarray) -> Callable[[int, int, int | None], bool]:
+        """Return `pull_string`'s motion check for a footprint (`path_problem`'s rules).
+
+        The motion i -> j: the turn in place at i (from the start heading at the start, else
+        from the segment into i), the swept footprint, and the turn to the goal heading
+        where j is the goal.
+        """
+        checks, last = rules.checks, len(points) - 1
+        turns: dict[tuple[int, int], _TurnCheck] = {}
+
+        def motion_ok(i: int, j: int, previous: int | None) -> bool:
+            a, b = points[i], points[j]
+            if math.hypot(b[0] - a[0], b[1] - a[1]) <= SAME_POINT:
+                return False
+            heading = math.atan2(b[1] - a[1], b[0] - a[0])
+            if previous is None:
+                if (rules.start_turns is not None and rules.start_heading is not None
+                        and not rules.start_turns.allows(
+                            wrap_heading(heading - rules.start_heading))):
+                    return False
+            else:
+                p = points[previous]
+                incoming = math.atan2(a[1] - p[1], a[0] - p[0])
+                delta = wrap_heading(heading - incoming)
+                if abs(delta) > NO_TURN:
+                    if (previous, i) not in turns:
+                        turns[previous, i] = _TurnCheck(checks, a, incoming)
+                    if not turns[previous, i].allows(delta):
+                        return False
+            if (j == last and rules.goal_turns is not None and rules.goal_heading is not None
+                    and not rules.goal_turns.allows(
+                        -wrap_heading(rules.goal_heading - heading))):
+                return False
+            return checks.sweep_hit(a, b) < 0
+        return motion_ok
 
     def path_problem(self, waypoints: np.ndarray, *, start_heading: float | None = None,
                      goal_heading: float | None = None) -> str | None:
