@@ -58,6 +58,15 @@ circle (a 0.60 m gap for the Jackal, whose circle needs 0.67 m) is crossed by on
 motion between states outside it, which RRT* has to sample aligned with the gap (a narrow
 passage, as for any sampling planner: more iterations, or another seed, where it misses).
 
+On a grid, where RRT* finds nothing (or only a path the final check refuses), a deterministic
+grid search takes over (core/grid_search.py, as Nav2's NavFn and Smac search their costmaps):
+Dijkstra over the cells where the inscribed disc grown by the clearance clears the occupied
+cells, preferring room by a cost rather than a wider margin, then straight segments along
+those cells kept only where the footprint's sweep and turns are clear (the checks below),
+backing up from a corner the robot cannot turn at. On BARN's hardest worlds (200-299) no
+chain of circumscribed discs joins start and goal in most worlds, so RRT* alone cannot
+succeed there; the grid search finds them all at the start with the cylinders known.
+
 After solving, `RrtStarPlanner.path_problem` checks every pose of the final path again,
 turns included, and a path that fails is refused with a PlanningError that says where (with
 ``simplify``, a simplified path that fails gives way to RRT*'s own first: OMPL's simplifier
