@@ -38,8 +38,11 @@ SOLVERS = ('fatrop', 'ipopt')
 BUDGETS = ('wall', 'iterations')
 # Seconds one solver iteration typically takes, to turn the wall budget into an iteration
 # allowance (MpcConfig.solve_iterations()). Measured on BARN with sensing at 2 m/s (the
-# Jackal, fatrop and IPOPT, compiled): see ITERATION_SECONDS_NOTE in docs of solve_iterations.
-ITERATION_SECONDS = 2e-3
+# Jackal, compiled NLPs, wall budget 0.1 s, worlds 0-49, on 2 cores shared with other jobs):
+# in the steps whose solving took over 50 ms, the ones the budget binds, the median was 1.05
+# ms an iteration (worlds 10-29) and 1.34 ms (worlds 30-49); over all steps 0.25-0.4 ms (small
+# NLPs). So 0.1 s is about 100 iterations (75 on that loaded machine).
+ITERATION_SECONDS = 1e-3
 
 
 class CostWeights(NamedTuple):
@@ -220,7 +223,7 @@ class MpcConfig:
         """Return the solver iterations one control step may make (budget 'iterations').
 
         max_solve_iterations, or solve_budget() at ITERATION_SECONDS an iteration: what the
-        wall budget allows on a typical machine (0.1 s: 50 iterations).
+        wall budget allows on a typical machine (0.1 s: 100 iterations).
         """
         if self.max_solve_iterations is not None:
             return int(self.max_solve_iterations)

@@ -143,9 +143,9 @@ def test_the_budget_is_half_the_period_unless_given_and_must_be_positive() -> No
 
 def test_the_budget_is_wall_time_unless_iterations_are_asked_for() -> None:
     assert MpcConfig().budget == 'wall'
-    # the wall budget's worth: 0.1 s at 2 ms an iteration
-    assert MpcConfig(budget='iterations').solve_iterations() == 50
-    assert MpcConfig(budget='iterations', step=0.1).solve_iterations() == 25
+    # the wall budget's worth: 0.1 s at 1 ms an iteration
+    assert MpcConfig(budget='iterations').solve_iterations() == 100
+    assert MpcConfig(budget='iterations', step=0.1).solve_iterations() == 50
     assert MpcConfig(budget='iterations', max_solve_iterations=7).solve_iterations() == 7
     with pytest.raises(ValueError, match="budget must be one of \\('wall', 'iterations'\\)"):
         MpcConfig(budget='cpu')

@@ -34,17 +34,21 @@ between the polygon at each predicted pose and each obstacle (obstacles.polygon_
 must be at least the clearance the motion needs, farkas_margin + h/2 (|v| + r_c |omega|) for
 both steps next to the pose (exact |.| here; the NLP's smooth one is never smaller).
 
-A step's solving is bounded in wall time: config.solve_budget() (max_solve_time, half the
-period by default), counted from the start of solve(). The first NLP solve gets what is left
-of it when it starts (an NLP built mid-step has spent its share: prepare() builds them
-ahead); the retries (a second start, the IPOPT fallback, further constraint-generation rounds)
-run only while some is left. Which tries an NLP solve makes, in which order, is tries.py's
+A step's solving is bounded: in wall time by default (config.budget 'wall', the robot's:
+config.solve_budget(), max_solve_time, half the period by default, counted from the start of
+solve()), or in solver iterations (config.budget 'iterations', the evaluation's:
+config.solve_iterations(), spent by the iterations each try makes; no clock is read, builds
+are free and a step waits for its NLP's compilation, so a step does the same on any machine
+under any load). The first NLP solve gets what is left of it when it starts (an NLP built
+mid-step has spent its share of wall time: prepare() builds them ahead); the retries (a
+second start, the IPOPT fallback, further constraint-generation rounds) run only while some
+is left. Which tries an NLP solve makes, in which order, is tries.py's
 table (solver_tries); _optimise only makes them. Once the budget is spent, decide() applies
 the verified shifted candidate (CANDIDATE_TIMEOUT), or stops if there is none, and the
 solution says so (MpcSolution.timed_out). Nothing unverified is ever applied: the budget
 only decides how hard the step tries to beat the candidate. How closely a solver keeps to its
 share is backends.py's (run_solver): IPOPT to an iteration, fatrop to its measured time per
-iteration.
+iteration (wall) or to an iteration level (iterations).
 
 The NLP itself is formulation.py (problem (6)); the solvers and their compilation are
 backends.py.
@@ -461,9 +465,9 @@ class MpcBase(ABC):
 
         With adaptive slots, for boxes (4 faces), for polygons of faces_per_obstacle (what
         sensed obstacles become) and for the face counts of the obstacles set now: an NLP
-        holds obstacles with fewer faces too. Their IPOPTs too (fallback, cold start): a step
-        builds one only if the build fits in what is left of its budget, so one not built
-        ahead may never be there when it is needed. From then on a control step builds no
+        holds obstacles with fewer faces too. Their IPOPTs too (fallback, cold start): with a
+        wall budget a step builds one only if the build fits in what is left of it, so one
+        not built ahead may never be there when it is needed. From then on a control step builds no
         NLP, in any thread (see NlpShapes): with more obstacles active than max_obstacles,
         the NLP holds the nearest ones and the solution is checked against all of them.
 
