@@ -7,7 +7,8 @@ from mpc_local_planner.core.baselines import TrackingMPC
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC, PlanSource
-from mpc_local_planner.core.mpc.step import SolveAttempt
+from mpc_local_planner.core.mpc import step as step_module
+from mpc_local_planner.core.mpc.backends import SolverRun
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import paper_sinusoid, WaypointPath
 from mpc_local_planner.evaluation.experiments import run_closed_loop
@@ -164,11 +165,11 @@ def test_without_a_solver_the_shifted_candidate_is_applied_until_it_runs_out(
         x = model.step(x, verified.u0, 0.2)
     assert verified.source == PlanSource.SOLVER
 
-    def failing_solver(nlp, w0, params, active, solver=None):  # the signature of _run_solver
-        return SolveAttempt(verified=False, w=np.asarray(w0, dtype=float), value=np.inf,
-                            status='injected failure', iterations=0, seconds=0.0)
+    def failing_solver(nlp, w0, params, solver=None, **limits):  # backends.run_solver's
+        return SolverRun(w=np.asarray(w0, dtype=float), value=np.inf, success=False,
+                         status='injected failure', iterations=0, seconds=0.0)
 
-    monkeypatch.setattr(controller, '_run_solver', failing_solver)
+    monkeypatch.setattr(step_module, 'run_solver', failing_solver)
     for k in range(1, horizon + 2):
         solution = controller.solve(x)
         assert solution.source == PlanSource.CANDIDATE and not solution.solver_verified

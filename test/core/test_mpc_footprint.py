@@ -30,6 +30,8 @@ from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import Decision, PathReferenceMPC, PlanSource
+from mpc_local_planner.core.mpc import step as step_module
+from mpc_local_planner.core.mpc.backends import SolverRun
 from mpc_local_planner.core.mpc.formulation import (
     dual_multipliers,
     formulate,
@@ -40,7 +42,7 @@ from mpc_local_planner.core.mpc.formulation import (
     sweep_rate,
     SWEEP_SMOOTHING,
 )
-from mpc_local_planner.core.mpc.step import Plan, SolveAttempt
+from mpc_local_planner.core.mpc.step import Plan
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
 from mpc_local_planner.core.paths import AnalyticPath, paper_sinusoid, ReferencePath, WaypointPath
 
@@ -328,11 +330,11 @@ def test_the_shifted_candidate_of_a_polygon_plan_is_verified_and_applied(
     run = drive(mpc, x, 14, GAP_BOXES)  # to the mouth of the gap, both boxes in the NLP
     assert mpc.last_active_obstacles and run.sources[-1] is PlanSource.SOLVER
 
-    def failing_solver(nlp, w0, params, active, solver=None):  # the signature of _run_solver
-        return SolveAttempt(verified=False, w=np.asarray(w0, dtype=float), value=np.inf,
-                            status='injected failure', iterations=0, seconds=0.0)
+    def failing_solver(nlp, w0, params, solver=None, **limits):  # backends.run_solver's
+        return SolverRun(w=np.asarray(w0, dtype=float), value=np.inf, success=False,
+                         status='injected failure', iterations=0, seconds=0.0)
 
-    monkeypatch.setattr(mpc, '_run_solver', failing_solver)
+    monkeypatch.setattr(step_module, 'run_solver', failing_solver)
     failed = drive(mpc, run.x, 6, GAP_BOXES)
     # the proof's candidate meets the NLP's smooth clearance rows with the exact multipliers
     assert all(status.endswith(f'({Decision.CANDIDATE_SOLVER_FAILED.value})')
