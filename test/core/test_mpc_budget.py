@@ -229,18 +229,18 @@ def test_without_a_plan_the_second_start_is_left_out_once_the_budget_is_spent(
     solver = FakeSolver()
     monkeypatch.setattr(step_module, 'run_solver', solver)
     solution = mpc.solve(mpc.path.start)
-    # the candidate (stay put), then the start along the path with IPOPT and the backend,
-    # then the candidate with IPOPT: solver_tries()'s order, each start packed once
+    # the candidate (stay put) with IPOPT cold and the backend, then the start along the
+    # path with IPOPT and the backend: solver_tries()'s order, each start packed once
     assert [t.start for t in solution.tries] == [
-        Start.CANDIDATE, Start.GUIDED, Start.GUIDED, Start.CANDIDATE]
+        Start.CANDIDATE, Start.CANDIDATE, Start.GUIDED, Start.GUIDED]
     starts = solver.starts
-    assert not np.array_equal(starts[1], starts[0])
-    np.testing.assert_array_equal(starts[2], starts[1])
-    np.testing.assert_array_equal(starts[3], starts[0])
+    np.testing.assert_array_equal(starts[1], starts[0])
+    assert not np.array_equal(starts[2], starts[0])
+    np.testing.assert_array_equal(starts[3], starts[2])
     mpc.reset()
     monkeypatch.setattr(step_module, 'run_solver', FakeSolver(clock, seconds=200.0))
     solution = mpc.solve(mpc.path.start)
-    assert solution.tries == (CANDIDATE_BACKEND,)
+    assert solution.tries == (Try(Start.CANDIDATE, Solver.IPOPT_COLD),)
     assert solution.timed_out
 
 
@@ -325,16 +325,25 @@ def test_an_iteration_budget_is_spent_by_the_iterations_made_and_never_reads_a_c
 
 
 def test_ipopt_and_fatrop_keep_to_an_iteration_budget() -> None:
-    x0 = np.array([0.0, 0.0, 0.944])  # horizon 3: 25 IPOPT or 30 fatrop iterations from it
+    x0 = np.array([0.0, 0.0, 0.944])
     for solver, spent in (('ipopt', 3), ('fatrop', iteration_levels(200)[-1] + 1)):
-        mpc = paper_mpc(solver=solver, horizon=3, budget='iterations', max_solve_iterations=3)
+        mpc = paper_mpc(solver=solver, horizon=3, budget='iterations',
+                        max_solve_iterations=10**6)
         mpc.clock = no_clock
-        solution = mpc.solve(x0)
+        first = mpc.solve(x0)  # from rest IPOPT cold goes first: this makes a plan that moves
+        assert first.success and np.any(first.u_pred)
+        mpc.update_config(mpc.config.with_changes(max_solve_iterations=3))
+        # off the prediction: the backend from the shifted candidate needs more than 3
+        solution = mpc.solve(first.x_pred[1] + np.array([0.05, -0.05, 0.2]))
         assert solution.timed_out and not solution.success
         assert solution.tries == (CANDIDATE_BACKEND,)
-        # IPOPT to the iteration; fatrop to its smallest level, here an interpreted copy
-        # (it reports one iteration more than its max_iter)
-        assert solution.iterations == spent
+        # IPOPT to the iteration; fatrop at most to its smallest level, here an interpreted
+        # copy (it reports one iteration more than its max_iter; from this start it gives
+        # up a little earlier)
+        if solver == 'ipopt':
+            assert solution.iterations == spent
+        else:
+            assert 3 < solution.iterations <= spent
 
 
 def test_with_a_generous_budget_the_paper_run_is_the_run_without_a_clock() -> None:

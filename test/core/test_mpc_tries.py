@@ -58,11 +58,11 @@ def test_from_rest_among_obstacles_ipopt_cold_starts_first() -> None:
                                    CANDIDATE_BACKEND, CANDIDATE_FALLBACK)
 
 
-def test_from_rest_without_obstacles_the_guided_start_is_tried_between_the_candidates() -> None:
+def test_from_rest_without_obstacles_ipopt_cold_starts_from_stay_put_then_the_others() -> None:
     for previous in (False, True):
         rest = Situation(plan_moves=False, obstacles_active=False, previous_round=previous)
-        assert solver_tries(rest) == (CANDIDATE_BACKEND, GUIDED_FALLBACK, GUIDED_BACKEND,
-                                      CANDIDATE_FALLBACK)
+        assert solver_tries(rest) == (Try(Start.CANDIDATE, Solver.IPOPT_COLD), CANDIDATE_BACKEND,
+                                      GUIDED_FALLBACK, GUIDED_BACKEND)
 
 
 def test_a_cut_try_goes_on_first_with_its_own_solver() -> None:
