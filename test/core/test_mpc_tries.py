@@ -106,3 +106,13 @@ def test_the_status_label_names_the_ipopt_that_solved() -> None:
     assert Solver.BACKEND.label == ''
     assert Solver.IPOPT_FALLBACK.label == ' (IPOPT fallback)'
     assert Solver.IPOPT_COLD.label == ' (IPOPT cold start)'
+
+
+def test_tries_that_failed_here_before_go_last_in_their_order() -> None:
+    for situation in every_situation():
+        plain = solver_tries(situation)
+        for failed in ({plain[0]}, set(plain[:2]), set(plain)):
+            tries = solver_tries(dataclasses.replace(situation, failed=frozenset(failed)))
+            assert set(tries) == set(plain)  # nothing left out: a failure may be luck
+            assert tries == (tuple(t for t in plain if t not in failed)
+                             + tuple(t for t in plain if t in failed))

@@ -176,6 +176,7 @@ class _Unfinished(NamedTuple):
     w: np.ndarray
     solver: Solver  # the solver of the try that was cut
     held: tuple[ConvexPolygon, ...]  # the obstacles its NLP held, in their slots' order
+    origin: Try  # the try that began it (a continuation's origin is the first one's)
 
 
 def _same_polygons(a: Sequence[ConvexPolygon], b: Sequence[ConvexPolygon]) -> bool:
@@ -390,6 +391,10 @@ class MpcBase(ABC):
         self._previous_stage: float = 0.0
         self._failures = 0
         self._unfinished: _Unfinished | None = None
+        # tries that failed from the state _failed_x0, with their NLP's id (see tries.py;
+        # the NLPs live as long as the controller's settings)
+        self._failed_here: set[tuple[int, Try]] = set()
+        self._failed_x0: np.ndarray | None = None
 
     # ----------------------------------------------------------------- the terminal condition
     @abstractmethod
@@ -778,11 +783,15 @@ class MpcBase(ABC):
             if (np.max(np.abs(unfinished.x0 - x0)) <= CONTINUE_TOLERANCE
                     and _same_polygons(unfinished.held, active)):
                 continuation = unfinished
+        if self._failed_x0 is None or np.max(np.abs(self._failed_x0 - x0)) > CONTINUE_TOLERANCE:
+            self._failed_here = set()  # the robot moved: every try is worth making again
+            self._failed_x0 = x0.copy()
         situation = Situation(
             plan_moves=self._plan is not None and bool(np.any(self._plan.u)),
             obstacles_active=bool(active), previous_round=previous is not None,
             has_fallback=nlp.has_fallback,
-            continuation=continuation.solver if continuation is not None else None)
+            continuation=continuation.solver if continuation is not None else None,
+            failed=frozenset(t for n, t in self._failed_here if n == id(nlp)))
         starts: dict[Start, np.ndarray] = {Start.CANDIDATE: w_candidate}
         if continuation is not None:
             starts[Start.CONTINUATION] = continuation.w
@@ -811,9 +820,16 @@ class MpcBase(ABC):
                                        _solver_of(nlp, kind))
             iterations += attempt.iterations
             seconds += attempt.seconds
+            origin = (continuation.origin if attempt_try.start is Start.CONTINUATION
+                      else attempt_try)
+            if not attempt.verified and (not attempt.cut
+                                         or attempt_try.start is Start.CONTINUATION):
+                # failed outright, or cut twice: not first again while the robot stands here
+                self._failed_here.update({(id(nlp), attempt_try), (id(nlp), origin)})
             if (attempt.cut and not attempt.verified and attempt.iterations > 0
                     and np.all(np.isfinite(attempt.w))):
-                self._unfinished = _Unfinished(nlp, x0.copy(), attempt.w, kind, tuple(active))
+                self._unfinished = _Unfinished(nlp, x0.copy(), attempt.w, kind, tuple(active),
+                                               origin)
             if attempt.verified:
                 best = attempt._replace(status=attempt.status + kind.label)
                 break
@@ -979,15 +995,16 @@ class MpcBase(ABC):
         n = self._config.horizon
         _, u_s = self._model.steady_state(x0[:3])
         u_s = np.asarray(u_s, dtype=float).reshape(-1)
-        failures, unfinished = self._failures, self._unfinished
+        kept = self._failures, self._unfinished, self._failed_here, self._failed_x0
         self.reset()
-        # the robot stands still: a solve the budget cut goes on at the next step
-        self._failures, self._unfinished = failures, unfinished
+        # the robot stands still: a solve the budget cut goes on at the next step, and the
+        # tries that failed here go last
+        self._failures, self._unfinished, self._failed_here, self._failed_x0 = kept
         return MpcSolution(
             u0=u_s, x_pred=np.tile(x0, (n + 1, 1)), u_pred=np.tile(u_s, (n, 1)),
             s=math.nan, value=math.nan, success=False, status=status,
             solve_time_s=attempt.seconds, iterations=attempt.iterations,
-            source=PlanSource.STOP, lyapunov_ok=None, failures=failures,
+            source=PlanSource.STOP, lyapunov_ok=None, failures=self._failures,
             obstacles_in_reach=in_reach, obstacles_active=active, timed_out=timed_out,
             tries=tuple(self._tries),
         )
