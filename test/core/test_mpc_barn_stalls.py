@@ -1,0 +1,75 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Recorded BARN states where the MPC failed at every step: it must drive from each now.
+
+Each state (test/core/data/barn_standing_new_plans.json) is a laser-only BARN run at the
+Jackal's limits, at the step where a new plan reached the robot and the MPC began to fail:
+with the evaluation's budget of 100 solver iterations a step, the robot stood still there
+until the run stalled (50 and more consecutive failures). The causes: fatrop from the
+stand-still candidate (the quartic cost is flat there) spent every step's budget (world 23);
+a second constraint-generation round was cut at every step because the first was solved
+again each time (world 44); the same failing try came first at every step (world 55).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.controller import ControllerSettings, MpcController, Reason
+from mpc_local_planner.core.footprint import JACKAL
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.obstacles import ConvexPolygon
+
+STATES = json.loads((Path(__file__).parent / 'data' / 'barn_standing_new_plans.json')
+                    .read_text(encoding='utf-8'))
+H = 0.2
+# Steps (2 s) within which the robot must be driving on a solver solution; it stood still
+# for 50 and more before.
+WITHIN_STEPS = 10
+
+
+def barn_controller() -> MpcController:
+    """The evaluation's MPC on laser-only BARN: the Jackal at 2 m/s, 100 iterations a step."""
+    config = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
+                       robot_radius=0.0, budget='iterations', max_solve_iterations=100)
+    settings = ControllerSettings(goal_tolerance=0.05, goal_heading_tolerance=math.pi,
+                                  capacity=128)
+    return MpcController(Unicycle(v_max=2.0, omega_max=4.0), config, settings=settings)
+
+
+@pytest.mark.parametrize('world', ['world_023', 'world_044', 'world_055'])
+def test_a_new_plan_for_a_standing_robot_among_barn_cylinders_is_driven_within_2_s(
+        world: str) -> None:
+    case = STATES[world]
+    controller = barn_controller()
+    model = controller.model.discrete(H)
+    controller.set_plan(np.array(case['plan']))
+    controller.set_obstacles([ConvexPolygon.from_vertices(np.array(v))
+                              for v in case['obstacles']])
+    x = np.array(case['x'])
+    reasons = []
+    for k in range(WITHIN_STEPS):
+        output = controller.compute(x, k * H)
+        reasons.append(output.reason)
+        if output.reason is Reason.TRACKING:
+            break
+        x = np.asarray(model(x, output.u)).reshape(-1)
+    assert reasons[-1] is Reason.TRACKING, reasons
+    assert abs(output.u[0]) > 0.1  # it drives (forward or, to turn in a tight spot, back)
