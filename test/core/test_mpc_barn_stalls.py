@@ -46,7 +46,11 @@ WITHIN_STEPS = 10
 
 
 def barn_controller() -> MpcController:
-    """The evaluation's MPC on laser-only BARN: the Jackal at 2 m/s, 100 iterations a step."""
+    """Return the evaluation's MPC on laser-only BARN as it was when these were recorded.
+
+    The Jackal at 2 m/s, 100 iterations a step, reversing allowed: the suite's Jackal now
+    drives forwards only (Robot.reverses), which these states predate.
+    """
     config = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
                        robot_radius=0.0, budget='iterations', max_solve_iterations=100)
     settings = ControllerSettings(goal_tolerance=0.05, goal_heading_tolerance=math.pi,
