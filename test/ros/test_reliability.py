@@ -786,15 +786,20 @@ def stamp(msg: Odometry) -> float:
     return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
 
 
-def test_a_killed_controller_stops_the_robot_and_a_restarted_one_drives_to_the_target(
-        ros, tmp_path) -> None:
+def drill(ros, tmp_path) -> tuple[RecordingSimulator, object, Lockstep]:
+    """The simulator at the start, the probe (the plan published once) and the lockstep."""
     simulator = ros.add(RecordingSimulator(context=ros.context, parameter_overrides=[
         Parameter('use_sim_time', value=True), Parameter('rate', value=SIM_RATE),
         Parameter('cmd_timeout', value=CMD_TIMEOUT),
         Parameter('initial_pose', value=[float(v) for v in WORLD.start])]))
     probe = ros.probe(use_sim_time=True)
     probe.plan_pub.publish(poses_to_path(PLAN))  # once: transient_local keeps it for late nodes
-    loop = Lockstep(ros, probe, simulator, tmp_path / 'logs')
+    return simulator, probe, Lockstep(ros, probe, simulator, tmp_path / 'logs')
+
+
+def test_a_killed_controller_stops_the_robot_and_a_restarted_one_drives_to_the_target(
+        ros, tmp_path) -> None:
+    simulator, probe, loop = drill(ros, tmp_path)
     try:
         # a controller process drives the robot past x = 1 (above the box)
         loop.start_controller()
@@ -858,13 +863,7 @@ def test_a_killed_controller_stops_the_robot_and_a_restarted_one_drives_to_the_t
 
 def test_sigterm_to_a_driving_controller_sends_zero_before_the_process_ends(
         ros, tmp_path) -> None:
-    simulator = ros.add(RecordingSimulator(context=ros.context, parameter_overrides=[
-        Parameter('use_sim_time', value=True), Parameter('rate', value=SIM_RATE),
-        Parameter('cmd_timeout', value=CMD_TIMEOUT),
-        Parameter('initial_pose', value=[float(v) for v in WORLD.start])]))
-    probe = ros.probe(use_sim_time=True)
-    probe.plan_pub.publish(poses_to_path(PLAN))
-    loop = Lockstep(ros, probe, simulator, tmp_path / 'logs')
+    simulator, probe, loop = drill(ros, tmp_path)
     try:
         loop.start_controller()
         process = loop.controller
