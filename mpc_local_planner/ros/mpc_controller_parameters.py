@@ -73,6 +73,11 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   float_range=(0.001, 10.0)),
     ParameterSpec('omega_max', float(_MODEL.omega_max),
                   'turn-rate bound |omega| (rad/s); rebuilds the NLP', float_range=(0.001, 50.0)),
+    ParameterSpec('allow_reversing', _MODEL.v_min is None or _MODEL.v_min < 0.0,
+                  "may drive backwards (v down to -v_max; false: v >= 0, as DWB's "
+                  'min_vel_x = 0). Set false when the laser does not see behind the robot (a '
+                  "Jackal's sees 270 degrees): backwards it would drive where it never looked; "
+                  'next solve'),
     ParameterSpec('weights.position', float(_CONFIG.weight_position),
                   'stage weight of dx^4 and dy^4; next solve', float_range=_WEIGHT),
     ParameterSpec('weights.heading', float(_CONFIG.weight_heading),
@@ -228,7 +233,8 @@ def build_settings(values: dict[str, Any], *, world_radius: float = 0.0,
     mpc_kwargs['robot_radius'] = max(float(values['robot_radius']), world_radius)
     mpc_kwargs['footprint'] = robot_footprint(values['footprint'], world_footprint)
     config = MpcConfig(**mpc_kwargs)  # raises ValueError with validate_mpc_config's reasons
-    model = Unicycle(**{name: float(values[name]) for name in _MODEL_FIELDS})
+    model = Unicycle(**{name: float(values[name]) for name in _MODEL_FIELDS},
+                     v_min=None if values['allow_reversing'] else 0.0)
     settings = ControllerSettings(**{k: float(values[k]) for k in _SETTINGS_FIELDS},
                                   max_plan_poses=int(values['max_plan_poses']))
     return config, model, settings

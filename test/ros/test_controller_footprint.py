@@ -74,6 +74,15 @@ def test_build_settings_puts_the_footprint_into_the_mpc_config() -> None:
     assert round_config.footprint == () and round_config.robot_footprint.radius == 0.25
 
 
+def test_allow_reversing_false_keeps_the_mpc_speed_at_or_above_zero() -> None:
+    _, model, _ = build_settings(dict(DEFAULTS))
+    assert DEFAULTS['allow_reversing'] is True  # the paper's robot drives backwards too
+    np.testing.assert_allclose(model.u_min, [-DEFAULTS['v_max'], -DEFAULTS['omega_max']])
+    _, forwards, _ = build_settings({**DEFAULTS, 'allow_reversing': False})
+    np.testing.assert_allclose(forwards.u_min, [0.0, -DEFAULTS['omega_max']])
+    np.testing.assert_allclose(forwards.u_max, model.u_max)
+
+
 @pytest.mark.parametrize(('text', 'reason'), [
     ('[[0, 0], [1, 1]]', 'at least 3'),
     (NOT_CONVEX, 'not convex'),
