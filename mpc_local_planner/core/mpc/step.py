@@ -179,6 +179,11 @@ class _Unfinished(NamedTuple):
     origin: Try  # the try that began it (a continuation's origin is the first one's)
 
 
+def _stood_still(before: np.ndarray | None, x0: np.ndarray) -> bool:
+    """Say whether the state is where it was (within CONTINUE_TOLERANCE); None: unknown."""
+    return before is not None and float(np.max(np.abs(before - x0))) <= CONTINUE_TOLERANCE
+
+
 def _same_polygons(a: Sequence[ConvexPolygon], b: Sequence[ConvexPolygon]) -> bool:
     """Say whether two obstacle lists are the same polygons in the same order."""
     return len(a) == len(b) and all(
@@ -780,10 +785,9 @@ class MpcBase(ABC):
         continuation: _Unfinished | None = None
         if unfinished is not None and unfinished.nlp is nlp:
             self._unfinished = None  # continued once, or moved away from
-            if (np.max(np.abs(unfinished.x0 - x0)) <= CONTINUE_TOLERANCE
-                    and _same_polygons(unfinished.held, active)):
+            if _stood_still(unfinished.x0, x0) and _same_polygons(unfinished.held, active):
                 continuation = unfinished
-        if self._failed_x0 is None or np.max(np.abs(self._failed_x0 - x0)) > CONTINUE_TOLERANCE:
+        if not _stood_still(self._failed_x0, x0):
             self._failed_here = set()  # the robot moved: every try is worth making again
             self._failed_x0 = x0.copy()
         situation = Situation(
@@ -908,7 +912,7 @@ class MpcBase(ABC):
 
         """
         unfinished = self._unfinished
-        if unfinished is None or np.max(np.abs(unfinished.x0 - x0)) > CONTINUE_TOLERANCE:
+        if unfinished is None or not _stood_still(unfinished.x0, x0):
             return None
         resumed = []
         for old in unfinished.held:
