@@ -34,8 +34,10 @@ from scipy.ndimage import binary_dilation, distance_transform_edt
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import points_along
 from mpc_local_planner.perception.scan_obstacles import (
+    classify_beams,
     compose_pose,
     Scan,
+    scan_points,
     validate_scan,
 )
 from mpc_local_planner.worlds.map_files import OccupancyMap, OCCUPIED
@@ -250,6 +252,9 @@ class PlanningGrid:
                  laser_pose: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
         """Clear the cells the beams pass through, then mark the cells of the returns.
 
+        The beams are read as `classify_beams` says: a -inf beam marks the cell at range_min
+        and clears nothing; NaN and out-of-range readings neither mark nor clear.
+
         Args:
             scan: The scan (validated here).
             robot_pose: (x, y, yaw) of the robot in the map frame at the scan's stamp.
@@ -261,18 +266,16 @@ class PlanningGrid:
         """
         validate_scan(scan)
         ox, oy, oyaw = compose_pose(robot_pose, laser_pose)
-        ranges = np.asarray(scan.ranges, dtype=float)
-        valid = (ranges >= scan.range_min) & (ranges <= scan.range_max)
-        theta = oyaw + scan.angle_min + np.arange(len(ranges)) * scan.angle_increment
-        free = np.where(valid, ranges, np.where(ranges > scan.range_max, scan.range_max, 0.0))
-        free = np.minimum(free, self.clear_range)
+        free = np.minimum(classify_beams(scan).free, self.clear_range)
+        beams = len(free)
+        theta = oyaw + scan.angle_min + np.arange(beams) * scan.angle_increment
         res = self.map.resolution
         # Clear up to one cell short of the return, sampled every half cell.
         length = np.maximum(free - res, 0.0)
         counts = np.ceil(length / (0.5 * res)).astype(np.int64) + 1
         counts[length <= 0.0] = 0
         if counts.sum():
-            beam = np.repeat(np.arange(len(ranges)), counts)
+            beam = np.repeat(np.arange(beams), counts)
             step = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
             dist = np.minimum(step * 0.5 * res, length[beam])
             xs = ox + dist * np.cos(theta[beam])
@@ -280,8 +283,7 @@ class PlanningGrid:
             rows, cols = self.map.world_to_cell(np.column_stack([xs, ys]))
             inside = self.map.contains_cell(rows, cols)
             self._scan[rows[inside], cols[inside]] = False
-        hits = np.column_stack([ox + ranges[valid] * np.cos(theta[valid]),
-                                oy + ranges[valid] * np.sin(theta[valid])])
+        hits, _ = scan_points(scan, robot_pose, laser_pose=laser_pose)
         rows, cols = self.map.world_to_cell(hits)
         inside = self.map.contains_cell(rows, cols)
         self._scan[rows[inside], cols[inside]] = True

@@ -16,21 +16,27 @@
 
 The MPC avoids convex polygons {p : A p <= b}; a scan is a fan of points. The steps:
 
-1. `validate_scan`: refuse malformed scans with a `ScanError` naming the problem (a NaN in
-   the ranges must not become a NaN obstacle inside the solver). inf and readings outside
-   [range_min, range_max] are "no return" (REP 117), not errors.
-2. `scan_points`: valid returns in the map frame, from the robot's pose at the scan's stamp
+1. `validate_scan`: refuse a scan that cannot be interpreted (angles, increment, beam count,
+   limits, intensities) with a `ScanError` naming the problem. Its readings are never a
+   reason: a real driver publishes NaN and -inf all the time, and a controller that drops the
+   whole scan for one of them never moves.
+2. `classify_beams`: the one place where a reading's meaning is decided, beam by beam, as
+   REP 117 says: a reading in [range_min, range_max] is a return; +inf is no return (free up
+   to range_max); -inf is "too close", taken conservatively as a return at range_min that
+   proves nothing free; NaN (an erroneous reading) and finite readings outside the limits are
+   ignored. Every reader (the points, the memory's clearing, the planner's grid) asks it.
+3. `scan_points`: the returns in the map frame, from the robot's pose at the scan's stamp
    and the laser's mounting pose in the robot frame.
-3. Clusters: consecutive points (in beam order) farther apart than ``gap`` belong to
+4. Clusters: consecutive points (in beam order) farther apart than ``gap`` belong to
    different objects.
-4. Convex pieces: a curved cluster that fits in ``small_size`` becomes its convex hull
+5. Convex pieces: a curved cluster that fits in ``small_size`` becomes its convex hull
    (thickened behind the surface, so a single point still has an interior); a straight one
    (within ``split_tolerance`` of its chord) or a larger one is split Douglas-Peucker style
    at its farthest point from the chord until every piece is within ``split_tolerance`` of
    its chord, and each piece becomes a thin rectangle along the chord, at least
    ``thickness`` wide, covering its points and reaching one beam spacing past its ends (the
    surface may continue up to the next beam, which missed it).
-5. `ObstacleMemory`: the laser does not see behind the robot, so obstacles are remembered for
+6. `ObstacleMemory`: the laser does not see behind the robot, so obstacles are remembered for
    ``ttl`` seconds; a later beam that passes through a remembered obstacle proves it gone, and
    one whose view covers it entirely replaces it by what it sees now.
 
@@ -51,6 +57,7 @@ from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.perception.raycast import TrueGeometry
 
 __all__ = [
+    'Beams',
     'MAX_BEAMS',
     'MAX_SCAN_FUTURE_S',
     'ObstacleMemory',
@@ -59,6 +66,7 @@ __all__ = [
     'ScanObstacleConfig',
     'check_beam_count',
     'check_scan_stamp',
+    'classify_beams',
     'compose_pose',
     'cluster_bounds',
     'scan_points',
@@ -87,7 +95,7 @@ class Scan(NamedTuple):
         angle_increment: Angle between consecutive beams (negative for a clockwise scan).
         range_min: Closest valid reading, metres.
         range_max: Farthest valid reading, metres.
-        ranges: (beams,) readings; inf (or anything outside the limits) is "no return".
+        ranges: (beams,) readings, as REP 117 gives them (see `classify_beams`).
         intensities: (beams,) or empty.
         stamp: Time of the scan, seconds.
         angle_max: Angle of the last beam as the message states it, or None when the scan
@@ -134,16 +142,22 @@ class ScanObstacleConfig:
 
 
 def validate_scan(scan: Scan, *, max_beams: int = MAX_BEAMS) -> None:
-    """Refuse a scan that cannot be turned into obstacles, naming the problem.
+    """Refuse a scan that cannot be interpreted, naming the problem.
+
+    Only the scan's frame of reference is checked: where its beams point and what its
+    limits are. Its readings are judged beam by beam (`classify_beams`), never here: a NaN,
+    -inf or out-of-range reading makes that beam ignored (or, for -inf, a return at
+    range_min), not the scan invalid.
 
     Args:
         scan: The scan.
         max_beams: Largest number of beams accepted.
 
     Raises:
-        ScanError: If an angle or limit is not finite, the increment is 0, range_max <=
-            range_min, a range is NaN or negative, the intensities' length differs from the
-            ranges', there are more than max_beams beams, the stamp is not finite, or the
+        ScanError: If an angle or limit is not finite, the increment is 0, range_min < 0 or
+            range_max <= range_min, the ranges are not a 1-D array of numbers, the
+            intensities' length differs from the ranges', there are more than max_beams
+            beams, the beams cover more than a full turn, the stamp is not finite, or the
             beam count disagrees with the angles (see check_beam_count).
 
     """
@@ -174,12 +188,6 @@ def validate_scan(scan: Scan, *, max_beams: int = MAX_BEAMS) -> None:
     if not np.issubdtype(ranges.dtype, np.number):
         msg = f'scan ranges must be numbers, got dtype {ranges.dtype}'
         raise ScanError(msg)
-    if np.any(np.isnan(ranges)):
-        msg = f'scan ranges contain NaN at beam {int(np.flatnonzero(np.isnan(ranges))[0])}'
-        raise ScanError(msg)
-    if np.any(ranges < 0):
-        msg = f'scan ranges contain a negative value at beam {int(np.argmax(ranges < 0))}'
-        raise ScanError(msg)
     if scan.intensities is not None and len(scan.intensities) not in (0, len(ranges)):
         msg = (f'scan has {len(ranges)} ranges but {len(scan.intensities)} intensities '
                '(expected the same number, or none)')
@@ -190,6 +198,60 @@ def validate_scan(scan: Scan, *, max_beams: int = MAX_BEAMS) -> None:
         raise ScanError(msg)
     if scan.angle_max is not None:
         check_beam_count(scan.angle_min, scan.angle_max, scan.angle_increment, len(ranges))
+
+
+class Beams(NamedTuple):
+    """What each beam of a scan says (REP 117), as `classify_beams` reads it.
+
+    Attributes:
+        hit: (beams,) True where the beam returned from a surface at ``seen``: a reading in
+            [range_min, range_max], or -inf ("too close"), placed at range_min.
+        seen: (beams,) how far the beam observed the world, metres: its return, range_max for
+            +inf (no return within range), NaN for an ignored beam (a NaN reading, or a
+            finite one outside [range_min, range_max]), which observed nothing.
+        free: (beams,) how far the beam proves free space, metres: up to its return (a
+            reading in range) or range_max (+inf); 0 for -inf and ignored beams, which
+            clear nothing.
+
+    """
+
+    hit: np.ndarray
+    seen: np.ndarray
+    free: np.ndarray
+
+    @property
+    def usable(self) -> np.ndarray:
+        """(beams,) True where the beam carries information (it is not ignored)."""
+        return ~np.isnan(self.seen)
+
+
+def classify_beams(scan: Scan) -> Beams:
+    """Say, beam by beam, what a scan's readings mean: the one rule every reader applies.
+
+    REP 117: a reading in [range_min, range_max] is a return; +inf is no return within
+    range_max (the beam's whole length is free); -inf is an object too close to measure,
+    taken conservatively as a return at range_min that proves nothing free; NaN is an
+    erroneous reading and a finite reading outside the limits an invalid one: both are
+    ignored (no return, no free space). Every reading is judged on its own.
+
+    Args:
+        scan: A scan that passed `validate_scan` (its limits are finite and ordered).
+
+    Returns:
+        The beams' returns, reach and free space.
+
+    """
+    ranges = np.asarray(scan.ranges, dtype=float)
+    in_range = (ranges >= scan.range_min) & (ranges <= scan.range_max)
+    no_return = ranges == math.inf
+    too_close = ranges == -math.inf
+    hit = in_range | too_close
+    seen = np.where(in_range, ranges, np.nan)
+    seen[no_return] = scan.range_max
+    seen[too_close] = scan.range_min
+    free = np.where(in_range, ranges, 0.0)
+    free[no_return] = scan.range_max
+    return Beams(hit=hit, seen=seen, free=free)
 
 
 def check_beam_count(angle_min: float, angle_max: float, angle_increment: float,
@@ -270,16 +332,17 @@ def scan_points(scan: Scan, robot_pose: Sequence[float], *,
         laser_pose: (x, y, yaw) of the laser in the robot frame.
 
     Returns:
-        (points (N, 2), beam indices (N,)): readings in [range_min, range_max] only.
+        (points (N, 2), beam indices (N,)): the returns of `classify_beams` (readings in
+        [range_min, range_max], and -inf at range_min).
 
     Raises:
         ScanError: If a pose is not finite.
 
     """
     ox, oy, oyaw = compose_pose(robot_pose, laser_pose)
-    ranges = np.asarray(scan.ranges, dtype=float)
-    beams = np.flatnonzero((ranges >= scan.range_min) & (ranges <= scan.range_max))
-    r = ranges[beams]
+    readings = classify_beams(scan)
+    beams = np.flatnonzero(readings.hit)
+    r = readings.seen[beams]
     theta = oyaw + scan.angle_min + beams * scan.angle_increment
     points = np.column_stack([ox + r * np.cos(theta), oy + r * np.sin(theta)])
     return points, beams
@@ -578,13 +641,10 @@ class ObstacleMemory:
     def _superseded(self, entries: list[_Entry], scan: Scan, laser: np.ndarray) -> np.ndarray:
         """Say, per remembered obstacle, whether the scan crosses it or sees it again."""
         polygons = [e.polygon for e in entries]
-        ranges = np.asarray(scan.ranges, dtype=float)
-        beams = len(ranges)
-        valid = (ranges >= scan.range_min) & (ranges <= scan.range_max)
+        readings = classify_beams(scan)
+        beams = len(readings.free)
         # Free space along each beam: up to its return, or up to range_max if none.
-        no_return = ~valid & (ranges > scan.range_max)
-        free = np.where(valid, ranges, np.where(no_return, scan.range_max, 0.0))
-        free = free - self.clear_margin
+        free = readings.free - self.clear_margin
         geometry = TrueGeometry(polygons)
         angle0 = laser[2] + scan.angle_min
         beam, owner, t = geometry.cast_pairs(laser[:2], angle0, scan.angle_increment, beams,
@@ -603,7 +663,8 @@ class ObstacleMemory:
         # (the robot moved a little since, and an edge return sits next to a miss).
         in_fov = (k >= -_VIEW_SLACK) & (k < beams + _VIEW_SLACK)
         k = np.clip(k, 0, beams - 1)
-        surface = np.where(valid, ranges, np.where(no_return, scan.range_max, 0.0))
+        # an ignored beam observed nothing: it sees no return again (nor does it hide one)
+        surface = np.where(readings.usable, readings.seen, -math.inf)
         padded = np.pad(surface, _VIEW_SLACK, mode='edge')
         reach = np.max(np.lib.stride_tricks.sliding_window_view(padded, 2 * _VIEW_SLACK + 1),
                        axis=1)[k]

@@ -37,8 +37,9 @@ robot_radius + clearance with a distance transform; the plane it samples is the 
 'waiting for map'). A malformed map is refused with one throttled error and the grid in force
 stays. With ``use_scan`` too, each ``scan`` (sensor_msgs/LaserScan from the laser at
 ``laser_pose`` in the robot frame) marks the cells of its returns and clears the cells its
-beams pass through, placed with the odometry pose nearest to its stamp; a malformed scan (a
-beam count its angles do not imply, within one increment, among others) or one stamped more
+beams pass through, beam by beam as REP 117 says (PlanningGrid.add_scan), placed with the
+odometry pose nearest to its stamp; a scan that cannot be interpreted (a beam count its
+angles do not imply, within one increment, among others) or one stamped more
 than MAX_SCAN_FUTURE_S ahead of this node's clock is dropped with one throttled error.
 
 Re-planning (``replan_check_rate``, 2 Hz by default): the rest of the plan in force, from the

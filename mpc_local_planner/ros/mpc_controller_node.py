@@ -33,7 +33,9 @@ and publishes.
 What the controller avoids, each control step: the world file's obstacles (source 'world'),
 the map's occupied cells near the robot merged into rectangles (source 'map'; recomputed
 when the map comes or the robot enters another cell), and what the laser saw (source 'scan':
-each scan's returns placed in the map frame with the odometry pose AT THE SCAN'S STAMP,
+each scan's returns, read beam by beam as REP 117 says (classify_beams: NaN and readings
+outside [range_min, range_max] are ignored, +inf clears the beam up to range_max, -inf is an
+obstacle at range_min), placed in the map frame with the odometry pose AT THE SCAN'S STAMP,
 interpolated in the last ODOM_HISTORY_S seconds of odometry (a scan older than that uses the
 oldest pose kept, a newer one the latest), clustered into convex pieces and remembered for
 ``obstacle_memory`` seconds). A plan through an obstacle is followed: the MPC stops in front
@@ -50,9 +52,10 @@ counts a polygon's circumscribed radius) plus SENSING_MARGIN.
 Refused input (odometry with NaN, inf or a zero quaternion; a plan that is empty, too short,
 too long, not finite or in another frame) makes the command zero until valid input comes,
 with one error per problem in the log (throttled) and the problem in the diagnostics. A
-malformed scan or grid (NaN or negative ranges, a zero increment, mismatched lengths, a
-beam count the angles do not imply within one increment, too many beams, another frame, a
-stamp more than MAX_SCAN_FUTURE_S ahead of this node's clock; a grid whose data is not
+scan that cannot be interpreted or a malformed grid (a zero or non-finite increment, limits
+that are not finite or not 0 <= range_min < range_max, mismatched lengths, a beam count
+the angles do not imply within one increment, too many beams, another frame, a stamp more
+than MAX_SCAN_FUTURE_S ahead of this node's clock; a grid whose data is not
 width x height, a resolution <= 0, a non-finite origin) is dropped with one throttled
 error; with 'scan' a source, the robot stops until a scan comes and whenever the latest
 valid one is older than ``scan_timeout``; with 'map' a source, it stops until a valid map

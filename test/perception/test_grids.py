@@ -126,6 +126,29 @@ def test_planning_grid_marks_scan_returns_and_clears_along_the_beams() -> None:
     assert grid.segment_is_free((0.0, 0.0), (1.5, 0.0))
 
 
+def test_planning_grid_reads_each_beam_as_rep_117_says() -> None:
+    box = ConvexPolygon.from_box(1.0, -0.2, 1.3, 0.2)
+    laser = SimulatedLaser([box], fov=math.pi, beams=181)
+    seen = laser.scan((0.0, 0.0, 0.0))
+    # NaN and out-of-range readings where the box was neither clear its cells nor mark any
+    for reading in (np.nan, 20.0, 0.01):
+        grid = PlanningGrid(empty_map(), inflation=0.0)
+        grid.add_scan(seen, (0.0, 0.0, 0.0))
+        marked = grid.occupied.copy()
+        grid.add_scan(seen._replace(ranges=np.full_like(seen.ranges, reading)), (0.0, 0.0, 0.0))
+        np.testing.assert_array_equal(grid.occupied, marked, err_msg=str(reading))
+    # one NaN beam among good ones: the others still mark the box
+    grid = PlanningGrid(empty_map(), inflation=0.0)
+    grid.add_scan(seen._replace(ranges=np.where(np.arange(181) == 90, np.nan, seen.ranges)),
+                  (0.0, 0.0, 0.0))
+    assert not grid.segment_is_free((0.0, 0.0), (1.5, 0.0))
+    # -inf: the cell at range_min along the beam is marked, and nothing is cleared
+    grid.add_scan(seen._replace(ranges=np.where(np.arange(181) == 90, -np.inf, np.nan),
+                                range_min=0.5), (0.0, 0.0, 0.0))
+    assert not grid.is_free(np.array([0.55, 0.05]))[0]  # the cell x 0.5 .. 0.6, y 0 .. 0.1
+    assert not grid.segment_is_free((1.0, 0.0), (1.5, 0.0))  # the box stays
+
+
 def test_first_within_says_how_far_along_a_path_an_obstacle_comes_within_the_margin() -> None:
     grid = PlanningGrid(empty_map(), inflation=0.25)
     # the wall's cells start at x = 2.0 (grown by a cell: 1.9); the path runs along y = 1
@@ -156,5 +179,7 @@ def test_planning_grid_refuses_bad_options_and_scans() -> None:
     with pytest.raises(ValueError, match='inflation'):
         PlanningGrid(empty_map(), inflation=-0.1)
     grid = PlanningGrid(empty_map(), inflation=0.1)
-    with pytest.raises(ValueError, match='NaN'):
-        grid.add_scan(Scan(0.0, 0.1, 0.0, 5.0, np.array([1.0, math.nan])), (0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match='range_min must be finite'):
+        grid.add_scan(Scan(0.0, 0.1, math.nan, 5.0, np.array([1.0, 2.0])), (0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match='angle_increment must not be 0'):
+        grid.add_scan(Scan(0.0, 0.0, 0.0, 5.0, np.array([1.0, 2.0])), (0.0, 0.0, 0.0))

@@ -25,6 +25,7 @@ import pytest
 from mpc_local_planner.core.obstacles import ConvexPolygon, min_clearance, point_in_any
 from mpc_local_planner.perception.laser import SimulatedLaser
 from mpc_local_planner.perception.scan_obstacles import (
+    classify_beams,
     cluster_bounds,
     ObstacleMemory,
     Scan,
@@ -193,12 +194,16 @@ def good_scan(**changes: Any) -> Scan:
 @pytest.mark.parametrize(('scan', 'match'), [
     (good_scan(angle_increment=math.nan), 'angle_increment must be finite'),
     (good_scan(angle_increment=0.0), 'must not be 0'),
-    (good_scan(ranges=np.array([1.0, math.nan])), 'NaN at beam 1'),
-    (good_scan(ranges=np.array([1.0, -0.5])), 'negative value at beam 1'),
     (good_scan(intensities=np.ones(3)), '201 ranges but 3 intensities'),
     (good_scan(ranges=np.ones(10_001), angle_increment=1e-4), 'more than the 10000'),
     (good_scan(range_max=0.01), 'range_min < range_max'),
+    (good_scan(range_min=-0.1), 'range_min < range_max'),
+    (good_scan(range_min=math.nan), 'range_min must be finite'),
+    (good_scan(range_max=math.inf), 'range_max must be finite'),
     (good_scan(angle_min=math.inf), 'angle_min must be finite'),
+    (good_scan(angle_max=0.5), 'scan has 201 ranges but'),
+    (good_scan(angle_increment=0.1), 'more than a full turn'),
+    (good_scan(ranges=np.ones((2, 3))), 'one-dimensional'),
     (good_scan(stamp=math.nan), 'stamp must be finite'),
 ])
 def test_malformed_scans_raise_scan_error(scan: Scan, match: str) -> None:
@@ -206,14 +211,87 @@ def test_malformed_scans_raise_scan_error(scan: Scan, match: str) -> None:
         validate_scan(scan)
 
 
-def test_inf_and_out_of_range_readings_are_no_return_not_errors() -> None:
-    ranges = np.array([np.inf, 0.01, 3.0, 20.0])
-    scan = Scan(-0.1, 0.1, 0.05, 10.0, ranges)
+def test_each_reading_is_judged_on_its_own_as_rep_117_says() -> None:
+    # +inf: no return, free to range_max; -inf: too close, a return at range_min that frees
+    # nothing; NaN, below range_min, above range_max: ignored (no return, nothing free)
+    ranges = np.array([np.inf, -np.inf, np.nan, 0.01, 3.0, 20.0, -1.0, 0.05, 10.0])
+    scan = Scan(-0.4, 0.1, 0.05, 10.0, ranges)
 
     validate_scan(scan)
-    points, beams = scan_points(scan, (0.0, 0.0, 0.0))
+    beams = classify_beams(scan)
 
-    assert beams.tolist() == [2]
+    assert beams.hit.tolist() == [False, True, False, False, True, False, False, True, True]
+    np.testing.assert_array_equal(
+        beams.seen, [10.0, 0.05, np.nan, np.nan, 3.0, np.nan, np.nan, 0.05, 10.0])
+    np.testing.assert_array_equal(beams.free, [10.0, 0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.05, 10.0])
+    assert beams.usable.tolist() == [True, True, False, False, True, False, False, True, True]
+    points, index = scan_points(scan, (0.0, 0.0, 0.0))
+    assert index.tolist() == [1, 4, 7, 8]
     with pytest.raises(ScanError, match='robot pose must be three finite'):
         scan_to_obstacles(scan, (0.0, math.nan, 0.0))
     assert issubclass(ScanError, ValueError)
+
+
+def assert_same_polygons(got: list[ConvexPolygon], expected: list[ConvexPolygon]) -> None:
+    assert len(got) == len(expected)
+    for a, b in zip(got, expected, strict=True):
+        np.testing.assert_array_equal(a.vertices, b.vertices)
+        np.testing.assert_array_equal(a.A, b.A)
+        np.testing.assert_array_equal(a.b, b.b)
+
+
+def test_a_nan_beam_among_good_ones_is_ignored_and_the_scan_kept() -> None:
+    scan = SimulatedLaser([BOX]).scan((0.0, 0.0, 0.0))
+    face = np.flatnonzero(np.isfinite(scan.ranges))
+    middle = face[len(face) // 2]
+    nan_beam = scan._replace(ranges=np.where(np.arange(len(scan.ranges)) == middle, np.nan,
+                                             scan.ranges))
+    no_return = scan._replace(ranges=np.where(np.arange(len(scan.ranges)) == middle, np.inf,
+                                              scan.ranges))
+
+    validate_scan(nan_beam)
+    obstacles = scan_to_obstacles(nan_beam, (0.0, 0.0, 0.0))
+
+    assert middle not in scan_points(nan_beam, (0.0, 0.0, 0.0))[1]
+    # the pieces are those of the scan without that beam's return
+    assert_same_polygons(obstacles, scan_to_obstacles(no_return, (0.0, 0.0, 0.0)))
+    assert covered(obstacles, np.column_stack([np.full(51, 2.0), np.linspace(-0.5, 0.5, 51)]))
+
+
+def test_minus_inf_is_an_obstacle_at_range_min_along_its_beam() -> None:
+    ranges = np.full(9, np.inf)
+    ranges[6] = -np.inf
+    scan = Scan(-0.4, 0.1, 0.2, 10.0, ranges)
+
+    (obstacle,) = scan_to_obstacles(scan, (1.0, 0.0, 0.5))
+
+    points, beams = scan_points(scan, (1.0, 0.0, 0.5))
+    assert beams.tolist() == [6]
+    np.testing.assert_allclose(points[0], [1.0 + 0.2 * math.cos(0.7), 0.2 * math.sin(0.7)])
+    assert obstacle.contains(points, margin=1e-9)[0]
+
+
+def test_memory_is_not_cleared_by_nan_minus_inf_or_out_of_range_beams() -> None:
+    laser = SimulatedLaser([BOX])
+    box_face = np.array([[2.0, 0.0]])
+    # the box is gone, and the beams that pass where it was say nothing usable (a +inf scan,
+    # which does say it is gone, is the control)
+    for reading, cleared in ((np.nan, False), (-np.inf, False), (20.0, False), (0.01, False),
+                             (np.inf, True)):
+        memory = ObstacleMemory(ttl=5.0)
+        memory.update(laser.scan((0.0, 0.0, 0.0), stamp=0.0), (0.0, 0.0, 0.0))
+        blind = laser.scan((0.0, 0.0, 0.0), stamp=1.0)
+        blind = blind._replace(ranges=np.full_like(blind.ranges, reading))
+
+        memory.update(blind, (0.0, 0.0, 0.0))
+
+        assert covered(memory.obstacles(), box_face) is not cleared, reading
+
+
+def test_a_scan_of_nothing_but_nan_is_valid_and_carries_no_information() -> None:
+    scan = Scan(-1.0, 0.01, 0.05, 10.0, np.full(201, np.nan), angle_max=1.0)
+
+    validate_scan(scan)
+
+    assert not classify_beams(scan).usable.any()
+    assert scan_to_obstacles(scan, (0.0, 0.0, 0.0)) == []

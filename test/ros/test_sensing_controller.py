@@ -283,8 +283,9 @@ def bad_scans(world: World) -> dict[str, tuple[Callable[[], LaserScan], str]]:
         return make
 
     return {
-        'nan range': (changed(ranges=[1.0, math.nan] + [2.0] * (BEAMS - 2)), 'NaN'),
-        'negative range': (changed(ranges=[-1.0] + [2.0] * (BEAMS - 1)), 'negative'),
+        'nan range_max': (changed(range_max=math.nan), 'range_max must be finite'),
+        'range_max below range_min': (changed(range_min=2.0, range_max=1.0),
+                                      'range_min < range_max'),
         'zero increment': (changed(angle_increment=0.0), 'angle_increment must not be 0'),
         'nan increment': (changed(angle_increment=math.nan), 'angle_increment must be finite'),
         'intensities': (changed(intensities=[1.0] * 3), 'intensities'),
