@@ -69,7 +69,8 @@ BEAMS = 181
 class World:
     """The test's robot, laser, clock and listeners, around one controller."""
 
-    def __init__(self, ros, obstacles: list[ConvexPolygon], **params) -> None:
+    def __init__(self, ros, obstacles: list[ConvexPolygon], *, beams: int = BEAMS,
+                 **params) -> None:
         overrides = [Parameter('use_sim_time', value=True), Parameter('world_file', value='')]
         overrides += [Parameter(k, value=v) for k, v in params.items()]
         self.ros = ros
@@ -84,12 +85,15 @@ class World:
         self.markers: list[MarkerArray] = []
         self.io.create_subscription(MarkerArray, OBSTACLES_TOPIC, self.markers.append,
                                     LOCAL_PLAN_QOS)
-        self.laser = SimulatedLaser(obstacles, fov=FOV, beams=BEAMS, range_max=5.0) \
+        self.beams = beams
+        self.laser = SimulatedLaser(obstacles, fov=FOV, beams=beams, range_max=5.0) \
             if obstacles else None
         self.t = 1.0
         self.state = np.zeros(3)
         self.drive = True  # integrate the commands
         self.scanning = True  # publish a scan each tick
+        # what the laser driver makes of the true ranges (None: it publishes them as they are)
+        self.readings: Callable[[np.ndarray], np.ndarray] | None = None
         self.positions: list[np.ndarray] = []
         assert ros.spin_until(lambda: self.probe.odom_pub.get_subscription_count() > 0
                               and self.probe.plan_pub.get_subscription_count() > 0
@@ -102,13 +106,14 @@ class World:
         msg.header.stamp = seconds_to_stamp(stamp)
         msg.angle_min = -FOV / 2
         msg.angle_max = FOV / 2
-        msg.angle_increment = FOV / (BEAMS - 1)
+        msg.angle_increment = FOV / (self.beams - 1)
         msg.range_min = 0.05
         msg.range_max = 5.0
-        if self.laser is None:
-            msg.ranges = [math.inf] * BEAMS
-        else:
-            msg.ranges = [float(r) for r in self.laser.scan(pose).ranges]
+        ranges = self.laser.scan(pose).ranges if self.laser is not None \
+            else np.full(self.beams, math.inf)
+        if self.readings is not None:
+            ranges = self.readings(ranges)
+        msg.ranges = [float(r) for r in ranges]
         return msg
 
     def u(self) -> np.ndarray:
@@ -379,4 +384,66 @@ def test_an_occupied_block_in_the_map_becomes_rectangles_and_the_plan_is_followe
     positions = np.array(world.positions)
     assert np.max(positions[:, 0]) > 0.5
     assert not np.any(inside(block, positions))
+    check_commands(world.probe)
+
+
+# ----------------------------------------------------------------------------- (f)
+# A real laser (REP 117): about 1 % of its readings are NaN (erroneous) and 0.2 % -inf (an
+# object too close to measure), at random beams; 720 beams over the front half-plane, so
+# that hardly a scan comes without them.
+REAL_BEAMS = 720
+NAN_SHARE = 0.01
+TOO_CLOSE_SHARE = 0.002
+
+
+class RealLaserReadings:
+    """Turn a random NaN_SHARE of the beams into NaN and TOO_CLOSE_SHARE into -inf."""
+
+    def __init__(self, seed: int) -> None:
+        self.rng = np.random.default_rng(seed)
+        self.nan = self.too_close = 0
+
+    def __call__(self, ranges: np.ndarray) -> np.ndarray:
+        draw = self.rng.random(len(ranges))
+        nan = draw < NAN_SHARE
+        too_close = (draw >= NAN_SHARE) & (draw < NAN_SHARE + TOO_CLOSE_SHARE)
+        self.nan += int(nan.sum())
+        self.too_close += int(too_close.sum())
+        return np.where(nan, math.nan, np.where(too_close, -math.inf, ranges))
+
+
+def test_a_laser_with_nan_and_minus_inf_readings_is_used_beam_by_beam_to_the_goal(ros) -> None:
+    # (the World's robot is the paper's point, robot_radius 0: a -inf reading's obstacle at
+    # range_min lies 5 cm ahead of it, not under it)
+    world = World(ros, [WALL], beams=REAL_BEAMS, obstacle_sources=['scan'],
+                  scan_timeout=SCAN_TIMEOUT)
+    readings = world.readings = RealLaserReadings(seed=117)
+    world.probe.plan_pub.publish(poses_to_path(PLAN))
+
+    def stopped_at_the_wall() -> bool:
+        steps = world.steps()
+        return (world.state[0] > WALL_X - 0.5 and len(steps) > 5
+                and all(s.path_blocked and abs(s.v) < 0.01 for s in steps[-5:]))
+
+    # the wall across the plan is seen through the bad readings: the robot drives up to it
+    # and stops in front of it
+    assert world.run_until(stopped_at_the_wall, timeout=60.0)
+    assert not np.any(inside(WALL, np.array(world.positions)))
+    # the wall is taken away: the beams that now pass where it was clear it from the memory
+    # (NaN and -inf ones clear nothing), and the robot drives on to the goal
+    world.laser = None
+
+    def at_goal() -> bool:
+        return bool(np.hypot(*(world.state[:2] - PLAN[-1, :2])) < 0.1)
+
+    assert world.run_until(at_goal, timeout=90.0), world.steps()[-3:]
+    assert readings.nan > 0 and readings.too_close > 0
+    # every scan was used: none refused, the scan never went stale once it came, and the
+    # robot drove a good part of the time (it also stops, as it must, for the -inf
+    # readings' obstacles on its path, 5 cm ahead)
+    assert not world.errors('invalid scan')
+    steps = world.steps()
+    first_scan = next(i for i, s in enumerate(steps) if s.reason is not Reason.NO_SCAN)
+    assert not [s for s in steps[first_scan:] if s.reason is Reason.STALE_SCAN]
+    assert sum(s.v > 0.01 for s in steps) > len(steps) / 3
     check_commands(world.probe)
