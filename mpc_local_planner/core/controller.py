@@ -550,7 +550,8 @@ class MpcController:
             scan_required: the laser is a source of obstacles: without a scan (scan_time
                 None) or with one older than settings.scan_timeout the robot stops, as the
                 obstacles it knows may be out of date.
-            scan_time: the stamp of the latest valid scan (seconds), or None.
+            scan_time: the stamp of the latest valid scan with a usable reading (seconds),
+                or None.
             map_missing: the map is a source of obstacles and no valid map has come: the
                 robot stops until one does.
 

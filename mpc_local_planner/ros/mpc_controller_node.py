@@ -59,7 +59,11 @@ than MAX_SCAN_FUTURE_S ahead of this node's clock; a grid whose data is not
 width x height, a resolution <= 0, a non-finite origin) is dropped with one throttled
 error; with 'scan' a source, the robot stops until a scan comes and whenever the latest
 valid one is older than ``scan_timeout``; with 'map' a source, it stops until a valid map
-has come (as before the first scan: what the map would show is unknown).
+has come (as before the first scan: what the map would show is unknown). A scan without a
+usable reading (every beam NaN or outside [range_min, range_max]) is valid but blind: it is
+used (it shows nothing and clears nothing) and does not renew ``scan_timeout``, so one
+such scan among good ones changes nothing, and a laser that sees nothing usable for
+``scan_timeout`` stops the robot as a silent one does (with a throttled warning).
 
 A wrong lifecycle request (activate while unconfigured, an unknown transition id) is
 refused with ``success: false`` and the node stays as it is (ManagedNode). When the process
@@ -105,6 +109,7 @@ from mpc_local_planner.perception.local_obstacles import LocalObstacles
 from mpc_local_planner.perception.pose_history import PoseHistory
 from mpc_local_planner.perception.scan_obstacles import (
     check_scan_stamp,
+    classify_beams,
     MAX_BEAMS,
     ObstacleMemory,
     validate_scan,
@@ -503,7 +508,9 @@ class MpcControllerNode(ManagedNode):
         The robot's pose is the odometry's at the scan's stamp (see pose_at). A malformed
         scan is dropped with one throttled error, so the scan goes stale if only bad ones
         come; the latest valid scan's time (its stamp, but never later than its arrival)
-        is what scan_timeout is measured against.
+        is what scan_timeout is measured against, if it has a usable reading: a blind
+        scan (no beam that is not ignored, see classify_beams) is used but does not renew
+        it, so only blind scans go stale as no scans do.
 
         Args:
             msg: the scan, or its CDR bytes as the raw subscription delivers them.
@@ -534,9 +541,15 @@ class MpcControllerNode(ManagedNode):
             return
         self._local.scan_updated()
         self._scan_stamp = stamp
-        self._scan_time = min(stamp, receipt)
         if self._problems.resolve('scan'):
             self.get_logger().info('scans are valid again')
+        if not classify_beams(scan).usable.any():
+            self.get_logger().warning(
+                'scan without a usable reading (every beam NaN or outside [range_min, '
+                'range_max]): it does not renew scan_timeout',
+                throttle_duration_sec=ERROR_THROTTLE_S)
+            return
+        self._scan_time = min(stamp, receipt)
 
     def _read_scan(self, msg: LaserScan | bytes, receipt: float) -> tuple[Any, float]:
         """Return the scan (validated, stamped) and its stamp in seconds.

@@ -447,3 +447,46 @@ def test_a_laser_with_nan_and_minus_inf_readings_is_used_beam_by_beam_to_the_goa
     assert not [s for s in steps[first_scan:] if s.reason is Reason.STALE_SCAN]
     assert sum(s.v > 0.01 for s in steps) > len(steps) / 3
     check_commands(world.probe)
+
+
+# ----------------------------------------------------------------------------- (g)
+def test_scans_without_a_usable_reading_renew_nothing_and_only_blind_scans_go_stale(
+        ros) -> None:
+    world = World(ros, [], obstacle_sources=['scan'], scan_timeout=SCAN_TIMEOUT)
+    world.probe.plan_pub.publish(poses_to_path(PLAN))
+    assert world.run_until(lambda: any(s.reason is Reason.TRACKING and s.v > 0.01
+                                       for s in world.steps()))
+
+    def blind(ranges: np.ndarray) -> np.ndarray:
+        return np.full_like(ranges, math.nan)
+
+    # every other scan blind: the others keep the scan fresh, the robot drives on
+    count = [0]
+
+    def every_other(ranges: np.ndarray) -> np.ndarray:
+        count[0] += 1
+        return blind(ranges) if count[0] % 2 else ranges
+
+    world.readings = every_other
+    first = len(world.probe.diagnostics)
+    world.run_for(1.0)
+    assert all(s.reason is Reason.TRACKING for s in world.steps(first))
+    # only blind scans: valid (no error), but they renew nothing: stale as without scans
+    world.readings = blind
+    last_usable = world.t
+    first = len(world.probe.diagnostics)
+    assert world.run_until(lambda: any(s.reason is Reason.STALE_SCAN
+                                       for s in world.steps(first)))
+    stale = next(d for d in world.probe.diagnostics[first:]
+                 if d.step.reason is Reason.STALE_SCAN)
+    assert stale.stamp <= last_usable + SCAN_TIMEOUT + STEP + 1e-6
+    assert stale.step.v == 0 and stale.step.omega == 0
+    assert not world.errors('invalid scan')
+    assert any('without a usable reading' in line
+               for line in world.probe.log_lines('mpc_controller', Log.WARN))
+    # readings again: it drives on
+    world.readings = None
+    resume = len(world.probe.diagnostics)
+    assert world.run_until(lambda: any(s.reason is Reason.TRACKING and s.v > 0.01
+                                       for s in world.steps(resume)))
+    check_commands(world.probe)
