@@ -271,8 +271,12 @@ def check_beam_count(angle_min: float, angle_max: float, angle_increment: float,
     if abs(last - angle_max) <= abs(angle_increment) * (1.0 + 1e-6):
         return
     span = (angle_max - angle_min) / angle_increment
-    implied = (f'{round(span) + 1}' if span > -0.5 else
-               "none (the increment's sign leads away from angle_max)")
+    if not math.isfinite(span):  # angles so far apart that the count overflows
+        implied = 'more beams than can be counted'
+    elif span > -0.5:
+        implied = f'{round(span) + 1}'
+    else:
+        implied = "none (the increment's sign leads away from angle_max)"
     msg = (f'scan has {beams} ranges but angle_min {angle_min:.6g}, angle_max '
            f'{angle_max:.6g} and angle_increment {angle_increment:.6g} imply {implied}')
     raise ScanError(msg)

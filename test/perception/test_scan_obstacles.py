@@ -202,6 +202,7 @@ def good_scan(**changes: Any) -> Scan:
     (good_scan(range_max=math.inf), 'range_max must be finite'),
     (good_scan(angle_min=math.inf), 'angle_min must be finite'),
     (good_scan(angle_max=0.5), 'scan has 201 ranges but'),
+    (good_scan(angle_min=-1e308, angle_max=1e308), 'more beams than can be counted'),
     (good_scan(angle_increment=0.1), 'more than a full turn'),
     (good_scan(ranges=np.ones((2, 3))), 'one-dimensional'),
     (good_scan(stamp=math.nan), 'stamp must be finite'),
