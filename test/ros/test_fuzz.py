@@ -13,12 +13,15 @@
 # limitations under the License.
 """Property-based fuzzing: random, mostly malformed messages never crash or steer the robot.
 
-The conversions either return finite values or raise ValueError. The controller and the
+The conversions either return finite values or raise ValueError. A scan is refused for its
+header (angles, limits, lengths), never for its readings: NaN, +-inf, negative and huge
+readings are judged beam by beam (REP 117) and give finite points. The controller and the
 simulator nodes get random message sequences through their callbacks (called directly, the
 way the executor calls them; simulated time is set by the test) and every twist they
 publish, as the probe receives it over DDS, is finite and within the unicycle's bounds. A
 second controller (namespace ``sensing``, obstacle_sources world, scan and map) gets random
-LaserScan and OccupancyGrid messages (and their CDR bytes) among good odometry and scans.
+LaserScan and OccupancyGrid messages (and their CDR bytes) among good odometry and scans; a
+good scan with random readings is used, one with a broken header refused.
 The node tests are marked slow (DDS). Hypothesis is derandomized with a bounded number of
 examples: the same cases every run.
 """
@@ -42,6 +45,12 @@ from rclpy.time import Time as RosTime
 from sensor_msgs.msg import LaserScan
 
 from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.perception.scan_obstacles import (
+    classify_beams,
+    scan_points,
+    ScanError,
+    validate_scan,
+)
 from mpc_local_planner.ros.conversions import (
     grid_from_message,
     odometry_to_state,
@@ -139,6 +148,16 @@ def scans(draw, stamp: Time | None = None) -> LaserScan:
     if draw(st.booleans()):
         msg.intensities = draw(st.lists(st.floats(0.0, 1.0), max_size=91))
     return msg
+
+
+# a good scan's beam count (good_scan below), with any readings
+READINGS = st.lists(RANGE, min_size=91, max_size=91)
+# what makes a scan impossible to interpret, whatever its readings
+BROKEN_HEADERS = st.sampled_from([
+    ('angle_increment', 0.0), ('angle_increment', math.nan), ('angle_min', math.inf),
+    ('range_min', math.nan), ('range_min', -0.1), ('range_max', 0.05), ('range_max', 0.01),
+    ('range_max', math.inf), ('angle_max', 0.0), ('intensities', [1.0] * 3),
+])
 
 
 @st.composite
@@ -241,6 +260,43 @@ def test_scans_convert_and_their_cdr_beam_count_is_exact_or_none(
         assert scan_beam_count(garbage) is None
     scan = scan_from_message(msg)
     assert len(scan.ranges) == len(msg.ranges)
+
+
+@FUZZ
+@given(msg=scans(), readings=READINGS)
+def test_a_scan_is_refused_for_its_header_never_for_its_readings_and_gives_finite_points(
+        msg: LaserScan, readings: list[float]) -> None:
+    scan = scan_from_message(msg)
+    calm = scan._replace(ranges=np.ones_like(scan.ranges))  # the same header, plain readings
+
+    def refusal(s) -> str | None:
+        try:
+            validate_scan(s)
+        except ScanError as err:
+            return str(err)
+        return None
+
+    verdict = refusal(scan)
+    assert verdict == refusal(calm)
+    header_ok = (all(math.isfinite(v) for v in (msg.angle_min, msg.angle_increment,
+                                                 msg.range_min, msg.range_max))
+                 and msg.angle_increment != 0.0 and 0.0 <= msg.range_min < msg.range_max)
+    if not header_ok:
+        assert verdict is not None
+    if verdict is not None:
+        return
+    noisy = scan._replace(ranges=np.asarray(readings[:len(scan.ranges)], dtype=np.float32))
+    validate_scan(noisy)
+    beams = classify_beams(noisy)
+    assert np.all(np.isfinite(beams.free)) and np.all(beams.free >= 0.0)
+    assert np.all(beams.free <= scan.range_max)
+    ranges = np.asarray(noisy.ranges, dtype=float)
+    in_range = (ranges >= scan.range_min) & (ranges <= scan.range_max)
+    np.testing.assert_array_equal(beams.hit, in_range | (ranges == -math.inf))
+    assert not np.any(beams.free[np.isnan(ranges)])  # a NaN beam clears nothing
+    points, _ = scan_points(noisy, (0.5, -0.2, 0.3))
+    assert len(points) == int(beams.hit.sum())
+    assert np.all(np.isfinite(points))
 
 
 @FUZZ
@@ -422,6 +478,10 @@ SENSING_EVENTS = st.lists(st.one_of(
     st.tuples(st.just('garbage bytes'), st.binary(max_size=80)),
     st.tuples(st.just('good scan'), st.floats(-1.0, 0.3)), st.tuples(st.just('good scan'),
                                                                       st.floats(-1.0, 0.3)),
+    # a good header with any readings is used; a broken header is refused, whatever the
+    # readings (stamped within the clock skew accepted, so that only the scan decides)
+    st.tuples(st.just('noisy scan'), st.floats(-0.9, 0.1), READINGS),
+    st.tuples(st.just('broken scan'), st.floats(-0.9, 0.1), READINGS, BROKEN_HEADERS),
     GOOD_ODOM, GOOD_ODOM,
     st.tuples(st.just('good plan')),
     st.tuples(st.just('tick')), st.tuples(st.just('tick')), st.tuples(st.just('tick')),
@@ -446,6 +506,17 @@ def test_controller_survives_random_scans_and_grids_and_publishes_bounded_twists
             node.map_callback(event[1])
         elif kind == 'good scan':
             node.scan_callback(serialize_message(good_scan(nodes.t + event[1])))
+        elif kind in ('noisy scan', 'broken scan'):
+            msg = good_scan(nodes.t + event[1])
+            msg.ranges = event[2]
+            if kind == 'broken scan':
+                setattr(msg, *event[3])
+            stamp, before = stamp_to_seconds(msg.header.stamp), node._scan_stamp
+            node.scan_callback(serialize_message(msg))
+            if kind == 'broken scan':
+                assert node._scan_stamp == before, event[3]  # refused
+            elif node.pose_at(stamp) is not None and (before is None or stamp >= before):
+                assert node._scan_stamp == stamp  # used (only an older scan is skipped)
         elif kind == 'good odom':
             msg = Odometry()
             msg.header.frame_id = 'odom'
