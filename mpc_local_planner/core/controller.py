@@ -224,8 +224,9 @@ class ControllerSettings:
     """What the controller checks around the MPC.
 
     Attributes:
-        goal_tolerance: position error to the plan's last pose that counts as arrival (m).
-        goal_heading_tolerance: heading error that counts as arrival (rad).
+        xy_goal_tolerance: position error to the plan's last pose that counts as arrival (m;
+            Nav2's SimpleGoalChecker's name).
+        yaw_goal_tolerance: heading error that counts as arrival (rad; Nav2's name).
         odom_timeout: odometry older than this (seconds of ROS time) is stale.
         turn_length: metres of path parameter per radian turned in place at plan corners.
         capacity: segments a waypoint plan may have (the solver's size; fixed so that
@@ -237,8 +238,8 @@ class ControllerSettings:
 
     """
 
-    goal_tolerance: float = 0.02
-    goal_heading_tolerance: float = 0.05
+    xy_goal_tolerance: float = 0.02
+    yaw_goal_tolerance: float = 0.05
     odom_timeout: float = 0.5
     turn_length: float = 0.25
     capacity: int = 64
@@ -247,7 +248,7 @@ class ControllerSettings:
 
     def __post_init__(self) -> None:
         """Refuse non-positive tolerances and capacities."""
-        for name in ('goal_tolerance', 'goal_heading_tolerance', 'odom_timeout',
+        for name in ('xy_goal_tolerance', 'yaw_goal_tolerance', 'odom_timeout',
                      'turn_length', 'scan_timeout'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -580,8 +581,8 @@ class MpcController:
             return self._idle(Reason.INVALID_ODOM, str(err))
         try:
             position, heading = self.goal_error(x)
-            if (position <= self.settings.goal_tolerance
-                    and heading <= self.settings.goal_heading_tolerance):
+            if (position <= self.settings.xy_goal_tolerance
+                    and heading <= self.settings.yaw_goal_tolerance):
                 return self._idle(Reason.GOAL_REACHED)
             solution = self._mpc.solve(x)
         except Exception as err:  # a controller must not die: stop instead

@@ -172,8 +172,10 @@ def test_new_velocity_bounds_bound_the_command() -> None:
 
 
 def test_settings_refuse_non_positive_tolerances() -> None:
-    with pytest.raises(ValueError, match='goal_tolerance'):
-        ControllerSettings(goal_tolerance=0.0)
+    with pytest.raises(ValueError, match='xy_goal_tolerance'):
+        ControllerSettings(xy_goal_tolerance=0.0)
+    with pytest.raises(ValueError, match='yaw_goal_tolerance'):
+        ControllerSettings(yaw_goal_tolerance=0.0)
 
 
 def test_world_files_resolve_by_name_and_missing_ones_raise() -> None:
