@@ -122,10 +122,15 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'them', int_range=(0, 64)),
     ParameterSpec('xy_goal_tolerance', float(_SETTINGS.xy_goal_tolerance),
                   "distance to the end of the plan that counts as arrived (m; Nav2's name): "
-                  'then cmd_vel is zero', float_range=(1e-4, 10.0)),
+                  'there the robot turns in place to the goal heading, and arrived cmd_vel is '
+                  'zero', float_range=(1e-4, 10.0)),
     ParameterSpec('yaw_goal_tolerance', float(_SETTINGS.yaw_goal_tolerance),
                   "heading error that counts as arrived (rad; Nav2's name)",
                   float_range=(1e-4, math.pi)),
+    ParameterSpec('stateful', bool(_SETTINGS.stateful),
+                  "as Nav2's SimpleGoalChecker: the position met stays met, and arrived "
+                  'cmd_vel stays zero until a new plan, even if the odometry drifts out; '
+                  'false: a pose drifting out is driven back'),
     ParameterSpec('odom_timeout', float(_SETTINGS.odom_timeout),
                   'odometry older than this (s) is stale: cmd_vel is zero',
                   float_range=(0.001, 3600.0)),
@@ -237,6 +242,7 @@ def build_settings(values: dict[str, Any], *, world_radius: float = 0.0,
     model = Unicycle(**{name: float(values[name]) for name in _MODEL_FIELDS},
                      v_min=None if values['allow_reversing'] else 0.0)
     settings = ControllerSettings(**{k: float(values[k]) for k in _SETTINGS_FIELDS},
+                                  stateful=bool(values['stateful']),
                                   max_plan_poses=int(values['max_plan_poses']))
     return config, model, settings
 
