@@ -109,6 +109,7 @@ class BagKey(Enum):
 _LEVELS = {
     Reason.TRACKING: Level.OK,
     Reason.GOAL_REACHED: Level.OK,
+    Reason.ROTATE_TO_HEADING: Level.OK,
     Reason.ERROR: Level.ERROR,
     Reason.INVALID_ODOM: Level.ERROR,
     Reason.INVALID_PLAN: Level.ERROR,
@@ -119,8 +120,9 @@ _LEVELS = {
 def level_of(reason: Reason | None) -> Level:
     """Return the severity of a reason.
 
-    OK while tracking or at the goal, ERROR when refused input or a failure stops the robot,
-    WARN otherwise (waiting for input, stale odometry, the shifted candidate).
+    OK while tracking, turning to the goal heading or at the goal, ERROR when refused input
+    or a failure stops the robot, WARN otherwise (waiting for input, stale odometry, the
+    shifted candidate).
     """
     return _LEVELS.get(reason, Level.WARN) if reason is not None else Level.WARN
 

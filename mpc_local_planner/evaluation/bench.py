@@ -410,7 +410,7 @@ def bench_scan_control(steps: int) -> dict[str, Any]:
     world = _barn_world()
     poses, kind = _reference(world)
     config = MpcConfig(horizon=10, step=STEP, robot_radius=world.robot_radius)
-    settings = ControllerSettings(goal_tolerance=0.1, goal_heading_tolerance=math.pi,
+    settings = ControllerSettings(xy_goal_tolerance=0.1, yaw_goal_tolerance=math.pi,
                                   capacity=2 * len(poses) + 1)
     controller = MpcController(Unicycle(), config, settings=settings)
     _control_run(world, poses, steps, controller)  # builds the NLPs it meets
@@ -461,8 +461,8 @@ def bench_footprint(scenario: str, steps: int, *, footprint: Footprint = JACKAL,
     # position only, as bench_scan_control does
     tolerances = ((REACHED_POSITION, REACHED_HEADING) if scenario == 'paper'
                   else (0.1, math.pi))
-    settings = ControllerSettings(goal_tolerance=tolerances[0],
-                                  goal_heading_tolerance=tolerances[1],
+    settings = ControllerSettings(xy_goal_tolerance=tolerances[0],
+                                  yaw_goal_tolerance=tolerances[1],
                                   capacity=2 * len(poses) + 1)
     sensing = scenario == 'barn'
     known = () if sensing else world.obstacles

@@ -154,8 +154,9 @@ class MpcLocal:
         output = self.controller.compute(x, t)
         solution = output.solution
         if solution is None:
-            return ControlStep(u=output.u, success=output.reason is Reason.GOAL_REACHED,
-                               solve_time_s=0.0, detail=output)
+            # no solve: a failure unless at the goal or turning in place to its heading
+            done = output.reason in (Reason.GOAL_REACHED, Reason.ROTATE_TO_HEADING)
+            return ControlStep(u=output.u, success=done, solve_time_s=0.0, detail=output)
         return ControlStep(
             u=output.u, s=float(solution.s), value=float(solution.value),
             solve_time_s=float(solution.solve_time_s),

@@ -252,7 +252,7 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
         config = MpcConfig(robot_radius=robot.footprint.radius if robot.footprint.is_circle
                            else 0.0, footprint=_vertices(robot.footprint), budget=budget)
         if name == 'proposed':
-            settings = ControllerSettings(goal_tolerance=0.05, goal_heading_tolerance=math.pi,
+            settings = ControllerSettings(xy_goal_tolerance=0.05, yaw_goal_tolerance=math.pi,
                                           capacity=PATH_CAPACITY)
             mpc = MpcController(model, config, settings=settings)
             mpc.set_plan(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))  # the NLPs' path family

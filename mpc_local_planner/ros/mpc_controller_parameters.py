@@ -51,7 +51,7 @@ _MPC_FIELDS = {
     'max_iterations': 'max_iterations', 'obstacle_slots': 'obstacle_slots',
 }
 _MODEL_FIELDS = ('v_max', 'omega_max')
-_SETTINGS_FIELDS = ('goal_tolerance', 'goal_heading_tolerance', 'odom_timeout',
+_SETTINGS_FIELDS = ('xy_goal_tolerance', 'yaw_goal_tolerance', 'odom_timeout',
                     'scan_timeout')
 # collision_margin None (v_max step / 2) is -1 as a parameter: a double cannot be None.
 _AUTO_MARGIN = -1.0
@@ -120,11 +120,17 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'against all in reach): the NLPs for 0..this many are built with each plan, '
                   'so that no control step builds one; a change rebuilds them as steps need '
                   'them', int_range=(0, 64)),
-    ParameterSpec('goal_tolerance', float(_SETTINGS.goal_tolerance),
-                  'distance to the end of the plan that counts as arrived (m): then cmd_vel '
-                  'is zero', float_range=(1e-4, 10.0)),
-    ParameterSpec('goal_heading_tolerance', float(_SETTINGS.goal_heading_tolerance),
-                  'heading error that counts as arrived (rad)', float_range=(1e-4, math.pi)),
+    ParameterSpec('xy_goal_tolerance', float(_SETTINGS.xy_goal_tolerance),
+                  "distance to the end of the plan that counts as arrived (m; Nav2's name): "
+                  'there the robot turns in place to the goal heading, and arrived cmd_vel is '
+                  'zero', float_range=(1e-4, 10.0)),
+    ParameterSpec('yaw_goal_tolerance', float(_SETTINGS.yaw_goal_tolerance),
+                  "heading error that counts as arrived (rad; Nav2's name)",
+                  float_range=(1e-4, math.pi)),
+    ParameterSpec('stateful', bool(_SETTINGS.stateful),
+                  "as Nav2's SimpleGoalChecker: the position met stays met, and arrived "
+                  'cmd_vel stays zero until a new plan, even if the odometry drifts out; '
+                  'false: a pose drifting out is driven back'),
     ParameterSpec('odom_timeout', float(_SETTINGS.odom_timeout),
                   'odometry older than this (s) is stale: cmd_vel is zero',
                   float_range=(0.001, 3600.0)),
@@ -236,6 +242,7 @@ def build_settings(values: dict[str, Any], *, world_radius: float = 0.0,
     model = Unicycle(**{name: float(values[name]) for name in _MODEL_FIELDS},
                      v_min=None if values['allow_reversing'] else 0.0)
     settings = ControllerSettings(**{k: float(values[k]) for k in _SETTINGS_FIELDS},
+                                  stateful=bool(values['stateful']),
                                   max_plan_poses=int(values['max_plan_poses']))
     return config, model, settings
 

@@ -15,6 +15,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -24,6 +26,7 @@ from mpc_local_planner.core.controller import (
     ControlOutput,
     MpcController,
     Reason,
+    ROTATE_STEPS,
     within_faces,
 )
 from mpc_local_planner.core.models import Unicycle
@@ -115,7 +118,8 @@ def test_an_exception_in_the_solve_gives_zero_with_the_error_reason_and_its_mess
 
 
 def test_only_tracking_and_the_candidate_apply_an_input_and_every_reason_has_words() -> None:
-    assert {r for r in Reason if r.applies_input} == {Reason.TRACKING, Reason.CANDIDATE}
+    assert {r for r in Reason if r.applies_input} == {Reason.TRACKING, Reason.CANDIDATE,
+                                                      Reason.ROTATE_TO_HEADING}
     assert all(r.text and ': ' not in r.text for r in Reason)
     assert len({r.value for r in Reason}) == len(Reason)
     plain = ControlOutput(np.zeros(2), None, Reason.NO_PLAN)
@@ -171,9 +175,114 @@ def test_new_velocity_bounds_bound_the_command() -> None:
     assert out.u[0] > 0.05
 
 
-def test_settings_refuse_non_positive_tolerances() -> None:
-    with pytest.raises(ValueError, match='goal_tolerance'):
-        ControllerSettings(goal_tolerance=0.0)
+@pytest.mark.parametrize('name', ['xy_goal_tolerance', 'yaw_goal_tolerance'])
+@pytest.mark.parametrize('value', [0.0, -0.1, math.nan, math.inf])
+def test_settings_refuse_goal_tolerances_that_are_not_positive_and_finite(
+        name: str, value: float) -> None:
+    with pytest.raises(ValueError, match=f'{name} must be > 0 and finite, got {value}'):
+        ControllerSettings(**{name: value})
+
+
+def test_settings_refuse_a_stateful_that_is_not_a_bool() -> None:
+    with pytest.raises(ValueError, match="stateful must be true or false, got 'yes'"):
+        ControllerSettings(stateful='yes')  # type: ignore[arg-type]
+
+
+def test_the_default_goal_tolerances_are_for_noisy_odometry_and_stateful() -> None:
+    settings = ControllerSettings()
+    # looser than the paper's 2 cm / 0.05 rad (odometry noise 0.5-3 cm), tighter than Nav2's
+    # 0.25 m / 0.25 rad
+    assert (settings.xy_goal_tolerance, settings.yaw_goal_tolerance) == (0.1, 0.15)
+    assert settings.stateful is True
+
+
+# ----------------------------------------------------------------------------- arrival
+# The goal of PLAN, and a pose at its position turned away from its heading.
+GOAL = np.array([2.5, 0.0, WORLD.goal[2]])
+TURNED = GOAL + np.array([0.05, 0.0, 0.5])
+
+
+def arrival_controller(**settings: object) -> MpcController:
+    controller = MpcController(Unicycle(), CONFIG, obstacles=WORLD.obstacles,
+                               settings=ControllerSettings(**settings))
+    controller.set_plan(PLAN)
+    return controller
+
+
+def test_at_the_goal_position_off_its_heading_the_robot_turns_in_place_then_arrives() -> None:
+    controller = arrival_controller()
+    model, step = controller.model, controller.config.step
+    x = TURNED.copy()
+    reasons = []
+    for _ in range(20):
+        out = controller.compute(x, 0.0)
+        reasons.append(out.reason)
+        if out.reason is Reason.GOAL_REACHED:
+            break
+        assert out.reason is Reason.ROTATE_TO_HEADING and out.solution is None
+        assert out.u[0] == 0.0 and out.u[1] < 0.0  # towards the heading, no creeping
+        assert abs(out.u[1]) <= model.omega_max
+        x = model.step(x, out.u, step)
+    # omega closes the error over ROTATE_STEPS periods: 0.5 rad -> 0.25 -> 0.125, arrived
+    assert reasons == [Reason.ROTATE_TO_HEADING] * 2 + [Reason.GOAL_REACHED]
+    np.testing.assert_allclose(x[:2], TURNED[:2], atol=1e-12)  # turned in place
+    position, heading = controller.goal_error(x)
+    assert position == pytest.approx(0.05) and heading <= 0.15
+    assert ROTATE_STEPS == 2.0
+
+
+def test_a_polygon_robot_beside_an_obstacle_lets_the_mpc_steer_to_the_heading() -> None:
+    # a 0.6 x 0.4 m rectangle turning in place sweeps a disc of radius 0.36 m: with a box
+    # 0.2 m beside the goal that turn could hit it, so the MPC is asked instead
+    rectangle = ((0.3, 0.2), (-0.3, 0.2), (-0.3, -0.2), (0.3, -0.2))
+    box = ConvexPolygon.from_box(2.75, -0.5, 3.0, 0.5)
+    controller = MpcController(Unicycle(), MpcConfig(footprint=rectangle), obstacles=[box])
+    controller.set_plan(PLAN)
+
+    def steered(state: np.ndarray) -> None:
+        raise RuntimeError('the MPC was asked')
+
+    controller.mpc.solve = steered  # type: ignore[method-assign]
+    out = controller.compute(TURNED, 0.0)
+    assert out.reason is Reason.ERROR and 'the MPC was asked' in out.detail
+    controller.set_obstacles([ConvexPolygon.from_box(3.5, -0.5, 4.0, 0.5)])  # 0.95 m away
+    out = controller.compute(TURNED, 0.0)
+    assert out.reason is Reason.ROTATE_TO_HEADING and out.u[0] == 0.0
+
+
+def test_stateful_arrival_stays_through_drift_until_a_new_plan() -> None:
+    controller = arrival_controller()
+    assert controller.compute(GOAL + [0.08, 0.0, 0.1], 0.0).reason is Reason.GOAL_REACHED
+    # odometry noise carries the measured pose out of both tolerances: still arrived
+    for drifted in (GOAL + [0.3, 0.0, 0.0], GOAL + [0.0, 0.12, 1.0], WORLD.start):
+        out = controller.compute(drifted, 0.0)
+        assert out.reason is Reason.GOAL_REACHED and out.solution is None
+        np.testing.assert_array_equal(out.u, [0.0, 0.0])
+    assert controller.compute(None, 0.0).reason is Reason.GOAL_REACHED
+    # a new plan (the same poses again: a new goal) is driven to from the drifted pose
+    controller.set_plan(PLAN)
+    out = controller.compute(GOAL + [0.3, 0.0, 0.0], 0.0)
+    assert out.reason in (Reason.TRACKING, Reason.CANDIDATE) and out.solution is not None
+
+
+def test_stateful_the_goal_position_once_met_stays_met_while_turning() -> None:
+    controller = arrival_controller()
+    assert controller.compute(TURNED, 0.0).reason is Reason.ROTATE_TO_HEADING
+    # noise moves the position 0.12 m off (outside 0.1 m): the robot still only turns
+    out = controller.compute(GOAL + [0.12, 0.0, 0.5], 0.0)
+    assert out.reason is Reason.ROTATE_TO_HEADING and out.u[0] == 0.0
+    assert controller.compute(GOAL + [0.12, 0.0, 0.1], 0.0).reason is Reason.GOAL_REACHED
+
+
+def test_not_stateful_a_pose_that_drifts_out_is_driven_back() -> None:
+    controller = arrival_controller(stateful=False)
+    assert controller.compute(GOAL + [0.08, 0.0, 0.1], 0.0).reason is Reason.GOAL_REACHED
+    out = controller.compute(GOAL + [0.3, 0.0, 0.0], 0.0)
+    assert out.reason in (Reason.TRACKING, Reason.CANDIDATE) and out.solution is not None
+    controller.set_plan(PLAN)
+    assert controller.compute(TURNED, 0.0).reason is Reason.ROTATE_TO_HEADING
+    out = controller.compute(GOAL + [0.12, 0.0, 0.5], 0.0)  # out of xy: the MPC again
+    assert out.reason in (Reason.TRACKING, Reason.CANDIDATE) and out.solution is not None
 
 
 def test_world_files_resolve_by_name_and_missing_ones_raise() -> None:

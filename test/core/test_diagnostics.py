@@ -100,6 +100,7 @@ def test_missing_malformed_and_unknown_values_keep_their_defaults() -> None:
 
 def test_levels_follow_the_reason() -> None:
     assert level_of(Reason.TRACKING) is Level.OK and level_of(Reason.GOAL_REACHED) is Level.OK
+    assert level_of(Reason.ROTATE_TO_HEADING) is Level.OK  # arriving, not waiting
     for reason in (Reason.STOP, Reason.ERROR, Reason.INVALID_ODOM, Reason.INVALID_PLAN):
         assert level_of(reason) is Level.ERROR
     for reason in (Reason.CANDIDATE, Reason.NO_PLAN, Reason.NO_ODOM, Reason.STALE_ODOM):

@@ -53,7 +53,7 @@ def barn_controller() -> MpcController:
     """
     config = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
                        robot_radius=0.0, budget='iterations', max_solve_iterations=100)
-    settings = ControllerSettings(goal_tolerance=0.05, goal_heading_tolerance=math.pi,
+    settings = ControllerSettings(xy_goal_tolerance=0.05, yaw_goal_tolerance=math.pi,
                                   capacity=128)
     return MpcController(Unicycle(v_max=2.0, omega_max=4.0), config, settings=settings)
 

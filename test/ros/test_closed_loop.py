@@ -44,6 +44,7 @@ from mpc_local_planner.ros.closed_loop import (
     main,
     node_command,
     node_parameters,
+    PAPER_GOAL_TOLERANCES,
     parse_parameter,
     POLYGON_CLEARANCE,
     recorder_topics,
@@ -115,6 +116,13 @@ def test_node_parameters_use_sim_time_and_the_world(tmp_path) -> None:
     assert params['unicycle_simulator']['real_time_factor'] == 8.0
     assert params['mpc_controller']['analytic_path'] == 'paper_sinusoid'
     np.testing.assert_allclose(params['unicycle_simulator']['initial_pose'], WORLD.start)
+    # the paper's scenario arrives within its own tight tolerances (exact odometry), not
+    # within the node's defaults for a real robot; --param still comes last
+    assert PAPER_GOAL_TOLERANCES == {'xy_goal_tolerance': 0.02, 'yaw_goal_tolerance': 0.05}
+    assert params['mpc_controller'].items() >= PAPER_GOAL_TOLERANCES.items()
+    loose = node_parameters(LoopOptions(extra_parameters={
+        'mpc_controller': {'xy_goal_tolerance': 0.1}}), WORLD_FILE, WORLD)
+    assert loose['mpc_controller']['xy_goal_tolerance'] == 0.1
 
 
 def test_analytic_path_on_a_world_without_one_is_refused(tmp_path) -> None:

@@ -231,6 +231,9 @@ def test_controller_applies_a_new_horizon_at_the_next_solve(ros) -> None:
     ('weights.v', -1.0, ''),  # outside the declared range
     ('world_file', 'no_such_world.yaml', 'not found'),
     ('analytic_path', 'no_such_path', 'unknown analytic path'),
+    ('xy_goal_tolerance', -0.1, 'out of range'),  # the declared range
+    ('yaw_goal_tolerance', math.nan, 'out of range'),
+    ('xy_goal_tolerance', math.inf, 'out of range'),
 ])
 def test_controller_refuses_invalid_parameters_with_a_reason(ros, name, value, reason) -> None:
     controller, _ = make_controller(ros)
@@ -239,6 +242,20 @@ def test_controller_refuses_invalid_parameters_with_a_reason(ros, name, value, r
     assert not result.successful
     assert reason in result.reason
     assert controller.get_parameter(name).value == before
+
+
+def test_controller_takes_nav2s_goal_checker_parameters_at_run_time(ros) -> None:
+    controller, _ = make_controller(ros)
+    settings = controller.controller.settings
+    assert (settings.xy_goal_tolerance, settings.yaw_goal_tolerance) == (0.1, 0.15)
+    assert settings.stateful is True
+    results = controller.set_parameters([Parameter('xy_goal_tolerance', value=0.25),
+                                         Parameter('yaw_goal_tolerance', value=0.3),
+                                         Parameter('stateful', value=False)])
+    assert all(r.successful for r in results), [r.reason for r in results]
+    settings = controller.controller.settings
+    assert (settings.xy_goal_tolerance, settings.yaw_goal_tolerance) == (0.25, 0.3)
+    assert settings.stateful is False
 
 
 # ----------------------------------------------------------------------------- planner
