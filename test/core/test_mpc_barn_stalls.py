@@ -77,3 +77,40 @@ def test_a_new_plan_for_a_standing_robot_among_barn_cylinders_is_driven_within_2
         x = np.asarray(model(x, output.u)).reshape(-1)
     assert reasons[-1] is Reason.TRACKING, reasons
     assert abs(output.u[0]) > 0.1  # it drives (forward or, to turn in a tight spot, back)
+
+
+WAITING = json.loads((Path(__file__).parent / 'data' / 'barn_212_waiting.json')
+                     .read_text(encoding='utf-8'))['world_212']
+# Steps (8 s) within which the robot must have left the waiting point; it stood there for the
+# 20 s that end a run as stalled.
+LEAVES_WITHIN_STEPS = 40
+
+
+def test_a_plan_that_puts_off_its_motion_does_not_hold_the_robot_in_open_space() -> None:
+    """Laser-only BARN world 212 at 2 m/s: a re-plan for a robot standing in open space.
+
+    The plan starts with a turn in place from the robot's heading, rounded into the first
+    segment. The cold solve from rest converged to "turn part-way and wait" (s frozen at the
+    rounded knot, the motion put off to the horizon's end, first input 1e-9); the warm starts
+    of the following steps, from that plan's shifted candidate, put it off again at every
+    step, and the robot stood 1.1 m from the nearest cylinder until the run stalled. A plan
+    whose first input stands still now gets the cold tries, which leave that point.
+    """
+    config = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
+                       robot_radius=0.0, budget='iterations', max_solve_iterations=100)
+    settings = ControllerSettings(xy_goal_tolerance=0.05, yaw_goal_tolerance=math.pi,
+                                  capacity=128)
+    controller = MpcController(Unicycle(v_max=2.0, omega_max=4.0, v_min=0.0), config,
+                               settings=settings)
+    model = controller.model.discrete(H)
+    x = np.array(WAITING['x'])
+    controller.set_plan(np.array(WAITING['poses']))
+    controller.set_obstacles([ConvexPolygon.from_vertices(np.array(v))
+                              for v in WAITING['obstacles']])
+    start = x.copy()
+    for k in range(LEAVES_WITHIN_STEPS):
+        output = controller.compute(x, k * H)
+        x = np.asarray(model(x, output.u)).reshape(-1)
+        if float(np.hypot(*(x[:2] - start[:2]))) > 1.0:
+            break
+    assert float(np.hypot(*(x[:2] - start[:2]))) > 1.0, (x, output.reason)
