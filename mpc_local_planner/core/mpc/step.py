@@ -102,9 +102,11 @@ MAX_CACHED_PLANS = 8
 # A solve the budget cut goes on at the next step from where it stopped if the state moved
 # less than this (each component): the robot stood still on the candidate meanwhile.
 CONTINUE_TOLERANCE = 1e-3
-# A plan whose first input is below this (m/s, rad/s, each) stands still now: a solver that
-# converged to "wait" leaves inputs of 1e-9, not zeros (see _plan_moves).
+# Inputs below this (m/s, rad/s) stand still: a solver that converged to "wait" leaves
+# 1e-9, not zeros; and a gain of path progress s below PROGRESS_TOLERANCE is none (see
+# _plan_moves).
 STANDING_INPUT = 1e-3
+PROGRESS_TOLERANCE = 1e-6
 
 
 class MpcSolution(NamedTuple):
@@ -187,19 +189,28 @@ def _stood_still(before: np.ndarray | None, x0: np.ndarray) -> bool:
     return before is not None and float(np.max(np.abs(before - x0))) <= CONTINUE_TOLERANCE
 
 
-def _plan_moves(plan: Plan | None) -> bool:
-    """Say whether a plan moves the robot now: its first input above STANDING_INPUT.
+def _plan_moves(plan: Plan | None, progress: float) -> bool:
+    """Say whether the plan in force moves the robot on: it drives now, or it advances s.
 
-    A plan that stands still now and moves later is a standing one: warm starts from it can
-    hold the solver at "wait" for good. At rest the unicycle's linearisation cannot move
-    sideways, so where the path's steady state g_p(s) leaves the robot's heading (a rounded
-    turn-in-place knot) the solver reports success with s frozen, the motion put off to the
-    end of the horizon, and the first input 1e-9; each step's shifted candidate puts it off
-    again. Laser-only BARN worlds 206 and 212 at 2 m/s stood 20 s in open space that way after
-    a re-plan, V_N constant. Counted as standing, the plan gets the cold tries of tries.py.
+    A plan that neither drives now (|v_0| <= STANDING_INPUT) nor advanced the path progress
+    beyond the plan before it (progress, the gain in s; a turn in place along the path
+    advances it) waits, and counts as standing: warm starts from it can hold the solver at
+    "wait" for good. At rest the unicycle's linearisation cannot move sideways, so where the
+    path's steady state g_p(s) leaves the robot's heading (a rounded turn-in-place knot) the
+    solver reports success with s frozen, the robot turning to and fro on the spot or not at
+    all, the motion put off to the horizon's end; each step's shifted candidate puts it off
+    again. Laser-only BARN worlds 206, 212, 275 and others at 2 m/s stood 20 s and more in
+    open space that way after a re-plan, V_N constant. Counted as standing, the plan gets the
+    cold tries of tries.py, which leave that point. Without a path (progress NaN, the
+    tracking baseline) any input above STANDING_INPUT moves.
     """
-    return plan is not None and len(plan.u) > 0 and bool(
-        np.any(np.abs(plan.u[0]) > STANDING_INPUT))
+    if plan is None or not len(plan.u):
+        return False
+    first = np.abs(plan.u[0])
+    if math.isnan(progress):
+        return bool(np.any(first > STANDING_INPUT))
+    return bool(first[0] > STANDING_INPUT or (progress > PROGRESS_TOLERANCE
+                                              and np.any(first > STANDING_INPUT)))
 
 
 def _same_polygons(a: Sequence[ConvexPolygon], b: Sequence[ConvexPolygon]) -> bool:
@@ -410,6 +421,7 @@ class MpcBase(ABC):
     def reset(self) -> None:
         """Forget the previous solution (warm start, candidate, Lyapunov history)."""
         self._plan: Plan | None = None
+        self._progress_gain = math.nan  # the gain in s of the plan in force over the one before
         self._previous_value: float | None = None
         self._previous_stage: float = 0.0
         self._failures = 0
@@ -809,7 +821,7 @@ class MpcBase(ABC):
             self._failed_here = set()  # the robot moved: every try is worth making again
             self._failed_x0 = x0.copy()
         situation = Situation(
-            plan_moves=_plan_moves(self._plan),
+            plan_moves=_plan_moves(self._plan, self._progress_gain),
             obstacles_active=bool(active), previous_round=previous is not None,
             has_fallback=nlp.has_fallback,
             continuation=continuation.solver if continuation is not None else None,
@@ -999,6 +1011,7 @@ class MpcBase(ABC):
         weights = np.array(self._config.cost_weights().as_vector())
         self._previous_stage = float(self._stage_fn(plan.x[0], plan.u[0], plan.x[-1], weights))
         self._previous_value = plan.value
+        self._progress_gain = (plan.s - self._plan.s) if self._plan is not None else math.nan
         self._plan = plan
         return MpcSolution(
             u0=np.clip(plan.u[0], self._model.u_min, self._model.u_max),
