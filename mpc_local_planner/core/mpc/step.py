@@ -102,6 +102,13 @@ MAX_CACHED_PLANS = 8
 # A solve the budget cut goes on at the next step from where it stopped if the state moved
 # less than this (each component): the robot stood still on the candidate meanwhile.
 CONTINUE_TOLERANCE = 1e-3
+# A cut solve goes on for at most this many steps after its first before it counts as failed
+# here. One was too few: from a standing robot after a re-plan among BARN cylinders at 2 m/s
+# (world 258), IPOPT from the guided start needed about 245 iterations against 100 a step,
+# counted as failed after its second step and began again from scratch every other step; the
+# robot stood until the run stalled. More than two held hopeless tries too long (world 55:
+# the other tries, which solve there, came too late).
+MAX_CONTINUED_STEPS = 2
 # Inputs below this (m/s, rad/s) stand still: a solver that converged to "wait" leaves
 # 1e-9, not zeros; and a gain of path progress s below PROGRESS_TOLERANCE is none (see
 # _plan_moves).
@@ -182,6 +189,7 @@ class _Unfinished(NamedTuple):
     solver: Solver  # the solver of the try that was cut
     held: tuple[ConvexPolygon, ...]  # the obstacles its NLP held, in their slots' order
     origin: Try  # the try that began it (a continuation's origin is the first one's)
+    steps: int = 1  # the steps it has run in (the first one's and each continuation's)
 
 
 def _stood_still(before: np.ndarray | None, x0: np.ndarray) -> bool:
@@ -856,14 +864,16 @@ class MpcBase(ABC):
             seconds += attempt.seconds
             origin = (continuation.origin if attempt_try.start is Start.CONTINUATION
                       else attempt_try)
-            if not attempt.verified and (not attempt.cut
-                                         or attempt_try.start is Start.CONTINUATION):
-                # failed outright, or cut twice: not first again while the robot stands here
+            steps = (continuation.steps + 1 if attempt_try.start is Start.CONTINUATION
+                     and continuation is not None else 1)
+            if not attempt.verified and (not attempt.cut or steps > MAX_CONTINUED_STEPS):
+                # failed outright, or cut in every step it was given: not first again while
+                # the robot stands here
                 self._failed_here.update({(id(nlp), attempt_try), (id(nlp), origin)})
             if (attempt.cut and not attempt.verified and attempt.iterations > 0
-                    and np.all(np.isfinite(attempt.w))):
+                    and steps <= MAX_CONTINUED_STEPS and np.all(np.isfinite(attempt.w))):
                 self._unfinished = _Unfinished(nlp, x0.copy(), attempt.w, kind, tuple(active),
-                                               origin)
+                                               origin, steps)
             if attempt.verified:
                 best = attempt._replace(status=attempt.status + kind.label)
                 break
