@@ -50,11 +50,11 @@ from rest with 10 cylinders held, IPOPT needs about 105 iterations (200 ms) and 
 and the robot stood still for good.
 
 A try that failed at an earlier step from the same state (the robot stood still since) goes
-last: it failed outright, or it was cut and went on for step.MAX_CONTINUED_STEPS more steps, cut
-in each. The same
-first try at every step of a standing robot is the same failure at every step: in laser-only
-BARN worlds at 2 m/s, fatrop went on from its cut iterate for 60 steps (world 208), IPOPT
-cold from the guided start for 90 (world 55), and the robot never moved again.
+last: it failed outright, or it was cut and went on for step.MAX_CONTINUED_STEPS more steps,
+cut in each. The same first try at every step of a standing robot is the same failure at
+every step: in laser-only BARN worlds at 2 m/s, fatrop went on from its cut iterate for 60
+steps (world 208), IPOPT cold from the guided start for 90 (world 55), and the robot never
+moved again.
 
 An NLP whose backend is IPOPT has no fallback: its fallback tries are left out.
 """
