@@ -119,6 +119,26 @@ class Footprint:
             raise ValueError(msg)
         return ConvexPolygon.from_vertices(self.vertices)
 
+    def contains(self, points: np.ndarray, *, margin: float = 0.0) -> np.ndarray:
+        """Say, per point in the robot frame, whether it is within the footprint grown by margin.
+
+        A circle grows to radius + margin; a polygon's faces move out by margin, its corners
+        staying sharp (a rectangle's reach 1.41 margin from the vertex rather than margin:
+        nothing for the millimetre the scan self-filter uses).
+
+        Args:
+            points: (N, 2) points, or (2,), in the robot frame (x forward).
+            margin: How far outside the footprint still counts as inside, metres (>= 0).
+
+        Returns:
+            (N,) booleans; the boundary counts as inside.
+
+        """
+        pts = np.atleast_2d(np.asarray(points, dtype=float))[:, :2]
+        if self.vertices is None:
+            return np.hypot(pts[:, 0], pts[:, 1]) <= self.radius + margin
+        return self.body.contains(pts, margin=margin)
+
     def at_poses(self, poses: np.ndarray) -> np.ndarray:
         """Return the vertices at each pose, (M, V, 2), counter-clockwise; one NumPy expression.
 

@@ -21,7 +21,8 @@ rollout's controller):
 
 1. the simulated laser scans the true world (known and unknown obstacles) from the pose;
 2. the scan goes into the planner's grid (map plus scans, `PlanningGrid`) and into the
-   controller's obstacle memory (`ObstacleMemory`);
+   controller's obstacle memory (`ObstacleMemory`), both told the robot's footprint, as the
+   nodes are (returns inside it are the robot itself);
 3. the planner follows the global_planner node's re-planning policy, through the same
    `Replanner` (core/replanning.py): every ``replan_check_period`` it checks the rest of its
    plan (`RrtStarPlanner.rest_problem`) and re-plans from the pose when it is blocked (and
@@ -48,6 +49,7 @@ import numpy as np
 from mpc_local_planner.core.controller import MpcController, Reason
 from mpc_local_planner.core.diagnostics import PlanTrigger
 from mpc_local_planner.core.errors import PlanningError
+from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import waypoints_to_poses
 from mpc_local_planner.core.planner import RrtStarPlanner
@@ -274,6 +276,8 @@ class Navigator:
         known_map: The map the controller takes rectangles from (None: no prior map).
         settings: Sensing and re-planning settings.
         snapshot_period: Seconds between two records of the sensed obstacles (figures).
+        footprint: The robot's footprint: scan returns inside it are the robot itself, not
+            obstacles (`classify_beams`), as the nodes read them; None: every return counts.
 
     """
 
@@ -281,8 +285,10 @@ class Navigator:
                  planner: RrtStarPlanner, goal: np.ndarray, *, h: float, faces: int = 8,
                  known_map: OccupancyMap | None = None,
                  settings: NavigationSettings | None = None,
-                 snapshot_period: float = 2.0) -> None:
+                 snapshot_period: float = 2.0,
+                 footprint: Footprint | None = None) -> None:
         self.local = local
+        self.footprint = footprint
         self.settings = settings or NavigationSettings()
         self.grid = grid
         self.planner = planner
@@ -315,11 +321,11 @@ class Navigator:
             self._adopt(self.replanner.plan_goal(self.planner, x, self.goal, now=t), x, t)
         scan = self.laser.scan(x, stamp=t) if self.settings.sense else None
         if scan is not None:
-            self.grid.add_scan(scan, x)
+            self.grid.add_scan(scan, x, body=self.footprint)
         self._adopt(self.replanner.check(self.planner, x, now=t, grid=self.grid), x, t)
         started = time.perf_counter()
         if scan is not None:
-            self.memory.update(scan, x)
+            self.memory.update(scan, x, body=self.footprint)
             self.obstacles.scan_updated()
         nearby = self.obstacles.near(x[:2], self.local.reach + self.settings.sensing_margin)
         self.local.avoid(nearby)

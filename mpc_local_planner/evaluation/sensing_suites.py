@@ -342,7 +342,7 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
     settings = NavigationSettings(sense=sensing)
     navigator = Navigator(local, TrueGeometry(world.physical_shapes()), grid, planner,
                           world.goal, h=h, known_map=known if world.obstacles else None,
-                          settings=settings)
+                          settings=settings, footprint=robot.footprint)
     clearance = footprint_clearance(world.physical_shapes(), robot.footprint)
     # a robot may wait in front of an obstacle for a re-plan: standing still ends a run after
     # STALL_SECONDS, not the rollout's default 5 s

@@ -31,6 +31,7 @@ from typing import Sequence
 import numpy as np
 from scipy.ndimage import binary_dilation, distance_transform_edt
 
+from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import points_along
 from mpc_local_planner.perception.scan_obstacles import (
@@ -249,16 +250,20 @@ class PlanningGrid:
         self._blocked = self._distance = None
 
     def add_scan(self, scan: Scan, robot_pose: Sequence[float], *,
-                 laser_pose: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
+                 laser_pose: Sequence[float] = (0.0, 0.0, 0.0),
+                 body: Footprint | None = None) -> None:
         """Clear the cells the beams pass through, then mark the cells of the returns.
 
         The beams are read as `classify_beams` says: a -inf beam marks the cell at range_min
-        and clears nothing; NaN and out-of-range readings neither mark nor clear.
+        and clears nothing; NaN and out-of-range readings neither mark nor clear, and nor
+        does a return inside the robot's body (the robot itself: marked, it would block
+        every plan from where the robot stands).
 
         Args:
             scan: The scan (validated here).
             robot_pose: (x, y, yaw) of the robot in the map frame at the scan's stamp.
             laser_pose: (x, y, yaw) of the laser in the robot frame.
+            body: The robot's footprint; None: every return marks its cell.
 
         Raises:
             ScanError: If the scan or a pose is malformed.
@@ -266,7 +271,8 @@ class PlanningGrid:
         """
         validate_scan(scan)
         ox, oy, oyaw = compose_pose(robot_pose, laser_pose)
-        free = np.minimum(classify_beams(scan).free, self.clear_range)
+        free = np.minimum(classify_beams(scan, body=body, laser_pose=laser_pose).free,
+                          self.clear_range)
         beams = len(free)
         theta = oyaw + scan.angle_min + np.arange(beams) * scan.angle_increment
         res = self.map.resolution
@@ -283,7 +289,7 @@ class PlanningGrid:
             rows, cols = self.map.world_to_cell(np.column_stack([xs, ys]))
             inside = self.map.contains_cell(rows, cols)
             self._scan[rows[inside], cols[inside]] = False
-        hits, _ = scan_points(scan, robot_pose, laser_pose=laser_pose)
+        hits, _ = scan_points(scan, robot_pose, laser_pose=laser_pose, body=body)
         rows, cols = self.map.world_to_cell(hits)
         inside = self.map.contains_cell(rows, cols)
         self._scan[rows[inside], cols[inside]] = True

@@ -24,7 +24,9 @@ The MPC avoids convex polygons {p : A p <= b}; a scan is a fan of points. The st
    REP 117 says: a reading in [range_min, range_max] is a return; +inf is no return (free up
    to range_max); -inf is "too close", taken conservatively as a return at range_min that
    proves nothing free; NaN (an erroneous reading) and finite readings outside the limits are
-   ignored. Every reader (the points, the memory's clearing, the planner's grid) asks it.
+   ignored. Given the robot's footprint (``body``), a return inside it (a -inf one at
+   range_min included) is the robot itself and is ignored too, as a laser self-filter does.
+   Every reader (the points, the memory's clearing, the planner's grid) asks it.
 3. `scan_points`: the returns in the map frame, from the robot's pose at the scan's stamp
    and the laser's mounting pose in the robot frame.
 4. Clusters: consecutive points (in beam order) farther apart than ``gap`` belong to
@@ -53,10 +55,12 @@ from typing import NamedTuple, Sequence
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.perception.raycast import TrueGeometry
 
 __all__ = [
+    'BODY_MARGIN',
     'Beams',
     'MAX_BEAMS',
     'MAX_SCAN_FUTURE_S',
@@ -81,6 +85,9 @@ MAX_BEAMS = 10_000
 MAX_SCAN_FUTURE_S = 0.2
 # Beams of slack when asking whether the current scan sees a remembered vertex.
 _VIEW_SLACK = 2
+#: A return at most this far outside the robot's footprint (metres) is still the robot itself
+#: (see `classify_beams`).
+BODY_MARGIN = 1e-3
 
 
 class ScanError(ValueError):
@@ -205,10 +212,12 @@ class Beams(NamedTuple):
 
     Attributes:
         hit: (beams,) True where the beam returned from a surface at ``seen``: a reading in
-            [range_min, range_max], or -inf ("too close"), placed at range_min.
+            [range_min, range_max], or -inf ("too close"), placed at range_min; never a
+            return inside the robot's body, when it is given.
         seen: (beams,) how far the beam observed the world, metres: its return, range_max for
-            +inf (no return within range), NaN for an ignored beam (a NaN reading, or a
-            finite one outside [range_min, range_max]), which observed nothing.
+            +inf (no return within range), NaN for an ignored beam (a NaN reading, a finite
+            one outside [range_min, range_max], or a return inside the robot's body), which
+            observed nothing.
         free: (beams,) how far the beam proves free space, metres: up to its return (a
             reading in range) or range_max (+inf); 0 for -inf and ignored beams, which
             clear nothing.
@@ -225,7 +234,8 @@ class Beams(NamedTuple):
         return ~np.isnan(self.seen)
 
 
-def classify_beams(scan: Scan) -> Beams:
+def classify_beams(scan: Scan, *, body: Footprint | None = None,
+                   laser_pose: Sequence[float] = (0.0, 0.0, 0.0)) -> Beams:
     """Say, beam by beam, what a scan's readings mean: the one rule every reader applies.
 
     REP 117: a reading in [range_min, range_max] is a return; +inf is no return within
@@ -234,11 +244,30 @@ def classify_beams(scan: Scan) -> Beams:
     erroneous reading and a finite reading outside the limits an invalid one: both are
     ignored (no return, no free space). Every reading is judged on its own.
 
+    The robot's own body: a return inside its footprint (within BODY_MARGIN of it) is the
+    robot itself (its chassis, a mount, a cable in view) or a spurious reading, never an
+    obstacle it could avoid: kept, it would sit inside the robot, where no input keeps the
+    MPC's constraints and the planner's start feasible, and the robot would stop for good.
+    Such a beam is ignored like a NaN one (laser_filters' footprint filter writes NaN there
+    too): no return, and nothing free, since the body hides what lies beyond. This is what
+    makes -inf usable on a real robot: its range_min point is inside the body for a laser
+    mounted within it (5 cm from a laser at the centre of a 0.2 m robot), and only outside
+    it (a laser at the front edge) is it an obstacle, as REP 117 means it. The margin of a
+    millimetre takes in the returns of a part flush with the footprint's outline (the laser's
+    own housing at an edge), which rounding in the beam's geometry puts either side of it;
+    an obstacle that close already touches the robot, and its farther points still count.
+
     Args:
         scan: A scan that passed `validate_scan` (its limits are finite and ordered).
+        body: The robot's footprint (the robot frame), which must be its body, not grown by
+            a clearance; None: no return is taken for the robot (nothing is dropped).
+        laser_pose: (x, y, yaw) of the laser in the robot frame (used with body only).
 
     Returns:
         The beams' returns, reach and free space.
+
+    Raises:
+        ScanError: If body is given and laser_pose is not three finite numbers.
 
     """
     ranges = np.asarray(scan.ranges, dtype=float)
@@ -251,7 +280,23 @@ def classify_beams(scan: Scan) -> Beams:
     seen[too_close] = scan.range_min
     free = np.where(in_range, ranges, 0.0)
     free[no_return] = scan.range_max
+    if body is not None:
+        beams = np.flatnonzero(hit)
+        mount = compose_pose((0.0, 0.0, 0.0), laser_pose)  # the laser in the robot frame
+        own = beams[body.contains(_beam_points(scan, beams, seen[beams], mount),
+                                  margin=BODY_MARGIN)]
+        hit[own] = False
+        seen[own] = np.nan
+        free[own] = 0.0
     return Beams(hit=hit, seen=seen, free=free)
+
+
+def _beam_points(scan: Scan, beams: np.ndarray, ranges: np.ndarray,
+                 laser: Sequence[float]) -> np.ndarray:
+    """Return the points at ranges along the given beams of a laser at (x, y, yaw), (N, 2)."""
+    ox, oy, oyaw = laser
+    theta = oyaw + scan.angle_min + beams * scan.angle_increment
+    return np.column_stack([ox + ranges * np.cos(theta), oy + ranges * np.sin(theta)])
 
 
 def check_beam_count(angle_min: float, angle_max: float, angle_increment: float,
@@ -327,29 +372,29 @@ def compose_pose(robot_pose: Sequence[float],
 
 
 def scan_points(scan: Scan, robot_pose: Sequence[float], *,
-                laser_pose: Sequence[float] = (0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+                laser_pose: Sequence[float] = (0.0, 0.0, 0.0),
+                body: Footprint | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Return the valid returns of a scan in the map frame, in beam order.
 
     Args:
         scan: A valid scan (see `validate_scan`).
         robot_pose: (x, y, yaw) of the robot in the map frame at the scan's stamp.
         laser_pose: (x, y, yaw) of the laser in the robot frame.
+        body: The robot's footprint: returns inside it are the robot (see `classify_beams`);
+            None: every return counts.
 
     Returns:
         (points (N, 2), beam indices (N,)): the returns of `classify_beams` (readings in
-        [range_min, range_max], and -inf at range_min).
+        [range_min, range_max], and -inf at range_min, outside the body).
 
     Raises:
         ScanError: If a pose is not finite.
 
     """
-    ox, oy, oyaw = compose_pose(robot_pose, laser_pose)
-    readings = classify_beams(scan)
+    laser = compose_pose(robot_pose, laser_pose)
+    readings = classify_beams(scan, body=body, laser_pose=laser_pose)
     beams = np.flatnonzero(readings.hit)
-    r = readings.seen[beams]
-    theta = oyaw + scan.angle_min + beams * scan.angle_increment
-    points = np.column_stack([ox + r * np.cos(theta), oy + r * np.sin(theta)])
-    return points, beams
+    return _beam_points(scan, beams, readings.seen[beams], laser), beams
 
 
 def cluster_bounds(points: np.ndarray, gap: float) -> tuple[np.ndarray, np.ndarray]:
@@ -497,6 +542,7 @@ def _hull(points: np.ndarray, origin: np.ndarray, thickness: float) -> ConvexPol
 
 def scan_to_obstacles(scan: Scan, robot_pose: Sequence[float], *,
                       laser_pose: Sequence[float] = (0.0, 0.0, 0.0),
+                      body: Footprint | None = None,
                       config: ScanObstacleConfig | None = None,
                       validate: bool = True) -> list[ConvexPolygon]:
     """Turn one scan into convex obstacles in the map frame.
@@ -505,6 +551,8 @@ def scan_to_obstacles(scan: Scan, robot_pose: Sequence[float], *,
         scan: The scan.
         robot_pose: (x, y, yaw) of the robot in the map frame at the scan's stamp.
         laser_pose: (x, y, yaw) of the laser in the robot frame.
+        body: The robot's footprint: returns inside it are the robot, not obstacles (see
+            `classify_beams`); None: every return counts.
         config: Clustering and splitting options (defaults if None).
         validate: Check the scan first (skip only for scans known to be valid).
 
@@ -518,17 +566,18 @@ def scan_to_obstacles(scan: Scan, robot_pose: Sequence[float], *,
     """
     if validate:
         validate_scan(scan)
-    return _pieces(scan, robot_pose, laser_pose, config or ScanObstacleConfig())[0]
+    return _pieces(scan, robot_pose, laser_pose, body, config or ScanObstacleConfig())[0]
 
 
 def _pieces(scan: Scan, robot_pose: Sequence[float], laser_pose: Sequence[float],
+            body: Footprint | None,
             config: ScanObstacleConfig) -> tuple[list[ConvexPolygon], np.ndarray]:
     """Return the obstacles of a valid scan and, per obstacle, three returns it was built from.
 
     The returns (first, middle, last) lie on surfaces the laser saw; the memory asks whether
     a later scan sees them again.
     """
-    points, _ = scan_points(scan, robot_pose, laser_pose=laser_pose)
+    points, _ = scan_points(scan, robot_pose, laser_pose=laser_pose, body=body)
     if not len(points):
         return [], np.zeros((0, 3, 2))
     origin = compose_pose(robot_pose, laser_pose)[:2]
@@ -613,13 +662,16 @@ class ObstacleMemory:
         self._stamp = -math.inf
 
     def update(self, scan: Scan, robot_pose: Sequence[float], *,
-               laser_pose: Sequence[float] = (0.0, 0.0, 0.0)) -> list[ConvexPolygon]:
+               laser_pose: Sequence[float] = (0.0, 0.0, 0.0),
+               body: Footprint | None = None) -> list[ConvexPolygon]:
         """Add a scan's obstacles, forget what it proves gone or sees anew, and expire.
 
         Args:
             scan: The scan (validated here).
             robot_pose: (x, y, yaw) of the robot in the map frame at the scan's stamp.
             laser_pose: (x, y, yaw) of the laser in the robot frame.
+            body: The robot's footprint: returns inside it are the robot, neither obstacles
+                nor a view of one (see `classify_beams`); None: every return counts.
 
         Returns:
             The obstacles built from this scan alone.
@@ -633,19 +685,21 @@ class ObstacleMemory:
             msg = f'scan stamp {scan.stamp} is older than the last one ({self._stamp})'
             raise ScanError(msg)
         self._stamp = float(scan.stamp)
-        current, anchors = _pieces(scan, robot_pose, laser_pose, self.config)
+        current, anchors = _pieces(scan, robot_pose, laser_pose, body, self.config)
         kept = [e for e in self._entries if scan.stamp - e.seen <= self.ttl]
         if kept:
-            drop = self._superseded(kept, scan, compose_pose(robot_pose, laser_pose))
+            readings = classify_beams(scan, body=body, laser_pose=laser_pose)
+            drop = self._superseded(kept, scan, readings,
+                                    compose_pose(robot_pose, laser_pose))
             kept = [e for e, gone in zip(kept, drop, strict=True) if not gone]
         self._entries = kept + [_Entry(p, float(scan.stamp), a)
                                 for p, a in zip(current, anchors, strict=True)]
         return current
 
-    def _superseded(self, entries: list[_Entry], scan: Scan, laser: np.ndarray) -> np.ndarray:
-        """Say, per remembered obstacle, whether the scan crosses it or sees it again."""
+    def _superseded(self, entries: list[_Entry], scan: Scan, readings: Beams,
+                    laser: np.ndarray) -> np.ndarray:
+        """Say, per remembered obstacle, whether the scan's beams cross it or see it again."""
         polygons = [e.polygon for e in entries]
-        readings = classify_beams(scan)
         beams = len(readings.free)
         # Free space along each beam: up to its return, or up to range_max if none.
         free = readings.free - self.clear_margin

@@ -37,9 +37,10 @@ robot_radius + clearance with a distance transform; the plane it samples is the 
 'waiting for map'). A malformed map is refused with one throttled error and the grid in force
 stays. With ``use_scan`` too, each ``scan`` (sensor_msgs/LaserScan from the laser at
 ``laser_pose`` in the robot frame) marks the cells of its returns and clears the cells its
-beams pass through, beam by beam as REP 117 says (PlanningGrid.add_scan), placed with the
-odometry pose nearest to its stamp; a scan that cannot be interpreted (a beam count its
-angles do not imply, within one increment, among others) or one stamped more
+beams pass through, beam by beam as REP 117 says (PlanningGrid.add_scan; a return inside
+the robot's footprint, the one the planner plans for, is the robot itself and marks nothing),
+placed with the odometry pose nearest to its stamp; a scan that cannot be interpreted (a
+beam count its angles do not imply, within one increment, among others) or one stamped more
 than MAX_SCAN_FUTURE_S ahead of this node's clock is dropped with one throttled error.
 
 Re-planning (``replan_check_rate``, 2 Hz by default): the rest of the plan in force, from the
@@ -561,8 +562,11 @@ class GlobalPlannerNode(ManagedNode):
             validate_scan(scan)  # before it is placed: a count the angles do not imply
             check_scan_stamp(scan.stamp, self._now())
             pose = self._pose_at(scan.stamp)
+            # returns inside the robot are the robot: the planner's footprint says where it is
+            body = self._planner.footprint if self._planner is not None else None
             self._grid.add_scan(scan, pose,
-                                laser_pose=list(self.get_parameter('laser_pose').value))
+                                laser_pose=list(self.get_parameter('laser_pose').value),
+                                body=body)
         except Exception as err:  # ScanError (a ValueError); nothing may escape a callback
             if self._problems.report('scan'):
                 self.get_logger().error(f'scan dropped: {err}')

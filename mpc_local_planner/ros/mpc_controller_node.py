@@ -35,7 +35,9 @@ the map's occupied cells near the robot merged into rectangles (source 'map'; re
 when the map comes or the robot enters another cell), and what the laser saw (source 'scan':
 each scan's returns, read beam by beam as REP 117 says (classify_beams: NaN and readings
 outside [range_min, range_max] are ignored, +inf clears the beam up to range_max, -inf is an
-obstacle at range_min), placed in the map frame with the odometry pose AT THE SCAN'S STAMP,
+obstacle at range_min; a return inside the robot's footprint, from the laser at
+``laser_pose``, is the robot itself and ignored, so a -inf from a laser within the body stops
+nothing), placed in the map frame with the odometry pose AT THE SCAN'S STAMP,
 interpolated in the last ODOM_HISTORY_S seconds of odometry (a scan older than that uses the
 oldest pose kept, a newer one the latest), clustered into convex pieces and remembered for
 ``obstacle_memory`` seconds). A plan through an obstacle is followed: the MPC stops in front
@@ -60,7 +62,8 @@ width x height, a resolution <= 0, a non-finite origin) is dropped with one thro
 error; with 'scan' a source, the robot stops until a scan comes and whenever the latest
 valid one is older than ``scan_timeout``; with 'map' a source, it stops until a valid map
 has come (as before the first scan: what the map would show is unknown). A scan without a
-usable reading (every beam NaN or outside [range_min, range_max]) is valid but blind: it is
+usable reading (every beam NaN, outside [range_min, range_max] or inside the footprint) is
+valid but blind: it is
 used (it shows nothing and clears nothing) and does not renew ``scan_timeout``, so one
 such scan among good ones changes nothing, and a laser that sees nothing usable for
 ``scan_timeout`` stops the robot as a silent one does (with a throttled warning).
@@ -517,7 +520,7 @@ class MpcControllerNode(ManagedNode):
 
         """
         memory = self._local.memory if self._local is not None else None
-        if memory is None:
+        if memory is None or self.controller is None:
             return  # 'scan' is not a source (or not configured)
         receipt = self._now()
         try:
@@ -532,7 +535,8 @@ class MpcControllerNode(ManagedNode):
                     return  # out of order: the memory holds a newer view already
                 memory.clear()  # the clock jumped back
             laser = [float(v) for v in self.get_parameter('laser_pose').value]
-            memory.update(scan, pose, laser_pose=laser)
+            body = self.controller.config.robot_footprint  # returns inside are the robot
+            memory.update(scan, pose, laser_pose=laser, body=body)
         except Exception as err:  # ScanError mostly; never leave a callback
             problem = str(err) or type(err).__name__
             if self._problems.report('scan'):
@@ -543,10 +547,10 @@ class MpcControllerNode(ManagedNode):
         self._scan_stamp = stamp
         if self._problems.resolve('scan'):
             self.get_logger().info('scans are valid again')
-        if not classify_beams(scan).usable.any():
+        if not classify_beams(scan, body=body, laser_pose=laser).usable.any():
             self.get_logger().warning(
-                'scan without a usable reading (every beam NaN or outside [range_min, '
-                'range_max]): it does not renew scan_timeout',
+                'scan without a usable reading (every beam NaN, outside [range_min, '
+                "range_max] or inside the robot's footprint): it does not renew scan_timeout",
                 throttle_duration_sec=ERROR_THROTTLE_S)
             return
         self._scan_time = min(stamp, receipt)

@@ -89,8 +89,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('offset_weight', float(_CONFIG.offset_weight),
                   'offset cost weight of (1 - s)^2; next solve', float_range=(1e-6, 1e9)),
     ParameterSpec('robot_radius', float(_CONFIG.robot_radius),
-                  "the round robot's radius (m), obstacles are inflated by it; the larger of "
-                  "this and the world's is used; ignored when a polygon footprint applies",
+                  "the round robot's radius (m), obstacles are inflated by it and scan "
+                  "returns within it are the robot itself (ignored); the larger of this and "
+                  "the world's is used; ignored when a polygon footprint applies",
                   float_range=(0.0, 10.0)),
     ParameterSpec('footprint', '',
                   "the robot's convex polygon in base_link (x forward), Nav2's form "

@@ -74,3 +74,17 @@ def test_the_polygon_at_many_poses_matches_one_pose_at_a_time() -> None:
         np.testing.assert_allclose(JACKAL.at(pose), expected, atol=1e-12)
     # extra state columns (a bicycle's steering angle) are ignored
     np.testing.assert_allclose(JACKAL.at_poses(np.column_stack([poses, np.ones(3)])), corners)
+
+
+def test_contains_says_which_robot_frame_points_are_within_the_footprint_grown_by_margin(
+        ) -> None:
+    circle = Footprint.circle(0.2)
+    points = np.array([[0.0, 0.0], [0.2, 0.0], [0.0, -0.2005], [0.15, 0.15], [0.21, 0.0]])
+    assert circle.contains(points).tolist() == [True, True, False, False, False]
+    assert circle.contains(points, margin=1e-3).tolist() == [True, True, True, False, False]
+    # the Jackal: 0.254 to the front and back faces, 0.215 to the sides
+    points = np.array([[0.254, 0.0], [0.2545, 0.0], [-0.2, 0.214], [0.0, -0.2155],
+                       [0.3, 0.3]])
+    assert JACKAL.contains(points).tolist() == [True, False, True, False, False]
+    assert JACKAL.contains(points, margin=1e-3).tolist() == [True, True, True, True, False]
+    assert JACKAL.contains(np.array([0.0, 0.0])).tolist() == [True]  # one point, (2,)

@@ -66,6 +66,8 @@ def test_the_laser_reveals_what_the_map_lacks_and_the_planner_replans_around_it(
     first, last = log.plans[0][1], log.plans[-1][1]
     assert np.any(box.contains(along(first))) and not np.any(box.contains(along(last)))
     assert log.sensed and len(log.control_seconds) == len(result.run.steps)
+    # scans are read as the nodes read them: returns inside the robot's footprint are it
+    assert result.navigator.footprint is CIRCLE.footprint
 
 
 def test_without_sensing_the_unknown_box_is_hit() -> None:

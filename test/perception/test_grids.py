@@ -21,6 +21,7 @@ import math
 import numpy as np
 import pytest
 
+from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.obstacles import ConvexPolygon, point_in_any
 from mpc_local_planner.perception.grids import (
     grid_from_fields,
@@ -147,6 +148,39 @@ def test_planning_grid_reads_each_beam_as_rep_117_says() -> None:
                                 range_min=0.5), (0.0, 0.0, 0.0))
     assert not grid.is_free(np.array([0.55, 0.05]))[0]  # the cell x 0.5 .. 0.6, y 0 .. 0.1
     assert not grid.segment_is_free((1.0, 0.0), (1.5, 0.0))  # the box stays
+
+
+@pytest.mark.parametrize(('body', 'front'), [(Footprint.circle(0.2), 0.2), (JACKAL, 0.254)])
+def test_planning_grid_takes_no_mark_from_the_robots_body(body: Footprint,
+                                                          front: float) -> None:
+    # 181 beams around the front half-plane of a laser at the robot's origin, all -inf
+    # (range_min 5 cm: inside the body), but for an obstacle 1 cm beyond the front face
+    ranges = np.full(181, -np.inf)
+    ranges[90] = front + 0.01
+    scan = Scan(-math.pi / 2, math.pi / 180, 0.05, 10.0, ranges)
+    grid = PlanningGrid(empty_map(), inflation=0.0)
+    static = grid.occupied.copy()
+
+    grid.add_scan(scan, (0.0, 0.0, 0.0), body=body)
+
+    def marks() -> list[list[int]]:
+        return np.argwhere(grid.occupied & ~static).tolist()
+
+    def cell(x: float, y: float) -> list[int]:
+        rows, cols = grid.map.world_to_cell(np.array([[x, y]]))
+        return [int(rows[0]), int(cols[0])]
+
+    assert marks() == [cell(front + 0.01, 0.0)]  # the obstacle's cell, none of the body's
+    # None (the default): the -inf points mark the cells under the robot
+    grid.clear_scans()
+    grid.add_scan(scan, (0.0, 0.0, 0.0))
+    assert cell(0.0, 0.05) in marks() and cell(0.0, -0.05) in marks()
+    # -inf ahead and behind a laser on the front face: ahead, range_min reaches out of the
+    # body and marks the cell there; behind, it stays inside
+    grid.clear_scans()
+    both_ways = Scan(0.0, math.pi, 0.05, 10.0, np.array([-np.inf, -np.inf]))
+    grid.add_scan(both_ways, (0.0, 0.0, 0.0), laser_pose=(front, 0.0, 0.0), body=body)
+    assert marks() == [cell(front + 0.05, 0.0)]
 
 
 def test_first_within_says_how_far_along_a_path_an_obstacle_comes_within_the_margin() -> None:

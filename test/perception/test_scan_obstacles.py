@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.obstacles import ConvexPolygon, min_clearance, point_in_any
 from mpc_local_planner.perception.laser import SimulatedLaser
 from mpc_local_planner.perception.scan_obstacles import (
@@ -296,3 +297,92 @@ def test_a_scan_of_nothing_but_nan_is_valid_and_carries_no_information() -> None
 
     assert not classify_beams(scan).usable.any()
     assert scan_to_obstacles(scan, (0.0, 0.0, 0.0)) == []
+
+
+# ------------------------------------------------------------------ the robot's own body
+# (the distance from the robot's origin to its front face, for each footprint)
+BODIES = [pytest.param(Footprint.circle(0.2), 0.2, id='circle'),
+          pytest.param(JACKAL, 0.254, id='jackal')]
+
+
+def body_scan(front: float) -> Scan:
+    """Return nine beams from the right to the left of a laser at the robot's origin.
+
+    range_min 5 cm; -inf to the right and the left, a mount 0.1 m away at -45 degrees, a real
+    obstacle 1 cm beyond the front face straight ahead, nothing elsewhere.
+    """
+    ranges = np.full(9, np.inf)
+    ranges[[0, 8]] = -np.inf
+    ranges[2] = 0.1
+    ranges[4] = front + 0.01
+    return Scan(-math.pi / 2, math.pi / 8, 0.05, 10.0, ranges)
+
+
+@pytest.mark.parametrize(('body', 'front'), BODIES)
+def test_returns_inside_the_robots_body_are_the_robot_and_ignored_like_nan(
+        body: Footprint, front: float) -> None:
+    scan = body_scan(front)
+    pose = (1.0, 2.0, 0.7)  # the body is placed at the robot's pose: not the map's origin
+
+    beams = classify_beams(scan, body=body)
+
+    # the -inf beams (5 cm away) and the mount are inside: no return, nothing seen or free
+    assert np.flatnonzero(beams.hit).tolist() == [4]
+    assert np.isnan(beams.seen[[0, 2, 8]]).all() and not beams.free[[0, 2, 8]].any()
+    assert beams.usable.tolist() == [False, True, False, True, True, True, True, True, False]
+    points, index = scan_points(scan, pose, body=body)
+    assert index.tolist() == [4]
+    np.testing.assert_allclose(points[0], [1.0 + (front + 0.01) * math.cos(0.7),
+                                           2.0 + (front + 0.01) * math.sin(0.7)])
+    # the obstacle just outside the footprint is kept; nothing is left inside the robot
+    obstacles = scan_to_obstacles(scan, pose, body=body)
+    assert covered(obstacles, points)
+    # None (the default): nothing is taken for the robot, every return is an obstacle
+    everything, index = scan_points(scan, pose)
+    assert index.tolist() == [0, 2, 4, 8]
+    assert scan_points(scan, pose, body=None)[1].tolist() == [0, 2, 4, 8]
+    own = everything[[0, 1, 3]]  # the -inf points at range_min and the mount
+    assert covered(scan_to_obstacles(scan, pose), own)
+    assert not point_in_any(obstacles, own).any()
+
+
+@pytest.mark.parametrize(('body', 'front'), BODIES)
+def test_minus_inf_from_a_laser_at_the_front_edge_is_an_obstacle_where_it_reaches_outside(
+        body: Footprint, front: float) -> None:
+    # two beams, ahead and behind: range_min (5 cm) from a laser on the front face reaches
+    # out of the body ahead, and stays inside it behind
+    scan = Scan(0.0, math.pi, 0.05, 10.0, np.array([-np.inf, -np.inf]))
+
+    for laser_pose, outside in (((front, 0.0, 0.0), 0), ((front, 0.0, math.pi), 1)):
+        points, index = scan_points(scan, (0.0, 0.0, 0.0), laser_pose=laser_pose, body=body)
+
+        assert index.tolist() == [outside], laser_pose  # the laser's yaw turns the beams
+        np.testing.assert_allclose(points, [[front + 0.05, 0.0]], atol=1e-12)
+        (obstacle,) = scan_to_obstacles(scan, (0.0, 0.0, 0.0), laser_pose=laser_pose,
+                                        body=body)
+        assert obstacle.contains(points, margin=1e-9)[0]
+
+
+def test_a_return_within_a_millimetre_of_the_footprint_is_the_robot_farther_out_an_obstacle(
+        ) -> None:
+    body = Footprint.circle(0.2)
+    # flush with the outline, half a millimetre and two millimetres out
+    ranges = np.array([0.2, 0.2005, 0.202])
+    scan = Scan(-0.1, 0.1, 0.05, 10.0, ranges)  # a round robot: only the range matters
+
+    assert classify_beams(scan, body=body).hit.tolist() == [False, False, True]
+
+
+def test_the_memory_takes_neither_obstacles_nor_clearing_from_the_robots_body() -> None:
+    body = Footprint.circle(0.2)
+    memory = ObstacleMemory(ttl=5.0)
+
+    assert len(memory.update(body_scan(0.2), (0.0, 0.0, 0.0), body=body)) == 1
+    assert len(memory) == 1
+    # a later scan of nothing but -inf and a return inside the body (the laser is covered)
+    # says nothing about what is outside: the obstacle is kept, not cleared nor replaced
+    blind = body_scan(0.2)._replace(ranges=np.array([-np.inf] * 8 + [0.1]), stamp=1.0)
+    assert memory.update(blind, (0.0, 0.0, 0.0), body=body) == []
+    assert covered(memory.obstacles(), np.array([[0.21, 0.0]]))
+    # without the body the same scan gives obstacles at range_min, inside the robot
+    assert len(ObstacleMemory(ttl=5.0).update(blind, (0.0, 0.0, 0.0))) > 0

@@ -201,6 +201,36 @@ def test_planner_avoids_an_obstacle_a_scan_shows_and_the_map_lacks(ros) -> None:
     assert face.distance(samples(waypoints)).min() >= INFLATION - 1e-9
 
 
+def test_minus_inf_readings_inside_the_robot_mark_nothing_and_outside_it_an_obstacle(
+        ros) -> None:
+    planner, probe = start(ros, use_scan=True)
+    probe.map_pub.publish(grid_message(np.zeros((120, 200), dtype=np.int8)))
+    assert ros.spin_until(lambda: planner.grid is not None, timeout=TIMEOUT)
+    pose = np.array([1.0, 3.0, 0.0])
+    stamp = probe.now()
+    locate(ros, planner, probe, pose, stamp)
+    box = ConvexPolygon.from_box(5.0, 2.5, 5.3, 3.5)
+    # every beam but those on the box -inf: range_min (5 cm) from a laser at the centre of
+    # the 0.2 m robot (the planner's robot_radius) is inside it, the robot itself
+    scan = scan_message([box], pose, stamp)
+    scan.ranges = [r if np.isfinite(r) else -np.inf for r in scan.ranges]
+
+    def marked() -> np.ndarray:
+        return planner.grid.map.cell_to_world(*np.nonzero(planner.grid.occupied))
+
+    assert ros.spin_until(lambda: probe.scan_pub.publish(scan) or planner.scan_count > 0,
+                          timeout=TIMEOUT)
+    assert len(marked()) > 0 and np.all(marked()[:, 0] >= 5.0 - RESOLUTION)  # the box only
+    # the same readings from a laser on the robot's front edge: ahead, range_min reaches out
+    # of the body, and -inf is an obstacle there
+    planner.grid.clear_scans()
+    planner.set_parameters([Parameter('laser_pose', value=[ROBOT_RADIUS, 0.0, 0.0])])
+    assert ros.spin_until(lambda: probe.scan_pub.publish(scan) or planner.scan_count > 1,
+                          timeout=TIMEOUT)
+    near = np.hypot(*(marked() - pose[:2]).T) < 0.5
+    assert near.any() and not planner.grid.is_free(pose[:2] + [ROBOT_RADIUS + 0.05, 0.0])[0]
+
+
 def test_a_malformed_map_is_refused_with_an_error_and_the_grid_in_force_stays(ros) -> None:
     planner, probe = start(ros)
     errors = lambda: probe.log_lines('global_planner', Log.ERROR)  # noqa: E731

@@ -115,7 +115,7 @@ class StillLocal:
 class NoGrid:
     """A grid the scans go into and nothing comes out of."""
 
-    def add_scan(self, scan: Any, pose: Sequence[float]) -> None:
+    def add_scan(self, scan: Any, pose: Sequence[float], *, body: Any = None) -> None:
         pass
 
 

@@ -394,6 +394,7 @@ def test_an_occupied_block_in_the_map_becomes_rectangles_and_the_plan_is_followe
 REAL_BEAMS = 720
 NAN_SHARE = 0.01
 TOO_CLOSE_SHARE = 0.002
+BODY_RADIUS = 0.2  # the robot's radius (m), its laser at the centre
 
 
 class RealLaserReadings:
@@ -413,10 +414,12 @@ class RealLaserReadings:
 
 
 def test_a_laser_with_nan_and_minus_inf_readings_is_used_beam_by_beam_to_the_goal(ros) -> None:
-    # (the World's robot is the paper's point, robot_radius 0: a -inf reading's obstacle at
-    # range_min lies 5 cm ahead of it, not under it)
+    # a round robot of 0.2 m with the laser at its centre: a -inf reading's point at
+    # range_min (5 cm) is inside the robot, the robot itself (a mount, a cable) or a spurious
+    # reading, never an obstacle; taken for one, it would stop the robot (no input keeps it
+    # clear of an obstacle inside it)
     world = World(ros, [WALL], beams=REAL_BEAMS, obstacle_sources=['scan'],
-                  scan_timeout=SCAN_TIMEOUT)
+                  scan_timeout=SCAN_TIMEOUT, robot_radius=BODY_RADIUS)
     readings = world.readings = RealLaserReadings(seed=117)
     world.probe.plan_pub.publish(poses_to_path(PLAN))
 
@@ -439,13 +442,13 @@ def test_a_laser_with_nan_and_minus_inf_readings_is_used_beam_by_beam_to_the_goa
     assert world.run_until(at_goal, timeout=90.0), world.steps()[-3:]
     assert readings.nan > 0 and readings.too_close > 0
     # every scan was used: none refused, the scan never went stale once it came, and the
-    # robot drove a good part of the time (it also stops, as it must, for the -inf
-    # readings' obstacles on its path, 5 cm ahead)
+    # robot drove most of the time: it stopped only at the wall (the -inf readings, inside
+    # it, stop nothing: taken for obstacles, they held it still nine steps in ten)
     assert not world.errors('invalid scan')
     steps = world.steps()
     first_scan = next(i for i, s in enumerate(steps) if s.reason is not Reason.NO_SCAN)
     assert not [s for s in steps[first_scan:] if s.reason is Reason.STALE_SCAN]
-    assert sum(s.v > 0.01 for s in steps) > len(steps) / 3
+    assert sum(s.v > 0.01 for s in steps) >= len(steps) / 2
     check_commands(world.probe)
 
 
