@@ -56,12 +56,10 @@ Writes ``runs.csv`` (one row per world x controller, appended as runs finish) an
 from __future__ import annotations
 
 import argparse
-from concurrent.futures import as_completed, ProcessPoolExecutor
 import csv
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, replace
 import json
 import math
-import multiprocessing
 import os
 from pathlib import Path
 import sys
@@ -98,6 +96,14 @@ from mpc_local_planner.evaluation.rollout import (
     RolloutController,
     StopRule,
 )
+from mpc_local_planner.evaluation.sweep import (
+    EXECUTORS,
+    ExecutorUnavailable,
+    import_distributed,
+    run_tasks,
+    RunTable,
+    SettingsMismatch,
+)
 from mpc_local_planner.evaluation.trajectory import read_trajectory_csv, write_trajectory_csv
 from mpc_local_planner.worlds.data_files import BARN_DIR
 
@@ -108,6 +114,7 @@ __all__ = [
     'plot_suite_runs',
     'run_task',
     'summarize',
+    'sweep_settings',
     'Task',
 ]
 
@@ -136,7 +143,7 @@ class Task:
     seed: int = 0
     v_max: float = 0.31
     omega_max: float = 1.9
-    barn_dir: str = ''
+    barn_dir: str = ''  # '' for the worlds shipped with the package, wherever it runs
     trajectory_dir: str = ''
     merge: bool = False
     sensing: bool = False
@@ -164,11 +171,15 @@ def barn_score(success: bool, time_s: float | None, barn_path_length: float) -> 
     return float(t_opt / np.clip(time_s, 2.0 * t_opt, 8.0 * t_opt))
 
 
+def _barn_file(task: Task) -> Path:
+    """Return the task's BARN world file, on the machine that runs it."""
+    return Path(task.barn_dir or DEFAULT_BARN_DIR) / f'world_{task.world:03d}.json'
+
+
 def _scenario(task: Task, margin: float) -> Scenario:
     if task.suite == 'random':
         return random_world(task.world, task.seed, margin=margin)
-    return barn_world(Path(task.barn_dir) / f'world_{task.world:03d}.json', seed=task.seed,
-                      margin=margin, merge=task.merge)
+    return barn_world(_barn_file(task), seed=task.seed, margin=margin, merge=task.merge)
 
 
 def _clearance_fn(scenario: Scenario) -> Clearance:
@@ -235,8 +246,6 @@ def _empty_row(task: Task, scenario: Scenario | None, reason: str) -> dict[str, 
 
 def run_navigation_task(task: Task) -> dict[str, Any]:
     """Run one world x controller through the navigation stack; return its runs.csv row."""
-    from dataclasses import replace
-
     from mpc_local_planner.evaluation import sensing_suites as suites
     from mpc_local_planner.worlds.world import load_world
 
@@ -248,7 +257,7 @@ def run_navigation_task(task: Task) -> dict[str, Any]:
         world = load_world(task.world_file)
         world = replace(world, footprint=robot.footprint, robot_radius=0.0)
     else:
-        path = Path(task.barn_dir) / f'world_{task.world:03d}.json'
+        path = _barn_file(task)
         world = suites.barn_sensing_world(path, robot)
         barn_length = float(json.loads(path.read_text(encoding='utf-8'))['barn_path_length'])
     row = dict.fromkeys(CSV_COLUMNS, '')
@@ -554,8 +563,21 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="m/s (default 0.31; with sensing, the robot's: --robot)")
     parser.add_argument('--omega-max', type=float, default=None,
                         help="rad/s (default 1.9; with sensing, the robot's: --robot)")
-    parser.add_argument('--out', type=Path, required=True)
-    parser.add_argument('--jobs', type=int, default=1)
+    parser.add_argument('--out', type=Path, required=True,
+                        help='the output folder: runs.csv, summary.md, settings.json (an '
+                        "earlier sweep's files there are overwritten unless --resume)")
+    parser.add_argument('--jobs', type=int, default=1,
+                        help='worker processes: local ones, or those of the Dask LocalCluster '
+                        'that --executor dask starts without --scheduler')
+    parser.add_argument('--executor', choices=EXECUTORS, default='local',
+                        help="where the runs run: this machine's processes, or a Dask "
+                        "cluster (pip install '.[cluster]'); the rows are the same")
+    parser.add_argument('--scheduler', default=None, metavar='ADDRESS',
+                        help='with --executor dask: the scheduler of a running cluster, e.g. '
+                        'tcp://10.0.0.5:8786 (its workers started with --nthreads 1)')
+    parser.add_argument('--resume', action='store_true',
+                        help='keep the runs already in OUT/runs.csv (made with the same '
+                        'settings, else refused) and run only the others')
     parser.add_argument('--budget', choices=BUDGETS, default=EVALUATION_BUDGET,
                         help='what bounds an MPC step: solver iterations (reproducible, the '
                         "default) or wall time (the robot's; outcomes move with the load)")
@@ -568,8 +590,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                         'suite with --save-trajectories in OUT, then exit')
     args = parser.parse_args(argv)
     if args.plot and (args.sensing or args.suite in ('unknown', 'worlds')):
-        from dataclasses import replace
-
         from mpc_local_planner.evaluation import sensing_suites as suites
 
         if args.suite != 'barn':
@@ -592,6 +612,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(target)
         return 0
 
+    if args.scheduler and args.executor != 'dask':
+        parser.error('--scheduler needs --executor dask')
     navigation = args.sensing or args.suite in ('unknown', 'worlds')
     if navigation:
         from mpc_local_planner.evaluation.sensing_suites import ROBOTS
@@ -631,16 +653,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         if missing:
             parser.error(f'BARN worlds not found in {args.barn_dir}: {missing[:10]}')
     args.out.mkdir(parents=True, exist_ok=True)
-    trajectories = str(args.out / 'trajectories') if args.save_trajectories else ''
-    tasks = [Task(args.suite, w, c, args.seed, args.v_max, args.omega_max, barn_dir,
-                  trajectories, args.merge, sensing=args.sensing, robot=args.robot,
-                  world_file=world_files[w] if world_files else '', budget=args.budget)
+    trajectories = str((args.out / 'trajectories').resolve()) if args.save_trajectories else ''
+    if barn_dir and Path(barn_dir).resolve() == Path(DEFAULT_BARN_DIR).resolve():
+        barn_dir = ''  # the shipped worlds: each worker finds its own copy
+    template = Task(args.suite, 0, '', args.seed, args.v_max, args.omega_max, barn_dir,
+                    trajectories, args.merge, sensing=args.sensing, robot=args.robot,
+                    budget=args.budget)
+    tasks = [replace(template, world=w, controller=c,
+                     world_file=world_files[w] if world_files else '')
              for w in worlds for c in controllers]
+    settings = sweep_settings(template, worlds, controllers, world_files)
     for var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
         os.environ[var] = '1'
 
-    csv_path = args.out / 'runs.csv'
-    summary_path = args.out / 'summary.md'
     if navigation:
         title = (f'{args.suite} with sensing (laser, re-planning; seed {args.seed}, '
                  f'{args.robot} robot, v_max {args.v_max:g} m/s, omega_max '
@@ -651,50 +676,99 @@ def main(argv: Sequence[str] | None = None) -> int:
         title = (f'{args.suite}, known map (seed {args.seed}, v_max {args.v_max:g} m/s, '
                  f'omega_max {args.omega_max:g} rad/s{", merged walls" if args.merge else ""}'
                  f', {args.budget} budget)')
-    rows: list[dict[str, Any]] = []
-    started = time.monotonic()
-    with open(csv_path, 'w', newline='') as stream:
-        writer = csv.DictWriter(stream, fieldnames=CSV_COLUMNS)
-        writer.writeheader()
-
-        def record(row: dict[str, Any]) -> None:
-            rows.append(row)
-            writer.writerow(row)
-            stream.flush()
-            elapsed = time.monotonic() - started
-            done = int(30 * len(rows) / max(len(tasks), 1))
-            print(f"[{'#' * done}{'.' * (30 - done)}] {len(rows)}/{len(tasks)} "
-                  f"{elapsed:6.0f} s  {row['controller']:12s} world {int(row['world']):3d}: "
-                  f"{'ok' if row['success'] else 'FAIL'} ({row['stop_reason']})",
-                  file=sys.stderr, flush=True)
-            if len(rows) % 10 == 0:
-                summary_path.write_text(summarize(rows, suite=args.suite, title=title))
-
-        if args.jobs <= 1:
-            for task in tasks:
-                record(run_task(task))
-        else:
-            context = multiprocessing.get_context('spawn')
-            with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context) as pool:
-                futures = {pool.submit(run_task, task): task for task in tasks}
-                for future in as_completed(futures):
-                    try:
-                        row = future.result()
-                    except Exception as err:
-                        task = futures[future]
-                        row = _empty_row(task, None, f'error: {type(err).__name__}: {err}')
-                    record(row)
-    rows.sort(key=lambda r: (int(r['world']), CONTROLLERS.index(r['controller'])))
-    with open(csv_path, 'w', newline='') as stream:
-        writer = csv.DictWriter(stream, fieldnames=CSV_COLUMNS)
-        writer.writeheader()
-        writer.writerows(rows)
+    table = RunTable(args.out, CSV_COLUMNS, key=_row_key)
+    try:
+        if args.executor == 'dask':
+            import_distributed()  # before the table is touched
+        done = table.start(settings, resume=args.resume, keep=_finished_row)
+    except (ExecutorUnavailable, SettingsMismatch) as err:
+        parser.exit(2, f'{parser.prog}: error: {err}\n')
+    try:
+        rows = _sweep(tasks, done, table, suite=args.suite, title=title,
+                      executor=args.executor, jobs=args.jobs, scheduler=args.scheduler)
+    finally:
+        table.close()
+    table.finish(rows)
     summary = summarize(rows, suite=args.suite, title=title)
-    summary_path.write_text(summary)
+    (args.out / 'summary.md').write_text(summary)
     print(summary)
-    print(f'wrote {csv_path} and {summary_path}', file=sys.stderr)
+    print(f'wrote {table.csv_path} and {args.out / "summary.md"}', file=sys.stderr)
     return 0
 
 
+def sweep_settings(template: Task, worlds: Sequence[int], controllers: Sequence[str],
+                   world_files: Sequence[str]) -> dict[str, Any]:
+    """Return what decides a sweep's rows, as OUT/settings.json records it for --resume.
+
+    Everything a Task holds but the run itself (world, controller) and where its files go,
+    and the worlds and controllers of the sweep.
+    """
+    settings = {k: v for k, v in asdict(template).items() if k not in _PER_RUN_FIELDS}
+    settings.update(worlds=list(worlds), controllers=list(controllers),
+                    world_files=list(world_files), columns=list(CSV_COLUMNS))
+    return settings
+
+
+# A Task's fields that name one run of a sweep or where its files go, not its settings.
+_PER_RUN_FIELDS = ('world', 'controller', 'world_file', 'trajectory_dir')
+
+
+def _row_key(row: dict[str, Any]) -> tuple[int, str]:
+    """Return the run a row is of: (world, controller)."""
+    return int(row['world']), str(row['controller'])
+
+
+def _finished_row(row: dict[str, Any]) -> bool:
+    """Tell whether a row of an earlier sweep is a finished run (an error is tried again)."""
+    return not str(row['stop_reason']).startswith('error:')
+
+
+def _canonical_order(row: dict[str, Any]) -> tuple[int, int]:
+    return int(row['world']), CONTROLLERS.index(row['controller'])
+
+
+def _sweep(tasks: Sequence[Task], done: list[dict[str, Any]], table: RunTable, *, suite: str,
+           title: str, executor: str, jobs: int, scheduler: str | None
+           ) -> list[dict[str, Any]]:
+    """Run the tasks without a row in ``done``, append each row as it comes; return all rows.
+
+    The rows come back in the canonical order (world, then controller), whichever executor
+    ran them and in whatever order they finished.
+    """
+    finished = {_row_key(row) for row in done}
+    todo = [t for t in tasks if (t.world, t.controller) not in finished]
+    rows = list(done)
+    summary_path = table.folder / 'summary.md'
+    started = time.monotonic()
+    if done:
+        print(f'resuming: {len(done)} of {len(tasks)} runs already in {table.csv_path}',
+              file=sys.stderr, flush=True)
+    for index, result in run_tasks(run_task, todo, executor=executor, jobs=jobs,
+                                   scheduler=scheduler):
+        if isinstance(result, BaseException):
+            result = _empty_row(todo[index], None,
+                                f'error: {type(result).__name__}: {result}')
+        rows.append(result)
+        table.append(result)
+        _progress(result, len(rows), len(tasks), time.monotonic() - started)
+        if len(rows) % 10 == 0:
+            summary_path.write_text(summarize(rows, suite=suite, title=title))
+    rows.sort(key=_canonical_order)
+    return rows
+
+
+def _progress(row: dict[str, Any], done: int, total: int, elapsed: float) -> None:
+    """Draw the progress bar line of a finished run on stderr."""
+    filled = int(30 * done / max(total, 1))
+    print(f"[{'#' * filled}{'.' * (30 - filled)}] {done}/{total} "
+          f"{elapsed:6.0f} s  {row['controller']:12s} world {int(row['world']):3d}: "
+          f"{'ok' if _true(row['success']) else 'FAIL'} ({row['stop_reason']})",
+          file=sys.stderr, flush=True)
+
+
 if __name__ == '__main__':
-    sys.exit(main())
+    # Run main() of the module imported by name, not of __main__: Dask pickles what __main__
+    # defines by value, so each task would carry its own copy of the MPC caches.
+    from mpc_local_planner.evaluation import evaluate
+
+    sys.exit(evaluate.main())
