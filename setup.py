@@ -58,7 +58,10 @@ setup(
             'ros-sensor-msgs==5.3.6',
             'ros-lifecycle-msgs==2.0.3',
         ],
-        'test': ['pytest', 'pytest-timeout', 'hypothesis', 'ruff'],
+        # evaluate --executor dask: the runs on a Dask cluster (dask scheduler, dask worker).
+        'cluster': ['dask[distributed]>=2024.1'],
+        # the tests run the Dask executor too
+        'test': ['pytest', 'pytest-timeout', 'hypothesis', 'ruff', 'dask[distributed]>=2024.1'],
     },
     python_requires='>=3.10',
     zip_safe=True,
