@@ -48,9 +48,15 @@ machine), so the same command gives the same runs on any machine under any load;
 wall`` bounds it by wall time as the robot does, on this machine as loaded now (four such
 runs of BARN with sensing at 2 m/s gave 95 to 98 successes).
 
-Writes ``runs.csv`` (one row per world x controller, appended as runs finish) and
-``summary.md`` (one table row per controller). With ``--save-trajectories``, the runs go to
+Writes ``runs.csv`` (one row per world x controller, appended as runs finish, sorted by world
+and controller at the end), ``summary.md`` (one table row per controller) and
+``settings.json`` (what decides the rows). With ``--save-trajectories``, the runs go to
 ``OUT/trajectories`` and ``--plot 0,1,2`` later draws those worlds in ``OUT/<suite>_runs.png``.
+
+Where the runs run (`sweep`): ``--jobs K`` local processes, or ``--executor dask`` on a Dask
+cluster (``--scheduler tcp://HOST:8786``; without it a LocalCluster of K processes); the rows
+are the same. A stopped sweep is continued with ``--resume``: the runs in ``OUT/runs.csv``
+made with the same settings are kept and only the others run.
 """
 
 from __future__ import annotations
