@@ -62,6 +62,7 @@ made with the same settings are kept and only the others run.
 from __future__ import annotations
 
 import argparse
+from contextlib import ExitStack
 import csv
 from dataclasses import asdict, dataclass, replace
 import json
@@ -105,8 +106,8 @@ from mpc_local_planner.evaluation.rollout import (
 from mpc_local_planner.evaluation.sweep import (
     EXECUTORS,
     ExecutorUnavailable,
-    import_distributed,
-    run_tasks,
+    open_executor,
+    Runner,
     RunTable,
     SettingsMismatch,
 )
@@ -682,18 +683,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         title = (f'{args.suite}, known map (seed {args.seed}, v_max {args.v_max:g} m/s, '
                  f'omega_max {args.omega_max:g} rad/s{", merged walls" if args.merge else ""}'
                  f', {args.budget} budget)')
-    table = RunTable(args.out, CSV_COLUMNS, key=_row_key)
-    try:
-        if args.executor == 'dask':
-            import_distributed()  # before the table is touched
-        done = table.start(settings, resume=args.resume, keep=_finished_row)
-    except (ExecutorUnavailable, SettingsMismatch) as err:
-        parser.exit(2, f'{parser.prog}: error: {err}\n')
-    try:
-        rows = _sweep(tasks, done, table, suite=args.suite, title=title,
-                      executor=args.executor, jobs=args.jobs, scheduler=args.scheduler)
-    finally:
-        table.close()
+    table = RunTable(args.out, CSV_COLUMNS)
+    with ExitStack() as stack:
+        # what can refuse the sweep, before the table is touched
+        try:
+            done = table.earlier_rows(settings, keep=_finished_row) if args.resume else []
+            run = stack.enter_context(open_executor(args.executor, jobs=args.jobs,
+                                                    scheduler=args.scheduler))
+        except (ExecutorUnavailable, SettingsMismatch) as err:
+            parser.exit(2, f'{parser.prog}: error: {err}\n')
+        table.start(settings, done)
+        try:
+            rows = _sweep(run, tasks, done, table, suite=args.suite, title=title)
+        finally:
+            table.close()
     table.finish(rows)
     summary = summarize(rows, suite=args.suite, title=title)
     (args.out / 'summary.md').write_text(summary)
@@ -733,9 +736,8 @@ def _canonical_order(row: dict[str, Any]) -> tuple[int, int]:
     return int(row['world']), CONTROLLERS.index(row['controller'])
 
 
-def _sweep(tasks: Sequence[Task], done: list[dict[str, Any]], table: RunTable, *, suite: str,
-           title: str, executor: str, jobs: int, scheduler: str | None
-           ) -> list[dict[str, Any]]:
+def _sweep(run: Runner, tasks: Sequence[Task], done: list[dict[str, Any]], table: RunTable, *,
+           suite: str, title: str) -> list[dict[str, Any]]:
     """Run the tasks without a row in ``done``, append each row as it comes; return all rows.
 
     The rows come back in the canonical order (world, then controller), whichever executor
@@ -749,8 +751,7 @@ def _sweep(tasks: Sequence[Task], done: list[dict[str, Any]], table: RunTable, *
     if done:
         print(f'resuming: {len(done)} of {len(tasks)} runs already in {table.csv_path}',
               file=sys.stderr, flush=True)
-    for index, result in run_tasks(run_task, todo, executor=executor, jobs=jobs,
-                                   scheduler=scheduler):
+    for index, result in run(run_task, todo):
         if isinstance(result, BaseException):
             result = _empty_row(todo[index], None,
                                 f'error: {type(result).__name__}: {result}')

@@ -128,15 +128,15 @@ def test_resume_with_other_settings_is_refused_and_leaves_the_table(tmp_path,
 
 def test_resume_drops_a_row_cut_short_and_the_errors(tmp_path) -> None:
     columns = ('world', 'controller', 'stop_reason')
-    table = RunTable(tmp_path, columns, key=lambda row: row['world'])
-    table.start({'seed': 0}, resume=False)
+    table = RunTable(tmp_path, columns)
+    table.start({'seed': 0})
     table.append({'world': 0, 'controller': 'dwa', 'stop_reason': 'reached'})
     table.append({'world': 1, 'controller': 'dwa', 'stop_reason': 'error: KilledWorker'})
     table.close()
     with open(tmp_path / 'runs.csv', 'a') as stream:
         stream.write('2,dwa,rea')  # the kill came mid-row
-    kept = RunTable(tmp_path, columns, key=lambda row: row['world']).start(
-        {'seed': 0}, resume=True, keep=lambda row: not row['stop_reason'].startswith('error'))
+    kept = RunTable(tmp_path, columns).earlier_rows(
+        {'seed': 0}, keep=lambda row: not row['stop_reason'].startswith('error'))
     assert kept == [{'world': '0', 'controller': 'dwa', 'stop_reason': 'reached'}]
 
 
