@@ -648,14 +648,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     elif args.suite == 'worlds':
         if args.world_dir is None or not args.world_dir.is_dir():
             parser.error('--suite worlds needs --world-dir DIR (a folder of world YAML files)')
-        world_files = sorted(str(f) for f in args.world_dir.glob('*.yaml'))
+        world_files = sorted(str(f.resolve()) for f in args.world_dir.glob('*.yaml'))
         if not world_files:
             parser.error(f'no *.yaml world files in {args.world_dir}')
         worlds = list(range(len(world_files)))
         barn_dir = ''
     else:
         worlds = _parse_worlds(args.worlds)
-        barn_dir = str(args.barn_dir)
+        barn_dir = str(args.barn_dir.resolve())
         missing = [w for w in worlds if not (args.barn_dir / f'world_{w:03d}.json').is_file()]
         if missing:
             parser.error(f'BARN worlds not found in {args.barn_dir}: {missing[:10]}')
