@@ -581,7 +581,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         "cluster (pip install '.[cluster]'); the rows are the same")
     parser.add_argument('--scheduler', default=None, metavar='ADDRESS',
                         help='with --executor dask: the scheduler of a running cluster, e.g. '
-                        'tcp://10.0.0.5:8786 (its workers started with --nthreads 1)')
+                        'tcp://SCHEDULER_HOST:8786 (its workers started with --nthreads 1)')
     parser.add_argument('--resume', action='store_true',
                         help='keep the runs already in OUT/runs.csv (made with the same '
                         'settings, else refused) and run only the others')
