@@ -23,12 +23,14 @@ working planner; with ``autostart:=false`` it waits for a lifecycle manager (or
 ``ros2 lifecycle set /global_planner configure``, then ``activate``).
 
 The goal comes from the ``goal`` parameter ([x, y, theta]) or a PoseStamped on
-``goal_pose`` (RViz's "2D Goal Pose"). Each new goal is planned once, from the latest
-``odom`` pose, around the world's obstacles inflated by robot_radius + clearance, and
-published on ``plan`` (reliable, transient_local: a late controller still gets it). With
-``analytic_path`` set the node publishes that path, sampled, instead of planning. Nothing is
-published before activation: a ``goal`` parameter is planned once the node is active (and
-odometry has come); a ``goal_pose`` that arrives while the node is inactive is refused.
+``goal_pose`` (RViz's "2D Goal Pose"). Each new goal is planned once, from the robot's
+pose in ``frame_id`` (the latest ``odom`` pose, or composed with a localizer's or taken from
+tf2: ros/robot_pose.py; without one the goal waits), around the world's obstacles inflated
+by robot_radius + clearance, and published on ``plan`` (reliable, transient_local: a late
+controller still gets it). With ``analytic_path`` set the node publishes that path,
+sampled, instead of planning. Nothing is published before activation: a ``goal`` parameter
+is planned once the node is active (and odometry has come); a ``goal_pose`` that arrives
+while the node is inactive is refused.
 
 With ``use_map`` it plans on an occupancy grid instead of the world's obstacles: the latest
 ``map`` (nav_msgs/OccupancyGrid, transient_local), unknown cells free, inflated by
@@ -39,9 +41,11 @@ stays. With ``use_scan`` too, each ``scan`` (sensor_msgs/LaserScan from the lase
 ``laser_pose`` in the robot frame) marks the cells of its returns and clears the cells its
 beams pass through, beam by beam as REP 117 says (PlanningGrid.add_scan; a return inside
 the robot's footprint, the one the planner plans for, is the robot itself and marks nothing),
-placed with the odometry pose nearest to its stamp; a scan that cannot be interpreted (a
-beam count its angles do not imply, within one increment, among others) or one stamped more
-than MAX_SCAN_FUTURE_S ahead of this node's clock is dropped with one throttled error.
+placed with the robot's pose in ``frame_id`` at its stamp (ros/robot_pose.py: odometry
+within SCAN_POSE_TOLERANCE of it, corrected by the localizer, or tf2); a scan that cannot
+be interpreted (a beam count its angles do not imply, within one increment, among others) or
+one stamped more than MAX_SCAN_FUTURE_S ahead of this node's clock is dropped with one
+throttled error.
 
 Re-planning (``replan_check_rate``, 2 Hz by default): the rest of the plan in force, from the
 robot's projection onto it, is checked against the grid with the rule plans are made with

@@ -22,6 +22,11 @@ cmd_vel and stops the timer; ``cleanup`` frees the NLP and every publisher and
 subscription; ``shutdown`` does the same (with a zero cmd_vel first when active). With
 ``autostart`` (the default) ``run_node`` configures and activates at start.
 
+The robot's pose in the plan's frame (``frame_id``) comes from a localizer's pose topic
+(``localization_topic``) composed with odometry, from tf2 when importable, or else is the
+odometry itself (ros/robot_pose.py); while there is none the command is zero (reason
+no_localization). ``local_plan``, ``mpc/obstacles`` and ``mpc/footprint`` are in ``frame_id``.
+
 Subscribes ``odom`` and ``plan`` (reliable, transient_local), ``scan`` (sensor_msgs/LaserScan,
 best effort) when ``obstacle_sources`` lists 'scan' and ``map`` (nav_msgs/OccupancyGrid,
 transient_local) when it lists 'map'; publishes ``cmd_vel`` (Twist, or
@@ -37,9 +42,10 @@ each scan's returns, read beam by beam as REP 117 says (classify_beams: NaN and 
 outside [range_min, range_max] are ignored, +inf clears the beam up to range_max, -inf is an
 obstacle at range_min; a return inside the robot's footprint, from the laser at
 ``laser_pose``, is the robot itself and ignored, so a -inf from a laser within the body stops
-nothing), placed in the map frame with the odometry pose AT THE SCAN'S STAMP,
-interpolated in the last ODOM_HISTORY_S seconds of odometry (a scan older than that uses the
-oldest pose kept, a newer one the latest), clustered into convex pieces and remembered for
+nothing), placed in the plan's frame with the robot's pose there AT THE SCAN'S STAMP
+(ros/robot_pose.py: the odometry interpolated in the last ODOM_HISTORY_S seconds, a scan
+older than that using the oldest pose kept, a newer one the latest, with the localizer's
+correction; or tf2's transform at the stamp), clustered into convex pieces and remembered for
 ``obstacle_memory`` seconds). A plan through an obstacle is followed: the MPC stops in front
 of it or goes around, and the diagnostics say ``path_blocked`` and ``blocked_at``.
 
@@ -48,8 +54,8 @@ The robot's shape, Nav2's precedence (as the simulator and the planner apply it)
 file's footprint if it is a polygon, else a circle of ``robot_radius`` (the larger of the
 parameter and the world's). A circle grows the obstacles by its radius; a polygon is kept
 apart from each obstacle exactly by the NLP. ``mpc/footprint`` shows that shape at the
-latest odometry pose, and sensed obstacles are handed over within ``MpcConfig.reach`` (which
-counts a polygon's circumscribed radius) plus SENSING_MARGIN.
+robot's pose in ``frame_id``, and sensed obstacles are handed over within
+``MpcConfig.reach`` (which counts a polygon's circumscribed radius) plus SENSING_MARGIN.
 
 Refused input (odometry with NaN, inf or a zero quaternion; a plan that is empty, too short,
 too long, not finite or in another frame) makes the command zero until valid input comes,
