@@ -645,6 +645,10 @@ class GlobalPlannerNode(ManagedNode):
             self._grid.add_scan(scan, pose,
                                 laser_pose=list(self.get_parameter('laser_pose').value),
                                 body=body)
+        except LocalizationError as err:  # not the scan's fault: said where plans wait
+            self.get_logger().info(f"scan dropped: no pose in the plan's frame ({err})",
+                                   throttle_duration_sec=2.0)
+            return
         except Exception as err:  # ScanError (a ValueError); nothing may escape a callback
             if self._problems.report('scan'):
                 self.get_logger().error(f'scan dropped: {err}')

@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The controller with a localizer: it waits for the localizer, then follows the plan in map.
+"""The nodes with a localizer: they wait for it, then act on the pose in map.
 
 The odometry is offset from the true pose by a known map <- odom correction (as drifted
 odometry is); the localizer gives the true pose. Without the correction the robot would
@@ -25,7 +25,7 @@ import math
 import time
 from typing import Callable
 
-from geometry_msgs.msg import PoseWithCovarianceStamped
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 import numpy as np
 import pytest
 from rcl_interfaces.msg import Log
@@ -37,9 +37,11 @@ from mpc_local_planner.ros.conversions import (
     path_to_poses,
     poses_to_path,
     seconds_to_stamp,
+    stamp_to_seconds,
     u_from_twist,
     yaw_to_quaternion,
 )
+from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
 from mpc_local_planner.ros.mpc_controller_node import ERROR_THROTTLE_S, MpcControllerNode
 from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.qos import LOCALIZER_QOS
@@ -155,3 +157,47 @@ def test_the_controller_stops_until_the_localizer_speaks_then_follows_the_plan_i
     assert robot.run_until(arrived, timeout=120.0, localize_every=10), probe.diagnostics[-1:]
     assert np.hypot(*(robot.truth[:2] - PLAN[-1, :2])) < 0.15
     assert np.hypot(*(robot.odometry[:2] - PLAN[-1, :2])) > 0.2  # the odometry is not there
+
+
+def test_the_planner_waits_for_the_localizer_then_plans_from_the_pose_in_map(ros) -> None:
+    planner = ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
+        Parameter('world_file', value='paper_obstacle.yaml'),
+        Parameter('localization_topic', value='amcl_pose')]))
+    assert autostart(planner) is None
+    probe = ros.probe()
+    localizer = probe.create_publisher(PoseWithCovarianceStamped, 'amcl_pose', LOCALIZER_QOS)
+    assert ros.spin_until(lambda: probe.goal_pub.get_subscription_count() > 0
+                          and localizer.get_subscription_count() > 0)
+    truth = np.array(WORLD.start[:3], dtype=float)
+    odometry = compose(invert(DRIFT), truth)
+    goal = PoseStamped()
+    goal.header.frame_id = 'map'
+    goal.pose.position.x, goal.pose.position.y = map(float, WORLD.goal[:2])
+    goal.pose.orientation = yaw_to_quaternion(float(WORLD.goal[2]))
+
+    def odometry_kept() -> bool:
+        probe.publish_odom(odometry)
+        return planner._state is not None  # the odometry came; no pose in map yet
+
+    assert ros.spin_until(odometry_kept)
+    assert planner.robot_pose is None
+    probe.goal_pub.publish(goal)
+    assert ros.spin_until(lambda: any(NO_POSE in line for line in
+                                      probe.log_lines('global_planner', Log.WARN)))
+    assert planner.plan_count == 0  # the goal waits
+
+    msg = PoseWithCovarianceStamped()
+    msg.header.frame_id = 'map'
+    msg.header.stamp = probe.get_clock().now().to_msg()
+    msg.pose.pose.position.x, msg.pose.pose.position.y = map(float, truth[:2])
+    msg.pose.pose.orientation = yaw_to_quaternion(float(truth[2]))
+
+    def planned() -> bool:
+        probe.publish_odom(odometry, stamp=stamp_to_seconds(msg.header.stamp))
+        localizer.publish(msg)
+        return planner.plan_count > 0 and bool(probe.raw_plans)
+
+    assert ros.spin_until(planned, timeout=20.0)
+    np.testing.assert_allclose(planner.robot_pose, truth, atol=1e-9)
+    start = path_to_poses(probe.plans[-1])[0]
+    np.testing.assert_allclose(start[:2], truth[:2], atol=1e-6)
