@@ -594,9 +594,10 @@ class MpcControllerNode(ManagedNode):
                                    f'{self._pose_source.describe()}')
 
     def scan_callback(self, msg: LaserScan | bytes) -> None:
-        """Place a scan's obstacles in the map frame and remember them; drop a bad scan.
+        """Place a scan's obstacles in the plan's frame and remember them; drop a bad scan.
 
-        The robot's pose is the odometry's at the scan's stamp (see pose_at). A malformed
+        The robot's pose is its pose in the plan's frame at the scan's stamp (see pose_at;
+        the one the controller steers with, so scan and plan agree). A malformed
         scan is dropped with one throttled error, so the scan goes stale if only bad ones
         come; the latest valid scan's time (its stamp, but never later than its arrival)
         is what scan_timeout is measured against, if it has a usable reading: a blind
