@@ -272,6 +272,8 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
             'publish_clock': True, 'real_time_factor': float(options.rtf),
             'initial_pose': [float(v) for v in world.start],
             'world_file': str(world_file), **robot,
+            # exact odometry IS the pose in map: said so, nodes with tf2 look nothing up
+            'frame_id': 'map',
         },
     }
     if not world.footprint.is_circle:
@@ -285,6 +287,7 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
         params['mpc_controller'].update(obstacle_sources=['map', 'scan'], world_file='')
     if options.drift:
         params['unicycle_simulator'].update({
+            'frame_id': 'odom',
             'odom_drift.position': float(options.drift), 'odom_drift.heading': float(
                 options.drift), 'localizer.rate': LOCALIZER_RATE,
             'localizer.noise_std': LOCALIZER_NOISE})

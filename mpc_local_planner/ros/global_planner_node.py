@@ -592,7 +592,8 @@ class GlobalPlannerNode(ManagedNode):
         except ValueError as err:
             self.get_logger().warning(f'ignoring odometry: {err}', throttle_duration_sec=1.0)
             return
-        self._pose_source.add_odometry(stamp_to_seconds(msg.header.stamp), self._state)
+        self._pose_source.add_odometry(stamp_to_seconds(msg.header.stamp), self._state,
+                                       msg.header.frame_id)
         if self._pending_goal is not None:
             self._try_plan()
 

@@ -546,7 +546,8 @@ class MpcControllerNode(ManagedNode):
         self._odom_state = state
         self._odom_time = min(stamp, receipt) if stamp > 0 else receipt
         self._odom_problem = None
-        self._pose_source.add_odometry(stamp if stamp > 0 else receipt, state)
+        self._pose_source.add_odometry(stamp if stamp > 0 else receipt, state,
+                                       msg.header.frame_id)
         if self._problems.resolve('odom'):
             self.get_logger().info('odometry is valid again')
 

@@ -26,7 +26,8 @@ plan's frame (``frame_id``), chosen at configure (`choose_mode`):
   stand-in of the buffer's interface (``can_transform``, ``lookup_transform``): tf2 is not
   installable from PyPI.
 * neither: the odometry is the pose in the plan's frame (the simulator, whose ``odom`` is
-  ``map``), exactly as before.
+  ``map``), exactly as before. So is odometry whose header.frame_id IS ``frame_id``, with
+  tf2 too (closed_loop's exact simulator publishes it so): there is nothing to look up.
 
 With a localizer or tf2 and no pose (no localizer message yet, one older than the odometry
 kept, no transform) the controller stops and says why; the planner waits.
@@ -180,6 +181,7 @@ class RobotPose:
         self.frame_id = frame_id
         self.located = LocalizedPose(span, localized=mode is PoseMode.LOCALIZER, source=topic)
         self.tf: TfPose | None = None
+        self._odom_in_plan_frame = False  # the latest odometry's frame is frame_id
         if mode is PoseMode.TF:
             if buffer is None:
                 problem = 'tf2 mode needs a transform buffer'
@@ -200,9 +202,15 @@ class RobotPose:
         """Forget the odometry and the localizer's correction."""
         self.located.clear()
 
-    def add_odometry(self, time: float, pose: np.ndarray) -> None:
-        """Keep an odometry pose (for scans' stamps and the localizer's)."""
+    def add_odometry(self, time: float, pose: np.ndarray, frame_id: str = '') -> None:
+        """Keep an odometry pose (for scans' stamps and the localizer's) and its frame."""
         self.located.add_odometry(time, pose)
+        self._odom_in_plan_frame = frame_id == self.frame_id
+
+    @property
+    def _tf(self) -> TfPose | None:
+        """The tf2 lookup in force: none when the odometry is in the plan's frame already."""
+        return None if self._odom_in_plan_frame else self.tf
 
     def add_localizer(self, msg: PoseWithCovarianceStamped, receipt: float) -> np.ndarray:
         """Take a localizer message (its stamp, or the receipt if unset); return the correction.
@@ -231,8 +239,8 @@ class RobotPose:
         """
         if odom is None:
             return None, None
-        if self.tf is not None:
-            return self.tf.lookup()
+        if self._tf is not None:
+            return self._tf.lookup()
         pose = self.located.pose(odom)
         if pose is None:
             raise LocalizationError(self.located.problem or 'no localizer pose')
@@ -245,8 +253,8 @@ class RobotPose:
             LocalizationError: if there is odometry but no pose in the plan's frame.
 
         """
-        if self.tf is not None:
-            return self.tf.lookup(stamp)[0]
+        if self._tf is not None:
+            return self._tf.lookup(stamp)[0]
         if len(self.located.odometry) == 0:
             return None
         pose = self.located.at(stamp)

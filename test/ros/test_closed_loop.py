@@ -273,9 +273,12 @@ def test_drift_makes_the_odometry_drift_and_the_nodes_follow_the_localizer(tmp_p
     assert simulator['localizer.rate'] > 0
     assert params['global_planner']['localization_topic'] == 'amcl_pose'
     assert params['mpc_controller']['localization_topic'] == 'amcl_pose'
+    assert simulator['frame_id'] == 'odom'  # drifting odometry is not in map
     plain = node_parameters(LoopOptions(path='rrt'), UNKNOWN_BOX_FILE, UNKNOWN_BOX)
     assert not any('drift' in name or 'localiz' in name
                    for values in plain.values() for name in values)
+    # exact odometry is in map, and says so: a node with tf2 looks nothing up
+    assert plain['unicycle_simulator']['frame_id'] == 'map'
 
 
 @pytest.mark.slow

@@ -168,3 +168,18 @@ def test_without_localizer_or_tf2_the_odometry_is_the_pose_unchanged() -> None:
     np.testing.assert_array_equal(pose, odom)
     assert time == 0.9
     np.testing.assert_array_equal(source.at(1.0), odom)
+
+
+def test_with_tf2_odometry_already_in_the_plan_frame_is_the_pose_without_a_lookup() -> None:
+    buffer = StandInBuffer([])  # no transform at all
+    source = RobotPose(PoseMode.TF, span=2.0, frame_id='map', buffer=buffer,
+                       base_frame_id='base_link', tolerance=0.1)
+    odom = np.array([1.0, 2.0, 0.3])
+    source.add_odometry(1.0, odom, 'map')  # the exact simulator's odometry
+    pose, time = source.current(odom, 1.0)
+    np.testing.assert_array_equal(pose, odom)
+    np.testing.assert_array_equal(source.at(1.0), odom)
+    assert buffer.calls == []
+    source.add_odometry(1.1, odom, 'odom')  # odometry in odom: tf2 again
+    with pytest.raises(LocalizationError, match='no transform'):
+        source.current(odom, 1.1)
