@@ -110,6 +110,9 @@ class Reason(Enum):
     # The map is a source of obstacles and no valid map came yet: what it would show is
     # unknown, as the scan's before the first one.
     NO_MAP = 'no_map'
+    # Odometry is there but no pose in the plan's frame: a localizer is expected and none
+    # (usable) came, or tf2 has no transform from the plan's frame to the robot's.
+    NO_LOCALIZATION = 'no_localization'
 
     @property
     def text(self) -> str:
@@ -137,6 +140,7 @@ _REASON_TEXT = {
     Reason.STALE_SCAN: 'scan is stale',
     Reason.NO_SCAN: 'no scan yet',
     Reason.NO_MAP: 'no valid map yet',
+    Reason.NO_LOCALIZATION: "no pose in the plan's frame",
 }
 
 

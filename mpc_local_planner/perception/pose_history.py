@@ -64,6 +64,11 @@ class PoseHistory:
         oldest_kept = bisect.bisect_left(self._times, self._times[-1] - self.span)
         del self._times[:oldest_kept], self._poses[:oldest_kept]
 
+    @property
+    def oldest(self) -> float:
+        """The time of the oldest pose kept (inf when empty)."""
+        return self._times[0] if self._times else math.inf
+
     def gap(self, time: float) -> float:
         """Return how far (seconds) time is from the nearest pose kept (inf when empty)."""
         if not self._times:

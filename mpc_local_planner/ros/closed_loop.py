@@ -68,6 +68,15 @@ clearance on a straight segment at full speed (h v_max / 2 = 0.031 m), and leave
 gap open to the 0.43 m wide Jackal (narrow_gap). ``--param global_planner.clearance:=X``
 (any node's parameter, as ``-p`` would give it) overrides it.
 
+With ``--drift [RATE]`` the simulated odometry drifts (the real case: ``odom`` is not
+``map``): RATE (0.05 = 5 %, the default) of the distance travelled in position and RATE rad
+per metre in heading; the simulator's localizer stand-in publishes the true pose with
+LOCALIZER_NOISE noise at LOCALIZER_RATE Hz on ``amcl_pose``, and the planner and the
+controller compose it with odometry (``localization_topic``). Contacts are the true pose's;
+``metrics.json`` has the run's ``drift`` and, in one process, the simulator's true final
+pose and its distance to the goal (``true_final_pose``, ``true_goal_error``), which must then
+be within TRUE_GOAL_TOLERANCE for the run to succeed.
+
 The controller arrives within PAPER_GOAL_TOLERANCES (the paper's scenario's 0.02 m and
 0.05 rad, which the reported metrics were measured with) instead of the node's defaults, which
 are for a real robot's noisy odometry: the simulated odometry is exact.
@@ -153,6 +162,7 @@ MAP_RESOLUTION = 0.05
 # this module does not load the nodes before they are needed).
 SCAN_TOPIC = 'scan'
 CONTACTS_TOPIC = 'simulator/contacts'
+LOCALIZER_TOPIC = 'amcl_pose'
 # What the controller avoids (mpc_controller_node's OBSTACLES_TOPIC) and the namespace of
 # the obstacles as it takes them in (from the map and the scans with --sensing).
 OBSTACLES_TOPIC = 'mpc/obstacles'
@@ -165,6 +175,14 @@ SENSED_SNAPSHOTS = 4
 POLYGON_CLEARANCE = 0.05
 # The controller's arrival on the paper's scenario (see the module docstring).
 PAPER_GOAL_TOLERANCES = {'xy_goal_tolerance': 0.02, 'yaw_goal_tolerance': 0.05}
+# --drift: the odometry's drift when the option comes without a rate, and the localizer
+# stand-in's rate (Hz) and noise (m, rad).
+DEFAULT_DRIFT = 0.05
+LOCALIZER_RATE = 5.0
+LOCALIZER_NOISE = 0.01
+# With --drift in one process, a run succeeds only if the TRUE robot ends this close (m) to
+# the goal: what the drifted odometry (or the controller) believes is not enough.
+TRUE_GOAL_TOLERANCE = 0.1
 
 MODULES = {
     'map_server': 'mpc_local_planner.ros.map_server_node',
@@ -188,6 +206,8 @@ class LoopOptions:
     respawn: bool = False
     seed: int = 0
     sensing: bool = False
+    # odometry drift (fraction of the distance, and rad/m), with the localizer; 0 = exact
+    drift: float = 0.0
     # the robot, instead of the world's: a polygon (Nav2's "[[x, y], ...]") or a circle
     footprint: str | None = None
     robot_radius: float | None = None
@@ -252,6 +272,8 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
             'publish_clock': True, 'real_time_factor': float(options.rtf),
             'initial_pose': [float(v) for v in world.start],
             'world_file': str(world_file), **robot,
+            # exact odometry IS the pose in map: said so, nodes with tf2 look nothing up
+            'frame_id': 'map',
         },
     }
     if not world.footprint.is_circle:
@@ -263,6 +285,14 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
         params['map_server'] = {'use_sim_time': True, 'yaml_filename': str(map_file)}
         params['global_planner'].update(use_map=True, use_scan=True, world_file='')
         params['mpc_controller'].update(obstacle_sources=['map', 'scan'], world_file='')
+    if options.drift:
+        params['unicycle_simulator'].update({
+            'frame_id': 'odom',
+            'odom_drift.position': float(options.drift), 'odom_drift.heading': float(
+                options.drift), 'localizer.rate': LOCALIZER_RATE,
+            'localizer.noise_std': LOCALIZER_NOISE})
+        for name in ('global_planner', 'mpc_controller'):
+            params[name]['localization_topic'] = LOCALIZER_TOPIC
     for name, extra in options.extra_parameters.items():
         if name not in params:  # map_server: only with --sensing
             msg = f'parameters for {name}, which does not run here (map_server needs --sensing)'
@@ -568,6 +598,8 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
                 stop_reason = f'{name} exited (code {children[name].returncode})'
                 break
         flush_recording(executor, recorder, monitor)
+        from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
+        truth = [n.state for n in nodes if isinstance(n, UnicycleSimulatorNode)]
     finally:
         wall_time = time.monotonic() - start
         _stop_children(list(children.values()))
@@ -584,7 +616,11 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
                 'respawns': respawns, 'sensing': options.sensing,
                 'contacts': monitor.contacts, 'replans': monitor.replans,
                 'path_source': options.path, 'world': str(source_file),
-                'world_file': str(world_file), 'footprint_source': robot_source}
+                'world_file': str(world_file), 'footprint_source': robot_source,
+                'drift': options.drift}
+    if truth:  # one process: the simulator's true pose, whatever odometry said
+        run_info['true_final_pose'] = [float(v) for v in truth[0]]
+        run_info['true_goal_error'] = float(np.hypot(*(truth[0][:2] - world.goal[:2])))
     shape = '' if world.footprint.is_circle else ', polygon footprint'
     title = (f'{world.name}: {options.path} path, rtf {options.rtf:g}'
              + (', sensing' if options.sensing else '') + shape)
@@ -593,6 +629,8 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
         _plot_sensing(bag, out / 'trajectory.png', world, monitor.sensed, title)
     success = (bool(metrics.get('reached')) and not metrics.get('collision')
                and not monitor.contacts)
+    if options.drift and truth:
+        success = success and run_info['true_goal_error'] <= TRUE_GOAL_TOLERANCE
     return LoopResult(metrics=metrics, stop_reason=stop_reason, wall_time=wall_time,
                       sim_time=sim_time, out=out, success=success)
 
@@ -757,6 +795,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help='the planner and the controller know only a map of the known '
                              "obstacles and the simulator's laser scans; unknown obstacles "
                              'are found by the laser')
+    parser.add_argument('--drift', type=float, nargs='?', const=DEFAULT_DRIFT, default=0.0,
+                        metavar='RATE',
+                        help='the odometry drifts by RATE of the distance travelled (and '
+                             'RATE rad/m in heading; default 5 %%), and the nodes follow a '
+                             'localizer stand-in on amcl_pose')
     parser.add_argument('--respawn', action='store_true',
                         help='with --separate-processes: start a node process that exits '
                              'again instead of ending the run (a restart drill)')
@@ -779,7 +822,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         options = LoopOptions(world=args.world, out=args.out, path=args.path, rtf=args.rtf,
                               timeout=args.timeout, time_limit=args.time_limit,
                               seed=args.seed, separate_processes=args.separate_processes,
-                              respawn=args.respawn, sensing=args.sensing,
+                              respawn=args.respawn, sensing=args.sensing, drift=args.drift,
                               footprint=args.footprint, robot_radius=args.robot_radius,
                               extra_parameters=extra)
         result = run_closed_loop(options, ros_args=ros_args)

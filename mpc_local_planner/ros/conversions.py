@@ -47,6 +47,8 @@ from mpc_local_planner.worlds.map_files import OccupancyMap
 
 __all__ = [
     'delete_all_marker',
+    'frame_problem',
+    'SCANS',
     'grid_from_message',
     'scan_beam_count',
     'scan_from_message',
@@ -67,8 +69,27 @@ __all__ = [
     'yaw_to_quaternion',
 ]
 
+# What frame_problem says of scans: the nodes place a scan with laser_pose, not with tf.
+SCANS = 'scans: laser_pose says where the laser sits'
 # A quaternion shorter than this carries no orientation (an unset message is all zeros).
 MIN_QUATERNION_NORM = 1e-9
+
+
+def frame_problem(frame_id: str, expected: str, what: str) -> str | None:
+    """Return why a message in frame_id is refused where expected is needed (None: it is not).
+
+    The one frame rule of the nodes: they do not transform messages between frames (a pose
+    in the plan's frame comes from ros/robot_pose.py instead).
+
+    Args:
+        frame_id: the message's header.frame_id.
+        expected: the frame it must be in.
+        what: what the message is, plural ('plans', 'scans', ...), for the reason.
+
+    """
+    if frame_id == expected:
+        return None
+    return f'frame {frame_id!r} is not {expected!r} (this node does not transform {what})'
 
 
 def yaw_to_quaternion(yaw: float) -> Quaternion:
@@ -385,9 +406,8 @@ def grid_from_message(msg: OccupancyGrid, *, frame_id: str | None = None) -> Occ
             value is outside -1..100.
 
     """
-    if frame_id is not None and msg.header.frame_id != frame_id:
-        problem = (f'frame {msg.header.frame_id!r} is not {frame_id!r} (this node does not '
-                   'transform maps)')
+    problem = None if frame_id is None else frame_problem(msg.header.frame_id, frame_id, 'maps')
+    if problem is not None:
         raise GridError(problem)
     info = msg.info
     origin = info.origin

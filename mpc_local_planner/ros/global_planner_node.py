@@ -23,12 +23,14 @@ working planner; with ``autostart:=false`` it waits for a lifecycle manager (or
 ``ros2 lifecycle set /global_planner configure``, then ``activate``).
 
 The goal comes from the ``goal`` parameter ([x, y, theta]) or a PoseStamped on
-``goal_pose`` (RViz's "2D Goal Pose"). Each new goal is planned once, from the latest
-``odom`` pose, around the world's obstacles inflated by robot_radius + clearance, and
-published on ``plan`` (reliable, transient_local: a late controller still gets it). With
-``analytic_path`` set the node publishes that path, sampled, instead of planning. Nothing is
-published before activation: a ``goal`` parameter is planned once the node is active (and
-odometry has come); a ``goal_pose`` that arrives while the node is inactive is refused.
+``goal_pose`` (RViz's "2D Goal Pose"). Each new goal is planned once, from the robot's
+pose in ``frame_id`` (the latest ``odom`` pose, or composed with a localizer's or taken from
+tf2: ros/robot_pose.py; without one the goal waits), around the world's obstacles inflated
+by robot_radius + clearance, and published on ``plan`` (reliable, transient_local: a late
+controller still gets it). With ``analytic_path`` set the node publishes that path,
+sampled, instead of planning. Nothing is published before activation: a ``goal`` parameter
+is planned once the node is active (and odometry has come); a ``goal_pose`` that arrives
+while the node is inactive is refused.
 
 With ``use_map`` it plans on an occupancy grid instead of the world's obstacles: the latest
 ``map`` (nav_msgs/OccupancyGrid, transient_local), unknown cells free, inflated by
@@ -39,9 +41,11 @@ stays. With ``use_scan`` too, each ``scan`` (sensor_msgs/LaserScan from the lase
 ``laser_pose`` in the robot frame) marks the cells of its returns and clears the cells its
 beams pass through, beam by beam as REP 117 says (PlanningGrid.add_scan; a return inside
 the robot's footprint, the one the planner plans for, is the robot itself and marks nothing),
-placed with the odometry pose nearest to its stamp; a scan that cannot be interpreted (a
-beam count its angles do not imply, within one increment, among others) or one stamped more
-than MAX_SCAN_FUTURE_S ahead of this node's clock is dropped with one throttled error.
+placed with the robot's pose in ``frame_id`` at its stamp (ros/robot_pose.py: odometry
+within SCAN_POSE_TOLERANCE of it, corrected by the localizer, or tf2); a scan that cannot
+be interpreted (a beam count its angles do not imply, within one increment, among others) or
+one stamped more than MAX_SCAN_FUTURE_S ahead of this node's clock is dropped with one
+throttled error.
 
 Re-planning (``replan_check_rate``, 2 Hz by default): the rest of the plan in force, from the
 robot's projection onto it, is checked against the grid with the rule plans are made with
@@ -69,7 +73,7 @@ import sys
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
@@ -96,14 +100,15 @@ from mpc_local_planner.core.replanning import (
     ReplanSettings,
 )
 from mpc_local_planner.perception.grids import PlanningGrid
-from mpc_local_planner.perception.pose_history import PoseHistory
 from mpc_local_planner.perception.scan_obstacles import check_scan_stamp, validate_scan
 from mpc_local_planner.ros.conversions import (
+    frame_problem,
     grid_from_message,
     odometry_to_state,
     pose_to_array,
     poses_to_path,
     scan_from_message,
+    SCANS,
     stamp_to_seconds,
 )
 from mpc_local_planner.ros.lifecycle import ManagedNode
@@ -115,11 +120,20 @@ from mpc_local_planner.ros.parameters import (
 )
 from mpc_local_planner.ros.qos import (
     GOAL_QOS,
+    LOCALIZER_QOS,
     MAP_QOS,
     ODOM_QOS,
     PLAN_QOS,
     PLANNER_DIAGNOSTICS_QOS,
     SCAN_QOS,
+)
+from mpc_local_planner.ros.robot_pose import (
+    choose_mode,
+    LocalizationError,
+    make_buffer,
+    POSE_PARAMETERS,
+    PoseMode,
+    RobotPose,
 )
 from mpc_local_planner.ros.throttle import ProblemThrottle
 from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -197,6 +211,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('replan_period', 0.0,
                   're-plan the goal in force this often (s) even when the plan is clear; 0 = '
                   'only when blocked or for a new goal', float_range=(0.0, 3600.0)),
+    *POSE_PARAMETERS,
     ParameterSpec('autostart', True,
                   'configure and activate at start; false = wait for a lifecycle manager (or '
                   '`ros2 lifecycle set`)', read_only=True),
@@ -239,9 +254,12 @@ class GlobalPlannerNode(ManagedNode):
         self._goal_sub: Subscription | None = None
         self._map_sub: Subscription | None = None
         self._scan_sub: Subscription | None = None
+        self._localizer_sub: Subscription | None = None
+        self._tf_listener: Any = None
         self._active = False
-        self._state: np.ndarray | None = None
-        self._odom_history = PoseHistory(ODOM_HISTORY_S)
+        self._state: np.ndarray | None = None  # the latest odometry (odom frame)
+        # the pose in the plan's frame (ros/robot_pose.py): configure chooses the mode
+        self._pose_source = RobotPose(PoseMode.ODOMETRY, span=ODOM_HISTORY_S, frame_id='map')
         self._pending_goal: np.ndarray | None = None
         self._waiting_reported = False
         self._problems = ProblemThrottle()
@@ -304,6 +322,11 @@ class GlobalPlannerNode(ManagedNode):
             self.release()
             return TransitionCallbackReturn.FAILURE
         self._configured = True
+        self._pose_source = self._make_pose_source()
+        if self._pose_source.mode is PoseMode.LOCALIZER:
+            self._localizer_sub = self.create_subscription(
+                PoseWithCovarianceStamped, self._pose_source.located.source,
+                self.localizer_callback, LOCALIZER_QOS)
         self._plan_pub = self.create_lifecycle_publisher(Path, 'plan', PLAN_QOS)
         self._diag_pub = self.create_lifecycle_publisher(
             DiagnosticArray, PLANNER_DIAGNOSTICS_TOPIC, PLANNER_DIAGNOSTICS_QOS)
@@ -320,8 +343,21 @@ class GlobalPlannerNode(ManagedNode):
         self._set_goal(self._goal_parameter())
         self.get_logger().info('configured' + (
             ' (planning on the map' + (' and scans' if self._use_scan else '') + ')'
-            if self._use_map else ''))
+            if self._use_map else '') + f'; plans start from {self._pose_source.describe()}')
         return super().on_configure(state)
+
+    def _make_pose_source(self) -> RobotPose:
+        """Return the pose source localization_topic and tf2's presence choose (robot_pose)."""
+        topic = str(self.get_parameter('localization_topic').value)
+        mode = choose_mode(topic)
+        buffer = None
+        if mode is PoseMode.TF:
+            buffer, self._tf_listener = make_buffer(self)
+        return RobotPose(mode, span=ODOM_HISTORY_S,
+                         frame_id=str(self.get_parameter('frame_id').value), topic=topic,
+                         buffer=buffer,
+                         base_frame_id=str(self.get_parameter('base_frame_id').value),
+                         tolerance=float(self.get_parameter('transform_tolerance').value))
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Enable the publishers; plan a goal given as a parameter, or publish analytic_path."""
@@ -358,14 +394,18 @@ class GlobalPlannerNode(ManagedNode):
         self.replanner.drop_plan()
         self._configured = False
         self.destroy_entities(self._plan_pub, self._diag_pub, self._odom_sub, self._goal_sub,
-                              self._map_sub, self._scan_sub)
+                              self._map_sub, self._scan_sub, self._localizer_sub)
         self._plan_pub = self._diag_pub = None
         self._odom_sub = self._goal_sub = self._map_sub = self._scan_sub = None
+        self._localizer_sub = None
+        if self._tf_listener is not None:
+            self._tf_listener.unregister()
+            self._tf_listener = None
         self._planner = None
         self._grid = None
         self._world = None
         self._state = None
-        self._odom_history.clear()
+        self._pose_source.clear()
         self._pending_goal = None
 
     # ------------------------------------------------------------------ parameters
@@ -503,8 +543,47 @@ class GlobalPlannerNode(ManagedNode):
     # ------------------------------------------------------------------ callbacks
     @property
     def robot_pose(self) -> np.ndarray | None:
-        """The latest valid odometry pose (x, y, yaw) plans start from, or None."""
-        return None if self._state is None else self._state.copy()
+        """The pose in the plan's frame (x, y, yaw) plans start from, or None.
+
+        The latest valid odometry, composed as the pose source says (RobotPose.current);
+        None without odometry or while there is no pose in the plan's frame.
+        """
+        try:
+            pose, _ = self._pose_source.current(self._state, None)
+        except LocalizationError:
+            return None
+        return pose
+
+    def _start(self) -> np.ndarray | None:
+        """Return the pose plans start from; None (a throttled warning) while there is none."""
+        try:
+            pose, _ = self._pose_source.current(self._state, None)
+        except LocalizationError as err:
+            if self._problems.report('localization'):
+                self.get_logger().warning(f"no pose in the plan's frame: {err}; goals wait")
+            return None
+        if pose is not None and self._problems.resolve('localization'):
+            self.get_logger().info(f"a pose in the plan's frame again, from "
+                                   f'{self._pose_source.describe()}')
+        return pose
+
+    def localizer_callback(self, msg: PoseWithCovarianceStamped) -> None:
+        """Take the localizer's pose (its correction map <- odom); plan a pending goal.
+
+        One the odometry kept cannot place drops the correction (goals wait); one in another
+        frame, or not a pose, is refused with one throttled error.
+        """
+        try:
+            self._pose_source.add_localizer(msg, self._now())
+        except LocalizationError:
+            return  # said when a plan needs the pose
+        except Exception as err:  # ValueError mostly; nothing may escape a callback
+            if self._problems.report('localizer'):
+                self.get_logger().error(f'localizer pose refused: {err}')
+            return
+        self._problems.resolve('localizer')
+        if self._pending_goal is not None:
+            self._try_plan()
 
     def odom_callback(self, msg: Odometry) -> None:
         """Keep the robot's pose (and recent ones, for scans); plan a pending goal."""
@@ -513,7 +592,8 @@ class GlobalPlannerNode(ManagedNode):
         except ValueError as err:
             self.get_logger().warning(f'ignoring odometry: {err}', throttle_duration_sec=1.0)
             return
-        self._odom_history.add(stamp_to_seconds(msg.header.stamp), self._state)
+        self._pose_source.add_odometry(stamp_to_seconds(msg.header.stamp), self._state,
+                                       msg.header.frame_id)
         if self._pending_goal is not None:
             self._try_plan()
 
@@ -554,9 +634,8 @@ class GlobalPlannerNode(ManagedNode):
             return
         try:
             frame = str(self.get_parameter('base_frame_id').value)
-            if msg.header.frame_id != frame:
-                problem = (f'frame {msg.header.frame_id!r} is not {frame!r} (this node does not '
-                           'transform scans: laser_pose says where the laser sits)')
+            problem = frame_problem(msg.header.frame_id, frame, SCANS)
+            if problem is not None:
                 raise ValueError(problem)
             scan = scan_from_message(msg)
             validate_scan(scan)  # before it is placed: a count the angles do not imply
@@ -567,6 +646,10 @@ class GlobalPlannerNode(ManagedNode):
             self._grid.add_scan(scan, pose,
                                 laser_pose=list(self.get_parameter('laser_pose').value),
                                 body=body)
+        except LocalizationError as err:  # not the scan's fault: said where plans wait
+            self.get_logger().info(f"scan dropped: no pose in the plan's frame ({err})",
+                                   throttle_duration_sec=2.0)
+            return
         except Exception as err:  # ScanError (a ValueError); nothing may escape a callback
             if self._problems.report('scan'):
                 self.get_logger().error(f'scan dropped: {err}')
@@ -575,19 +658,23 @@ class GlobalPlannerNode(ManagedNode):
         self.scan_count += 1
 
     def _pose_at(self, stamp: float) -> np.ndarray:
-        """Return the odometry pose at stamp (seconds), interpolated in the history.
+        """Return the pose in the plan's frame at stamp (seconds): RobotPose.at.
 
         Raises:
-            ValueError: if no pose kept is within SCAN_POSE_TOLERANCE of it.
+            ValueError: if no odometry kept is within SCAN_POSE_TOLERANCE of it, or there is
+                no pose in the plan's frame (LocalizationError).
 
         """
-        gap = self._odom_history.gap(stamp)
+        odometry = self._pose_source.located.odometry
+        gap = odometry.gap(stamp)
         if not gap <= SCAN_POSE_TOLERANCE:
-            problem = ('no odometry yet to place it' if len(self._odom_history) == 0 else
+            problem = ('no odometry yet to place it' if len(odometry) == 0 else
                        f'no odometry within {SCAN_POSE_TOLERANCE:g} s of its stamp '
                        f'{stamp:.3f} s (nearest {gap:.3f} s away)')
             raise ValueError(problem)
-        return self._odom_history.at(stamp)
+        pose = self._pose_source.at(stamp)
+        assert pose is not None  # odometry is kept
+        return pose
 
     def goal_callback(self, msg: PoseStamped) -> None:
         """Plan to a goal sent as a PoseStamped (RViz's 2D Goal Pose); refused unless active."""
@@ -597,9 +684,8 @@ class GlobalPlannerNode(ManagedNode):
             return
         frame = str(self.get_parameter('frame_id').value)
         try:
-            if msg.header.frame_id != frame:
-                problem = (f'frame {msg.header.frame_id!r} is not {frame!r} (this node does '
-                           'not transform goals)')
+            problem = frame_problem(msg.header.frame_id, frame, 'goals')
+            if problem is not None:
                 raise ValueError(problem)
             goal = pose_to_array(msg.pose)
         except ValueError as err:
@@ -630,9 +716,11 @@ class GlobalPlannerNode(ManagedNode):
         if self._state is None:
             self.get_logger().info('goal received: waiting for odometry', once=True)
             return
+        start = self._start()
+        if start is None:
+            return
         goal, self._pending_goal = self._pending_goal, None
-        self._adopt(self.replanner.plan_goal(self._planner, self._state.copy(), goal,
-                                             now=self._now()))
+        self._adopt(self.replanner.plan_goal(self._planner, start, goal, now=self._now()))
 
     def check_plan(self) -> None:
         """Re-plan the goal in force when the rest of its plan is blocked, or periodically.
@@ -647,7 +735,10 @@ class GlobalPlannerNode(ManagedNode):
                 or self._pending_goal is not None
                 or self.get_parameter('analytic_path').value):
             return
-        self._adopt(self.replanner.check(self._planner, self._state.copy(), now=self._now(),
+        start = self._start()
+        if start is None:
+            return
+        self._adopt(self.replanner.check(self._planner, start, now=self._now(),
                                          grid=self._grid))
 
     def _now(self) -> float:

@@ -22,6 +22,11 @@ cmd_vel and stops the timer; ``cleanup`` frees the NLP and every publisher and
 subscription; ``shutdown`` does the same (with a zero cmd_vel first when active). With
 ``autostart`` (the default) ``run_node`` configures and activates at start.
 
+The robot's pose in the plan's frame (``frame_id``) comes from a localizer's pose topic
+(``localization_topic``) composed with odometry, from tf2 when importable, or else is the
+odometry itself (ros/robot_pose.py); while there is none the command is zero (reason
+no_localization). ``local_plan``, ``mpc/obstacles`` and ``mpc/footprint`` are in ``frame_id``.
+
 Subscribes ``odom`` and ``plan`` (reliable, transient_local), ``scan`` (sensor_msgs/LaserScan,
 best effort) when ``obstacle_sources`` lists 'scan' and ``map`` (nav_msgs/OccupancyGrid,
 transient_local) when it lists 'map'; publishes ``cmd_vel`` (Twist, or
@@ -37,9 +42,10 @@ each scan's returns, read beam by beam as REP 117 says (classify_beams: NaN and 
 outside [range_min, range_max] are ignored, +inf clears the beam up to range_max, -inf is an
 obstacle at range_min; a return inside the robot's footprint, from the laser at
 ``laser_pose``, is the robot itself and ignored, so a -inf from a laser within the body stops
-nothing), placed in the map frame with the odometry pose AT THE SCAN'S STAMP,
-interpolated in the last ODOM_HISTORY_S seconds of odometry (a scan older than that uses the
-oldest pose kept, a newer one the latest), clustered into convex pieces and remembered for
+nothing), placed in the plan's frame with the robot's pose there AT THE SCAN'S STAMP
+(ros/robot_pose.py: the odometry interpolated in the last ODOM_HISTORY_S seconds, a scan
+older than that using the oldest pose kept, a newer one the latest, with the localizer's
+correction; or tf2's transform at the stamp), clustered into convex pieces and remembered for
 ``obstacle_memory`` seconds). A plan through an obstacle is followed: the MPC stops in front
 of it or goes around, and the diagnostics say ``path_blocked`` and ``blocked_at``.
 
@@ -48,8 +54,8 @@ The robot's shape, Nav2's precedence (as the simulator and the planner apply it)
 file's footprint if it is a polygon, else a circle of ``robot_radius`` (the larger of the
 parameter and the world's). A circle grows the obstacles by its radius; a polygon is kept
 apart from each obstacle exactly by the NLP. ``mpc/footprint`` shows that shape at the
-latest odometry pose, and sensed obstacles are handed over within ``MpcConfig.reach`` (which
-counts a polygon's circumscribed radius) plus SENSING_MARGIN.
+robot's pose in ``frame_id``, and sensed obstacles are handed over within
+``MpcConfig.reach`` (which counts a polygon's circumscribed radius) plus SENSING_MARGIN.
 
 Refused input (odometry with NaN, inf or a zero quaternion; a plan that is empty, too short,
 too long, not finite or in another frame) makes the command zero until valid input comes,
@@ -83,7 +89,7 @@ import sys
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PolygonStamped, Twist, TwistStamped
+from geometry_msgs.msg import PolygonStamped, PoseWithCovarianceStamped, Twist, TwistStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
@@ -109,7 +115,6 @@ from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path
 from mpc_local_planner.perception.local_obstacles import LocalObstacles
-from mpc_local_planner.perception.pose_history import PoseHistory
 from mpc_local_planner.perception.scan_obstacles import (
     check_scan_stamp,
     classify_beams,
@@ -119,6 +124,7 @@ from mpc_local_planner.perception.scan_obstacles import (
 )
 from mpc_local_planner.ros.conversions import (
     delete_all_marker,
+    frame_problem,
     grid_from_message,
     odometry_to_state,
     path_pose_count,
@@ -128,6 +134,7 @@ from mpc_local_planner.ros.conversions import (
     poses_to_path,
     scan_beam_count,
     scan_from_message,
+    SCANS,
     seconds_to_stamp,
     stamp_to_seconds,
     twist_from_u,
@@ -150,10 +157,18 @@ from mpc_local_planner.ros.qos import (
     CMD_VEL_QOS,
     DIAGNOSTICS_QOS,
     LOCAL_PLAN_QOS,
+    LOCALIZER_QOS,
     MAP_QOS,
     ODOM_QOS,
     PLAN_QOS,
     SCAN_QOS,
+)
+from mpc_local_planner.ros.robot_pose import (
+    choose_mode,
+    LocalizationError,
+    make_buffer,
+    PoseMode,
+    RobotPose,
 )
 from mpc_local_planner.ros.throttle import ProblemThrottle
 
@@ -232,10 +247,15 @@ class MpcControllerNode(ManagedNode):
         self._plan_sub = None
         self._scan_sub = None
         self._map_sub = None
+        self._localizer_sub = None
+        self._tf_listener = None
         self._timer = None
         self._stamped = False
         self._sources: frozenset[str] = frozenset()
         self._world_obstacles: list[ConvexPolygon] = []
+        # where the pose in the plan's frame comes from (ros/robot_pose.py); configure
+        # chooses the mode, odometry until then
+        self._pose_source = RobotPose(PoseMode.ODOMETRY, span=ODOM_HISTORY_S, frame_id='map')
         self._forget_inputs()
         self.add_on_set_parameters_callback(self.parameters_callback)
         declare_parameters(self, PARAMETERS)
@@ -243,19 +263,25 @@ class MpcControllerNode(ManagedNode):
 
     def _forget_inputs(self) -> None:
         """Drop the latest odometry, plan verdicts and step bookkeeping (as at construction)."""
+        # the latest odometry (odom frame) and when it was measured; the pose in the plan's
+        # frame made of it at the latest control step (RobotPose.current) and its time
+        self._odom_state: np.ndarray | None = None
+        self._odom_time: float | None = None
         self._state: np.ndarray | None = None
         self._state_time: float | None = None
-        # what is wrong with the latest odometry / plan (None when valid): the command is
-        # zero while either is set, and the diagnostics carry it as the reason
+        # what is wrong with the latest odometry / plan / pose in the plan's frame (None when
+        # valid): the command is zero while one is set, and the diagnostics carry it
         self._odom_problem: str | None = None
         self._plan_problem: str | None = None
+        self._pose_problem: str | None = None
         self._problems = ProblemThrottle(ERROR_THROTTLE_S)
         self._last_message = ''
         self._last_step_time: float | None = None
         self._markers_shown: tuple[tuple, tuple] | None = None  # (grown, active) last sent
         self._steps_since_markers = 0
         # the last ODOM_HISTORY_S seconds of odometry, to place each scan where it was taken
-        self._odom_history = PoseHistory(ODOM_HISTORY_S)
+        # (and the localizer's correction)
+        self._pose_source.clear()
         # the map's and the laser's obstacles (the scan memory inside), when the latest valid
         # scan was taken (None: none yet) and its stamp, the latest valid map
         self._local: LocalObstacles | None = None
@@ -296,6 +322,7 @@ class MpcControllerNode(ManagedNode):
         self.controller = controller
         self._sources = sources
         self._world_obstacles = list(obstacles)
+        self._pose_source = self._make_robot_pose(values)
         self._forget_inputs()
         self._local = LocalObstacles(
             config.faces_per_obstacle,
@@ -326,13 +353,29 @@ class MpcControllerNode(ManagedNode):
         if 'map' in sources:
             self._map_sub = self.create_subscription(OccupancyGrid, 'map', self.map_callback,
                                                      MAP_QOS)
+        if self._pose_source.mode is PoseMode.LOCALIZER:
+            self._localizer_sub = self.create_subscription(
+                PoseWithCovarianceStamped, str(values['localization_topic']),
+                self.localizer_callback, LOCALIZER_QOS)
         shape = config.robot_footprint
         robot = (f'a circle of radius {shape.radius:g} m' if shape.is_circle
                  else f'the footprint {shape.vertices.tolist()}')
         self.get_logger().info(f'configured: {len(obstacles)} obstacles from the world, '
                                f'sources {sorted(sources)}, horizon {config.horizon}, step '
-                               f'{config.step:g} s, the robot {robot}')
+                               f'{config.step:g} s, the robot {robot}; the pose in '
+                               f'{values["frame_id"]!r} from {self._pose_source.describe()}')
         return super().on_configure(state)
+
+    def _make_robot_pose(self, values: dict[str, Any]) -> RobotPose:
+        """Return the pose source localization_topic and tf2's presence choose (robot_pose)."""
+        mode = choose_mode(str(values['localization_topic']))
+        buffer = None
+        if mode is PoseMode.TF:
+            buffer, self._tf_listener = make_buffer(self)
+        return RobotPose(mode, span=ODOM_HISTORY_S, frame_id=str(values['frame_id']),
+                         topic=str(values['localization_topic']), buffer=buffer,
+                         base_frame_id=str(values['base_frame_id']),
+                         tolerance=float(values['transform_tolerance']))
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Enable the publishers and start the control timer."""
@@ -391,10 +434,15 @@ class MpcControllerNode(ManagedNode):
     def release(self) -> None:
         """Destroy the timer, subscriptions and publishers, and drop the controller (its NLPs)."""
         self.destroy_entities(self._timer, self._odom_sub, self._plan_sub, self._scan_sub,
-                              self._map_sub, self._cmd_pub, self._local_plan_pub,
-                              self._diag_pub, self._obstacles_pub, self._footprint_pub)
+                              self._map_sub, self._localizer_sub, self._cmd_pub,
+                              self._local_plan_pub, self._diag_pub, self._obstacles_pub,
+                              self._footprint_pub)
         self._timer = None
         self._odom_sub = self._plan_sub = self._scan_sub = self._map_sub = None
+        self._localizer_sub = None
+        if self._tf_listener is not None:
+            self._tf_listener.unregister()
+            self._tf_listener = None
         self._cmd_pub = self._local_plan_pub = self._diag_pub = None
         self._obstacles_pub = self._footprint_pub = None
         self.controller = None  # the MPC and its NLPs go with it
@@ -486,6 +534,7 @@ class MpcControllerNode(ManagedNode):
         try:
             state = self.controller.check_state(odometry_to_state(msg))
         except Exception as err:  # ValueError, or a message gone wrong
+            self._odom_state, self._odom_time = None, None
             self._state, self._state_time = None, None
             self._odom_problem = str(err) or type(err).__name__
             if self._problems.report('odom'):
@@ -494,21 +543,62 @@ class MpcControllerNode(ManagedNode):
                     'valid odometry comes')
             return
         stamp = stamp_to_seconds(msg.header.stamp)
-        self._state = state
-        self._state_time = min(stamp, receipt) if stamp > 0 else receipt
+        self._odom_state = state
+        self._odom_time = min(stamp, receipt) if stamp > 0 else receipt
         self._odom_problem = None
-        self._odom_history.add(stamp if stamp > 0 else receipt, state)
+        self._pose_source.add_odometry(stamp if stamp > 0 else receipt, state,
+                                       msg.header.frame_id)
         if self._problems.resolve('odom'):
             self.get_logger().info('odometry is valid again')
 
     def pose_at(self, time: float) -> np.ndarray | None:
-        """Return the odometry pose at time (see PoseHistory.at; None before odometry)."""
-        return self._odom_history.at(time)
+        """Return the pose in the plan's frame at time (RobotPose.at; None before odometry).
+
+        Raises:
+            LocalizationError: if there is odometry but no pose in the plan's frame.
+
+        """
+        return self._pose_source.at(time)
+
+    def localizer_callback(self, msg: PoseWithCovarianceStamped) -> None:
+        """Take the localizer's pose: its correction map <- odom applies from now on.
+
+        One older than the odometry kept drops the correction (the robot stops until a
+        usable one comes; the control step says why). One in another frame, or not a pose,
+        is refused with one throttled error, and the correction in force stays.
+        """
+        try:
+            self._pose_source.add_localizer(msg, self._now())
+        except LocalizationError:
+            return  # the next control step stops and says why
+        except Exception as err:  # ValueError mostly; never leave a callback
+            if self._problems.report('localizer'):
+                self.get_logger().error(f'localizer pose refused: {err}')
+            return
+        self._problems.resolve('localizer')
+
+    def _locate(self) -> None:
+        """Set this step's pose in the plan's frame (RobotPose.current); say once if none."""
+        try:
+            self._state, self._state_time = self._pose_source.current(self._odom_state,
+                                                                     self._odom_time)
+        except LocalizationError as err:
+            self._state, self._state_time = None, None
+            self._pose_problem = str(err)
+            if self._problems.report('localization'):
+                self.get_logger().error(f'{Reason.NO_LOCALIZATION.text}: {err}; cmd_vel is '
+                                        'zero until there is one')
+            return
+        self._pose_problem = None
+        if self._problems.resolve('localization'):
+            self.get_logger().info(f"a pose in the plan's frame again, from "
+                                   f'{self._pose_source.describe()}')
 
     def scan_callback(self, msg: LaserScan | bytes) -> None:
-        """Place a scan's obstacles in the map frame and remember them; drop a bad scan.
+        """Place a scan's obstacles in the plan's frame and remember them; drop a bad scan.
 
-        The robot's pose is the odometry's at the scan's stamp (see pose_at). A malformed
+        The robot's pose is its pose in the plan's frame at the scan's stamp (see pose_at;
+        the one the controller steers with, so scan and plan agree). A malformed
         scan is dropped with one throttled error, so the scan goes stale if only bad ones
         come; the latest valid scan's time (its stamp, but never later than its arrival)
         is what scan_timeout is measured against, if it has a usable reading: a blind
@@ -525,9 +615,14 @@ class MpcControllerNode(ManagedNode):
         receipt = self._now()
         try:
             scan, stamp = self._read_scan(msg, receipt)
-            pose = self.pose_at(stamp)
+            try:
+                pose = self.pose_at(stamp)
+            except LocalizationError as err:
+                pose, problem = None, f"no pose in the plan's frame to place it ({err})"
+            else:
+                problem = 'no odometry yet to place it'
             if pose is None:
-                self.get_logger().info('scan dropped: no odometry yet to place it',
+                self.get_logger().info(f'scan dropped: {problem}',
                                        throttle_duration_sec=ERROR_THROTTLE_S)
                 return
             if self._scan_stamp is not None and stamp < self._scan_stamp:
@@ -575,9 +670,8 @@ class MpcControllerNode(ManagedNode):
             problem = f'{len(msg.ranges)} beams, more than the {MAX_BEAMS} accepted'
             raise ValueError(problem)
         frame = str(self.get_parameter('base_frame_id').value)
-        if msg.header.frame_id != frame:
-            problem = (f'frame {msg.header.frame_id!r} is not {frame!r} (this node does not '
-                       'transform scans: laser_pose says where the laser sits)')
+        problem = frame_problem(msg.header.frame_id, frame, SCANS)
+        if problem is not None:
             raise ValueError(problem)
         scan = scan_from_message(msg)
         stamp = scan.stamp if scan.stamp > 0 else receipt
@@ -674,9 +768,8 @@ class MpcControllerNode(ManagedNode):
         if len(msg.poses) > limit:
             raise too_many(len(msg.poses))
         frame = str(self.get_parameter('frame_id').value)
-        if msg.header.frame_id != frame:
-            problem = (f'frame {msg.header.frame_id!r} is not {frame!r} (this node does not '
-                       'transform plans)')
+        problem = frame_problem(msg.header.frame_id, frame, 'plans')
+        if problem is not None:
             raise ValueError(problem)
         return msg
 
@@ -696,10 +789,13 @@ class MpcControllerNode(ManagedNode):
         self._last_step_time = now
         self.control_steps += 1
         try:
+            self._locate()
             if self._odom_problem is not None:
                 output = self.controller.stop(Reason.INVALID_ODOM, self._odom_problem)
             elif self._plan_problem is not None:
                 output = self.controller.stop(Reason.INVALID_PLAN, self._plan_problem)
+            elif self._pose_problem is not None:
+                output = self.controller.stop(Reason.NO_LOCALIZATION, self._pose_problem)
             else:
                 self._update_obstacles()
                 output = self.controller.compute(
@@ -770,7 +866,7 @@ class MpcControllerNode(ManagedNode):
             return
         self._last_message = message
         self.goal_reached = output.reason is Reason.GOAL_REACHED
-        if output.reason in (Reason.INVALID_ODOM, Reason.INVALID_PLAN):
+        if output.reason in (Reason.INVALID_ODOM, Reason.INVALID_PLAN, Reason.NO_LOCALIZATION):
             return
         if output.reason is Reason.ERROR and not self._problems.report('error'):
             return

@@ -31,6 +31,7 @@ __all__ = [
     'DIAGNOSTICS_QOS',
     'GOAL_QOS',
     'LOCAL_PLAN_QOS',
+    'LOCALIZER_QOS',
     'MAP_QOS',
     'ODOM_QOS',
     'PLAN_QOS',
@@ -78,3 +79,8 @@ SCAN_QOS = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT,
 CONTACTS_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL,
                           history=HistoryPolicy.KEEP_LAST)
+
+# ``amcl_pose`` (geometry_msgs/PoseWithCovarianceStamped) as a subscriber takes it: reliable
+# and volatile, which matches AMCL's transient_local publisher and a volatile one alike.
+LOCALIZER_QOS = QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)

@@ -46,6 +46,17 @@ The footprint, first that applies (Nav2's names; a polygon wins over a radius, a
 So a world that describes its robot is simulated with that robot unless the parameter says
 otherwise, and ``robot_radius`` (which closed_loop sets from the world's covering radius) never
 turns a polygon back into its circumscribed circle.
+
+A real robot's odometry drifts, and the controller must follow the plan in ``map`` all the
+same (ros/robot_pose.py). With ``odom_drift.position`` or ``odom_drift.heading`` set (both
+0 by default: the odometry is the true pose, ``odom`` is ``map``) the published odometry is
+integrated apart from the true pose, from the same start, with the speed scaled by (1 +
+``odom_drift.position``) and the turn rate biased by ``odom_drift.heading`` rad per metre
+travelled; scans and contacts stay with the true pose. With ``localizer.rate`` > 0 a
+localizer stands in for AMCL: at that rate (in ticks, as scans) it publishes the TRUE pose
+with Gaussian noise of ``localizer.noise_std`` (m, and rad for the heading) on ``amcl_pose``
+(geometry_msgs/PoseWithCovarianceStamped in ``localizer.frame_id``, stamped like the
+odometry of the same instant).
 """
 
 from __future__ import annotations
@@ -55,7 +66,7 @@ import math
 import sys
 from typing import Any
 
-from geometry_msgs.msg import Twist, TwistStamped
+from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
@@ -71,17 +82,28 @@ from mpc_local_planner.core.footprint import Footprint, parse_footprint
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.perception.laser import contact, SimulatedLaser, TrueGeometry
 from mpc_local_planner.perception.scan_obstacles import Scan
-from mpc_local_planner.ros.conversions import seconds_to_stamp, state_to_odometry, u_from_twist
+from mpc_local_planner.ros.conversions import (
+    seconds_to_stamp,
+    state_to_odometry,
+    u_from_twist,
+    yaw_to_quaternion,
+)
 from mpc_local_planner.ros.node_main import destroy_on_failure, run_node
 from mpc_local_planner.ros.parameters import declare_parameters, ParameterSpec
-from mpc_local_planner.ros.qos import CLOCK_QOS, CMD_VEL_QOS, CONTACTS_QOS, ODOM_QOS
+from mpc_local_planner.ros.qos import (
+    CLOCK_QOS,
+    CMD_VEL_QOS,
+    CONTACTS_QOS,
+    LOCALIZER_QOS,
+    ODOM_QOS,
+)
 from mpc_local_planner.ros.throttle import ProblemThrottle
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world, World
 
-__all__ = ['CONTACTS_TOPIC', 'PARAMETERS', 'SCAN_PUBLISHER_QOS', 'SCAN_RANGE_MIN',
-           'SCAN_TOPIC', 'SUMMARY', 'UnicycleSimulatorNode', 'laser_scan_msg', 'main',
-           'validate_simulator_parameters']
+__all__ = ['CONTACTS_TOPIC', 'LOCALIZER_TOPIC', 'PARAMETERS', 'SCAN_PUBLISHER_QOS',
+           'SCAN_RANGE_MIN', 'SCAN_TOPIC', 'SUMMARY', 'UnicycleSimulatorNode', 'laser_scan_msg',
+           'main', 'validate_simulator_parameters']
 
 
 # At most this many integration steps catch up a late tick (real-time mode).
@@ -90,6 +112,8 @@ _MODEL = Unicycle()  # the single source of the saturation defaults
 
 SCAN_TOPIC = 'scan'
 CONTACTS_TOPIC = 'simulator/contacts'
+# The localizer stand-in's topic, as AMCL's.
+LOCALIZER_TOPIC = 'amcl_pose'
 # The simulated laser's closest valid reading (m), as a LaserScan's range_min.
 SCAN_RANGE_MIN = 0.05
 # The publisher side of ``scan``: reliable, volatile, depth 10 (best-effort readers match).
@@ -159,6 +183,23 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('scan.noise_std', 0.0,
                   'standard deviation of the Gaussian range noise (m), >= 0'),
     ParameterSpec('scan.seed', 0, 'seed of the noise generator (runs are reproducible)'),
+    ParameterSpec('odom_drift.position', 0.0,
+                  "odometry's distance error as a fraction of the distance travelled (0.05 = "
+                  '5 %: the odometry says 1.05 m per true metre); 0 = exact',
+                  float_range=(-0.5, 0.5)),
+    ParameterSpec('odom_drift.heading', 0.0,
+                  "odometry's heading error per metre travelled (rad/m); 0 = exact",
+                  float_range=(-1.0, 1.0)),
+    ParameterSpec('localizer.rate', 0.0,
+                  f'publish the true pose with noise on {LOCALIZER_TOPIC} this often (Hz of '
+                  'simulated time, at most one per tick), a stand-in for AMCL; 0 = off',
+                  float_range=(0.0, 1000.0)),
+    ParameterSpec('localizer.noise_std', 0.01,
+                  "standard deviation of the localizer's Gaussian noise (m, and rad for the "
+                  'heading)', float_range=(0.0, 10.0)),
+    ParameterSpec('localizer.frame_id', 'map', "frame of the localizer's poses"),
+    ParameterSpec('localizer.seed', 0, "seed of the localizer's noise",
+                  int_range=(0, 2**31 - 1)),
 )
 
 
@@ -242,6 +283,7 @@ class UnicycleSimulatorNode(Node):
         self.add_post_set_parameters_callback(self.post_parameters_callback)
         pose = np.array(self.get_parameter('initial_pose').value, dtype=float)
         self._state = pose
+        self._odom_state = pose.copy()  # what odometry says: the true pose unless drifting
         self._model = self._read_model()
         self._u = np.zeros(2)
         self._sim_time = 0.0
@@ -255,12 +297,17 @@ class UnicycleSimulatorNode(Node):
         # scan periods elapsed since the last scan, advanced by scan.rate / rate per tick:
         # scans follow the simulation's steps, not the wall clock
         self._scan_phase = 0.0
+        self._localizer_phase = 0.0
+        self._localizer_rng = np.random.default_rng(
+            int(self.get_parameter('localizer.seed').value))
         self._in_contact = False
         self._contacts = 0
         self._laser = self._make_laser()
         self._odom_pub = self.create_publisher(Odometry, 'odom', ODOM_QOS)
         self._scan_pub = self.create_publisher(LaserScan, SCAN_TOPIC, SCAN_PUBLISHER_QOS)
         self._contacts_pub = self.create_publisher(UInt32, CONTACTS_TOPIC, CONTACTS_QOS)
+        self._localizer_pub = self.create_publisher(PoseWithCovarianceStamped, LOCALIZER_TOPIC,
+                                                    LOCALIZER_QOS)
         self._contacts_pub.publish(UInt32(data=0))
         self._clock_pub = self.create_publisher(ClockMsg, 'clock', CLOCK_QOS)
         cmd_type = TwistStamped if self.get_parameter('enable_stamped_cmd_vel').value else Twist
@@ -342,6 +389,11 @@ class UnicycleSimulatorNode(Node):
         return self._state.copy()
 
     @property
+    def odometry(self) -> np.ndarray:
+        """The pose odometry says (x, y, theta): the true one unless odom_drift is set."""
+        return self._odom_state.copy()
+
+    @property
     def sim_time(self) -> float:
         """Simulated seconds so far (publish_clock mode)."""
         return self._sim_time
@@ -400,10 +452,15 @@ class UnicycleSimulatorNode(Node):
                                 or self._now() - self._last_cmd_time > timeout):
                 u = np.zeros(2)
             u = self._model.saturate(u)
+            drift = (float(self.get_parameter('odom_drift.position').value),
+                     float(self.get_parameter('odom_drift.heading').value))
             for _ in range(steps):
+                self._step_odometry(u, drift)
                 self._state = self._model.step(self._state, u, self._dt)
                 self._sim_time += self._dt
                 self._scan_phase += float(self.get_parameter('scan.rate').value) * self._dt
+                self._localizer_phase += float(
+                    self.get_parameter('localizer.rate').value) * self._dt
                 self._check_contact()
             publish_clock = self.get_parameter('publish_clock').value
             if publish_clock:
@@ -412,10 +469,11 @@ class UnicycleSimulatorNode(Node):
                 stamp = self.get_clock().now().to_msg()
             # odom before clock: a controller woken by the new time already has the state
             self._odom_pub.publish(state_to_odometry(
-                self._state, u, stamp=stamp,
+                self._odom_state, u, stamp=stamp,
                 frame_id=str(self.get_parameter('frame_id').value),
                 child_frame_id=str(self.get_parameter('child_frame_id').value)))
             self._publish_scan(stamp)
+            self._publish_localizer(stamp)
             if publish_clock:
                 self._clock_pub.publish(ClockMsg(clock=stamp))
         except Exception as err:  # never let a callback kill the executor
@@ -424,6 +482,36 @@ class UnicycleSimulatorNode(Node):
             self.get_logger().error(f'simulation step failed: {err}',
                                     throttle_duration_sec=1.0)
 
+
+    def _step_odometry(self, u: np.ndarray, drift: tuple[float, float]) -> None:
+        """Advance what odometry says by one step: the true step, or a drifting one."""
+        position, heading = drift
+        if position == 0.0 and heading == 0.0:
+            self._odom_state = self._model.step(self._state, u, self._dt)
+            return
+        v, omega = (float(value) for value in self._model.saturate(u))
+        odom_u = np.array([(1.0 + position) * v, omega + heading * abs(v)])
+        # what the wheels' encoders report, not a command: not saturated again
+        self._odom_state = np.asarray(self._model.discrete(self._dt)(self._odom_state, odom_u),
+                                      dtype=float).reshape(-1)
+
+    def _publish_localizer(self, stamp: Any) -> None:
+        """Publish the true pose with noise if a localizer period ended during this tick."""
+        if self._localizer_phase < 1.0 - _TICK_EPS:
+            return
+        self._localizer_phase = max(
+            0.0, self._localizer_phase - math.floor(self._localizer_phase + _TICK_EPS))
+        std = float(self.get_parameter('localizer.noise_std').value)
+        x, y, theta = self._state[:3] + self._localizer_rng.normal(0.0, std, 3)
+        msg = PoseWithCovarianceStamped()
+        msg.header.stamp = stamp
+        msg.header.frame_id = str(self.get_parameter('localizer.frame_id').value)
+        msg.pose.pose.position.x, msg.pose.pose.position.y = float(x), float(y)
+        msg.pose.pose.orientation = yaw_to_quaternion(float(theta))
+        covariance = np.zeros(36)
+        covariance[[0, 7, 35]] = std * std
+        msg.pose.covariance = covariance.tolist()
+        self._localizer_pub.publish(msg)
 
     def _check_contact(self) -> None:
         """Count a contact episode when the robot's footprint starts touching the true world."""

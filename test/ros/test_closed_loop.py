@@ -265,6 +265,34 @@ def check_sensing_run(out: Path, world) -> dict:
     return metrics
 
 
+def test_drift_makes_the_odometry_drift_and_the_nodes_follow_the_localizer(tmp_path) -> None:
+    params = node_parameters(LoopOptions(path='rrt', drift=0.05), UNKNOWN_BOX_FILE,
+                             UNKNOWN_BOX)
+    simulator = params['unicycle_simulator']
+    assert simulator['odom_drift.position'] == simulator['odom_drift.heading'] == 0.05
+    assert simulator['localizer.rate'] > 0
+    assert params['global_planner']['localization_topic'] == 'amcl_pose'
+    assert params['mpc_controller']['localization_topic'] == 'amcl_pose'
+    assert simulator['frame_id'] == 'odom'  # drifting odometry is not in map
+    plain = node_parameters(LoopOptions(path='rrt'), UNKNOWN_BOX_FILE, UNKNOWN_BOX)
+    assert not any('drift' in name or 'localiz' in name
+                   for values in plain.values() for name in values)
+    # exact odometry is in map, and says so: a node with tf2 looks nothing up
+    assert plain['unicycle_simulator']['frame_id'] == 'map'
+
+
+@pytest.mark.slow
+def test_closed_loop_with_drifting_odometry_goes_around_the_unknown_box_with_the_localizer(
+        tmp_path) -> None:
+    code = main(['--world', str(UNKNOWN_BOX_FILE), '--out', str(tmp_path), '--sensing',
+                 '--path', 'rrt', '--drift', '--rtf', '4', '--timeout', '150',
+                 '--time-limit', '60'])
+    assert code == 0
+    metrics = check_sensing_run(tmp_path, UNKNOWN_BOX)
+    assert metrics['drift'] == 0.05
+    assert metrics['true_goal_error'] < 0.1  # the true robot, not only what odometry says
+
+
 @pytest.mark.slow
 def test_closed_loop_with_sensing_reaches_the_paper_target_without_contact(tmp_path) -> None:
     code = main(['--world', str(WORLD_FILE), '--out', str(tmp_path), '--sensing',

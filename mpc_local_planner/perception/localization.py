@@ -1,0 +1,138 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""The robot's pose in the plan's frame (map) from odometry (odom) and a localizer.
+
+Odometry drifts: a plan in ``map`` followed with the odometry pose is followed displaced by
+the drift. A localizer (AMCL's ``amcl_pose``) says where the robot is in ``map``, but late
+and seldom; odometry is smooth and frequent. Composed, the correction ``map <- odom`` =
+localizer_pose(t) * inverse(odom_pose(t)), computed at the localizer's stamp t with the
+odometry interpolated in the history, is applied to every later odometry pose (and to the
+odometry at a scan's stamp, so that the scan lands where the robot was in ``map``). This is
+what tf2 does with AMCL's map -> odom transform; here without tf2, which PyPI does not have.
+
+Without a localizer the correction is the identity: the odometry is the pose in the plan's
+frame, as in the simulator. With one, there is no pose until its first message, and none
+after a message the history cannot place (older than every odometry pose kept): the
+controller stops and says why (`LocalizedPose.problem`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from mpc_local_planner.core.paths import wrap_angle
+from mpc_local_planner.perception.pose_history import PoseHistory
+from mpc_local_planner.perception.scan_obstacles import compose_pose
+
+__all__ = ['compose', 'invert', 'LocalizationError', 'LocalizedPose']
+
+
+class LocalizationError(ValueError):
+    """A localizer pose that gives no correction (no odometry to compose it with, too old)."""
+
+
+def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Return the planar pose a * b (b given in a's frame), its heading in [-pi, pi].
+
+    The rule scans are placed with (compose_pose: the laser on the robot).
+    """
+    pose = compose_pose(a, b)
+    pose[2] = float(wrap_angle(pose[2]))
+    return pose
+
+
+def invert(a: np.ndarray) -> np.ndarray:
+    """Return the planar pose that undoes a (composed with a, the identity)."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], float(wrap_angle(-a[2]))])
+
+
+class LocalizedPose:
+    """Odometry history plus the latest localizer correction: poses in the plan's frame.
+
+    Args:
+        span: seconds of odometry kept (a scan's, or a localizer's, stamp is looked up in it).
+        localized: a localizer is expected: no pose until its first message. False: the
+            odometry is the pose in the plan's frame (the correction is the identity).
+        source: the localizer's name in messages (its topic).
+
+    """
+
+    def __init__(self, span: float, *, localized: bool = False, source: str = '') -> None:
+        self.odometry = PoseHistory(span)
+        self.localized = bool(localized)
+        self.source = source
+        self.correction: np.ndarray | None = None
+        self.problem: str | None = None
+        self.corrections = 0  # localizer poses taken
+        self.clear()
+
+    def clear(self) -> None:
+        """Forget the odometry and the correction (as at construction)."""
+        self.odometry.clear()
+        self.correction = None if self.localized else np.zeros(3)
+        self.problem = f'no localizer pose yet on {self.source!r}' if self.localized else None
+        self.corrections = 0
+
+    def add_odometry(self, time: float, pose: np.ndarray) -> None:
+        """Keep an odometry pose (x, y, theta in odom) at time."""
+        self.odometry.add(time, pose)
+
+    def add_localizer(self, time: float, pose: np.ndarray) -> np.ndarray:
+        """Take a localizer pose (x, y, theta in the plan's frame) at time; return the correction.
+
+        The odometry at time is interpolated in the history; a time after the newest
+        odometry uses the newest (no extrapolation, as PoseHistory).
+
+        Raises:
+            LocalizationError: if no odometry is kept yet, or time is older than all of it;
+                the correction is dropped then (no pose until a usable localizer pose).
+
+        """
+        if len(self.odometry) == 0:
+            problem = f'localizer pose at {time:.3f} s but no odometry yet to compose it with'
+        elif time < self.odometry.oldest:
+            problem = (f'localizer pose at {time:.3f} s is older than the odometry kept '
+                       f'(from {self.odometry.oldest:.3f} s, {self.odometry.span:g} s)')
+        else:
+            odom = self.odometry.at(time)
+            self.correction = compose(np.asarray(pose[:3], dtype=float), invert(odom))
+            self.problem = None
+            self.corrections += 1
+            return self.correction.copy()
+        self.correction, self.problem = None, problem
+        raise LocalizationError(problem)
+
+    def pose(self, odom_pose: np.ndarray) -> np.ndarray | None:
+        """Return an odometry pose in the plan's frame (None while there is no correction).
+
+        Without a localizer it is the odometry pose itself, unchanged (a copy).
+        """
+        if not self.localized:
+            return np.array(odom_pose[:3], dtype=float)
+        if self.correction is None:
+            return None
+        return compose(self.correction, np.asarray(odom_pose[:3], dtype=float))
+
+    def at(self, time: float) -> np.ndarray | None:
+        """Return the pose in the plan's frame at time (None: no odometry or no correction).
+
+        The odometry at time (PoseHistory.at) with the latest correction.
+        """
+        odom = self.odometry.at(time)
+        return None if odom is None else self.pose(odom)

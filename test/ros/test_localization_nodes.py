@@ -1,0 +1,203 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The nodes with a localizer: they wait for it, then act on the pose in map.
+
+The odometry is offset from the true pose by a known map <- odom correction (as drifted
+odometry is); the localizer gives the true pose. Without the correction the robot would
+follow the plan displaced by the offset.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Callable
+
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+import numpy as np
+import pytest
+from rcl_interfaces.msg import Log
+from rclpy.parameter import Parameter
+
+from mpc_local_planner.core.controller import Reason
+from mpc_local_planner.perception.localization import compose, invert
+from mpc_local_planner.ros.conversions import (
+    path_to_poses,
+    poses_to_path,
+    seconds_to_stamp,
+    stamp_to_seconds,
+    u_from_twist,
+    yaw_to_quaternion,
+)
+from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
+from mpc_local_planner.ros.mpc_controller_node import ERROR_THROTTLE_S, MpcControllerNode
+from mpc_local_planner.ros.node_main import autostart
+from mpc_local_planner.ros.qos import LOCALIZER_QOS
+from mpc_local_planner.worlds.world import paper_world
+
+pytestmark = pytest.mark.slow  # DDS
+
+WORLD = paper_world()
+# A plan around the paper's box (above it), as test_reliability's.
+PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
+                 [2.5, 0.0, WORLD.goal[2]]])
+# map <- odom: where the drifted odometry's origin is in map.
+DRIFT = np.array([0.3, -0.2, 0.1])
+NO_POSE = "no pose in the plan's frame"
+
+
+class DriftingRobot:
+    """Simulated time and a unicycle driven by cmd_vel; odometry = inverse(DRIFT) * truth.
+
+    Each tick integrates the latest command over dt, publishes the odometry and /clock,
+    and spins the executor.
+    """
+
+    def __init__(self, ros, probe, dt: float = 0.05) -> None:
+        self.ros, self.probe, self.dt = ros, probe, dt
+        self.t = 1.0
+        self.truth = np.array(WORLD.start[:3], dtype=float)
+        self.localizer = probe.create_publisher(PoseWithCovarianceStamped, 'amcl_pose',
+                                                LOCALIZER_QOS)
+
+    @property
+    def odometry(self) -> np.ndarray:
+        return compose(invert(DRIFT), self.truth)
+
+    def tick(self) -> None:
+        v, omega = u_from_twist(self.probe.cmds[-1]) if self.probe.cmds else (0.0, 0.0)
+        x, y, theta = self.truth
+        self.truth = np.array([x + v * math.cos(theta) * self.dt,
+                               y + v * math.sin(theta) * self.dt, theta + omega * self.dt])
+        self.t += self.dt
+        self.probe.publish_odom(self.odometry, stamp=self.t)
+        self.probe.publish_clock(self.t)
+        for _ in range(6):
+            self.ros.executor.spin_once(timeout_sec=0.002)
+
+    def localize(self) -> None:
+        """Publish the true pose in map, stamped now (odometry of that stamp is kept)."""
+        msg = PoseWithCovarianceStamped()
+        msg.header.frame_id = 'map'
+        msg.header.stamp = seconds_to_stamp(self.t)
+        msg.pose.pose.position.x, msg.pose.pose.position.y = map(float, self.truth[:2])
+        msg.pose.pose.orientation = yaw_to_quaternion(float(self.truth[2]))
+        self.localizer.publish(msg)
+
+    def run_until(self, condition: Callable[[], bool], timeout: float = 60.0,
+                  localize_every: int = 0) -> bool:
+        deadline = time.monotonic() + timeout
+        ticks = 0
+        while not condition() and time.monotonic() < deadline:
+            self.tick()
+            ticks += 1
+            if localize_every and ticks % localize_every == 0:
+                self.localize()
+        return condition()
+
+
+def test_the_controller_stops_until_the_localizer_speaks_then_follows_the_plan_in_map(
+        ros) -> None:
+    overrides = [Parameter('use_sim_time', value=True),
+                 Parameter('localization_topic', value='amcl_pose')]
+    node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=overrides))
+    assert autostart(node) is None
+    probe = ros.probe(use_sim_time=True)
+    robot = DriftingRobot(ros, probe)
+    assert ros.spin_until(lambda: probe.plan_pub.get_subscription_count() > 0
+                          and robot.localizer.get_subscription_count() > 0)
+    probe.plan_pub.publish(poses_to_path(PLAN))
+
+    # odometry and a plan, no localizer yet: zero commands, the reason said, one error
+    began = time.monotonic()
+
+    def waiting() -> list:
+        return [d for d in probe.diagnostics if d.message.startswith(NO_POSE)]
+
+    def errors() -> list[str]:
+        return [line for line in probe.log_lines('mpc_controller', Log.ERROR)
+                if NO_POSE in line]
+
+    assert robot.run_until(lambda: len(waiting()) >= 5 and errors())
+    assert all(d.step.reason is Reason.NO_LOCALIZATION for d in waiting())
+    assert "no localizer pose yet on 'amcl_pose'" in waiting()[0].message
+    assert all(not u_from_twist(c).any() for c in probe.cmds)
+    assert len(errors()) <= 1 + (time.monotonic() - began) / ERROR_THROTTLE_S
+    assert 'zero' in errors()[0]
+
+    # the localizer's first pose: the controller tracks from the true pose, not the odometry
+    robot.localize()
+    start = len(probe.diagnostics)
+    assert robot.run_until(lambda: any(d.step.reason is Reason.TRACKING
+                                       for d in probe.diagnostics[start:]))
+    tracked = next(d for d in probe.diagnostics[start:] if d.step.reason is Reason.TRACKING)
+    np.testing.assert_allclose([tracked.step.x, tracked.step.y], robot.truth[:2], atol=0.05)
+    assert np.hypot(*(robot.odometry[:2] - robot.truth[:2])) > 0.2  # the drift is visible
+    assert ros.spin_until(lambda: probe.local_plans)
+    first = path_to_poses(probe.local_plans[-1])[0]
+    assert probe.local_plans[-1].header.frame_id == 'map'
+    np.testing.assert_allclose(first[:2], robot.truth[:2], atol=0.1)
+
+    # with the localizer at 2 Hz the robot reaches the plan's end in map
+    def arrived() -> bool:
+        return node.goal_reached
+
+    assert robot.run_until(arrived, timeout=120.0, localize_every=10), probe.diagnostics[-1:]
+    assert np.hypot(*(robot.truth[:2] - PLAN[-1, :2])) < 0.15
+    assert np.hypot(*(robot.odometry[:2] - PLAN[-1, :2])) > 0.2  # the odometry is not there
+
+
+def test_the_planner_waits_for_the_localizer_then_plans_from_the_pose_in_map(ros) -> None:
+    planner = ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
+        Parameter('world_file', value='paper_obstacle.yaml'),
+        Parameter('localization_topic', value='amcl_pose')]))
+    assert autostart(planner) is None
+    probe = ros.probe()
+    localizer = probe.create_publisher(PoseWithCovarianceStamped, 'amcl_pose', LOCALIZER_QOS)
+    assert ros.spin_until(lambda: probe.goal_pub.get_subscription_count() > 0
+                          and localizer.get_subscription_count() > 0)
+    truth = np.array(WORLD.start[:3], dtype=float)
+    odometry = compose(invert(DRIFT), truth)
+    goal = PoseStamped()
+    goal.header.frame_id = 'map'
+    goal.pose.position.x, goal.pose.position.y = map(float, WORLD.goal[:2])
+    goal.pose.orientation = yaw_to_quaternion(float(WORLD.goal[2]))
+
+    def odometry_kept() -> bool:
+        probe.publish_odom(odometry)
+        return planner._state is not None  # the odometry came; no pose in map yet
+
+    assert ros.spin_until(odometry_kept)
+    assert planner.robot_pose is None
+    probe.goal_pub.publish(goal)
+    assert ros.spin_until(lambda: any(NO_POSE in line for line in
+                                      probe.log_lines('global_planner', Log.WARN)))
+    assert planner.plan_count == 0  # the goal waits
+
+    msg = PoseWithCovarianceStamped()
+    msg.header.frame_id = 'map'
+    msg.header.stamp = probe.get_clock().now().to_msg()
+    msg.pose.pose.position.x, msg.pose.pose.position.y = map(float, truth[:2])
+    msg.pose.pose.orientation = yaw_to_quaternion(float(truth[2]))
+
+    def planned() -> bool:
+        probe.publish_odom(odometry, stamp=stamp_to_seconds(msg.header.stamp))
+        localizer.publish(msg)
+        return planner.plan_count > 0 and bool(probe.raw_plans)
+
+    assert ros.spin_until(planned, timeout=20.0)
+    np.testing.assert_allclose(planner.robot_pose, truth, atol=1e-9)
+    start = path_to_poses(probe.plans[-1])[0]
+    np.testing.assert_allclose(start[:2], truth[:2], atol=1e-6)
