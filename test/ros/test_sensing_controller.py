@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Callable
+from typing import Any, Callable
 
 from nav_msgs.msg import OccupancyGrid
 import numpy as np
@@ -243,6 +243,20 @@ def test_a_wall_behind_the_robot_is_remembered_until_obstacle_memory_expires(ros
     assert seen + memory - 0.1 <= world.t <= seen + memory + STEP + 0.1 + 0.05
 
 
+def goes_stale(world: World, last_usable: float) -> Any:
+    """Run until a step stops for a stale scan; check it came within one period, with zero.
+
+    Returns that step's diagnostics.
+    """
+    first = len(world.probe.diagnostics)
+    assert world.run_until(lambda: any(s.reason is Reason.STALE_SCAN
+                                       for s in world.steps(first)))
+    stale = next(d for d in world.probe.diagnostics[first:]
+                 if d.step.reason is Reason.STALE_SCAN)
+    assert stale.stamp <= last_usable + SCAN_TIMEOUT + STEP + 1e-6
+    assert stale.step.v == 0 and stale.step.omega == 0
+    return stale
+
 # ----------------------------------------------------------------------------- (c)
 def test_a_stale_scan_stops_the_robot_within_one_period_and_fresh_scans_resume(ros) -> None:
     world = World(ros, [], obstacle_sources=['scan'], scan_timeout=SCAN_TIMEOUT)
@@ -256,13 +270,7 @@ def test_a_stale_scan_stops_the_robot_within_one_period_and_fresh_scans_resume(r
                                        for s in world.steps()))
     world.scanning = False
     last_scan = world.t
-    first = len(world.probe.diagnostics)
-    assert world.run_until(lambda: any(s.reason is Reason.STALE_SCAN
-                                       for s in world.steps(first)))
-    stale = next(d for d in world.probe.diagnostics[first:]
-                 if d.step.reason is Reason.STALE_SCAN)
-    assert stale.stamp <= last_scan + SCAN_TIMEOUT + STEP + 1e-6
-    assert stale.step.v == 0 and stale.step.omega == 0
+    stale = goes_stale(world, last_scan)
     assert world.probe.diagnostics[-1].message == 'scan is stale'
     after = world.probe.diagnostics.index(stale)
     world.run_for(0.5)
@@ -476,14 +484,7 @@ def test_scans_without_a_usable_reading_renew_nothing_and_only_blind_scans_go_st
     assert all(s.reason is Reason.TRACKING for s in world.steps(first))
     # only blind scans: valid (no error), but they renew nothing: stale as without scans
     world.readings = blind
-    last_usable = world.t
-    first = len(world.probe.diagnostics)
-    assert world.run_until(lambda: any(s.reason is Reason.STALE_SCAN
-                                       for s in world.steps(first)))
-    stale = next(d for d in world.probe.diagnostics[first:]
-                 if d.step.reason is Reason.STALE_SCAN)
-    assert stale.stamp <= last_usable + SCAN_TIMEOUT + STEP + 1e-6
-    assert stale.step.v == 0 and stale.step.omega == 0
+    goes_stale(world, world.t)
     assert not world.errors('invalid scan')
     assert any('without a usable reading' in line
                for line in world.probe.log_lines('mpc_controller', Log.WARN))
