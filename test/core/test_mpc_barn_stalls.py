@@ -145,3 +145,32 @@ def test_a_solve_longer_than_two_steps_goes_on_while_the_robot_stands() -> None:
     reasons, output = steps_until_tracking(controller, np.array(FORWARD_ONLY['world_258']['x']))
     assert reasons[-1] is Reason.TRACKING, reasons
     assert output.u[0] > 0.1
+
+
+def test_a_new_plan_at_speed_starts_from_the_motion_in_hand() -> None:
+    """Laser-only BARN world 213 at 2 m/s: a re-plan while driving at 1.5 m/s among cylinders.
+
+    The recorded second before it (states, plans and sensed obstacles of each step) is
+    replayed, then the loop is closed on the nominal model. From rest on the new plan, the
+    guided start drove straight ahead at half speed, whatever the old plan was doing: no
+    try was verified within the budget, step after step, and the robot stood until the run
+    stalled. The guided start now rolls out the old plan's inputs: the MPC tracks the new
+    plan within 2 s.
+    """
+    sequence = json.loads((Path(__file__).parent / 'data' / 'barn_213_replan_sequence.json')
+                          .read_text(encoding='utf-8'))
+    controller = forward_only_controller(sequence[0])
+    poses = sequence[0]['poses']
+    for step in sequence:
+        if step['poses'] != poses:
+            poses = step['poses']
+            controller.set_plan(np.array(poses))  # the re-plan, at the last recorded step
+        controller.set_obstacles([ConvexPolygon.from_vertices(np.array(v))
+                                  for v in step['obstacles']])
+        output = controller.compute(np.array(step['x']), step['t'])
+    assert poses != sequence[0]['poses']  # the sequence ends with the re-plan
+    model = controller.model.discrete(H)
+    x = np.asarray(model(np.array(sequence[-1]['x']), output.u)).reshape(-1)
+    reasons, output = steps_until_tracking(controller, x)
+    assert reasons[-1] is Reason.TRACKING, reasons
+    assert np.max(np.abs(output.u)) > 0.1

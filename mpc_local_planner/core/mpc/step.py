@@ -438,6 +438,9 @@ class MpcBase(ABC):
         # the NLPs live as long as the controller's settings)
         self._failed_here: set[tuple[int, Try]] = set()
         self._failed_x0: np.ndarray | None = None
+        # the inputs of the last plan on the previous path (set_path keeps them): the guided
+        # start drives them from the robot's state, see _guided_guess
+        self._carried_inputs: np.ndarray | None = None
 
     # ----------------------------------------------------------------- the terminal condition
     @abstractmethod
@@ -730,10 +733,20 @@ class MpcBase(ABC):
         return Plan(x=self._rollout(x0, u), u=u, s=prev.s, mu=np.zeros(0), value=math.inf)
 
     def _guided_guess(self, x0: np.ndarray, active: list[ConvexPolygon], nlp: Nlp) -> Plan:
-        """An infeasible but informative start: drive forward at half speed."""
+        """An infeasible but informative start: the motion in hand, ended on the path.
+
+        After a new path, the inputs of the last plan on the old one shifted by a step (the
+        robot was carrying them out, and they avoid what the old plan avoided); else drive
+        forward at half speed. Either is rolled out from x0, and its last state replaced by
+        the steady state on the path nearest it.
+        """
         n = self._config.horizon
         u = np.zeros((n, self._model.nu))
-        u[:, 0] = 0.5 * self._model.u_max[0]
+        carried = self._carried_inputs
+        if carried is not None and len(carried) == n:
+            u[:-1] = carried[1:]
+        else:
+            u[:, 0] = 0.5 * self._model.u_max[0]
         x = self._rollout(x0, u)
         s = self._progress(x[-1], s_min=self._progress(x0))
         terminal = self._terminal_state(s)
@@ -1079,8 +1092,11 @@ class PathReferenceMPC(MpcBase):
 
     def set_path(self, path: ReferencePath) -> None:
         """Use a new reference path; s restarts at the robot's projection onto it."""
+        previous = self._plan
         self._path = path
         self.reset()
+        if previous is not None and _plan_moves(previous, math.inf):
+            self._carried_inputs = previous.u.copy()
 
     def _require_path(self) -> ReferencePath:
         if self._path is None:
