@@ -1091,7 +1091,12 @@ class PathReferenceMPC(MpcBase):
         return self._path
 
     def set_path(self, path: ReferencePath) -> None:
-        """Use a new reference path; s restarts at the robot's projection onto it."""
+        """Use a new reference path; s restarts at the robot's projection onto it.
+
+        The proof's candidate does not carry over (the old plan does not end on the new
+        path), but the old plan's inputs do, as the guided start (_guided_guess): a robot
+        re-planned at speed is carrying them out.
+        """
         previous = self._plan
         self._path = path
         self.reset()
