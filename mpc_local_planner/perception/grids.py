@@ -271,8 +271,8 @@ class PlanningGrid:
         """
         validate_scan(scan)
         ox, oy, oyaw = compose_pose(robot_pose, laser_pose)
-        free = np.minimum(classify_beams(scan, body=body, laser_pose=laser_pose).free,
-                          self.clear_range)
+        readings = classify_beams(scan, body=body, laser_pose=laser_pose)
+        free = np.minimum(readings.free, self.clear_range)
         beams = len(free)
         theta = oyaw + scan.angle_min + np.arange(beams) * scan.angle_increment
         res = self.map.resolution
@@ -289,7 +289,7 @@ class PlanningGrid:
             rows, cols = self.map.world_to_cell(np.column_stack([xs, ys]))
             inside = self.map.contains_cell(rows, cols)
             self._scan[rows[inside], cols[inside]] = False
-        hits, _ = scan_points(scan, robot_pose, laser_pose=laser_pose, body=body)
+        hits, _ = scan_points(scan, robot_pose, laser_pose=laser_pose, readings=readings)
         rows, cols = self.map.world_to_cell(hits)
         inside = self.map.contains_cell(rows, cols)
         self._scan[rows[inside], cols[inside]] = True

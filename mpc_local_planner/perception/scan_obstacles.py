@@ -373,7 +373,8 @@ def compose_pose(robot_pose: Sequence[float],
 
 def scan_points(scan: Scan, robot_pose: Sequence[float], *,
                 laser_pose: Sequence[float] = (0.0, 0.0, 0.0),
-                body: Footprint | None = None) -> tuple[np.ndarray, np.ndarray]:
+                body: Footprint | None = None,
+                readings: Beams | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Return the valid returns of a scan in the map frame, in beam order.
 
     Args:
@@ -382,6 +383,9 @@ def scan_points(scan: Scan, robot_pose: Sequence[float], *,
         laser_pose: (x, y, yaw) of the laser in the robot frame.
         body: The robot's footprint: returns inside it are the robot (see `classify_beams`);
             None: every return counts.
+        readings: The scan's beams as `classify_beams(scan, body=body, laser_pose=...)`
+            reads them, when the caller has them already (the memory and the planner's grid
+            use them for clearing too); None: read here.
 
     Returns:
         (points (N, 2), beam indices (N,)): the returns of `classify_beams` (readings in
@@ -392,7 +396,8 @@ def scan_points(scan: Scan, robot_pose: Sequence[float], *,
 
     """
     laser = compose_pose(robot_pose, laser_pose)
-    readings = classify_beams(scan, body=body, laser_pose=laser_pose)
+    if readings is None:
+        readings = classify_beams(scan, body=body, laser_pose=laser_pose)
     beams = np.flatnonzero(readings.hit)
     return _beam_points(scan, beams, readings.seen[beams], laser), beams
 
@@ -566,18 +571,20 @@ def scan_to_obstacles(scan: Scan, robot_pose: Sequence[float], *,
     """
     if validate:
         validate_scan(scan)
-    return _pieces(scan, robot_pose, laser_pose, body, config or ScanObstacleConfig())[0]
+    return _pieces(scan, robot_pose, laser_pose,
+                   classify_beams(scan, body=body, laser_pose=laser_pose),
+                   config or ScanObstacleConfig())[0]
 
 
 def _pieces(scan: Scan, robot_pose: Sequence[float], laser_pose: Sequence[float],
-            body: Footprint | None,
+            readings: Beams,
             config: ScanObstacleConfig) -> tuple[list[ConvexPolygon], np.ndarray]:
     """Return the obstacles of a valid scan and, per obstacle, three returns it was built from.
 
     The returns (first, middle, last) lie on surfaces the laser saw; the memory asks whether
     a later scan sees them again.
     """
-    points, _ = scan_points(scan, robot_pose, laser_pose=laser_pose, body=body)
+    points, _ = scan_points(scan, robot_pose, laser_pose=laser_pose, readings=readings)
     if not len(points):
         return [], np.zeros((0, 3, 2))
     origin = compose_pose(robot_pose, laser_pose)[:2]
@@ -685,10 +692,10 @@ class ObstacleMemory:
             msg = f'scan stamp {scan.stamp} is older than the last one ({self._stamp})'
             raise ScanError(msg)
         self._stamp = float(scan.stamp)
-        current, anchors = _pieces(scan, robot_pose, laser_pose, body, self.config)
+        readings = classify_beams(scan, body=body, laser_pose=laser_pose)
+        current, anchors = _pieces(scan, robot_pose, laser_pose, readings, self.config)
         kept = [e for e in self._entries if scan.stamp - e.seen <= self.ttl]
         if kept:
-            readings = classify_beams(scan, body=body, laser_pose=laser_pose)
             drop = self._superseded(kept, scan, readings,
                                     compose_pose(robot_pose, laser_pose))
             kept = [e for e, gone in zip(kept, drop, strict=True) if not gone]
