@@ -129,6 +129,20 @@ def locate(ros, planner, probe, pose: np.ndarray, stamp: float | None = None) ->
     assert ros.spin_until(located, timeout=TIMEOUT)
 
 
+def scanning_planner(ros) -> tuple[GlobalPlannerNode, object, np.ndarray, float]:
+    """Start a planner that reads scans, on an empty 10 m x 6 m map, located at (1, 3, 0).
+
+    Returns the planner, the probe, the robot's pose and the odometry's stamp (the scans'
+    stamp, so that they are placed with that pose).
+    """
+    planner, probe = start(ros, use_scan=True)
+    probe.map_pub.publish(grid_message(np.zeros((120, 200), dtype=np.int8)))
+    assert ros.spin_until(lambda: planner.grid is not None, timeout=TIMEOUT)
+    pose = np.array([1.0, 3.0, 0.0])
+    stamp = probe.now()
+    locate(ros, planner, probe, pose, stamp)
+    return planner, probe, pose, stamp
+
 def next_plan(ros, planner, probe, goal: PoseStamped) -> np.ndarray:
     """Send a goal and return the (x, y) of the plan it gets."""
     count = len(probe.raw_plans)
@@ -166,12 +180,7 @@ def test_planner_waits_for_the_map_then_plans_around_its_wall_with_the_clearance
 
 
 def test_planner_avoids_an_obstacle_a_scan_shows_and_the_map_lacks(ros) -> None:
-    planner, probe = start(ros, use_scan=True)
-    probe.map_pub.publish(grid_message(np.zeros((120, 200), dtype=np.int8)))
-    assert ros.spin_until(lambda: planner.grid is not None, timeout=TIMEOUT)
-    pose = np.array([1.0, 3.0, 0.0])
-    stamp = probe.now()
-    locate(ros, planner, probe, pose, stamp)
+    planner, probe, pose, stamp = scanning_planner(ros)
 
     assert len(next_plan(ros, planner, probe, goal_message(9.0, 3.0))) == 2  # nothing seen
 
@@ -203,12 +212,7 @@ def test_planner_avoids_an_obstacle_a_scan_shows_and_the_map_lacks(ros) -> None:
 
 def test_minus_inf_readings_inside_the_robot_mark_nothing_and_outside_it_an_obstacle(
         ros) -> None:
-    planner, probe = start(ros, use_scan=True)
-    probe.map_pub.publish(grid_message(np.zeros((120, 200), dtype=np.int8)))
-    assert ros.spin_until(lambda: planner.grid is not None, timeout=TIMEOUT)
-    pose = np.array([1.0, 3.0, 0.0])
-    stamp = probe.now()
-    locate(ros, planner, probe, pose, stamp)
+    planner, probe, pose, stamp = scanning_planner(ros)
     box = ConvexPolygon.from_box(5.0, 2.5, 5.3, 3.5)
     # every beam but those on the box -inf: range_min (5 cm) from a laser at the centre of
     # the 0.2 m robot (the planner's robot_radius) is inside it, the robot itself
@@ -329,13 +333,8 @@ def test_a_robot_within_the_clearance_replans_from_the_nearest_clear_point(ros) 
 
 def test_planner_refuses_scans_whose_beams_do_not_match_their_angles_or_from_the_future(
         ros) -> None:
-    planner, probe = start(ros, use_scan=True)
-    probe.map_pub.publish(grid_message(np.zeros((120, 200), dtype=np.int8)))
-    assert ros.spin_until(lambda: planner.grid is not None, timeout=TIMEOUT)
-    pose = np.array([1.0, 3.0, 0.0])
+    planner, probe, pose, stamp = scanning_planner(ros)
     box = ConvexPolygon.from_box(5.0, 1.5, 5.3, 4.5)
-    stamp = probe.now()
-    locate(ros, planner, probe, pose, stamp)
 
     def cut(msg: LaserScan, count: int) -> LaserScan:
         msg.ranges = (list(msg.ranges) * 2)[:count]
