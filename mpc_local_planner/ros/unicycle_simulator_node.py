@@ -12,7 +12,32 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""unicycle_simulator: integrate cmd_vel with saturation, publish odom (and clock).
+"""unicycle_simulator: a robot base and its laser, as ideal or as real as ``reality`` says.
+
+The node simulates what a real robot does with a velocity command and what its sensors give
+back, with ONE model shared with the ROS-free rollout of the evaluation suites
+(core/reality.py: `Base` for the base and its odometry, `ScanChannel` for the laser), so the
+suites measure what the nodes see. ``reality`` names a preset (ideal|mild|real|harsh, their
+values and sources in core/reality.py); with ``ideal`` (the default) a command acts at once
+and exactly (saturated), the odometry is the true pose and the laser is exact, as this node
+always did. Otherwise:
+
+- a cmd_vel reaches the motors ``command_latency`` s (simulated) after its arrival;
+- the wheels follow it through first-order lags (``actuator_lag`` [v, omega], s) and within
+  ``acceleration_limits`` [m/s^2, rad/s^2]; the true pose moves with the wheels;
+- the published odometry is integrated apart from the true pose (``odom_drift.*``), with
+  white noise of ``odom_noise_std`` [m, rad] on each message, and its twist is what the
+  wheels measure (not the command);
+- scans carry range noise (``scan.noise_std``), beams reading NaN (``scan.nan_fraction``)
+  and -inf (``scan.neg_inf_fraction``), and a ``scan.loss_fraction`` of them is never
+  published.
+
+Each override replaces one field of the preset: the new ones take the preset's value when
+negative (their default, -1), so 0 turns a preset's imperfection off; the older
+``odom_drift.position``, ``odom_drift.heading`` and ``scan.noise_std`` keep their default 0,
+which takes the preset's value (0 for ideal: what they always meant), and any other value
+overrides it. ``scan.seed`` seeds every draw (laser and odometry noise): runs are
+reproducible. An unknown preset or an invalid value is refused with the reason.
 
 With ``publish_clock`` the node is the clock: each tick of a steady wall timer, fired at
 ``rate * real_time_factor`` Hz, advances simulated time by exactly ``1 / rate`` s, publishes
@@ -23,8 +48,9 @@ making it jump. Without it, the node integrates in ROS time (wall or an external
 ``cmd_vel`` is a geometry_msgs/Twist, or a TwistStamped with ``enable_stamped_cmd_vel``
 (Nav2's parameter; give the controller the same value). A cmd_vel older than ``cmd_timeout``
 (a controller that died or hangs; the age counts from its arrival, stamped or not) is
-replaced by zero, and so is one with NaN or inf in linear.x or angular.z (its sender is
-broken: no part of it is trusted); the saturation bounds every command that is integrated.
+replaced by zero (the base's watchdog: the stop acts at once, without the latency), and so is
+one with NaN or inf in linear.x or angular.z (its sender is broken: no part of it is
+trusted); the saturation bounds every command that is integrated.
 
 The node holds the TRUE world (``world_file``: known and unknown obstacles, disks as disks;
 '' = an empty world). Every ``1 / scan.rate`` s of simulated time (counted in ticks, so the
@@ -48,11 +74,12 @@ otherwise, and ``robot_radius`` (which closed_loop sets from the world's coverin
 turns a polygon back into its circumscribed circle.
 
 A real robot's odometry drifts, and the controller must follow the plan in ``map`` all the
-same (ros/robot_pose.py). With ``odom_drift.position`` or ``odom_drift.heading`` set (both
-0 by default: the odometry is the true pose, ``odom`` is ``map``) the published odometry is
-integrated apart from the true pose, from the same start, with the speed scaled by (1 +
-``odom_drift.position``) and the turn rate biased by ``odom_drift.heading`` rad per metre
-travelled; scans and contacts stay with the true pose. With ``localizer.rate`` > 0 a
+same (ros/robot_pose.py). With a drift (``odom_drift.position`` or ``odom_drift.heading``
+set, or a preset's; none with ideal: the odometry is the true pose, ``odom`` is ``map``) the
+published odometry is integrated apart from the true pose, from the same start, with the
+speed scaled by (1 + ``odom_drift.position``) and the turn rate biased by
+``odom_drift.heading`` rad per metre travelled; scans, contacts and the localizer stand-in
+stay with the true pose. With ``localizer.rate`` > 0 a
 localizer stands in for AMCL: at that rate (in ticks, as scans) it publishes the TRUE pose
 with Gaussian noise of ``localizer.noise_std`` (m, and rad for the heading) on ``amcl_pose``
 (geometry_msgs/PoseWithCovarianceStamped in ``localizer.frame_id``, stamped like the
@@ -62,6 +89,7 @@ odometry of the same instant).
 from __future__ import annotations
 
 import array
+from dataclasses import replace
 import math
 import sys
 from typing import Any
@@ -80,6 +108,13 @@ from std_msgs.msg import UInt32
 
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
 from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.reality import (
+    Base,
+    Reality,
+    reality_preset,
+    REALITY_PRESETS,
+    ScanChannel,
+)
 from mpc_local_planner.perception.laser import contact, SimulatedLaser, TrueGeometry
 from mpc_local_planner.perception.scan_obstacles import Scan
 from mpc_local_planner.ros.conversions import (
@@ -101,9 +136,10 @@ from mpc_local_planner.ros.throttle import ProblemThrottle
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world, World
 
-__all__ = ['CONTACTS_TOPIC', 'LOCALIZER_TOPIC', 'PARAMETERS', 'SCAN_PUBLISHER_QOS',
-           'SCAN_RANGE_MIN', 'SCAN_TOPIC', 'SUMMARY', 'UnicycleSimulatorNode', 'laser_scan_msg',
-           'main', 'validate_simulator_parameters']
+__all__ = ['CONTACTS_TOPIC', 'LOCALIZER_TOPIC', 'PARAMETERS', 'REALITY_PARAMETERS',
+           'SCAN_PUBLISHER_QOS', 'SCAN_RANGE_MIN', 'SCAN_TOPIC', 'SUMMARY',
+           'UnicycleSimulatorNode', 'laser_scan_msg', 'main', 'reality_from_parameters',
+           'validate_simulator_parameters']
 
 
 # At most this many integration steps catch up a late tick (real-time mode).
@@ -124,14 +160,29 @@ SCAN_PUBLISHER_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE
 MAX_SCAN_BEAMS = 10_000
 # Tolerance when counting scan periods in ticks (rate / scan.rate need not be an integer).
 _TICK_EPS = 1e-9
-_SCAN_PARAMETERS = frozenset({'scan.fov', 'scan.beams', 'scan.range_max', 'scan.noise_std',
-                              'scan.seed'})
+_SCAN_PARAMETERS = frozenset({'scan.fov', 'scan.beams', 'scan.range_max'})
+# "From the preset" for the reality overrides that cannot be negative (see REALITY_PARAMETERS).
+FROM_PRESET = -1.0
+# Overrides of the preset's fields, each: parameter -> Reality field. A negative value (in
+# a pair: per component) takes the preset's; odom_drift.* and scan.noise_std are older
+# parameters whose default 0 stays: 0 takes the preset's, any other value overrides it.
+_PAIR_OVERRIDES = {'actuator_lag': 'lag', 'acceleration_limits': 'acceleration',
+                   'odom_noise_std': 'odom_noise'}
+_SCALAR_OVERRIDES = {'command_latency': 'latency', 'scan.nan_fraction': 'scan_nan',
+                     'scan.neg_inf_fraction': 'scan_neg_inf', 'scan.loss_fraction': 'scan_loss'}
+_ZERO_IS_PRESET = {'scan.noise_std': 'scan_noise'}
+_DRIFT = ('odom_drift.position', 'odom_drift.heading')
+# Every parameter that shapes the Reality (a change rebuilds it: see post_parameters_callback).
+REALITY_PARAMETERS = frozenset({'reality', 'scan.seed', *_PAIR_OVERRIDES, *_SCALAR_OVERRIDES,
+                                *_ZERO_IS_PRESET, *_DRIFT})
 _FOOTPRINT_PARAMETERS = frozenset({'footprint', 'robot_radius'})
 
-SUMMARY = ('Integrate a unicycle driven by cmd_vel (Twist, or TwistStamped with '
-           'enable_stamped_cmd_vel) with saturation; publish odom, and clock with '
-           'publish_clock; simulate a laser (scan) and count contacts with the true world '
-           '(simulator/contacts).')
+SUMMARY = ('Simulate a robot base driven by cmd_vel (Twist, or TwistStamped with '
+           'enable_stamped_cmd_vel) with saturation, and as real as the reality parameter '
+           'says (ideal|mild|real|harsh: latency, lag, acceleration limits, odometry noise '
+           'and drift, laser noise, NaN/-inf beams, lost scans); publish odom, and clock '
+           'with publish_clock; simulate a laser (scan) and count contacts with the true '
+           'world (simulator/contacts).')
 
 PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('initial_pose', [0.0, 0.0, 0.0],
@@ -181,15 +232,44 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   f'farthest reading (m), > range_min = {SCAN_RANGE_MIN}; beyond it a beam '
                   'reads inf'),
     ParameterSpec('scan.noise_std', 0.0,
-                  'standard deviation of the Gaussian range noise (m), >= 0'),
-    ParameterSpec('scan.seed', 0, 'seed of the noise generator (runs are reproducible)'),
+                  'standard deviation of the Gaussian range noise (m), >= 0; 0 = the '
+                  "reality preset's (ideal: none)"),
+    ParameterSpec('scan.seed', 0,
+                  'seed of every random draw of the simulated reality: range noise, NaN and '
+                  '-inf beams, lost scans, odometry noise (runs are reproducible); the '
+                  'odometry reads it once at start'),
     ParameterSpec('odom_drift.position', 0.0,
                   "odometry's distance error as a fraction of the distance travelled (0.05 = "
-                  '5 %: the odometry says 1.05 m per true metre); 0 = exact',
-                  float_range=(-0.5, 0.5)),
+                  "5 %: the odometry says 1.05 m per true metre); 0 = the reality preset's "
+                  '(ideal: exact)', float_range=(-0.5, 0.5)),
     ParameterSpec('odom_drift.heading', 0.0,
-                  "odometry's heading error per metre travelled (rad/m); 0 = exact",
-                  float_range=(-1.0, 1.0)),
+                  "odometry's heading error per metre travelled (rad/m); 0 = the reality "
+                  "preset's (ideal: exact)", float_range=(-1.0, 1.0)),
+    ParameterSpec('reality', 'ideal',
+                  'how real the robot and its laser are, a preset of core/reality.py: '
+                  f'{"|".join(REALITY_PRESETS)} (ideal: commands act at once and exactly, '
+                  'odometry is the pose, the laser is exact); the parameters below override '
+                  'single fields'),
+    ParameterSpec('actuator_lag', [FROM_PRESET, FROM_PRESET],
+                  'first-order time constants [v, omega] (s) of the wheels following the '
+                  "command, >= 0; negative = the preset's"),
+    ParameterSpec('acceleration_limits', [FROM_PRESET, FROM_PRESET],
+                  'limits of |dv/dt| (m/s^2) and |domega/dt| (rad/s^2), > 0 (.inf = none); '
+                  "negative = the preset's"),
+    ParameterSpec('command_latency', FROM_PRESET,
+                  'seconds from a cmd_vel to its reaching the motors (simulated time), >= 0; '
+                  "negative = the preset's"),
+    ParameterSpec('odom_noise_std', [FROM_PRESET, FROM_PRESET],
+                  'standard deviations [m, rad] of the white noise on each published odometry '
+                  "pose, >= 0; negative = the preset's"),
+    ParameterSpec('scan.nan_fraction', FROM_PRESET,
+                  "fraction of beams that read NaN, in [0, 1); negative = the preset's"),
+    ParameterSpec('scan.neg_inf_fraction', FROM_PRESET,
+                  "fraction of beams that read -inf (too close), in [0, 1); negative = the "
+                  "preset's"),
+    ParameterSpec('scan.loss_fraction', FROM_PRESET,
+                  "fraction of scans that are never published, in [0, 1); negative = the "
+                  "preset's"),
     ParameterSpec('localizer.rate', 0.0,
                   f'publish the true pose with noise on {LOCALIZER_TOPIC} this often (Hz of '
                   'simulated time, at most one per tick), a stand-in for AMCL; 0 = off',
@@ -238,7 +318,104 @@ def validate_simulator_parameters(values: dict[str, Any]) -> str | None:
     seed = values.get('scan.seed')
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
         return f'scan.seed must be an integer >= 0, got {seed!r}'
+    return _validate_reality_parameters(values)
+
+
+def _is_number(value: Any) -> bool:
+    return not isinstance(value, bool) and isinstance(value, (int, float)) and not math.isnan(
+        float(value))
+
+
+def _validate_reality_parameters(values: dict[str, Any]) -> str | None:
+    """Return why a reality parameter is invalid on its own, or None (see PARAMETERS).
+
+    Combinations (scan.nan_fraction + scan.neg_inf_fraction < 1 with the preset's values
+    filled in) are Reality's to check: reality_from_parameters.
+    """
+    name = values.get('reality')
+    if name is not None and (not isinstance(name, str) or name not in REALITY_PRESETS):
+        return (f'reality must be one of {"|".join(REALITY_PRESETS)} (core/reality.py), '
+                f'got {name!r}')
+    pairs = {
+        'actuator_lag': (lambda v: v < math.inf, 'finite and >= 0'),
+        'acceleration_limits': (lambda v: v > 0.0, '> 0 (.inf = no limit)'),
+        'odom_noise_std': (lambda v: v < math.inf, 'finite and >= 0'),
+    }
+    for key, (valid, what) in pairs.items():
+        value = values.get(key)
+        if value is None:
+            continue
+        pair = list(value) if isinstance(value, (list, tuple)) else None
+        if pair is None or len(pair) != 2 or not all(_is_number(v) for v in pair) or not all(
+                float(v) < 0.0 or valid(float(v)) for v in pair):
+            return (f'{key} must be two numbers, each {what} or negative for the '
+                    f"preset's, got {value!r}")
+    scalars = {
+        'command_latency': (lambda v: v < math.inf, 'finite and >= 0'),
+        'scan.nan_fraction': (lambda v: v < 1.0, 'in [0, 1)'),
+        'scan.neg_inf_fraction': (lambda v: v < 1.0, 'in [0, 1)'),
+        'scan.loss_fraction': (lambda v: v < 1.0, 'in [0, 1)'),
+    }
+    for key, (valid, what) in scalars.items():
+        value = values.get(key)
+        if value is None:
+            continue
+        if not _is_number(value) or not (float(value) < 0.0 or valid(float(value))):
+            return f"{key} must be a number, {what}, or negative for the preset's, got {value!r}"
+    for key in _DRIFT:
+        value = values.get(key)
+        if value is not None and (not _is_number(value) or not math.isfinite(float(value))):
+            return f'{key} must be a finite number, got {value!r}'
     return None
+
+
+def reality_from_parameters(values: dict[str, Any]) -> Reality:
+    """Return the Reality the simulator's parameter values describe.
+
+    The preset named by ``reality`` (default 'ideal'), with each override that is set taking
+    the place of the preset's field: a negative ``actuator_lag``, ``acceleration_limits``,
+    ``odom_noise_std`` (per component), ``command_latency`` or ``scan.*_fraction`` means "the
+    preset's"; for the older ``odom_drift.position``, ``odom_drift.heading`` and
+    ``scan.noise_std``, whose default 0 always meant "exact", 0 means the preset's (so the
+    ideal preset and the old defaults agree). ``scan.seed`` is the seed. Missing names are
+    the preset's.
+
+    Raises:
+        ValueError: for an unknown preset, or values Reality refuses (the reason says which).
+
+    """
+    reason = _validate_reality_parameters(values)
+    if reason is not None:
+        raise ValueError(reason)
+    preset = reality_preset(str(values.get('reality', 'ideal')))
+    changes: dict[str, Any] = {}
+    for key, attribute in _PAIR_OVERRIDES.items():
+        value = values.get(key)
+        if value is not None:
+            changes[attribute] = tuple(
+                float(v) if float(v) >= 0.0 else old
+                for v, old in zip(value, getattr(preset, attribute), strict=True))
+    for key, attribute in _SCALAR_OVERRIDES.items():
+        value = values.get(key)
+        if value is not None and float(value) >= 0.0:
+            changes[attribute] = float(value)
+    for key, attribute in _ZERO_IS_PRESET.items():
+        value = values.get(key)
+        if value is not None and float(value) != 0.0:
+            changes[attribute] = float(value)
+    drift = list(preset.odom_drift)
+    for i, key in enumerate(_DRIFT):
+        value = values.get(key)
+        if value is not None and float(value) != 0.0:
+            drift[i] = float(value)
+    changes['odom_drift'] = tuple(drift)
+    changes['seed'] = int(values.get('scan.seed', 0))
+    try:
+        return replace(preset, **changes)  # Reality.__post_init__ checks the whole
+    except ValueError as err:
+        msg = (f"reality {values.get('reality', 'ideal')!r} with its overrides: {err} "
+               '(scan_nan = scan.nan_fraction, scan_neg_inf = scan.neg_inf_fraction)')
+        raise ValueError(msg) from None
 
 
 def laser_scan_msg(scan: Scan, *, frame_id: str, stamp: Any) -> LaserScan:
@@ -282,12 +459,19 @@ class UnicycleSimulatorNode(Node):
         declare_parameters(self, PARAMETERS)
         self.add_post_set_parameters_callback(self.post_parameters_callback)
         pose = np.array(self.get_parameter('initial_pose').value, dtype=float)
-        self._state = pose
-        self._odom_state = pose.copy()  # what odometry says: the true pose unless drifting
         self._model = self._read_model()
-        self._u = np.zeros(2)
+        reality = self._read_reality()
+        # the robot: its true pose, its wheels and its odometry, on the simulation's time
+        # axis (sim_time); the rollout drives the same Base
+        self._base = Base(self._model, reality, pose,
+                          dt=1.0 / float(self.get_parameter('rate').value))
+        self._scan_channel = ScanChannel(reality)
+        if not reality.ideal:
+            self.get_logger().info(f'reality: {self.get_parameter("reality").value} '
+                                   f'{reality.as_dict()}')
         self._sim_time = 0.0
         self._last_cmd_time: float | None = None
+        self._timed_out = False  # cmd_timeout has stopped the base since the last cmd_vel
         self._last_tick: float | None = None
         self._problems = ProblemThrottle(2.0)
         self._world = _load_true_world(str(self.get_parameter('world_file').value))
@@ -319,12 +503,18 @@ class UnicycleSimulatorNode(Node):
 
     # ------------------------------------------------------------------ parameters
     def parameters_callback(self, parameters: list[Parameter]) -> SetParametersResult:
-        """Refuse an initial_pose that is not three finite numbers."""
+        """Refuse invalid values with the reason (validate_simulator_parameters).
+
+        Reality parameters are also checked together with the current values of the others
+        (e.g. scan.nan_fraction + scan.neg_inf_fraction < 1 with the preset's filled in).
+        """
         values = {p.name: p.value for p in parameters}
         try:
             reason = validate_simulator_parameters(values)
+            if reason is None and REALITY_PARAMETERS & set(values):
+                reality_from_parameters({**self._reality_values(), **values})
         except (TypeError, ValueError) as err:
-            reason = f'invalid value: {err}'
+            reason = str(err) if REALITY_PARAMETERS & set(values) else f'invalid value: {err}'
         if reason is not None:
             return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
@@ -334,10 +524,17 @@ class UnicycleSimulatorNode(Node):
         names = {p.name for p in parameters}
         if names & {'v_max', 'omega_max'}:
             self._model = self._read_model()
+            self._base.model = self._model  # saturates the commands sent from now on
         if names & {'rate', 'real_time_factor'}:
             self._make_timer()
         if names & _SCAN_PARAMETERS:
             self._laser = self._make_laser()
+        if names & REALITY_PARAMETERS:
+            # the base keeps its state (pose, wheels, commands on their way, odometry's
+            # noise stream); the laser's draws restart from the seed
+            reality = self._read_reality()
+            self._base.reality = reality
+            self._scan_channel = ScanChannel(reality)
         if names & _FOOTPRINT_PARAMETERS:
             self._footprint = self._read_footprint()
 
@@ -361,20 +558,32 @@ class UnicycleSimulatorNode(Node):
             f'contacts counted with the polygon {footprint.vertices.tolist()} from {source}')
         return footprint
 
+    def _reality_values(self) -> dict[str, Any]:
+        """Return the reality parameters' values, of the declared ones.
+
+        During the declaration the rest are missing: reality_from_parameters then takes the
+        preset's for them, and the last declaration checks the whole.
+        """
+        return {name: self.get_parameter(name).value for name in REALITY_PARAMETERS
+                if self.has_parameter(name)}
+
+    def _read_reality(self) -> Reality:
+        # validated by parameters_callback: cannot fail here
+        return reality_from_parameters(self._reality_values())
+
     def _make_laser(self) -> SimulatedLaser:
-        noise = float(self.get_parameter('scan.noise_std').value)
-        seed = int(self.get_parameter('scan.seed').value)
+        """Return the exact laser: its noise is the ScanChannel's (applied once, there)."""
         return SimulatedLaser(self._geometry, fov=float(self.get_parameter('scan.fov').value),
                               beams=int(self.get_parameter('scan.beams').value),
                               range_min=SCAN_RANGE_MIN,
-                              range_max=float(self.get_parameter('scan.range_max').value),
-                              noise_std=noise, rng=np.random.default_rng(seed))
+                              range_max=float(self.get_parameter('scan.range_max').value))
 
     def _make_timer(self) -> None:
         if self._timer is not None:
             self.destroy_timer(self._timer)
         rate = float(self.get_parameter('rate').value)
         self._dt = 1.0 / rate
+        self._base.dt = self._dt  # the base's sub-step is the tick
         if self.get_parameter('publish_clock').value:
             rtf = float(self.get_parameter('real_time_factor').value)
             self._timer = self.create_timer(self._dt / rtf, self.timer_callback,
@@ -385,13 +594,21 @@ class UnicycleSimulatorNode(Node):
     # ------------------------------------------------------------------ callbacks
     @property
     def state(self) -> np.ndarray:
-        """The simulated state (x, y, theta), theta unwrapped."""
-        return self._state.copy()
+        """The TRUE pose (x, y, theta), theta unwrapped."""
+        return self._base.pose.copy()
 
     @property
     def odometry(self) -> np.ndarray:
-        """The pose odometry says (x, y, theta): the true one unless odom_drift is set."""
-        return self._odom_state.copy()
+        """The pose odometry integrates (x, y, theta): the true one unless it drifts.
+
+        Without the white noise each published message adds (odom_noise_std).
+        """
+        return self._base.odom_pose.copy()
+
+    @property
+    def reality(self) -> Reality:
+        """How real the simulated robot and laser are."""
+        return self._base.reality
 
     @property
     def sim_time(self) -> float:
@@ -419,20 +636,26 @@ class UnicycleSimulatorNode(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def cmd_vel_callback(self, msg: Twist | TwistStamped) -> None:
-        """Take the new command (saturated when integrated); a non-finite one means stop."""
+        """Send the command to the base (it acts after command_latency, saturated).
+
+        A non-finite command means stop. Its time is the simulation's (sim_time): the base
+        takes it from the next tick on.
+        """
         if isinstance(msg, TwistStamped):
             msg = msg.twist  # the same checks and timeout as a Twist
         raw = (msg.linear.x, msg.angular.z)
         if not all(math.isfinite(value) for value in raw):
-            self._u = np.zeros(2)
+            u = np.zeros(2)
             if self._problems.report('cmd_vel'):
                 self.get_logger().error(
                     f'invalid cmd_vel: linear.x = {raw[0]}, angular.z = {raw[1]}; stopping')
         else:
-            self._u = u_from_twist(msg)
+            u = u_from_twist(msg)
             if self._problems.resolve('cmd_vel'):
                 self.get_logger().info('cmd_vel is valid again')
+        self._base.command(u, self._sim_time)
         self._last_cmd_time = self._now()
+        self._timed_out = False
 
     def timer_callback(self) -> None:
         """Advance the simulation and publish clock and odom."""
@@ -446,18 +669,17 @@ class UnicycleSimulatorNode(Node):
                 self._last_tick = last + steps * self._dt if steps else last
                 if now - self._last_tick > MAX_CATCH_UP_STEPS * self._dt:
                     self._last_tick = now  # far behind (a clock jump): do not catch up
-            u = self._u
             timeout = float(self.get_parameter('cmd_timeout').value)
-            if timeout > 0 and (self._last_cmd_time is None
-                                or self._now() - self._last_cmd_time > timeout):
-                u = np.zeros(2)
-            u = self._model.saturate(u)
-            drift = (float(self.get_parameter('odom_drift.position').value),
-                     float(self.get_parameter('odom_drift.heading').value))
+            if (timeout > 0 and not self._timed_out and self._last_cmd_time is not None
+                    and self._now() - self._last_cmd_time > timeout):
+                # the driver's watchdog: the stop needs no trip over the network, it acts
+                # now, not command_latency later (before any cmd_vel the base is at rest)
+                self._base.stop(self._sim_time - self._base.reality.latency)
+                self._timed_out = True
             for _ in range(steps):
-                self._step_odometry(u, drift)
-                self._state = self._model.step(self._state, u, self._dt)
-                self._sim_time += self._dt
+                until = self._sim_time + self._dt
+                self._base.advance(until)
+                self._sim_time = until
                 self._scan_phase += float(self.get_parameter('scan.rate').value) * self._dt
                 self._localizer_phase += float(
                     self.get_parameter('localizer.rate').value) * self._dt
@@ -467,9 +689,11 @@ class UnicycleSimulatorNode(Node):
                 stamp = seconds_to_stamp(self._sim_time)
             else:
                 stamp = self.get_clock().now().to_msg()
-            # odom before clock: a controller woken by the new time already has the state
+            # odom before clock: a controller woken by the new time already has the state;
+            # what odometry reports (noise, drift) and the wheels' measured twist
+            pose, twist = self._base.odometry()
             self._odom_pub.publish(state_to_odometry(
-                self._odom_state, u, stamp=stamp,
+                pose, twist, stamp=stamp,
                 frame_id=str(self.get_parameter('frame_id').value),
                 child_frame_id=str(self.get_parameter('child_frame_id').value)))
             self._publish_scan(stamp)
@@ -482,19 +706,6 @@ class UnicycleSimulatorNode(Node):
             self.get_logger().error(f'simulation step failed: {err}',
                                     throttle_duration_sec=1.0)
 
-
-    def _step_odometry(self, u: np.ndarray, drift: tuple[float, float]) -> None:
-        """Advance what odometry says by one step: the true step, or a drifting one."""
-        position, heading = drift
-        if position == 0.0 and heading == 0.0:
-            self._odom_state = self._model.step(self._state, u, self._dt)
-            return
-        v, omega = (float(value) for value in self._model.saturate(u))
-        odom_u = np.array([(1.0 + position) * v, omega + heading * abs(v)])
-        # what the wheels' encoders report, not a command: not saturated again
-        self._odom_state = np.asarray(self._model.discrete(self._dt)(self._odom_state, odom_u),
-                                      dtype=float).reshape(-1)
-
     def _publish_localizer(self, stamp: Any) -> None:
         """Publish the true pose with noise if a localizer period ended during this tick."""
         if self._localizer_phase < 1.0 - _TICK_EPS:
@@ -502,7 +713,7 @@ class UnicycleSimulatorNode(Node):
         self._localizer_phase = max(
             0.0, self._localizer_phase - math.floor(self._localizer_phase + _TICK_EPS))
         std = float(self.get_parameter('localizer.noise_std').value)
-        x, y, theta = self._state[:3] + self._localizer_rng.normal(0.0, std, 3)
+        x, y, theta = self._base.pose[:3] + self._localizer_rng.normal(0.0, std, 3)
         msg = PoseWithCovarianceStamped()
         msg.header.stamp = stamp
         msg.header.frame_id = str(self.get_parameter('localizer.frame_id').value)
@@ -515,7 +726,7 @@ class UnicycleSimulatorNode(Node):
 
     def _check_contact(self) -> None:
         """Count a contact episode when the robot's footprint starts touching the true world."""
-        x, y, theta = (float(v) for v in self._state[:3])
+        x, y, theta = (float(v) for v in self._base.pose[:3])
         touching = contact(self._geometry, x, y, self._footprint, theta)
         if touching and not self._in_contact:
             self._contacts += 1
@@ -534,11 +745,18 @@ class UnicycleSimulatorNode(Node):
         self._in_contact = touching
 
     def _publish_scan(self, stamp: Any) -> None:
-        """Cast and publish a scan if a scan period ended during this tick."""
+        """Cast and publish a scan if a scan period ended during this tick.
+
+        The reality's laser: a lost scan (scan.loss_fraction) is not published; the others
+        carry its range noise and NaN / -inf beams (ScanChannel, as in the rollout).
+        """
         if self._scan_phase < 1.0 - _TICK_EPS:
             return
         self._scan_phase = max(0.0, self._scan_phase - math.floor(self._scan_phase + _TICK_EPS))
-        scan = self._laser.scan(self._state)
+        if self._scan_channel.lost():
+            return
+        scan = self._laser.scan(self._base.pose)
+        scan = scan._replace(ranges=self._scan_channel.corrupt(scan.ranges, scan.range_max))
         self._scan_pub.publish(laser_scan_msg(
             scan, frame_id=str(self.get_parameter('child_frame_id').value), stamp=stamp))
 
