@@ -14,23 +14,36 @@
 """unicycle_simulator takes cmd_vel as Twist or, with enable_stamped_cmd_vel, TwistStamped.
 
 Both are handled alike: a valid command moves the robot, a non-finite one stops it with an
-error, and silence longer than cmd_timeout (simulated time) stops it too.
+error, and silence longer than cmd_timeout (simulated time) stops it too. With ``reality``
+the robot is a real one (core/reality.py): its wheels lag the command, a command arrives late,
+its scans have NaN beams and some never come; every check counts in simulated time.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 import math
 
 from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
+import numpy as np
 import pytest
 from rcl_interfaces.msg import Log
+from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import LaserScan
 
-from mpc_local_planner.ros.conversions import twist_from_u, twist_stamped_from_u
+from mpc_local_planner.core.reality import REALITY_PRESETS
+from mpc_local_planner.ros.conversions import stamp_to_seconds, twist_from_u, twist_stamped_from_u
 from mpc_local_planner.ros.qos import CMD_VEL_QOS, LOCALIZER_QOS
-from mpc_local_planner.ros.unicycle_simulator_node import LOCALIZER_TOPIC, UnicycleSimulatorNode
+from mpc_local_planner.ros.unicycle_simulator_node import (
+    LOCALIZER_TOPIC,
+    reality_from_parameters,
+    SCAN_TOPIC,
+    UnicycleSimulatorNode,
+    validate_simulator_parameters,
+)
 
 pytestmark = pytest.mark.slow  # topics over DDS
 
@@ -140,3 +153,133 @@ def test_drifting_odometry_and_the_localizer_stand_in(ros) -> None:
     assert last.pose.pose.position.y == 0.0
     seconds = sim.sim_time - start
     assert len(poses) <= 5 * seconds + 2  # at localizer.rate
+
+
+def real_simulator(ros, **values) -> UnicycleSimulatorNode:
+    """A simulator owning the clock (10 x real time), no cmd_timeout, with these values."""
+    values = {'publish_clock': True, 'real_time_factor': 10.0, 'rate': 50.0,
+              'cmd_timeout': 0.0, **values}
+    return ros.add(UnicycleSimulatorNode(context=ros.context, parameter_overrides=[
+        Parameter(name, value=value) for name, value in values.items()]))
+
+
+def test_with_reality_real_the_measured_twist_rises_gradually_after_a_step_command(
+        ros) -> None:
+    """The real preset's wheels lag (0.1 s) and accelerate at most 2 m/s^2: no jump."""
+    sim = real_simulator(ros, reality='real')
+    assert sim.reality == REALITY_PRESETS['real']
+    probe = ros.probe()
+    assert ros.spin_until(lambda: probe.cmd_pub.get_subscription_count() > 0, timeout=TIMEOUT)
+    v = 0.3
+    probe.cmd_pub.publish(twist_from_u([v, 0.0]))
+    scale = REALITY_PRESETS['real'].odom_drift[0]  # what the encoders count
+
+    def speeds() -> list[float]:
+        return [m.twist.twist.linear.x for m in probe.odoms]
+
+    assert ros.spin_until(lambda: max(speeds(), default=0.0) >= 0.99 * v * (1 + scale),
+                          timeout=TIMEOUT)
+    rising = [s for s in speeds() if s > 0.0]
+    # not at once: the first measured speeds are a fraction of the command, and they grow by
+    # at most the acceleration limit per tick (odometry may skip a message: two ticks)
+    assert rising[0] < 0.5 * v
+    assert sum(0.0 < s < 0.9 * v for s in rising) >= 3
+    assert np.all(np.diff(rising) <= 2 * 2.0 * (1 + scale) / 50.0 + 1e-9)
+    assert np.all(np.diff(rising) >= -1e-9)  # a step up: never back down
+
+
+def test_with_command_latency_the_robot_stands_until_the_latency_has_passed(ros) -> None:
+    latency = 0.3
+    sim = real_simulator(ros, command_latency=latency)
+    assert sim.reality.latency == latency and sim.reality.lag == (0.0, 0.0)
+    probe = ros.probe()
+    assert ros.spin_until(lambda: probe.cmd_pub.get_subscription_count() > 0, timeout=TIMEOUT)
+    sent = sim.sim_time  # the command arrives at this simulated time or later
+    probe.cmd_pub.publish(twist_from_u([0.2, 0.0]))
+    assert ros.spin_until(lambda: sim.state[0] > 0.02, timeout=TIMEOUT)
+    moving = [m for m in probe.odoms if m.pose.pose.position.x > 0.0]
+    standing = [m for m in probe.odoms if m.pose.pose.position.x == 0.0]
+    assert moving and standing
+    started = stamp_to_seconds(moving[0].header.stamp)
+    # the first moved pose is one tick after the command reached the motors
+    assert started >= sent + latency + 1.0 / 50.0 - 1e-6
+    assert all(m.twist.twist.linear.x == 0.0 for m in standing)
+    assert all(stamp_to_seconds(m.header.stamp) < started for m in standing)
+
+
+def test_an_unknown_reality_is_refused_with_the_known_ones(ros) -> None:
+    with pytest.raises(ParameterException, match='reality must be one of ideal|mild'):
+        UnicycleSimulatorNode(context=ros.context,
+                              parameter_overrides=[Parameter('reality', value='realistic')])
+    sim = ros.add(UnicycleSimulatorNode(context=ros.context))
+    [result] = sim.set_parameters([Parameter('reality', value='realistic')])
+    assert not result.successful and 'ideal|mild|real|harsh' in result.reason
+    assert sim.get_parameter('reality').value == 'ideal' and sim.reality.ideal
+    # a combination only Reality can judge: NaN and -inf beams together at least 1
+    [result] = sim.set_parameters([Parameter('scan.nan_fraction', value=0.6)])
+    assert result.successful and sim.reality.scan_nan == 0.6
+    [result] = sim.set_parameters([Parameter('scan.neg_inf_fraction', value=0.5)])
+    assert not result.successful and 'scan.neg_inf_fraction' in result.reason
+    assert sim.reality.scan_neg_inf == 0.0
+    # a valid preset at run time replaces the reality; the override set stays
+    [result] = sim.set_parameters([Parameter('reality', value='harsh')])
+    assert result.successful
+    assert sim.reality == replace(REALITY_PRESETS['harsh'], scan_nan=0.6)
+
+
+def test_scans_have_nan_beams_and_some_are_lost_counted_in_simulated_time(ros) -> None:
+    rate = 50.0  # one scan per tick: every tick is a scan's slot
+    sim = real_simulator(ros, **{'scan.rate': rate, 'scan.beams': 200,
+                                 'scan.nan_fraction': 0.2, 'scan.neg_inf_fraction': 0.05,
+                                 'scan.loss_fraction': 0.3, 'scan.seed': 7})
+    probe = ros.probe()
+    scans: list[LaserScan] = []
+    reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.VOLATILE)
+    probe.create_subscription(LaserScan, SCAN_TOPIC, scans.append, reliable)
+    assert ros.spin_until(lambda: len(scans) >= 100, timeout=TIMEOUT)
+    assert sim.sim_time < 10.0
+    stamps = np.array([stamp_to_seconds(m.header.stamp) for m in scans])
+    slots = int(round((stamps[-1] - stamps[0]) * rate)) + 1
+    lost = 1.0 - len(scans) / slots
+    assert 0.15 < lost < 0.45  # 0.3 of the scans never come
+    # the gaps are whole ticks: a lost scan is a missing slot, not a shifted one
+    np.testing.assert_allclose(stamps * rate, np.round(stamps * rate), atol=1e-6)
+    ranges = np.concatenate([np.array(m.ranges) for m in scans])
+    assert 0.15 < np.isnan(ranges).mean() < 0.25
+    assert 0.03 < np.isneginf(ranges).mean() < 0.07
+    assert np.all(np.isposinf(ranges[~np.isnan(ranges) & ~np.isneginf(ranges)]))  # empty world
+
+
+def test_validate_simulator_parameters_gives_a_reason_for_each_bad_reality_value() -> None:
+    assert validate_simulator_parameters({
+        'reality': 'harsh', 'actuator_lag': [0.2, -1.0], 'acceleration_limits': [math.inf, 2.0],
+        'command_latency': 0.0, 'odom_noise_std': [0.0, 0.01], 'scan.nan_fraction': -1.0,
+        'scan.neg_inf_fraction': 0.0, 'scan.loss_fraction': 0.5}) is None
+    bad = {'reality': 'realistic', 'actuator_lag': [0.1], 'acceleration_limits': [0.0, 1.0],
+           'odom_noise_std': [math.inf, 0.0], 'command_latency': math.inf,
+           'scan.nan_fraction': 1.0, 'scan.neg_inf_fraction': math.nan,
+           'scan.loss_fraction': 'half'}
+    for name, value in bad.items():
+        reason = validate_simulator_parameters({name: value})
+        assert reason is not None and reason.startswith(name), (name, reason)
+
+
+def test_reality_parameters_override_the_preset_field_by_field() -> None:
+    real = REALITY_PRESETS['real']
+    assert reality_from_parameters({}) == REALITY_PRESETS['ideal']
+    # the defaults (negative, or 0 for the older names) are the preset's
+    defaults = {'actuator_lag': [-1.0, -1.0], 'acceleration_limits': [-1.0, -1.0],
+                'command_latency': -1.0, 'odom_noise_std': [-1.0, -1.0],
+                'scan.nan_fraction': -1.0, 'scan.neg_inf_fraction': -1.0,
+                'scan.loss_fraction': -1.0, 'scan.noise_std': 0.0,
+                'odom_drift.position': 0.0, 'odom_drift.heading': 0.0, 'scan.seed': 0}
+    assert reality_from_parameters({'reality': 'real', **defaults}) == real
+    mixed = reality_from_parameters({'reality': 'real', **defaults, 'actuator_lag': [0.0, -1.0],
+                                     'command_latency': 0.0, 'odom_drift.position': 0.05,
+                                     'scan.noise_std': 0.05, 'scan.seed': 3})
+    assert mixed.lag == (0.0, real.lag[1]) and mixed.latency == 0.0
+    assert mixed.odom_drift == (0.05, real.odom_drift[1]) and mixed.scan_noise == 0.05
+    assert mixed.seed == 3 and mixed.acceleration == real.acceleration
+    with pytest.raises(ValueError, match='reality must be one of'):
+        reality_from_parameters({'reality': 'Real'})
