@@ -77,6 +77,16 @@ controller compose it with odometry (``localization_topic``). Contacts are the t
 pose and its distance to the goal (``true_final_pose``, ``true_goal_error``), which must then
 be within TRUE_GOAL_TOLERANCE for the run to succeed.
 
+With ``--reality {ideal,mild,real,harsh}`` (default ideal) the simulator's robot and laser
+are that preset of core/reality.py (the simulator's ``reality`` parameter: command latency,
+actuator lag, acceleration limits, odometry noise and drift, laser noise, NaN/-inf beams,
+lost scans), the same model the ROS-free rollout uses. A preset whose odometry is not exact
+(all but ideal) is run as ``--drift`` is: odometry in ``odom``, the localizer stand-in on
+``amcl_pose`` followed by the planner and the controller, and the true final pose within
+TRUE_GOAL_TOLERANCE for success (``--drift RATE`` then overrides the preset's drift).
+``metrics.json`` records the preset in ``reality`` (and its values in ``reality_values``);
+``--param unicycle_simulator.NAME:=VALUE`` overrides single fields (``scan.seed`` seeds it).
+
 The controller arrives within PAPER_GOAL_TOLERANCES (the paper's scenario's 0.02 m and
 0.05 rad, which the reported metrics were measured with) instead of the node's defaults, which
 are for a real robot's noisy odometry: the simulated odometry is exact.
@@ -119,6 +129,7 @@ from mpc_local_planner.core.diagnostics import (
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
 from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
+from mpc_local_planner.core.reality import reality_preset, REALITY_PRESETS
 from mpc_local_planner.evaluation.analyze_bag import analyze, read_run, summary
 from mpc_local_planner.evaluation.plotting import plot_runs
 from mpc_local_planner.ros.bag_recorder_node import (
@@ -208,6 +219,8 @@ class LoopOptions:
     sensing: bool = False
     # odometry drift (fraction of the distance, and rad/m), with the localizer; 0 = exact
     drift: float = 0.0
+    # the simulator's reality preset (core/reality.py): how real the robot and laser are
+    reality: str = 'ideal'
     # the robot, instead of the world's: a polygon (Nav2's "[[x, y], ...]") or a circle
     footprint: str | None = None
     robot_radius: float | None = None
@@ -234,6 +247,16 @@ def footprint_parameter(footprint: Footprint) -> str:
     return '[' + ', '.join(f'[{x!r}, {y!r}]' for x, y in footprint.vertices.tolist()) + ']'
 
 
+def localized(options: LoopOptions) -> bool:
+    """Whether the run's odometry is not the true pose (--drift, or a non-ideal reality).
+
+    Raises:
+        ValueError: for an unknown --reality (the message lists the presets).
+
+    """
+    return bool(options.drift) or not reality_preset(options.reality).ideal_base
+
+
 def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
                     map_file: Path | None = None) -> dict[str, dict[str, Any]]:
     """Return each node's parameter values for a run (use_sim_time included).
@@ -247,7 +270,7 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
 
     Raises:
         ValueError: if --path analytic names no path of the world, sensing lacks map_file,
-            or extra parameters name a node that does not run.
+            extra parameters name a node that does not run, or the reality is unknown.
 
     """
     analytic = world.path if options.path == 'analytic' else ''
@@ -274,6 +297,7 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
             'world_file': str(world_file), **robot,
             # exact odometry IS the pose in map: said so, nodes with tf2 look nothing up
             'frame_id': 'map',
+            'reality': options.reality,
         },
     }
     if not world.footprint.is_circle:
@@ -287,9 +311,13 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
         params['mpc_controller'].update(obstacle_sources=['map', 'scan'], world_file='')
     if options.drift:
         params['unicycle_simulator'].update({
-            'frame_id': 'odom',
             'odom_drift.position': float(options.drift), 'odom_drift.heading': float(
-                options.drift), 'localizer.rate': LOCALIZER_RATE,
+                options.drift)})
+    if localized(options):
+        # odometry that drifts or is noisy is not the pose in map: a localizer says where
+        # the robot is, as on a real robot
+        params['unicycle_simulator'].update({
+            'frame_id': 'odom', 'localizer.rate': LOCALIZER_RATE,
             'localizer.noise_std': LOCALIZER_NOISE})
         for name in ('global_planner', 'mpc_controller'):
             params[name]['localization_topic'] = LOCALIZER_TOPIC
@@ -617,7 +645,8 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
                 'contacts': monitor.contacts, 'replans': monitor.replans,
                 'path_source': options.path, 'world': str(source_file),
                 'world_file': str(world_file), 'footprint_source': robot_source,
-                'drift': options.drift}
+                'drift': options.drift, 'reality': options.reality,
+                'reality_values': _run_reality(params)}
     if truth:  # one process: the simulator's true pose, whatever odometry said
         run_info['true_final_pose'] = [float(v) for v in truth[0]]
         run_info['true_goal_error'] = float(np.hypot(*(truth[0][:2] - world.goal[:2])))
@@ -629,10 +658,26 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
         _plot_sensing(bag, out / 'trajectory.png', world, monitor.sensed, title)
     success = (bool(metrics.get('reached')) and not metrics.get('collision')
                and not monitor.contacts)
-    if options.drift and truth:
+    if localized(options) and truth:
         success = success and run_info['true_goal_error'] <= TRUE_GOAL_TOLERANCE
     return LoopResult(metrics=metrics, stop_reason=stop_reason, wall_time=wall_time,
                       sim_time=sim_time, out=out, success=success)
+
+
+def _run_reality(params: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Return the simulator's reality as the run set it: the preset with its overrides.
+
+    An infinite value (no acceleration limit) is None: metrics.json stays standard JSON.
+    """
+    from mpc_local_planner.ros.unicycle_simulator_node import reality_from_parameters
+
+    def finite(value: Any) -> Any:
+        if isinstance(value, list):
+            return [finite(v) for v in value]
+        return None if isinstance(value, float) and not math.isfinite(value) else value
+
+    values = reality_from_parameters(params['unicycle_simulator']).as_dict()
+    return {name: finite(value) for name, value in values.items()}
 
 
 def _plot_sensing(bag: Path, png: Path, world: World,
@@ -800,6 +845,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help='the odometry drifts by RATE of the distance travelled (and '
                              'RATE rad/m in heading; default 5 %%), and the nodes follow a '
                              'localizer stand-in on amcl_pose')
+    parser.add_argument('--reality', choices=tuple(REALITY_PRESETS), default=defaults.reality,
+                        help="how real the simulator's robot and laser are (core/reality.py): "
+                             'ideal (exact), mild, real or harsh (latency, lag, acceleration '
+                             'limits, odometry noise and drift, laser noise, NaN/-inf beams, '
+                             'lost scans); a non-ideal one runs with the localizer, as --drift')
     parser.add_argument('--respawn', action='store_true',
                         help='with --separate-processes: start a node process that exits '
                              'again instead of ending the run (a restart drill)')
@@ -823,6 +873,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                               timeout=args.timeout, time_limit=args.time_limit,
                               seed=args.seed, separate_processes=args.separate_processes,
                               respawn=args.respawn, sensing=args.sensing, drift=args.drift,
+                              reality=args.reality,
                               footprint=args.footprint, robot_radius=args.robot_radius,
                               extra_parameters=extra)
         result = run_closed_loop(options, ros_args=ros_args)

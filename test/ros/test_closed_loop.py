@@ -281,6 +281,22 @@ def test_drift_makes_the_odometry_drift_and_the_nodes_follow_the_localizer(tmp_p
     assert plain['unicycle_simulator']['frame_id'] == 'map'
 
 
+def test_reality_reaches_the_simulator_and_a_real_one_runs_with_the_localizer() -> None:
+    plain = node_parameters(LoopOptions(path='rrt'), UNKNOWN_BOX_FILE, UNKNOWN_BOX)
+    assert plain['unicycle_simulator']['reality'] == 'ideal'
+    params = node_parameters(LoopOptions(path='rrt', reality='real'), UNKNOWN_BOX_FILE,
+                             UNKNOWN_BOX)
+    simulator = params['unicycle_simulator']
+    assert simulator['reality'] == 'real'
+    # noisy, drifting odometry is not in map: the nodes follow the localizer, as with --drift
+    assert simulator['frame_id'] == 'odom' and simulator['localizer.rate'] > 0
+    assert params['mpc_controller']['localization_topic'] == 'amcl_pose'
+    assert not any('odom_drift' in name for name in simulator)  # the preset's drift
+    with pytest.raises(ValueError, match='unknown reality'):
+        node_parameters(LoopOptions(path='rrt', reality='realistic'), UNKNOWN_BOX_FILE,
+                        UNKNOWN_BOX)
+
+
 @pytest.mark.slow
 def test_closed_loop_with_drifting_odometry_goes_around_the_unknown_box_with_the_localizer(
         tmp_path) -> None:
