@@ -38,6 +38,13 @@ the planner and the controller no longer read the world, so the launch file hand
 world's polygon itself (unless their parameter file sets one). An invalid footprint is
 refused at launch, with the reason.
 
+How real the simulated robot and laser are: ``reality:=ideal|mild|real|harsh`` (a preset of
+core/reality.py: command latency, actuator lag, acceleration limits, odometry noise and
+drift, laser noise, NaN/-inf beams, lost scans) sets the simulator's ``reality`` over its
+parameter file; empty (the default), the parameter file's (ideal in the shipped one). An
+unknown name is refused at launch. The odometry of a non-ideal preset is not the pose in
+``map``: run it with a localizer (closed_loop --reality does so with its stand-in).
+
 Checked statically only: ``launch`` and ``launch_ros`` are not installable from PyPI, so the
 tests compile this file and check the executables and files it names (test/ros/test_launch.py).
 """
@@ -126,6 +133,23 @@ def _check_footprint(text: str) -> str:
     return text
 
 
+def _check_reality(text: str) -> dict[str, str]:
+    """Return the simulator's reality parameter for reality:=NAME ({} when empty).
+
+    Raises:
+        RuntimeError: for an unknown preset (the message lists the known ones).
+
+    """
+    from mpc_local_planner.core.reality import REALITY_PRESETS
+
+    if not text:
+        return {}
+    if text not in REALITY_PRESETS:
+        msg = f'reality:={text}: choose one of {"|".join(REALITY_PRESETS)} (or leave it empty)'
+        raise RuntimeError(msg)
+    return {'reality': text}
+
+
 def _nodes(context: LaunchContext) -> list[Node]:
     """Read the world once the arguments are known, and start the nodes for it."""
     from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -139,6 +163,7 @@ def _nodes(context: LaunchContext) -> list[Node]:
     use_sim_time = arg('use_sim_time').lower() == 'true'
     sensing = arg('sensing').lower() == 'true'
     footprint = _check_footprint(arg('footprint'))
+    reality = _check_reality(arg('reality'))
     common = {'use_sim_time': use_sim_time}
     map_file = _map_file(arg('map'), world.name)
     if sensing and map_file is None:
@@ -170,7 +195,7 @@ def _nodes(context: LaunchContext) -> list[Node]:
                  # in the map frame, so RViz (fixed frame map) shows it as it is
                  'frame_id': 'map',
                  **_robot(footprint, world, arg('simulator_params'), 'unicycle_simulator',
-                          False)}]),
+                          False), **reality}]),
         Node(package=PACKAGE, executable='global_planner', name='global_planner',
              output='screen',
              parameters=[arg('planner_params'), common, {
@@ -208,6 +233,10 @@ def generate_launch_description() -> LaunchDescription:
                                           '"[[x, y], ...]" in base_link, for the simulator, '
                                           "the planner and the controller; empty: each node's "
                                           "parameter file, else the world's footprint"),
+        DeclareLaunchArgument('reality', default_value='',
+                              description="how real the simulator's robot and laser are: "
+                                          'ideal|mild|real|harsh (core/reality.py); empty: '
+                                          "the simulator's parameter file"),
         DeclareLaunchArgument('use_sim_time', default_value='true',
                               description='the simulator drives /clock; every node follows it'),
         DeclareLaunchArgument('real_time_factor', default_value='1.0',
