@@ -188,7 +188,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('initial_pose', [0.0, 0.0, 0.0],
                   'start pose [x, y, theta] (m, m, rad); read once at start'),
     ParameterSpec('rate', 50.0,
-                  'integration rate in Hz of simulated time (one RK4 step of 1/rate per tick)',
+                  'integration rate in Hz of simulated time (one step of 1/rate per tick: RK4 '
+                  "with ideal reality, else the exact arc of the wheels' velocity)",
                   float_range=(1.0, 1000.0)),
     ParameterSpec('cmd_timeout', 0.5,
                   'a cmd_vel older than this (s of simulated time) is replaced by zero; '
