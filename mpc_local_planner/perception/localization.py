@@ -89,15 +89,21 @@ class LocalizedPose:
         self.problem = f'no localizer pose yet on {self.source!r}' if self.localized else None
         self.corrections = 0
 
-    def add_odometry(self, time: float, pose: np.ndarray) -> None:
-        """Keep an odometry pose (x, y, theta in odom) at time."""
-        self.odometry.add(time, pose)
+    def add_odometry(self, time: float, pose: np.ndarray,
+                     twist: np.ndarray | tuple[float, float] | None = None) -> None:
+        """Keep an odometry pose (x, y, theta in odom) at time, with its twist (v, omega).
+
+        The twist lets a scan's stamp just past the newest odometry be placed (PoseHistory).
+        """
+        self.odometry.add(time, pose, twist)
 
     def add_localizer(self, time: float, pose: np.ndarray) -> np.ndarray:
         """Take a localizer pose (x, y, theta in the plan's frame) at time; return the correction.
 
-        The odometry at time is interpolated in the history; a time after the newest
-        odometry uses the newest (no extrapolation, as PoseHistory).
+        The odometry at time is interpolated in the history, or extrapolated along the
+        newest odometry's twist within its bound (PoseHistory.at); a time later than that
+        uses the newest odometry pose, as before: a localizer's message is not held back
+        (a correction from a slightly stale pair beats none).
 
         Raises:
             LocalizationError: if no odometry is kept yet, or time is older than all of it;
@@ -111,6 +117,8 @@ class LocalizedPose:
                        f'(from {self.odometry.oldest:.3f} s, {self.odometry.span:g} s)')
         else:
             odom = self.odometry.at(time)
+            if odom is None:  # past the extrapolation bound: the newest, as before
+                odom = self.odometry.newest_pose()
             self.correction = compose(np.asarray(pose[:3], dtype=float), invert(odom))
             self.problem = None
             self.corrections += 1
@@ -130,9 +138,10 @@ class LocalizedPose:
         return compose(self.correction, np.asarray(odom_pose[:3], dtype=float))
 
     def at(self, time: float) -> np.ndarray | None:
-        """Return the pose in the plan's frame at time (None: no odometry or no correction).
+        """Return the pose in the plan's frame at time (None: no odometry then, no correction).
 
-        The odometry at time (PoseHistory.at) with the latest correction.
+        The odometry at time (PoseHistory.at: interpolated, or extrapolated within its
+        bound; None past it) with the latest correction: extrapolation is of odometry only.
         """
         odom = self.odometry.at(time)
         return None if odom is None else self.pose(odom)

@@ -53,6 +53,7 @@ __all__ = [
     'scan_beam_count',
     'scan_from_message',
     'odometry_to_state',
+    'odometry_twist',
     'path_pose_count',
     'path_to_poses',
     'pose_to_array',
@@ -248,6 +249,17 @@ def odometry_to_state(odom: Odometry) -> np.ndarray:
 
     """
     return pose_to_array(odom.pose.pose)
+
+
+def odometry_twist(odom: Odometry) -> np.ndarray:
+    """Return the (v, omega) an odometry message measured: twist.linear.x, twist.angular.z.
+
+    nav_msgs/Odometry's twist is in child_frame_id (base_link): linear.x is along the
+    robot's heading. Unlike u_from_twist, NaN and inf are kept: a twist that is not finite
+    is unknown (nothing is extrapolated from it), not a standstill.
+    """
+    twist = odom.twist.twist
+    return np.array([twist.linear.x, twist.angular.z], dtype=float)
 
 
 def state_to_odometry(state: np.ndarray, u: np.ndarray, *, stamp: Time,

@@ -42,7 +42,11 @@ stays. With ``use_scan`` too, each ``scan`` (sensor_msgs/LaserScan from the lase
 beams pass through, beam by beam as REP 117 says (PlanningGrid.add_scan; a return inside
 the robot's footprint, the one the planner plans for, is the robot itself and marks nothing),
 placed with the robot's pose in ``frame_id`` at its stamp (ros/robot_pose.py: odometry
-within SCAN_POSE_TOLERANCE of it, corrected by the localizer, or tf2); a scan that cannot
+within SCAN_POSE_TOLERANCE of it, corrected by the localizer, or tf2); a scan newer than
+the latest odometry by at most MAX_EXTRAPOLATION_S is placed with the latest pose moved
+along its twist's arc, a newer one waits (the latest PENDING_SCANS) until odometry covering
+its stamp has come, never placed with the older pose, and is discarded if none has once it
+is SCAN_POSE_TOLERANCE old; a scan that cannot
 be interpreted (a beam count its angles do not imply, within one increment, among others) or
 one stamped more than MAX_SCAN_FUTURE_S ahead of this node's clock is dropped with one
 throttled error.
@@ -67,6 +71,7 @@ supervisor such as closed_loop learns that no plan will come.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import replace
 import math
 import sys
@@ -100,11 +105,13 @@ from mpc_local_planner.core.replanning import (
     ReplanSettings,
 )
 from mpc_local_planner.perception.grids import PlanningGrid
+from mpc_local_planner.perception.pose_history import MAX_EXTRAPOLATION_S
 from mpc_local_planner.perception.scan_obstacles import check_scan_stamp, validate_scan
 from mpc_local_planner.ros.conversions import (
     frame_problem,
     grid_from_message,
     odometry_to_state,
+    odometry_twist,
     pose_to_array,
     poses_to_path,
     scan_from_message,
@@ -147,8 +154,13 @@ ANALYTIC_SAMPLES = 101
 # Seconds of odometry kept to place scans.
 ODOM_HISTORY_S = 2.0
 # A scan farther than this (seconds) from every kept odometry stamp is dropped: the pose it
-# would be placed with is not the robot's at the scan.
+# would be placed with is not the robot's at the scan. A scan newer than the odometry by
+# more than MAX_EXTRAPOLATION_S waits instead, and is discarded if no odometry has covered
+# its stamp by the time it is this old (by this node's clock).
 SCAN_POSE_TOLERANCE = 0.5
+# Scans kept waiting for odometry that covers their stamps (the latest; an older one falls
+# out), as the controller keeps them.
+PENDING_SCANS = 3
 # A re-plan from a robot standing within the planner's clearance of an obstacle starts from
 # the nearest clear point no farther than this (m) that it can drive straight to.
 ESCAPE_DISTANCE = 1.0
@@ -261,6 +273,8 @@ class GlobalPlannerNode(ManagedNode):
         # the pose in the plan's frame (ros/robot_pose.py): configure chooses the mode
         self._pose_source = RobotPose(PoseMode.ODOMETRY, span=ODOM_HISTORY_S, frame_id='map')
         self._pending_goal: np.ndarray | None = None
+        # valid scans waiting for odometry that covers their stamps, in arrival order
+        self._pending_scans: deque[Any] = deque(maxlen=PENDING_SCANS)
         self._waiting_reported = False
         self._problems = ProblemThrottle()
         self.last_plan: np.ndarray | None = None
@@ -407,6 +421,7 @@ class GlobalPlannerNode(ManagedNode):
         self._state = None
         self._pose_source.clear()
         self._pending_goal = None
+        self._pending_scans.clear()
 
     # ------------------------------------------------------------------ parameters
     def parameters_callback(self, parameters: list[Parameter]) -> SetParametersResult:
@@ -586,14 +601,19 @@ class GlobalPlannerNode(ManagedNode):
             self._try_plan()
 
     def odom_callback(self, msg: Odometry) -> None:
-        """Keep the robot's pose (and recent ones, for scans); plan a pending goal."""
+        """Keep the robot's pose (and recent ones with their twists, for scans).
+
+        Then place the scans waiting for odometry that covers their stamps, and plan a
+        pending goal.
+        """
         try:
             self._state = odometry_to_state(msg)
         except ValueError as err:
             self.get_logger().warning(f'ignoring odometry: {err}', throttle_duration_sec=1.0)
             return
         self._pose_source.add_odometry(stamp_to_seconds(msg.header.stamp), self._state,
-                                       msg.header.frame_id)
+                                       msg.header.frame_id, odometry_twist(msg))
+        self._place_pending()
         if self._pending_goal is not None:
             self._try_plan()
 
@@ -624,10 +644,12 @@ class GlobalPlannerNode(ManagedNode):
             self._try_plan()
 
     def scan_callback(self, msg: LaserScan) -> None:
-        """Mark and clear the grid with a scan, placed with the odometry nearest its stamp.
+        """Mark and clear the grid with a scan, placed with the pose at its stamp.
 
         A malformed scan, or one without odometry near its stamp, is dropped with one
-        throttled error.
+        throttled error. One stamped more than MAX_EXTRAPOLATION_S after the latest
+        odometry waits (_place_pending) until odometry covering its stamp has come: the
+        older pose would mark its returns displaced by the motion since.
         """
         if self._grid is None:
             self.get_logger().info('scans are ignored until a map comes', once=True)
@@ -640,40 +662,79 @@ class GlobalPlannerNode(ManagedNode):
             scan = scan_from_message(msg)
             validate_scan(scan)  # before it is placed: a count the angles do not imply
             check_scan_stamp(scan.stamp, self._now())
-            pose = self._pose_at(scan.stamp)
-            # returns inside the robot are the robot: the planner's footprint says where it is
-            body = self._planner.footprint if self._planner is not None else None
-            self._grid.add_scan(scan, pose,
-                                laser_pose=list(self.get_parameter('laser_pose').value),
-                                body=body)
-        except LocalizationError as err:  # not the scan's fault: said where plans wait
-            self.get_logger().info(f"scan dropped: no pose in the plan's frame ({err})",
-                                   throttle_duration_sec=2.0)
-            return
         except Exception as err:  # ScanError (a ValueError); nothing may escape a callback
-            if self._problems.report('scan'):
-                self.get_logger().error(f'scan dropped: {err}')
+            self._refuse_scan(err)
             return
-        self._problems.resolve('scan')
-        self.scan_count += 1
+        self._pending_scans.append(scan)
+        self._place_pending()
 
-    def _pose_at(self, stamp: float) -> np.ndarray:
+    def _place_pending(self) -> None:
+        """Add to the grid the waiting scans whose stamps the pose now covers, in order.
+
+        Called on each scan and each odometry message. What is covered is every stamp up to
+        a threshold (MAX_EXTRAPOLATION_S past the latest odometry, or the latest
+        transform), so a scan added is never newer than one left waiting. A scan still
+        without a pose once SCAN_POSE_TOLERANCE old is discarded (said once a while).
+        """
+        if self._grid is None:
+            self._pending_scans.clear()
+            return
+        waiting = []
+        while self._pending_scans:
+            scan = self._pending_scans.popleft()
+            try:
+                pose = self._pose_at(scan.stamp)
+                if pose is None:
+                    if self._now() - scan.stamp <= SCAN_POSE_TOLERANCE:
+                        waiting.append(scan)  # until odometry covers its stamp
+                    else:
+                        self.get_logger().info(
+                            f'scan discarded: no odometry covered its stamp {scan.stamp:.3f} '
+                            f's (more than {MAX_EXTRAPOLATION_S:g} s past the latest) within '
+                            f'{SCAN_POSE_TOLERANCE:g} s', throttle_duration_sec=2.0)
+                    continue
+                # returns inside the robot are the robot: the planner's footprint says where
+                body = self._planner.footprint if self._planner is not None else None
+                self._grid.add_scan(scan, pose,
+                                    laser_pose=list(self.get_parameter('laser_pose').value),
+                                    body=body)
+            except LocalizationError as err:  # not the scan's fault: said where plans wait
+                self.get_logger().info(f"scan dropped: no pose in the plan's frame ({err})",
+                                       throttle_duration_sec=2.0)
+                continue
+            except Exception as err:  # ScanError (a ValueError); nothing may escape
+                self._refuse_scan(err)
+                continue
+            self._problems.resolve('scan')
+            self.scan_count += 1
+        self._pending_scans.extend(waiting)
+
+    def _refuse_scan(self, err: Exception) -> None:
+        """Say (throttled) that a scan was dropped."""
+        if self._problems.report('scan'):
+            self.get_logger().error(f'scan dropped: {err}')
+
+    def _pose_at(self, stamp: float) -> np.ndarray | None:
         """Return the pose in the plan's frame at stamp (seconds): RobotPose.at.
 
+        None: not yet (no odometry, or none within MAX_EXTRAPOLATION_S before the stamp;
+        with tf2, no transform as new): the scan waits.
+
         Raises:
-            ValueError: if no odometry kept is within SCAN_POSE_TOLERANCE of it, or there is
-                no pose in the plan's frame (LocalizationError).
+            ValueError: if no odometry kept is within SCAN_POSE_TOLERANCE of it (an old
+                stamp), or there is no pose in the plan's frame (LocalizationError).
 
         """
+        pose = self._pose_source.at(stamp)
+        if pose is None:
+            return None
         odometry = self._pose_source.located.odometry
         gap = odometry.gap(stamp)
-        if not gap <= SCAN_POSE_TOLERANCE:
+        if not gap <= SCAN_POSE_TOLERANCE:  # with tf2 the odometry may lag, or be none
             problem = ('no odometry yet to place it' if len(odometry) == 0 else
                        f'no odometry within {SCAN_POSE_TOLERANCE:g} s of its stamp '
                        f'{stamp:.3f} s (nearest {gap:.3f} s away)')
             raise ValueError(problem)
-        pose = self._pose_source.at(stamp)
-        assert pose is not None  # odometry is kept
         return pose
 
     def goal_callback(self, msg: PoseStamped) -> None:

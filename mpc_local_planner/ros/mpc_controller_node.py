@@ -44,10 +44,14 @@ obstacle at range_min; a return inside the robot's footprint, from the laser at
 ``laser_pose``, is the robot itself and ignored, so a -inf from a laser within the body stops
 nothing), placed in the plan's frame with the robot's pose there AT THE SCAN'S STAMP
 (ros/robot_pose.py: the odometry interpolated in the last ODOM_HISTORY_S seconds, a scan
-older than that using the oldest pose kept, a newer one the latest, with the localizer's
-correction; or tf2's transform at the stamp), clustered into convex pieces and remembered for
-``obstacle_memory`` seconds). A plan through an obstacle is followed: the MPC stops in front
-of it or goes around, and the diagnostics say ``path_blocked`` and ``blocked_at``.
+older than that using the oldest pose kept; a scan newer than the latest odometry by at most
+MAX_EXTRAPOLATION_S with the latest pose moved along its twist's arc, a newer one waiting
+(the latest PENDING_SCANS, in order of arrival) until odometry covering its stamp has come
+and discarded if none has within ``scan_timeout``, never placed with the older pose; with
+the localizer's correction; or tf2's transform at the stamp, waited for the same way),
+clustered into convex pieces and remembered for ``obstacle_memory`` seconds). A plan
+through an obstacle is followed: the MPC stops in front of it or goes around, and the
+diagnostics say ``path_blocked`` and ``blocked_at``.
 
 The robot's shape, Nav2's precedence (as the simulator and the planner apply it): the
 ``footprint`` parameter's convex polygon (``"[[x, y], ...]"``, base_link), else the world
@@ -66,8 +70,9 @@ the angles do not imply within one increment, too many beams, another frame, a s
 than MAX_SCAN_FUTURE_S ahead of this node's clock; a grid whose data is not
 width x height, a resolution <= 0, a non-finite origin) is dropped with one throttled
 error; with 'scan' a source, the robot stops until a scan comes and whenever the latest
-valid one is older than ``scan_timeout``; with 'map' a source, it stops until a valid map
-has come (as before the first scan: what the map would show is unknown). A scan without a
+valid one placed is older than ``scan_timeout`` (a waiting scan renews nothing); with
+'map' a source, it stops until a valid map has come (as before the first scan: what the
+map would show is unknown). A scan without a
 usable reading (every beam NaN, outside [range_min, range_max] or inside the footprint) is
 valid but blind: it is
 used (it shows nothing and clears nothing) and does not renew ``scan_timeout``, so one
@@ -85,6 +90,7 @@ reason on stderr (so does a configure that fails, with autostart).
 
 from __future__ import annotations
 
+from collections import deque
 import sys
 from typing import Any
 
@@ -115,6 +121,7 @@ from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path
 from mpc_local_planner.perception.local_obstacles import LocalObstacles
+from mpc_local_planner.perception.pose_history import MAX_EXTRAPOLATION_S
 from mpc_local_planner.perception.scan_obstacles import (
     check_scan_stamp,
     classify_beams,
@@ -127,6 +134,7 @@ from mpc_local_planner.ros.conversions import (
     frame_problem,
     grid_from_message,
     odometry_to_state,
+    odometry_twist,
     path_pose_count,
     path_to_poses,
     polygon_marker,
@@ -195,6 +203,10 @@ MARKER_STYLE = {
 }
 # Seconds of odometry kept to find the pose at a scan's stamp.
 ODOM_HISTORY_S = 2.0
+# Scans kept waiting for odometry that covers their stamps (the latest; an older one falls
+# out). A few: at 10-40 Hz, three scans span 75-300 ms, more than odometry is normally late,
+# and a waiting scan older than scan_timeout is discarded anyway.
+PENDING_SCANS = 3
 # Metres beyond the horizon's reach (MpcConfig.reach: v_max N h, the inflation and a
 # polygon's circumscribed radius) within which map cells and remembered scan obstacles are
 # handed to the MPC.
@@ -287,6 +299,8 @@ class MpcControllerNode(ManagedNode):
         self._local: LocalObstacles | None = None
         self._scan_time: float | None = None
         self._scan_stamp: float | None = None
+        # valid scans waiting for odometry that covers their stamps: (scan, stamp, receipt)
+        self._pending_scans: deque[tuple[Any, float, float]] = deque(maxlen=PENDING_SCANS)
         self._grid = None
         self.blockage = Blockage()
         self.last_output: ControlOutput | None = None
@@ -528,7 +542,9 @@ class MpcControllerNode(ManagedNode):
         """Keep the latest state and when it was measured; a bad one stops the robot.
 
         The measurement time is the stamp, but never later than the arrival: a stamp from
-        the future must not keep the state fresh after the odometry stops.
+        the future must not keep the state fresh after the odometry stops. The pose and its
+        twist go to the history (to place scans), and the scans waiting for odometry that
+        covers their stamps are placed if this one does.
         """
         receipt = self._now()
         try:
@@ -547,12 +563,16 @@ class MpcControllerNode(ManagedNode):
         self._odom_time = min(stamp, receipt) if stamp > 0 else receipt
         self._odom_problem = None
         self._pose_source.add_odometry(stamp if stamp > 0 else receipt, state,
-                                       msg.header.frame_id)
+                                       msg.header.frame_id, odometry_twist(msg))
         if self._problems.resolve('odom'):
             self.get_logger().info('odometry is valid again')
+        self._place_pending()
 
     def pose_at(self, time: float) -> np.ndarray | None:
-        """Return the pose in the plan's frame at time (RobotPose.at; None before odometry).
+        """Return the pose in the plan's frame at time (RobotPose.at; None: not yet).
+
+        None before any odometry and for a time more than MAX_EXTRAPOLATION_S past the
+        latest odometry (with tf2, past the latest transform): the scan waits.
 
         Raises:
             LocalizationError: if there is odometry but no pose in the plan's frame.
@@ -595,15 +615,15 @@ class MpcControllerNode(ManagedNode):
                                    f'{self._pose_source.describe()}')
 
     def scan_callback(self, msg: LaserScan | bytes) -> None:
-        """Place a scan's obstacles in the plan's frame and remember them; drop a bad scan.
+        """Take a scan: placed now if the odometry covers its stamp, else it waits.
 
         The robot's pose is its pose in the plan's frame at the scan's stamp (see pose_at;
-        the one the controller steers with, so scan and plan agree). A malformed
-        scan is dropped with one throttled error, so the scan goes stale if only bad ones
-        come; the latest valid scan's time (its stamp, but never later than its arrival)
-        is what scan_timeout is measured against, if it has a usable reading: a blind
-        scan (no beam that is not ignored, see classify_beams) is used but does not renew
-        it, so only blind scans go stale as no scans do.
+        the one the controller steers with, so scan and plan agree). A scan stamped more
+        than MAX_EXTRAPOLATION_S after the latest odometry waits (with at most
+        PENDING_SCANS - 1 others, the oldest falling out) until odometry covering its stamp
+        has come (_place_pending), renewing nothing meanwhile; the older pose would displace
+        what it saw by the motion since. A malformed scan is dropped with one throttled
+        error, so the scan goes stale if only bad ones come.
 
         Args:
             msg: the scan, or its CDR bytes as the raw subscription delivers them.
@@ -615,16 +635,58 @@ class MpcControllerNode(ManagedNode):
         receipt = self._now()
         try:
             scan, stamp = self._read_scan(msg, receipt)
+        except Exception as err:  # ScanError mostly; never leave a callback
+            self._refuse_scan(err)
+            return
+        self._pending_scans.append((scan, stamp, receipt))
+        self._place_pending()
+
+    def _place_pending(self) -> None:
+        """Place the waiting scans whose stamps the pose now covers, in arrival order.
+
+        Called on each scan, each odometry message and each control step. What is covered
+        is every stamp up to a threshold (MAX_EXTRAPOLATION_S past the latest odometry, or
+        the latest transform), so a scan placed here is never newer than one left waiting:
+        the memory sees them in order. A scan still without a pose once older than
+        scan_timeout is discarded (it would be stale when placed); one whose pose cannot be
+        had (no localizer correction, no transform) is dropped, as before.
+        """
+        if self._local is None or self._local.memory is None or self.controller is None:
+            self._pending_scans.clear()
+            return
+        waiting: list[tuple[Any, float, float]] = []
+        while self._pending_scans:
+            scan, stamp, receipt = self._pending_scans.popleft()
             try:
                 pose = self.pose_at(stamp)
-            except LocalizationError as err:
-                pose, problem = None, f"no pose in the plan's frame to place it ({err})"
-            else:
-                problem = 'no odometry yet to place it'
-            if pose is None:
-                self.get_logger().info(f'scan dropped: {problem}',
-                                       throttle_duration_sec=ERROR_THROTTLE_S)
-                return
+            except Exception as err:  # LocalizationError mostly; never leave a callback
+                self.get_logger().info(f"scan dropped: no pose in the plan's frame to place "
+                                       f'it ({err})', throttle_duration_sec=ERROR_THROTTLE_S)
+                continue
+            if pose is not None:
+                self._use_scan(scan, stamp, receipt, pose)
+                continue
+            timeout = float(self.get_parameter('scan_timeout').value)
+            if self._now() - stamp <= timeout:
+                waiting.append((scan, stamp, receipt))  # until odometry covers its stamp
+                continue
+            self.get_logger().info(
+                f'scan discarded: no odometry covered its stamp {stamp:.3f} s (more than '
+                f'{MAX_EXTRAPOLATION_S:g} s past the latest) within scan_timeout '
+                f'({timeout:g} s)', throttle_duration_sec=ERROR_THROTTLE_S)
+        self._pending_scans.extend(waiting)
+
+    def _use_scan(self, scan: Any, stamp: float, receipt: float, pose: np.ndarray) -> None:
+        """Remember a placed scan's obstacles; renew scan_timeout if it has a usable reading.
+
+        The scan's time (its stamp, but never later than its arrival) is what scan_timeout
+        is measured against, set only here, once the scan is placed and used: a waiting
+        scan renews nothing. A blind scan (no beam that is not ignored, see
+        classify_beams) is used but does not renew it, so only blind scans go stale as no
+        scans do.
+        """
+        memory = self._local.memory
+        try:
             if self._scan_stamp is not None and stamp < self._scan_stamp:
                 if self._scan_stamp - stamp <= ODOM_HISTORY_S:
                     return  # out of order: the memory holds a newer view already
@@ -632,11 +694,8 @@ class MpcControllerNode(ManagedNode):
             laser = [float(v) for v in self.get_parameter('laser_pose').value]
             body = self.controller.config.robot_footprint  # returns inside are the robot
             memory.update(scan, pose, laser_pose=laser, body=body)
-        except Exception as err:  # ScanError mostly; never leave a callback
-            problem = str(err) or type(err).__name__
-            if self._problems.report('scan'):
-                self.get_logger().error(f'invalid scan: {problem}; scan dropped (cmd_vel is '
-                                        'zero once the scan is stale)')
+        except Exception as err:  # never leave a callback
+            self._refuse_scan(err)
             return
         self._local.scan_updated()
         self._scan_stamp = stamp
@@ -649,6 +708,13 @@ class MpcControllerNode(ManagedNode):
                 throttle_duration_sec=ERROR_THROTTLE_S)
             return
         self._scan_time = min(stamp, receipt)
+
+    def _refuse_scan(self, err: Exception) -> None:
+        """Say (throttled) that a scan was dropped as invalid."""
+        problem = str(err) or type(err).__name__
+        if self._problems.report('scan'):
+            self.get_logger().error(f'invalid scan: {problem}; scan dropped (cmd_vel is '
+                                    'zero once the scan is stale)')
 
     def _read_scan(self, msg: LaserScan | bytes, receipt: float) -> tuple[Any, float]:
         """Return the scan (validated, stamped) and its stamp in seconds.
@@ -789,6 +855,7 @@ class MpcControllerNode(ManagedNode):
         self._last_step_time = now
         self.control_steps += 1
         try:
+            self._place_pending()  # odometry may have come since a scan began to wait
             self._locate()
             if self._odom_problem is not None:
                 output = self.controller.stop(Reason.INVALID_ODOM, self._odom_problem)

@@ -31,6 +31,13 @@ plan's frame (``frame_id``), chosen at configure (`choose_mode`):
 
 With a localizer or tf2 and no pose (no localizer message yet, one older than the odometry
 kept, no transform) the controller stops and says why; the planner waits.
+
+A scan's stamp (`RobotPose.at`) is often newer than the latest odometry. Within
+MAX_EXTRAPOLATION_S of it the odometry is extrapolated along its twist (PoseHistory.at; the
+localizer's correction is then applied as at any stamp: only odometry is extrapolated);
+beyond, ``at`` says "not yet" (None) and the nodes keep the scan until odometry covering
+its stamp has come. With tf2, a stamp newer than the latest transform is "not yet" too
+(tf2 does not extrapolate): the nodes wait for it the same way.
 """
 
 from __future__ import annotations
@@ -159,6 +166,33 @@ class TfPose:
             problem = f'transform {frames}: {err or type(err).__name__}'
             raise LocalizationError(problem) from None
 
+    def at(self, stamp: float) -> np.ndarray | None:
+        """Return the pose at stamp, or None if the transforms have not reached it yet.
+
+        A stamp with no transform (after waiting up to tolerance) but newer than the latest
+        one is "not yet" (tf2 does not extrapolate; the transform may still come). Any
+        other failure is the lookup's LocalizationError.
+
+        Raises:
+            LocalizationError: if there is no transform at stamp and the latest is not older.
+
+        """
+        try:
+            return self.lookup(stamp)[0]
+        except LocalizationError:
+            latest = Time()
+            if not self.buffer.can_transform(self.global_frame, self.robot_frame, latest,
+                                             Duration()):
+                raise
+            try:
+                _, newest = transform_to_pose(self.buffer.lookup_transform(
+                    self.global_frame, self.robot_frame, latest))
+            except Exception:  # the latest cannot be read either: the first error stands
+                newest = stamp
+            if newest < stamp:
+                return None
+            raise
+
 
 class RobotPose:
     """A node's pose in the plan's frame: odometry in, poses out (its mode's way).
@@ -202,9 +236,14 @@ class RobotPose:
         """Forget the odometry and the localizer's correction."""
         self.located.clear()
 
-    def add_odometry(self, time: float, pose: np.ndarray, frame_id: str = '') -> None:
-        """Keep an odometry pose (for scans' stamps and the localizer's) and its frame."""
-        self.located.add_odometry(time, pose)
+    def add_odometry(self, time: float, pose: np.ndarray, frame_id: str = '',
+                     twist: np.ndarray | tuple[float, float] | None = None) -> None:
+        """Keep an odometry pose and its twist (for scans' stamps and the localizer's).
+
+        The twist (v, omega; None or not finite: unknown) lets a scan stamped just after
+        this pose be placed without waiting (PoseHistory.at).
+        """
+        self.located.add_odometry(time, pose, twist)
         self._odom_in_plan_frame = frame_id == self.frame_id
 
     @property
@@ -247,17 +286,24 @@ class RobotPose:
         return pose, odom_time
 
     def at(self, stamp: float) -> np.ndarray | None:
-        """Return the pose in the plan's frame at stamp (a scan's); None without odometry.
+        """Return the pose in the plan's frame at stamp (a scan's); None: not yet, wait.
+
+        None without odometry, for a stamp more than MAX_EXTRAPOLATION_S past the newest
+        odometry (or past it at all when its twist is unknown), and with tf2 for a stamp
+        newer than the latest transform: the pose at the stamp is not known yet, and an
+        older one is not where the robot was (a scan placed with it is displaced).
 
         Raises:
-            LocalizationError: if there is odometry but no pose in the plan's frame.
+            LocalizationError: if there is odometry at stamp but no pose in the plan's
+                frame (no localizer correction), or no transform that can ever come.
 
         """
         if self._tf is not None:
-            return self._tf.lookup(stamp)[0]
-        if len(self.located.odometry) == 0:
+            return self._tf.at(stamp)
+        odom = self.located.odometry.at(stamp)
+        if odom is None:
             return None
-        pose = self.located.at(stamp)
+        pose = self.located.pose(odom)
         if pose is None:
             raise LocalizationError(self.located.problem or 'no localizer pose')
         return pose

@@ -38,7 +38,12 @@ from mpc_local_planner.core.diagnostics import (
 )
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.perception.laser import SimulatedLaser
-from mpc_local_planner.ros.conversions import path_to_poses, seconds_to_stamp, yaw_to_quaternion
+from mpc_local_planner.ros.conversions import (
+    path_to_poses,
+    seconds_to_stamp,
+    state_to_odometry,
+    yaw_to_quaternion,
+)
 from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
 from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.qos import MAP_QOS, PLANNER_DIAGNOSTICS_QOS, SCAN_QOS
@@ -329,6 +334,34 @@ def test_a_robot_within_the_clearance_replans_from_the_nearest_clear_point(ros) 
     # the first, short segment keeps the robot's radius; the rest the full inflation
     assert face.distance(samples(replanned[:2])).min() > ROBOT_RADIUS
     assert face.distance(samples(replanned[1:])).min() >= INFLATION - 1e-9
+
+
+def test_planner_places_a_scan_newer_than_the_odometry_once_odometry_covers_its_stamp(
+        ros) -> None:
+    """A scan 0.15 s after the latest odometry (beyond MAX_EXTRAPOLATION_S) waits for it.
+
+    Placed with that older pose it would mark the box's face 0.15 m short of where it is;
+    it waits, marks nothing, and is placed when odometry covering its stamp comes. The
+    callbacks are called directly: no DDS timing between the scan and the odometry.
+    """
+    planner, _probe, pose, _ = scanning_planner(ros)
+    box = ConvexPolygon.from_box(5.0, 1.5, 5.3, 4.5)
+    t0, v = planner._now(), 1.0
+
+    def odometry(t: float) -> None:  # driving along +x at v from pose at t0
+        planner.odom_callback(state_to_odometry(pose + [v * (t - t0), 0.0, 0.0],
+                                                np.array([v, 0.0]), stamp=seconds_to_stamp(t)))
+
+    odometry(t0)
+    count = planner.scan_count
+    t_scan = t0 + 0.15
+    planner.scan_callback(scan_message([box], pose + [v * (t_scan - t0), 0.0, 0.0], t_scan))
+    assert planner.scan_count == count and len(planner._pending_scans) == 1
+    assert not planner.grid.occupied.any()
+    odometry(t0 + 0.1)  # covers up to t0 + 0.1 + MAX_EXTRAPOLATION_S
+    assert planner.scan_count == count + 1 and not planner._pending_scans
+    columns = np.nonzero(planner.grid.occupied.any(axis=0))[0]
+    assert columns.min() * RESOLUTION == pytest.approx(5.0, abs=RESOLUTION)
 
 
 def test_planner_refuses_scans_whose_beams_do_not_match_their_angles_or_from_the_future(

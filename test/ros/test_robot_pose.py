@@ -29,6 +29,7 @@ import pytest
 from rclpy.duration import Duration
 from rclpy.time import Time
 
+from mpc_local_planner.perception.pose_history import MAX_EXTRAPOLATION_S
 from mpc_local_planner.ros.conversions import seconds_to_stamp, yaw_to_quaternion
 from mpc_local_planner.ros.robot_pose import (
     choose_mode,
@@ -183,3 +184,36 @@ def test_with_tf2_odometry_already_in_the_plan_frame_is_the_pose_without_a_looku
     source.add_odometry(1.1, odom, 'odom')  # odometry in odom: tf2 again
     with pytest.raises(LocalizationError, match='no transform'):
         source.current(odom, 1.1)
+
+
+def test_a_scan_stamp_past_the_odometry_is_extrapolated_along_its_twist_then_waits() -> None:
+    source = RobotPose(PoseMode.ODOMETRY, span=2.0, frame_id='map')
+    assert source.at(1.0) is None  # no odometry: not yet
+    source.add_odometry(1.0, np.array([1.0, 0.0, 0.0]), 'map', (1.0, 0.0))
+    np.testing.assert_allclose(source.at(1.08), [1.08, 0.0, 0.0], atol=1e-12)
+    assert source.at(1.0 + MAX_EXTRAPOLATION_S + 0.01) is None  # beyond the bound: wait
+    source.add_odometry(1.5, np.array([1.5, 0.0, 0.0]), 'map', (1.0, 0.0))
+    np.testing.assert_allclose(source.at(1.45), [1.45, 0.0, 0.0], atol=1e-12)
+
+
+def test_with_a_localizer_the_extrapolated_odometry_is_corrected_at_the_stamp() -> None:
+    source = RobotPose(PoseMode.LOCALIZER, span=2.0, frame_id='map', topic='amcl_pose')
+    source.add_odometry(1.0, np.array([1.0, 0.0, 0.0]), 'odom', (1.0, 0.0))
+    source.add_localizer(localizer_message(1.0, 1.0, math.pi / 2, 1.0), 1.0)
+    # map <- odom = (1, 0, pi/2); odom at 1.1 s is (1.1, 0, 0): in map (1, 1.1, pi/2)
+    np.testing.assert_allclose(source.at(1.1), [1.0, 1.1, math.pi / 2], atol=1e-12)
+    assert source.at(1.3) is None
+    # a localizer stamp past the bound still gives a correction (with the newest odometry)
+    source.add_localizer(localizer_message(0.0, 0.0, 0.0, 1.3), 1.3)
+    np.testing.assert_allclose(source.located.correction, [-1.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_with_tf2_a_stamp_newer_than_the_latest_transform_is_not_yet() -> None:
+    buffer = StandInBuffer([transform(1.0, 2.0, 0.5, 10.0)])
+    source = RobotPose(PoseMode.TF, span=2.0, frame_id='map', buffer=buffer,
+                       base_frame_id='base_link', tolerance=0.1)
+    assert source.at(10.2) is None  # the transform at 10.2 may still come: wait
+    buffer.transforms.append(transform(1.2, 2.0, 0.5, 10.2))
+    np.testing.assert_allclose(source.at(10.2), [1.2, 2.0, 0.5])
+    with pytest.raises(LocalizationError, match='at 10.100 s'):
+        source.at(10.1)  # older than the latest, and not there: it will not come

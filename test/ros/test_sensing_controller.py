@@ -41,6 +41,7 @@ from mpc_local_planner.perception.laser import SimulatedLaser
 from mpc_local_planner.ros.conversions import (
     poses_to_path,
     seconds_to_stamp,
+    state_to_odometry,
     u_from_twist,
     yaw_to_quaternion,
 )
@@ -217,6 +218,92 @@ def test_a_wall_seen_by_the_laser_is_placed_with_the_pose_at_the_scan_stamp_and_
     assert np.max(positions[:, 0]) < WALL_X - 0.02
     assert np.max(positions[:, 0]) > 0.5  # it drove up to the wall
     check_commands(world.probe)
+
+
+# ----------------------------------------------------------------------------- (a')
+def test_a_scan_newer_than_the_odometry_is_placed_along_its_twist_or_waits_for_odometry(
+        ros) -> None:
+    """Odometry in bursts (issue 21): a scan after the latest odometry lands where it is.
+
+    The robot drives at 1 m/s toward the wall. A scan stamped 80 ms after the latest
+    odometry, placed with that older pose, would put the wall 8 cm closer than it is (a
+    phantom obstacle); extrapolated along the odometry's twist it lands on the wall. A scan
+    0.5 s ahead, beyond MAX_EXTRAPOLATION_S, waits, renews nothing, and is placed when the
+    odometry's next burst covers its stamp (with the old pose it would be 0.5 m short).
+    """
+    world = World(ros, [WALL], obstacle_sources=['scan'], scan_timeout=1.0)
+    node = world.node
+    world.probe.plan_pub.publish(poses_to_path(PLAN))
+    v = 1.0
+    sent = {'odometry': 0.0, 'clock': 0.0}  # the newest odometry stamp and clock sent
+
+    def x(t: float) -> float:  # the robot is at x = t - 1 m, driving at v along x
+        return v * (t - 1.0)
+
+    def odometry(t: float) -> None:
+        sent['odometry'] = max(sent['odometry'], t)
+        world.probe.odom_pub.publish(state_to_odometry(
+            np.array([x(t), 0.0, 0.0]), np.array([v, 0.0]), stamp=seconds_to_stamp(t)))
+
+    def clock(t: float) -> None:
+        sent['clock'] = max(sent['clock'], t)
+        world.probe.publish_clock(sent['clock'])
+
+    def odometry_received() -> bool:
+        return node._odom_state is not None and node._odom_state[0] >= x(
+            sent['odometry']) - 1e-9
+
+    def placed(stamp: float, markers_before: int) -> list[np.ndarray]:
+        """The raw markers once the scan stamped stamp is used and the markers resent."""
+        assert ros.spin_until(lambda: (node._scan_stamp or 0.0) >= stamp - 1e-9,
+                              timeout=10.0)
+        deadline = time.monotonic() + 30.0
+        while not (len(world.markers) > markers_before and any(len(p) for p in world.raw())):
+            assert time.monotonic() < deadline, 'no markers'
+            clock(sent['clock'] + 0.05)  # control steps, no odometry (none is needed)
+            for _ in range(6):
+                ros.executor.spin_once(timeout_sec=0.002)
+        return [p for p in world.raw() if len(p)]
+
+    def on_the_wall(pieces: list[np.ndarray]) -> None:
+        near = np.vstack(pieces)
+        # pieces are 4 cm thick, centred on the surface: within 2 cm of x = 1.2 when
+        # placed with the pose at the stamp; 8 cm (0.5 m) short with the older pose
+        assert np.all(np.abs(near[:, 0] - WALL_X) < 0.035), near[:, 0]
+        assert abs(np.mean(near[:, 0]) - WALL_X) < 0.02, near[:, 0]
+
+    # odometry at 20 Hz up to 1.15 s (x = 0.15), then a scan taken at 1.23 s (x = 0.23)
+    for k in range(4):
+        odometry(1.0 + 0.05 * k)
+        clock(1.0 + 0.05 * k)
+    assert ros.spin_until(odometry_received, timeout=10.0)
+    t_scan = 1.23
+    clock(t_scan)
+    world.scan_pub.publish(world.scan_message(np.array([x(t_scan), 0.0, 0.0]), t_scan))
+    on_the_wall(placed(t_scan, len(world.markers)))
+    scan_time = node._scan_time
+    assert scan_time == pytest.approx(t_scan)
+
+    # the odometry catches up with the clock, then a scan 0.5 s after the newest: beyond
+    # the bound, it waits
+    while sent['odometry'] < sent['clock']:
+        odometry(sent['odometry'] + 0.05)
+    assert ros.spin_until(odometry_received, timeout=10.0)
+    t0 = sent['odometry']
+    t_ahead = t0 + 0.5
+    clock(t_ahead)
+    world.scan_pub.publish(world.scan_message(np.array([x(t_ahead), 0.0, 0.0]), t_ahead))
+    assert ros.spin_until(lambda: len(getattr(node, '_pending_scans', ())) == 1
+                          or node._scan_stamp > t_scan, timeout=10.0)
+    assert node._scan_stamp == pytest.approx(t_scan)  # not placed with the pose at t0
+    assert node._scan_time == scan_time  # and it renews nothing while it waits
+    # the odometry's burst: 20 Hz from t0 to past the scan, all at once
+    for k in range(1, 12):
+        odometry(t0 + 0.05 * k)
+    clock(sent['odometry'])
+    on_the_wall(placed(t_ahead, len(world.markers)))
+    assert not node._pending_scans
+    assert node._scan_time == pytest.approx(t_ahead)
 
 
 # ----------------------------------------------------------------------------- (b)
