@@ -144,6 +144,11 @@ class MpcConfig:
             control step (every try and round together); None means the wall budget's
             worth on a typical machine (see solve_iterations()).
         solver_options: extra options passed to casadi.nlpsol (override the defaults).
+        max_accel: None (inputs may jump, the paper's model), or the largest change of v
+            (m/s^2) and omega (rad/s^2) per second: a real base cannot follow a jump. The
+            NLP then bounds |u_0 - u_prev| and |u_{l+1} - u_l| by max_accel h, and
+            |u_{N-1}| too (u_N = 0), with u_prev the input commanded over the step before
+            (or the measured twist after a stop): see formulation.formulate.
 
     """
 
@@ -171,12 +176,18 @@ class MpcConfig:
     max_solve_time: float | None = None
     budget: str = 'wall'
     max_solve_iterations: int | None = None
+    max_accel: tuple[float, float] | None = None
     solver_options: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
 
     def __post_init__(self) -> None:
         # frozen: normalise with object.__setattr__, so that a list (from YAML, a ROS
         # parameter) or an array still gives a hashable, comparable tuple of floats
         object.__setattr__(self, 'footprint', _as_vertex_tuple(self.footprint))
+        if self.max_accel is not None:
+            try:
+                object.__setattr__(self, 'max_accel', tuple(float(a) for a in self.max_accel))
+            except (TypeError, ValueError):
+                pass  # refused with a reason below
         problems = validate_mpc_config(self)
         if problems:
             msg = 'invalid MPC configuration: ' + '; '.join(problems)
@@ -244,7 +255,7 @@ class MpcConfig:
 STRUCTURAL_FIELDS = frozenset(
     {'horizon', 'step', 'cost_exponent', 'farkas_margin', 'obstacle_slots',
      'faces_per_obstacle', 'solver', 'max_iterations', 'tolerance', 'solver_options',
-     'adaptive_slots', 'compile', 'footprint', 'fatrop_stage_limit'}
+     'adaptive_slots', 'compile', 'footprint', 'fatrop_stage_limit', 'max_accel'}
 )
 
 
@@ -321,6 +332,11 @@ def validate_mpc_config(config: MpcConfig) -> list[str]:
                         f'got {budget!r}')
     if config.budget not in BUDGETS:
         problems.append(f'budget must be one of {BUDGETS}, got {config.budget!r}')
+    accel = config.max_accel
+    if accel is not None and not (isinstance(accel, tuple) and len(accel) == 2 and all(
+            isinstance(a, float) and math.isfinite(a) and a > 0 for a in accel)):
+        problems.append(f'max_accel must be None or two finite numbers > 0 (m/s^2, '
+                        f'rad/s^2), got {accel!r}')
     iterations = config.max_solve_iterations
     if iterations is not None and (isinstance(iterations, bool)
                                    or not isinstance(iterations, int) or iterations < 1):

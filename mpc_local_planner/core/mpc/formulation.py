@@ -210,6 +210,9 @@ class Layout(NamedTuple):
     mu: np.ndarray  # (N, slots * block) the multipliers of steps 1..N (see Formulation)
     # (N, 1) the sweep rate of the step before x_1..x_N (polygon), (N, 0) for a circle
     c: np.ndarray = np.zeros((0, 0), dtype=int)
+    # (N+1, nu) the copies of the input before each stage (u_prev, u_0..u_{N-1}) with
+    # max_accel, else (N+1, 0)
+    prev: np.ndarray = np.zeros((0, 0), dtype=int)
 
 
 @dataclass(frozen=True)
@@ -258,12 +261,14 @@ class Formulation:
         return self.faces + self.robot_faces
 
     def pack(self, x: np.ndarray, r: np.ndarray, u: np.ndarray, mu: np.ndarray,
-             steady: np.ndarray | None = None) -> np.ndarray:
+             steady: np.ndarray | None = None, u_prev: np.ndarray | None = None
+             ) -> np.ndarray:
         """Return the decision vector w holding states, reference, inputs and multipliers.
 
         The polygon's carried sweep rates are computed here from x and u, so that the
         gap-closing constraints of a rolled-out plan hold exactly; a carried steady state
-        is the given x_s(r) at every stage (required then).
+        is the given x_s(r) at every stage (required then); so is the input before the
+        horizon with max_accel (the carried copies are u_prev, u_0, ..., u_{N-1}).
         """
         w = np.zeros(self.lbw.shape[0])
         w[self.layout.x] = x
@@ -274,6 +279,12 @@ class Formulation:
                 raise ValueError(msg)
             w[self.layout.xs] = np.asarray(steady, dtype=float).reshape(1, -1)
         w[self.layout.u] = u
+        if self.layout.prev.size:
+            if u_prev is None:
+                msg = 'this formulation bounds input rates: pack needs u_prev'
+                raise ValueError(msg)
+            w[self.layout.prev] = np.vstack([np.asarray(u_prev, dtype=float).reshape(1, -1),
+                                             np.asarray(u, dtype=float)])
         w[self.layout.mu] = mu.reshape(self.layout.mu.shape)
         if self.sweep_fn is not None:
             rates = self.sweep_fn(np.asarray(x[:-1], dtype=float).T,
@@ -296,6 +307,12 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
     c_l = sweep_rate(x_{l-1}, u_{l-1}) too: the clearance at x_l must cover the step before
     it and the step after it, and a stage's constraints may only touch its own variables.
     mu_l then holds, per slot, the lambda of its faces and the mu of the robot's faces.
+
+    With config.max_accel (a real base: its inputs cannot jump), z_l ends with q_l, the input
+    before stage l (q_0 = u_prev, a parameter; q_{l+1} = u_l by the gap-closing rows), and
+    stage l bounds |u_l - q_l| <= max_accel h, stage N |q_N| <= max_accel h (u_N = 0). The
+    proof's shifted candidate keeps them (its inputs u_1..u_{N-1}, 0 follow u_0, which was
+    commanded), so the guarantee holds for the commanded inputs.
 
     Args:
         model: the robot model (f, bounds Z, steady states).
@@ -323,6 +340,9 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
         robot_faces = 0
         sweep = None
     nc = 1 if polygon else 0  # the carried sweep rate of z_1..z_N
+    npv = nu if config.max_accel is not None else 0  # the carried input before each stage
+    rate = (np.asarray(config.max_accel, dtype=float) * config.step if npv
+            else np.zeros(0))
     block = faces + robot_faces
     nm = block * slots
     f = model.discrete(config.step)  # RK4 over one step h
@@ -335,6 +355,7 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
     weights = symbolic_weights(w_weights)
     obs = ca.SX.sym('obs', 3 * faces * slots)
     p_path = ca.SX.sym('path', terminal.num_params)
+    u_prev = ca.SX.sym('u_prev', npv)
     A_list, b_list = [], []  # obstacle j is {p : A_j p <= b_j}
     for j in range(slots):
         base = 3 * faces * j
@@ -342,7 +363,9 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
         b_list.append(obs[base + 2 * faces:base + 3 * faces])
 
     # ---- decision variables, stage by stage
-    Z = [ca.SX.sym(f'z{k}', nz + (nc if k >= 1 else 0)) for k in range(n + 1)]
+    Z = [ca.SX.sym(f'z{k}', nz + (nc if k >= 1 else 0) + npv) for k in range(n + 1)]
+    # q_l, the input before stage l, at the end of z_l
+    Q = [Z[k][nz + (nc if k >= 1 else 0):] for k in range(n + 1)]
     U = [ca.SX.sym(f'u{k}', nu) for k in range(n)]  # u_N = u_s is a constant, (6d)-(6e)
     MU = [None] + [ca.SX.sym(f'mu{k}', nm) for k in range(1, n + 1)]
     order: list[ca.SX] = []
@@ -353,7 +376,7 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
         if k >= 1:
             order.append(MU[k])
     w = ca.vertcat(*order)
-    layout = _layout(w.numel(), n, nx, nr, nz, nu, nm, nc)
+    layout = _layout(w.numel(), n, nx, nr, nz, nu, nm, nc, npv)
 
     g, lbg, ubg = [], [], []
     ng_stage = []
@@ -374,9 +397,18 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
             cost = cost + stage(x_l, U[k], x_s, w_weights)
             # (6c): x_{l+1} = f(x_l, u_l); and r_{l+1} = r_l (one reference, and its steady
             # state when carried); a polygon also carries this step's sweep rate
-            carried = ([x_s] if ns else []) + ([sweep(x_l, U[k])] if polygon else [])
+            carried = ([x_s] if ns else []) + ([sweep(x_l, U[k])] if polygon else []) + (
+                [U[k]] if npv else [])
             add(Z[k + 1] - ca.vertcat(f(x_l, U[k]), r_l, *carried), 0.0, 0.0)
         rows = 0
+        if npv:
+            # (6g) for a real base: each input within max_accel h of the one before it
+            # (the commanded u_prev at l = 0), and u_N = 0 within it of u_{N-1}
+            if k == 0:
+                rows += add(Q[0] - u_prev, 0.0, 0.0)
+            change = U[k] - Q[k] if k < n else Q[k]
+            for i in range(nu):
+                rows += add(change[i], -rate[i], rate[i])
         if k == 0:
             # (6b): x_0 = x(k)
             rows += add(x_l - x_k, 0.0, 0.0)
@@ -421,10 +453,10 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
             lbw[layout.mu[k - 1]], ubw[layout.mu[k - 1]] = 0.0, np.inf
 
     g_all = ca.vertcat(*g)
-    params = ca.vertcat(x_k, w_weights, obs, p_path)
+    params = ca.vertcat(x_k, w_weights, obs, p_path, u_prev)
     structure = {
         'N': n,
-        'nx': [nz] + [nz + nc] * n,
+        'nx': [nz + npv] + [nz + nc + npv] * n,
         'nu': [nu] + [nu + nm] * (n - 1) + [nm] if n > 1 else [nu, nm],
         'ng': ng_stage,
     }
@@ -469,10 +501,10 @@ def _polygon_rows(add: Callable[[ca.SX, float, float], int], x_l: ca.SX, angle: 
 
 
 def _layout(size: int, n: int, nx: int, nr: int, nz: int, nu: int, nm: int,
-            nc: int = 0) -> Layout:
-    """Return the indices of x, r, the carried x_s, u, mu and the carried sweep rates in w."""
+            nc: int = 0, npv: int = 0) -> Layout:
+    """Return the indices of x, r, the carried x_s, u, mu, sweep rates and inputs in w."""
     index = np.arange(size)
-    xs, rs, ss, us, mus, cs = [], [], [], [], [], []
+    xs, rs, ss, us, mus, cs, qs = [], [], [], [], [], [], []
     offset = 0
     for k in range(n + 1):
         xs.append(index[offset:offset + nx])
@@ -482,6 +514,8 @@ def _layout(size: int, n: int, nx: int, nr: int, nz: int, nu: int, nm: int,
         if k >= 1:
             cs.append(index[offset:offset + nc])
             offset += nc
+        qs.append(index[offset:offset + npv])
+        offset += npv
         if k < n:
             us.append(index[offset:offset + nu])
             offset += nu
@@ -490,13 +524,20 @@ def _layout(size: int, n: int, nx: int, nr: int, nz: int, nu: int, nm: int,
             offset += nm
     return Layout(x=np.array(xs), r=np.array(rs), xs=np.array(ss, dtype=int).reshape(n + 1, -1),
                   u=np.array(us), mu=np.array(mus).reshape(n, nm),
-                  c=np.array(cs, dtype=int).reshape(n, nc))
+                  c=np.array(cs, dtype=int).reshape(n, nc),
+                  prev=np.array(qs, dtype=int).reshape(n + 1, npv))
 
 
 def parameter_vector(x0: np.ndarray, weights: CostWeights, obstacles: np.ndarray,
-                     terminal_params: np.ndarray) -> np.ndarray:
-    """Return the NLP's parameters: (x(k), weights, obstacle_parameters(), path or target)."""
-    return np.concatenate([x0, np.array(weights.as_vector()), obstacles, terminal_params])
+                     terminal_params: np.ndarray, u_prev: np.ndarray | None = None
+                     ) -> np.ndarray:
+    """Return the NLP's parameters (x(k), weights, obstacles, path or target, u_prev).
+
+    u_prev, the input commanded before, only for an NLP built with max_accel.
+    """
+    tail = [] if u_prev is None else [np.asarray(u_prev, dtype=float).reshape(-1)]
+    return np.concatenate([x0, np.array(weights.as_vector()), obstacles, terminal_params,
+                           *tail])
 
 
 def obstacle_parameters(selected: Sequence[ConvexPolygon], slots: int,

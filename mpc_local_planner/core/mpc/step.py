@@ -441,6 +441,8 @@ class MpcBase(ABC):
         # the inputs of the last plan on the previous path (set_path keeps them): the guided
         # start drives them from the robot's state, see _guided_guess
         self._carried_inputs: np.ndarray | None = None
+        # with max_accel: the input commanded over the step before this one (solve())
+        self._input_before: np.ndarray | None = None
 
     # ----------------------------------------------------------------- the terminal condition
     @abstractmethod
@@ -484,7 +486,7 @@ class MpcBase(ABC):
         return (c.horizon, c.step, c.cost_exponent, c.farkas_margin, c.faces_per_obstacle,
                 c.solver, c.max_iterations, c.tolerance, c.compile, c.footprint,
                 tuple(sorted((k, repr(v)) for k, v in c.solver_options.items())),
-                terminal.family, terminal.num_params)
+                terminal.family, terminal.num_params, c.max_accel)
 
     def _slot_shape(self, selected: list[ConvexPolygon]) -> tuple[int, int]:
         """Return (slots, faces) of the NLP that holds the selected obstacles."""
@@ -569,13 +571,14 @@ class MpcBase(ABC):
         form = nlp.formulation
         params = parameter_vector(x0, self._config.cost_weights(),
                                   obstacle_parameters(held, form.slots, form.faces),
-                                  self._terminal_parameters())
+                                  self._terminal_parameters(), self._input_before)
         return nlp, params, held
 
     def _pack(self, plan: Plan, nlp: Nlp) -> np.ndarray:
         form = nlp.formulation
         steady = self._terminal_state(plan.s) if form.layout.xs.size else None
-        return form.pack(plan.x, self._reference_value(plan), plan.u, plan.mu, steady)
+        return form.pack(plan.x, self._reference_value(plan), plan.u, plan.mu, steady,
+                         self._input_before)
 
     def _multipliers(self, x: np.ndarray, selected: list[ConvexPolygon],
                      nlp: Nlp) -> np.ndarray:
@@ -976,11 +979,15 @@ class MpcBase(ABC):
         return resumed
 
     # ----------------------------------------------------------------- the step
-    def solve(self, x: np.ndarray) -> MpcSolution:
+    def solve(self, x: np.ndarray, previous_input: np.ndarray | None = None) -> MpcSolution:
         """Compute the input for the measured state x.
 
         Takes at most about config.solve_budget() seconds of solving (see the module's note):
         past it the verified shifted candidate is applied, and the solution is timed_out.
+
+        With config.max_accel the first input is bounded around previous_input, the input
+        commanded over the step before (the caller knows what it sent; after a stop, the
+        measured twist); None: the last plan's first input (it was applied), or rest.
 
         Raises:
             ValueError: if x is not a finite state of the model's size.
@@ -997,6 +1004,7 @@ class MpcBase(ABC):
         self._geometry.clear()  # the memos hold this step's plans only
         self._clearance_memo.clear()
         x0 = self._unwrap(x)
+        self._input_before = self._before(previous_input)
         reachable = self._reachable(x0)
         candidate = self._candidate(x0)
         result = self._generate_constraints(x0, candidate, reachable)
@@ -1046,6 +1054,18 @@ class MpcBase(ABC):
             rounds=result.rounds, solver_verified=attempt.verified,
             timed_out=budget.timed_out, tries=tuple(self._tries),
         )
+
+    def _before(self, previous_input: np.ndarray | None) -> np.ndarray | None:
+        """Return the input the rate bounds start from (None without max_accel)."""
+        if self._config.max_accel is None:
+            return None
+        if previous_input is not None:
+            u = np.asarray(previous_input, dtype=float).reshape(-1)
+            if u.shape == (self._model.nu,) and np.all(np.isfinite(u)):
+                return np.clip(u, self._model.u_min, self._model.u_max)
+        if self._plan is not None:
+            return np.asarray(self._plan.u[0], dtype=float).copy()
+        return np.zeros(self._model.nu)
 
     def _stop(self, x0: np.ndarray, status: str, attempt: SolveAttempt, in_reach: int,
               active: int, *, timed_out: bool = False) -> MpcSolution:
