@@ -50,6 +50,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
+from mpc_local_planner.core.braking import Brake
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import MpcSolution, PathReferenceMPC, PlanSource
@@ -83,8 +84,10 @@ class Reason(Enum):
     """Why the controller commands what it commands (the value is the diagnostics' word).
 
     Only TRACKING and CANDIDATE apply an MPC input, and ROTATE_TO_HEADING an in-place turn;
-    every other reason comes with a zero command. Free text about the case (what was wrong
-    with a plan, an exception's message) travels separately, in `ControlOutput.detail`.
+    every other reason stops the robot: a zero command, or, for a moving robot with
+    ControllerSettings.max_decel, the braking command along the last verified plan. Free
+    text about the case (what was wrong with a plan, an exception's message) travels
+    separately, in `ControlOutput.detail`.
     """
 
     TRACKING = 'tracking'
@@ -227,6 +230,9 @@ class ControlOutput(NamedTuple):
         reason: why the command is what it is.
         detail: free text about the case ('' when the reason says it all), e.g. what is
             wrong with a refused plan, or an exception's message.
+        fresh: the MPC solved at this call; False between solves (control_frequency above
+            1 / step), where u is the input the last verified plan gives for now, or where a
+            stop brakes along it (u then need not be zero: see `Brake`).
 
     """
 
@@ -234,6 +240,7 @@ class ControlOutput(NamedTuple):
     solution: MpcSolution | None
     reason: Reason
     detail: str = ''
+    fresh: bool = True
 
     @property
     def message(self) -> str:
@@ -278,6 +285,15 @@ class ControllerSettings:
             would hold up the control loop (10,000 poses at 5 cm is 500 m).
         scan_timeout: a scan older than this (seconds of ROS time) is stale, when the
             laser is a source of obstacles (compute's scan_required).
+        control_frequency: commands per second (Hz). A real base wants them at 10-20 Hz,
+            while the MPC predicts in steps of h (MpcConfig.step, 0.2 s). The MPC solves
+            once a step; the calls between return the input its last verified plan gives
+            for the current time (the plan is piecewise constant over its steps, so this is
+            the plan, applied), after every safety check. 1 / step or less: every call solves.
+        max_decel: the base's deceleration limits (m/s^2, rad/s^2), as Nav2's velocity
+            smoother names them. A stop of a moving robot (stale data, a failure, a rejected
+            candidate) brakes along the last verified plan within them (`Brake`) instead of
+            commanding zero at once, which a real base cannot follow; inf: zero at once.
 
     """
 
@@ -289,11 +305,18 @@ class ControllerSettings:
     capacity: int = 64
     max_plan_poses: int = 10_000
     scan_timeout: float = 0.5
+    control_frequency: float = 20.0
+    max_decel: tuple[float, float] = (math.inf, math.inf)
 
     def __post_init__(self) -> None:
         """Refuse non-positive or non-finite tolerances and timeouts, and small capacities."""
+        decel = tuple(float(a) for a in self.max_decel)
+        if len(decel) != 2 or not all(a > 0 for a in decel):
+            msg = f'max_decel must be two values > 0 (inf: none), got {self.max_decel!r}'
+            raise ValueError(msg)
+        object.__setattr__(self, 'max_decel', decel)
         for name in ('xy_goal_tolerance', 'yaw_goal_tolerance', 'odom_timeout',
-                     'turn_length', 'scan_timeout'):
+                     'turn_length', 'scan_timeout', 'control_frequency'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 msg = f'{name} must be > 0 and finite, got {value}'
@@ -339,6 +362,15 @@ class MpcController:
         # the plan's arrival so far (kept only with settings.stateful; a new plan clears it)
         self._xy_reached = False
         self._arrived = False
+        # the last solve's output while it is in force (control_frequency: the calls between
+        # solves apply it), when it was solved, and the time of the latest call
+        self._held: ControlOutput | None = None
+        self._held_time = -math.inf
+        self._last_call: float | None = None
+        self._brake = Brake(self.settings.max_decel)
+        # the latest command and measured twist (the MPC's rate bounds start from them)
+        self._last_u = np.zeros(2)
+        self._velocity: np.ndarray | None = None
 
     # ------------------------------------------------------------------ configuration
     @property
@@ -403,12 +435,14 @@ class MpcController:
         """Use new MPC settings from the next solve on (a shape change rebuilds there)."""
         self._config = config
         self._mpc.update_config(config)
+        self._held = None
 
     def set_model(self, model: Unicycle) -> None:
         """Use new input bounds: the NLP is rebuilt at the next solve."""
         self._model = model
         self._mpc = PathReferenceMPC(model, self._config, obstacles=self._obstacles,
                                      path=self._path)
+        self._held = None
 
     def set_obstacles(self, obstacles: Sequence[ConvexPolygon]) -> None:
         """Replace the obstacles (as described, not inflated); cheap enough for every step.
@@ -443,6 +477,7 @@ class MpcController:
         self._polyline = np.asarray(polyline, dtype=float)
         self._projection_segment = 0
         self._xy_reached = self._arrived = False
+        self._held = None
 
     def set_plan(self, poses: np.ndarray) -> WaypointPath:
         """Follow a global plan of (M, 3) poses (x, y, yaw), as a nav_msgs/Path carries.
@@ -538,6 +573,8 @@ class MpcController:
         self._path = None
         self._polyline = None
         self._xy_reached = self._arrived = False
+        self._held = None
+        self._brake.stop()
         self._mpc.reset()
 
     def path_blockage(self, state: np.ndarray | None) -> Blockage:
@@ -591,13 +628,18 @@ class MpcController:
 
     def compute(self, state: np.ndarray | None, now: float, *,
                 state_time: float | None = None, scan_required: bool = False,
-                scan_time: float | None = None, map_missing: bool = False) -> ControlOutput:
+                scan_time: float | None = None, map_missing: bool = False,
+                velocity: np.ndarray | None = None) -> ControlOutput:
         """Return the command for the measured state at time now.
 
         Never raises: anything unexpected becomes a zero command with Reason.ERROR. At the
         goal position (xy_goal_tolerance) and off its heading the robot turns in place
         (Reason.ROTATE_TO_HEADING); arrived, the command is zero (Reason.GOAL_REACHED), and
-        with settings.stateful it stays so, whatever the state, until a new plan.
+        with settings.stateful it stays so, whatever the state, until a new plan. The MPC
+        solves once per step h; a call sooner than that after a solve that gave an input
+        (settings.control_frequency) returns that input again, after the same checks
+        (ControlOutput.fresh False). A stop of a moving robot brakes along the last verified
+        plan within settings.max_decel (`Brake`).
 
         Args:
             state: (3,) measured (x, y, yaw), or None when no odometry has come.
@@ -610,34 +652,46 @@ class MpcController:
                 or None.
             map_missing: the map is a source of obstacles and no valid map has come: the
                 robot stops until one does.
+            velocity: the measured twist (v, omega), if known: with MpcConfig.max_accel the
+                MPC's first input starts from it after a step without a plan's input (the
+                base may still be moving); while plans are applied, from the input commanded.
 
         """
-        zero = np.zeros(2)
+        self._velocity = velocity
+        output = self._compute(state, now, state_time=state_time, scan_required=scan_required,
+                               scan_time=scan_time, map_missing=map_missing)
+        self._last_call = now
+        self._last_u = np.asarray(output.u, dtype=float)
+        return output
+
+    def _compute(self, state: np.ndarray | None, now: float, *, state_time: float | None,
+                 scan_required: bool, scan_time: float | None,
+                 map_missing: bool) -> ControlOutput:
         if self._path is None:
             return self._idle(Reason.NO_PLAN)
         if self.settings.stateful and self._arrived:
             # arrived once: the plan is done, whatever the measured pose does now
             return self._idle(Reason.GOAL_REACHED)
         if state is None:
-            return self._idle(Reason.NO_ODOM)
+            return self._idle(Reason.NO_ODOM, now=now)
         if state_time is not None:
             age = now - state_time
             # "not within" so that a NaN age (NaN compares false) counts as stale; a state
             # from the future by more than the timeout means the clock jumped back
             if not -self.settings.odom_timeout <= age <= self.settings.odom_timeout:
-                return self._idle(Reason.STALE_ODOM)
+                return self._idle(Reason.STALE_ODOM, now=now)
         if scan_required:
             if scan_time is None:
-                return self._idle(Reason.NO_SCAN)
+                return self._idle(Reason.NO_SCAN, now=now)
             age = now - scan_time
             if not -self.settings.scan_timeout <= age <= self.settings.scan_timeout:
-                return self._idle(Reason.STALE_SCAN)
+                return self._idle(Reason.STALE_SCAN, now=now)
         if map_missing:
-            return self._idle(Reason.NO_MAP)
+            return self._idle(Reason.NO_MAP, now=now)
         try:
             x = self.check_state(state)
         except ValueError as err:
-            return self._idle(Reason.INVALID_ODOM, str(err))
+            return self._idle(Reason.INVALID_ODOM, str(err), now=now)
         try:
             position_met, arrived = self._check_goal(x)
             if arrived:
@@ -646,11 +700,18 @@ class MpcController:
                 turn = self._rotate_to_heading(x)
                 if turn is not None:
                     self._drop_warm_start()
+                    self._brake.stop()
                     return ControlOutput(turn, None, Reason.ROTATE_TO_HEADING)
-            solution = self._mpc.solve(x)
+            held = self._held
+            if held is not None and now - self._held_time < self._hold_period():
+                return held._replace(fresh=False)
+            if self._config.max_accel is None:
+                solution = self._mpc.solve(x)
+            else:
+                solution = self._mpc.solve(x, previous_input=self._input_before())
         except Exception as err:  # a controller must not die: stop instead
             self._solver_failures += 1
-            return self._idle(Reason.ERROR, f'{type(err).__name__}: {err}')
+            return self._idle(Reason.ERROR, f'{type(err).__name__}: {err}', now=now)
         self._solved_last_step = True
         if not solution.success:
             self._solver_failures += 1
@@ -658,37 +719,88 @@ class MpcController:
             self._timeouts += 1
         source = PlanSource(solution.source)
         if source is PlanSource.STOP:
-            return ControlOutput(zero, solution, Reason.STOP)
+            # no verified input: the MPC keeps its own state (failure count, the plan it
+            # carries) for the next step, as it decides what to try from there
+            return self._idle(Reason.STOP, now=now, solution=solution, keep_warm_start=True)
         if source is PlanSource.CANDIDATE and solution.failures > self._config.horizon:
             # the shifted candidate has run out (N shifts leave only steady-state inputs):
             # stop, and let the next step start over from the measured state
-            self._mpc.reset()
-            self._solved_last_step = False
-            return ControlOutput(zero, solution, Reason.STOP, 'the shifted candidate ran out')
+            return self._idle(Reason.STOP, 'the shifted candidate ran out', now=now,
+                              solution=solution)
         u = np.asarray(solution.u0, dtype=float).reshape(-1)
         if u.shape != (2,) or not np.all(np.isfinite(u)):
-            self._mpc.reset()
-            self._solved_last_step = False
-            return ControlOutput(zero, solution, Reason.ERROR, f'non-finite input {u}')
+            return self._idle(Reason.ERROR, f'non-finite input {u}', now=now,
+                              solution=solution)
         u = np.clip(u, self._model.u_min, self._model.u_max)
         reason = Reason.TRACKING if solution.success else Reason.CANDIDATE
-        return ControlOutput(u, solution, reason)
+        output = ControlOutput(u, solution, reason)
+        self._held, self._held_time = output, now
+        self._brake.stop()
+        return output
 
-    def stop(self, reason: Reason, detail: str = '') -> ControlOutput:
-        """Return a zero command with reason (the node's verdict on refused input).
+    def _input_before(self) -> np.ndarray | None:
+        """Return what the MPC's rate bounds start from (MpcConfig.max_accel).
 
-        The warm start is dropped as after any step without an MPC input, so that the next
-        solve starts from the measured state instead of a shift of a plan never applied.
+        The input commanded since the last solve, when that was a plan's input (the proof's
+        candidate follows it); after a stop or a turn, the measured twist if there is one
+        (the base may still be moving), else what was commanded.
         """
-        return self._idle(reason, detail)
+        if self._held is not None:
+            return self._held.u
+        if self._velocity is not None:
+            return np.asarray(self._velocity, dtype=float)
+        return self._last_u
 
-    def _idle(self, reason: Reason, detail: str = '') -> ControlOutput:
-        self._drop_warm_start()
-        return ControlOutput(np.zeros(2), None, reason, detail)
+    def _hold_period(self) -> float:
+        """Seconds after a solve during which calls apply its input instead of solving.
+
+        Half a control period short of h, so that the call nearest to the next step's
+        instant solves even when the timer fires a little early.
+        """
+        return self._config.step - 0.5 / self.settings.control_frequency
+
+    def stop(self, reason: Reason, detail: str = '', *, now: float | None = None
+             ) -> ControlOutput:
+        """Return the stop command with reason (the node's verdict on refused input).
+
+        With now, a moving robot brakes along its last verified plan (settings.max_decel);
+        the call counts as a control call (the braking's clock). The warm start is dropped
+        as after any step without an MPC input, so that the next solve starts from the
+        measured state instead of a shift of a plan never applied.
+        """
+        output = self._idle(reason, detail, now=now)
+        if now is not None:
+            self._last_call = now
+        return output
+
+    def _idle(self, reason: Reason, detail: str = '', *, now: float | None = None,
+              solution: MpcSolution | None = None,
+              keep_warm_start: bool = False) -> ControlOutput:
+        """Return a stop: zero, or with now the braking command along the last plan.
+
+        Arrival and the end of a plan are not braked (the robot is slow at the goal, and a
+        cancelled plan is Nav2's zero); everything else that stops a moving robot is.
+        """
+        u = np.zeros(2)
+        if now is None or reason in (Reason.NO_PLAN, Reason.GOAL_REACHED):
+            self._brake.stop()
+        else:
+            if not self._brake.active and self._held is not None \
+                    and self._held.solution is not None:
+                self._brake.start(self._held.solution.u_pred, self._config.step,
+                                  now - self._held_time)
+            last = self._last_call if self._last_call is not None else now
+            u = np.clip(self._brake.command(now - last), self._model.u_min, self._model.u_max)
+        if keep_warm_start:
+            self._held = None
+        else:
+            self._drop_warm_start()
+        return ControlOutput(u, solution, reason, detail)
 
     def _drop_warm_start(self) -> None:
         # The shifted warm start assumes its first input was applied: after a step without
         # one, start the MPC over (s restarts at the projection).
+        self._held = None
         if self._solved_last_step:
             self._mpc.reset()
             self._solved_last_step = False

@@ -306,10 +306,13 @@ class Base:
         if std_position > 0.0 or std_heading > 0.0:
             pose += self._rng.normal(0.0, 1.0, 3) * np.array(
                 [std_position, std_position, std_heading])
+        return pose, self.twist()
+
+    def twist(self) -> np.ndarray:
+        """Return the twist odometry reports (as odometry() does, without drawing noise)."""
         scale, bias = self.reality.odom_drift
         v, omega = (float(u) for u in self.velocity)
-        twist = np.array([(1.0 + scale) * v, omega + bias * abs(v)])
-        return pose, twist
+        return np.array([(1.0 + scale) * v, omega + bias * abs(v)])
 
     def _take_commands(self, now: float) -> None:
         """Make the latest command that has reached the motors by now the one in force."""

@@ -1,0 +1,93 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Stop a moving robot along its last verified plan, within the base's deceleration limits.
+
+A zero command is not a stop: a base with deceleration limits (and a command latency) coasts
+on, straight ahead or on its last arc, into space no plan has checked. Every plan the MPC
+applies has been verified collision-free over its whole horizon and ends at rest (x_N =
+g_p(s), u_N = 0), so the curve it traces is known to be clear. A unicycle traces the same
+curve at any speed if v and omega are scaled alike, so the robot brakes ON that curve: the
+command is sigma u_plan(tau), where tau runs through the plan at the scaled speed (dtau =
+sigma dt) and sigma falls from 1 to 0 at the rate that keeps each input's deceleration within
+its limit. The robot stops within the plan's curve (it brakes at least as hard as the plan,
+which also stops by its end), so the stop stays where the verification was.
+
+What it does not cover: an obstacle that appears on that curve after the plan was verified
+(nothing can stop a robot faster than its base allows) and the base's own lag (the base
+follows the braking commands late, as it followed the plan's).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ['Brake']
+
+
+class Brake:
+    """Braking along a plan: start it with the plan's inputs, then ask for commands.
+
+    Args:
+        max_decel: the base's deceleration limits (m/s^2, rad/s^2); inf: stop at once.
+
+    """
+
+    def __init__(self, max_decel: tuple[float, float]) -> None:
+        self.max_decel = np.asarray(max_decel, dtype=float)
+        self._inputs: np.ndarray | None = None
+        self._h = 0.0
+        self._tau = 0.0
+        self._scale = 0.0
+        self._rate = math.inf
+
+    @property
+    def active(self) -> bool:
+        """The robot is braking (the scale has not reached zero)."""
+        return self._inputs is not None and self._scale > 0.0
+
+    def start(self, inputs: np.ndarray, h: float, elapsed: float) -> None:
+        """Brake along a plan of piecewise constant inputs (N, 2) of step h, elapsed s in.
+
+        The rate at which the scale falls makes the largest input of the plan decelerate at
+        its limit: every command's |d(sigma u_i)/dt| from braking is at most max_decel_i.
+        """
+        inputs = np.asarray(inputs, dtype=float).reshape(-1, 2)
+        peak = np.max(np.abs(inputs), axis=0) if len(inputs) else np.zeros(2)
+        with np.errstate(divide='ignore'):
+            rates = np.where(peak > 0.0, self.max_decel / np.maximum(peak, 1e-12), math.inf)
+        self._rate = float(np.min(rates))
+        self._inputs = inputs
+        self._h = float(h)
+        self._tau = max(float(elapsed), 0.0)
+        self._scale = 1.0 if math.isfinite(self._rate) else 0.0
+
+    def stop(self) -> None:
+        """Forget the plan (a fresh solve, a new plan, arrival)."""
+        self._inputs = None
+        self._scale = 0.0
+
+    def command(self, dt: float) -> np.ndarray:
+        """Return the braking command dt after the previous one (zero once stopped)."""
+        if self._inputs is None or self._scale <= 0.0:
+            return np.zeros(2)
+        dt = max(float(dt), 0.0)
+        self._tau += self._scale * dt
+        self._scale = max(self._scale - self._rate * dt, 0.0)
+        index = int(self._tau / self._h + 1e-9) if self._h > 0 else len(self._inputs)
+        if index >= len(self._inputs) or self._scale <= 0.0:
+            return np.zeros(2)
+        return self._scale * self._inputs[index]
