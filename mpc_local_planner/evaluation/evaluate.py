@@ -82,6 +82,7 @@ from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC
 from mpc_local_planner.core.paths import WaypointPath
 from mpc_local_planner.core.planner import PlanningError
+from mpc_local_planner.core.reality import REALITY_PRESETS
 from mpc_local_planner.evaluation.known_map_worlds import (
     barn_world,
     polyline_length,
@@ -134,7 +135,7 @@ CSV_COLUMNS = (
     'solve_ms_median', 'solve_ms_max', 'barn_score', 'assumption_1', 'reference_length',
     'final_distance', 'steps', 'stop_reason', 'planner_clearance', 'solver_failures', 'v_max',
     'robot', 'sensing', 'contacts', 'replans', 'replan_failures', 'step_ms_median',
-    'step_ms_max', 'plan_s_max', 'name',
+    'step_ms_max', 'plan_s_max', 'name', 'reality',
 )
 DEFAULT_BARN_DIR = BARN_DIR
 PATH_CAPACITY = 128
@@ -157,6 +158,7 @@ class Task:
     robot: str = 'circle'
     world_file: str = ''
     budget: str = EVALUATION_BUDGET  # MpcConfig.budget of the MPCs
+    reality: str = 'ideal'  # core/reality.py preset: how real the robot is (navigation runs)
 
     @property
     def navigation(self) -> bool:
@@ -270,11 +272,11 @@ def run_navigation_task(task: Task) -> dict[str, Any]:
     row = dict.fromkeys(CSV_COLUMNS, '')
     row.update(controller=task.controller, world=task.world, name=world.name,
                robot=task.robot, sensing=task.sensing or task.suite == 'unknown',
-               v_max=robot.v_max)
+               v_max=robot.v_max, reality=task.reality)
     try:
         result = suites.run_navigation(world, task.controller, robot,
                                        sensing=bool(row['sensing']), seed=task.seed,
-                                       budget=task.budget)
+                                       budget=task.budget, reality=task.reality)
     except PlanningError as err:
         row.update(success=False, collision=False, stop_reason=f'no plan: {err}',
                    barn_score=0.0 if barn_length is not None else '')
@@ -588,6 +590,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--budget', choices=BUDGETS, default=EVALUATION_BUDGET,
                         help='what bounds an MPC step: solver iterations (reproducible, the '
                         "default) or wall time (the robot's; outcomes move with the load)")
+    parser.add_argument('--reality', choices=tuple(REALITY_PRESETS), default='ideal',
+                        help='how real the robot is (core/reality.py presets): lag, latency, '
+                             'acceleration limits, odometry noise and drift, laser noise and '
+                             'dropouts; navigation suites only')
     parser.add_argument('--save-trajectories', action='store_true',
                         help='write each run as trajectory CSV under OUT/trajectories')
     parser.add_argument('--merge', action='store_true',
@@ -635,6 +641,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error('--sensing: use --suite unknown for random worlds with unknown obstacles')
     if args.robot != 'circle' and not navigation:
         parser.error('--robot jackal needs the navigation stack: add --sensing')
+    if args.reality != 'ideal' and not navigation:
+        parser.error('--reality needs the navigation stack (--suite unknown, --suite worlds '
+                     'or --sensing): the known-map suites follow a fixed path on the model')
     allowed = CONTROLLERS if navigation else KNOWN_MAP_CONTROLLERS
     controllers = ([c.strip() for c in args.controllers.split(',') if c.strip()]
                    if args.controllers else list(allowed))
@@ -665,7 +674,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         barn_dir = ''  # the shipped worlds: each worker finds its own copy
     template = Task(args.suite, 0, '', args.seed, args.v_max, args.omega_max, barn_dir,
                     trajectories, args.merge, sensing=args.sensing, robot=args.robot,
-                    budget=args.budget)
+                    budget=args.budget, reality=args.reality)
     tasks = [replace(template, world=w, controller=c,
                      world_file=world_files[w] if world_files else '')
              for w in worlds for c in controllers]
@@ -678,7 +687,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                  f'{args.robot} robot, v_max {args.v_max:g} m/s, omega_max '
                  f'{args.omega_max:g} rad/s'
                  + (', no prior map' if args.suite == 'barn' else '')
-                 + f', {args.budget} budget)')
+                 + f', {args.budget} budget, reality {args.reality})')
     else:
         title = (f'{args.suite}, known map (seed {args.seed}, v_max {args.v_max:g} m/s, '
                  f'omega_max {args.omega_max:g} rad/s{", merged walls" if args.merge else ""}'

@@ -19,7 +19,10 @@ What ``closed_loop --sensing`` runs over DDS, in one process and deterministical
 suites of hundreds of worlds are affordable. Every control step (`Navigator.step`, the
 rollout's controller):
 
-1. the simulated laser scans the true world (known and unknown obstacles) from the pose;
+1. the simulated laser scans the true world (known and unknown obstacles) from the TRUE
+   pose (every ``scan_period``; with a real robot's `Base`, through its reality's
+   `ScanChannel`: noise, NaN and -inf beams, lost scans), and the scan is placed with the
+   pose the controller is given (odometry, which may be noisy and drift);
 2. the scan goes into the planner's grid (map plus scans, `PlanningGrid`) and into the
    controller's obstacle memory (`ObstacleMemory`), both told the robot's footprint, as the
    nodes are (returns inside it are the robot itself);
@@ -53,6 +56,7 @@ from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import waypoints_to_poses
 from mpc_local_planner.core.planner import RrtStarPlanner
+from mpc_local_planner.core.reality import Base, ScanChannel
 from mpc_local_planner.core.replanning import (
     ReplanDecision,
     Replanner,
@@ -64,7 +68,7 @@ from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.perception.laser import JACKAL_FOV, SimulatedLaser
 from mpc_local_planner.perception.local_obstacles import LocalObstacles
 from mpc_local_planner.perception.raycast import TrueGeometry
-from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
+from mpc_local_planner.perception.scan_obstacles import ObstacleMemory, Scan
 from mpc_local_planner.worlds.map_files import OccupancyMap
 
 __all__ = [
@@ -97,6 +101,7 @@ class NavigationSettings:
         escape_distance: How far a re-plan may start from a robot standing within the
             planner's clearance (see PlanningGrid.escape_point).
         sense: The laser is on. Off, nothing but the map is known: no scans, no re-plans.
+        scan_period: Seconds between two scans; None: one scan per control step.
 
     """
 
@@ -109,6 +114,7 @@ class NavigationSettings:
     sensing_margin: float = 0.5
     escape_distance: float = 1.0
     sense: bool = True
+    scan_period: float | None = None
 
     def replan_settings(self) -> ReplanSettings:
         """Return the re-planner's settings (without sensing the grid never changes: no checks).
@@ -132,8 +138,9 @@ class LocalController(Protocol):
     def avoid(self, obstacles: Sequence[ConvexPolygon]) -> None:
         """Take the obstacles in force (as sensed, not inflated)."""
 
-    def command(self, x: np.ndarray, t: float) -> ControlStep:
-        """Return the input for state x at time t."""
+    def command(self, x: np.ndarray, t: float, velocity: np.ndarray | None = None
+                ) -> ControlStep:
+        """Return the input for state x at time t (velocity: the measured twist, if known)."""
 
 
 class MpcLocal:
@@ -151,10 +158,15 @@ class MpcLocal:
         """Set the obstacles (the MPC grows them itself)."""
         self.controller.set_obstacles(obstacles)
 
-    def command(self, x: np.ndarray, t: float) -> ControlStep:
+    def command(self, x: np.ndarray, t: float, velocity: np.ndarray | None = None
+                ) -> ControlStep:
         """Compute the command as the node does (stop reasons give a zero input)."""
-        output = self.controller.compute(x, t)
+        output = self.controller.compute(x, t, velocity=velocity)
         solution = output.solution
+        if not output.fresh and solution is not None:
+            # between solves (control_frequency): the verified plan's input, nothing solved
+            return ControlStep(u=output.u, s=float(solution.s), value=float(solution.value),
+                               solve_time_s=0.0, success=True, detail=output)
         if solution is None:
             # no solve: a failure unless at the goal or turning in place to its heading
             done = output.reason in (Reason.GOAL_REACHED, Reason.ROTATE_TO_HEADING)
@@ -180,7 +192,8 @@ class TrackingLocal:
         """Set the obstacles."""
         self.mpc.set_obstacles(obstacles)
 
-    def command(self, x: np.ndarray, t: float) -> ControlStep:
+    def command(self, x: np.ndarray, t: float, velocity: np.ndarray | None = None
+                ) -> ControlStep:
         """Solve and apply what the MPC applies."""
         solution = self.mpc.solve(x)
         return ControlStep(
@@ -199,11 +212,15 @@ class PathFollowerLocal:
         make: waypoints (M, 2) -> the controller for that plan.
         reach: How far obstacles matter to it, metres (0: it ignores obstacles).
         uses_obstacles: Hand it the obstacles (its ``set_obstacles``) at every step.
+        takes_velocity: Its ``command`` takes the measured twist (``velocity=``), as DWB
+            reads odometry's; given only when a real base reports one.
 
     """
 
-    def __init__(self, make: Any, *, reach: float = 0.0, uses_obstacles: bool = False) -> None:
+    def __init__(self, make: Any, *, reach: float = 0.0, uses_obstacles: bool = False,
+                 takes_velocity: bool = False) -> None:
         self._make = make
+        self._takes_velocity = takes_velocity
         self.reach = float(reach)
         self._uses_obstacles = uses_obstacles
         self.follower: Any = None
@@ -225,12 +242,16 @@ class PathFollowerLocal:
         if self._uses_obstacles and self.follower is not None:
             self.follower.set_obstacles(self._obstacles)
 
-    def command(self, x: np.ndarray, t: float) -> ControlStep:
-        """Return its command (zero without a plan), timed."""
+    def command(self, x: np.ndarray, t: float, velocity: np.ndarray | None = None
+                ) -> ControlStep:
+        """Return its command (zero without a plan), timed; the DWA takes the measured twist."""
         if self.follower is None:
             return ControlStep(u=np.zeros(2), solve_time_s=0.0)
         start = time.perf_counter()
-        u = np.asarray(self.follower.command(x), dtype=float)
+        if velocity is not None and self._takes_velocity:
+            u = np.asarray(self.follower.command(x, velocity=velocity), dtype=float)
+        else:
+            u = np.asarray(self.follower.command(x), dtype=float)
         return ControlStep(u=u, solve_time_s=time.perf_counter() - start)
 
 
@@ -278,6 +299,10 @@ class Navigator:
         snapshot_period: Seconds between two records of the sensed obstacles (figures).
         footprint: The robot's footprint: scan returns inside it are the robot itself, not
             obstacles (`classify_beams`), as the nodes read them; None: every return counts.
+        base: The real robot's base the rollout drives (core/reality.py), or None: the
+            laser scans from the pose step() is given (an ideal robot, whose odometry is
+            its pose). With a base it scans from the base's true pose through the
+            reality's ScanChannel, and step() gets what odometry says.
 
     """
 
@@ -286,8 +311,12 @@ class Navigator:
                  known_map: OccupancyMap | None = None,
                  settings: NavigationSettings | None = None,
                  snapshot_period: float = 2.0,
-                 footprint: Footprint | None = None) -> None:
+                 footprint: Footprint | None = None,
+                 base: Base | None = None) -> None:
         self.local = local
+        self.base = base
+        self._channel = ScanChannel(base.reality) if base is not None else None
+        self._next_scan = 0.0
         self.footprint = footprint
         self.settings = settings or NavigationSettings()
         self.grid = grid
@@ -319,7 +348,7 @@ class Navigator:
         self._k += 1
         if self.replanner.plan is None:  # the goal comes first, planned on the map alone
             self._adopt(self.replanner.plan_goal(self.planner, x, self.goal, now=t), x, t)
-        scan = self.laser.scan(x, stamp=t) if self.settings.sense else None
+        scan = self._scan(x, t)
         if scan is not None:
             self.grid.add_scan(scan, x, body=self.footprint)
         self._adopt(self.replanner.check(self.planner, x, now=t, grid=self.grid), x, t)
@@ -329,11 +358,29 @@ class Navigator:
             self.obstacles.scan_updated()
         nearby = self.obstacles.near(x[:2], self.local.reach + self.settings.sensing_margin)
         self.local.avoid(nearby)
-        answer = self.local.command(np.asarray(x, dtype=float), t)
+        velocity = self.base.twist() if self.base is not None else None
+        answer = self.local.command(np.asarray(x, dtype=float), t, velocity)
         self.log.control_seconds.append(time.perf_counter() - started)
         if not self.log.sensed or t >= self.log.sensed[-1][0] + self._snapshot_period:
             self.log.sensed.append((t, list(nearby)))
         return answer
+
+    def _scan(self, x: np.ndarray, t: float) -> Scan | None:
+        """Return the scan due at t (None: the laser is off, not due, or the scan was lost)."""
+        if not self.settings.sense:
+            return None
+        period = self.settings.scan_period
+        if period is not None:
+            if t < self._next_scan - 1e-9:
+                return None
+            self._next_scan = t + period
+        if self.base is None:
+            return self.laser.scan(x, stamp=t)
+        assert self._channel is not None
+        scan = self.laser.scan(self.base.pose, stamp=t)
+        if self._channel.lost():
+            return None
+        return scan._replace(ranges=self._channel.corrupt(scan.ranges, scan.range_max))
 
     def _adopt(self, decision: ReplanDecision, x: np.ndarray, t: float) -> None:
         """Log the re-planner's decision and hand a new plan to the local controller.

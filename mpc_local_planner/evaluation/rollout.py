@@ -35,6 +35,14 @@ Otherwise u_k is applied: x_{k+1} = model.step(x_k, u_k, h). A controller that r
 PlanningError (it has no way to the goal) or commands a non-finite input ends the run as
 STOPPED; its last row has a zero input.
 
+The plant may instead be a real robot's base (core/reality.py `Base`, the model the
+unicycle_simulator node runs): then the controller is called every h with what odometry
+reports (noise and drift included), its command is sent to the base at that instant and acts
+after the base's latency, lag and acceleration limits, and the rows hold the TRUE pose (the
+stop rule and contacts judge the truth; the controller never sees it). h is then the control
+period (1 / control_frequency), and stall_steps counts periods of stall_period seconds
+(StopRule.stall_period), so that a stall lasts as long in seconds at any control rate.
+
 Nothing here reads a clock but to report step times. The MPCs of the evaluation suites bound
 a step's solving by solver iterations (EVALUATION_BUDGET, MpcConfig.budget 'iterations'), not
 by wall time as the robot does: the same command gives the same runs on any machine under any
@@ -108,6 +116,8 @@ class StopRule(NamedTuple):
             compares positions only (the BARN challenge).
         stall_input: a command with every |component| below this is standing still.
         stall_steps: consecutive standing-still steps that end the run as STALLED.
+        stall_period: the step stall_steps counts, seconds (None: the rollout's h); a
+            rollout at another control period stalls after the same time.
 
     """
 
@@ -116,6 +126,7 @@ class StopRule(NamedTuple):
     heading_tolerance: float = math.inf
     stall_input: float = STALL_INPUT
     stall_steps: int = STALL_STEPS
+    stall_period: float | None = None
 
     def reached(self, x: np.ndarray, goal: np.ndarray) -> bool:
         """Say whether the pose x is within the tolerances of the goal (headings wrapped)."""
@@ -130,6 +141,12 @@ class StopRule(NamedTuple):
     def steps(self, h: float) -> int:
         """Return the index of the last step within the time limit at step length h."""
         return int(math.ceil(self.time_limit / h - 1e-9))
+
+    def still_steps(self, h: float) -> int:
+        """Return the standing-still steps of length h that end a run as STALLED."""
+        if self.stall_period is None:
+            return self.stall_steps
+        return max(int(math.ceil(self.stall_steps * self.stall_period / h - 1e-9)), 1)
 
 
 class ControlStep(NamedTuple):
@@ -272,7 +289,8 @@ def rollout(
 
     Args:
         controller: a RolloutController, or anything as_controller adapts.
-        model: the plant: ``model.step(x, u, h) -> x_next``.
+        model: the plant: ``model.step(x, u, h) -> x_next``, or a real robot's `Base`
+            (core/reality.py; it holds the start pose: start is not used).
         start: the initial state.
         goal: the goal pose (x, y, theta).
         h: the step length, seconds.
@@ -287,8 +305,10 @@ def rollout(
     """
     stepper = as_controller(controller)
     goal = np.asarray(goal, dtype=float)
-    x = np.asarray(start, dtype=float).copy()
+    base = model if callable(getattr(model, 'advance', None)) else None
+    x = np.asarray(start, dtype=float).copy() if base is None else base.pose.copy()
     last = rule.steps(h)
+    still_needed = rule.still_steps(h)
     rows: list[np.ndarray] = []
     steps: list[ControlStep] = []
     step_times: list[float] = []
@@ -296,9 +316,10 @@ def rollout(
     outcome, note = Outcome.TIME_LIMIT, ''
     for k in range(last + 1):
         t = k * h
+        measured = x if base is None else base.odometry()[0]
         started = time.perf_counter()
         try:
-            answer = stepper.step(x)
+            answer = stepper.step(measured)
         except PlanningError as err:
             outcome, note = Outcome.STOPPED, f'{type(err).__name__}: {err}'
             rows.append(trajectory_row(t, x))
@@ -318,13 +339,21 @@ def rollout(
         if rule.reached(x, goal):
             outcome = Outcome.REACHED
             break
-        still = still + 1 if float(np.max(np.abs(u))) < rule.stall_input else 0
-        if still >= rule.stall_steps:
+        # a real base may still be moving on a zero command: it has stalled once it stands
+        moving = base is not None and float(np.max(np.abs(base.velocity))) >= rule.stall_input
+        still = still + 1 if float(np.max(np.abs(u))) < rule.stall_input and not moving \
+            else 0
+        if still >= still_needed:
             outcome = Outcome.STALLED
             break
         if k == last:
             break
-        x = np.asarray(model.step(x, u, h), dtype=float)
+        if base is None:
+            x = np.asarray(model.step(x, u, h), dtype=float)
+        else:
+            base.command(u, t)
+            base.advance(t + h)
+            x = base.pose.copy()
     return Rollout(outcome=outcome, rows=np.array(rows, dtype=float), steps=tuple(steps),
                    step_times=np.array(step_times, dtype=float), h=float(h), note=note)
 

@@ -54,6 +54,7 @@ from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
+from mpc_local_planner.core.reality import Base, Reality, reality_preset
 from mpc_local_planner.evaluation.known_map_worlds import RANDOM_BOUNDS, RANDOM_GOAL, RANDOM_START
 from mpc_local_planner.evaluation.metrics import footprint_clearance
 from mpc_local_planner.evaluation.navigation import (
@@ -103,6 +104,12 @@ GOAL_TOLERANCE = 0.1
 PREPARED_SLOTS = 10
 UNKNOWN_ATTEMPTS = 50
 STALL_SECONDS = 20.0
+# With a real robot (reality other than ideal): commands at the node's control_frequency,
+# the laser at 10 Hz (the BARN Jackal's UST-10LX does 40; scans cost the perception time),
+# and the base integrated in sub-steps of REALITY_SUBSTEP.
+CONTROL_FREQUENCY = 20.0
+SCAN_PERIOD = 0.1
+REALITY_SUBSTEP = 0.01
 
 
 @dataclass(frozen=True)
@@ -242,18 +249,27 @@ _MPC_CACHE: dict[tuple[str, str], Any] = {}
 
 
 def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
-         budget: str = EVALUATION_BUDGET) -> Any:
-    """Return the cached MpcController or TrackingMPC for the robot, reset for a new run."""
-    key = (name, robot.name, robot.v_max, robot.omega_max, robot.reverses, prepare, budget)
+         budget: str = EVALUATION_BUDGET, reality: Reality | None = None) -> Any:
+    """Return the cached MpcController or TrackingMPC for the robot, reset for a new run.
+
+    With a real base (reality), the paper's MPC is told its limits as a user sets them:
+    max_accel (its inputs cannot jump) and the controller's max_decel (stops brake).
+    """
+    accel = reality.acceleration if reality is not None and all(
+        math.isfinite(a) for a in reality.acceleration) else None
+    key = (name, robot.name, robot.v_max, robot.omega_max, robot.reverses, prepare, budget,
+           accel)
     mpc = _MPC_CACHE.get(key)
     if mpc is None:
         model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max,
                          v_min=None if robot.reverses else 0.0)
         config = MpcConfig(robot_radius=robot.footprint.radius if robot.footprint.is_circle
-                           else 0.0, footprint=_vertices(robot.footprint), budget=budget)
+                           else 0.0, footprint=_vertices(robot.footprint), budget=budget,
+                           max_accel=accel if name == 'proposed' else None)
         if name == 'proposed':
             settings = ControllerSettings(xy_goal_tolerance=0.05, yaw_goal_tolerance=math.pi,
-                                          capacity=PATH_CAPACITY)
+                                          capacity=PATH_CAPACITY,
+                                          max_decel=accel or (math.inf, math.inf))
             mpc = MpcController(model, config, settings=settings)
             mpc.set_plan(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))  # the NLPs' path family
             core = mpc.mpc
@@ -281,10 +297,12 @@ def _prepare(mpc: Any) -> None:
 
 
 def _local_controller(name: str, robot: Robot, world: World, *, prepare: bool = True,
-                      budget: str = EVALUATION_BUDGET) -> LocalController:
-    """Return the named local controller for the robot."""
+                      budget: str = EVALUATION_BUDGET,
+                      reality: Reality | None = None) -> LocalController:
+    """Return the named local controller for the robot (tuned to a real base's limits)."""
     if name == 'proposed':
-        return MpcLocal(_mpc(name, robot, world, prepare=prepare, budget=budget))
+        return MpcLocal(_mpc(name, robot, world, prepare=prepare, budget=budget,
+                             reality=reality))
     if name == 'tracking':
         return TrackingLocal(_mpc(name, robot, world, prepare=prepare, budget=budget))
     tolerance = 0.5 * float(world.goal_tolerance or GOAL_TOLERANCE)
@@ -297,9 +315,17 @@ def _local_controller(name: str, robot: Robot, world: World, *, prepare: bool = 
 
         dwa = DwaConfig(max_vel_x=robot.v_max, max_vel_theta=robot.omega_max,
                         footprint=robot.footprint, xy_goal_tolerance=min(0.03, tolerance))
+        if reality is not None:
+            # as a user configures DWB for the robot: its control rate and its limits
+            dwa = replace(dwa, control_period=1.0 / CONTROL_FREQUENCY)
+            linear, angular = reality.acceleration
+            if math.isfinite(linear):
+                dwa = replace(dwa, acc_lim_x=linear, decel_lim_x=linear)
+            if math.isfinite(angular):
+                dwa = replace(dwa, acc_lim_theta=angular)
         reach = robot.v_max * dwa.sim_time + robot.footprint.radius + dwa.inflation_radius
         return PathFollowerLocal(lambda waypoints: Dwa(waypoints, dwa), reach=reach,
-                                 uses_obstacles=True)
+                                 uses_obstacles=True, takes_velocity=reality is not None)
     msg = f'unknown controller {name!r}'
     raise ValueError(msg)
 
@@ -317,7 +343,8 @@ class SensingResult:
 
 def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool = True,
                    seed: int = 0, h: float = 0.2, prepare: bool = True,
-                   budget: str = EVALUATION_BUDGET) -> SensingResult:
+                   budget: str = EVALUATION_BUDGET,
+                   reality: str | Reality = 'ideal') -> SensingResult:
     """Drive robot through world with the named controller, perception and re-planning.
 
     Args:
@@ -333,25 +360,38 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
             first steps), which is enough for tests that do not time steps.
         budget: What bounds an MPC step's solving (MpcConfig.budget): 'iterations', the
             same on any machine under any load, or 'wall', the robot's.
+        reality: How real the robot is (core/reality.py: a preset's name or a Reality).
+            Ideal: the model takes each command exactly every h, odometry is the pose, the
+            laser is exact (every suite before). Otherwise the robot is a `Base` with that
+            reality (seeded with seed), commanded at CONTROL_FREQUENCY (the MPC still
+            predicts in steps of h), the laser scans every SCAN_PERIOD through its
+            ScanChannel, and every controller sees odometry, not the true pose.
 
     """
+    if isinstance(reality, str):
+        reality = reality_preset(reality)
+    real = not reality.ideal
     known = rasterize_world(world, MAP_RESOLUTION) if world.obstacles else \
         _empty_map(world.bounds)
     grid, planner = _grid_planner(known, robot, world.bounds, seed)
-    local = _local_controller(controller, robot, world, prepare=prepare, budget=budget)
-    settings = NavigationSettings(sense=sensing)
+    local = _local_controller(controller, robot, world, prepare=prepare, budget=budget,
+                              reality=reality if real else None)
+    model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max)
+    base = Base(model, reality.with_seed(seed), world.start, dt=REALITY_SUBSTEP) if real \
+        else None
+    period = 1.0 / CONTROL_FREQUENCY if real else h
+    settings = NavigationSettings(sense=sensing, scan_period=SCAN_PERIOD if real else None)
     navigator = Navigator(local, TrueGeometry(world.physical_shapes()), grid, planner,
-                          world.goal, h=h, known_map=known if world.obstacles else None,
-                          settings=settings, footprint=robot.footprint)
+                          world.goal, h=period, known_map=known if world.obstacles else None,
+                          settings=settings, footprint=robot.footprint, base=base)
     clearance = footprint_clearance(world.physical_shapes(), robot.footprint)
     # a robot may wait in front of an obstacle for a re-plan: standing still ends a run after
     # STALL_SECONDS, not the rollout's default 5 s
     rule = StopRule(time_limit=float(world.time_limit or 100.0),
                     position_tolerance=float(world.goal_tolerance or GOAL_TOLERANCE),
-                    stall_steps=int(STALL_SECONDS / h))
-    model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max)
-    run = rollout(navigator, model, world.start, world.goal, h=h, rule=rule,
-                  clearance=clearance)
+                    stall_steps=int(STALL_SECONDS / period))
+    run = rollout(navigator, base if base is not None else model, world.start, world.goal,
+                  h=period, rule=rule, clearance=clearance)
     closest = float(np.min(clearance(run.rows[:, 1:4])))
     return SensingResult(run=run, navigator=navigator,
                          contacts=int(run.outcome is Outcome.COLLISION or closest <= 0.0),
