@@ -37,9 +37,10 @@ Where the preset values come from:
 
 - The Jackal's ``jackal_control/config/control.yaml`` lets its diff_drive_controller
   accelerate at up to 20 m/s^2 and 25 rad/s^2 and times commands out after 0.25 s; those are
-  software caps, not what the 17 kg robot does. Its navigation configurations plan with
-  about 2 m/s^2 and 3 rad/s^2, which is ``real``; ``harsh`` halves it as a loaded robot on
-  grass would.
+  software caps, not what the 17 kg robot does. Navigation configurations for it plan with
+  about 2 m/s^2 linear, which is ``real``; a skid-steer base turns in place at 4 rad/s, and
+  ``real`` lets it reach that in 2/3 s (6 rad/s^2, a quarter of the cap). ``harsh`` halves
+  both, as a loaded robot on grass would; ``mild`` doubles them.
 - Lag: a velocity-controlled base with wheel PID loops settles in 0.1-0.3 s (time constants
   of 0.05-0.1 s are typical of small differential-drive bases; 0.3 s is a heavy one).
 - Latency: a command crosses DDS, the driver's serial link and the motor controller's cycle:
@@ -163,13 +164,13 @@ class Reality:
 
 REALITY_PRESETS: dict[str, Reality] = {
     'ideal': Reality(),
-    'mild': Reality(lag=(0.05, 0.05), acceleration=(4.0, 8.0), latency=0.02,
+    'mild': Reality(lag=(0.05, 0.05), acceleration=(4.0, 12.0), latency=0.02,
                     odom_noise=(0.005, 0.005), odom_drift=(0.002, 0.001),
                     scan_noise=0.01, scan_nan=0.002, scan_neg_inf=0.0005, scan_loss=0.01),
-    'real': Reality(lag=(0.1, 0.1), acceleration=(2.0, 3.0), latency=0.05,
+    'real': Reality(lag=(0.1, 0.1), acceleration=(2.0, 6.0), latency=0.05,
                     odom_noise=(0.01, 0.01), odom_drift=(0.01, 0.003),
                     scan_noise=0.015, scan_nan=0.01, scan_neg_inf=0.002, scan_loss=0.02),
-    'harsh': Reality(lag=(0.3, 0.3), acceleration=(1.0, 2.0), latency=0.2,
+    'harsh': Reality(lag=(0.3, 0.3), acceleration=(1.0, 3.0), latency=0.2,
                      odom_noise=(0.03, 0.02), odom_drift=(0.02, 0.01),
                      scan_noise=0.03, scan_nan=0.05, scan_neg_inf=0.01, scan_loss=0.1),
 }

@@ -110,6 +110,10 @@ STALL_SECONDS = 20.0
 CONTROL_FREQUENCY = 20.0
 SCAN_PERIOD = 0.1
 REALITY_SUBSTEP = 0.01
+# The paper's MPC's collision_margin for a real base (m): what a user adds for the tracking
+# error of a lagging base (a polygon's default is 0: the NLP's clearance covers the motion of
+# the model exactly, not the robot's departures from it).
+REALITY_MARGIN = 0.03
 
 
 @dataclass(frozen=True)
@@ -258,14 +262,15 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
     accel = reality.acceleration if reality is not None and all(
         math.isfinite(a) for a in reality.acceleration) else None
     key = (name, robot.name, robot.v_max, robot.omega_max, robot.reverses, prepare, budget,
-           accel)
+           accel, reality is not None)
     mpc = _MPC_CACHE.get(key)
     if mpc is None:
         model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max,
                          v_min=None if robot.reverses else 0.0)
         config = MpcConfig(robot_radius=robot.footprint.radius if robot.footprint.is_circle
                            else 0.0, footprint=_vertices(robot.footprint), budget=budget,
-                           max_accel=accel if name == 'proposed' else None)
+                           max_accel=accel if name == 'proposed' else None,
+                           collision_margin=REALITY_MARGIN if reality is not None else None)
         if name == 'proposed':
             settings = ControllerSettings(xy_goal_tolerance=0.05, yaw_goal_tolerance=math.pi,
                                           capacity=PATH_CAPACITY,
