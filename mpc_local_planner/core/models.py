@@ -25,12 +25,13 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from functools import lru_cache
+import math
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
-__all__ = ['KinematicBicycle', 'RobotModel', 'Unicycle', 'rk4']
+__all__ = ['KinematicBicycle', 'RobotModel', 'STRAIGHT_OMEGA', 'Unicycle', 'rk4', 'unicycle_arc']
 
 Symbolic = Any  # a CasADi SX/MX expression or a NumPy array
 
@@ -221,3 +222,23 @@ class KinematicBicycle(RobotModel):
     def steady_state(self, pose: Symbolic) -> tuple[Symbolic, Symbolic]:
         """Stand still at the pose with straight wheels."""
         return ca.vertcat(pose, 0), ca.DM.zeros(2)
+
+# Below this yaw rate (rad/s) the arc is taken as the straight line (no division by omega).
+STRAIGHT_OMEGA = 1e-9
+
+
+def unicycle_arc(pose: np.ndarray, v: float, omega: float, dt: float) -> np.ndarray:
+    """Return pose (x, y, theta) moved for dt seconds at the constant twist (v, omega).
+
+    The exact unicycle motion: a circular arc of radius v / omega, or the straight line
+    when omega is (numerically) zero. The heading is not wrapped (as the odometry's).
+    """
+    x, y, theta = (float(c) for c in pose[:3])
+    turn = omega * dt
+    if abs(omega) < STRAIGHT_OMEGA:
+        return np.array([x + v * dt * math.cos(theta), y + v * dt * math.sin(theta),
+                         theta + turn])
+    radius = v / omega
+    return np.array([x + radius * (math.sin(theta + turn) - math.sin(theta)),
+                     y - radius * (math.cos(theta + turn) - math.cos(theta)),
+                     theta + turn])

@@ -62,7 +62,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.models import Unicycle, unicycle_arc
 
 __all__ = [
     'Base',
@@ -190,19 +190,6 @@ def reality_preset(name: str) -> Reality:
         raise ValueError(msg) from None
 
 
-def _unicycle_step(pose: np.ndarray, v: float, omega: float, dt: float) -> np.ndarray:
-    """Return the pose after dt at constant (v, omega): the exact arc."""
-    x, y, theta = (float(p) for p in pose[:3])
-    turn = omega * dt
-    if abs(turn) < 1e-9:
-        mid = theta + 0.5 * turn
-        return np.array([x + v * dt * math.cos(mid), y + v * dt * math.sin(mid), theta + turn])
-    radius = v / omega
-    return np.array([x + radius * (math.sin(theta + turn) - math.sin(theta)),
-                     y - radius * (math.cos(theta + turn) - math.cos(theta)),
-                     theta + turn])
-
-
 @dataclass
 class Base:
     """A robot base driven by velocity commands, as `Reality` says a real one behaves.
@@ -289,9 +276,9 @@ class Base:
             self._take_commands(self.time)
             self._follow(dt)
             v, omega = (float(u) for u in self.velocity)
-            self.pose = _unicycle_step(self.pose, v, omega, dt)
+            self.pose = unicycle_arc(self.pose, v, omega, dt)
             scale, bias = self.reality.odom_drift
-            self.odom_pose = _unicycle_step(self.odom_pose, (1.0 + scale) * v,
+            self.odom_pose = unicycle_arc(self.odom_pose, (1.0 + scale) * v,
                                             omega + bias * abs(v), dt)
             self.time += dt
         self.time = float(until)

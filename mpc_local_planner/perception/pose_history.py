@@ -36,9 +36,10 @@ import math
 
 import numpy as np
 
+from mpc_local_planner.core.models import unicycle_arc
 from mpc_local_planner.core.paths import wrap_angle
 
-__all__ = ['MAX_EXTRAPOLATION_S', 'PoseHistory', 'unicycle_arc']
+__all__ = ['MAX_EXTRAPOLATION_S', 'PoseHistory']
 
 # How far (s) past the newest odometry a pose is extrapolated along its twist. About two
 # odometry periods at 20-50 Hz (50 and 20 ms): one late or lost sample is bridged, while the
@@ -48,25 +49,6 @@ __all__ = ['MAX_EXTRAPOLATION_S', 'PoseHistory', 'unicycle_arc']
 MAX_EXTRAPOLATION_S = 0.1
 # Seconds of rounding forgiven at the bound (stamps are nanoseconds; sums of floats are not).
 _STAMP_ROUNDING = 1e-9
-# Below this yaw rate (rad/s) the arc is taken as the straight line (no division by omega).
-_STRAIGHT_OMEGA = 1e-9
-
-
-def unicycle_arc(pose: np.ndarray, v: float, omega: float, dt: float) -> np.ndarray:
-    """Return pose (x, y, theta) moved for dt seconds at the constant twist (v, omega).
-
-    The exact unicycle motion: a circular arc of radius v / omega, or the straight line
-    when omega is (numerically) zero. The heading is not wrapped (as the odometry's).
-    """
-    x, y, theta = (float(c) for c in pose[:3])
-    turn = omega * dt
-    if abs(omega) < _STRAIGHT_OMEGA:
-        return np.array([x + v * dt * math.cos(theta), y + v * dt * math.sin(theta),
-                         theta + turn])
-    radius = v / omega
-    return np.array([x + radius * (math.sin(theta + turn) - math.sin(theta)),
-                     y - radius * (math.cos(theta + turn) - math.cos(theta)),
-                     theta + turn])
 
 
 class PoseHistory:

@@ -210,3 +210,36 @@ def test_the_same_rollout_twice_is_the_same_with_the_iteration_budget() -> None:
     np.testing.assert_array_equal(first.rows[:, applied], second.rows[:, applied])
     assert ([(s.detail.status, s.detail.iterations, s.detail.tries) for s in first.steps]
             == [(s.detail.status, s.detail.iterations, s.detail.tries) for s in second.steps])
+
+
+def test_on_a_real_base_the_controller_sees_odometry_and_the_rows_hold_the_truth():
+    from mpc_local_planner.core.reality import Base, Reality
+
+    seen = []
+
+    class Forward:
+        def step(self, x):
+            seen.append(np.array(x, dtype=float))
+            return ControlStep(u=np.array([0.2, 0.0]))
+
+    base = Base(Unicycle(), Reality(odom_drift=(0.1, 0.0), latency=0.1), [0.0, 0.0, 0.0])
+    run = rollout(Forward(), base, np.zeros(3), np.array([9.0, 0.0, 0.0]), h=0.05,
+                  rule=StopRule(time_limit=2.0, position_tolerance=0.01))
+    assert run.rows[-1, 0] == pytest.approx(2.0)
+    # latency: the first 0.1 s without motion; then 0.2 m/s; odometry says 10 % more
+    assert run.rows[-1, 1] == pytest.approx(0.2 * 1.9, abs=1e-6)
+    assert seen[-1][0] == pytest.approx(1.1 * 0.2 * 1.9, abs=1e-6)
+
+
+def test_a_stall_lasts_as_long_in_seconds_at_any_control_period():
+    class Still:
+        def step(self, x):
+            return ControlStep(u=np.zeros(2))
+
+    for h in (0.2, 0.05):
+        rule = StopRule(time_limit=60.0, position_tolerance=0.01, stall_steps=10,
+                        stall_period=0.2)
+        run = rollout(Still(), Unicycle(), np.zeros(3), np.array([1.0, 0.0, 0.0]), h=h,
+                      rule=rule)
+        assert run.outcome is Outcome.STALLED
+        assert run.end_time == pytest.approx(2.0 - h)

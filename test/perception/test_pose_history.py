@@ -3,10 +3,10 @@ import math
 import numpy as np
 import pytest
 
+from mpc_local_planner.core.models import unicycle_arc
 from mpc_local_planner.perception.pose_history import (
     MAX_EXTRAPOLATION_S,
     PoseHistory,
-    unicycle_arc,
 )
 
 
