@@ -366,6 +366,9 @@ class MpcController:
         # solves apply it), when it was solved, and the time of the latest call
         self._held: ControlOutput | None = None
         self._held_time = -math.inf
+        # the last solve's stop (no verified input) and when: the calls until the next
+        # step's instant keep it instead of solving again
+        self._stopped: tuple[float, ControlOutput] | None = None
         self._last_call: float | None = None
         self._brake = Brake(self.settings.max_decel)
         # the latest command and measured twist (the MPC's rate bounds start from them)
@@ -436,6 +439,7 @@ class MpcController:
         self._config = config
         self._mpc.update_config(config)
         self._held = None
+        self._stopped = None
 
     def set_model(self, model: Unicycle) -> None:
         """Use new input bounds: the NLP is rebuilt at the next solve."""
@@ -443,6 +447,7 @@ class MpcController:
         self._mpc = PathReferenceMPC(model, self._config, obstacles=self._obstacles,
                                      path=self._path)
         self._held = None
+        self._stopped = None
 
     def set_obstacles(self, obstacles: Sequence[ConvexPolygon]) -> None:
         """Replace the obstacles (as described, not inflated); cheap enough for every step.
@@ -478,6 +483,7 @@ class MpcController:
         self._projection_segment = 0
         self._xy_reached = self._arrived = False
         self._held = None
+        self._stopped = None
 
     def set_plan(self, poses: np.ndarray) -> WaypointPath:
         """Follow a global plan of (M, 3) poses (x, y, yaw), as a nav_msgs/Path carries.
@@ -574,6 +580,7 @@ class MpcController:
         self._polyline = None
         self._xy_reached = self._arrived = False
         self._held = None
+        self._stopped = None
         self._brake.stop()
         self._mpc.reset()
 
@@ -705,6 +712,13 @@ class MpcController:
             held = self._held
             if held is not None and now - self._held_time < self._hold_period():
                 return held._replace(fresh=False)
+            stopped = self._stopped
+            if stopped is not None and now - stopped[0] < self._hold_period():
+                # the solver found no verified input at this step: keep braking (or
+                # standing) until the next step's instant, as a plan is kept for its step
+                return self._idle(Reason.STOP, stopped[1].detail, now=now,
+                                  solution=stopped[1].solution,
+                                  keep_warm_start=True)._replace(fresh=False)
             if self._config.max_accel is None:
                 solution = self._mpc.solve(x)
             else:
@@ -721,7 +735,9 @@ class MpcController:
         if source is PlanSource.STOP:
             # no verified input: the MPC keeps its own state (failure count, the plan it
             # carries) for the next step, as it decides what to try from there
-            return self._idle(Reason.STOP, now=now, solution=solution, keep_warm_start=True)
+            output = self._idle(Reason.STOP, now=now, solution=solution, keep_warm_start=True)
+            self._stopped = (now, output)
+            return output
         if source is PlanSource.CANDIDATE and solution.failures > self._config.horizon:
             # the shifted candidate has run out (N shifts leave only steady-state inputs):
             # stop, and let the next step start over from the measured state
@@ -735,6 +751,7 @@ class MpcController:
         reason = Reason.TRACKING if solution.success else Reason.CANDIDATE
         output = ControlOutput(u, solution, reason)
         self._held, self._held_time = output, now
+        self._stopped = None
         self._brake.stop()
         return output
 
@@ -801,6 +818,7 @@ class MpcController:
         # The shifted warm start assumes its first input was applied: after a step without
         # one, start the MPC over (s restarts at the projection).
         self._held = None
+        self._stopped = None
         if self._solved_last_step:
             self._mpc.reset()
             self._solved_last_step = False

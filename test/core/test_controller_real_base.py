@@ -159,3 +159,25 @@ def test_a_closed_loop_with_lag_and_delay_reaches_the_goal_and_settles(reality):
     assert all(np.all(step.u == 0.0) for step in run.steps[arrived:])
     final = run.rows[-1, 1:3]
     assert math.hypot(*(final - WORLD.goal[:2])) <= 0.1 + 0.02  # xy tolerance + coasting
+
+
+def test_after_a_stop_the_mpc_tries_again_at_the_next_step_not_at_every_call():
+    """A stop is kept for its step as a plan is: at 20 Hz the solver still runs at 5 Hz."""
+    from mpc_local_planner.core.obstacles import ConvexPolygon
+
+    trapped = ConvexPolygon.from_vertices([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
+    controller = MpcController(MODEL, CONFIG, obstacles=[trapped],
+                               settings=ControllerSettings(control_frequency=20.0))
+    controller.set_plan(np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]]))
+    solves = []
+    solve = controller.mpc.solve
+
+    def counted(x, *args, **kwargs):
+        solves.append(x)
+        return solve(x, *args, **kwargs)
+
+    controller.mpc.solve = counted
+    outputs = [controller.compute(np.zeros(3), k * PERIOD) for k in range(20)]
+    assert all(out.reason is Reason.STOP for out in outputs)
+    assert len(solves) == 5
+    assert [out.fresh for out in outputs[:5]] == [True, False, False, False, True]
