@@ -37,6 +37,7 @@ import math
 from typing import Sequence
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError
 
 __all__ = [
     'ConvexPolygon',
@@ -61,31 +62,27 @@ _PARALLEL_TOL = 1e-12
 def convex_hull(points: np.ndarray) -> np.ndarray:
     """Return the convex hull of 2-D points, counter-clockwise, without repeated points.
 
-    Andrew's monotone chain: a dozen lines, and it keeps SciPy out of the dependencies.
+    SciPy's Qhull, with the vertices starting at the lexicographically smallest one (so the
+    faces of a polygon come in the same order whatever order its vertices were given in).
+
+    Raises:
+        ValueError: with fewer than 3 distinct points, or points on one line.
+
     """
     pts = np.unique(np.asarray(points, dtype=float).reshape(-1, 2), axis=0)
     if len(pts) < 3:
         msg = f'a polygon needs at least 3 distinct vertices, got {len(pts)}'
         raise ValueError(msg)
-
-    def cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
-        return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
-
-    lower: list[np.ndarray] = []
-    for p in pts:
-        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 1e-12:
-            lower.pop()
-        lower.append(p)
-    upper: list[np.ndarray] = []
-    for p in pts[::-1]:
-        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 1e-12:
-            upper.pop()
-        upper.append(p)
-    hull = np.array(lower[:-1] + upper[:-1])
-    if len(hull) < 3:
-        msg = 'the vertices are collinear: a polygon needs a non-empty interior'
+    if not np.all(np.isfinite(pts)):
+        msg = 'polygon vertices must be finite'
         raise ValueError(msg)
-    return hull
+    try:
+        order = ConvexHull(pts).vertices  # counter-clockwise in 2-D
+    except QhullError:
+        msg = 'the vertices are collinear: a polygon needs a non-empty interior'
+        raise ValueError(msg) from None
+    first = int(np.argmin(order))  # pts is sorted: the smallest index is the smallest point
+    return pts[np.roll(order, -first)]
 
 
 @dataclass(frozen=True)
