@@ -30,18 +30,16 @@ from mpc_local_planner.core.footprint import Footprint, parse_footprint
 __all__ = ['BUDGETS', 'CostWeights', 'MpcConfig', 'STRUCTURAL_FIELDS', 'validate_mpc_config']
 
 # 'fatrop' (structure-exploiting interior point) is the fastest that gives IPOPT's closed loop;
-# 'ipopt' is the reference. SQP (sqpmethod with qrqp/qpOASES/OSQP) was measured and dropped:
-# from rest, where every derivative of the quartic cost vanishes, it stops or stalls.
+# 'ipopt' is the reference. SQP is not offered: from rest, where every derivative of the
+# quartic cost vanishes, it stops or stalls (see docs/design/mpc.md, section SOLVERS).
 SOLVERS = ('fatrop', 'ipopt')
 # What bounds a control step's solving (MpcConfig.budget): wall time, the robot's, or solver
 # iterations, the same on any machine and under any load (the evaluation's).
 BUDGETS = ('wall', 'iterations')
 # Seconds one solver iteration typically takes, to turn the wall budget into an iteration
-# allowance (MpcConfig.solve_iterations()). Measured on BARN with sensing at 2 m/s (the
-# Jackal, compiled NLPs, wall budget 0.1 s, worlds 0-49, on 2 cores shared with other jobs):
-# in the steps whose solving took over 50 ms, the ones the budget binds, the median was 1.05
-# ms an iteration (worlds 10-29) and 1.34 ms (worlds 30-49); over all steps 0.25-0.4 ms (small
-# NLPs). So 0.1 s is about 100 iterations (75 on that loaded machine).
+# allowance (MpcConfig.solve_iterations()): the typical time of an iteration in the steps the
+# wall budget binds (large NLPs), so the default 0.1 s is 100 iterations (see
+# docs/design/mpc.md, section ITERATION_SECONDS).
 ITERATION_SECONDS = 1e-3
 
 
@@ -106,10 +104,9 @@ class MpcConfig:
         solver: NLP backend, one of SOLVERS.
         fatrop_stage_limit: with solver 'fatrop', an NLP shape whose stages have more
             variables than this is solved by IPOPT instead. fatrop's Riccati recursion costs
-            about the cube of a stage's size, IPOPT's sparse factorisation about its size:
-            on a BARN state at 2 m/s, per iteration, fatrop took 0.85 ms and IPOPT 0.97 ms
-            with 4 boxes held (42 variables a stage), 1.85 and 1.25 ms with 6 (58), 5.7 and
-            1.9 ms with 10 (90). Each obstacle adds its faces plus the robot's as
+            about the cube of a stage's size, IPOPT's sparse factorisation about its size, so
+            beyond some stage size IPOPT is the faster (see docs/design/mpc.md, section
+            fatrop_stage_limit). Each obstacle adds its faces plus the robot's as
             multipliers (a box beside the Jackal: 8).
         max_iterations: solver iteration limit per solve.
         tolerance: solver and verification tolerance.

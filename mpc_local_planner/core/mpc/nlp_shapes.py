@@ -18,10 +18,10 @@
 Problem (6) holds a fixed number of obstacle slots of a fixed number of faces; each shape is
 its own NLP (built in tens of ms to a second, compiled by gcc in minutes). Before an MPC is
 prepared a control step builds the shape it needs (a first step, a test); after prepare()
-no step builds one, in its own thread or another: building a polygon NLP with more obstacles
-than were prepared took 1.1 s in a BARN run, five control periods, and built in a background
-thread it still cost the steps meanwhile up to 0.5 s (CasADi holds Python's lock while it
-builds). The step gets the smallest prepared NLP with room for its obstacles (an unused slot
+no step builds one, in its own thread or another: a build takes several control periods, and
+in a background thread it still stalls the steps meanwhile, since CasADi holds Python's lock
+while it builds (see docs/design/mpc.md, section "No builds after prepare() (nlp_shapes.py)").
+The step gets the smallest prepared NLP with room for its obstacles (an unused slot
 is padded empty), or the largest one, which holds the nearest of them; the MPC checks its
 solution against all of them.
 """
@@ -104,9 +104,10 @@ class NlpShapes:
         """Estimate a never-solved NLP's seconds per iteration from the solved ones (0: none).
 
         The largest measured time per iteration, scaled by the number of variables (a
-        structure-exploiting iteration costs about linearly in the stage sizes). Without it
-        the first solve of a shape ran fatrop's 200 iterations unbounded: single steps of
-        0.3-0.8 s at 1 m/s on BARN (fatrop's own bound needs the time per iteration).
+        structure-exploiting iteration costs about linearly in the stage sizes). fatrop's own
+        time bound needs a time per iteration, so without this estimate the first solve of a
+        shape would run its max_iterations unbounded by the step's budget (see
+        docs/design/mpc.md, section NlpShapes.iteration_time_estimate).
         """
         size = nlp.formulation.lbw.shape[0]
         return max((other.iteration_time * size / other.formulation.lbw.shape[0]

@@ -103,11 +103,9 @@ MAX_CACHED_PLANS = 8
 # less than this (each component): the robot stood still on the candidate meanwhile.
 CONTINUE_TOLERANCE = 1e-3
 # A cut solve goes on for at most this many steps after its first before it counts as failed
-# here. One was too few: from a standing robot after a re-plan among BARN cylinders at 2 m/s
-# (world 258), IPOPT from the guided start needed about 245 iterations against 100 a step,
-# counted as failed after its second step and began again from scratch every other step; the
-# robot stood until the run stalled. More than two held hopeless tries too long (world 55:
-# the other tries, which solve there, came too late).
+# here: enough for a solve of up to about three steps' budget to finish, few enough that a
+# hopeless try does not hold back the others (see docs/design/mpc.md, section
+# MAX_CONTINUED_STEPS).
 MAX_CONTINUED_STEPS = 2
 # Inputs below this (m/s, rad/s) stand still: a solver that converged to "wait" leaves
 # 1e-9, not zeros; and a gain of path progress s below PROGRESS_TOLERANCE is none (see
@@ -207,8 +205,8 @@ def _plan_moves(plan: Plan | None, progress: float) -> bool:
     path's steady state g_p(s) leaves the robot's heading (a rounded turn-in-place knot) the
     solver reports success with s frozen, the robot turning to and fro on the spot or not at
     all, the motion put off to the horizon's end; each step's shifted candidate puts it off
-    again. Laser-only BARN worlds 206, 212, 275 and others at 2 m/s stood 20 s and more in
-    open space that way after a re-plan, V_N constant. Counted as standing, the plan gets the
+    again, V_N constant, and the robot stands in open space (see docs/design/mpc.md, section
+    "A waiting plan counts as standing (_plan_moves)"). Counted as standing, the plan gets the
     cold tries of tries.py, which leave that point. Without a path (progress NaN, the
     tracking baseline) any input above STANDING_INPUT moves.
     """
@@ -609,9 +607,9 @@ class MpcBase(ABC):
         c = self._config
         if c.activation_distance is not None:
             return c.activation_distance
-        # half a step: measured, re-solves on < 1 % of steps (BARN at 1 m/s, the paper's
-        # scenario with 20 obstacles) with at most 4 obstacles in the NLP; 2 v_max h held
-        # up to 22 and built 4x as many NLP shapes
+        # half a step (v_max h / 2): few re-solves with few obstacles in the NLP, where a
+        # wider band holds many more and builds many more NLP shapes (see
+        # docs/design/mpc.md, section "Default activation distance")
         return 0.5 * self._speed_bound() * c.step
 
     def _near_trajectory(self, x: np.ndarray, u: np.ndarray, reachable: ObstacleSet,
@@ -957,11 +955,10 @@ class MpcBase(ABC):
         Only when the robot has not moved since (the state within CONTINUE_TOLERANCE) and
         every obstacle that round held is still there, unchanged: then this step starts with
         that round, and its cut try goes on first (see _optimise), rather than solving the
-        rounds before it again. Without this a step whose rounds needed more iterations
-        together than one step has spent its budget on the same first round at every step,
-        and the cut round never got further (laser-only BARN at 2 m/s, world 44: a new plan
-        from a standing robot, 11 obstacles held in the second round; fatrop's first round
-        took 81 of the 100 iterations each step, and the robot stood still for good).
+        rounds before it again. Without this a step whose rounds need more iterations
+        together than one step has would spend its budget on the same first round at every
+        step, and the cut round would never get further (see docs/design/mpc.md, section
+        "Resuming a cut round (_resumed_round)").
 
         Returns:
             The reachable obstacles that round held, in its order, or None.

@@ -19,42 +19,34 @@ IPOPTs). solver_tries() is pure: it says which tries are worth making, most prom
 and nothing else. step.py's loop (MpcBase._optimise) makes them in that order while the
 step's budget lasts and stops at the first verified solution, as Nav2 MPPI's fallback does.
 
-The order, and why:
+The order, and why (the runs behind each rule: docs/design/mpc.md, section "Solver tries
+(tries.py)"):
 
 - after a plan that moves: the backend from the candidate, then the IPOPT fallback from it;
 - without one, or after a plan that stands still (a step from rest that did not solve applied
-  it; from it fatrop failed and spent the budget at every step after a re-plan at 2 m/s on
-  BARN), with obstacles in the NLP: IPOPT with cold-start options from the previous
+  it), with obstacles in the NLP: IPOPT with cold-start options from the previous
   constraint-generation round's solution (else from the start rolled out along the path),
-  then the backend and the fallback from the candidate. At the seven BARN stalls at 1 m/s
-  fatrop failed from every start in six, IPOPT converged from nearly all; the robot stood
-  still because fatrop's failing first try spent each step's budget;
+  then the backend and the fallback from the candidate. From such states fatrop tends to fail
+  from every start while IPOPT converges, and a failing first try would spend each step's
+  budget and keep the robot standing;
 - without one and without obstacles: IPOPT with cold-start options from the candidate, then
   the backend from it, then from the rolled-out start the fallback and the backend. "Stay
   put" zeroes every derivative of the quartic stage cost, so Newton steps from it are badly
-  scaled: on recorded laser-only BARN states at 2 m/s (worlds 23, 44, 208, a new plan from a
-  standing robot) fatrop needed 196, 81 and 22 iterations from it, IPOPT's warm options
-  failed in 200 once, and IPOPT's cold options (a larger initial barrier, which the flat
-  cost needs) took 51, 27 and 35. With the budget of 100 iterations a step, fatrop first
-  stood the robot still for good in world 23.
+  scaled; IPOPT with its cold options (a larger initial barrier, which the flat cost needs)
+  copes with it best.
 
 A try the budget cut at the last step goes on first, from its last iterate
 (Start.CONTINUATION), when the step may continue it (same NLP, same state: the robot stood
 still meanwhile): an IPOPT try with the same IPOPT, a cut fatrop try with the warm IPOPT
-when the NLP has one.
-fatrop restarts from scratch at every call, so going on with it made no progress across
-steps (laser-only BARN at 2 m/s, worlds 2 and 208: cut at every step, 60 steps); the warm
-IPOPT finished from the same iterate in under 26 iterations. Without a continuation a solve
-longer than the budget started over at every step and never finished: at 2 m/s on BARN,
-from rest with 10 cylinders held, IPOPT needs about 105 iterations (200 ms) and had 100 ms,
-and the robot stood still for good.
+when the NLP has one. fatrop restarts from scratch at every call, so going on with it makes
+no progress across steps, while the warm IPOPT finishes from the same iterate. Without a
+continuation a solve longer than one step's budget would start over at every step and never
+finish.
 
 A try that failed at an earlier step from the same state (the robot stood still since) goes
 last: it failed outright, or it was cut and went on for step.MAX_CONTINUED_STEPS more steps,
 cut in each. The same first try at every step of a standing robot is the same failure at
-every step: in laser-only BARN worlds at 2 m/s, fatrop went on from its cut iterate for 60
-steps (world 208), IPOPT cold from the guided start for 90 (world 55), and the robot never
-moved again.
+every step, and the robot would never move again.
 
 An NLP whose backend is IPOPT has no fallback: its fallback tries are left out.
 """
