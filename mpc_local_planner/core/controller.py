@@ -349,7 +349,9 @@ class MpcController:
         self._model = model or Unicycle()
         self._config = config or MpcConfig()
         self._obstacles = list(obstacles)
-        self.settings = settings or ControllerSettings()
+        settings = settings or ControllerSettings()
+        self._brake = Brake(settings.max_decel)
+        self.settings = settings
         self._mpc = PathReferenceMPC(self._model, self._config, obstacles=self._obstacles)
         self._path: ReferencePath | None = None
         self._solved_last_step = False
@@ -370,12 +372,23 @@ class MpcController:
         # step's instant keep it instead of solving again
         self._stopped: tuple[float, ControlOutput] | None = None
         self._last_call: float | None = None
-        self._brake = Brake(self.settings.max_decel)
         # the latest command and measured twist (the MPC's rate bounds start from them)
         self._last_u = np.zeros(2)
         self._velocity: np.ndarray | None = None
 
     # ------------------------------------------------------------------ configuration
+    @property
+    def settings(self) -> ControllerSettings:
+        """The checks around the MPC in force; a new value applies from the next call."""
+        return self._settings
+
+    @settings.setter
+    def settings(self, settings: ControllerSettings) -> None:
+        # the brake keeps its own copy of the deceleration limits: a change at run time (the
+        # node's max_decel parameter) must reach it, or stops would brake with the old ones
+        self._settings = settings
+        self._brake.max_decel = np.asarray(settings.max_decel, dtype=float)
+
     @property
     def model(self) -> Unicycle:
         """The robot model in force."""

@@ -85,6 +85,9 @@ class Key(Enum):
     OMEGA = 'omega'
     PATH_BLOCKED = 'path_blocked'  # the remaining plan meets a grown obstacle
     BLOCKED_AT = 'blocked_at'  # metres along the plan from the robot's projection (nan)
+    # the MPC solved at this control step; false between solves (control_frequency above
+    # 1 / step: the step applied the held plan, and s_k, V_N, solve_ms... are that solve's)
+    SOLVED = 'solved'
 
 
 class PlannerKey(Enum):
@@ -155,6 +158,7 @@ class ControllerDiagnostics(NamedTuple):
     omega: float = 0.0
     path_blocked: bool = False
     blocked_at: float = math.nan
+    solved: bool = False
 
     @classmethod
     def from_output(cls, output: ControlOutput, *, state: np.ndarray | None,
@@ -195,6 +199,8 @@ class ControllerDiagnostics(NamedTuple):
             v=float(output.u[0]), omega=float(output.u[1]),
             path_blocked=bool(blockage.blocked) if blockage else False,
             blocked_at=float(blockage.at) if blockage else math.nan,
+            # a stop without a solve is fresh too, but carries no solution
+            solved=bool(output.fresh and sol is not None),
         )
 
     @property

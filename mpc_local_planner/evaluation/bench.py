@@ -32,6 +32,12 @@ goal as in the paper; the paper's sinusoid itself crosses the box for the Jackal
 an Assumption 1 violation for that path) and on BARN world 0, with scan obstacles (the
 perception rows' step) and with the world's obstacles known (the MPC's step alone).
 
+Control rate (section 'rate'): MpcController.compute called at CONTROL_FREQUENCY (20 Hz,
+t = k / 20) in closed loop on the paper's scenario (N = 10, h = 0.2 s, the model as the
+plant): the MPC solves once per step, so three calls in four apply the held plan after the
+safety checks; their times are reported apart from the solving calls' and together
+(median, p99, max), which is what a 20 Hz control timer has to fit into its 50 ms period.
+
 Usage: ``python -m mpc_local_planner.evaluation.bench [--quick] [--skip-dds] [--out FILE]
 [--sections ...]``.
 """
@@ -76,6 +82,7 @@ from mpc_local_planner.worlds.world import load_barn_world, paper_world, World
 __all__ = [
     'barn_line_poses',
     'bench_footprint',
+    'bench_control_rate',
     'bench_laser',
     'bench_scan_control',
     'bench_scan_obstacles',
@@ -115,8 +122,12 @@ FOOTPRINT_SCENARIOS = ('paper', 'barn', 'barn_map')
 FOOTPRINT_HORIZON = 10
 TARGET_FOOTPRINT_SOLVE_MS = 2.0
 TARGET_FOOTPRINT_STEP_MS = TARGET_CONTROL_STEP_MS
+# The control-rate rows: commands per second (ControllerSettings.control_frequency, the
+# node's default), and the MPC's horizon there.
+CONTROL_FREQUENCY = 20.0
+RATE_HORIZON = 10
 # What main() can run, in this order (dds also needs no --skip-dds).
-SECTIONS = ('horizons', 'obstacles', 'rrt', 'perception', 'footprint', 'dds')
+SECTIONS = ('horizons', 'obstacles', 'rrt', 'perception', 'footprint', 'rate', 'dds')
 
 
 def paper_obstacle() -> ConvexPolygon:
@@ -488,6 +499,85 @@ def bench_footprint(scenario: str, steps: int, *, footprint: Footprint = JACKAL,
             **result}
 
 
+def _tail_stats(values: list[float]) -> dict[str, float]:
+    """Return median, p99 and max (ms): a timer's period must hold the tail, not the median."""
+    a = np.asarray(values, dtype=float)
+    if a.size == 0:
+        return {'median': math.nan, 'p99': math.nan, 'max': math.nan}
+    return {'median': float(np.median(a)), 'p99': float(np.percentile(a, 99)),
+            'max': float(np.max(a))}
+
+
+def _rate_run(controller: MpcController, calls: int) -> dict[str, Any]:
+    """Drive the paper's sinusoid with compute at CONTROL_FREQUENCY; time each call."""
+    model, dt = controller.model, 1.0 / CONTROL_FREQUENCY
+    controller.set_path(paper_sinusoid())
+    x = np.array(paper_sinusoid().start, dtype=float)
+    solves, holds, reached = [], [], False
+    for k in range(calls):
+        start = time.perf_counter()
+        output = controller.compute(x, k * dt)
+        elapsed = 1e3 * (time.perf_counter() - start)
+        # a solve: fresh with a solution; a hold: not fresh (stops and turns are neither)
+        if output.fresh and output.solution is not None:
+            solves.append(elapsed)
+        elif not output.fresh:
+            holds.append(elapsed)
+        if output.reason is Reason.GOAL_REACHED:
+            reached = True
+            break
+        x = model.step(x, output.u, dt)
+    return {'solve_calls': solves, 'hold_calls': holds, 'reached': reached,
+            'calls': k + 1 if calls else 0}
+
+
+def bench_control_rate(calls: int, *, compile_functions: bool = True) -> dict[str, Any]:
+    """Time MpcController.compute at CONTROL_FREQUENCY on the paper's scenario (N = 10).
+
+    A closed loop on the model (the plant integrates each call's command over 1 /
+    CONTROL_FREQUENCY) with calls at t = k / CONTROL_FREQUENCY: the MPC solves at one call
+    in step * CONTROL_FREQUENCY (four at h = 0.2 s), the others apply the last verified
+    plan's input after the safety checks. An untimed first run builds (and compiles) the
+    NLPs. Reported apart: the solving calls, the holding calls, and all calls together.
+    """
+    config = MpcConfig(horizon=RATE_HORIZON, step=STEP, compile=compile_functions)
+    settings = ControllerSettings(xy_goal_tolerance=REACHED_POSITION,
+                                  yaw_goal_tolerance=REACHED_HEADING,
+                                  control_frequency=CONTROL_FREQUENCY)
+    controller = MpcController(Unicycle(), config, obstacles=[paper_obstacle()],
+                               settings=settings)
+    _rate_run(controller, calls)  # builds the NLPs it meets
+    controller.mpc.wait_compiled()
+    controller.clear_path()
+    run = _rate_run(controller, calls)
+    solves, holds = run['solve_calls'], run['hold_calls']
+    return {'frequency': CONTROL_FREQUENCY, 'step': STEP, 'horizon': config.horizon,
+            'solver': config.solver if not compile_functions else f'{config.solver}+compiled',
+            'max_calls': calls, 'calls': run['calls'], 'reached': run['reached'],
+            'solves': len(solves), 'holds': len(holds),
+            'solve_ms': _tail_stats(solves), 'hold_ms': _tail_stats(holds),
+            'all_ms': _tail_stats(solves + holds)}
+
+
+def _rate_lines(rate: dict[str, Any]) -> list[str]:
+    """Return the control-rate table: solving calls, holding calls, all; then context."""
+    title = f"compute at {rate['frequency']:g} Hz (N = {rate['horizon']})"
+    lines = [f'| {title:<25} | calls | median ms |  p99 ms  |  max ms  |',
+             '|---------------------------|-------|-----------|----------|----------|']
+    for name, key, count in (('solving (once per step h)', 'solve_ms', rate['solves']),
+                             ('holding the verified plan', 'hold_ms', rate['holds']),
+                             ('all', 'all_ms', rate['solves'] + rate['holds'])):
+        f = rate[key]
+        lines.append(f"| {name:<25} | {count:>5} | {f['median']:9.3f} | {f['p99']:8.3f} "
+                     f"| {f['max']:8.3f} |")
+    lines.append(
+        f"paper's scenario, {rate['solver']}, h = {rate['step']:g} s, calls at t = k / "
+        f"{rate['frequency']:g} s: {rate['calls']} of at most {rate['max_calls']} calls, "
+        f"{'goal reached' if rate['reached'] else 'goal not reached'}; the period is "
+        f"{1e3 / rate['frequency']:g} ms.")
+    return lines
+
+
 def _verdict(figures: dict[str, float], target: float) -> str:
     """Say whether the median meets the target, as every target row of the tables does."""
     return 'met' if figures['median'] <= target else 'MISSED'
@@ -604,17 +694,19 @@ HEADER = ('| backend          |   N | obs | reach | active | solve ms |  p95 ms 
 
 
 def main(argv: Sequence[str] | None = None, *, footprint_compile: bool = True,
-         footprint_steps: int | None = None) -> int:
+         footprint_steps: int | None = None, rate_compile: bool = True,
+         rate_calls: int | None = None) -> int:
     """Run the benchmark, print the tables and write JSON.
 
     footprint_compile: compile the footprint rows' NLPs with gcc (as a robot would run
     them); False times the interpreted functions, and footprint_steps caps each footprint
     row's steps: a test uses both to check the rows' form without waiting minutes for gcc.
+    rate_compile and rate_calls do the same for the control-rate rows.
     """
     parser = argparse.ArgumentParser(prog='mpc_bench', description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true',
                         help='fewer steps, N = 10 and 40 only, 50 scans and 60 control steps '
-                             '(also per footprint row)')
+                             '(also per footprint row), 240 calls at the control rate')
     parser.add_argument('--skip-dds', action='store_true', help='skip the ROS 2 measurement')
     parser.add_argument('--out', default='bench.json', help='JSON output file')
     parser.add_argument('--backends', nargs='*', default=list(SOLVERS),
@@ -689,6 +781,16 @@ def main(argv: Sequence[str] | None = None, *, footprint_compile: bool = True,
                 for scenario in FOOTPRINT_SCENARIOS]
         results['footprint'] = rows
         for line in _footprint_lines(rows):
+            print(line, flush=True)
+
+    if 'rate' in sections:
+        calls = rate_calls if rate_calls is not None else (240 if args.quick else 1000)
+        print(f'\ncontrol rate: MpcController.compute at {CONTROL_FREQUENCY:g} Hz in closed '
+              f'loop, the MPC solving once per step h = {STEP:g} s, ms per call after an '
+              'untimed warm-up', flush=True)
+        rate = bench_control_rate(calls, compile_functions=rate_compile)
+        results['rate'] = rate
+        for line in _rate_lines(rate):
             print(line, flush=True)
 
     if 'dds' in sections and not args.skip_dds:

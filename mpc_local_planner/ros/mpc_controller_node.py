@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""mpc_controller: the paper's MPC every `step` seconds of ROS time on odom and plan.
+"""mpc_controller: the paper's MPC on odom and plan, cmd_vel at ``control_frequency``.
 
 A lifecycle node, as Nav2's servers are. Unconfigured after construction (parameters
 declared, nothing else); ``configure`` loads the world, builds the MPC and creates the
@@ -21,6 +21,22 @@ the control timer, and only then is anything published; ``deactivate`` publishes
 cmd_vel and stops the timer; ``cleanup`` frees the NLP and every publisher and
 subscription; ``shutdown`` does the same (with a zero cmd_vel first when active). With
 ``autostart`` (the default) ``run_node`` configures and activates at start.
+
+The control timer runs at ``control_frequency`` (Hz of ROS time, 20 by default, Nav2's
+controller_server name), independent of the MPC's step h (``step``, 0.2 s): a real base
+wants commands at 10-20 Hz, while the MPC predicts in steps of h. The MPC solves once per
+step; the ticks between publish the input the last verified plan gives for now, after every
+safety check (stale or invalid input stops the robot at the next tick, not the next solve),
+and ``mpc/diagnostics`` says ``solved`` false for them. A ``control_frequency`` of 1 / step
+or less solves at every tick. Changing ``control_frequency`` or ``step`` restarts the timer.
+
+The base's limits, Nav2 velocity_smoother's names ([v, omega]; [0.0, 0.0] = none, the
+default): with ``max_accel`` the NLP bounds each input change by max_accel h, starting from
+the input commanded before (or the measured twist of the latest odometry after a stop), so
+the plan is one the base can follow; with ``max_decel`` every stop of a moving robot (stale,
+invalid or missing input, a failure) brakes along the last verified plan within those
+limits (core/braking.py) instead of commanding zero at once, which a base with finite
+deceleration could not follow anyway: it would coast into space no plan checked.
 
 The robot's pose in the plan's frame (``frame_id``) comes from a localizer's pose topic
 (``localization_topic``) composed with odometry, from tf2 when importable, or else is the
@@ -216,16 +232,18 @@ SENSING_MARGIN = 0.5
 MAX_SCAN_BYTES = 2 * 4 * MAX_BEAMS + 4096
 
 _SUMMARY = """\
-The MPC of Lorenzen et al. (a lifecycle node): every `step` seconds of ROS time while active,
-it solves for the latest odom (nav_msgs/Odometry) along the latest plan (nav_msgs/Path,
-transient_local; or an analytic path) and publishes cmd_vel (geometry_msgs/Twist, or
-TwistStamped with enable_stamped_cmd_vel), local_plan (the prediction), mpc/diagnostics,
+The MPC of Lorenzen et al. (a lifecycle node): while active it solves once per `step` seconds
+of ROS time for the latest odom (nav_msgs/Odometry) along the latest plan (nav_msgs/Path,
+transient_local; or an analytic path), and control_frequency times a second it publishes
+cmd_vel (geometry_msgs/Twist, or TwistStamped with enable_stamped_cmd_vel: the last verified
+plan's input between solves), local_plan (the prediction), mpc/diagnostics,
 mpc/obstacles (visualization_msgs/MarkerArray: the obstacles raw, grown, and those active in
 the NLP) and mpc/footprint (geometry_msgs/PolygonStamped: the footprint parameter's polygon,
 else the world's, else the circle of robot_radius). Obstacles come from the world file,
 scan (sensor_msgs/LaserScan) and map (nav_msgs/OccupancyGrid), as obstacle_sources says.
 Invalid input, and a stale scan when the laser is a source, stops the robot (zero cmd_vel)
-until valid input comes. With autostart false it waits unconfigured for a
+until valid input comes (braking along the last verified plan within max_decel, if set).
+With autostart false it waits unconfigured for a
 lifecycle manager; deactivate publishes one zero cmd_vel."""
 
 
@@ -279,6 +297,10 @@ class MpcControllerNode(ManagedNode):
         # frame made of it at the latest control step (RobotPose.current) and its time
         self._odom_state: np.ndarray | None = None
         self._odom_time: float | None = None
+        # the latest odometry's measured twist (v, omega), None when unknown or not finite:
+        # the MPC's rate bounds (max_accel) start from it after a stop, as the base may
+        # still be moving
+        self._odom_twist: np.ndarray | None = None
         self._state: np.ndarray | None = None
         self._state_time: float | None = None
         # what is wrong with the latest odometry / plan / pose in the plan's frame (None when
@@ -376,7 +398,8 @@ class MpcControllerNode(ManagedNode):
                  else f'the footprint {shape.vertices.tolist()}')
         self.get_logger().info(f'configured: {len(obstacles)} obstacles from the world, '
                                f'sources {sorted(sources)}, horizon {config.horizon}, step '
-                               f'{config.step:g} s, the robot {robot}; the pose in '
+                               f'{config.step:g} s, cmd_vel at {settings.control_frequency:g} '
+                               f'Hz, the robot {robot}; the pose in '
                                f'{values["frame_id"]!r} from {self._pose_source.describe()}')
         return super().on_configure(state)
 
@@ -519,7 +542,7 @@ class MpcControllerNode(ManagedNode):
             if 'analytic_path' in names and values['analytic_path']:
                 self.controller.set_path(analytic_path(values['analytic_path']))
                 self._plan_problem = None  # the plan topic is ignored from now on
-            if 'step' in names and self._timer is not None:
+            if names & {'step', 'control_frequency'} and self._timer is not None:
                 self._make_timer()
             if ('obstacle_memory' in names and self._local is not None
                     and self._local.memory is not None):
@@ -529,10 +552,14 @@ class MpcControllerNode(ManagedNode):
             return
         self.get_logger().info(f'parameters changed: {sorted(names)}')
 
+    def _control_period(self) -> float:
+        """Return the control timer's period (s of ROS time): 1 / control_frequency."""
+        return 1.0 / float(self.get_parameter('control_frequency').value)
+
     def _make_timer(self) -> None:
+        """(Re)start the control timer at control_frequency (the MPC's step is apart)."""
         self._destroy_timer()
-        step = float(self.get_parameter('step').value)
-        self._timer = self.create_timer(step, self.timer_callback)
+        self._timer = self.create_timer(self._control_period(), self.timer_callback)
 
     # ------------------------------------------------------------------ callbacks
     def _now(self) -> float:
@@ -551,6 +578,7 @@ class MpcControllerNode(ManagedNode):
             state = self.controller.check_state(odometry_to_state(msg))
         except Exception as err:  # ValueError, or a message gone wrong
             self._odom_state, self._odom_time = None, None
+            self._odom_twist = None
             self._state, self._state_time = None, None
             self._odom_problem = str(err) or type(err).__name__
             if self._problems.report('odom'):
@@ -559,11 +587,13 @@ class MpcControllerNode(ManagedNode):
                     'valid odometry comes')
             return
         stamp = stamp_to_seconds(msg.header.stamp)
+        twist = odometry_twist(msg)
         self._odom_state = state
         self._odom_time = min(stamp, receipt) if stamp > 0 else receipt
+        self._odom_twist = twist if np.all(np.isfinite(twist)) else None
         self._odom_problem = None
         self._pose_source.add_odometry(stamp if stamp > 0 else receipt, state,
-                                       msg.header.frame_id, odometry_twist(msg))
+                                       msg.header.frame_id, twist)
         if self._problems.resolve('odom'):
             self.get_logger().info('odometry is valid again')
         self._place_pending()
@@ -846,29 +876,34 @@ class MpcControllerNode(ManagedNode):
             self.get_logger().warning(f'could not prepare the NLPs: {err}')
 
     def timer_callback(self) -> None:
-        """Solve, then publish cmd_vel, local_plan and diagnostics; zero on any failure."""
+        """Control (solve or hold), then publish cmd_vel, local_plan and diagnostics.
+
+        A stop (refused input, no pose) goes through the controller with now, so that a
+        moving robot brakes within max_decel rather than getting zero at once.
+        """
         now = self._now()
-        step = float(self.get_parameter('step').value)
         if (self._last_step_time is not None
-                and 0 <= now - self._last_step_time < 0.5 * step):
-            return  # a timer fired twice for one instant (ROS-time timers can): one step
+                and 0 <= now - self._last_step_time < 0.5 * self._control_period()):
+            return  # a timer fired twice for one instant (ROS-time timers can): one tick
         self._last_step_time = now
         self.control_steps += 1
         try:
             self._place_pending()  # odometry may have come since a scan began to wait
             self._locate()
             if self._odom_problem is not None:
-                output = self.controller.stop(Reason.INVALID_ODOM, self._odom_problem)
+                output = self.controller.stop(Reason.INVALID_ODOM, self._odom_problem, now=now)
             elif self._plan_problem is not None:
-                output = self.controller.stop(Reason.INVALID_PLAN, self._plan_problem)
+                output = self.controller.stop(Reason.INVALID_PLAN, self._plan_problem, now=now)
             elif self._pose_problem is not None:
-                output = self.controller.stop(Reason.NO_LOCALIZATION, self._pose_problem)
+                output = self.controller.stop(Reason.NO_LOCALIZATION, self._pose_problem,
+                                              now=now)
             else:
                 self._update_obstacles()
                 output = self.controller.compute(
                     self._state, now, state_time=self._state_time,
                     scan_required='scan' in self._sources, scan_time=self._scan_time,
-                    map_missing='map' in self._sources and self._grid is None)
+                    map_missing='map' in self._sources and self._grid is None,
+                    velocity=self._odom_twist)
         except Exception as err:  # compute never raises; belt and braces
             output = ControlOutput(np.zeros(2), None, Reason.ERROR, str(err))
         try:

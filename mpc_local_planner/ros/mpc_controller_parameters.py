@@ -19,6 +19,13 @@ mirrors the defaults, which come from the core's dataclasses); `build_settings` 
 values into the MPC's, the model's and the controller's settings, with Nav2's precedence for
 the robot's shape (`robot_footprint`); `check_obstacles` and `check_sensing` refuse values
 the node could not use, with the reason, before they are set.
+
+The base's rate limits ``max_accel`` and ``max_decel`` (Nav2 velocity_smoother's names, here
+[v, omega] in m/s^2 and rad/s^2) are double arrays, and a ROS double array cannot be None:
+[0.0, 0.0] (`RATE_LIMIT_OFF`) means none (MpcConfig.max_accel None; ControllerSettings.max_decel
+inf, a stop commands zero at once). Anything else must be two finite numbers > 0, given as
+magnitudes (Nav2's velocity_smoother writes max_decel negative; a negative value is refused
+here rather than guessed at).
 """
 
 from __future__ import annotations
@@ -36,9 +43,9 @@ from mpc_local_planner.ros.robot_pose import POSE_PARAMETERS
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world
 
-__all__ = ['BASE_FRAME', 'DEFAULTS', 'OBSTACLE_SOURCES', 'PARAMETERS', 'build_settings',
-           'check_obstacles', 'check_sensing', 'load_obstacles', 'load_robot',
-           'robot_footprint']
+__all__ = ['BASE_FRAME', 'DEFAULTS', 'OBSTACLE_SOURCES', 'PARAMETERS', 'RATE_LIMIT_OFF',
+           'build_settings', 'check_obstacles', 'check_sensing', 'load_obstacles',
+           'load_robot', 'rate_limit', 'robot_footprint']
 
 # The frame of a TwistStamped cmd_vel.
 BASE_FRAME = 'base_link'
@@ -53,9 +60,11 @@ _MPC_FIELDS = {
 }
 _MODEL_FIELDS = ('v_max', 'omega_max')
 _SETTINGS_FIELDS = ('xy_goal_tolerance', 'yaw_goal_tolerance', 'odom_timeout',
-                    'scan_timeout')
+                    'scan_timeout', 'control_frequency')
 # collision_margin None (v_max step / 2) is -1 as a parameter: a double cannot be None.
 _AUTO_MARGIN = -1.0
+# max_accel / max_decel of [0.0, 0.0]: no limit (a double array cannot be None).
+RATE_LIMIT_OFF = (0.0, 0.0)
 # The defaults come from the dataclasses (the paper's values), the single source.
 _CONFIG, _MODEL, _SETTINGS = MpcConfig(), Unicycle(), ControllerSettings()
 _SHAPE = 'changes the NLP shape: rebuilt before the next solve'
@@ -67,8 +76,25 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('horizon', int(_CONFIG.horizon), f'prediction steps N; {_SHAPE}',
                   int_range=(1, 200)),
     ParameterSpec('step', float(_CONFIG.step),
-                  f'sampling time h (s of ROS time) and control period; {_SHAPE}',
+                  f'sampling time h (s of ROS time): the MPC solves once per step; {_SHAPE}',
                   float_range=(0.01, 5.0)),
+    ParameterSpec('control_frequency', float(_SETTINGS.control_frequency),
+                  "cmd_vel per second (Hz of ROS time; Nav2's controller_server name): the "
+                  'control timer runs at this rate, independent of step; between solves '
+                  "each tick applies the last verified plan's input after every safety "
+                  'check (1 / step or less: every tick solves); restarts the timer',
+                  float_range=(0.1, 1000.0)),
+    ParameterSpec('max_accel', list(RATE_LIMIT_OFF),
+                  "the base's acceleration limits [v, omega] (m/s^2, rad/s^2; Nav2 "
+                  "velocity_smoother's name): the NLP bounds each input change by "
+                  "max_accel step, so the plan is one the base can follow; [0.0, 0.0] = "
+                  f"none (inputs may jump, the paper's model); {_SHAPE}"),
+    ParameterSpec('max_decel', list(RATE_LIMIT_OFF),
+                  "the base's deceleration limits [v, omega] (m/s^2, rad/s^2, magnitudes; "
+                  "Nav2 velocity_smoother's name): a stop of a moving robot (stale or "
+                  'invalid input, a failure) brakes along the last verified plan within '
+                  'them instead of commanding zero at once, which a real base cannot '
+                  'follow; [0.0, 0.0] = none (zero at once); next control tick'),
     ParameterSpec('v_max', float(_MODEL.v_max),
                   'speed bound |v| (m/s); rebuilds the NLP before the next solve',
                   float_range=(0.001, 10.0)),
@@ -170,6 +196,26 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
 DEFAULTS: dict[str, Any] = {spec.name: spec.default for spec in PARAMETERS}
 
 
+def rate_limit(name: str, value: Any) -> tuple[float, float] | None:
+    """Return a max_accel / max_decel parameter as limits, or None for RATE_LIMIT_OFF.
+
+    Raises:
+        ValueError: unless it is [0.0, 0.0] or two finite numbers > 0, with the reason.
+
+    """
+    try:
+        limits = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        limits = ()
+    if limits == RATE_LIMIT_OFF:
+        return None
+    if len(limits) != 2 or not all(math.isfinite(v) and v > 0 for v in limits):
+        msg = (f'{name} must be [v, omega], two finite numbers > 0 (m/s^2, rad/s^2, '
+               f'magnitudes), or [0.0, 0.0] for none; got {list(value)}')
+        raise ValueError(msg)
+    return limits  # type: ignore[return-value]  # two floats, checked above
+
+
 def load_robot(world_file: str) -> tuple[list[ConvexPolygon], Footprint]:
     """Return the obstacles and the robot's footprint of a world file.
 
@@ -241,12 +287,15 @@ def build_settings(values: dict[str, Any], *, world_radius: float = 0.0,
     mpc_kwargs['max_solve_time'] = None if budget <= 0 else budget
     mpc_kwargs['robot_radius'] = max(float(values['robot_radius']), world_radius)
     mpc_kwargs['footprint'] = robot_footprint(values['footprint'], world_footprint)
+    mpc_kwargs['max_accel'] = rate_limit('max_accel', values['max_accel'])
+    decel = rate_limit('max_decel', values['max_decel'])
     config = MpcConfig(**mpc_kwargs)  # raises ValueError with validate_mpc_config's reasons
     model = Unicycle(**{name: float(values[name]) for name in _MODEL_FIELDS},
                      v_min=None if values['allow_reversing'] else 0.0)
     settings = ControllerSettings(**{k: float(values[k]) for k in _SETTINGS_FIELDS},
                                   stateful=bool(values['stateful']),
-                                  max_plan_poses=int(values['max_plan_poses']))
+                                  max_plan_poses=int(values['max_plan_poses']),
+                                  max_decel=(math.inf, math.inf) if decel is None else decel)
     return config, model, settings
 
 

@@ -234,6 +234,16 @@ def test_controller_applies_a_new_horizon_at_the_next_solve(ros) -> None:
     ('xy_goal_tolerance', -0.1, 'out of range'),  # the declared range
     ('yaw_goal_tolerance', math.nan, 'out of range'),
     ('xy_goal_tolerance', math.inf, 'out of range'),
+    ('control_frequency', 0.0, 'out of range'),
+    ('control_frequency', -20.0, 'out of range'),
+    ('control_frequency', math.nan, 'out of range'),
+    ('control_frequency', math.inf, 'out of range'),
+    ('max_accel', [2.0], 'max_accel must be [v, omega]'),
+    ('max_accel', [2.0, 0.0], 'or [0.0, 0.0] for none'),  # off is both or neither
+    ('max_accel', [math.nan, 3.0], 'two finite numbers > 0'),
+    ('max_decel', [-2.0, -3.0], 'magnitudes'),  # Nav2's velocity_smoother writes them < 0
+    ('max_decel', [math.inf, 3.0], 'max_decel must be [v, omega]'),
+    ('max_decel', [2.0, 3.0, 0.0], 'max_decel must be [v, omega]'),
 ])
 def test_controller_refuses_invalid_parameters_with_a_reason(ros, name, value, reason) -> None:
     controller, _ = make_controller(ros)
@@ -259,6 +269,29 @@ def test_controller_takes_nav2s_goal_checker_parameters_at_run_time(ros) -> None
 
 
 # ----------------------------------------------------------------------------- planner
+def test_controller_takes_its_rate_and_the_bases_limits_at_run_time(ros) -> None:
+    controller, _ = make_controller(ros)
+    # the defaults: 20 Hz, no limits ([0.0, 0.0] is none: a double array cannot be None)
+    assert controller._timer.timer_period_ns == 50_000_000
+    assert controller.controller.settings.control_frequency == 20.0
+    assert controller.controller.settings.max_decel == (math.inf, math.inf)
+    assert controller.controller.config.max_accel is None
+    results = controller.set_parameters([Parameter('control_frequency', value=10.0),
+                                         Parameter('max_accel', value=[2.0, 3.0]),
+                                         Parameter('max_decel', value=[1.5, 2.5])])
+    assert all(r.successful for r in results), [r.reason for r in results]
+    assert controller._timer.timer_period_ns == 100_000_000  # the timer was restarted
+    assert controller.controller.settings.control_frequency == 10.0
+    assert controller.controller.settings.max_decel == (1.5, 2.5)
+    assert controller.controller.config.max_accel == (2.0, 3.0)  # the NLPs rebuild
+    result = controller.set_parameters([Parameter('step', value=0.1)])[0]
+    assert result.successful, result.reason
+    assert controller._timer.timer_period_ns == 100_000_000  # control_frequency's, not step's
+    result = controller.set_parameters([Parameter('max_accel', value=[0.0, 0.0])])[0]
+    assert result.successful, result.reason
+    assert controller.controller.config.max_accel is None
+
+
 def test_planner_path_starts_at_odometry_ends_at_goal_and_is_collision_free(ros) -> None:
     goal = [float(v) for v in WORLD.goal]
     planner = started(ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[

@@ -70,7 +70,7 @@ WORLD = paper_world()
 PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
                  [2.5, 0.0, WORLD.goal[2]]])
 U_MAX = Unicycle().u_max
-STEP = 0.2  # the controller's default control period (s)
+STEP = 0.2  # the controller's default step h (s): an upper bound of its control period (20 Hz)
 ODOM_TIMEOUT = 0.5  # the controller's default odom_timeout (s)
 
 
@@ -403,7 +403,10 @@ def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_th
         lambda: sum(d.step.reason is Reason.STOP for d in after_patch()) >= 3,
         timeout=60.0), after_patch()[-3:]
     steps = after_patch()
-    candidates = [d for d in steps if d.step.source is PlanSource.CANDIDATE and applied(d).any()]
+    # the MPC solves once per step h; the control ticks between (control_frequency) apply
+    # the same input again, so the candidates are counted at the ticks that solved
+    candidates = [d for d in steps if d.step.solved and d.step.source is PlanSource.CANDIDATE
+                  and applied(d).any()]
     # the proof's candidate: the verified inputs shifted by one step per failure...
     assert 1 <= len(candidates) <= horizon
     for k, diag in enumerate(candidates, start=1):
@@ -413,7 +416,7 @@ def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_th
     # ...then it has run out: zero from the N-th failure on, the robot stops
     stop = steps.index(next(d for d in steps if d.step.reason is Reason.STOP))
     assert steps[stop].step.failures == horizon + 1
-    assert all(not applied(d).any() for d in steps[len(candidates):])
+    assert all(not applied(d).any() for d in steps[stop:])
     assert steps[stop].level == 2
     assert steps[-1].step.failures_total >= failures_before + horizon + 1
     assert ros.spin_until(lambda: abs(probe.odoms[-1].twist.twist.linear.x) < 1e-12
@@ -726,7 +729,12 @@ class Lockstep:
         self.first_diagnostic = len(self.probe.diagnostics)
         self.first_command = len(self.simulator.received)
         rosout = len(self.probe.logs)
-        self.controller = spawn_node('mpc_controller', {'use_sim_time': True},
+        # one control tick per step h (control_frequency 1 / STEP, every tick solves): the
+        # lockstep waits for a step at each multiple of STEP, and at the default 20 Hz a
+        # tick fired late by the stepped clock (at 2.78 s for 2.75 s) makes the duplicate
+        # guard skip the one at 2.80 s; the drill is about a killed process, not the rate
+        self.controller = spawn_node('mpc_controller',
+                                     {'use_sim_time': True, 'control_frequency': 1.0 / STEP},
                                      self.logs / 'mpc_controller.log', append=again)
         published = -math.inf
 
