@@ -231,7 +231,7 @@ SENSING_MARGIN = 0.5
 # a long frame id) is refused before it is decoded.
 MAX_SCAN_BYTES = 2 * 4 * MAX_BEAMS + 4096
 
-_SUMMARY = """\
+SUMMARY = """\
 The MPC of Lorenzen et al. (a lifecycle node): while active it solves once per `step` seconds
 of ROS time for the latest odom (nav_msgs/Odometry) along the latest plan (nav_msgs/Path,
 transient_local; or an analytic path), and control_frequency times a second it publishes
@@ -1031,7 +1031,7 @@ def main(args: list[str] | None = None) -> int:
 
     ``--help`` prints the parameters with their defaults and starts nothing.
     """
-    return run_node(MpcControllerNode, 'mpc_controller', args, summary=_SUMMARY,
+    return run_node(MpcControllerNode, 'mpc_controller', args, summary=SUMMARY,
                     parameters=PARAMETERS)
 
 

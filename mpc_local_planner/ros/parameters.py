@@ -33,7 +33,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 __all__ = ['DEFAULT_WORLD_FILE', 'ParameterSpec', 'declare_parameters', 'describe',
-           'format_help']
+           'format_default', 'format_help']
 
 # The world every node and closed_loop use unless told otherwise: the paper's scenario.
 DEFAULT_WORLD_FILE = 'worlds/paper_obstacle.yaml'
@@ -99,7 +99,8 @@ def declare_parameters(node: Node, specs: Sequence[ParameterSpec]) -> None:
         node.declare_parameter(spec.name, spec.default, spec.descriptor())
 
 
-def _format_default(value: Any) -> str:
+def format_default(value: Any) -> str:
+    """Return a default as --help and docs/parameters.md show it."""
     if isinstance(value, Parameter.Type):
         return '(unset)'
     if isinstance(value, str):
@@ -107,7 +108,7 @@ def _format_default(value: Any) -> str:
     if isinstance(value, bool):
         return 'true' if value else 'false'
     if isinstance(value, (list, tuple)):
-        return '[' + ', '.join(_format_default(v) for v in value) + ']'
+        return '[' + ', '.join(format_default(v) for v in value) + ']'
     return f'{value:g}' if isinstance(value, float) else str(value)
 
 
@@ -120,6 +121,6 @@ def format_help(executable: str, summary: str, specs: Sequence[ParameterSpec]) -
     for spec in specs:
         limits = spec.float_range or spec.int_range
         bounds = f' [{limits[0]:g}, {limits[1]:g}]' if limits else ''
-        lines.append(f'  {spec.name:<{width}}  {_format_default(spec.default)}{bounds}: '
+        lines.append(f'  {spec.name:<{width}}  {format_default(spec.default)}{bounds}: '
                      f'{spec.description}')
     return '\n'.join(lines) + '\n'
