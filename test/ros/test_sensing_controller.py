@@ -133,7 +133,14 @@ class World:
         if self.scanning:
             self.scan_pub.publish(self.scan_message(self.state, self.t))
         self.probe.publish_clock(self.t)
-        for _ in range(6):
+        # lockstep: spin until the controller has stepped at this instant (its diagnostics
+        # stamped now), so that a fast-ticking test never runs ahead of the node and leaves
+        # its scans queued; a tick the timer skips (clock rounding) ends by the short cap
+        deadline = time.monotonic() + 0.5
+        while time.monotonic() < deadline and not (
+                self.probe.diagnostics and self.probe.diagnostics[-1].stamp >= self.t - 1e-6):
+            self.ros.executor.spin_once(timeout_sec=0.002)
+        for _ in range(3):
             self.ros.executor.spin_once(timeout_sec=0.002)
 
     def run_until(self, condition: Callable[[], bool], timeout: float = 60.0) -> bool:
