@@ -723,10 +723,11 @@ class MpcController:
                     self._brake.stop()
                     return ControlOutput(turn, None, Reason.ROTATE_TO_HEADING)
             held = self._held
-            if held is not None and now - self._held_time < self._hold_period():
+            # (a clock that jumped back solves at once: the held plan's time is not now's)
+            if held is not None and 0.0 <= now - self._held_time < self._hold_period():
                 return held._replace(fresh=False)
             stopped = self._stopped
-            if stopped is not None and now - stopped[0] < self._hold_period():
+            if stopped is not None and 0.0 <= now - stopped[0] < self._hold_period():
                 # the solver found no verified input at this step: keep braking (or
                 # standing) until the next step's instant, as a plan is kept for its step
                 return self._idle(Reason.STOP, stopped[1].detail, now=now,

@@ -231,6 +231,9 @@ class PlanTrigger(str, Enum):
     GOAL = 'goal'  # a new goal (the parameter or goal_pose)
     BLOCKED = 'blocked'  # the rest of the plan in force came too close to an obstacle
     PERIODIC = 'periodic'  # replan_period elapsed
+    # the robot has not moved progress_radius in progress_timeout, away from the goal (Nav2's
+    # progress checker): a plan from where it stands may be one it can follow
+    NO_PROGRESS = 'no_progress'
 
     def __str__(self) -> str:
         return self.value

@@ -31,6 +31,14 @@
   robot's pose.
 - **Periodic**: otherwise, with ``replan_period`` > 0, the goal in force is re-planned at the
   first check at least ``replan_period`` seconds after the plan in force was made.
+- **No progress** (Nav2's progress checker): otherwise, with ``progress_timeout`` > 0, when
+  the robot, farther than ``progress_radius`` from the goal, has not moved
+  ``progress_radius`` from where it was ``progress_timeout`` seconds ago (or since the plan
+  in force was made), the goal is re-planned from where it stands. A real robot that
+  re-planned while moving coasts on past the new plan's start; a forward-only one may then
+  have the plan behind it, and its controller no verified way back onto it. The clock of
+  this rule restarts at each attempt, so a robot that cannot be helped is re-planned once
+  per ``progress_timeout``.
 - **Re-plans** go through ``RrtStarPlanner.replan``: from the robot's pose, or from the
   nearest clear point within ``escape_distance`` when the robot stands within the clearance.
 - **Failures**: a failed re-plan keeps the plan in force (and is checked again at the next
@@ -99,6 +107,11 @@ class ReplanSettings:
         escape_distance: How far a re-plan may start from a robot standing within the
             planner's clearance (RrtStarPlanner.replan).
         slack: How much earlier than check_period a check still counts as due, seconds.
+        progress_timeout: Re-plan from where the robot stands when it has not moved
+            progress_radius in this many seconds away from the goal; 0 = never (Nav2's
+            movement_time_allowance).
+        progress_radius: Metres that count as progress (Nav2's required_movement_radius),
+            and the distance to the goal within which standing still is arriving.
 
     """
 
@@ -106,10 +119,13 @@ class ReplanSettings:
     replan_period: float = 0.0
     escape_distance: float = 1.0
     slack: float = TIME_EPSILON
+    progress_timeout: float = 0.0
+    progress_radius: float = 0.25
 
     def __post_init__(self) -> None:
         """Refuse negative or non-finite periods."""
-        for name in ('check_period', 'replan_period', 'escape_distance', 'slack'):
+        for name in ('check_period', 'replan_period', 'escape_distance', 'slack',
+                     'progress_timeout', 'progress_radius'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 problem = f'{name} must be finite and >= 0, got {value}'
@@ -188,6 +204,9 @@ class Replanner:
         self.replans = 0
         self.replan_failures = 0
         self.consecutive_failures = 0
+        # where the robot was when progress was last measured, and when (No progress)
+        self._anchor: np.ndarray | None = None
+        self._anchor_time = -math.inf
 
     @property
     def plan(self) -> np.ndarray | None:
@@ -235,7 +254,8 @@ class Replanner:
             grid: The grid a re-plan may escape on (None: no escape).
 
         Returns:
-            NOT_DUE, CLEAR, or the re-plan's PLANNED or FAILED (trigger BLOCKED or PERIODIC).
+            NOT_DUE, CLEAR, or the re-plan's PLANNED or FAILED (trigger BLOCKED, PERIODIC
+            or NO_PROGRESS).
 
         """
         settings = self.settings
@@ -251,7 +271,27 @@ class Replanner:
                 and now - self._plan_time >= settings.replan_period - TIME_EPSILON):
             return self._attempt(planner, start, self._goal, PlanTrigger.PERIODIC, now=now,
                                  grid=grid)
+        if self._no_progress(start, now):
+            return self._attempt(planner, start, self._goal, PlanTrigger.NO_PROGRESS, now=now,
+                                 grid=grid)
         return ReplanDecision(ReplanOutcome.CLEAR)
+
+    def _no_progress(self, start: np.ndarray, now: float) -> bool:
+        """Say whether the robot has stood for progress_timeout away from the goal."""
+        settings = self.settings
+        if settings.progress_timeout <= 0.0 or self._goal is None:
+            return False
+        position = np.asarray(start, dtype=float)[:2]
+        if self._anchor is None or float(np.hypot(*(position - self._anchor))) \
+                >= settings.progress_radius:
+            self._anchor, self._anchor_time = position.copy(), now
+            return False
+        if float(np.hypot(*(position - self._goal[:2]))) <= settings.progress_radius:
+            return False  # at the goal: standing is arriving
+        if now - self._anchor_time < settings.progress_timeout - TIME_EPSILON:
+            return False
+        self._anchor_time = now  # once per progress_timeout, whatever the attempt gives
+        return True
 
     def _attempt(self, planner: ReplanningPlanner, start: np.ndarray, goal: np.ndarray,
                  trigger: PlanTrigger, *, now: float, grid: EscapeGrid | None = None,
@@ -276,6 +316,7 @@ class Replanner:
         seconds = time.perf_counter() - started
         waypoints = np.asarray(waypoints, dtype=float)
         self._plan, self._goal, self._plan_time = waypoints, goal, now
+        self._anchor, self._anchor_time = start[:2].copy(), now
         if trigger is PlanTrigger.GOAL:
             self._checked = now
         else:

@@ -102,6 +102,9 @@ class NavigationSettings:
             planner's clearance (see PlanningGrid.escape_point).
         sense: The laser is on. Off, nothing but the map is known: no scans, no re-plans.
         scan_period: Seconds between two scans; None: one scan per control step.
+        progress_timeout: Re-plan from where the robot stands when it has not moved
+            progress_radius in this many seconds (the node's progress_timeout); 0 = never.
+        progress_radius: Metres that count as progress (the node's progress_radius).
 
     """
 
@@ -115,6 +118,8 @@ class NavigationSettings:
     escape_distance: float = 1.0
     sense: bool = True
     scan_period: float | None = None
+    progress_timeout: float = 5.0
+    progress_radius: float = 0.25
 
     def replan_settings(self) -> ReplanSettings:
         """Return the re-planner's settings (without sensing the grid never changes: no checks).
@@ -124,7 +129,8 @@ class NavigationSettings:
         """
         return ReplanSettings(
             check_period=self.replan_check_period if self.sense else 0.0,
-            replan_period=self.replan_period, escape_distance=self.escape_distance)
+            replan_period=self.replan_period, escape_distance=self.escape_distance,
+            progress_timeout=self.progress_timeout, progress_radius=self.progress_radius)
 
 
 class LocalController(Protocol):

@@ -256,8 +256,11 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
          budget: str = EVALUATION_BUDGET, reality: Reality | None = None) -> Any:
     """Return the cached MpcController or TrackingMPC for the robot, reset for a new run.
 
-    With a real base (reality), the paper's MPC is told its limits as a user sets them:
-    max_accel (its inputs cannot jump) and the controller's max_decel (stops brake).
+    With a real base (reality), the paper's MPC is told its deceleration limits (stops
+    brake along the last verified plan, ControllerSettings.max_decel) and keeps a collision
+    margin for the base's lag (REALITY_MARGIN). Its NLP does not bound the input rates
+    (MpcConfig.max_accel): with the base's limits there, a standing robot's rate-bounded NLP
+    often found no verified plan within the step's iterations (docs/real_robot.md).
     """
     accel = reality.acceleration if reality is not None and all(
         math.isfinite(a) for a in reality.acceleration) else None
@@ -269,7 +272,6 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
                          v_min=None if robot.reverses else 0.0)
         config = MpcConfig(robot_radius=robot.footprint.radius if robot.footprint.is_circle
                            else 0.0, footprint=_vertices(robot.footprint), budget=budget,
-                           max_accel=accel if name == 'proposed' else None,
                            collision_margin=REALITY_MARGIN if reality is not None else None)
         if name == 'proposed':
             settings = ControllerSettings(xy_goal_tolerance=0.05, yaw_goal_tolerance=math.pi,

@@ -181,3 +181,11 @@ def test_after_a_stop_the_mpc_tries_again_at_the_next_step_not_at_every_call():
     assert all(out.reason is Reason.STOP for out in outputs)
     assert len(solves) == 5
     assert [out.fresh for out in outputs[:5]] == [True, False, False, False, True]
+
+
+def test_a_clock_that_jumps_back_solves_at_once():
+    controller = _controller(control_frequency=20.0)
+    x = np.array(WORLD.start, dtype=float)
+    assert controller.compute(x, 5.0).fresh
+    assert not controller.compute(x, 5.05).fresh
+    assert controller.compute(x, 1.0).fresh  # e.g. a simulation restarted its /clock
