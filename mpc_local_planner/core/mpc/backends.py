@@ -35,6 +35,7 @@ limit is always kept, by an interpreted copy if need be.
 
 from __future__ import annotations
 
+from collections import deque
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 import fcntl
@@ -56,14 +57,17 @@ from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.mpc.formulation import Formulation
 
 __all__ = ['Nlp', 'SolverRun', 'backend_options', 'build_nlp', 'compile_cache_dir',
-           'iteration_levels', 'run_solver', 'stage_size']
+           'compile_wait_seconds', 'iteration_levels', 'run_solver', 'stage_size']
 
 _LOG = logging.getLogger(__name__)
 
-# C compiler and flags for config.compile; CC overrides the compiler as usual.
-COMPILE_FLAGS = ('-O2', '-fPIC', '-shared')
-# One compilation at a time (the machine may have two cores and a control loop to run).
-_COMPILE_LOCK = threading.Lock()
+# C compiler and flags for config.compile; CC overrides the compiler as usual. -O0, not -O2:
+# gcc took 5x less time on the Jackal's polygon NLPs (4.6 s instead of 25.6 s for 3 boxes,
+# 17 s instead of 88 s for 10 octagons, on 2 loaded cores) and the solves 1.2x more (most of
+# a solve is the solver's own linear algebra, compiled with the solver), with the same
+# results to the bit (x86-64: no -ffast-math, no fused multiply-add); see docs/results.md,
+# "Cold start". The flags are part of the cache key (_library_path).
+COMPILE_FLAGS = ('-O0', '-fPIC', '-shared')
 # Iteration limits of the copies a call with little time left runs instead of the full solver
 # (fatrop: no time limit of its own), as fractions of config.max_iterations: halving keeps the
 # copies few (one per level and NLP, built when first needed) and wastes at most half of what
@@ -311,7 +315,10 @@ class Nlp:
         """Swap in the compiled solver once its background compilation is done.
 
         Args:
-            wait: block until the compilation is done (or failed).
+            wait: block until the compilation is done (or failed). A compilation still
+                queued behind others is run at once, in this thread (gcc is a subprocess:
+                the background one goes on meanwhile); the seconds waited are counted in
+                compile_wait_seconds().
 
         """
         future = self.pending
@@ -319,6 +326,8 @@ class Nlp:
             return
         self.pending = None
         try:
+            if not future.done():
+                _wait_for(future)
             library = future.result()
             self.solver = ca.nlpsol('mpc', self.plugin, str(library), self.options)
             self.compiled = True
@@ -493,24 +502,80 @@ def _library_path(source: str) -> Path:
     return compile_cache_dir() / f'mpc_nlp_{key}.so'
 
 
+class _CompileJob(Future):
+    """A compilation: its result (the library) once run, by the queue or by a waiter."""
+
+    def __init__(self, source: str, library: Path) -> None:
+        super().__init__()
+        self._work: tuple[str, Path] | None = (source, library)
+        self._claim = threading.Lock()
+
+    def run(self) -> None:
+        """Compile, unless it is (being) done already: whoever comes first runs it."""
+        with self._claim:
+            work, self._work = self._work, None
+        if work is None:
+            return
+        try:
+            self.set_result(_compile(*work))
+        except BaseException as err:  # handed to the waiting solver
+            self.set_exception(err)
+
+
+# Compilations not yet started, in the order they were asked for; one daemon thread runs
+# them one at a time (the machine may have two cores and a control loop to run), and a
+# step that needs one still queued runs it itself (Nlp.finish_compilation(wait=True)).
+_QUEUE: deque[_CompileJob] = deque()
+_QUEUE_READY = threading.Condition()
+_WORKER: list[threading.Thread] = []
+# seconds spent waiting for compilations, in any thread (see compile_wait_seconds)
+_WAITED = [0.0]
+
+
+def compile_wait_seconds() -> float:
+    """Return the seconds callers have waited for compilations so far in this process.
+
+    A rollout subtracts what a control step waited for its NLP's compilation from the
+    step's time: the wait happens once per NLP on a fresh machine, not in a robot's loop.
+    """
+    return _WAITED[0]
+
+
+def _wait_for(job: Future) -> None:
+    start = time.perf_counter()
+    if isinstance(job, _CompileJob):
+        job.run()  # still queued: now, here; else this returns at once
+    try:
+        job.exception()  # blocks until done
+    finally:
+        _WAITED[0] += time.perf_counter() - start
+
+
+def _queue_worker() -> None:
+    while True:
+        with _QUEUE_READY:
+            while not _QUEUE:
+                _QUEUE_READY.wait()
+            job = _QUEUE.popleft()
+        job.run()
+
+
 def _submit_compilation(source: str, library: Path) -> Future:
-    """Compile in a daemon thread: a node stopped with Ctrl-C must not wait for gcc.
+    """Queue a compilation for the daemon thread: a node stopped with Ctrl-C must not wait.
 
     A ThreadPoolExecutor's workers are joined at interpreter exit, which kept a stopped
     controller alive for the whole compilation; a daemon thread is simply dropped (the
     library is renamed into place atomically, so an interrupted build leaves no bad file).
     """
-    future: Future = Future()
-
-    def work() -> None:
-        with _COMPILE_LOCK:
-            try:
-                future.set_result(_compile(source, library))
-            except BaseException as err:  # handed to the waiting solver
-                future.set_exception(err)
-
-    threading.Thread(target=work, name='mpc_compile', daemon=True).start()
-    return future
+    job = _CompileJob(source, library)
+    with _QUEUE_READY:
+        if not _WORKER or not _WORKER[0].is_alive():
+            _WORKER[:] = [threading.Thread(target=_queue_worker, name='mpc_compile',
+                                           daemon=True)]
+            _WORKER[0].start()
+        _QUEUE.append(job)
+        _QUEUE_READY.notify()
+    return job
 
 
 def _compile(source: str, library: Path) -> Path:
