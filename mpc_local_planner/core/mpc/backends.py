@@ -35,6 +35,7 @@ limit is always kept, by an interpreted copy if need be.
 
 from __future__ import annotations
 
+import atexit
 from collections import deque
 from concurrent.futures import Future
 from dataclasses import dataclass, field
@@ -43,8 +44,10 @@ import hashlib
 import json
 import logging
 import math
+import multiprocessing.util
 import os
 from pathlib import Path
+import signal
 import subprocess
 import tempfile
 import threading
@@ -651,10 +654,42 @@ def _run_compiler(source: str, library: Path) -> Path:
         c_file = Path(tmp) / 'mpc_nlp.c'
         c_file.write_text(source)
         out = Path(tmp) / library.name
-        result = subprocess.run([compiler, *COMPILE_FLAGS, str(c_file), '-o', str(out), '-lm'],
-                                capture_output=True, text=True, timeout=600, check=False)
-        if result.returncode != 0:
-            msg = f'{compiler} failed ({result.returncode}): {result.stderr.strip()[:500]}'
+        with subprocess.Popen([compiler, *COMPILE_FLAGS, str(c_file), '-o', str(out), '-lm'],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              start_new_session=True) as process:  # gcc and its cc1: a group
+            _RUNNING.add(process)
+            try:
+                _, stderr = process.communicate(timeout=600)
+            except subprocess.TimeoutExpired:
+                _kill(process)
+                raise
+            finally:
+                _RUNNING.discard(process)
+        if process.returncode != 0:
+            msg = f'{compiler} failed ({process.returncode}): {stderr.strip()[:500]}'
             raise RuntimeError(msg)
         os.replace(out, library)
     return library
+
+
+# Compilers running in this process's threads: stopped when it exits (an evaluation's
+# worker ends with compilations still queued; its gcc would go on, orphaned, for nothing:
+# the temporary folder it writes to is removed at exit). Pool workers leave through
+# multiprocessing's exit function, which runs no atexit handler: both are registered.
+_RUNNING: set[subprocess.Popen] = set()
+
+
+def _kill(process: subprocess.Popen) -> None:
+    try:
+        os.killpg(process.pid, signal.SIGKILL)
+    except OSError:  # gone already
+        pass
+
+
+def _stop_compilers() -> None:
+    for process in list(_RUNNING):
+        _kill(process)
+
+
+atexit.register(_stop_compilers)
+multiprocessing.util.Finalize(None, _stop_compilers, exitpriority=10)
