@@ -66,7 +66,7 @@ from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC
-from mpc_local_planner.core.mpc.backends import COMPILE_FLAGS
+from mpc_local_planner.core.mpc.backends import COMPILE_FLAGS, NO_OBSTACLE_COMPILE_FLAGS
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import paper_sinusoid, ReferencePath, wrap_angle
 from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
@@ -767,6 +767,7 @@ def bench_cold_start(repeats: int, *, controllers: str = 'proposed') -> dict[str
         'command': ' '.join(['evaluate', *COLD_START_ARGS, '--controllers', controllers]),
         'repeats': repeats, 'target_cold_s': TARGET_COLD_START_S,
         'compile_flags': list(COMPILE_FLAGS),
+        'no_obstacle_compile_flags': list(NO_OBSTACLE_COMPILE_FLAGS),
         'cold_s': stats([r['seconds'] for r in cold]),
         'warm_s': stats([r['seconds'] for r in warm]),
         'cold_solve_ms_median': float(np.median([r['solve_ms_median'] for r in cold])),
@@ -780,7 +781,8 @@ def _cold_start_lines(result: dict[str, Any]) -> list[str]:
     cold, warm = result['cold_s'], result['warm_s']
     verdict = 'OK' if cold['median'] <= result['target_cold_s'] else 'NO'
     return [
-        f"\ncold start: {result['command']} (gcc {' '.join(result['compile_flags'])}), "
+        f"\ncold start: {result['command']} (gcc {' '.join(result['compile_flags'])}; "
+        f"without obstacles {' '.join(result['no_obstacle_compile_flags'])}), "
         f"medians over {result['repeats']} fresh cache folder(s)",
         f"  cold (empty cache): {cold['median']:.1f} s (max {cold['max']:.1f} s; target "
         f"{result['target_cold_s']:g} s: {verdict}), "

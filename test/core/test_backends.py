@@ -90,7 +90,7 @@ def test_compilation_failure_falls_back_to_the_interpreter(
 def test_processes_wanting_the_same_library_compile_it_once(tmp_path, monkeypatch) -> None:
     runs: list[str] = []
 
-    def compiler(source: str, library):
+    def compiler(source: str, library, flags=None):
         runs.append(source)
         library.write_text('built')  # what gcc would leave
         return library
@@ -109,7 +109,7 @@ def test_a_waiter_compiles_its_queued_job_itself_and_the_wait_is_counted(
     started: list[str] = []
     gate = threading.Event()
 
-    def compiler(source: str, library):
+    def compiler(source: str, library, flags=None):
         started.append(source)
         if source == 'first':
             gate.wait(10.0)  # the queue's thread is busy with the first job

@@ -61,17 +61,21 @@ from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.mpc.formulation import Formulation
 
 __all__ = ['Nlp', 'SolverRun', 'backend_options', 'build_nlp', 'compile_cache_dir',
-           'compile_wait_seconds', 'iteration_levels', 'run_solver', 'stage_size']
+           'compile_flags', 'compile_wait_seconds', 'iteration_levels', 'run_solver', 'stage_size']
 
 _LOG = logging.getLogger(__name__)
 
-# C compiler and flags for config.compile; CC overrides the compiler as usual. -O0, not -O2:
-# gcc took 5x less time on the Jackal's polygon NLPs (4.6 s instead of 25.6 s for 3 boxes,
-# 17 s instead of 88 s for 10 octagons, on 2 loaded cores) and the solves 1.2x more (most of
-# a solve is the solver's own linear algebra, compiled with the solver), with the same
-# results to the bit (x86-64: no -ffast-math, no fused multiply-add); see docs/results.md,
-# "Cold start". The flags are part of the cache key (_library_path).
+# C compiler and flags for config.compile (compile_flags); CC overrides the compiler as usual.
+# NLPs with obstacle slots: -O0, not -O2: gcc took 5x less time on the Jackal's polygon NLPs
+# (4.6 s instead of 25.6 s for 3 boxes, 17 s instead of 88 s for 10 octagons, on 2 loaded
+# cores) and the solves 1.2x more (most of such a solve is the solver's own linear algebra,
+# compiled with the solver), with the same results to the bit (x86-64: no -ffast-math, no
+# fused multiply-add); see docs/results.md, "Cold start".
 COMPILE_FLAGS = ('-O0', '-fPIC', '-shared')
+# The NLP without obstacles: -O1. The smallest (gcc 10 s at -O1, 12 s at -O2, compiled
+# first, while the others are built), the most used (half of a BARN run's solves), and the
+# one where the generated functions are most of a solve: 1.56x at -O0, 1.00x at -O1.
+NO_OBSTACLE_COMPILE_FLAGS = ('-O1', '-fPIC', '-shared')
 # Iteration limits of the copies a call with little time left runs instead of the full solver
 # (fatrop: no time limit of its own), as fractions of config.max_iterations: halving keeps the
 # copies few (one per level and NLP, built when first needed) and wastes at most half of what
@@ -486,16 +490,22 @@ def _start_compilation(nlp: Nlp) -> None:
         library = _pointed_library(pointer)
         if library is None:
             source = _nlp_source(nlp.formulation.problem, nlp.solver)
-            library = _library_path(source)
+            flags = compile_flags(nlp)
+            library = _library_path(source, flags)
             _write_pointer(pointer, library)
             if not library.exists():
-                nlp.pending = _submit_compilation(source, library)
+                nlp.pending = _submit_compilation(source, library, flags)
                 return
         nlp.solver = ca.nlpsol('mpc', nlp.plugin, str(library), nlp.options)
         nlp.compiled = True
         nlp.library = library
     except Exception as err:  # any failure falls back to the interpreter
         _LOG.warning('compiling the MPC NLP failed, using the interpreted functions: %s', err)
+
+
+def compile_flags(nlp: Nlp) -> tuple[str, ...]:
+    """Return gcc's flags for this NLP (part of its library's cache key)."""
+    return NO_OBSTACLE_COMPILE_FLAGS if nlp.formulation.slots == 0 else COMPILE_FLAGS
 
 
 def _problem_key(nlp: Nlp) -> str:
@@ -510,7 +520,7 @@ def _problem_key(nlp: Nlp) -> str:
     function = ca.Function('nlp', [problem['x'], problem['p']], [problem['f'], problem['g']],
                            ['x', 'p'], ['f', 'g'])
     options = {k: v for k, v in nlp.options.items() if k != 'iteration_callback'}
-    parts = [ca.__version__, os.environ.get('CC', 'gcc'), *COMPILE_FLAGS, nlp.plugin,
+    parts = [ca.__version__, os.environ.get('CC', 'gcc'), *compile_flags(nlp), nlp.plugin,
              ','.join(nlp.solver.get_function()), json.dumps(options, sort_keys=True,
                                                              default=repr),
              function.serialize()]
@@ -549,20 +559,20 @@ def _nlp_source(problem: dict, solver: ca.Function) -> str:
     return generator.dump()
 
 
-def _library_path(source: str) -> Path:
+def _library_path(source: str, flags: tuple[str, ...] = COMPILE_FLAGS) -> Path:
     """Return the cache file of this source (its hash, with CasADi, compiler and flags)."""
     compiler = os.environ.get('CC', 'gcc')
     key = hashlib.sha256('\n'.join(
-        [ca.__version__, compiler, *COMPILE_FLAGS, source]).encode()).hexdigest()[:24]
+        [ca.__version__, compiler, *flags, source]).encode()).hexdigest()[:24]
     return compile_cache_dir() / f'mpc_nlp_{key}.so'
 
 
 class _CompileJob(Future):
     """A compilation: its result (the library) once run, by the queue or by a waiter."""
 
-    def __init__(self, source: str, library: Path) -> None:
+    def __init__(self, source: str, library: Path, flags: tuple[str, ...]) -> None:
         super().__init__()
-        self._work: tuple[str, Path] | None = (source, library)
+        self._work: tuple[str, Path, tuple[str, ...]] | None = (source, library, flags)
         self._claim = threading.Lock()
 
     def run(self) -> None:
@@ -615,14 +625,15 @@ def _queue_worker() -> None:
         job.run()
 
 
-def _submit_compilation(source: str, library: Path) -> Future:
+def _submit_compilation(source: str, library: Path,
+                        flags: tuple[str, ...] = COMPILE_FLAGS) -> Future:
     """Queue a compilation for the daemon thread: a node stopped with Ctrl-C must not wait.
 
     A ThreadPoolExecutor's workers are joined at interpreter exit, which kept a stopped
     controller alive for the whole compilation; a daemon thread is simply dropped (the
     library is renamed into place atomically, so an interrupted build leaves no bad file).
     """
-    job = _CompileJob(source, library)
+    job = _CompileJob(source, library, flags)
     with _QUEUE_READY:
         if not _WORKER or not _WORKER[0].is_alive():
             _WORKER[:] = [threading.Thread(target=_queue_worker, name='mpc_compile',
@@ -633,7 +644,7 @@ def _submit_compilation(source: str, library: Path) -> Future:
     return job
 
 
-def _compile(source: str, library: Path) -> Path:
+def _compile(source: str, library: Path, flags: tuple[str, ...] = COMPILE_FLAGS) -> Path:
     """Compile source into library (atomically: a half-written file is never loaded).
 
     Processes that want the same library (an evaluation's workers, two nodes) take turns on
@@ -645,16 +656,16 @@ def _compile(source: str, library: Path) -> Path:
         fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file is closed
         if library.exists():
             return library
-        return _run_compiler(source, library)
+        return _run_compiler(source, library, flags)
 
 
-def _run_compiler(source: str, library: Path) -> Path:
+def _run_compiler(source: str, library: Path, flags: tuple[str, ...] = COMPILE_FLAGS) -> Path:
     compiler = os.environ.get('CC', 'gcc')
     with tempfile.TemporaryDirectory(dir=library.parent) as tmp:
         c_file = Path(tmp) / 'mpc_nlp.c'
         c_file.write_text(source)
         out = Path(tmp) / library.name
-        with subprocess.Popen([compiler, *COMPILE_FLAGS, str(c_file), '-o', str(out), '-lm'],
+        with subprocess.Popen([compiler, *flags, str(c_file), '-o', str(out), '-lm'],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                               start_new_session=True) as process:  # gcc and its cc1: a group
             _RUNNING.add(process)
