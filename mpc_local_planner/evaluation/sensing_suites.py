@@ -248,7 +248,8 @@ def _empty_map(bounds: tuple[float, float, float, float]) -> OccupancyMap:
 
 
 # Per process: one MPC per (controller, robot), reused across runs so that its NLPs are built
-# and compiled once, before the first run (a robot builds them at start-up, not mid-run).
+# once, before the first run (a robot builds them at start-up, not mid-run), and compiled
+# once (see _prepare).
 _MPC_CACHE: dict[tuple[str, str], Any] = {}
 
 
