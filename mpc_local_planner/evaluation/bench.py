@@ -45,12 +45,16 @@ Usage: ``python -m mpc_local_planner.evaluation.bench [--quick] [--skip-dds] [--
 from __future__ import annotations
 
 import argparse
+import csv
 from dataclasses import replace
 import json
 import math
 import os
+from pathlib import Path
 import platform
+import subprocess
 import sys
+import tempfile
 import time
 from typing import Any, Sequence
 
@@ -68,6 +72,7 @@ from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC
+from mpc_local_planner.core.mpc.backends import COMPILE_FLAGS, NO_OBSTACLE_COMPILE_FLAGS
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import paper_sinusoid, ReferencePath, wrap_angle
 from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
@@ -81,6 +86,7 @@ from mpc_local_planner.worlds.world import load_barn_world, paper_world, World
 
 __all__ = [
     'barn_line_poses',
+    'bench_cold_start',
     'bench_footprint',
     'bench_control_rate',
     'bench_laser',
@@ -127,7 +133,14 @@ TARGET_FOOTPRINT_STEP_MS = TARGET_CONTROL_STEP_MS
 CONTROL_FREQUENCY = 20.0
 RATE_HORIZON = 10
 # What main() can run, in this order (dds also needs no --skip-dds).
-SECTIONS = ('horizons', 'obstacles', 'rrt', 'perception', 'footprint', 'rate', 'dds')
+SECTIONS = ('horizons', 'obstacles', 'rrt', 'perception', 'footprint', 'rate', 'cold_start',
+            'dds')
+# Cold start (issue 24): the first laser-only BARN run of the paper's MPC, as a new user runs
+# it, with an empty compile cache and then again with the cache it filled; the target is for
+# the cold one (on a fresh machine, from the command to the finished run).
+COLD_START_ARGS = ('--suite', 'barn', '--sensing', '--robot', 'jackal', '--v-max', '2.0',
+                   '--omega-max', '4.0', '--worlds', '0', '--jobs', '1')
+TARGET_COLD_START_S = 60.0
 
 
 def paper_obstacle() -> ConvexPolygon:
@@ -695,13 +708,14 @@ HEADER = ('| backend          |   N | obs | reach | active | solve ms |  p95 ms 
 
 def main(argv: Sequence[str] | None = None, *, footprint_compile: bool = True,
          footprint_steps: int | None = None, rate_compile: bool = True,
-         rate_calls: int | None = None) -> int:
+         rate_calls: int | None = None, cold_start_controllers: str = 'proposed') -> int:
     """Run the benchmark, print the tables and write JSON.
 
     footprint_compile: compile the footprint rows' NLPs with gcc (as a robot would run
     them); False times the interpreted functions, and footprint_steps caps each footprint
     row's steps: a test uses both to check the rows' form without waiting minutes for gcc.
     rate_compile and rate_calls do the same for the control-rate rows.
+    cold_start_controllers: the controller of the cold-start runs (a test: 'dwa', no NLP).
     """
     parser = argparse.ArgumentParser(prog='mpc_bench', description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true',
@@ -793,6 +807,12 @@ def main(argv: Sequence[str] | None = None, *, footprint_compile: bool = True,
         for line in _rate_lines(rate):
             print(line, flush=True)
 
+    if 'cold_start' in sections:
+        cold = bench_cold_start(1 if args.quick else 3, controllers=cold_start_controllers)
+        results['cold_start'] = cold
+        for line in _cold_start_lines(cold):
+            print(line, flush=True)
+
     if 'dds' in sections and not args.skip_dds:
         # the one part that needs rclpy, hence in ros/ and imported only when it runs
         from mpc_local_planner.ros.latency_bench import measure_controller_latency
@@ -810,6 +830,70 @@ def main(argv: Sequence[str] | None = None, *, footprint_compile: bool = True,
         json.dump(results, f, indent=2)
     print(f'\nwrote {args.out}')
     return 0
+
+
+def _evaluate_once(controllers: str, cache: Path, out: Path) -> dict[str, Any]:
+    """Run the cold-start command in a fresh interpreter; return its wall time and row."""
+    command = [sys.executable, '-m', 'mpc_local_planner.evaluation.evaluate', *COLD_START_ARGS,
+               '--controllers', controllers, '--out', str(out)]
+    env = {**os.environ, 'MPC_LOCAL_PLANNER_CACHE': str(cache)}
+    start = time.perf_counter()
+    done = subprocess.run(command, env=env, capture_output=True, text=True, check=False)
+    seconds = time.perf_counter() - start
+    if done.returncode != 0:
+        msg = f'{" ".join(command)} failed: {done.stderr.strip()[-500:]}'
+        raise RuntimeError(msg)
+    with open(out / 'runs.csv', encoding='utf-8') as f:
+        row = next(csv.DictReader(f))
+    solve = row.get('solve_ms_median', '')
+    return {'seconds': seconds, 'solve_ms_median': float(solve) if solve else math.nan,
+            'success': row.get('success') == 'True'}
+
+
+def bench_cold_start(repeats: int, *, controllers: str = 'proposed') -> dict[str, Any]:
+    """Time the first BARN run from an empty compile cache, then again with the cache full.
+
+    Each repeat gets a fresh temporary cache folder ($MPC_LOCAL_PLANNER_CACHE: the user's
+    own cache is not touched) and runs the command twice in new interpreters: cold (every
+    NLP built, its C generated and compiled) and warm (the libraries loaded from the cache).
+    """
+    cold, warm = [], []
+    libraries: list[int] = []
+    for _ in range(repeats):
+        with tempfile.TemporaryDirectory(prefix='mpc_cold_start_') as tmp:
+            cache = Path(tmp) / 'cache'
+            cache.mkdir()
+            cold.append(_evaluate_once(controllers, cache, Path(tmp) / 'cold'))
+            libraries.append(len(list(cache.glob('*.so'))))
+            warm.append(_evaluate_once(controllers, cache, Path(tmp) / 'warm'))
+    return {
+        'command': ' '.join(['evaluate', *COLD_START_ARGS, '--controllers', controllers]),
+        'repeats': repeats, 'target_cold_s': TARGET_COLD_START_S,
+        'compile_flags': list(COMPILE_FLAGS),
+        'no_obstacle_compile_flags': list(NO_OBSTACLE_COMPILE_FLAGS),
+        'cold_s': stats([r['seconds'] for r in cold]),
+        'warm_s': stats([r['seconds'] for r in warm]),
+        'cold_solve_ms_median': float(np.median([r['solve_ms_median'] for r in cold])),
+        'warm_solve_ms_median': float(np.median([r['solve_ms_median'] for r in warm])),
+        'success': all(r['success'] for r in cold + warm),
+        'libraries_after_cold': libraries,
+    }
+
+
+def _cold_start_lines(result: dict[str, Any]) -> list[str]:
+    cold, warm = result['cold_s'], result['warm_s']
+    verdict = 'OK' if cold['median'] <= result['target_cold_s'] else 'NO'
+    return [
+        f"\ncold start: {result['command']} (gcc {' '.join(result['compile_flags'])}; "
+        f"without obstacles {' '.join(result['no_obstacle_compile_flags'])}), "
+        f"medians over {result['repeats']} fresh cache folder(s)",
+        f"  cold (empty cache): {cold['median']:.1f} s (max {cold['max']:.1f} s; target "
+        f"{result['target_cold_s']:g} s: {verdict}), "
+        f"solve median {result['cold_solve_ms_median']:.2f} ms, "
+        f"{int(np.median(result['libraries_after_cold']))} libraries compiled by its end",
+        f"  warm (cache present): {warm['median']:.1f} s (max {warm['max']:.1f} s), "
+        f"solve median {result['warm_solve_ms_median']:.2f} ms",
+    ]
 
 
 def _extent(footprint: Footprint) -> str:

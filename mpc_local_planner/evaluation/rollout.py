@@ -59,6 +59,7 @@ from typing import Any, Callable, NamedTuple, Protocol, Sequence, TYPE_CHECKING
 import numpy as np
 
 from mpc_local_planner.core.errors import PlanningError
+from mpc_local_planner.core.mpc.backends import compile_wait_seconds
 from mpc_local_planner.core.paths import wrap_angle
 from mpc_local_planner.evaluation.trajectory import trajectory_row
 
@@ -236,7 +237,8 @@ class Rollout(NamedTuple):
         outcome: why the run ended.
         rows: (n, 9) trajectory rows (trajectory.TRAJECTORY_COLUMNS), one per step.
         steps: the controller's answers, one per row (STOPPED: one fewer).
-        step_times: wall time of each controller call, seconds (adapter included).
+        step_times: wall time of each controller call, seconds (adapter included; without
+            a wait for an NLP's compilation, backends.compile_wait_seconds).
         h: the step length, seconds.
         note: why the controller stopped (STOPPED), else ''.
 
@@ -318,13 +320,15 @@ def rollout(
         t = k * h
         measured = x if base is None else base.odometry()[0]
         started = time.perf_counter()
+        waited = compile_wait_seconds()  # a first use of an NLP on a fresh machine
         try:
             answer = stepper.step(measured)
         except PlanningError as err:
             outcome, note = Outcome.STOPPED, f'{type(err).__name__}: {err}'
             rows.append(trajectory_row(t, x))
             break
-        step_times.append(time.perf_counter() - started)
+        step_times.append(time.perf_counter() - started
+                          - (compile_wait_seconds() - waited))
         u = np.asarray(answer.u, dtype=float)
         if not np.all(np.isfinite(u)):
             outcome, note = Outcome.STOPPED, f'non-finite input {u.tolist()}'

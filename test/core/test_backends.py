@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
+import threading
 
 import numpy as np
 import pytest
@@ -89,7 +90,7 @@ def test_compilation_failure_falls_back_to_the_interpreter(
 def test_processes_wanting_the_same_library_compile_it_once(tmp_path, monkeypatch) -> None:
     runs: list[str] = []
 
-    def compiler(source: str, library):
+    def compiler(source: str, library, flags=None):
         runs.append(source)
         library.write_text('built')  # what gcc would leave
         return library
@@ -101,3 +102,51 @@ def test_processes_wanting_the_same_library_compile_it_once(tmp_path, monkeypatc
         results = list(pool.map(lambda _: backends._compile('int f;', library), range(2)))
     assert results == [library, library]
     assert runs == ['int f;']  # the second found the library when its turn came
+
+
+def test_a_waiter_compiles_its_queued_job_itself_and_the_wait_is_counted(
+        tmp_path, monkeypatch) -> None:
+    started: list[str] = []
+    gate = threading.Event()
+    real = backends._run_compiler  # for what earlier tests left in the queue
+
+    def compiler(source: str, library, flags=backends.COMPILE_FLAGS):
+        if source not in ('first', 'second'):
+            return real(source, library, flags)
+        started.append(source)
+        if source == 'first':
+            gate.wait(10.0)  # the queue's thread is busy with the first job
+        library.write_text('built')
+        return library
+
+    monkeypatch.setattr(backends, '_run_compiler', compiler)
+    first = backends._submit_compilation('first', tmp_path / 'mpc_nlp_first.so')
+    second = backends._submit_compilation('second', tmp_path / 'mpc_nlp_second.so')
+    waited = backends.compile_wait_seconds()
+    backends._wait_for(second)  # not behind the first: run here
+    assert second.result() == tmp_path / 'mpc_nlp_second.so'
+    assert not first.done()
+    assert backends.compile_wait_seconds() >= waited
+    gate.set()
+    assert first.result(timeout=10.0) == tmp_path / 'mpc_nlp_first.so'
+    assert sorted(started) == ['first', 'second']  # each compiled once
+
+
+def test_a_cached_library_is_found_without_generating_its_source(
+        tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv('MPC_LOCAL_PLANNER_CACHE', str(tmp_path))
+    model, path = Unicycle(), paper_sinusoid()
+    config = MpcConfig(horizon=5, compile=True)
+    first = PathReferenceMPC(model, config, path=path)
+    nlp = first._nlp_for(0, 0)
+    first.wait_compiled()
+    assert nlp.compiled and nlp.library is not None
+    assert [p.read_text() for p in tmp_path.glob('*.key')] == [nlp.library.name]
+
+    def no_source(*args: object) -> str:
+        raise AssertionError('the source was generated again')
+
+    monkeypatch.setattr(backends, '_nlp_source', no_source)
+    again = PathReferenceMPC(model, config, path=path)._nlp_for(0, 0)
+    assert again.compiled and again.pending is None
+    assert again.library == nlp.library

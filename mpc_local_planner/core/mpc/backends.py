@@ -35,14 +35,19 @@ limit is always kept, by an interpreted copy if need be.
 
 from __future__ import annotations
 
+import atexit
+from collections import deque
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 import fcntl
 import hashlib
+import json
 import logging
 import math
+import multiprocessing.util
 import os
 from pathlib import Path
+import signal
 import subprocess
 import tempfile
 import threading
@@ -56,14 +61,21 @@ from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.mpc.formulation import Formulation
 
 __all__ = ['Nlp', 'SolverRun', 'backend_options', 'build_nlp', 'compile_cache_dir',
-           'iteration_levels', 'run_solver', 'stage_size']
+           'compile_flags', 'compile_wait_seconds', 'iteration_levels', 'run_solver', 'stage_size']
 
 _LOG = logging.getLogger(__name__)
 
-# C compiler and flags for config.compile; CC overrides the compiler as usual.
-COMPILE_FLAGS = ('-O2', '-fPIC', '-shared')
-# One compilation at a time (the machine may have two cores and a control loop to run).
-_COMPILE_LOCK = threading.Lock()
+# C compiler and flags for config.compile (compile_flags); CC overrides the compiler as usual.
+# NLPs with obstacle slots: -O0, not -O2: gcc took 5x less time on the Jackal's polygon NLPs
+# (4.6 s instead of 25.6 s for 3 boxes, 17 s instead of 88 s for 10 octagons, on 2 loaded
+# cores) and the solves 1.2x more (most of such a solve is the solver's own linear algebra,
+# compiled with the solver), with the same results to the bit (x86-64: no -ffast-math, no
+# fused multiply-add); see docs/results.md, "Cold start".
+COMPILE_FLAGS = ('-O0', '-fPIC', '-shared')
+# The NLP without obstacles: -O1. The smallest (gcc 10 s at -O1, 12 s at -O2, compiled
+# first, while the others are built), the most used (half of a BARN run's solves), and the
+# one where the generated functions are most of a solve: 1.56x at -O0, 1.00x at -O1.
+NO_OBSTACLE_COMPILE_FLAGS = ('-O1', '-fPIC', '-shared')
 # Iteration limits of the copies a call with little time left runs instead of the full solver
 # (fatrop: no time limit of its own), as fractions of config.max_iterations: halving keeps the
 # copies few (one per level and NLP, built when first needed) and wastes at most half of what
@@ -311,7 +323,10 @@ class Nlp:
         """Swap in the compiled solver once its background compilation is done.
 
         Args:
-            wait: block until the compilation is done (or failed).
+            wait: block until the compilation is done (or failed). A compilation still
+                queued behind others is run at once, in this thread (gcc is a subprocess:
+                the background one goes on meanwhile); the seconds waited are counted in
+                compile_wait_seconds().
 
         """
         future = self.pending
@@ -319,6 +334,8 @@ class Nlp:
             return
         self.pending = None
         try:
+            if not future.done():
+                _wait_for(future)
             library = future.result()
             self.solver = ca.nlpsol('mpc', self.plugin, str(library), self.options)
             self.compiled = True
@@ -461,18 +478,75 @@ def compile_cache_dir() -> Path:
 
 
 def _start_compilation(nlp: Nlp) -> None:
-    """Use a cached compiled library now, or compile one in the background."""
+    """Use a cached compiled library now, or compile one in the background.
+
+    The library is named by the hash of its C source (_library_path); generating the source
+    took a third of a warm start (0.2-0.4 s a shape, 14 s of 47 for the 21 shapes of a BARN
+    run), so a pointer file named by a cheaper key (_problem_key: the NLP's serialized
+    expressions, 35x faster) finds it without generating the source again.
+    """
     try:
-        source = _nlp_source(nlp.formulation.problem, nlp.solver)
-        library = _library_path(source)
-        if library.exists():
-            nlp.solver = ca.nlpsol('mpc', nlp.plugin, str(library), nlp.options)
-            nlp.compiled = True
-            nlp.library = library
-            return
-        nlp.pending = _submit_compilation(source, library)
+        pointer = _pointer_path(_problem_key(nlp))
+        library = _pointed_library(pointer)
+        if library is None:
+            source = _nlp_source(nlp.formulation.problem, nlp.solver)
+            flags = compile_flags(nlp)
+            library = _library_path(source, flags)
+            _write_pointer(pointer, library)
+            if not library.exists():
+                nlp.pending = _submit_compilation(source, library, flags)
+                return
+        nlp.solver = ca.nlpsol('mpc', nlp.plugin, str(library), nlp.options)
+        nlp.compiled = True
+        nlp.library = library
     except Exception as err:  # any failure falls back to the interpreter
         _LOG.warning('compiling the MPC NLP failed, using the interpreted functions: %s', err)
+
+
+def compile_flags(nlp: Nlp) -> tuple[str, ...]:
+    """Return gcc's flags for this NLP (part of its library's cache key)."""
+    return NO_OBSTACLE_COMPILE_FLAGS if nlp.formulation.slots == 0 else COMPILE_FLAGS
+
+
+def _problem_key(nlp: Nlp) -> str:
+    """Return a hash of what decides the generated C: the NLP, the plugin and its options.
+
+    The NLP's expressions serialized (exactly its graph), the plugin, the functions it
+    evaluates, its options (those that shape the derivatives: a fatrop's stage structure,
+    and the rest, which split the cache at worst) and, as for the library, CasADi's
+    version, the compiler and its flags.
+    """
+    problem = nlp.formulation.problem
+    function = ca.Function('nlp', [problem['x'], problem['p']], [problem['f'], problem['g']],
+                           ['x', 'p'], ['f', 'g'])
+    options = {k: v for k, v in nlp.options.items() if k != 'iteration_callback'}
+    parts = [ca.__version__, os.environ.get('CC', 'gcc'), *compile_flags(nlp), nlp.plugin,
+             ','.join(nlp.solver.get_function()), json.dumps(options, sort_keys=True,
+                                                             default=repr),
+             function.serialize()]
+    return hashlib.sha256('\n'.join(parts).encode()).hexdigest()[:24]
+
+
+def _pointer_path(key: str) -> Path:
+    return compile_cache_dir() / f'mpc_nlp_{key}.key'
+
+
+def _pointed_library(pointer: Path) -> Path | None:
+    """Return the library a pointer file names, if both are there."""
+    try:
+        library = pointer.parent / pointer.read_text(encoding='utf-8').strip()
+    except OSError:
+        return None
+    return library if library.suffix == '.so' and library.exists() else None
+
+
+def _write_pointer(pointer: Path, library: Path) -> None:
+    """Write the pointer file atomically (two processes may write the same one)."""
+    pointer.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.NamedTemporaryFile('w', dir=pointer.parent, suffix='.tmp', delete=False,
+                                     encoding='utf-8') as f:
+        f.write(library.name)
+    os.replace(f.name, pointer)
 
 
 def _nlp_source(problem: dict, solver: ca.Function) -> str:
@@ -485,35 +559,92 @@ def _nlp_source(problem: dict, solver: ca.Function) -> str:
     return generator.dump()
 
 
-def _library_path(source: str) -> Path:
+def _library_path(source: str, flags: tuple[str, ...] = COMPILE_FLAGS) -> Path:
     """Return the cache file of this source (its hash, with CasADi, compiler and flags)."""
     compiler = os.environ.get('CC', 'gcc')
     key = hashlib.sha256('\n'.join(
-        [ca.__version__, compiler, *COMPILE_FLAGS, source]).encode()).hexdigest()[:24]
+        [ca.__version__, compiler, *flags, source]).encode()).hexdigest()[:24]
     return compile_cache_dir() / f'mpc_nlp_{key}.so'
 
 
-def _submit_compilation(source: str, library: Path) -> Future:
-    """Compile in a daemon thread: a node stopped with Ctrl-C must not wait for gcc.
+class _CompileJob(Future):
+    """A compilation: its result (the library) once run, by the queue or by a waiter."""
+
+    def __init__(self, source: str, library: Path, flags: tuple[str, ...]) -> None:
+        super().__init__()
+        self._work: tuple[str, Path, tuple[str, ...]] | None = (source, library, flags)
+        self._claim = threading.Lock()
+
+    def run(self) -> None:
+        """Compile, unless it is (being) done already: whoever comes first runs it."""
+        with self._claim:
+            work, self._work = self._work, None
+        if work is None:
+            return
+        try:
+            self.set_result(_compile(*work))
+        except BaseException as err:  # handed to the waiting solver
+            self.set_exception(err)
+
+
+# Compilations not yet started, in the order they were asked for; one daemon thread runs
+# them one at a time (the machine may have two cores and a control loop to run), and a
+# step that needs one still queued runs it itself (Nlp.finish_compilation(wait=True)).
+_QUEUE: deque[_CompileJob] = deque()
+_QUEUE_READY = threading.Condition()
+_WORKER: list[threading.Thread] = []
+# seconds spent waiting for compilations, in any thread (see compile_wait_seconds)
+_WAITED = [0.0]
+
+
+def compile_wait_seconds() -> float:
+    """Return the seconds callers have waited for compilations so far in this process.
+
+    A rollout subtracts what a control step waited for its NLP's compilation from the
+    step's time: the wait happens once per NLP on a fresh machine, not in a robot's loop.
+    """
+    return _WAITED[0]
+
+
+def _wait_for(job: Future) -> None:
+    start = time.perf_counter()
+    if isinstance(job, _CompileJob):
+        job.run()  # still queued: now, here; else this returns at once
+    try:
+        job.exception()  # blocks until done
+    finally:
+        _WAITED[0] += time.perf_counter() - start
+
+
+def _queue_worker() -> None:
+    while True:
+        with _QUEUE_READY:
+            while not _QUEUE:
+                _QUEUE_READY.wait()
+            job = _QUEUE.popleft()
+        job.run()
+
+
+def _submit_compilation(source: str, library: Path,
+                        flags: tuple[str, ...] = COMPILE_FLAGS) -> Future:
+    """Queue a compilation for the daemon thread: a node stopped with Ctrl-C must not wait.
 
     A ThreadPoolExecutor's workers are joined at interpreter exit, which kept a stopped
     controller alive for the whole compilation; a daemon thread is simply dropped (the
     library is renamed into place atomically, so an interrupted build leaves no bad file).
     """
-    future: Future = Future()
-
-    def work() -> None:
-        with _COMPILE_LOCK:
-            try:
-                future.set_result(_compile(source, library))
-            except BaseException as err:  # handed to the waiting solver
-                future.set_exception(err)
-
-    threading.Thread(target=work, name='mpc_compile', daemon=True).start()
-    return future
+    job = _CompileJob(source, library, flags)
+    with _QUEUE_READY:
+        if not _WORKER or not _WORKER[0].is_alive():
+            _WORKER[:] = [threading.Thread(target=_queue_worker, name='mpc_compile',
+                                           daemon=True)]
+            _WORKER[0].start()
+        _QUEUE.append(job)
+        _QUEUE_READY.notify()
+    return job
 
 
-def _compile(source: str, library: Path) -> Path:
+def _compile(source: str, library: Path, flags: tuple[str, ...] = COMPILE_FLAGS) -> Path:
     """Compile source into library (atomically: a half-written file is never loaded).
 
     Processes that want the same library (an evaluation's workers, two nodes) take turns on
@@ -525,19 +656,51 @@ def _compile(source: str, library: Path) -> Path:
         fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file is closed
         if library.exists():
             return library
-        return _run_compiler(source, library)
+        return _run_compiler(source, library, flags)
 
 
-def _run_compiler(source: str, library: Path) -> Path:
+def _run_compiler(source: str, library: Path, flags: tuple[str, ...] = COMPILE_FLAGS) -> Path:
     compiler = os.environ.get('CC', 'gcc')
     with tempfile.TemporaryDirectory(dir=library.parent) as tmp:
         c_file = Path(tmp) / 'mpc_nlp.c'
         c_file.write_text(source)
         out = Path(tmp) / library.name
-        result = subprocess.run([compiler, *COMPILE_FLAGS, str(c_file), '-o', str(out), '-lm'],
-                                capture_output=True, text=True, timeout=600, check=False)
-        if result.returncode != 0:
-            msg = f'{compiler} failed ({result.returncode}): {result.stderr.strip()[:500]}'
+        with subprocess.Popen([compiler, *flags, str(c_file), '-o', str(out), '-lm'],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              start_new_session=True) as process:  # gcc and its cc1: a group
+            _RUNNING.add(process)
+            try:
+                _, stderr = process.communicate(timeout=600)
+            except subprocess.TimeoutExpired:
+                _kill(process)
+                raise
+            finally:
+                _RUNNING.discard(process)
+        if process.returncode != 0:
+            msg = f'{compiler} failed ({process.returncode}): {stderr.strip()[:500]}'
             raise RuntimeError(msg)
         os.replace(out, library)
     return library
+
+
+# Compilers running in this process's threads: stopped when it exits (an evaluation's
+# worker ends with compilations still queued; its gcc would go on, orphaned, for nothing:
+# the temporary folder it writes to is removed at exit). Pool workers leave through
+# multiprocessing's exit function, which runs no atexit handler: both are registered.
+_RUNNING: set[subprocess.Popen] = set()
+
+
+def _kill(process: subprocess.Popen) -> None:
+    try:
+        os.killpg(process.pid, signal.SIGKILL)
+    except OSError:  # gone already
+        pass
+
+
+def _stop_compilers() -> None:
+    for process in list(_RUNNING):
+        _kill(process)
+
+
+atexit.register(_stop_compilers)
+multiprocessing.util.Finalize(None, _stop_compilers, exitpriority=10)

@@ -16,14 +16,14 @@
 """The NLPs of one MPC, one per obstacle shape (slots, faces), and when they are built.
 
 Problem (6) holds a fixed number of obstacle slots of a fixed number of faces; each shape is
-its own NLP (built in tens of ms to a second, compiled by gcc in minutes). Before an MPC is
-prepared a control step builds the shape it needs (a first step, a test); after prepare()
-no step builds one, in its own thread or another: a build takes several control periods, and
-in a background thread it still stalls the steps meanwhile, since CasADi holds Python's lock
-while it builds (see docs/design/mpc.md, section "No builds after prepare() (nlp_shapes.py)").
-The step gets the smallest prepared NLP with room for its obstacles (an unused slot
-is padded empty), or the largest one, which holds the nearest of them; the MPC checks its
-solution against all of them.
+its own NLP (built in tens of ms to a second, compiled by gcc in seconds to a minute).
+Before an MPC is prepared a control step builds the shape it needs (a first step, a test);
+after prepare() no step builds one, in its own thread or another: a build takes several
+control periods, and in a background thread it still stalls the steps meanwhile, since
+CasADi holds Python's lock while it builds (see docs/design/mpc.md, section "No builds after
+prepare() (nlp_shapes.py)"). The step gets the smallest prepared NLP with room for its
+obstacles (an unused slot is padded empty), or the largest one, which holds the nearest of
+them; the MPC checks its solution against all of them.
 """
 
 from __future__ import annotations

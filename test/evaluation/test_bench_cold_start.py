@@ -1,0 +1,51 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""mpc_bench's cold_start section: the first BARN run from an empty compile cache, then warm.
+
+The test runs the section's form on the DWA (no NLP to compile: seconds, not minutes); what is
+checked is that it runs the command twice with a temporary cache and reports both, not timings.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from mpc_local_planner.evaluation.bench import COLD_START_ARGS, main, TARGET_COLD_START_S
+
+
+def test_cold_start_section_reports_cold_and_warm(tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str],
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    own_cache = tmp_path / 'own_cache'
+    monkeypatch.setenv('MPC_LOCAL_PLANNER_CACHE', str(own_cache))
+    out = tmp_path / 'bench.json'
+    assert main(['--quick', '--skip-dds', '--sections', 'cold_start', '--out', str(out)],
+                cold_start_controllers='dwa') == 0
+    result = json.loads(out.read_text(encoding='utf-8'))['cold_start']
+    assert result['repeats'] == 1
+    assert result['target_cold_s'] == TARGET_COLD_START_S
+    assert result['command'].endswith('--controllers dwa')
+    assert ' '.join(COLD_START_ARGS) in result['command']
+    for key in ('cold_s', 'warm_s'):
+        assert set(result[key]) == {'median', 'p95', 'max'}
+        assert result[key]['median'] > 0.0
+    assert result['success']
+    assert result['libraries_after_cold'] == [0]  # the DWA compiles nothing
+    assert not own_cache.exists()  # a temporary cache folder, not the caller's
+    printed = capsys.readouterr().out
+    assert 'cold (empty cache)' in printed and 'warm (cache present)' in printed
