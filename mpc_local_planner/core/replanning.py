@@ -69,6 +69,8 @@ if TYPE_CHECKING:
     from mpc_local_planner.core.planner import EscapeGrid
 
 __all__ = [
+    'PROGRESS_RADIUS',
+    'PROGRESS_TIMEOUT',
     'ReplanDecision',
     'Replanner',
     'ReplanningPlanner',
@@ -79,6 +81,12 @@ __all__ = [
 
 # Seconds: times computed as k * h by a simulation land on a period up to rounding.
 TIME_EPSILON = 1e-9
+# The no-progress rule as the planner node and the suites run it (ReplanSettings keeps it off
+# unless asked): Nav2's progress checker allows 10 s for 0.5 m; a robot that stands 5 s has
+# stopped (its controller found no verified plan), and 0.25 m is more than odometry noise
+# and less than a third of the Jackal's length.
+PROGRESS_TIMEOUT = 5.0
+PROGRESS_RADIUS = 0.25
 
 
 class ReplanningPlanner(Protocol):

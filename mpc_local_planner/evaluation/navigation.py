@@ -59,6 +59,8 @@ from mpc_local_planner.core.paths import waypoints_to_poses
 from mpc_local_planner.core.planner import RrtStarPlanner
 from mpc_local_planner.core.reality import Base, ScanChannel
 from mpc_local_planner.core.replanning import (
+    PROGRESS_RADIUS,
+    PROGRESS_TIMEOUT,
     ReplanDecision,
     Replanner,
     ReplanOutcome,
@@ -119,8 +121,8 @@ class NavigationSettings:
     escape_distance: float = 1.0
     sense: bool = True
     scan_period: float | None = None
-    progress_timeout: float = 5.0
-    progress_radius: float = 0.25
+    progress_timeout: float = PROGRESS_TIMEOUT
+    progress_radius: float = PROGRESS_RADIUS
 
     def replan_settings(self) -> ReplanSettings:
         """Return the re-planner's settings (without sensing the grid never changes: no checks).

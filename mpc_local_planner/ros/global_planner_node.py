@@ -99,6 +99,8 @@ from mpc_local_planner.core.footprint import parse_footprint
 from mpc_local_planner.core.paths import analytic_path, waypoints_to_poses
 from mpc_local_planner.core.planner import path_length, PlannerConfig, RrtStarPlanner
 from mpc_local_planner.core.replanning import (
+    PROGRESS_RADIUS,
+    PROGRESS_TIMEOUT,
     ReplanDecision,
     Replanner,
     ReplanOutcome,
@@ -223,6 +225,15 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('replan_period', 0.0,
                   're-plan the goal in force this often (s) even when the plan is clear; 0 = '
                   'only when blocked or for a new goal', float_range=(0.0, 3600.0)),
+    ParameterSpec('progress_timeout', PROGRESS_TIMEOUT,
+                  "Nav2's progress checker: when the robot, away from the goal, has not moved "
+                  'progress_radius in this many seconds, the goal is re-planned from where it '
+                  "stands (a forward-only robot that coasted past a new plan's start may have "
+                  'no way back onto it); 0 = never', float_range=(0.0, 3600.0)),
+    ParameterSpec('progress_radius', PROGRESS_RADIUS,
+                  'metres that count as progress for progress_timeout, and the distance to '
+                  'the goal within which standing still is arriving',
+                  float_range=(0.0, 100.0)),
     *POSE_PARAMETERS,
     ParameterSpec('autostart', True,
                   'configure and activate at start; false = wait for a lifecycle manager (or '
@@ -312,7 +323,9 @@ class GlobalPlannerNode(ManagedNode):
         return ReplanSettings.from_rate(
             float(self.get_parameter('replan_check_rate').value),
             replan_period=float(self.get_parameter('replan_period').value),
-            escape_distance=ESCAPE_DISTANCE)
+            escape_distance=ESCAPE_DISTANCE,
+            progress_timeout=float(self.get_parameter('progress_timeout').value),
+            progress_radius=float(self.get_parameter('progress_radius').value))
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Load the world, build the planner, create the publishers and subscriptions.
@@ -485,10 +498,13 @@ class GlobalPlannerNode(ManagedNode):
         Unconfigured, nothing is built: configure reads the parameters as they then are.
         """
         names = {p.name for p in parameters}
-        if 'replan_period' in names:  # at the next check (replan_check_rate: at activate)
+        if names & {'replan_period', 'progress_timeout', 'progress_radius'}:
+            # at the next check (replan_check_rate: at activate)
             self.replanner.settings = replace(
                 self.replanner.settings,
-                replan_period=float(self.get_parameter('replan_period').value))
+                replan_period=float(self.get_parameter('replan_period').value),
+                progress_timeout=float(self.get_parameter('progress_timeout').value),
+                progress_radius=float(self.get_parameter('progress_radius').value))
         if not self._configured:
             return
         for name in ('use_map', 'use_scan'):

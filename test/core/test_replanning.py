@@ -229,3 +229,56 @@ def test_settings_refuse_negative_periods() -> None:
     with pytest.raises(ValueError, match='replan_period must be finite'):
         ReplanSettings(replan_period=-1.0)
     assert not ReplanDecision(ReplanOutcome.CLEAR).attempted
+
+
+def test_a_robot_that_makes_no_progress_away_from_the_goal_is_re_planned_from_where_it_stands():
+    """Nav2's progress checker: standing progress_timeout away from the goal re-plans."""
+    planner = _NoProgressPlanner()
+    replanner = Replanner(ReplanSettings(check_period=0.5, progress_timeout=5.0,
+                                         progress_radius=0.25))
+    goal = np.array([10.0, 0.0, 0.0])
+    assert replanner.plan_goal(planner, np.zeros(3), goal, now=0.0).outcome \
+        is ReplanOutcome.PLANNED
+    stuck = np.array([1.0, 0.0, 0.0])
+    outcomes = {}
+    for k in range(1, 40):  # moves 1 m by t = 0.5 s, then stands there
+        decision = replanner.check(planner, stuck if k > 1 else np.array([0.5, 0.0, 0.0]),
+                                   now=0.5 * k)
+        outcomes[0.5 * k] = decision
+    planned = [t for t, d in outcomes.items() if d.outcome is ReplanOutcome.PLANNED]
+    assert all(outcomes[t].trigger is PlanTrigger.NO_PROGRESS for t in planned)
+    # standing since 1.0 s: a re-plan at 6.0 s, then once per progress_timeout after each
+    assert planned[:3] == [6.0, 11.0, 16.0]
+    np.testing.assert_array_equal(planner.starts[1][:2], stuck[:2])  # from where it stands
+
+
+def test_standing_at_the_goal_or_moving_is_no_reason_to_re_plan():
+    planner = _NoProgressPlanner()
+    replanner = Replanner(ReplanSettings(check_period=0.5, progress_timeout=5.0))
+    goal = np.array([2.0, 0.0, 0.0])
+    replanner.plan_goal(planner, np.zeros(3), goal, now=0.0)
+    for k in range(1, 40):  # slowly on: 0.3 m every 2 s
+        x = np.array([min(0.075 * k, 1.9), 0.0, 0.0])
+        assert replanner.check(planner, x, now=0.5 * k).outcome is not ReplanOutcome.PLANNED
+    for k in range(40, 80):  # at the goal (within progress_radius), for 20 s
+        assert replanner.check(planner, np.array([1.9, 0.0, 0.0]), now=0.5 * k).outcome \
+            is not ReplanOutcome.PLANNED
+    # and the rule is off unless asked for
+    assert ReplanSettings().progress_timeout == 0.0
+
+
+class _NoProgressPlanner:
+    """A planner whose plans are always clear: only the progress rule can re-plan."""
+
+    def __init__(self) -> None:
+        self.starts: list[np.ndarray] = []
+
+    def plan(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        self.starts.append(np.array(start))
+        return np.array([start[:2], goal[:2]])
+
+    def replan(self, start, goal, *, failures=0, grid=None, escape_distance=1.0):
+        return self.plan(start, goal)
+
+    def rest_problem(self, plan, position):
+        return None
