@@ -368,8 +368,10 @@ class Navigator:
             self.obstacles.scan_updated()
         nearby = self.obstacles.near(x[:2], self.local.reach + self.settings.sensing_margin)
         self.local.avoid(nearby)
-        velocity = self.base.twist() if self.base is not None else None
-        answer = self.local.command(np.asarray(x, dtype=float), t, velocity)
+        if self.base is None:
+            answer = self.local.command(np.asarray(x, dtype=float), t)
+        else:  # a real base reports its twist: the controllers that use it get it
+            answer = self.local.command(np.asarray(x, dtype=float), t, self.base.twist())
         self.log.control_seconds.append(time.perf_counter() - started
                                         - (compile_wait_seconds() - waited))
         if not self.log.sensed or t >= self.log.sensed[-1][0] + self._snapshot_period:

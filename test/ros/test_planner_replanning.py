@@ -29,7 +29,13 @@ from rclpy.parameter import Parameter
 
 from mpc_local_planner.core.diagnostics import PlanTrigger
 from mpc_local_planner.core.errors import PlanningError
-from mpc_local_planner.core.replanning import Replanner, ReplanOutcome, ReplanSettings
+from mpc_local_planner.core.replanning import (
+    PROGRESS_RADIUS,
+    PROGRESS_TIMEOUT,
+    Replanner,
+    ReplanOutcome,
+    ReplanSettings,
+)
 from mpc_local_planner.evaluation.navigation import NavigationSettings, Navigator
 from mpc_local_planner.evaluation.rollout import ControlStep
 from mpc_local_planner.perception.raycast import TrueGeometry
@@ -180,10 +186,14 @@ def test_the_node_and_the_navigator_make_the_same_replanning_decisions(ros) -> N
 
 def test_the_navigators_settings_map_onto_the_nodes_defaults(ros) -> None:
     node = ros.add(GlobalPlannerNode(context=ros.context))
-    assert node.replanner.settings == ReplanSettings.from_rate(2.0, escape_distance=1.0)
+    assert node.replanner.settings == ReplanSettings.from_rate(
+        2.0, escape_distance=1.0, progress_timeout=PROGRESS_TIMEOUT,
+        progress_radius=PROGRESS_RADIUS)
     navigation = NavigationSettings().replan_settings()
     assert navigation.check_period == node.replanner.settings.check_period
     assert navigation.replan_period == node.replanner.settings.replan_period == 0.0
     assert navigation.escape_distance == node.replanner.settings.escape_distance
+    assert navigation.progress_timeout == node.replanner.settings.progress_timeout
+    assert navigation.progress_radius == node.replanner.settings.progress_radius
     # without sensing the grid never changes: the navigator never checks (a rate of 0)
     assert NavigationSettings(sense=False).replan_settings().check_period == 0.0
