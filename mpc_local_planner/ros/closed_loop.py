@@ -120,6 +120,7 @@ from std_msgs.msg import UInt32
 from visualization_msgs.msg import Marker, MarkerArray
 import yaml
 
+from mpc_local_planner.core.controller import ControllerSettings
 from mpc_local_planner.core.diagnostics import (
     CONTROLLER_DIAGNOSTICS_TOPIC,
     ControllerDiagnostics,
@@ -194,6 +195,11 @@ LOCALIZER_NOISE = 0.01
 # With --drift in one process, a run succeeds only if the TRUE robot ends this close (m) to
 # the goal: what the drifted odometry (or the controller) believes is not enough.
 TRUE_GOAL_TOLERANCE = 0.1
+# With a real robot (--reality other than ideal) the controller arrives within its node
+# defaults (xy_goal_tolerance 0.1 m, yaw_goal_tolerance 0.15 rad) as the pose estimate says;
+# the true robot must end within that plus REAL_POSE_ERROR, what the estimate may be off by
+# (the localizer stand-in's 1 cm noise, odometry's jitter between its corrections).
+REAL_POSE_ERROR = 0.05
 
 MODULES = {
     'map_server': 'mpc_local_planner.ros.map_server_node',
@@ -257,6 +263,21 @@ def localized(options: LoopOptions) -> bool:
     return bool(options.drift) or not reality_preset(options.reality).ideal_base
 
 
+def _controller_for_reality(reality: str) -> dict[str, Any]:
+    """Return the controller's arrival and braking settings for the simulated robot.
+
+    The ideal robot arrives within the paper's tolerances (PAPER_GOAL_TOLERANCES: its
+    odometry is exact). A real one keeps the node's defaults, sized for noisy odometry and a
+    lagging base, and brakes within the base's deceleration limits, as a user configures a
+    real robot (docs/real_robot.md).
+    """
+    if reality == 'ideal':
+        return dict(PAPER_GOAL_TOLERANCES)
+    accel = reality_preset(reality).acceleration
+    return {'max_decel': [float(a) for a in accel]} if all(
+        math.isfinite(a) for a in accel) else {}
+
+
 def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
                     map_file: Path | None = None) -> dict[str, dict[str, Any]]:
     """Return each node's parameter values for a run (use_sim_time included).
@@ -266,7 +287,8 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
     (map_file, which map_server serves) and the scans. The robot (world.footprint: pass the
     run's world, see run_world) reaches all three as ``footprint`` and ``robot_radius``, in
     every mode; for a polygon the planner's clearance is POLYGON_CLEARANCE; the controller
-    arrives within PAPER_GOAL_TOLERANCES. options.extra_parameters come last.
+    arrives within PAPER_GOAL_TOLERANCES on an ideal robot, with the node's defaults and
+    braking on a real one (_controller_for_reality). options.extra_parameters come last.
 
     Raises:
         ValueError: if --path analytic names no path of the world, sensing lacks map_file,
@@ -289,7 +311,7 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
         },
         'mpc_controller': {
             'use_sim_time': True, 'world_file': str(world_file), 'analytic_path': analytic,
-            **PAPER_GOAL_TOLERANCES, **robot,
+            **_controller_for_reality(options.reality), **robot,
         },
         'unicycle_simulator': {
             'publish_clock': True, 'real_time_factor': float(options.rtf),
@@ -653,13 +675,18 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
     shape = '' if world.footprint.is_circle else ', polygon footprint'
     title = (f'{world.name}: {options.path} path, rtf {options.rtf:g}'
              + (', sensing' if options.sensing else '') + shape)
-    metrics = analyze(bag, out, extra=run_info, title=title)
+    real = not reality_preset(options.reality).ideal
+    tolerances = (ControllerSettings().xy_goal_tolerance, ControllerSettings().yaw_goal_tolerance
+                  ) if real else (0.05, 0.1)
+    metrics = analyze(bag, out, extra=run_info, title=title,
+                      position_tolerance=tolerances[0], heading_tolerance=tolerances[1])
     if options.sensing or world.unknown_obstacles:
         _plot_sensing(bag, out / 'trajectory.png', world, monitor.sensed, title)
     success = (bool(metrics.get('reached')) and not metrics.get('collision')
                and not monitor.contacts)
     if localized(options) and truth:
-        success = success and run_info['true_goal_error'] <= TRUE_GOAL_TOLERANCE
+        allowed = tolerances[0] + REAL_POSE_ERROR if real else TRUE_GOAL_TOLERANCE
+        success = success and run_info['true_goal_error'] <= allowed
     return LoopResult(metrics=metrics, stop_reason=stop_reason, wall_time=wall_time,
                       sim_time=sim_time, out=out, success=success)
 
