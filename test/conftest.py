@@ -205,3 +205,25 @@ class Probe(Node):
         """Return what node logged (at level, e.g. Log.ERROR, if given), in order."""
         return [entry.msg for entry in self.logs
                 if entry.name == node and (level is None or entry.level == level)]
+
+
+# Modules whose tests run whole closed loops without DDS (rollouts, suites, the benchmark's
+# sections, recorded BARN states stepped until the MPC tracks): marked closed_loop. Every
+# test not marked dds or closed_loop is marked unit, so `-m unit` is the quick run.
+CLOSED_LOOP_MODULES = frozenset({
+    'test_controller_real_base.py', 'test_mpc_barn_stalls.py', 'test_rollout.py',
+    'test_sensing_suites.py', 'test_evaluate.py', 'test_sweep.py', 'test_experiments.py',
+    'test_bench_footprint.py', 'test_bench_rate.py', 'test_bench_cold_start.py',
+    'test_bench_peer.py', 'test_mpc_footprint.py',
+})
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Mark every test by its cost: dds (already marked), closed_loop, or unit."""
+    for item in items:
+        if item.get_closest_marker('dds') is not None:
+            continue
+        if item.path.name in CLOSED_LOOP_MODULES:
+            item.add_marker(pytest.mark.closed_loop)
+        else:
+            item.add_marker(pytest.mark.unit)

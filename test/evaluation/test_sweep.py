@@ -56,7 +56,7 @@ def reference(tmp_path_factory) -> list[dict[str, str]]:
     return rows
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 @pytest.mark.parametrize('cluster', ['--scheduler', 'LocalCluster of --jobs'])
 def test_a_dask_cluster_gives_the_local_table(reference, tmp_path, cluster) -> None:
     distributed = pytest.importorskip('distributed')
@@ -77,7 +77,7 @@ def _rows_written(path: Path) -> int:
     return max(0, path.read_text().count('\n') - 1)
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_a_killed_sweep_resumed_gives_the_uninterrupted_table(reference, tmp_path,
                                                                capsys) -> None:
     command = [sys.executable, '-m', 'mpc_local_planner.evaluation.evaluate', *SWEEP,

@@ -65,7 +65,7 @@ def record(ros, bag: Path, odoms: int, cmds: int, world_file: str = '') -> BagRe
     return recorder
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_recorded_bag_is_mcap_readable_by_rosbags_with_topics_and_counts(ros, tmp_path) -> None:
     bag = tmp_path / 'bag'
     record(ros, bag, odoms=25, cmds=7)
@@ -89,7 +89,7 @@ def test_recorded_bag_is_mcap_readable_by_rosbags_with_topics_and_counts(ros, tm
         np.testing.assert_allclose(xs, 0.1 * np.arange(25))
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_analyze_bag_rebuilds_rows_from_odometry_without_diagnostics(ros, tmp_path) -> None:
     bag = tmp_path / 'bag'
     record(ros, bag, odoms=10, cmds=0)
@@ -101,7 +101,7 @@ def test_analyze_bag_rebuilds_rows_from_odometry_without_diagnostics(ros, tmp_pa
     assert run.plan.shape == (2, 3)
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_recorder_refuses_an_unknown_message_type(ros, tmp_path) -> None:
     with pytest.raises(InvalidParameterValueException, match='not available'):
         BagRecorderNode(context=ros.context, parameter_overrides=[
@@ -109,7 +109,7 @@ def test_recorder_refuses_an_unknown_message_type(ros, tmp_path) -> None:
             Parameter('topics', value=['odom']), Parameter('types', value=['nope_msgs/msg/X'])])
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_recorder_records_the_world_file_and_its_contents_in_the_metadata(ros, tmp_path) -> None:
     bag = tmp_path / 'bag'
     record(ros, bag, odoms=3, cmds=0, world_file='rrt_cluttered')
@@ -120,7 +120,7 @@ def test_recorder_records_the_world_file_and_its_contents_in_the_metadata(ros, t
     assert str(resolve_data_file('rrt_cluttered.yaml')) in metadata
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_a_bag_recorded_without_a_world_is_refused_without_world(ros, tmp_path, capsys) -> None:
     bag = tmp_path / 'bag'
     record(ros, bag, odoms=5, cmds=0)
@@ -132,7 +132,7 @@ def test_a_bag_recorded_without_a_world_is_refused_without_world(ros, tmp_path, 
                          'paper_obstacle']) == 1  # analysed: the robot never got there
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_recorder_refuses_an_existing_output_folder_and_leaves_it_untouched(ros, tmp_path) -> None:
     bag = tmp_path / 'bag'
     bag.mkdir()

@@ -86,7 +86,7 @@ def check_run(out, metrics) -> None:
     assert on_disk['contacts'] == 0  # counted by the simulator in every mode
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 @pytest.mark.parametrize('path', ['analytic', 'rrt'])
 def test_closed_loop_in_one_process_reaches_the_paper_target_faster_than_real_time(
         tmp_path, path) -> None:
@@ -98,7 +98,7 @@ def test_closed_loop_in_one_process_reaches_the_paper_target_faster_than_real_ti
     check_run(tmp_path, result.metrics)
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_closed_loop_as_separate_processes_reaches_the_target(tmp_path) -> None:
     code = main(['--out', str(tmp_path), '--path', 'rrt', '--rtf', '4', '--timeout', '90',
                  '--separate-processes'])
@@ -154,7 +154,7 @@ def test_a_goal_inside_the_inflated_obstacles_is_refused_before_anything_starts(
         check_plannable(load_world(world), {'clearance': 0.01, 'robot_radius': 0.1})
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_a_walled_off_goal_ends_the_run_when_the_planner_says_so_with_one_line(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     walls = '  - box: [3.0, 3.0, 5.0, 3.2]\n  - box: [3.0, 3.0, 3.2, 5.0]\n'
@@ -177,7 +177,7 @@ def test_a_world_named_without_its_suffix_is_found(tmp_path: Path,
     assert 'rrt_cluttered names no analytic path' in capsys.readouterr().err
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_the_diagnostics_that_stop_the_run_reach_the_bag(ros, tmp_path: Path) -> None:
     bag = tmp_path / 'bag'
     monitor = ros.add(_Monitor(context=ros.context))
@@ -297,7 +297,7 @@ def test_reality_reaches_the_simulator_and_a_real_one_runs_with_the_localizer() 
                         UNKNOWN_BOX)
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_closed_loop_with_drifting_odometry_goes_around_the_unknown_box_with_the_localizer(
         tmp_path) -> None:
     code = main(['--world', str(UNKNOWN_BOX_FILE), '--out', str(tmp_path), '--sensing',
@@ -309,7 +309,7 @@ def test_closed_loop_with_drifting_odometry_goes_around_the_unknown_box_with_the
     assert metrics['true_goal_error'] < 0.1  # the true robot, not only what odometry says
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_closed_loop_with_sensing_reaches_the_paper_target_without_contact(tmp_path) -> None:
     code = main(['--world', str(WORLD_FILE), '--out', str(tmp_path), '--sensing',
                  '--rtf', '4', '--timeout', '120'])
@@ -317,7 +317,7 @@ def test_closed_loop_with_sensing_reaches_the_paper_target_without_contact(tmp_p
     check_sensing_run(tmp_path, WORLD)
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_closed_loop_with_sensing_goes_around_the_box_only_the_laser_shows(tmp_path) -> None:
     # the first plan, on the map of the known wall, runs through the unknown box
     code = main(['--world', str(UNKNOWN_BOX_FILE), '--out', str(tmp_path), '--sensing',
@@ -327,7 +327,7 @@ def test_closed_loop_with_sensing_goes_around_the_box_only_the_laser_shows(tmp_p
     assert metrics['replans'] >= 1
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_a_run_with_a_contact_fails_and_reports_it(tmp_path) -> None:
     # an unknown box on the paper's path, and no sensing: the controller drives into it
     world = tmp_path / 'hidden_box.yaml'
@@ -464,7 +464,7 @@ def check_footprint_run(out: Path, world, vertices: np.ndarray, source: str) -> 
     return metrics
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_the_jackal_drives_through_the_narrow_gap_its_circle_would_not_pass(tmp_path) -> None:
     code = main(['--world', 'narrow_gap', '--path', 'rrt', '--out', str(tmp_path),
                  '--rtf', '4', '--timeout', '120'])
@@ -476,7 +476,7 @@ def test_the_jackal_drives_through_the_narrow_gap_its_circle_would_not_pass(tmp_
     assert metrics['min_clearance'] <= 0.085 + 1e-6
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_the_jackals_circumscribed_circle_ends_the_run_at_once_with_no_path(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code = main(['--world', 'narrow_gap', '--path', 'rrt', '--out', str(tmp_path / 'out'),
@@ -490,7 +490,7 @@ def test_the_jackals_circumscribed_circle_ends_the_run_at_once_with_no_path(
     assert not (tmp_path / 'out' / 'metrics.json').exists()
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_the_jackal_goes_around_the_papers_box_on_an_rrt_plan(tmp_path) -> None:
     code = main(['--world', 'paper_obstacle', '--path', 'rrt', '--out', str(tmp_path),
                  '--footprint', JACKAL_TEXT, '--rtf', '4', '--timeout', '120'])

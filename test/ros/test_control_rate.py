@@ -40,7 +40,7 @@ from mpc_local_planner.ros.mpc_controller_node import MpcControllerNode
 from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.worlds.world import paper_world
 
-pytestmark = pytest.mark.slow  # DDS: the node spins in an rclpy context
+pytestmark = pytest.mark.dds  # DDS: the node spins in an rclpy context
 WORLD = paper_world()
 # A plan around the paper's box (above it), headings as the planner sends them.
 PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],

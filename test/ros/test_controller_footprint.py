@@ -110,7 +110,7 @@ class Listener(Node):
         return np.array([[p.x, p.y] for p in self.footprints[-1].polygon.points])
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_mpc_footprint_shows_the_polygon_in_force_and_a_bad_one_is_refused(ros) -> None:
     node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=[
         Parameter('world_file', value='narrow_gap')]))
@@ -158,7 +158,7 @@ def grid_with_block(xmin: float, xmax: float, ymin: float, ymax: float) -> Occup
     return msg
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_map_obstacles_a_polygons_corner_can_reach_are_handed_to_the_mpc(ros) -> None:
     # horizon travel 0.31 m/s x 0.2 s x 10 = 0.62 m, no inflation for a polygon, margin 0.5 m:
     # without the Jackal's circumscribed radius (0.333 m) the window would end at 1.12 m and

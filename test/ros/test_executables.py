@@ -36,7 +36,7 @@ import pytest
 
 from mpc_local_planner.ros.parameters import ParameterSpec
 
-pytestmark = pytest.mark.slow  # one process per executable
+pytestmark = pytest.mark.dds  # one process per executable
 
 DISTRIBUTION = 'mpc_local_planner'
 SETUP_PY = Path(__file__).resolve().parents[2] / 'setup.py'

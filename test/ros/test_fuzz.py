@@ -22,7 +22,7 @@ publish, as the probe receives it over DDS, is finite and within the unicycle's 
 second controller (namespace ``sensing``, obstacle_sources world, scan and map) gets random
 LaserScan and OccupancyGrid messages (and their CDR bytes) among good odometry and scans; a
 good scan with random readings is used, one with a broken header refused.
-The node tests are marked slow (DDS). Hypothesis is derandomized with a bounded number of
+The node tests are marked dds. Hypothesis is derandomized with a bounded number of
 examples: the same cases every run.
 """
 
@@ -397,7 +397,7 @@ EVENTS = st.lists(st.one_of(
 ), min_size=1, max_size=12)
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 @FUZZ
 @given(events=EVENTS)
 def test_controller_callbacks_survive_random_messages_and_publish_bounded_twists(
@@ -435,7 +435,7 @@ def test_controller_callbacks_survive_random_messages_and_publish_bounded_twists
     assert np.all(np.isfinite(raw)) and np.all(np.abs(raw) <= U_MAX + 1e-12)
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 @FUZZ
 @given(commands=st.lists(twists(), min_size=1, max_size=6))
 def test_simulator_callbacks_survive_random_twists_and_stay_finite_and_saturated(
@@ -488,7 +488,7 @@ SENSING_EVENTS = st.lists(st.one_of(
 ), min_size=1, max_size=12)
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 @FUZZ
 @given(events=SENSING_EVENTS)
 def test_controller_survives_random_scans_and_grids_and_publishes_bounded_twists(

@@ -171,7 +171,7 @@ def test_launch_file_compiles(path: Path) -> None:
     compile(path.read_text(), str(path), 'exec')
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 @pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
 def test_launch_file_names_only_console_scripts_installed_files_and_declared_parameters(
         path: Path, monkeypatch: pytest.MonkeyPatch, ros: Any, tmp_path: Path) -> None:
@@ -260,7 +260,7 @@ def test_simulation_launch_serves_the_map_argument_or_none_for_a_world_without_a
     assert 'map_server' not in executables and 'mpc_controller' in executables
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_simulation_launch_with_sensing_gives_the_world_only_to_the_simulator(
         monkeypatch: pytest.MonkeyPatch, ros: Any, tmp_path: Path) -> None:
     ros.tmp_path = tmp_path
@@ -353,7 +353,7 @@ _RVIZ_DURABILITY = {'Volatile': DurabilityPolicy.VOLATILE,
                     'Transient Local': DurabilityPolicy.TRANSIENT_LOCAL}
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_every_topic_the_rviz_config_names_is_served_by_a_node_with_a_matching_qos(
         ros: Any) -> None:
     config = yaml.safe_load(RVIZ_FILE.read_text())
@@ -406,7 +406,7 @@ def test_rviz_config_is_yaml_with_the_map_frame_and_a_goal_tool_on_goal_pose() -
 JACKAL_TEXT = '[[0.254, 0.215], [-0.254, 0.215], [-0.254, -0.215], [0.254, -0.215]]'
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_the_footprint_argument_reaches_simulator_planner_and_controller(
         monkeypatch: pytest.MonkeyPatch, ros: Any, tmp_path: Path) -> None:
     ros.tmp_path = tmp_path

@@ -50,7 +50,7 @@ from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.qos import CMD_VEL_QOS, LOCAL_PLAN_QOS
 from mpc_local_planner.worlds.world import paper_world
 
-pytestmark = pytest.mark.slow  # DDS, and a node process
+pytestmark = pytest.mark.dds  # DDS, and a node process
 WORLD = paper_world()
 # A plan around the paper's box (above it), headings as the planner sends them.
 PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],

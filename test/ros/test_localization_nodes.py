@@ -47,7 +47,7 @@ from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.qos import LOCALIZER_QOS
 from mpc_local_planner.worlds.world import paper_world
 
-pytestmark = pytest.mark.slow  # DDS
+pytestmark = pytest.mark.dds  # DDS
 
 WORLD = paper_world()
 # A plan around the paper's box (above it), as test_reliability's.

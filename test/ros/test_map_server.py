@@ -90,7 +90,7 @@ def test_the_shipped_maps_resolve_from_the_source_tree_and_match_their_worlds() 
         assert load_map(resolve_data_file(f'maps/{name}.yaml')).resolution == 0.05
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_map_server_publishes_the_map_to_a_late_subscriber(ros: Any) -> None:
     occupancy = load_map(resolve_data_file(PAPER_MAP))
     server = ros.add(MapServerNode(context=ros.context, parameter_overrides=[
@@ -104,7 +104,7 @@ def test_map_server_publishes_the_map_to_a_late_subscriber(ros: Any) -> None:
     assert _cell(grid, occupancy, AT_THE_START) == FREE
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_map_server_uses_frame_id_topic_name_and_the_map_origin_yaw(
         ros: Any, tmp_path: Path) -> None:
     data = np.full((4, 5), FREE, dtype=np.int8)
@@ -120,7 +120,7 @@ def test_map_server_uses_frame_id_topic_name_and_the_map_origin_yaw(
     _assert_grid_is_the_map(listener.maps[0], load_map(yaml_path), frame_id='world')
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_map_server_refuses_a_bad_yaml_filename_and_fails_configure_on_a_vanished_file(
         ros: Any, tmp_path: Path) -> None:
     yaml_path = save_map(OccupancyMap(data=np.zeros((2, 2)), resolution=0.1), tmp_path, 'gone')
@@ -157,7 +157,7 @@ def _bad_map(tmp_path: Path, kind: str) -> Path:
     return yaml_path
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 @pytest.mark.parametrize('kind', ['missing', 'malformed_yaml', 'zero_resolution',
                                   'negative_resolution', 'missing_image',
                                   'unreadable_image', 'missing_key'])
@@ -173,7 +173,7 @@ def test_map_server_exits_2_with_one_line_on_a_bad_map_file(tmp_path: Path, kind
     assert str(yaml_path) in lines[0]
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 def test_map_server_executable_autostarts_and_serves_the_map_until_ctrl_c(ros: Any) -> None:
     occupancy = load_map(resolve_data_file('maps/unknown_box.yaml'))
     command = [sys.executable, '-m', 'mpc_local_planner.ros.map_server_node',

@@ -61,7 +61,7 @@ from mpc_local_planner.ros.qos import (
 from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
 from mpc_local_planner.worlds.world import paper_world
 
-pytestmark = pytest.mark.slow  # DDS: every test spins nodes in an rclpy context
+pytestmark = pytest.mark.dds  # DDS: every test spins nodes in an rclpy context
 WORLD = paper_world()
 PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
                  [2.5, 0.0, WORLD.goal[2]]])

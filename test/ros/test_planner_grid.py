@@ -48,7 +48,7 @@ from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
 from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.qos import MAP_QOS, PLANNER_DIAGNOSTICS_QOS, SCAN_QOS
 
-pytestmark = pytest.mark.slow  # topics over DDS
+pytestmark = pytest.mark.dds  # topics over DDS
 
 RESOLUTION = 0.05
 ROBOT_RADIUS = 0.2

@@ -33,7 +33,7 @@ from mpc_local_planner.ros.conversions import path_to_poses, yaw_to_quaternion
 from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
 from mpc_local_planner.worlds.world import paper_world
 
-pytestmark = pytest.mark.slow  # lifecycle services and topics over DDS
+pytestmark = pytest.mark.dds  # lifecycle services and topics over DDS
 
 WORLD = paper_world()
 GOAL = [float(v) for v in WORLD.goal]

@@ -64,7 +64,7 @@ from mpc_local_planner.ros.qos import MAP_QOS, SCAN_QOS
 from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
 from mpc_local_planner.worlds.world import paper_world
 
-pytestmark = pytest.mark.slow  # DDS, and node processes
+pytestmark = pytest.mark.dds  # DDS, and node processes
 WORLD = paper_world()
 # A plan around the paper's box (above it), headings as the planner sends them.
 PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],

@@ -53,7 +53,7 @@ from mpc_local_planner.ros.mpc_controller_node import (
 from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.qos import LOCAL_PLAN_QOS, MAP_QOS
 
-pytestmark = pytest.mark.slow  # DDS
+pytestmark = pytest.mark.dds  # DDS
 
 U_MAX = Unicycle().u_max
 STEP = 0.2  # the controller's control period (s)

@@ -24,7 +24,7 @@ from rclpy.node import Node
 
 from mpc_local_planner.ros.closed_loop import MODULES
 
-pytestmark = pytest.mark.slow  # a node process over DDS
+pytestmark = pytest.mark.dds  # a node process over DDS
 # Wall seconds a process may take to start or to exit before it counts as hung.
 HANG_GUARD = 60.0
 
@@ -160,7 +160,7 @@ def test_sigterm_ends_run_node_cleanly_through_on_exit(monkeypatch) -> None:
     assert not rclpy.ok()
 
 
-@pytest.mark.slow
+@pytest.mark.dds
 @pytest.mark.parametrize('node_name', ['unicycle_simulator', 'global_planner'])
 def test_a_node_that_refused_its_parameters_leaves_no_handle_to_silence_the_next_one(
         ros, node_name: str) -> None:

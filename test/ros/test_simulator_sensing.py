@@ -43,7 +43,7 @@ from mpc_local_planner.ros.unicycle_simulator_node import (
     UnicycleSimulatorNode,
 )
 
-pytestmark = pytest.mark.slow  # topics over DDS
+pytestmark = pytest.mark.dds  # topics over DDS
 
 ROOT = Path(__file__).resolve().parents[2]
 NARROW_GAP = ROOT / 'config' / 'worlds' / 'narrow_gap.yaml'  # a 0.6 m gap in a wall at x = 2

@@ -45,7 +45,7 @@ from mpc_local_planner.ros.unicycle_simulator_node import (
     validate_simulator_parameters,
 )
 
-pytestmark = pytest.mark.slow  # topics over DDS
+pytestmark = pytest.mark.dds  # topics over DDS
 
 # Wall seconds before a condition counts as never reached.
 TIMEOUT = 20.0
