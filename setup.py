@@ -78,6 +78,7 @@ setup(
             'closed_loop = mpc_local_planner.ros.closed_loop:main',
             'analyze_bag = mpc_local_planner.evaluation.analyze_bag:main',
             'mpc_bench = mpc_local_planner.evaluation.bench:main',
+            'mpc_bench_dds = mpc_local_planner.ros.latency_bench:main',
             'world_to_map = mpc_local_planner.worlds.world_to_map:main',
             'map_server = mpc_local_planner.ros.map_server_node:main',
         ],

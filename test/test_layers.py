@@ -33,7 +33,7 @@ ALLOWED_LAYERS = {
     'core': {'core'},
     'worlds': {'core', 'worlds'},
     'perception': {'core', 'worlds', 'perception'},
-    'evaluation': {'core', 'perception', 'worlds', 'evaluation', 'ros'},
+    'evaluation': {'core', 'perception', 'worlds', 'evaluation'},
     'ros': {'core', 'perception', 'worlds', 'evaluation', 'ros'},
 }
 # ament_index_python is a plain lookup of installed files (worlds/data_files.py), not ROS I/O

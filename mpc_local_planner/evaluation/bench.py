@@ -18,8 +18,9 @@ Every figure is measured in the run that prints it: the paper's obstacle scenari
 loop (h = 0.2 s, Unicycle().step as the plant) for N in {10, 20, 40} and each backend, the
 same problem written as a competent CasADi user would (`opti_peer.OptiMpc`: casadi.Opti, IPOPT with
 expand=True, warm-started from the shifted previous solution and multipliers), N = 10
-with 1, 5 and 20 obstacles, RRT* planning time for 1000 iterations, and (unless --skip-dds)
-the controller node's latency from /odom to /cmd_vel over DDS and its resident memory.
+with 1, 5 and 20 obstacles, and RRT* planning time for 1000 iterations. The controller
+node's latency over DDS is ``mpc_bench_dds`` (ros/latency_bench.py): the one benchmark that
+needs rclpy lives in ros/, and this module imports nothing from there.
 
 Perception on BARN world 0 (the robot at poses along its start-goal line, heading to the
 goal): a simulated 720-beam scan; scan -> obstacles and the obstacle memory's update; and
@@ -38,8 +39,7 @@ plant): the MPC solves once per step, so three calls in four apply the held plan
 safety checks; their times are reported apart from the solving calls' and together
 (median, p99, max), which is what a 20 Hz control timer has to fit into its 50 ms period.
 
-Usage: ``python -m mpc_local_planner.evaluation.bench [--quick] [--skip-dds] [--out FILE]
-[--sections ...]``.
+Usage: ``python -m mpc_local_planner.evaluation.bench [--quick] [--out FILE] [--sections ...]``.
 """
 
 from __future__ import annotations
@@ -132,9 +132,8 @@ TARGET_FOOTPRINT_STEP_MS = TARGET_CONTROL_STEP_MS
 # node's default), and the MPC's horizon there.
 CONTROL_FREQUENCY = 20.0
 RATE_HORIZON = 10
-# What main() can run, in this order (dds also needs no --skip-dds).
-SECTIONS = ('horizons', 'obstacles', 'rrt', 'perception', 'footprint', 'rate', 'cold_start',
-            'dds')
+# What main() can run, in this order.
+SECTIONS = ('horizons', 'obstacles', 'rrt', 'perception', 'footprint', 'rate', 'cold_start')
 # Cold start (issue 24): the first laser-only BARN run of the paper's MPC, as a new user runs
 # it, with an empty compile cache and then again with the cache it filled; the target is for
 # the cold one (on a fresh machine, from the command to the finished run).
@@ -721,12 +720,11 @@ def main(argv: Sequence[str] | None = None, *, footprint_compile: bool = True,
     parser.add_argument('--quick', action='store_true',
                         help='fewer steps, N = 10 and 40 only, 50 scans and 60 control steps '
                              '(also per footprint row), 240 calls at the control rate')
-    parser.add_argument('--skip-dds', action='store_true', help='skip the ROS 2 measurement')
     parser.add_argument('--out', default='bench.json', help='JSON output file')
     parser.add_argument('--backends', nargs='*', default=list(SOLVERS),
                         help='backends to time (default: all)')
     parser.add_argument('--sections', nargs='*', choices=SECTIONS, default=list(SECTIONS),
-                        help='tables to measure (default: all; dds also needs no --skip-dds)')
+                        help='tables to measure (default: all)')
     args = parser.parse_args(argv)
     sections = set(args.sections)
 
@@ -812,14 +810,6 @@ def main(argv: Sequence[str] | None = None, *, footprint_compile: bool = True,
         results['cold_start'] = cold
         for line in _cold_start_lines(cold):
             print(line, flush=True)
-
-    if 'dds' in sections and not args.skip_dds:
-        # the one part that needs rclpy, hence in ros/ and imported only when it runs
-        from mpc_local_planner.ros.latency_bench import measure_controller_latency
-
-        dds = measure_controller_latency(steps=30 if args.quick else 100)
-        results['dds'] = dds
-        print(dds['summary'], flush=True)
 
     results['machine']['load_average_after'] = list(os.getloadavg())
     print('\nload average (1, 5, 15 min) before: '

@@ -13,20 +13,24 @@
 # limitations under the License.
 
 
-"""The controller node's latency over DDS, for mpc_bench (``mpc_bench`` without ``--skip-dds``).
+"""mpc_bench_dds: the controller node's latency over DDS and its resident memory.
 
-It lives in ros/ because it is the one benchmark that needs rclpy: a probe node plays the
-simulator and the clock for a controller started as its own process.
+The one benchmark that needs rclpy, so it lives in ros/ with its own entry point (mpc_bench,
+in evaluation/, imports nothing from ros/): a probe node plays the simulator and the clock for
+a controller started as its own process. Run it with
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST mpc_bench_dds [--quick] [--out FILE]``.
 """
 
 from __future__ import annotations
 
+import argparse
+import json
 import math
 import os
 import subprocess
 import sys
 import time
-from typing import Any
+from typing import Any, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Twist
@@ -150,3 +154,21 @@ def measure_controller_latency(steps: int = 100) -> dict[str, Any]:
         f"median {result['beyond_solve_ms']['median']:.2f} ms, p95 "
         f"{result['beyond_solve_ms']['p95']:.2f} ms; controller RSS {rss:.0f} MB")
     return result
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Measure the controller node over DDS, print the summary and write JSON."""
+    parser = argparse.ArgumentParser(prog='mpc_bench_dds', description=__doc__.splitlines()[0])
+    parser.add_argument('--quick', action='store_true', help='30 control steps instead of 100')
+    parser.add_argument('--out', default='bench_dds.json', help='JSON output file')
+    args = parser.parse_args(argv)
+    result = measure_controller_latency(steps=30 if args.quick else 100)
+    print(result['summary'], flush=True)
+    with open(args.out, 'w', encoding='utf-8') as f:
+        json.dump(result, f, indent=2)
+    print(f'wrote {args.out}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

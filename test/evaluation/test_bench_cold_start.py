@@ -34,7 +34,7 @@ def test_cold_start_section_reports_cold_and_warm(tmp_path: Path,
     own_cache = tmp_path / 'own_cache'
     monkeypatch.setenv('MPC_LOCAL_PLANNER_CACHE', str(own_cache))
     out = tmp_path / 'bench.json'
-    assert main(['--quick', '--skip-dds', '--sections', 'cold_start', '--out', str(out)],
+    assert main(['--quick', '--sections', 'cold_start', '--out', str(out)],
                 cold_start_controllers='dwa') == 0
     result = json.loads(out.read_text(encoding='utf-8'))['cold_start']
     assert result['repeats'] == 1

@@ -50,7 +50,7 @@ def test_footprint_rows_appear_in_the_json_with_their_keys(tmp_path: Path,
                                                            capsys: pytest.CaptureFixture[str]
                                                            ) -> None:
     out = tmp_path / 'bench.json'
-    assert main(['--quick', '--skip-dds', '--sections', 'footprint', '--out', str(out)],
+    assert main(['--quick', '--sections', 'footprint', '--out', str(out)],
                 footprint_compile=False, footprint_steps=3) == 0
     results = json.loads(out.read_text(encoding='utf-8'))
     rows = results['footprint']

@@ -35,7 +35,7 @@ def test_the_rate_section_times_solving_and_holding_calls_apart(
     assert 'rate' in SECTIONS
     out = tmp_path / 'bench.json'
     calls = 12  # three steps h of four calls
-    assert main(['--skip-dds', '--sections', 'rate', '--out', str(out)],
+    assert main(['--sections', 'rate', '--out', str(out)],
                 rate_compile=False, rate_calls=calls) == 0
     results = json.loads(out.read_text(encoding='utf-8'))
     assert 'horizons' not in results and 'footprint' not in results  # --sections

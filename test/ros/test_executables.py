@@ -97,7 +97,8 @@ def scalar_default(value: object) -> str | None:
 
 def test_the_package_has_the_executables_the_readme_names() -> None:
     assert {'global_planner', 'mpc_controller', 'unicycle_simulator', 'bag_recorder',
-            'closed_loop', 'analyze_bag', 'mpc_bench', 'world_to_map'} <= set(SCRIPTS)
+            'closed_loop', 'analyze_bag', 'mpc_bench', 'mpc_bench_dds',
+            'world_to_map'} <= set(SCRIPTS)
 
 
 @pytest.mark.parametrize('name', sorted(SCRIPTS))
