@@ -33,7 +33,7 @@ import yaml
 
 from mpc_local_planner.core.obstacles import ConvexPolygon
 
-__all__ = ['CIRCLE', 'Footprint', 'JACKAL', 'parse_footprint']
+__all__ = ['CIRCLE', 'Footprint', 'JACKAL', 'parse_footprint', 'resolve']
 
 # Smallest turn (cross product, m^2) between consecutive edges that counts as a corner.
 _COLLINEAR_TOLERANCE = 1e-12
@@ -210,3 +210,32 @@ def parse_footprint(footprint: str | Sequence[Sequence[float]] | None,
         msg = f'footprint {footprint!r} is not a list of [x, y] pairs'
         raise ValueError(msg) from err
     return Footprint.polygon(vertices)
+
+
+def resolve(parameter: str | Sequence[Sequence[float]] | None, robot_radius: float = 0.0,
+            world_footprint: Footprint | None = None, world_radius: float = 0.0) -> Footprint:
+    """Return the robot's shape by Nav2's precedence, as every node and closed_loop apply it.
+
+    1. the ``footprint`` parameter's convex polygon;
+    2. the world file's footprint, when it is a polygon;
+    3. a circle of the larger of ``robot_radius`` and the world's radius.
+
+    So a world that describes its robot is run with that robot unless the parameter says
+    otherwise, and a radius (closed_loop sets it from the world's covering radius) never
+    turns a polygon back into its circumscribed circle.
+
+    Raises:
+        ValueError: the parameter is not Nav2's "[[x, y], ...]" form of a convex polygon,
+            with the reason.
+
+    """
+    try:
+        shape = parse_footprint(parameter)
+    except ValueError as err:
+        msg = f'footprint {parameter!r}: {err}'
+        raise ValueError(msg) from None
+    if not shape.is_circle:
+        return shape
+    if world_footprint is not None and not world_footprint.is_circle:
+        return world_footprint
+    return Footprint.circle(max(float(robot_radius), float(world_radius)))

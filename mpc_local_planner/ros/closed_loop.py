@@ -128,7 +128,7 @@ from mpc_local_planner.core.diagnostics import (
     PlannerDiagnostics,
 )
 from mpc_local_planner.core.errors import PlanningError
-from mpc_local_planner.core.footprint import Footprint, parse_footprint
+from mpc_local_planner.core.footprint import Footprint, parse_footprint, resolve
 from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
 from mpc_local_planner.core.reality import reality_preset, REALITY_PRESETS
 from mpc_local_planner.evaluation.analyze_bag import analyze, read_run, summary
@@ -546,9 +546,8 @@ def check_plannable(world: World, planner_parameters: dict[str, Any]) -> None:
     radius = max(float(planner_parameters.get('robot_radius', defaults.robot_radius)),
                  world.robot_radius)
     clearance = float(planner_parameters.get('clearance', defaults.clearance))
-    footprint = parse_footprint(str(planner_parameters.get('footprint', '')))
-    if footprint.is_circle:
-        footprint = world.footprint
+    footprint = resolve(str(planner_parameters.get('footprint', '')),
+                        world_footprint=world.footprint)
     polygon = () if footprint.is_circle else tuple(map(tuple, footprint.vertices.tolist()))
     planner = RrtStarPlanner(world.obstacles, world.bounds,
                              config=PlannerConfig(robot_radius=radius, clearance=clearance,

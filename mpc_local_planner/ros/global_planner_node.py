@@ -95,7 +95,7 @@ from mpc_local_planner.core.diagnostics import (
     PlanTrigger,
 )
 from mpc_local_planner.core.errors import PlanningError
-from mpc_local_planner.core.footprint import parse_footprint
+from mpc_local_planner.core.footprint import parse_footprint, resolve
 from mpc_local_planner.core.paths import analytic_path, waypoints_to_poses
 from mpc_local_planner.core.planner import path_length, PlannerConfig, RrtStarPlanner
 from mpc_local_planner.core.replanning import (
@@ -539,9 +539,8 @@ class GlobalPlannerNode(ManagedNode):
         values['simplify'] = bool(values['simplify'])
         for key in ('time_limit', 'range', 'clearance'):
             values[key] = float(values[key])
-        footprint = parse_footprint(str(self.get_parameter('footprint').value))
-        if footprint.is_circle and self._world is not None:
-            footprint = self._world.footprint
+        footprint = resolve(str(self.get_parameter('footprint').value),
+                            world_footprint=self._world.footprint if self._world else None)
         if not footprint.is_circle:
             values['footprint'] = tuple(map(tuple, footprint.vertices.tolist()))
         return PlannerConfig(**values)

@@ -35,7 +35,7 @@ from typing import Any
 
 from mpc_local_planner.core.config import MpcConfig, SOLVERS
 from mpc_local_planner.core.controller import ControllerSettings
-from mpc_local_planner.core.footprint import Footprint, parse_footprint
+from mpc_local_planner.core.footprint import Footprint, resolve
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.ros.parameters import DEFAULT_WORLD_FILE, ParameterSpec
@@ -248,13 +248,7 @@ def robot_footprint(parameter: str, world_footprint: Footprint | None = None
             with the reason (too few vertices, not convex, ...).
 
     """
-    try:
-        shape = parse_footprint(str(parameter))
-    except ValueError as err:
-        msg = f'footprint {parameter!r}: {err}'
-        raise ValueError(msg) from None
-    if shape.is_circle and world_footprint is not None:
-        shape = world_footprint
+    shape = resolve(str(parameter), world_footprint=world_footprint)
     if shape.is_circle:
         return ()
     return tuple((float(x), float(y)) for x, y in shape.vertices)

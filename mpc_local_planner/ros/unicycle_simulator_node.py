@@ -106,7 +106,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import LaserScan
 from std_msgs.msg import UInt32
 
-from mpc_local_planner.core.footprint import Footprint, parse_footprint
+from mpc_local_planner.core.footprint import Footprint, parse_footprint, resolve
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.reality import (
     Base,
@@ -546,17 +546,17 @@ class UnicycleSimulatorNode(Node):
     def _read_footprint(self) -> Footprint:
         """Return the footprint contacts are counted with (precedence: module docstring)."""
         # validated by parameters_callback: parsing cannot fail here
-        footprint = parse_footprint(str(self.get_parameter('footprint').value))
-        source = 'the footprint parameter'
+        parameter = str(self.get_parameter('footprint').value)
         world = self._world
-        if footprint.is_circle and world is not None and world.footprint is not None \
-                and not world.footprint.is_circle:
-            footprint, source = world.footprint, f'the world {world.name!r}'
-        if footprint.is_circle:
-            return Footprint.circle(max(float(self.get_parameter('robot_radius').value),
-                                        world.robot_radius if world else 0.0))
-        self.get_logger().info(
-            f'contacts counted with the polygon {footprint.vertices.tolist()} from {source}')
+        footprint = resolve(parameter, float(self.get_parameter('robot_radius').value),
+                            world.footprint if world else None,
+                            world.robot_radius if world else 0.0)
+        if not footprint.is_circle:
+            source = ('the footprint parameter' if not parse_footprint(parameter).is_circle
+                      else f'the world {world.name!r}')
+            self.get_logger().info(
+                f'contacts counted with the polygon {footprint.vertices.tolist()} from '
+                f'{source}')
         return footprint
 
     def _reality_values(self) -> dict[str, Any]:

@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from mpc_local_planner.core.footprint import Footprint, JACKAL, parse_footprint
+from mpc_local_planner.core.footprint import Footprint, JACKAL, parse_footprint, resolve
 
 
 def test_nav2_string_form_gives_a_counter_clockwise_polygon_and_its_circumscribed_radius() -> None:
@@ -88,3 +88,18 @@ def test_contains_says_which_robot_frame_points_are_within_the_footprint_grown_b
     assert JACKAL.contains(points).tolist() == [True, False, True, False, False]
     assert JACKAL.contains(points, margin=1e-3).tolist() == [True, True, True, True, False]
     assert JACKAL.contains(np.array([0.0, 0.0])).tolist() == [True]  # one point, (2,)
+
+
+def test_the_footprint_in_force_follows_nav2s_precedence():
+    square = '[[0.2, 0.2], [-0.2, 0.2], [-0.2, -0.2], [0.2, -0.2]]'
+    world = Footprint.polygon([[0.3, 0.1], [-0.3, 0.1], [-0.3, -0.1], [0.3, -0.1]])
+    # 1. the parameter's polygon wins over the world's polygon and any radius
+    assert np.allclose(resolve(square, 1.0, world, 2.0).vertices,
+                       parse_footprint(square).vertices)
+    # 2. else the world's polygon, whatever the radii
+    assert resolve('', 1.0, world, 2.0) is world
+    # 3. else a circle of the larger radius
+    assert resolve('', 0.3, Footprint.circle(0.1), 0.2).radius == pytest.approx(0.3)
+    assert resolve('', 0.1, None, 0.25).radius == pytest.approx(0.25)
+    with pytest.raises(ValueError, match='footprint'):
+        resolve('[[0, 0], [1, 0]]')
