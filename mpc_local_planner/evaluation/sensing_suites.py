@@ -114,6 +114,12 @@ REALITY_SUBSTEP = 0.01
 # error of a lagging base (a polygon's default is 0: the NLP's clearance covers the motion of
 # the model exactly, not the robot's departures from it).
 REALITY_MARGIN = 0.03
+# The paper's MPC's input-rate bounds on a real base, as a multiple of the base's
+# acceleration limits. At the base's own limits a standing robot's NLP often found no
+# verified plan (7 of 8 hard BARN worlds stalled); without bounds its commands jumped and the
+# lagging base left the verified motion (3 contacts in BARN 0-99); at twice them, all 5
+# worlds that failed either way were reached, with no contact (docs/real_robot.md).
+REALITY_ACCEL_FACTOR = 2.0
 
 
 @dataclass(frozen=True)
@@ -258,10 +264,10 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
     """Return the cached MpcController or TrackingMPC for the robot, reset for a new run.
 
     With a real base (reality), the paper's MPC is told its deceleration limits (stops
-    brake along the last verified plan, ControllerSettings.max_decel) and keeps a collision
-    margin for the base's lag (REALITY_MARGIN). Its NLP does not bound the input rates
-    (MpcConfig.max_accel): with the base's limits there, a standing robot's rate-bounded NLP
-    often found no verified plan within the step's iterations (docs/real_robot.md).
+    brake along the last verified plan, ControllerSettings.max_decel), bounds its input rates
+    at REALITY_ACCEL_FACTOR times the base's (MpcConfig.max_accel) and keeps a collision
+    margin for the base's lag (REALITY_MARGIN); see docs/real_robot.md for how these were
+    chosen.
     """
     accel = reality.acceleration if reality is not None and all(
         math.isfinite(a) for a in reality.acceleration) else None
@@ -273,7 +279,9 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
                          v_min=None if robot.reverses else 0.0)
         config = MpcConfig(robot_radius=robot.footprint.radius if robot.footprint.is_circle
                            else 0.0, footprint=_vertices(robot.footprint), budget=budget,
-                           collision_margin=REALITY_MARGIN if reality is not None else None)
+                           collision_margin=REALITY_MARGIN if reality is not None else None,
+                           max_accel=tuple(REALITY_ACCEL_FACTOR * a for a in accel)
+                           if accel is not None and name == 'proposed' else None)
         if name == 'proposed':
             settings = ControllerSettings(xy_goal_tolerance=0.05, yaw_goal_tolerance=math.pi,
                                           capacity=PATH_CAPACITY,

@@ -26,7 +26,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 import yaml
 
-from mpc_local_planner.core.controller import ControlOutput, Reason
+from mpc_local_planner.core.controller import ControllerSettings, ControlOutput, Reason
 from mpc_local_planner.core.diagnostics import ControllerDiagnostics
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import Footprint, JACKAL, parse_footprint
@@ -73,8 +73,10 @@ def check_run(out, metrics) -> None:
     # no sample inside the box (the raw obstacle)
     for obstacle in WORLD.obstacles:
         assert not np.any(obstacle.contains(rows[:, 1:3]))
-    # one control step every h = 0.2 s of simulated time
-    assert np.median(np.diff(rows[:, 0])) == pytest.approx(0.2, abs=1e-6)
+    # one command every 1 / control_frequency = 0.05 s of simulated time (the MPC solving
+    # once per h = 0.2 s)
+    assert np.median(np.diff(rows[:, 0])) == pytest.approx(
+        1.0 / ControllerSettings().control_frequency, abs=1e-6)
     # the commands respect the bounds
     assert np.all(np.abs(rows[:, 4]) <= 0.31 + 1e-9) and np.all(np.abs(rows[:, 5]) <= 1.9 + 1e-9)
     on_disk = json.loads((out / 'metrics.json').read_text())
