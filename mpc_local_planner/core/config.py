@@ -96,10 +96,10 @@ class MpcConfig:
             none for a polygon (its NLP asks for a clearance that follows the motion).
         farkas_margin: the Farkas constraint asks (A p - b)^T mu >= this (metres); a polygon's
             dual bound asks for this plus the motion's h/2 (|v| + r_c |omega|).
-        obstacle_slots: with adaptive_slots False, obstacles the solver holds at once (grows,
-            with a rebuild, when more are within reach); with adaptive_slots, the count
-            prepare() builds in advance, and the most a step holds once prepared (the
-            nearest; its solution is checked against all obstacles in reach).
+        obstacle_slots: the obstacle counts prepare() builds NLPs for in advance (one NLP
+            per count of obstacles near the trajectory and face count), and the most a step
+            holds once prepared (the nearest; its solution is checked against all obstacles
+            in reach).
         faces_per_obstacle: half-planes per obstacle slot (larger polygons are refused).
         solver: NLP backend, one of SOLVERS.
         fatrop_stage_limit: with solver 'fatrop', an NLP shape whose stages have more
@@ -114,8 +114,6 @@ class MpcConfig:
             Farkas multipliers in the NLP; the others within reach are checked and added
             when a solution comes within half of it (None: v_max h / 2). For a polygon, the
             distance is what its exact clearance exceeds the clearance the motion needs by.
-        adaptive_slots: build the NLP for the obstacles actually within reach (a small cache
-            of NLPs keyed by their count and face count) instead of fixed, padded slots.
         compile: compile the NLP's functions to C with the system compiler ($CC or gcc), in
             the background, cached on disk (see mpc.compile_cache_dir); until it is done, or
             if it fails (a logged warning), the interpreted functions are used.
@@ -168,7 +166,6 @@ class MpcConfig:
     max_iterations: int = 200
     tolerance: float = 1e-8
     activation_distance: float | None = None
-    adaptive_slots: bool = True
     compile: bool = True
     max_solve_time: float | None = None
     budget: str = 'wall'
@@ -252,7 +249,7 @@ class MpcConfig:
 STRUCTURAL_FIELDS = frozenset(
     {'horizon', 'step', 'cost_exponent', 'farkas_margin', 'obstacle_slots',
      'faces_per_obstacle', 'solver', 'max_iterations', 'tolerance', 'solver_options',
-     'adaptive_slots', 'compile', 'footprint', 'fatrop_stage_limit', 'max_accel'}
+     'compile', 'footprint', 'fatrop_stage_limit', 'max_accel'}
 )
 
 

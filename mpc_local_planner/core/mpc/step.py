@@ -340,7 +340,6 @@ class MpcBase(ABC):
         self._use_footprint()
         self._raw_obstacles: list[ConvexPolygon] = []
         self._inflated: list[ConvexPolygon] = []
-        self._slots = self._config.obstacle_slots
         self._shapes = NlpShapes(self._structure, self._build)
         self._last_nlp: Nlp | None = None
         self._last_active: tuple[ConvexPolygon, ...] = ()
@@ -388,7 +387,6 @@ class MpcBase(ABC):
         if any(getattr(old, name) != getattr(config, name) for name in STRUCTURAL_FIELDS):
             self._use_footprint()
             self._shapes.clear()  # the new shapes are built as steps need them
-            self._slots = max(self._slots, config.obstacle_slots)
             self._stage_fn = stage_cost(self._model, config.cost_exponent)
             self.reset()
         if old.inflation(self._model.u_max[0]) != config.inflation(self._model.u_max[0]):
@@ -489,8 +487,6 @@ class MpcBase(ABC):
     def _slot_shape(self, selected: list[ConvexPolygon]) -> tuple[int, int]:
         """Return (slots, faces) of the NLP that holds the selected obstacles."""
         c = self._config
-        if not c.adaptive_slots:
-            return max(self._slots, len(selected)), c.faces_per_obstacle
         if not selected:
             return 0, 0
         # faces rounded up to a multiple of 4 so that boxes and octagons share few builds
@@ -522,9 +518,9 @@ class MpcBase(ABC):
     def prepare(self, max_obstacles: int | None = None) -> None:
         """Build the NLPs for 0..max_obstacles obstacles in reach, so no control step waits.
 
-        With adaptive slots, for boxes (4 faces), for polygons of faces_per_obstacle (what
-        sensed obstacles become) and for the face counts of the obstacles set now: an NLP
-        holds obstacles with fewer faces too. Their IPOPTs too (fallback, cold start): with a
+        For boxes (4 faces), for polygons of faces_per_obstacle (what sensed obstacles
+        become) and for the face counts of the obstacles set now: an NLP holds obstacles with
+        fewer faces too. Their IPOPTs too (fallback, cold start): with a
         wall budget a step builds one only if the build fits in what is left of it, so one
         not built ahead may never be there when it is needed. From then on a control step builds no
         NLP, in any thread (see NlpShapes): with more obstacles active than max_obstacles,
@@ -536,12 +532,9 @@ class MpcBase(ABC):
         """
         c = self._config
         count = c.obstacle_slots if max_obstacles is None else max_obstacles
-        if c.adaptive_slots:
-            faces = sorted({4, c.faces_per_obstacle}
-                           | {self._slot_shape([o])[1] for o in self._inflated})
-            shapes = [(0, 0)] + [(k, f) for k in range(1, count + 1) for f in faces]
-        else:
-            shapes = [self._slot_shape(self._inflated[:count])]
+        faces = sorted({4, c.faces_per_obstacle}
+                       | {self._slot_shape([o])[1] for o in self._inflated})
+        shapes = [(0, 0)] + [(k, f) for k in range(1, count + 1) for f in faces]
         for shape in shapes:
             nlp = self._nlp_for(*shape)
             nlp.fallback_solver()
@@ -557,8 +550,6 @@ class MpcBase(ABC):
     def _prepare_nlp(self, active: list[ConvexPolygon], x0: np.ndarray
                      ) -> tuple[Nlp, np.ndarray, list[ConvexPolygon]]:
         """Return the NLP for the active obstacles, its parameters and the ones it holds."""
-        if not self._config.adaptive_slots and len(active) > self._slots:
-            self._slots = len(active)  # grow: rebuilt below, between two control steps
         nlp, held = self._nlp_holding(active)
         # with an iteration budget, which functions run must not depend on timing either
         nlp.finish_compilation(wait=self._config.budget == 'iterations')
