@@ -33,8 +33,10 @@
   first check at least ``replan_period`` seconds after the plan in force was made.
 - **No progress** (Nav2's progress checker): otherwise, with ``progress_timeout`` > 0, when
   the robot, farther than ``progress_radius`` from the goal, has not moved
-  ``progress_radius`` from where it was ``progress_timeout`` seconds ago (or since the plan
-  in force was made), the goal is re-planned from where it stands. A real robot that
+  ``progress_radius`` from where it was ``progress_timeout`` seconds ago, the goal is
+  re-planned from where it stands. The rule counts only once the robot has moved
+  ``progress_radius`` since the plan was made (a controller that starts late is not a robot
+  that is stuck); after a no-progress re-plan it goes on counting. A real robot that
   re-planned while moving coasts on past the new plan's start; a forward-only one may then
   have the plan behind it, and its controller no verified way back onto it. The clock of
   this rule restarts at each attempt, so a robot that cannot be helped is re-planned once
@@ -215,6 +217,7 @@ class Replanner:
         # where the robot was when progress was last measured, and when (No progress)
         self._anchor: np.ndarray | None = None
         self._anchor_time = -math.inf
+        self._moved = False  # the robot has moved progress_radius since the plan was made
 
     @property
     def plan(self) -> np.ndarray | None:
@@ -293,7 +296,10 @@ class Replanner:
         if self._anchor is None or float(np.hypot(*(position - self._anchor))) \
                 >= settings.progress_radius:
             self._anchor, self._anchor_time = position.copy(), now
+            self._moved = True
             return False
+        if not self._moved:
+            return False  # not moved since the plan: its controller may not be up yet
         if float(np.hypot(*(position - self._goal[:2]))) <= settings.progress_radius:
             return False  # at the goal: standing is arriving
         if now - self._anchor_time < settings.progress_timeout - TIME_EPSILON:
@@ -325,6 +331,7 @@ class Replanner:
         waypoints = np.asarray(waypoints, dtype=float)
         self._plan, self._goal, self._plan_time = waypoints, goal, now
         self._anchor, self._anchor_time = start[:2].copy(), now
+        self._moved = trigger is PlanTrigger.NO_PROGRESS  # standing already: it counts on
         if trigger is PlanTrigger.GOAL:
             self._checked = now
         else:

@@ -267,6 +267,16 @@ def test_standing_at_the_goal_or_moving_is_no_reason_to_re_plan():
     assert ReplanSettings().progress_timeout == 0.0
 
 
+def test_a_robot_that_has_not_moved_since_its_plan_is_waiting_for_its_controller():
+    """A controller that starts late is not a robot that is stuck: no re-plan until it moved."""
+    planner = _NoProgressPlanner()
+    replanner = Replanner(ReplanSettings(check_period=0.5, progress_timeout=5.0))
+    replanner.plan_goal(planner, np.zeros(3), np.array([10.0, 0.0, 0.0]), now=0.0)
+    for k in range(1, 60):
+        assert replanner.check(planner, np.zeros(3), now=0.5 * k).outcome \
+            is not ReplanOutcome.PLANNED
+
+
 class _NoProgressPlanner:
     """A planner whose plans are always clear: only the progress rule can re-plan."""
 
