@@ -55,7 +55,7 @@ WORLD = paper_world()
 # A plan around the paper's box (above it), headings as the planner sends them.
 PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
                  [2.5, 0.0, WORLD.goal[2]]])
-STEP = 0.2  # the controller's default control period (s)
+STEP = 0.2  # the prediction step h, and the control period these tests run the node at (s)
 TICK = 0.05  # simulated seconds per tick of the test's clock
 QUIET_PERIODS = 5  # control periods of simulated time that must pass in silence
 
@@ -136,8 +136,11 @@ def driving(probe) -> bool:
 
 
 def test_every_lifecycle_transition_over_dds_and_what_each_state_publishes(ros) -> None:
+    # one control tick per step h, as the test's clock steps (the 20 Hz ticks between solves
+    # are test_control_rate.py's): the counts below are per step
     node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=[
-        Parameter('use_sim_time', value=True), Parameter('autostart', value=False)]))
+        Parameter('use_sim_time', value=True), Parameter('autostart', value=False),
+        Parameter('control_frequency', value=1.0 / STEP)]))
     lifecycle = ros.add(LifecycleProbe(ros.context))
     probe = ros.probe(use_sim_time=True)
     clock = Clock(ros, probe)
@@ -247,7 +250,8 @@ def test_markers_show_the_obstacles_raw_grown_and_active_and_the_footprint_follo
         ros) -> None:
     radius = 0.1
     node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=[
-        Parameter('use_sim_time', value=True), Parameter('robot_radius', value=radius)]))
+        Parameter('use_sim_time', value=True), Parameter('robot_radius', value=radius),
+        Parameter('control_frequency', value=1.0 / STEP)]))  # a tick per clock step
     assert autostart(node) is None
     lifecycle = ros.add(LifecycleProbe(ros.context))
     probe = ros.probe(use_sim_time=True)
