@@ -148,6 +148,12 @@ class Reality:
                 and self.scan_loss == 0.0)
 
     @property
+    def acceleration_limits(self) -> tuple[float, float] | None:
+        """The acceleration limits when both are finite (what a controller is told), else None."""
+        return self.acceleration if all(math.isfinite(a) for a in self.acceleration) \
+            else None
+
+    @property
     def ideal(self) -> bool:
         """Nothing differs from the model."""
         return self.ideal_base and self.ideal_laser

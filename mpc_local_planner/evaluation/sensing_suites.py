@@ -269,8 +269,7 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
     margin for the base's lag (REALITY_MARGIN); see docs/real_robot.md for how these were
     chosen.
     """
-    accel = reality.acceleration if reality is not None and all(
-        math.isfinite(a) for a in reality.acceleration) else None
+    accel = reality.acceleration_limits if reality is not None else None
     key = (name, robot.name, robot.v_max, robot.omega_max, robot.reverses, prepare, budget,
            accel, reality is not None)
     mpc = _MPC_CACHE.get(key)

@@ -273,9 +273,8 @@ def _controller_for_reality(reality: str) -> dict[str, Any]:
     """
     if reality == 'ideal':
         return dict(PAPER_GOAL_TOLERANCES)
-    accel = reality_preset(reality).acceleration
-    return {'max_decel': [float(a) for a in accel]} if all(
-        math.isfinite(a) for a in accel) else {}
+    accel = reality_preset(reality).acceleration_limits
+    return {'max_decel': [float(a) for a in accel]} if accel is not None else {}
 
 
 def node_parameters(options: LoopOptions, world_file: Path, world: World, *,

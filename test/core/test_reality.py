@@ -119,6 +119,8 @@ def test_the_laser_loses_scans_and_reads_nan_and_minus_inf_at_the_set_rates():
 
 def test_presets_are_ordered_from_ideal_to_harsh_and_unknown_names_are_refused():
     assert reality_preset('ideal').ideal
+    assert reality_preset('ideal').acceleration_limits is None  # no limits to tell anyone
+    assert reality_preset('real').acceleration_limits == (2.0, 6.0)
     mild, real, harsh = (REALITY_PRESETS[name] for name in ('mild', 'real', 'harsh'))
     assert mild.latency < real.latency < harsh.latency
     assert mild.lag[0] < real.lag[0] < harsh.lag[0]
