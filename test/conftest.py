@@ -97,6 +97,18 @@ class RosHarness:
             self.executor.spin_once(timeout_sec=0.05)
         return condition()
 
+    @staticmethod
+    def tick_until(tick: Callable[[], None], condition: Callable[[], bool],
+                   timeout: float) -> bool:
+        """Tick a test's simulated world until condition() holds or timeout wall seconds pass.
+
+        Returns condition(): the run_until of the tests' simulated worlds.
+        """
+        deadline = time.monotonic() + timeout
+        while not condition() and time.monotonic() < deadline:
+            tick()
+        return condition()
+
     def probe(self, *, use_sim_time: bool = False) -> Probe:
         """Create a Probe in this context and spin it with the others."""
         return self.add(Probe(self.context, use_sim_time=use_sim_time))

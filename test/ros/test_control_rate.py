@@ -20,7 +20,6 @@ the controller sees a robot that drives as commanded. Every assertion is about R
 
 from __future__ import annotations
 
-import time
 from typing import Callable
 
 import numpy as np
@@ -80,10 +79,7 @@ class Base:
 
     def run_until(self, condition: Callable[[], bool], timeout: float = 60.0) -> bool:
         """Tick until condition() holds or timeout wall seconds pass; return condition()."""
-        deadline = time.monotonic() + timeout
-        while not condition() and time.monotonic() < deadline:
-            self.tick()
-        return condition()
+        return self.ros.tick_until(self.tick, condition, timeout)
 
 
 def start(ros, **params) -> tuple[MpcControllerNode, object, Base]:

@@ -115,10 +115,7 @@ class SimClock:
 
     def run_until(self, condition: Callable[[], bool], timeout: float = 30.0) -> bool:
         """Tick until condition() holds or timeout wall seconds pass; return condition()."""
-        deadline = time.monotonic() + timeout
-        while not condition() and time.monotonic() < deadline:
-            self.tick()
-        return condition()
+        return self.ros.tick_until(self.tick, condition, timeout)
 
 
 def check_commands(probe) -> np.ndarray:

@@ -144,10 +144,7 @@ class World:
             self.ros.executor.spin_once(timeout_sec=0.002)
 
     def run_until(self, condition: Callable[[], bool], timeout: float = 60.0) -> bool:
-        deadline = time.monotonic() + timeout
-        while not condition() and time.monotonic() < deadline:
-            self.tick()
-        return condition()
+        return self.ros.tick_until(self.tick, condition, timeout)
 
     def run_for(self, seconds: float) -> None:
         end = self.t + seconds
