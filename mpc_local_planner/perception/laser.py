@@ -375,7 +375,8 @@ class SimulatedLaser:
 
     Beam angles are relative to the laser's forward axis: angle_min = -fov / 2,
     angle_increment = fov / (beams - 1), so the middle beam looks straight ahead. Readings are
-    the exact distance (plus optional Gaussian noise); a beam that hits nothing within
+    the exact distance (a real laser's noise and dropouts are core/reality.py's ScanChannel,
+    applied to the scan by whoever simulates a real one); a beam that hits nothing within
     range_max is inf. Readings below range_min are reported as measured (consumers discard
     them, as they must for a real sensor).
 
@@ -385,9 +386,6 @@ class SimulatedLaser:
         beams: Number of beams (>= 2).
         range_min: Closest valid reading, metres.
         range_max: Farthest valid reading, metres.
-        noise_std: Standard deviation of the additive range noise, metres (0: exact).
-        rng: Random generator for the noise; required when noise_std > 0, so that runs are
-            reproducible.
 
     Raises:
         ValueError: If an option is out of range.
@@ -395,8 +393,7 @@ class SimulatedLaser:
     """
 
     def __init__(self, geometry: TrueGeometry | Sequence[Shape], *, fov: float = JACKAL_FOV,
-                 beams: int = 720, range_min: float = 0.05, range_max: float = 10.0,
-                 noise_std: float = 0.0, rng: np.random.Generator | None = None) -> None:
+                 beams: int = 720, range_min: float = 0.05, range_max: float = 10.0) -> None:
         if not (0.0 < fov <= 2.0 * math.pi):
             msg = f'fov must be in (0, 2 pi], got {fov}'
             raise ValueError(msg)
@@ -406,20 +403,12 @@ class SimulatedLaser:
         if not (0.0 <= range_min < range_max < math.inf):
             msg = f'need 0 <= range_min < range_max < inf, got {range_min}, {range_max}'
             raise ValueError(msg)
-        if not (math.isfinite(noise_std) and noise_std >= 0.0):
-            msg = f'noise_std must be >= 0, got {noise_std}'
-            raise ValueError(msg)
-        if noise_std > 0.0 and rng is None:
-            msg = 'noise_std > 0 needs a seeded numpy Generator (rng=...)'
-            raise ValueError(msg)
         self.geometry = geometry if isinstance(geometry, TrueGeometry) else TrueGeometry(
             geometry)
         self.fov = float(fov)
         self.beams = beams
         self.range_min = float(range_min)
         self.range_max = float(range_max)
-        self.noise_std = float(noise_std)
-        self.rng = rng
 
     @property
     def angle_min(self) -> float:
@@ -455,12 +444,6 @@ class SimulatedLaser:
             raise ValueError(msg)
         ranges = self.geometry.cast((x, y), yaw + self.angle_min, self.angle_increment,
                                     self.beams, self.range_max)
-        if self.noise_std > 0.0 and self.rng is not None:
-            hit = np.isfinite(ranges)
-            noisy = ranges[hit] + self.rng.normal(0.0, self.noise_std, int(hit.sum()))
-            noisy = np.maximum(noisy, 0.0)
-            noisy[noisy > self.range_max] = np.inf
-            ranges[hit] = noisy
         return Scan(angle_min=self.angle_min, angle_increment=self.angle_increment,
                     range_min=self.range_min, range_max=self.range_max, ranges=ranges,
                     stamp=float(stamp))

@@ -117,6 +117,17 @@ def test_the_laser_loses_scans_and_reads_nan_and_minus_inf_at_the_set_rates():
     np.testing.assert_array_equal(ScanChannel(Reality()).corrupt(ranges, 10.0), ranges)
 
 
+def test_the_laser_s_noise_is_reproducible_with_its_seed():
+    exact = np.linspace(0.5, 9.0, 720)
+
+    def noisy(seed: int) -> np.ndarray:
+        return ScanChannel(Reality(scan_noise=0.01, seed=seed)).corrupt(exact, 10.0)
+
+    np.testing.assert_array_equal(noisy(7), noisy(7))
+    assert 0.0 < np.std(noisy(7) - exact) < 0.02
+    assert not np.array_equal(noisy(7), noisy(8))
+
+
 def test_presets_are_ordered_from_ideal_to_harsh_and_unknown_names_are_refused():
     assert reality_preset('ideal').ideal
     assert reality_preset('ideal').acceleration_limits is None  # no limits to tell anyone

@@ -112,20 +112,6 @@ def test_laser_sees_unknown_obstacles_of_a_world() -> None:
     assert isinstance(world.true_shapes[0], Circle)  # cast against the disk itself
 
 
-def test_laser_noise_is_reproducible_with_a_seeded_generator_and_required_for_noise() -> None:
-    shapes = [ConvexPolygon.from_box(2.0, -1.0, 3.0, 1.0)]
-    first = SimulatedLaser(shapes, noise_std=0.01, rng=np.random.default_rng(7))
-    second = SimulatedLaser(shapes, noise_std=0.01, rng=np.random.default_rng(7))
-    exact = SimulatedLaser(shapes).scan((0, 0, 0)).ranges
-
-    noisy = first.scan((0, 0, 0)).ranges
-    np.testing.assert_array_equal(noisy, second.scan((0, 0, 0)).ranges)
-    hit = np.isfinite(exact)
-    assert 0.0 < np.std(noisy[hit] - exact[hit]) < 0.02
-    with pytest.raises(ValueError, match='seeded numpy Generator'):
-        SimulatedLaser(shapes, noise_std=0.01)
-
-
 @pytest.mark.parametrize('options', [{'beams': 1}, {'fov': 0.0}, {'range_max': math.inf},
                                      {'range_min': 2.0, 'range_max': 1.0}])
 def test_laser_refuses_bad_options(options: dict) -> None:
