@@ -67,8 +67,7 @@ class Brake:
         """
         inputs = np.asarray(inputs, dtype=float).reshape(-1, 2)
         peak = np.max(np.abs(inputs), axis=0) if len(inputs) else np.zeros(2)
-        with np.errstate(divide='ignore'):
-            rates = np.where(peak > 0.0, self.max_decel / np.maximum(peak, 1e-12), math.inf)
+        rates = np.where(peak > 0.0, self.max_decel / np.maximum(peak, 1e-12), math.inf)
         self._rate = float(np.min(rates))
         self._inputs = inputs
         self._h = float(h)
