@@ -317,7 +317,7 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
             'initial_pose': [float(v) for v in world.start],
             'world_file': str(world_file), **robot,
             # exact odometry IS the pose in map: said so, nodes with tf2 look nothing up
-            'frame_id': 'map',
+            'odom_frame': 'map',
             'reality': options.reality,
         },
     }
@@ -338,7 +338,7 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
         # odometry that drifts or is noisy is not the pose in map: a localizer says where
         # the robot is, as on a real robot
         params['unicycle_simulator'].update({
-            'frame_id': 'odom', 'localizer.rate': LOCALIZER_RATE,
+            'odom_frame': 'odom', 'localizer.rate': LOCALIZER_RATE,
             'localizer.noise_std': LOCALIZER_NOISE})
         for name in ('global_planner', 'mpc_controller'):
             params[name]['localization_topic'] = LOCALIZER_TOPIC

@@ -24,7 +24,7 @@ working planner; with ``autostart:=false`` it waits for a lifecycle manager (or
 
 The goal comes from the ``goal`` parameter ([x, y, theta]) or a PoseStamped on
 ``goal_pose`` (RViz's "2D Goal Pose"). Each new goal is planned once, from the robot's
-pose in ``frame_id`` (the latest ``odom`` pose, or composed with a localizer's or taken from
+pose in ``global_frame`` (the latest ``odom`` pose, or composed with a localizer's or taken from
 tf2: ros/robot_pose.py; without one the goal waits), around the world's obstacles inflated
 by robot_radius + clearance, and published on ``plan`` (reliable, transient_local: a late
 controller still gets it). With ``analytic_path`` set the node publishes that path,
@@ -41,7 +41,7 @@ stays. With ``use_scan`` too, each ``scan`` (sensor_msgs/LaserScan from the lase
 ``laser_pose`` in the robot frame) marks the cells of its returns and clears the cells its
 beams pass through, beam by beam as REP 117 says (PlanningGrid.add_scan; a return inside
 the robot's footprint, the one the planner plans for, is the robot itself and marks nothing),
-placed with the robot's pose in ``frame_id`` at its stamp (ros/robot_pose.py: odometry
+placed with the robot's pose in ``global_frame`` at its stamp (ros/robot_pose.py: odometry
 within SCAN_POSE_TOLERANCE of it, corrected by the localizer, or tf2); a scan newer than
 the latest odometry by at most MAX_EXTRAPOLATION_S is placed with the latest pose moved
 along its twist's arc, a newer one waits (the latest PENDING_SCANS) until odometry covering
@@ -190,7 +190,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'use_map); applies at the next configure'),
     ParameterSpec('laser_pose', [0.0, 0.0, 0.0],
                   'pose [x, y, yaw] of the laser in the robot frame (base_link)'),
-    ParameterSpec('base_frame_id', 'base_link',
+    ParameterSpec('robot_base_frame', 'base_link',
                   'the robot frame: scans must be in it (laser_pose says where the laser '
                   'sits); read when a scan comes'),
     ParameterSpec('goal', Parameter.Type.DOUBLE_ARRAY,
@@ -216,7 +216,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('analytic_path', '',
                   "publish this analytic path (e.g. 'paper_sinusoid') instead of planning; '' "
                   '= plan with RRT*'),
-    ParameterSpec('frame_id', 'map', 'frame of the plan'),
+    ParameterSpec('global_frame', 'map', 'frame of the plan'),
     ParameterSpec('replan_check_rate', 2.0,
                   'how often (Hz) the rest of the plan is checked against the grid (map plus '
                   'scans) with the rule plans are made with; a blocked plan is re-planned from '
@@ -282,7 +282,7 @@ class GlobalPlannerNode(ManagedNode):
         self._active = False
         self._state: np.ndarray | None = None  # the latest odometry (odom frame)
         # the pose in the plan's frame (ros/robot_pose.py): configure chooses the mode
-        self._pose_source = RobotPose(PoseMode.ODOMETRY, span=ODOM_HISTORY_S, frame_id='map')
+        self._pose_source = RobotPose(PoseMode.ODOMETRY, span=ODOM_HISTORY_S, global_frame='map')
         self._pending_goal: np.ndarray | None = None
         # valid scans waiting for odometry that covers their stamps, in arrival order
         self._pending_scans: deque[Any] = deque(maxlen=PENDING_SCANS)
@@ -381,9 +381,9 @@ class GlobalPlannerNode(ManagedNode):
         if mode is PoseMode.TF:
             buffer, self._tf_listener = make_buffer(self)
         return RobotPose(mode, span=ODOM_HISTORY_S,
-                         frame_id=str(self.get_parameter('frame_id').value), topic=topic,
+                         global_frame=str(self.get_parameter('global_frame').value), topic=topic,
                          buffer=buffer,
-                         base_frame_id=str(self.get_parameter('base_frame_id').value),
+                         robot_base_frame=str(self.get_parameter('robot_base_frame').value),
                          tolerance=float(self.get_parameter('transform_tolerance').value))
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -637,7 +637,7 @@ class GlobalPlannerNode(ManagedNode):
 
         A malformed map is refused with one throttled error; the grid in force stays.
         """
-        frame = str(self.get_parameter('frame_id').value)
+        frame = str(self.get_parameter('global_frame').value)
         try:
             occupancy = grid_from_message(msg, frame_id=frame)
             config = self._planner_config()
@@ -670,7 +670,7 @@ class GlobalPlannerNode(ManagedNode):
             self.get_logger().info('scans are ignored until a map comes', once=True)
             return
         try:
-            frame = str(self.get_parameter('base_frame_id').value)
+            frame = str(self.get_parameter('robot_base_frame').value)
             problem = frame_problem(msg.header.frame_id, frame, SCANS)
             if problem is not None:
                 raise ValueError(problem)
@@ -758,7 +758,7 @@ class GlobalPlannerNode(ManagedNode):
             self.get_logger().warning('goal refused: the planner is inactive (activate it '
                                       'first); no plan published')
             return
-        frame = str(self.get_parameter('frame_id').value)
+        frame = str(self.get_parameter('global_frame').value)
         try:
             problem = frame_problem(msg.header.frame_id, frame, 'goals')
             if problem is not None:
@@ -856,7 +856,7 @@ class GlobalPlannerNode(ManagedNode):
         self._publish(poses)
 
     def _publish(self, poses: np.ndarray, trigger: PlanTrigger = PlanTrigger.GOAL) -> None:
-        msg = poses_to_path(poses, frame_id=str(self.get_parameter('frame_id').value),
+        msg = poses_to_path(poses, frame_id=str(self.get_parameter('global_frame').value),
                             stamp=self.get_clock().now().to_msg())
         assert self._plan_pub is not None  # active
         self._plan_pub.publish(msg)

@@ -38,10 +38,10 @@ invalid or missing input, a failure) brakes along the last verified plan within 
 limits (core/braking.py) instead of commanding zero at once, which a base with finite
 deceleration could not follow anyway: it would coast into space no plan checked.
 
-The robot's pose in the plan's frame (``frame_id``) comes from a localizer's pose topic
+The robot's pose in the plan's frame (``global_frame``) comes from a localizer's pose topic
 (``localization_topic``) composed with odometry, from tf2 when importable, or else is the
 odometry itself (ros/robot_pose.py); while there is none the command is zero (reason
-no_localization). ``local_plan``, ``mpc/obstacles`` and ``mpc/footprint`` are in ``frame_id``.
+no_localization). ``local_plan``, ``mpc/obstacles`` and ``mpc/footprint`` are in ``global_frame``.
 
 Subscribes ``odom`` and ``plan`` (reliable, transient_local), ``scan`` (sensor_msgs/LaserScan,
 best effort) when ``obstacle_sources`` lists 'scan' and ``map`` (nav_msgs/OccupancyGrid,
@@ -74,7 +74,7 @@ The robot's shape, Nav2's precedence (as the simulator and the planner apply it)
 file's footprint if it is a polygon, else a circle of ``robot_radius`` (the larger of the
 parameter and the world's). A circle grows the obstacles by its radius; a polygon is kept
 apart from each obstacle exactly by the NLP. ``mpc/footprint`` shows that shape at the
-robot's pose in ``frame_id``, and sensed obstacles are handed over within
+robot's pose in ``global_frame``, and sensed obstacles are handed over within
 ``MpcConfig.reach`` (which counts a polygon's circumscribed radius) plus SENSING_MARGIN.
 
 Refused input (odometry with NaN, inf or a zero quaternion; a plan that is empty, too short,
@@ -285,7 +285,7 @@ class MpcControllerNode(ManagedNode):
         self._world_obstacles: list[ConvexPolygon] = []
         # where the pose in the plan's frame comes from (ros/robot_pose.py); configure
         # chooses the mode, odometry until then
-        self._pose_source = RobotPose(PoseMode.ODOMETRY, span=ODOM_HISTORY_S, frame_id='map')
+        self._pose_source = RobotPose(PoseMode.ODOMETRY, span=ODOM_HISTORY_S, global_frame='map')
         self._forget_inputs()
         self.add_on_set_parameters_callback(self.parameters_callback)
         declare_parameters(self, PARAMETERS)
@@ -400,7 +400,7 @@ class MpcControllerNode(ManagedNode):
                                f'sources {sorted(sources)}, horizon {config.horizon}, step '
                                f'{config.step:g} s, cmd_vel at {settings.control_frequency:g} '
                                f'Hz, the robot {robot}; the pose in '
-                               f'{values["frame_id"]!r} from {self._pose_source.describe()}')
+                               f'{values["global_frame"]!r} from {self._pose_source.describe()}')
         return super().on_configure(state)
 
     def _make_robot_pose(self, values: dict[str, Any]) -> RobotPose:
@@ -409,9 +409,9 @@ class MpcControllerNode(ManagedNode):
         buffer = None
         if mode is PoseMode.TF:
             buffer, self._tf_listener = make_buffer(self)
-        return RobotPose(mode, span=ODOM_HISTORY_S, frame_id=str(values['frame_id']),
+        return RobotPose(mode, span=ODOM_HISTORY_S, global_frame=str(values['global_frame']),
                          topic=str(values['localization_topic']), buffer=buffer,
-                         base_frame_id=str(values['base_frame_id']),
+                         robot_base_frame=str(values['robot_base_frame']),
                          tolerance=float(values['transform_tolerance']))
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -765,7 +765,7 @@ class MpcControllerNode(ManagedNode):
         if len(msg.ranges) > MAX_BEAMS:
             problem = f'{len(msg.ranges)} beams, more than the {MAX_BEAMS} accepted'
             raise ValueError(problem)
-        frame = str(self.get_parameter('base_frame_id').value)
+        frame = str(self.get_parameter('robot_base_frame').value)
         problem = frame_problem(msg.header.frame_id, frame, SCANS)
         if problem is not None:
             raise ValueError(problem)
@@ -781,7 +781,7 @@ class MpcControllerNode(ManagedNode):
         if 'map' not in self._sources or self.controller is None:
             return
         try:
-            frame = str(self.get_parameter('frame_id').value)
+            frame = str(self.get_parameter('global_frame').value)
             grid = grid_from_message(msg, frame_id=frame)
         except Exception as err:  # GridError mostly; never leave a callback
             problem = str(err) or type(err).__name__
@@ -863,7 +863,7 @@ class MpcControllerNode(ManagedNode):
             msg = deserialize_message(bytes(msg), Path)
         if len(msg.poses) > limit:
             raise too_many(len(msg.poses))
-        frame = str(self.get_parameter('frame_id').value)
+        frame = str(self.get_parameter('global_frame').value)
         problem = frame_problem(msg.header.frame_id, frame, 'plans')
         if problem is not None:
             raise ValueError(problem)
@@ -914,7 +914,7 @@ class MpcControllerNode(ManagedNode):
         self._cmd_pub.publish(self._cmd_message(output.u, now))
         try:
             stamp = seconds_to_stamp(max(now, 0.0))
-            frame = str(self.get_parameter('frame_id').value)
+            frame = str(self.get_parameter('global_frame').value)
             if output.solution is not None:
                 self._local_plan_pub.publish(poses_to_path(
                     output.solution.x_pred[:, :3], frame_id=frame, stamp=stamp))
@@ -934,7 +934,7 @@ class MpcControllerNode(ManagedNode):
         if not self._stamped:
             return twist_from_u(u)
         return twist_stamped_from_u(u, stamp=seconds_to_stamp(max(now, 0.0)),
-                                    frame_id=str(self.get_parameter('base_frame_id').value))
+                                    frame_id=str(self.get_parameter('robot_base_frame').value))
 
     def _publish_obstacles(self, output: ControlOutput, frame: str, stamp: Any) -> None:
         """Publish the obstacles raw, grown and active when that changes (or now and then).

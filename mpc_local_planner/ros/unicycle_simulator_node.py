@@ -55,7 +55,7 @@ trusted); the saturation bounds every command that is integrated.
 The node holds the TRUE world (``world_file``: known and unknown obstacles, disks as disks;
 '' = an empty world). Every ``1 / scan.rate`` s of simulated time (counted in ticks, so the
 scans are deterministic under ``publish_clock``) it casts a simulated laser from the robot's
-pose and publishes ``scan`` (sensor_msgs/LaserScan in ``child_frame_id``, the laser at the
+pose and publishes ``scan`` (sensor_msgs/LaserScan in ``robot_base_frame``, the laser at the
 robot's origin facing forward, stamped like the odometry of the same pose; ``inf`` where a
 beam hits nothing, per REP 117). Each tick it checks the robot's TRUE footprint at its pose
 (x, y, theta) against the true world and counts contact EPISODES (entering contact counts one;
@@ -82,7 +82,7 @@ speed scaled by (1 + ``odom_drift.position``) and the turn rate biased by
 stay with the true pose. With ``localizer.rate`` > 0 a
 localizer stands in for AMCL: at that rate (in ticks, as scans) it publishes the TRUE pose
 with Gaussian noise of ``localizer.noise_std`` (m, and rad for the heading) on ``amcl_pose``
-(geometry_msgs/PoseWithCovarianceStamped in ``localizer.frame_id``, stamped like the
+(geometry_msgs/PoseWithCovarianceStamped in ``localizer.global_frame``, stamped like the
 odometry of the same instant).
 """
 
@@ -207,8 +207,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   float_range=(0.001, 10.0)),
     ParameterSpec('omega_max', _MODEL.omega_max, 'saturation of |angular.z| (rad/s)',
                   float_range=(0.001, 50.0)),
-    ParameterSpec('frame_id', 'odom', 'odometry frame'),
-    ParameterSpec('child_frame_id', 'base_link', 'robot frame (also the frame of scan)'),
+    ParameterSpec('odom_frame', 'odom', 'frame of odom (its header.frame_id)'),
+    ParameterSpec('robot_base_frame', 'base_link',
+                  "robot frame: odom's child_frame_id and the frame of scan (Nav2's name)"),
     ParameterSpec('world_file', '',
                   'the TRUE world (known and unknown obstacles) the laser sees and the robot '
                   "can touch: a path, or a name in the package's config/ or config/worlds/; "
@@ -278,7 +279,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('localizer.noise_std', 0.01,
                   "standard deviation of the localizer's Gaussian noise (m, and rad for the "
                   'heading)', float_range=(0.0, 10.0)),
-    ParameterSpec('localizer.frame_id', 'map', "frame of the localizer's poses"),
+    ParameterSpec('localizer.global_frame', 'map',
+                  "frame of the localizer's poses (Nav2's name for the map frame)"),
     ParameterSpec('localizer.seed', 0, "seed of the localizer's noise",
                   int_range=(0, 2**31 - 1)),
 )
@@ -695,8 +697,8 @@ class UnicycleSimulatorNode(Node):
             pose, twist = self._base.odometry()
             self._odom_pub.publish(state_to_odometry(
                 pose, twist, stamp=stamp,
-                frame_id=str(self.get_parameter('frame_id').value),
-                child_frame_id=str(self.get_parameter('child_frame_id').value)))
+                frame_id=str(self.get_parameter('odom_frame').value),
+                child_frame_id=str(self.get_parameter('robot_base_frame').value)))
             self._publish_scan(stamp)
             self._publish_localizer(stamp)
             if publish_clock:
@@ -717,7 +719,7 @@ class UnicycleSimulatorNode(Node):
         x, y, theta = self._base.pose[:3] + self._localizer_rng.normal(0.0, std, 3)
         msg = PoseWithCovarianceStamped()
         msg.header.stamp = stamp
-        msg.header.frame_id = str(self.get_parameter('localizer.frame_id').value)
+        msg.header.frame_id = str(self.get_parameter('localizer.global_frame').value)
         msg.pose.pose.position.x, msg.pose.pose.position.y = float(x), float(y)
         msg.pose.pose.orientation = yaw_to_quaternion(float(theta))
         covariance = np.zeros(36)
@@ -759,7 +761,7 @@ class UnicycleSimulatorNode(Node):
         scan = self._laser.scan(self._base.pose)
         scan = scan._replace(ranges=self._scan_channel.corrupt(scan.ranges, scan.range_max))
         self._scan_pub.publish(laser_scan_msg(
-            scan, frame_id=str(self.get_parameter('child_frame_id').value), stamp=stamp))
+            scan, frame_id=str(self.get_parameter('robot_base_frame').value), stamp=stamp))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -278,12 +278,12 @@ def test_drift_makes_the_odometry_drift_and_the_nodes_follow_the_localizer(tmp_p
     assert simulator['localizer.rate'] > 0
     assert params['global_planner']['localization_topic'] == 'amcl_pose'
     assert params['mpc_controller']['localization_topic'] == 'amcl_pose'
-    assert simulator['frame_id'] == 'odom'  # drifting odometry is not in map
+    assert simulator['odom_frame'] == 'odom'  # drifting odometry is not in map
     plain = node_parameters(LoopOptions(path='rrt'), UNKNOWN_BOX_FILE, UNKNOWN_BOX)
     assert not any('drift' in name or 'localiz' in name
                    for values in plain.values() for name in values)
     # exact odometry is in map, and says so: a node with tf2 looks nothing up
-    assert plain['unicycle_simulator']['frame_id'] == 'map'
+    assert plain['unicycle_simulator']['odom_frame'] == 'map'
 
 
 def test_reality_reaches_the_simulator_and_a_real_one_runs_with_the_localizer() -> None:
@@ -294,7 +294,7 @@ def test_reality_reaches_the_simulator_and_a_real_one_runs_with_the_localizer() 
     simulator = params['unicycle_simulator']
     assert simulator['reality'] == 'real'
     # noisy, drifting odometry is not in map: the nodes follow the localizer, as with --drift
-    assert simulator['frame_id'] == 'odom' and simulator['localizer.rate'] > 0
+    assert simulator['odom_frame'] == 'odom' and simulator['localizer.rate'] > 0
     assert params['mpc_controller']['localization_topic'] == 'amcl_pose'
     assert not any('odom_drift' in name for name in simulator)  # the preset's drift
     with pytest.raises(ValueError, match='unknown reality'):
