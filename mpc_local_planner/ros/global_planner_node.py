@@ -384,7 +384,10 @@ class GlobalPlannerNode(ManagedNode):
                          global_frame=str(self.get_parameter('global_frame').value), topic=topic,
                          buffer=buffer,
                          robot_base_frame=str(self.get_parameter('robot_base_frame').value),
-                         tolerance=float(self.get_parameter('transform_tolerance').value))
+                         tolerance=float(self.get_parameter('transform_tolerance').value),
+                         max_travel=float(self.get_parameter('localization_max_travel').value),
+                         max_rotation=float(
+                             self.get_parameter('localization_max_rotation').value))
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Enable the publishers; plan a goal given as a parameter, or publish analytic_path."""

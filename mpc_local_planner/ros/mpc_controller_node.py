@@ -412,7 +412,9 @@ class MpcControllerNode(ManagedNode):
         return RobotPose(mode, span=ODOM_HISTORY_S, global_frame=str(values['global_frame']),
                          topic=str(values['localization_topic']), buffer=buffer,
                          robot_base_frame=str(values['robot_base_frame']),
-                         tolerance=float(values['transform_tolerance']))
+                         tolerance=float(values['transform_tolerance']),
+                         max_travel=float(values['localization_max_travel']),
+                         max_rotation=float(values['localization_max_rotation']))
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Enable the publishers and start the control timer."""

@@ -30,7 +30,10 @@ plan's frame (``global_frame``), chosen at configure (`choose_mode`):
   tf2 too (closed_loop's exact simulator publishes it so): there is nothing to look up.
 
 With a localizer or tf2 and no pose (no localizer message yet, one older than the odometry
-kept, no transform) the controller stops and says why; the planner waits.
+kept, no transform) the controller stops and says why; the planner waits. So they do when
+the localizer falls silent while the robot moves: after ``localization_max_travel`` m or
+``localization_max_rotation`` rad of odometry since its last pose's stamp (AMCL publishes
+after 0.25 m or 0.2 rad of motion, and nothing at rest, so a time limit would not fit it).
 
 A scan's stamp (`RobotPose.at`) is often newer than the latest odometry. Within
 MAX_EXTRAPOLATION_S of it the odometry is extrapolated along its twist (PoseHistory.at; the
@@ -76,6 +79,15 @@ POSE_PARAMETERS: tuple[ParameterSpec, ...] = (
                   "global_frame, as AMCL's amcl_pose), composed with odometry as the pose in "
                   "global_frame; '' = none: tf2's global_frame -> robot_base_frame if tf2_ros "
                   'is importable, else the odometry is that pose; read at configure'),
+    ParameterSpec('localization_max_travel', 1.0,
+                  'with localization_topic, the odometry travel (m) after the last localizer '
+                  "pose's stamp beyond which the localizer is taken as silent or lost: the "
+                  "controller stops (no_localization) until its next pose; 4 x AMCL's "
+                  'update_min_d; 0 = no limit; read at configure', float_range=(0.0, 1000.0)),
+    ParameterSpec('localization_max_rotation', 0.8,
+                  'with localization_topic, the same for the odometry rotation (rad); 4 x '
+                  "AMCL's update_min_a; 0 = no limit; read at configure",
+                  float_range=(0.0, 1000.0)),
     ParameterSpec('transform_tolerance', 0.1,
                   "with tf2, how long (s) to wait for global_frame -> robot_base_frame (Nav2's "
                   'name); none by then: the controller stops', float_range=(0.0, 10.0)),
@@ -205,15 +217,19 @@ class RobotPose:
         buffer: the tf2 buffer (TF; required then).
         robot_base_frame: the robot's frame (TF).
         tolerance: transform_tolerance (TF).
+        max_travel: localization_max_travel (LOCALIZER; 0 = no limit).
+        max_rotation: localization_max_rotation (LOCALIZER; 0 = no limit).
 
     """
 
     def __init__(self, mode: PoseMode, *, span: float, global_frame: str, topic: str = '',
                  buffer: TransformBuffer | None = None, robot_base_frame: str = 'base_link',
-                 tolerance: float = 0.1) -> None:
+                 tolerance: float = 0.1, max_travel: float = 0.0,
+                 max_rotation: float = 0.0) -> None:
         self.mode = mode
         self.global_frame = global_frame
-        self.located = LocalizedPose(span, localized=mode is PoseMode.LOCALIZER, source=topic)
+        self.located = LocalizedPose(span, localized=mode is PoseMode.LOCALIZER, source=topic,
+                                     max_travel=max_travel, max_rotation=max_rotation)
         self.tf: TfPose | None = None
         self._odom_in_plan_frame = False  # the latest odometry's frame is global_frame
         if mode is PoseMode.TF:
@@ -273,7 +289,8 @@ class RobotPose:
         (None, None) without odometry (the controller says no odometry, as before).
 
         Raises:
-            LocalizationError: if there is odometry but no pose in the plan's frame.
+            LocalizationError: if there is odometry but no pose in the plan's frame, or the
+                localizer's correction is stale (LocalizedPose.staleness).
 
         """
         if odom is None:
@@ -283,6 +300,9 @@ class RobotPose:
         pose = self.located.pose(odom)
         if pose is None:
             raise LocalizationError(self.located.problem or 'no localizer pose')
+        stale = self.located.staleness()
+        if stale is not None:
+            raise LocalizationError(stale)
         return pose, odom_time
 
     def at(self, stamp: float) -> np.ndarray | None:

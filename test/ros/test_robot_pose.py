@@ -161,6 +161,23 @@ def test_the_localizer_message_corrects_the_odometry_and_another_frame_is_refuse
     np.testing.assert_allclose(source.located.correction, [0.0, 0.0, 0.0], atol=1e-12)
 
 
+def test_a_localizer_silent_while_the_robot_moves_gives_no_pose_until_it_speaks() -> None:
+    source = RobotPose(PoseMode.LOCALIZER, span=2.0, global_frame='map', topic='amcl_pose',
+                       max_travel=1.0, max_rotation=0.8)
+    for k in range(11):  # 0.5 m/s from 0 to 1 s
+        source.add_odometry(k / 10, np.array([k / 20, 0.0, 0.0]), twist=(0.5, 0.0))
+    source.add_localizer(localizer_message(0.0, 0.0, 0.0, 0.0), 0.0)
+    assert source.current(np.array([0.5, 0.0, 0.0]), 1.0)[0] is not None
+    for k in range(11, 23):  # 1.1 m since the localizer's stamp
+        source.add_odometry(k / 10, np.array([k / 20, 0.0, 0.0]), twist=(0.5, 0.0))
+    with pytest.raises(LocalizationError, match="no localizer pose on 'amcl_pose' while the "
+                                                'odometry moved 1.10 m'):
+        source.current(np.array([1.1, 0.0, 0.0]), 2.2)
+    source.add_localizer(localizer_message(1.1, 0.0, 0.0, 2.2), 2.2)
+    pose, _ = source.current(np.array([1.1, 0.0, 0.0]), 2.2)
+    np.testing.assert_allclose(pose, [1.1, 0.0, 0.0], atol=1e-12)
+
+
 def test_without_localizer_or_tf2_the_odometry_is_the_pose_unchanged() -> None:
     source = RobotPose(PoseMode.ODOMETRY, span=2.0, global_frame='map')
     odom = np.array([1.0, 2.0, 3.0])
