@@ -694,7 +694,7 @@ def _run_reality(params: dict[str, dict[str, Any]]) -> dict[str, Any]:
 
     An infinite value (no acceleration limit) is None: metrics.json stays standard JSON.
     """
-    from mpc_local_planner.ros.unicycle_simulator_node import reality_from_parameters
+    from mpc_local_planner.ros.unicycle_simulator_parameters import reality_from_parameters
 
     def finite(value: Any) -> Any:
         if isinstance(value, list):
