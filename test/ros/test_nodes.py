@@ -47,7 +47,8 @@ from mpc_local_planner.ros.conversions import (
     yaw_to_quaternion,
 )
 from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
-from mpc_local_planner.ros.mpc_controller_node import log_line, MpcControllerNode
+from mpc_local_planner.ros.mpc_controller_node import MpcControllerNode
+from mpc_local_planner.ros.mpc_controller_outputs import log_line
 from mpc_local_planner.ros.mpc_controller_parameters import load_obstacles
 from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.qos import (
