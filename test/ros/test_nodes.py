@@ -413,7 +413,7 @@ def test_shipped_params_files_mirror_the_defaults_the_nodes_take_from_the_datacl
 
 
 @pytest.mark.parametrize(('name', 'module'), [
-    ('bag_recorder', 'bag_recorder_node'), ('global_planner', 'global_planner_node'),
+    ('bag_recorder', 'bag_recorder_node'), ('global_planner', 'global_planner_parameters'),
     ('mpc_controller', 'mpc_controller_parameters'),
     ('unicycle_simulator', 'unicycle_simulator_parameters')])
 def test_shipped_params_files_set_only_declared_parameters_with_their_types(
