@@ -36,22 +36,26 @@ from mpc_local_planner.evaluation.analyze_bag import read_run
 from mpc_local_planner.evaluation.trajectory import read_trajectory_csv, TRAJECTORY_COLUMNS
 from mpc_local_planner.ros.bag_recorder_node import BagRecorderNode
 from mpc_local_planner.ros.closed_loop import (
-    _Monitor,
     check_plannable,
     EXIT_NO_PLAN,
-    flush_recording,
-    LoopOptions,
     main,
-    node_command,
+    run_closed_loop,
+    write_known_map,
+)
+from mpc_local_planner.ros.closed_loop_monitor import (
+    flush_recording,
+    LoopMonitor,
+    recorder_topics,
+)
+from mpc_local_planner.ros.closed_loop_parameters import (
+    LoopOptions,
     node_parameters,
     PAPER_GOAL_TOLERANCES,
     parse_parameter,
     POLYGON_CLEARANCE,
-    recorder_topics,
-    run_closed_loop,
     run_world,
-    write_known_map,
 )
+from mpc_local_planner.ros.closed_loop_processes import node_command
 from mpc_local_planner.ros.qos import DIAGNOSTICS_QOS
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.map_files import load_map
@@ -185,7 +189,7 @@ def test_a_world_named_without_its_suffix_is_found(tmp_path: Path,
 @pytest.mark.dds
 def test_the_diagnostics_that_stop_the_run_reach_the_bag(ros, tmp_path: Path) -> None:
     bag = tmp_path / 'bag'
-    monitor = ros.add(_Monitor(context=ros.context))
+    monitor = ros.add(LoopMonitor(context=ros.context))
     # subscribed, but not spun until the monitor has seen the goal: the worst case of the
     # executor running the monitor's callbacks before the recorder's
     recorder = BagRecorderNode(context=ros.context, parameter_overrides=[
