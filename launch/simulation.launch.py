@@ -193,7 +193,7 @@ def _nodes(context: LaunchContext) -> list[Node]:
                  'world_file': world_file, 'robot_radius': float(world.robot_radius),
                  # no TF here (tf2 is not installable): the simulated odometry is ground truth
                  # in the map frame, so RViz (fixed frame map) shows it as it is
-                 'frame_id': 'map',
+                 'odom_frame': 'map',
                  **_robot(footprint, world, arg('simulator_params'), 'unicycle_simulator',
                           False), **reality}]),
         Node(package=PACKAGE, executable='global_planner', name='global_planner',

@@ -27,6 +27,15 @@ Without a localizer the correction is the identity: the odometry is the pose in 
 frame, as in the simulator. With one, there is no pose until its first message, and none
 after a message the history cannot place (older than every odometry pose kept): the
 controller stops and says why (`LocalizedPose.problem`).
+
+A localizer can also fall silent: AMCL publishes only after the robot has moved
+(``update_min_d`` 0.25 m, ``update_min_a`` 0.2 rad), so silence at rest is normal and a
+timeout in seconds would stop a robot that waits. What is measured instead is the odometry
+travelled since the last localizer pose's stamp (``max_travel`` metres, ``max_rotation``
+radians; `LocalizedPose.staleness`): beyond a few times AMCL's update thresholds the
+correction is stale, the localizer lost or dead, and the drift since then uncorrected.
+The count starts at the localizer's stamp, not its arrival, so a late pose counts the travel
+made while it was on its way.
 """
 
 from __future__ import annotations
@@ -70,16 +79,24 @@ class LocalizedPose:
         localized: a localizer is expected: no pose until its first message. False: the
             odometry is the pose in the plan's frame (the correction is the identity).
         source: the localizer's name in messages (its topic).
+        max_travel: metres of odometry travel after the last localizer pose's stamp beyond
+            which its correction is stale (`staleness`); 0 = no limit.
+        max_rotation: the same in radians of odometry rotation; 0 = no limit.
 
     """
 
-    def __init__(self, span: float, *, localized: bool = False, source: str = '') -> None:
+    def __init__(self, span: float, *, localized: bool = False, source: str = '',
+                 max_travel: float = 0.0, max_rotation: float = 0.0) -> None:
         self.odometry = PoseHistory(span)
         self.localized = bool(localized)
         self.source = source
+        self.max_travel = float(max_travel)
+        self.max_rotation = float(max_rotation)
         self.correction: np.ndarray | None = None
         self.problem: str | None = None
         self.corrections = 0  # localizer poses taken
+        self.travel = 0.0  # m of odometry since the last localizer pose's stamp
+        self.rotation = 0.0  # rad of odometry since then
         self.clear()
 
     def clear(self) -> None:
@@ -88,14 +105,20 @@ class LocalizedPose:
         self.correction = None if self.localized else np.zeros(3)
         self.problem = f'no localizer pose yet on {self.source!r}' if self.localized else None
         self.corrections = 0
+        self.travel = self.rotation = 0.0
 
     def add_odometry(self, time: float, pose: np.ndarray,
                      twist: np.ndarray | tuple[float, float] | None = None) -> None:
         """Keep an odometry pose (x, y, theta in odom) at time, with its twist (v, omega).
 
         The twist lets a scan's stamp just past the newest odometry be placed (PoseHistory).
+        A pose newer than the newest adds its step to the travel since the localizer's pose.
         """
+        newest = self.odometry.newest_pose() if time > self.odometry.newest else None
         self.odometry.add(time, pose, twist)
+        if newest is not None:  # a step forward (a clock jump back starts anew)
+            self.travel += math.hypot(pose[0] - newest[0], pose[1] - newest[1])
+            self.rotation += abs(float(wrap_angle(pose[2] - newest[2])))
 
     def add_localizer(self, time: float, pose: np.ndarray) -> np.ndarray:
         """Take a localizer pose (x, y, theta in the plan's frame) at time; return the correction.
@@ -122,9 +145,33 @@ class LocalizedPose:
             self.correction = compose(np.asarray(pose[:3], dtype=float), invert(odom))
             self.problem = None
             self.corrections += 1
+            # the travel since its stamp: from the odometry then to the newest (a chord)
+            newest = self.odometry.newest_pose()
+            self.travel = math.hypot(newest[0] - odom[0], newest[1] - odom[1])
+            self.rotation = abs(float(wrap_angle(newest[2] - odom[2])))
             return self.correction.copy()
         self.correction, self.problem = None, problem
         raise LocalizationError(problem)
+
+    def staleness(self) -> str | None:
+        """Return why the correction in force is stale (None: it is not, or no limit applies).
+
+        Stale when the odometry has travelled more than max_travel, or turned more than
+        max_rotation, since the last localizer pose's stamp: the localizer should have
+        spoken by then (AMCL does after 0.25 m or 0.2 rad), so it is silent or lost, and the
+        drift since is not corrected. A new localizer pose ends it.
+        """
+        if not self.localized or self.correction is None:
+            return None
+        if 0.0 < self.max_travel < self.travel:
+            travelled = f'{self.travel:.2f} m (localization_max_travel {self.max_travel:g})'
+        elif 0.0 < self.max_rotation < self.rotation:
+            travelled = (f'{self.rotation:.2f} rad (localization_max_rotation '
+                         f'{self.max_rotation:g})')
+        else:
+            return None
+        return (f'no localizer pose on {self.source!r} while the odometry moved '
+                f'{travelled}: the localizer is silent or lost')
 
     def pose(self, odom_pose: np.ndarray) -> np.ndarray | None:
         """Return an odometry pose in the plan's frame (None while there is no correction).

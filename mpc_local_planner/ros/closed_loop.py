@@ -96,102 +96,64 @@ are for a real robot's noisy odometry: the simulated odometry is exact.
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import math
-import os
 from pathlib import Path
 import shutil
-import signal
 import subprocess
 import sys
 import time
 from typing import Any, Sequence
 
-from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 import rclpy
 from rclpy.context import Context
 from rclpy.exceptions import ParameterException
-from rclpy.executors import Executor, SingleThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from std_msgs.msg import UInt32
-from visualization_msgs.msg import Marker, MarkerArray
-import yaml
 
 from mpc_local_planner.core.controller import ControllerSettings
-from mpc_local_planner.core.diagnostics import (
-    CONTROLLER_DIAGNOSTICS_TOPIC,
-    ControllerDiagnostics,
-    PLANNER_DIAGNOSTICS_TOPIC,
-    PlannerDiagnostics,
-)
 from mpc_local_planner.core.errors import PlanningError
-from mpc_local_planner.core.footprint import Footprint, parse_footprint, resolve
+from mpc_local_planner.core.footprint import resolve
 from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
 from mpc_local_planner.core.reality import reality_preset, REALITY_PRESETS
 from mpc_local_planner.evaluation.analyze_bag import analyze, read_run, summary
 from mpc_local_planner.evaluation.plotting import plot_runs
 from mpc_local_planner.ros.bag_recorder_node import (
     BagRecorderNode,
-    DEFAULT_LATCHED,
-    DEFAULT_TOPICS,
-    DEFAULT_TYPES,
 )
-from mpc_local_planner.ros.executors import spin_until
-from mpc_local_planner.ros.node_main import autostart, EXIT_INVALID_PARAMETERS
-from mpc_local_planner.ros.parameters import DEFAULT_WORLD_FILE
-from mpc_local_planner.ros.qos import (
-    CONTACTS_QOS,
-    DIAGNOSTICS_QOS,
-    LOCAL_PLAN_QOS,
-    PLANNER_DIAGNOSTICS_QOS,
+from mpc_local_planner.ros.closed_loop_monitor import (
+    flush_recording,
+    LoopMonitor,
+    recorder_topics,
+    SENSED_SNAPSHOTS,
 )
+from mpc_local_planner.ros.closed_loop_parameters import (
+    DEFAULT_DRIFT,
+    localized,
+    LoopOptions,
+    MODULES,
+    node_parameters,
+    parse_parameter,
+    run_world,
+)
+from mpc_local_planner.ros.closed_loop_processes import respawn, spawn_all, stop_children
+from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.map_files import rasterize_world, save_map
 from mpc_local_planner.worlds.world import load_world, World
 
-__all__ = ['EXIT_NO_PLAN', 'LoopOptions', 'LoopResult', 'MAP_RESOLUTION',
-           'PAPER_GOAL_TOLERANCES', 'POLYGON_CLEARANCE', 'check_plannable', 'flush_recording',
-           'footprint_parameter', 'main', 'node_command', 'node_parameters', 'parse_parameter',
-           'recorder_topics', 'run_closed_loop', 'run_world', 'spawn_node', 'write_known_map']
+__all__ = ['EXIT_NO_PLAN', 'LoopResult', 'MAP_RESOLUTION', 'check_plannable', 'main',
+           'run_closed_loop', 'write_known_map']
 
-DEFAULT_WORLD = DEFAULT_WORLD_FILE
 # Exit code when no plan can come (as for invalid options: the run was misconfigured).
 EXIT_NO_PLAN = 2
-# Wall seconds the recorder gets, after the run stops, to write what the monitor has seen.
-FLUSH_TIMEOUT = 5.0
 # Simulated seconds allowed when the world sets no time_limit.
 DEFAULT_TIME_LIMIT = 60.0
-# Wall seconds a child process gets to exit after SIGINT before it is killed.
-CHILD_EXIT_TIMEOUT = 5.0
-# Restarts of node processes per run with --respawn (a crash loop ends the run instead).
-MAX_RESPAWNS = 10
 # Cell side (m) of the map of the known obstacles that --sensing serves.
 MAP_RESOLUTION = 0.05
-# Topics the simulator publishes (unicycle_simulator_node's names; not imported, so that
-# this module does not load the nodes before they are needed).
-SCAN_TOPIC = 'scan'
-CONTACTS_TOPIC = 'simulator/contacts'
-LOCALIZER_TOPIC = 'amcl_pose'
-# What the controller avoids (mpc_controller_node's OBSTACLES_TOPIC) and the namespace of
-# the obstacles as it takes them in (from the map and the scans with --sensing).
-OBSTACLES_TOPIC = 'mpc/obstacles'
-RAW_NAMESPACE = 'raw'
-# With --sensing, the monitor keeps what the controller avoids at most once per this many
-# simulated seconds; the figure shows SENSED_SNAPSHOTS of them, spread over the run.
-SNAPSHOT_PERIOD = 2.0
-SENSED_SNAPSHOTS = 4
-# The planner's clearance (m) for a polygon robot (see the module docstring).
-POLYGON_CLEARANCE = 0.05
-# The controller's arrival on the paper's scenario (see the module docstring).
-PAPER_GOAL_TOLERANCES = {'xy_goal_tolerance': 0.02, 'yaw_goal_tolerance': 0.05}
-# --drift: the odometry's drift when the option comes without a rate, and the localizer
-# stand-in's rate (Hz) and noise (m, rad).
-DEFAULT_DRIFT = 0.05
-LOCALIZER_RATE = 5.0
-LOCALIZER_NOISE = 0.01
 # With --drift in one process, a run succeeds only if the TRUE robot ends this close (m) to
 # the goal: what the drifted odometry (or the controller) believes is not enough.
 TRUE_GOAL_TOLERANCE = 0.1
@@ -200,38 +162,6 @@ TRUE_GOAL_TOLERANCE = 0.1
 # the true robot must end within that plus REAL_POSE_ERROR, what the estimate may be off by
 # (the localizer stand-in's 1 cm noise, odometry's jitter between its corrections).
 REAL_POSE_ERROR = 0.05
-
-MODULES = {
-    'map_server': 'mpc_local_planner.ros.map_server_node',
-    'global_planner': 'mpc_local_planner.ros.global_planner_node',
-    'mpc_controller': 'mpc_local_planner.ros.mpc_controller_node',
-    'unicycle_simulator': 'mpc_local_planner.ros.unicycle_simulator_node',
-}
-
-
-@dataclass
-class LoopOptions:
-    """What to run (the command-line options)."""
-
-    world: str = DEFAULT_WORLD
-    out: str = 'out/closed_loop'
-    path: str = 'analytic'
-    rtf: float = 4.0
-    timeout: float = 120.0
-    time_limit: float | None = None
-    separate_processes: bool = False
-    respawn: bool = False
-    seed: int = 0
-    sensing: bool = False
-    # odometry drift (fraction of the distance, and rad/m), with the localizer; 0 = exact
-    drift: float = 0.0
-    # the simulator's reality preset (core/reality.py): how real the robot and laser are
-    reality: str = 'ideal'
-    # the robot, instead of the world's: a polygon (Nav2's "[[x, y], ...]") or a circle
-    footprint: str | None = None
-    robot_radius: float | None = None
-    # node -> parameter -> value, applied last (over what closed_loop chooses)
-    extra_parameters: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
 @dataclass
@@ -246,287 +176,9 @@ class LoopResult:
     success: bool
 
 
-def footprint_parameter(footprint: Footprint) -> str:
-    """Return the footprint parameter for a robot: Nav2's "[[x, y], ...]", '' for a circle."""
-    if footprint.is_circle:
-        return ''
-    return '[' + ', '.join(f'[{x!r}, {y!r}]' for x, y in footprint.vertices.tolist()) + ']'
-
-
-def localized(options: LoopOptions) -> bool:
-    """Whether the run's odometry is not the true pose (--drift, or a non-ideal reality).
-
-    Raises:
-        ValueError: for an unknown --reality (the message lists the presets).
-
-    """
-    return bool(options.drift) or not reality_preset(options.reality).ideal_base
-
-
-def _controller_for_reality(reality: str) -> dict[str, Any]:
-    """Return the controller's arrival and braking settings for the simulated robot.
-
-    The ideal robot arrives within the paper's tolerances (PAPER_GOAL_TOLERANCES: its
-    odometry is exact). A real one keeps the node's defaults, sized for noisy odometry and a
-    lagging base, and brakes within the base's deceleration limits, as a user configures a
-    real robot (docs/real_robot.md).
-    """
-    if reality == 'ideal':
-        return dict(PAPER_GOAL_TOLERANCES)
-    accel = reality_preset(reality).acceleration_limits
-    return {'max_decel': [float(a) for a in accel]} if accel is not None else {}
-
-
-def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
-                    map_file: Path | None = None) -> dict[str, dict[str, Any]]:
-    """Return each node's parameter values for a run (use_sim_time included).
-
-    The simulator always gets the true world (for the laser and the contacts). With
-    options.sensing the planner and the controller get no world file: they see the map
-    (map_file, which map_server serves) and the scans. The robot (world.footprint: pass the
-    run's world, see run_world) reaches all three as ``footprint`` and ``robot_radius``, in
-    every mode; for a polygon the planner's clearance is POLYGON_CLEARANCE; the controller
-    arrives within PAPER_GOAL_TOLERANCES on an ideal robot, with the node's defaults and
-    braking on a real one (_controller_for_reality). options.extra_parameters come last.
-
-    Raises:
-        ValueError: if --path analytic names no path of the world, sensing lacks map_file,
-            extra parameters name a node that does not run, or the reality is unknown.
-
-    """
-    analytic = world.path if options.path == 'analytic' else ''
-    if options.path == 'analytic' and not world.path:
-        msg = f'--path analytic: the world {world.name} names no analytic path (use --path rrt)'
-        raise ValueError(msg)
-    # the robot, said to every node: the simulator counts its contacts, the planner plans
-    # for it and the MPC keeps it clear; never left to each node's reading of the world
-    robot = {'footprint': footprint_parameter(world.footprint),
-             'robot_radius': float(world.robot_radius)}
-    params: dict[str, dict[str, Any]] = {
-        'global_planner': {
-            'use_sim_time': True, 'world_file': str(world_file),
-            'goal': [float(v) for v in world.goal], 'seed': int(options.seed),
-            'analytic_path': analytic, **robot,
-        },
-        'mpc_controller': {
-            'use_sim_time': True, 'world_file': str(world_file), 'analytic_path': analytic,
-            **_controller_for_reality(options.reality), **robot,
-        },
-        'unicycle_simulator': {
-            'publish_clock': True, 'real_time_factor': float(options.rtf),
-            'initial_pose': [float(v) for v in world.start],
-            'world_file': str(world_file), **robot,
-            # exact odometry IS the pose in map: said so, nodes with tf2 look nothing up
-            'frame_id': 'map',
-            'reality': options.reality,
-        },
-    }
-    if not world.footprint.is_circle:
-        params['global_planner']['clearance'] = POLYGON_CLEARANCE
-    if options.sensing:
-        if map_file is None:
-            msg = '--sensing needs the map of the known obstacles (map_file)'
-            raise ValueError(msg)
-        params['map_server'] = {'use_sim_time': True, 'yaml_filename': str(map_file)}
-        params['global_planner'].update(use_map=True, use_scan=True, world_file='')
-        params['mpc_controller'].update(obstacle_sources=['map', 'scan'], world_file='')
-    if options.drift:
-        params['unicycle_simulator'].update({
-            'odom_drift.position': float(options.drift), 'odom_drift.heading': float(
-                options.drift)})
-    if localized(options):
-        # odometry that drifts or is noisy is not the pose in map: a localizer says where
-        # the robot is, as on a real robot
-        params['unicycle_simulator'].update({
-            'frame_id': 'odom', 'localizer.rate': LOCALIZER_RATE,
-            'localizer.noise_std': LOCALIZER_NOISE})
-        for name in ('global_planner', 'mpc_controller'):
-            params[name]['localization_topic'] = LOCALIZER_TOPIC
-    for name, extra in options.extra_parameters.items():
-        if name not in params:  # map_server: only with --sensing
-            msg = f'parameters for {name}, which does not run here (map_server needs --sensing)'
-            raise ValueError(msg)
-        params[name].update(extra)
-    return params
-
-
-def run_world(options: LoopOptions, world_file: Path, world: World,
-              folder: Path) -> tuple[Path, World, str]:
-    """Return the run's world file, its world and where its robot comes from.
-
-    Without --footprint or --robot-radius: the world file itself ('the world'). With one:
-    the world file with its robot replaced, written to folder/<world name>.yaml, so that
-    every node reads the same robot and the bag records it (the name stays the world's).
-
-    Raises:
-        ValueError: both options given, an invalid footprint or radius, or a BARN JSON world
-            (its format holds no robot).
-
-    """
-    if options.footprint is None and options.robot_radius is None:
-        return world_file, world, 'the world'
-    if options.footprint is not None and options.robot_radius is not None:
-        msg = 'give either --footprint (a polygon) or --robot-radius (a circle), not both'
-        raise ValueError(msg)
-    if options.footprint is not None:
-        robot = parse_footprint(options.footprint)
-        if robot.is_circle:
-            msg = (f'--footprint {options.footprint!r}: give a polygon "[[x, y], ...]" (a '
-                   'round robot: --robot-radius)')
-            raise ValueError(msg)
-        source, key, value = '--footprint', 'footprint', robot.vertices.tolist()
-    else:
-        robot = Footprint.circle(float(options.robot_radius))
-        source, key, value = '--robot-radius', 'robot_radius', robot.radius
-    if world_file.suffix.lower() not in ('.yaml', '.yml'):
-        msg = (f'{source}: {world_file.name} is not a YAML world (a BARN world holds no '
-               'robot); write one with the robot instead')
-        raise ValueError(msg)
-    data = yaml.safe_load(world_file.read_text(encoding='utf-8'))
-    data = {k: v for k, v in data.items() if k not in ('footprint', 'robot_radius')}
-    data[key] = value
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f'{world.name}.yaml'
-    path.write_text(f'# closed_loop: {world_file} with the robot of {source}\n'
-                    + yaml.safe_dump(data, sort_keys=False, default_flow_style=None),
-                    encoding='utf-8')
-    return path, load_world(path), source
-
-
-def _ros_arg(name: str, value: Any) -> str:
-    if isinstance(value, bool):
-        text = 'true' if value else 'false'
-    elif isinstance(value, (list, tuple)):
-        text = '[' + ','.join(repr(float(v)) if isinstance(v, float) else str(v)
-                              for v in value) + ']'
-    elif isinstance(value, float):
-        text = repr(value)
-    elif isinstance(value, str):
-        # ROS reads a -p value as YAML: quote a string that would read as something else
-        # ('' as nothing, a footprint "[[x, y], ...]" as a nested list)
-        try:
-            plain = yaml.safe_load(value) == value
-        except yaml.YAMLError:
-            plain = False
-        text = value if plain else "'" + value.replace("'", "''") + "'"
-    else:
-        text = str(value)
-    return f'{name}:={text}'
-
-
 def write_known_map(world: World, folder: Path) -> Path:
     """Rasterise the world's KNOWN obstacles at MAP_RESOLUTION into folder; return the YAML."""
     return save_map(rasterize_world(world, MAP_RESOLUTION), folder, world.name)
-
-
-def recorder_topics(*, sensing: bool) -> dict[str, list[str]]:
-    """Return the recorder's topics, types and latched topics (scan too with sensing)."""
-    topics = [*DEFAULT_TOPICS, CONTACTS_TOPIC]
-    types = [*DEFAULT_TYPES, 'std_msgs/msg/UInt32']
-    if sensing:
-        topics.append(SCAN_TOPIC)
-        types.append('sensor_msgs/msg/LaserScan')
-    return {'topics': topics, 'types': types,
-            'transient_local_topics': [*DEFAULT_LATCHED, CONTACTS_TOPIC]}
-
-
-def _raw_polygons(msg: MarkerArray) -> list[np.ndarray]:
-    """Return the (K, 2) outlines of the markers in the raw namespace (closed rings opened)."""
-    polygons = []
-    for marker in msg.markers:
-        if marker.ns != RAW_NAMESPACE or marker.action != Marker.ADD or len(marker.points) < 2:
-            continue
-        ring = np.array([(p.x, p.y) for p in marker.points], dtype=float)
-        if len(ring) > 2 and np.allclose(ring[0], ring[-1]):
-            ring = ring[:-1]
-        polygons.append(ring)
-    return polygons
-
-
-class _Monitor(Node):
-    """Watch the controller's diagnostics for the goal and the planner's for a failure.
-
-    Also counts the simulator's contacts and, with sensing, keeps what the controller
-    avoids (its raw obstacles) at a few instants for the figure.
-    """
-
-    def __init__(self, *, sensing: bool = False, **kwargs: Any) -> None:
-        super().__init__('closed_loop_monitor', **kwargs)
-        self.goal_reached = False
-        self.replans = 0  # the planner's count of re-plans, as it last reported it
-        self.contacts: int | None = None  # the simulator's count, once heard
-        # (simulated time, raw obstacle outlines) every SNAPSHOT_PERIOD at most
-        self.sensed: list[tuple[float, list[np.ndarray]]] = []
-        self.messages = 0  # diagnostics messages of the controller received
-        self.last_reason = ''
-        self.plan_failure: str | None = None  # why the planner published no plan
-        self._sub = self.create_subscription(DiagnosticArray, CONTROLLER_DIAGNOSTICS_TOPIC,
-                                             self.diagnostics_callback, DIAGNOSTICS_QOS)
-        self._planner_sub = self.create_subscription(
-            DiagnosticArray, PLANNER_DIAGNOSTICS_TOPIC, self.planner_callback,
-            PLANNER_DIAGNOSTICS_QOS)
-        self._contacts_sub = self.create_subscription(UInt32, CONTACTS_TOPIC,
-                                                      self.contacts_callback, CONTACTS_QOS)
-        self._obstacles_sub = None
-        if sensing:
-            self._obstacles_sub = self.create_subscription(
-                MarkerArray, OBSTACLES_TOPIC, self.obstacles_callback, LOCAL_PLAN_QOS)
-
-    def contacts_callback(self, msg: UInt32) -> None:
-        """Keep the simulator's contact count (it only grows)."""
-        self.contacts = max(int(msg.data), self.contacts or 0)
-
-    def obstacles_callback(self, msg: MarkerArray) -> None:
-        """Keep what the controller avoids, once per SNAPSHOT_PERIOD of simulated time."""
-        now = self.sim_time()
-        if self.sensed and now < self.sensed[-1][0] + SNAPSHOT_PERIOD:
-            return
-        polygons = _raw_polygons(msg)
-        if polygons:
-            self.sensed.append((now, polygons))
-
-    @property
-    def diagnostics_topic(self) -> str:
-        """The controller's diagnostics topic, resolved."""
-        return self._sub.topic_name
-
-    def diagnostics_callback(self, msg: DiagnosticArray) -> None:
-        """Note each control step and whether the controller is at the goal."""
-        self.messages += 1
-        for status in msg.status:
-            step = ControllerDiagnostics.from_values((kv.key, kv.value) for kv in status.values)
-            self.last_reason = step.message
-            self.goal_reached = step.goal_reached
-
-    def planner_callback(self, msg: DiagnosticArray) -> None:
-        """Note whether the planner's latest goal failed (a later plan clears it)."""
-        for status in msg.status:
-            outcome = PlannerDiagnostics.from_values((kv.key, kv.value) for kv in status.values)
-            self.replans = max(self.replans, outcome.replans)
-            if outcome.waiting:
-                continue  # waiting for the map: the plan is still to come
-            self.plan_failure = (outcome.detail or 'no plan') if outcome.failed else None
-
-    def sim_time(self) -> float:
-        """Return the current ROS (simulated) time in seconds."""
-        return self.get_clock().now().nanoseconds * 1e-9
-
-
-def flush_recording(executor: Executor, recorder: BagRecorderNode, monitor: _Monitor, *,
-                    timeout_sec: float = FLUSH_TIMEOUT) -> bool:
-    """Spin until the recorder holds every controller diagnostics message the monitor saw.
-
-    The run stops on the message that says the goal is reached; without this the executor
-    may never run the recorder's callback for it, and the bag (so metrics.json's
-    controller_goal_reached) would miss the arrival.
-
-    Returns:
-        True if the recorder caught up within timeout_sec.
-
-    """
-    return spin_until(
-        executor, lambda: recorder.counts.get(monitor.diagnostics_topic, 0) >= monitor.messages,
-        timeout_sec=timeout_sec)
 
 
 def check_plannable(world: World, planner_parameters: dict[str, Any]) -> None:
@@ -614,10 +266,10 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
             Parameter('world_file', value=str(world_file)),
             *(Parameter(k, value=v)
               for k, v in recorder_topics(sensing=options.sensing).items())])
-        monitor = _Monitor(context=context, parameter_overrides=sim, sensing=options.sensing)
+        monitor = LoopMonitor(context=context, parameter_overrides=sim, sensing=options.sensing)
         nodes += [recorder, monitor]
         if options.separate_processes:
-            children = _spawn(params, out / 'logs')
+            children = spawn_all(params, out / 'logs')
         else:
             nodes += _create_nodes(params, context)
         for node in nodes:
@@ -640,7 +292,7 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
                 stop_reason = f'wall-clock timeout ({options.timeout:g} s)'
                 break
             dead = [name for name, c in children.items() if c.poll() is not None]
-            if dead and not _respawn(options, dead, children, params, out / 'logs', respawns,
+            if dead and not respawn(options, dead, children, params, out / 'logs', respawns,
                                      sim_time):
                 name = dead[0]
                 stop_reason = f'{name} exited (code {children[name].returncode})'
@@ -650,7 +302,7 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
         truth = [n.state for n in nodes if isinstance(n, UnicycleSimulatorNode)]
     finally:
         wall_time = time.monotonic() - start
-        _stop_children(list(children.values()))
+        stop_children(list(children.values()))
         executor.shutdown()
         for node in reversed(nodes):
             node.destroy_node()
@@ -694,7 +346,7 @@ def _run_reality(params: dict[str, dict[str, Any]]) -> dict[str, Any]:
 
     An infinite value (no acceleration limit) is None: metrics.json stays standard JSON.
     """
-    from mpc_local_planner.ros.unicycle_simulator_node import reality_from_parameters
+    from mpc_local_planner.ros.unicycle_simulator_parameters import reality_from_parameters
 
     def finite(value: Any) -> Any:
         if isinstance(value, list):
@@ -753,87 +405,6 @@ def _create_nodes(params: dict[str, dict[str, Any]], context: Context) -> list[N
             msg = f'{name}: {problem}'
             raise ValueError(msg)
     return nodes
-
-
-def node_command(name: str, parameters: dict[str, Any]) -> list[str]:
-    """Return the command that runs node name (a key of MODULES) with parameters.
-
-    ``python -m <module> --ros-args -p key:=value ...``: no ros2cli or colcon install needed.
-    """
-    command = [sys.executable, '-m', MODULES[name], '--ros-args']
-    for key, value in parameters.items():
-        command += ['-p', _ros_arg(key, value)]
-    return command
-
-
-def spawn_node(name: str, parameters: dict[str, Any], log: Path, *,
-               append: bool = False) -> subprocess.Popen:
-    """Start node name as a process; stdout and stderr go to log."""
-    log.parent.mkdir(parents=True, exist_ok=True)
-    with open(log, 'a' if append else 'w', encoding='utf-8') as stream:
-        if append:
-            stream.write(f'--- {name} started again ---\n')
-            stream.flush()
-        # the child holds its own descriptor once started
-        return subprocess.Popen(node_command(name, parameters), stdout=stream,
-                                stderr=subprocess.STDOUT, env=dict(os.environ))
-
-
-def _spawn(params: dict[str, dict[str, Any]], logs: Path) -> dict[str, subprocess.Popen]:
-    return {name: spawn_node(name, params[name], logs / f'{name}.log')
-            for name in MODULES if name in params}
-
-
-def _respawn(options: LoopOptions, dead: list[str], children: dict[str, subprocess.Popen],
-             params: dict[str, dict[str, Any]], logs: Path, respawns: list[dict[str, Any]],
-             sim_time: float) -> bool:
-    """Start the dead node processes again if --respawn allows; return False to end the run."""
-    if not options.respawn:
-        return False
-    for name in dead:
-        code = children[name].returncode
-        if code == EXIT_INVALID_PARAMETERS or len(respawns) >= MAX_RESPAWNS:
-            return False
-        respawns.append({'node': name, 'exit_code': code, 'sim_time': sim_time})
-        print(f'closed_loop: {name} exited (code {code}) at {sim_time:.1f} s simulated; '
-              'starting it again', file=sys.stderr, flush=True)
-        children[name] = spawn_node(name, params[name], logs / f'{name}.log', append=True)
-    return True
-
-
-def _stop_children(children: list[subprocess.Popen]) -> None:
-    for child in children:
-        if child.poll() is None:
-            child.send_signal(signal.SIGINT)
-    deadline = time.monotonic() + CHILD_EXIT_TIMEOUT
-    for child in children:
-        try:
-            child.wait(timeout=max(0.1, deadline - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            child.kill()
-            child.wait()
-
-
-def parse_parameter(text: str) -> tuple[str, str, Any]:
-    """Return (node, name, value) of ``NODE.NAME:=VALUE`` (the value read as YAML, as -p does).
-
-    Raises:
-        ValueError: text is not of that form, or NODE is none of closed_loop's nodes.
-
-    """
-    key, sep, value = text.partition(':=')
-    node, dot, name = key.partition('.')
-    if not sep or not dot or not name:
-        msg = f'--param {text!r}: expected NODE.NAME:=VALUE, e.g. global_planner.clearance:=0.05'
-        raise ValueError(msg)
-    if node not in MODULES:
-        msg = f'--param {text!r}: unknown node {node!r}, expected one of {sorted(MODULES)}'
-        raise ValueError(msg)
-    try:
-        parsed = yaml.safe_load(value) if value else ''
-    except yaml.YAMLError:
-        parsed = value
-    return node, name, '' if parsed is None else parsed
 
 
 def main(argv: Sequence[str] | None = None) -> int:

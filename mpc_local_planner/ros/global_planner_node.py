@@ -24,7 +24,7 @@ working planner; with ``autostart:=false`` it waits for a lifecycle manager (or
 
 The goal comes from the ``goal`` parameter ([x, y, theta]) or a PoseStamped on
 ``goal_pose`` (RViz's "2D Goal Pose"). Each new goal is planned once, from the robot's
-pose in ``frame_id`` (the latest ``odom`` pose, or composed with a localizer's or taken from
+pose in ``global_frame`` (the latest ``odom`` pose, or composed with a localizer's or taken from
 tf2: ros/robot_pose.py; without one the goal waits), around the world's obstacles inflated
 by robot_radius + clearance, and published on ``plan`` (reliable, transient_local: a late
 controller still gets it). With ``analytic_path`` set the node publishes that path,
@@ -41,7 +41,7 @@ stays. With ``use_scan`` too, each ``scan`` (sensor_msgs/LaserScan from the lase
 ``laser_pose`` in the robot frame) marks the cells of its returns and clears the cells its
 beams pass through, beam by beam as REP 117 says (PlanningGrid.add_scan; a return inside
 the robot's footprint, the one the planner plans for, is the robot itself and marks nothing),
-placed with the robot's pose in ``frame_id`` at its stamp (ros/robot_pose.py: odometry
+placed with the robot's pose in ``global_frame`` at its stamp (ros/robot_pose.py: odometry
 within SCAN_POSE_TOLERANCE of it, corrected by the localizer, or tf2); a scan newer than
 the latest odometry by at most MAX_EXTRAPOLATION_S is placed with the latest pose moved
 along its twist's arc, a newer one waits (the latest PENDING_SCANS) until odometry covering
@@ -73,7 +73,6 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import replace
-import math
 import sys
 from typing import Any
 
@@ -95,20 +94,16 @@ from mpc_local_planner.core.diagnostics import (
     PlanTrigger,
 )
 from mpc_local_planner.core.errors import PlanningError
-from mpc_local_planner.core.footprint import parse_footprint, resolve
+from mpc_local_planner.core.footprint import resolve
 from mpc_local_planner.core.paths import analytic_path, waypoints_to_poses
 from mpc_local_planner.core.planner import path_length, PlannerConfig, RrtStarPlanner
 from mpc_local_planner.core.replanning import (
-    PROGRESS_RADIUS,
-    PROGRESS_TIMEOUT,
     ReplanDecision,
     Replanner,
     ReplanOutcome,
     ReplanSettings,
 )
 from mpc_local_planner.perception.grids import PlanningGrid
-from mpc_local_planner.perception.pose_history import MAX_EXTRAPOLATION_S
-from mpc_local_planner.perception.scan_obstacles import check_scan_stamp, validate_scan
 from mpc_local_planner.ros.conversions import (
     frame_problem,
     grid_from_message,
@@ -116,16 +111,22 @@ from mpc_local_planner.ros.conversions import (
     odometry_twist,
     pose_to_array,
     poses_to_path,
-    scan_from_message,
-    SCANS,
     stamp_to_seconds,
+)
+from mpc_local_planner.ros.global_planner_parameters import (
+    parameter_problems,
+    PARAMETERS,
+    PLANNER_FIELDS,
+)
+from mpc_local_planner.ros.global_planner_scans import (
+    ODOM_HISTORY_S,
+    PENDING_SCANS,
+    PlannerScans,
 )
 from mpc_local_planner.ros.lifecycle import ManagedNode
 from mpc_local_planner.ros.node_main import destroy_on_failure, run_node
 from mpc_local_planner.ros.parameters import (
     declare_parameters,
-    DEFAULT_WORLD_FILE,
-    ParameterSpec,
 )
 from mpc_local_planner.ros.qos import (
     GOAL_QOS,
@@ -140,7 +141,6 @@ from mpc_local_planner.ros.robot_pose import (
     choose_mode,
     LocalizationError,
     make_buffer,
-    POSE_PARAMETERS,
     PoseMode,
     RobotPose,
 )
@@ -148,28 +148,15 @@ from mpc_local_planner.ros.throttle import ProblemThrottle
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world, World
 
-__all__ = ['GlobalPlannerNode', 'PARAMETERS', 'SUMMARY', 'main']
+__all__ = ['GlobalPlannerNode', 'SUMMARY', 'main']
 
 
 # Poses of a published analytic path (enough for RViz and for a polyline controller).
 ANALYTIC_SAMPLES = 101
-# Seconds of odometry kept to place scans.
-ODOM_HISTORY_S = 2.0
-# A scan farther than this (seconds) from every kept odometry stamp is dropped: the pose it
-# would be placed with is not the robot's at the scan. A scan newer than the odometry by
-# more than MAX_EXTRAPOLATION_S waits instead, and is discarded if no odometry has covered
-# its stamp by the time it is this old (by this node's clock).
-SCAN_POSE_TOLERANCE = 0.5
-# Scans kept waiting for odometry that covers their stamps (the latest; an older one falls
-# out), as the controller keeps them.
-PENDING_SCANS = 3
 # A re-plan from a robot standing within the planner's clearance of an obstacle starts from
 # the nearest clear point no farther than this (m) that it can drive straight to.
 ESCAPE_DISTANCE = 1.0
 
-_PLANNER_FIELDS = ('iterations', 'time_limit', 'seed', 'range', 'robot_radius', 'clearance',
-                   'simplify')
-_DEFAULTS = PlannerConfig()  # the single source of the planner's defaults
 
 SUMMARY = ('OMPL RRT* from the current odometry (odom) to the goal (the goal parameter or '
            "goal_pose), around the world's obstacles or, with use_map, on the map's grid "
@@ -177,85 +164,8 @@ SUMMARY = ('OMPL RRT* from the current odometry (odom) to the goal (the goal par
            'planner/diagnostics. A lifecycle node: configure loads the world, activate starts '
            'planning.')
 
-PARAMETERS: tuple[ParameterSpec, ...] = (
-    ParameterSpec('world_file', DEFAULT_WORLD_FILE,
-                  "world YAML/JSON: obstacles and bounds (a path, or a name in the package's "
-                  "config/ or config/worlds/); used at the next plan; '' with use_map (only "
-                  "its robot_radius is used then)"),
-    ParameterSpec('use_map', False,
-                  "plan on the occupancy grid from `map` (unknown cells free) instead of the "
-                  "world's obstacles; applies at the next configure"),
-    ParameterSpec('use_scan', False,
-                  'mark the grid with `scan` returns and clear it along the beams (needs '
-                  'use_map); applies at the next configure'),
-    ParameterSpec('laser_pose', [0.0, 0.0, 0.0],
-                  'pose [x, y, yaw] of the laser in the robot frame (base_link)'),
-    ParameterSpec('base_frame_id', 'base_link',
-                  'the robot frame: scans must be in it (laser_pose says where the laser '
-                  'sits); read when a scan comes'),
-    ParameterSpec('goal', Parameter.Type.DOUBLE_ARRAY,
-                  'goal [x, y, theta]; setting it plans from the current odometry once the '
-                  'node is active (optional: goal_pose messages do the same)'),
-    ParameterSpec('iterations', _DEFAULTS.iterations, 'RRT* iterations per plan',
-                  int_range=(1, 10_000_000)),
-    ParameterSpec('time_limit', _DEFAULTS.time_limit, 'upper bound on planning time (s)',
-                  float_range=(0.001, 600.0)),
-    ParameterSpec('seed', _DEFAULTS.seed, "seed of OMPL's random numbers (reproducible plans)",
-                  int_range=(0, 2**31 - 1)),
-    ParameterSpec('range', _DEFAULTS.range, 'RRT* extension length (m); 0 = OMPL chooses',
-                  float_range=(0.0, 1e3)),
-    ParameterSpec('robot_radius', _DEFAULTS.robot_radius,
-                  "robot radius (m); the larger of this and the world's is used",
-                  float_range=(0.0, 10.0)),
-    ParameterSpec('footprint', '',
-                  "the robot's convex polygon in base_link, Nav2's form \"[[x, y], ...]\"; '' = "
-                  "the world file's footprint, or a circle of robot_radius"),
-    ParameterSpec('clearance', _DEFAULTS.clearance,
-                  'extra obstacle inflation beyond the radius (m)', float_range=(0.0, 10.0)),
-    ParameterSpec('simplify', _DEFAULTS.simplify, "shortcut the path with OMPL's simplifier"),
-    ParameterSpec('analytic_path', '',
-                  "publish this analytic path (e.g. 'paper_sinusoid') instead of planning; '' "
-                  '= plan with RRT*'),
-    ParameterSpec('frame_id', 'map', 'frame of the plan'),
-    ParameterSpec('replan_check_rate', 2.0,
-                  'how often (Hz) the rest of the plan is checked against the grid (map plus '
-                  'scans) with the rule plans are made with; a blocked plan is re-planned from '
-                  'the current odometry; 0 = never (read at activate)',
-                  float_range=(0.0, 100.0)),
-    ParameterSpec('replan_period', 0.0,
-                  're-plan the goal in force this often (s) even when the plan is clear; 0 = '
-                  'only when blocked or for a new goal', float_range=(0.0, 3600.0)),
-    ParameterSpec('progress_timeout', PROGRESS_TIMEOUT,
-                  "Nav2's progress checker: when the robot, away from the goal, has not moved "
-                  'progress_radius in this many seconds, the goal is re-planned from where it '
-                  "stands (a forward-only robot that coasted past a new plan's start may have "
-                  'no way back onto it); 0 = never', float_range=(0.0, 3600.0)),
-    ParameterSpec('progress_radius', PROGRESS_RADIUS,
-                  'metres that count as progress for progress_timeout, and the distance to '
-                  'the goal within which standing still is arriving',
-                  float_range=(0.0, 100.0)),
-    *POSE_PARAMETERS,
-    ParameterSpec('autostart', True,
-                  'configure and activate at start; false = wait for a lifecycle manager (or '
-                  '`ros2 lifecycle set`)', read_only=True),
-)
 
-
-def _check_laser_pose(pose: list[float]) -> str | None:
-    if len(pose) != 3 or not all(math.isfinite(float(v)) for v in pose):
-        return f'laser_pose must be [x, y, yaw] (3 finite numbers), got {list(pose)}'
-    return None
-
-
-def _check_goal(goal: list[float] | None) -> str | None:
-    if goal is None or len(goal) == 0:
-        return None
-    if len(goal) != 3 or not all(math.isfinite(float(v)) for v in goal):
-        return f'goal must be [x, y, theta] (3 finite numbers) or empty, got {list(goal)}'
-    return None
-
-
-class GlobalPlannerNode(ManagedNode):
+class GlobalPlannerNode(PlannerScans, ManagedNode):
     """Plan with RRT* from odom to the goal and publish the plan (a lifecycle node)."""
 
     @destroy_on_failure
@@ -282,7 +192,7 @@ class GlobalPlannerNode(ManagedNode):
         self._active = False
         self._state: np.ndarray | None = None  # the latest odometry (odom frame)
         # the pose in the plan's frame (ros/robot_pose.py): configure chooses the mode
-        self._pose_source = RobotPose(PoseMode.ODOMETRY, span=ODOM_HISTORY_S, frame_id='map')
+        self._pose_source = RobotPose(PoseMode.ODOMETRY, span=ODOM_HISTORY_S, global_frame='map')
         self._pending_goal: np.ndarray | None = None
         # valid scans waiting for odometry that covers their stamps, in arrival order
         self._pending_scans: deque[Any] = deque(maxlen=PENDING_SCANS)
@@ -381,10 +291,13 @@ class GlobalPlannerNode(ManagedNode):
         if mode is PoseMode.TF:
             buffer, self._tf_listener = make_buffer(self)
         return RobotPose(mode, span=ODOM_HISTORY_S,
-                         frame_id=str(self.get_parameter('frame_id').value), topic=topic,
+                         global_frame=str(self.get_parameter('global_frame').value), topic=topic,
                          buffer=buffer,
-                         base_frame_id=str(self.get_parameter('base_frame_id').value),
-                         tolerance=float(self.get_parameter('transform_tolerance').value))
+                         robot_base_frame=str(self.get_parameter('robot_base_frame').value),
+                         tolerance=float(self.get_parameter('transform_tolerance').value),
+                         max_travel=float(self.get_parameter('localization_max_travel').value),
+                         max_rotation=float(
+                             self.get_parameter('localization_max_rotation').value))
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Enable the publishers; plan a goal given as a parameter, or publish analytic_path."""
@@ -439,31 +352,7 @@ class GlobalPlannerNode(ManagedNode):
     # ------------------------------------------------------------------ parameters
     def parameters_callback(self, parameters: list[Parameter]) -> SetParametersResult:
         """Refuse a malformed goal, an unknown world or analytic path, bad planner settings."""
-        reasons = []
-        for parameter in parameters:
-            if parameter.name == 'goal':
-                reason = _check_goal(parameter.value)
-                if reason:
-                    reasons.append(reason)
-            elif parameter.name == 'laser_pose':
-                reason = _check_laser_pose(parameter.value)
-                if reason:
-                    reasons.append(reason)
-            elif parameter.name == 'world_file' and parameter.value:
-                try:
-                    load_world(resolve_data_file(str(parameter.value)))
-                except Exception as err:  # any failure to load refuses it
-                    reasons.append(str(err) or type(err).__name__)
-            elif parameter.name == 'footprint':
-                try:
-                    parse_footprint(str(parameter.value))
-                except ValueError as err:
-                    reasons.append(str(err))
-            elif parameter.name == 'analytic_path' and parameter.value:
-                try:
-                    analytic_path(str(parameter.value))
-                except ValueError as err:
-                    reasons.append(str(err))
+        reasons = parameter_problems(parameters)
         reasons += self._check_modes(parameters)
         if reasons:
             return SetParametersResult(successful=False, reason='; '.join(reasons))
@@ -531,7 +420,7 @@ class GlobalPlannerNode(ManagedNode):
         return load_world(resolve_data_file(str(self.get_parameter('world_file').value)))
 
     def _planner_config(self) -> PlannerConfig:
-        values = {name: self.get_parameter(name).value for name in _PLANNER_FIELDS}
+        values = {name: self.get_parameter(name).value for name in PLANNER_FIELDS}
         world_radius = self._world.robot_radius if self._world is not None else 0.0
         values['robot_radius'] = max(float(values['robot_radius']), world_radius)
         values['iterations'] = int(values['iterations'])
@@ -637,7 +526,7 @@ class GlobalPlannerNode(ManagedNode):
 
         A malformed map is refused with one throttled error; the grid in force stays.
         """
-        frame = str(self.get_parameter('frame_id').value)
+        frame = str(self.get_parameter('global_frame').value)
         try:
             occupancy = grid_from_message(msg, frame_id=frame)
             config = self._planner_config()
@@ -658,107 +547,13 @@ class GlobalPlannerNode(ManagedNode):
         if self._pending_goal is not None:
             self._try_plan()
 
-    def scan_callback(self, msg: LaserScan) -> None:
-        """Mark and clear the grid with a scan, placed with the pose at its stamp.
-
-        A malformed scan, or one without odometry near its stamp, is dropped with one
-        throttled error. One stamped more than MAX_EXTRAPOLATION_S after the latest
-        odometry waits (_place_pending) until odometry covering its stamp has come: the
-        older pose would mark its returns displaced by the motion since.
-        """
-        if self._grid is None:
-            self.get_logger().info('scans are ignored until a map comes', once=True)
-            return
-        try:
-            frame = str(self.get_parameter('base_frame_id').value)
-            problem = frame_problem(msg.header.frame_id, frame, SCANS)
-            if problem is not None:
-                raise ValueError(problem)
-            scan = scan_from_message(msg)
-            validate_scan(scan)  # before it is placed: a count the angles do not imply
-            check_scan_stamp(scan.stamp, self._now())
-        except Exception as err:  # ScanError (a ValueError); nothing may escape a callback
-            self._refuse_scan(err)
-            return
-        self._pending_scans.append(scan)
-        self._place_pending()
-
-    def _place_pending(self) -> None:
-        """Add to the grid the waiting scans whose stamps the pose now covers, in order.
-
-        Called on each scan and each odometry message. What is covered is every stamp up to
-        a threshold (MAX_EXTRAPOLATION_S past the latest odometry, or the latest
-        transform), so a scan added is never newer than one left waiting. A scan still
-        without a pose once SCAN_POSE_TOLERANCE old is discarded (said once a while).
-        """
-        if self._grid is None:
-            self._pending_scans.clear()
-            return
-        waiting = []
-        while self._pending_scans:
-            scan = self._pending_scans.popleft()
-            try:
-                pose = self._pose_at(scan.stamp)
-                if pose is None:
-                    if self._now() - scan.stamp <= SCAN_POSE_TOLERANCE:
-                        waiting.append(scan)  # until odometry covers its stamp
-                    else:
-                        self.get_logger().info(
-                            f'scan discarded: no odometry covered its stamp {scan.stamp:.3f} '
-                            f's (more than {MAX_EXTRAPOLATION_S:g} s past the latest) within '
-                            f'{SCAN_POSE_TOLERANCE:g} s', throttle_duration_sec=2.0)
-                    continue
-                # returns inside the robot are the robot: the planner's footprint says where
-                body = self._planner.footprint if self._planner is not None else None
-                self._grid.add_scan(scan, pose,
-                                    laser_pose=list(self.get_parameter('laser_pose').value),
-                                    body=body)
-            except LocalizationError as err:  # not the scan's fault: said where plans wait
-                self.get_logger().info(f"scan dropped: no pose in the plan's frame ({err})",
-                                       throttle_duration_sec=2.0)
-                continue
-            except Exception as err:  # ScanError (a ValueError); nothing may escape
-                self._refuse_scan(err)
-                continue
-            self._problems.resolve('scan')
-            self.scan_count += 1
-        self._pending_scans.extend(waiting)
-
-    def _refuse_scan(self, err: Exception) -> None:
-        """Say (throttled) that a scan was dropped."""
-        if self._problems.report('scan'):
-            self.get_logger().error(f'scan dropped: {err}')
-
-    def _pose_at(self, stamp: float) -> np.ndarray | None:
-        """Return the pose in the plan's frame at stamp (seconds): RobotPose.at.
-
-        None: not yet (no odometry, or none within MAX_EXTRAPOLATION_S before the stamp;
-        with tf2, no transform as new): the scan waits.
-
-        Raises:
-            ValueError: if no odometry kept is within SCAN_POSE_TOLERANCE of it (an old
-                stamp), or there is no pose in the plan's frame (LocalizationError).
-
-        """
-        pose = self._pose_source.at(stamp)
-        if pose is None:
-            return None
-        odometry = self._pose_source.located.odometry
-        gap = odometry.gap(stamp)
-        if not gap <= SCAN_POSE_TOLERANCE:  # with tf2 the odometry may lag, or be none
-            problem = ('no odometry yet to place it' if len(odometry) == 0 else
-                       f'no odometry within {SCAN_POSE_TOLERANCE:g} s of its stamp '
-                       f'{stamp:.3f} s (nearest {gap:.3f} s away)')
-            raise ValueError(problem)
-        return pose
-
     def goal_callback(self, msg: PoseStamped) -> None:
         """Plan to a goal sent as a PoseStamped (RViz's 2D Goal Pose); refused unless active."""
         if not self._active:
             self.get_logger().warning('goal refused: the planner is inactive (activate it '
                                       'first); no plan published')
             return
-        frame = str(self.get_parameter('frame_id').value)
+        frame = str(self.get_parameter('global_frame').value)
         try:
             problem = frame_problem(msg.header.frame_id, frame, 'goals')
             if problem is not None:
@@ -856,7 +651,7 @@ class GlobalPlannerNode(ManagedNode):
         self._publish(poses)
 
     def _publish(self, poses: np.ndarray, trigger: PlanTrigger = PlanTrigger.GOAL) -> None:
-        msg = poses_to_path(poses, frame_id=str(self.get_parameter('frame_id').value),
+        msg = poses_to_path(poses, frame_id=str(self.get_parameter('global_frame').value),
                             stamp=self.get_clock().now().to_msg())
         assert self._plan_pub is not None  # active
         self._plan_pub.publish(msg)

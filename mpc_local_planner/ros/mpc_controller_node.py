@@ -38,10 +38,10 @@ invalid or missing input, a failure) brakes along the last verified plan within 
 limits (core/braking.py) instead of commanding zero at once, which a base with finite
 deceleration could not follow anyway: it would coast into space no plan checked.
 
-The robot's pose in the plan's frame (``frame_id``) comes from a localizer's pose topic
+The robot's pose in the plan's frame (``global_frame``) comes from a localizer's pose topic
 (``localization_topic``) composed with odometry, from tf2 when importable, or else is the
 odometry itself (ros/robot_pose.py); while there is none the command is zero (reason
-no_localization). ``local_plan``, ``mpc/obstacles`` and ``mpc/footprint`` are in ``frame_id``.
+no_localization). ``local_plan``, ``mpc/obstacles`` and ``mpc/footprint`` are in ``global_frame``.
 
 Subscribes ``odom`` and ``plan`` (reliable, transient_local), ``scan`` (sensor_msgs/LaserScan,
 best effort) when ``obstacle_sources`` lists 'scan' and ``map`` (nav_msgs/OccupancyGrid,
@@ -51,49 +51,22 @@ TwistStamped with ``enable_stamped_cmd_vel``), ``local_plan`` (the prediction),
 All decisions live in `MpcController`; this node converts messages, keeps the latest inputs
 and publishes.
 
-What the controller avoids, each control step: the world file's obstacles (source 'world'),
-the map's occupied cells near the robot merged into rectangles (source 'map'; recomputed
-when the map comes or the robot enters another cell), and what the laser saw (source 'scan':
-each scan's returns, read beam by beam as REP 117 says (classify_beams: NaN and readings
-outside [range_min, range_max] are ignored, +inf clears the beam up to range_max, -inf is an
-obstacle at range_min; a return inside the robot's footprint, from the laser at
-``laser_pose``, is the robot itself and ignored, so a -inf from a laser within the body stops
-nothing), placed in the plan's frame with the robot's pose there AT THE SCAN'S STAMP
-(ros/robot_pose.py: the odometry interpolated in the last ODOM_HISTORY_S seconds, a scan
-older than that using the oldest pose kept; a scan newer than the latest odometry by at most
-MAX_EXTRAPOLATION_S with the latest pose moved along its twist's arc, a newer one waiting
-(the latest PENDING_SCANS, in order of arrival) until odometry covering its stamp has come
-and discarded if none has within ``scan_timeout``, never placed with the older pose; with
-the localizer's correction; or tf2's transform at the stamp, waited for the same way),
-clustered into convex pieces and remembered for ``obstacle_memory`` seconds). A plan
-through an obstacle is followed: the MPC stops in front of it or goes around, and the
-diagnostics say ``path_blocked`` and ``blocked_at``.
+What the controller avoids (the world's obstacles, the map's, what the laser saw) and how
+scans are placed: ros/mpc_controller_sensing.py. A plan through an obstacle is followed: the
+MPC stops in front of it or goes around, and the diagnostics say ``path_blocked``.
 
 The robot's shape, Nav2's precedence (as the simulator and the planner apply it): the
 ``footprint`` parameter's convex polygon (``"[[x, y], ...]"``, base_link), else the world
 file's footprint if it is a polygon, else a circle of ``robot_radius`` (the larger of the
 parameter and the world's). A circle grows the obstacles by its radius; a polygon is kept
 apart from each obstacle exactly by the NLP. ``mpc/footprint`` shows that shape at the
-robot's pose in ``frame_id``, and sensed obstacles are handed over within
+robot's pose in ``global_frame``, and sensed obstacles are handed over within
 ``MpcConfig.reach`` (which counts a polygon's circumscribed radius) plus SENSING_MARGIN.
 
 Refused input (odometry with NaN, inf or a zero quaternion; a plan that is empty, too short,
 too long, not finite or in another frame) makes the command zero until valid input comes,
-with one error per problem in the log (throttled) and the problem in the diagnostics. A
-scan that cannot be interpreted or a malformed grid (a zero or non-finite increment, limits
-that are not finite or not 0 <= range_min < range_max, mismatched lengths, a beam count
-the angles do not imply within one increment, too many beams, another frame, a stamp more
-than MAX_SCAN_FUTURE_S ahead of this node's clock; a grid whose data is not
-width x height, a resolution <= 0, a non-finite origin) is dropped with one throttled
-error; with 'scan' a source, the robot stops until a scan comes and whenever the latest
-valid one placed is older than ``scan_timeout`` (a waiting scan renews nothing); with
-'map' a source, it stops until a valid map has come (as before the first scan: what the
-map would show is unknown). A scan without a
-usable reading (every beam NaN, outside [range_min, range_max] or inside the footprint) is
-valid but blind: it is
-used (it shows nothing and clears nothing) and does not renew ``scan_timeout``, so one
-such scan among good ones changes nothing, and a laser that sees nothing usable for
-``scan_timeout`` stops the robot as a silent one does (with a throttled warning).
+with one error per problem in the log (throttled) and the problem in the diagnostics. What
+is done with scans and grids that cannot be interpreted: ros/mpc_controller_sensing.py.
 
 A wrong lifecycle request (activate while unconfigured, an unknown transition id) is
 refused with ``success: false`` and the node stays as it is (ManagedNode). When the process
@@ -110,7 +83,7 @@ from collections import deque
 import sys
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PolygonStamped, PoseWithCovarianceStamped, Twist, TwistStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 import numpy as np
@@ -130,41 +103,24 @@ from mpc_local_planner.core.controller import (
 )
 from mpc_local_planner.core.diagnostics import (
     CONTROLLER_DIAGNOSTICS_TOPIC,
-    ControllerDiagnostics,
-    Level,
 )
 from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path
 from mpc_local_planner.perception.local_obstacles import LocalObstacles
-from mpc_local_planner.perception.pose_history import MAX_EXTRAPOLATION_S
 from mpc_local_planner.perception.scan_obstacles import (
-    check_scan_stamp,
-    classify_beams,
-    MAX_BEAMS,
     ObstacleMemory,
-    validate_scan,
 )
 from mpc_local_planner.ros.conversions import (
-    delete_all_marker,
     frame_problem,
-    grid_from_message,
     odometry_to_state,
     odometry_twist,
     path_pose_count,
     path_to_poses,
-    polygon_marker,
-    polygon_stamped,
-    poses_to_path,
-    scan_beam_count,
-    scan_from_message,
-    SCANS,
-    seconds_to_stamp,
     stamp_to_seconds,
-    twist_from_u,
-    twist_stamped_from_u,
 )
 from mpc_local_planner.ros.lifecycle import ManagedNode
+from mpc_local_planner.ros.mpc_controller_outputs import ControllerOutputs
 from mpc_local_planner.ros.mpc_controller_parameters import (
     build_settings,
     check_obstacles,
@@ -172,6 +128,11 @@ from mpc_local_planner.ros.mpc_controller_parameters import (
     DEFAULTS,
     load_robot,
     PARAMETERS,
+)
+from mpc_local_planner.ros.mpc_controller_sensing import (
+    ControllerSensing,
+    ODOM_HISTORY_S,
+    PENDING_SCANS,
 )
 from mpc_local_planner.ros.node_main import destroy_on_failure, EXIT_INVALID_PARAMETERS, run_node
 from mpc_local_planner.ros.parameters import (
@@ -194,13 +155,11 @@ from mpc_local_planner.ros.robot_pose import (
     PoseMode,
     RobotPose,
 )
-from mpc_local_planner.ros.throttle import ProblemThrottle
+from mpc_local_planner.ros.throttle import ERROR_THROTTLE_S, ProblemThrottle
 
-__all__ = ['EXIT_INVALID_PARAMETERS', 'FOOTPRINT_TOPIC', 'MpcControllerNode',
-           'OBSTACLES_TOPIC', 'log_line', 'main']
+__all__ = ['ERROR_THROTTLE_S', 'EXIT_INVALID_PARAMETERS', 'FOOTPRINT_TOPIC', 'MpcControllerNode',
+           'OBSTACLES_TOPIC', 'main']
 
-# Seconds between two error logs of an input problem that persists.
-ERROR_THROTTLE_S = 2.0
 # Wall seconds the exiting process waits for subscribers to acknowledge its zero cmd_vel.
 EXIT_ACK_TIMEOUT_S = 1.0
 # What the controller avoids (MarkerArray) and the robot's outline (PolygonStamped).
@@ -208,28 +167,6 @@ OBSTACLES_TOPIC = 'mpc/obstacles'
 FOOTPRINT_TOPIC = 'mpc/footprint'
 # Streams like local_plan: reliable, volatile, depth 10.
 MARKERS_QOS = LOCAL_PLAN_QOS
-# mpc/obstacles goes out when what it shows changes, and at least every this many control
-# steps (for an RViz that subscribes late: the topic is volatile).
-OBSTACLE_REFRESH_STEPS = 10
-# Marker namespaces, colours (r, g, b, a) and line widths (m).
-MARKER_STYLE = {
-    'raw': ((0.2, 0.2, 0.2, 1.0), 0.02),  # as described in the world
-    'grown': ((1.0, 0.6, 0.0, 0.8), 0.015),  # inflated by robot radius + collision margin
-    'active': ((0.9, 0.0, 0.0, 1.0), 0.04),  # held in the NLP at the last solve
-}
-# Seconds of odometry kept to find the pose at a scan's stamp.
-ODOM_HISTORY_S = 2.0
-# Scans kept waiting for odometry that covers their stamps (the latest; an older one falls
-# out). A few: at 10-40 Hz, three scans span 75-300 ms, more than odometry is normally late,
-# and a waiting scan older than scan_timeout is discarded anyway.
-PENDING_SCANS = 3
-# Metres beyond the horizon's reach (MpcConfig.reach: v_max N h, the inflation and a
-# polygon's circumscribed radius) within which map cells and remembered scan obstacles are
-# handed to the MPC.
-SENSING_MARGIN = 0.5
-# A serialised scan larger than this (both arrays at MAX_BEAMS float32, plus a header with
-# a long frame id) is refused before it is decoded.
-MAX_SCAN_BYTES = 2 * 4 * MAX_BEAMS + 4096
 
 SUMMARY = """\
 The MPC of Lorenzen et al. (a lifecycle node): while active it solves once per `step` seconds
@@ -247,12 +184,7 @@ With autostart false it waits unconfigured for a
 lifecycle manager; deactivate publishes one zero cmd_vel."""
 
 
-def _same(a: tuple, b: tuple) -> bool:
-    """Say whether two tuples hold the same objects (identity, not equality)."""
-    return len(a) == len(b) and all(x is y for x, y in zip(a, b, strict=True))
-
-
-class MpcControllerNode(ManagedNode):
+class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
     """Run the MPC on the latest odom and plan; publish cmd_vel, local_plan, diagnostics.
 
     Attributes:
@@ -285,7 +217,7 @@ class MpcControllerNode(ManagedNode):
         self._world_obstacles: list[ConvexPolygon] = []
         # where the pose in the plan's frame comes from (ros/robot_pose.py); configure
         # chooses the mode, odometry until then
-        self._pose_source = RobotPose(PoseMode.ODOMETRY, span=ODOM_HISTORY_S, frame_id='map')
+        self._pose_source = RobotPose(PoseMode.ODOMETRY, span=ODOM_HISTORY_S, global_frame='map')
         self._forget_inputs()
         self.add_on_set_parameters_callback(self.parameters_callback)
         declare_parameters(self, PARAMETERS)
@@ -400,7 +332,7 @@ class MpcControllerNode(ManagedNode):
                                f'sources {sorted(sources)}, horizon {config.horizon}, step '
                                f'{config.step:g} s, cmd_vel at {settings.control_frequency:g} '
                                f'Hz, the robot {robot}; the pose in '
-                               f'{values["frame_id"]!r} from {self._pose_source.describe()}')
+                               f'{values["global_frame"]!r} from {self._pose_source.describe()}')
         return super().on_configure(state)
 
     def _make_robot_pose(self, values: dict[str, Any]) -> RobotPose:
@@ -409,10 +341,12 @@ class MpcControllerNode(ManagedNode):
         buffer = None
         if mode is PoseMode.TF:
             buffer, self._tf_listener = make_buffer(self)
-        return RobotPose(mode, span=ODOM_HISTORY_S, frame_id=str(values['frame_id']),
+        return RobotPose(mode, span=ODOM_HISTORY_S, global_frame=str(values['global_frame']),
                          topic=str(values['localization_topic']), buffer=buffer,
-                         base_frame_id=str(values['base_frame_id']),
-                         tolerance=float(values['transform_tolerance']))
+                         robot_base_frame=str(values['robot_base_frame']),
+                         tolerance=float(values['transform_tolerance']),
+                         max_travel=float(values['localization_max_travel']),
+                         max_rotation=float(values['localization_max_rotation']))
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Enable the publishers and start the control timer."""
@@ -644,175 +578,6 @@ class MpcControllerNode(ManagedNode):
             self.get_logger().info(f"a pose in the plan's frame again, from "
                                    f'{self._pose_source.describe()}')
 
-    def scan_callback(self, msg: LaserScan | bytes) -> None:
-        """Take a scan: placed now if the odometry covers its stamp, else it waits.
-
-        The robot's pose is its pose in the plan's frame at the scan's stamp (see pose_at;
-        the one the controller steers with, so scan and plan agree). A scan stamped more
-        than MAX_EXTRAPOLATION_S after the latest odometry waits (with at most
-        PENDING_SCANS - 1 others, the oldest falling out) until odometry covering its stamp
-        has come (_place_pending), renewing nothing meanwhile; the older pose would displace
-        what it saw by the motion since. A malformed scan is dropped with one throttled
-        error, so the scan goes stale if only bad ones come.
-
-        Args:
-            msg: the scan, or its CDR bytes as the raw subscription delivers them.
-
-        """
-        memory = self._local.memory if self._local is not None else None
-        if memory is None or self.controller is None:
-            return  # 'scan' is not a source (or not configured)
-        receipt = self._now()
-        try:
-            scan, stamp = self._read_scan(msg, receipt)
-        except Exception as err:  # ScanError mostly; never leave a callback
-            self._refuse_scan(err)
-            return
-        self._pending_scans.append((scan, stamp, receipt))
-        self._place_pending()
-
-    def _place_pending(self) -> None:
-        """Place the waiting scans whose stamps the pose now covers, in arrival order.
-
-        Called on each scan, each odometry message and each control step. What is covered
-        is every stamp up to a threshold (MAX_EXTRAPOLATION_S past the latest odometry, or
-        the latest transform), so a scan placed here is never newer than one left waiting:
-        the memory sees them in order. A scan still without a pose once older than
-        scan_timeout is discarded (it would be stale when placed); one whose pose cannot be
-        had (no localizer correction, no transform) is dropped, as before.
-        """
-        if self._local is None or self._local.memory is None or self.controller is None:
-            self._pending_scans.clear()
-            return
-        waiting: list[tuple[Any, float, float]] = []
-        while self._pending_scans:
-            scan, stamp, receipt = self._pending_scans.popleft()
-            try:
-                pose = self.pose_at(stamp)
-            except Exception as err:  # LocalizationError mostly; never leave a callback
-                self.get_logger().info(f"scan dropped: no pose in the plan's frame to place "
-                                       f'it ({err})', throttle_duration_sec=ERROR_THROTTLE_S)
-                continue
-            if pose is not None:
-                self._use_scan(scan, stamp, receipt, pose)
-                continue
-            timeout = float(self.get_parameter('scan_timeout').value)
-            if self._now() - stamp <= timeout:
-                waiting.append((scan, stamp, receipt))  # until odometry covers its stamp
-                continue
-            self.get_logger().info(
-                f'scan discarded: no odometry covered its stamp {stamp:.3f} s (more than '
-                f'{MAX_EXTRAPOLATION_S:g} s past the latest) within scan_timeout '
-                f'({timeout:g} s)', throttle_duration_sec=ERROR_THROTTLE_S)
-        self._pending_scans.extend(waiting)
-
-    def _use_scan(self, scan: Any, stamp: float, receipt: float, pose: np.ndarray) -> None:
-        """Remember a placed scan's obstacles; renew scan_timeout if it has a usable reading.
-
-        The scan's time (its stamp, but never later than its arrival) is what scan_timeout
-        is measured against, set only here, once the scan is placed and used: a waiting
-        scan renews nothing. A blind scan (no beam that is not ignored, see
-        classify_beams) is used but does not renew it, so only blind scans go stale as no
-        scans do.
-        """
-        memory = self._local.memory
-        try:
-            if self._scan_stamp is not None and stamp < self._scan_stamp:
-                if self._scan_stamp - stamp <= ODOM_HISTORY_S:
-                    return  # out of order: the memory holds a newer view already
-                memory.clear()  # the clock jumped back
-            laser = [float(v) for v in self.get_parameter('laser_pose').value]
-            body = self.controller.config.robot_footprint  # returns inside are the robot
-            memory.update(scan, pose, laser_pose=laser, body=body)
-        except Exception as err:  # never leave a callback
-            self._refuse_scan(err)
-            return
-        self._local.scan_updated()
-        self._scan_stamp = stamp
-        if self._problems.resolve('scan'):
-            self.get_logger().info('scans are valid again')
-        if not classify_beams(scan, body=body, laser_pose=laser).usable.any():
-            self.get_logger().warning(
-                'scan without a usable reading (every beam NaN, outside [range_min, '
-                "range_max] or inside the robot's footprint): it does not renew scan_timeout",
-                throttle_duration_sec=ERROR_THROTTLE_S)
-            return
-        self._scan_time = min(stamp, receipt)
-
-    def _refuse_scan(self, err: Exception) -> None:
-        """Say (throttled) that a scan was dropped as invalid."""
-        problem = str(err) or type(err).__name__
-        if self._problems.report('scan'):
-            self.get_logger().error(f'invalid scan: {problem}; scan dropped (cmd_vel is '
-                                    'zero once the scan is stale)')
-
-    def _read_scan(self, msg: LaserScan | bytes, receipt: float) -> tuple[Any, float]:
-        """Return the scan (validated, stamped) and its stamp in seconds.
-
-        Raises:
-            ValueError: if it is too large, in another frame, or malformed.
-
-        """
-        if isinstance(msg, (bytes, bytearray)):
-            count = scan_beam_count(bytes(msg))
-            if count is not None and count > MAX_BEAMS:
-                problem = f'{count} beams, more than the {MAX_BEAMS} accepted'
-                raise ValueError(problem)
-            if len(msg) > MAX_SCAN_BYTES:
-                problem = f'{len(msg)} bytes, more than {MAX_SCAN_BYTES} (too many values)'
-                raise ValueError(problem)
-            msg = deserialize_message(bytes(msg), LaserScan)
-        if len(msg.ranges) > MAX_BEAMS:
-            problem = f'{len(msg.ranges)} beams, more than the {MAX_BEAMS} accepted'
-            raise ValueError(problem)
-        frame = str(self.get_parameter('base_frame_id').value)
-        problem = frame_problem(msg.header.frame_id, frame, SCANS)
-        if problem is not None:
-            raise ValueError(problem)
-        scan = scan_from_message(msg)
-        stamp = scan.stamp if scan.stamp > 0 else receipt
-        scan = scan._replace(stamp=stamp)
-        validate_scan(scan)
-        check_scan_stamp(stamp, receipt)
-        return scan, stamp
-
-    def map_callback(self, msg: OccupancyGrid) -> None:
-        """Keep a valid map (its rectangles near the robot are recomputed); drop a bad one."""
-        if 'map' not in self._sources or self.controller is None:
-            return
-        try:
-            frame = str(self.get_parameter('frame_id').value)
-            grid = grid_from_message(msg, frame_id=frame)
-        except Exception as err:  # GridError mostly; never leave a callback
-            problem = str(err) or type(err).__name__
-            if self._problems.report('map'):
-                self.get_logger().error(f'invalid map: {problem}; map dropped (the previous '
-                                        'one, if any, stays in force)')
-            return
-        self._grid = grid
-        if self._local is not None:
-            self._local.occupancy = grid
-        self._problems.resolve('map')
-        self.get_logger().info(f'new map: {grid.width} x {grid.height} cells of '
-                               f'{grid.resolution:g} m')
-
-    def _sensing_radius(self) -> float:
-        """Return how far from the robot sensed obstacles matter (reach plus a margin).
-
-        MpcConfig.reach: the horizon's travel, the inflation and, for a polygon, the
-        circumscribed radius (a polygon's obstacles are not grown by the body, so the
-        inflation alone would leave out those its corners can hit).
-        """
-        config, model = self.controller.config, self.controller.model
-        return config.reach(float(model.u_max[0])) + SENSING_MARGIN
-
-    def _update_obstacles(self) -> None:
-        """Hand the obstacles in force to the controller: world + map + scan memory."""
-        sensed: list[ConvexPolygon] = []
-        if self._local is not None and self._state is not None:
-            sensed = self._local.near(self._state[:2], self._sensing_radius())
-        self.controller.set_obstacles(self._world_obstacles + sensed)
-
     def plan_callback(self, msg: Path | bytes) -> None:
         """Follow a new global plan (s restarts at the robot's projection onto it).
 
@@ -863,7 +628,7 @@ class MpcControllerNode(ManagedNode):
             msg = deserialize_message(bytes(msg), Path)
         if len(msg.poses) > limit:
             raise too_many(len(msg.poses))
-        frame = str(self.get_parameter('frame_id').value)
+        frame = str(self.get_parameter('global_frame').value)
         problem = frame_problem(msg.header.frame_id, frame, 'plans')
         if problem is not None:
             raise ValueError(problem)
@@ -911,119 +676,7 @@ class MpcControllerNode(ManagedNode):
         except Exception:  # a report, not a decision: never let it stop the step
             self.blockage = Blockage()
         self.last_output = output
-        self._cmd_pub.publish(self._cmd_message(output.u, now))
-        try:
-            stamp = seconds_to_stamp(max(now, 0.0))
-            frame = str(self.get_parameter('frame_id').value)
-            if output.solution is not None:
-                self._local_plan_pub.publish(poses_to_path(
-                    output.solution.x_pred[:, :3], frame_id=frame, stamp=stamp))
-            self._diag_pub.publish(self._diagnostics(output, now))
-            self._publish_obstacles(output, frame, stamp)
-            if self._state is not None:
-                # the shape the MPC keeps clear: the polygon, or the circle as a 16-gon
-                self._footprint_pub.publish(polygon_stamped(
-                    self.controller.config.robot_footprint.at(self._state), frame_id=frame,
-                    stamp=stamp))
-        except Exception as err:  # a message that cannot be built: keep controlling
-            self.get_logger().warning(f'could not publish: {err}', throttle_duration_sec=1.0)
-        self._log(output)
-
-    def _cmd_message(self, u: np.ndarray, now: float) -> Twist | TwistStamped:
-        """Return cmd_vel's message for u: a Twist, or a TwistStamped in base_link."""
-        if not self._stamped:
-            return twist_from_u(u)
-        return twist_stamped_from_u(u, stamp=seconds_to_stamp(max(now, 0.0)),
-                                    frame_id=str(self.get_parameter('base_frame_id').value))
-
-    def _publish_obstacles(self, output: ControlOutput, frame: str, stamp: Any) -> None:
-        """Publish the obstacles raw, grown and active when that changes (or now and then).
-
-        Each publication starts with DELETEALL, so markers of obstacles gone (or no longer
-        active) disappear; ids are the obstacles' indices within their namespace.
-        """
-        grown = self.controller.grown_obstacles
-        # active only if this step solved: a stop without a solve holds nothing
-        active = self.controller.active_obstacles if output.solution is not None else ()
-        self._steps_since_markers += 1
-        shown = self._markers_shown
-        if (shown is not None and _same(shown[0], grown) and _same(shown[1], active)
-                and self._steps_since_markers < OBSTACLE_REFRESH_STEPS):
-            return
-        markers = [delete_all_marker(frame_id=frame, stamp=stamp)]
-        for ns, polygons in (('raw', self.controller.obstacles), ('grown', grown),
-                             ('active', active)):
-            rgba, width = MARKER_STYLE[ns]
-            markers += [polygon_marker(p.vertices, ns=ns, marker_id=i, frame_id=frame,
-                                       stamp=stamp, rgba=rgba, width=width)
-                        for i, p in enumerate(polygons)]
-        self._obstacles_pub.publish(MarkerArray(markers=markers))
-        self._markers_shown = (grown, active)
-        self._steps_since_markers = 0
-
-    def _log(self, output: ControlOutput) -> None:
-        """Log a change of reason (refused input is logged, throttled, where refused)."""
-        message = output.message
-        if message == self._last_message:
-            return
-        self._last_message = message
-        self.goal_reached = output.reason is Reason.GOAL_REACHED
-        if output.reason in (Reason.INVALID_ODOM, Reason.INVALID_PLAN, Reason.NO_LOCALIZATION):
-            return
-        if output.reason is Reason.ERROR and not self._problems.report('error'):
-            return
-        state = self._state if self._state is not None else np.full(3, np.nan)
-        level, line = log_line(output, failures=self.controller.solver_failures,
-                               goal_error=self.controller.goal_error(state))
-        # one call site per severity: rclpy refuses a call site that changes severity
-        if level is Level.ERROR:
-            self.get_logger().error(line)
-        elif level is Level.WARN:
-            self.get_logger().warning(line)
-        else:
-            self.get_logger().info(line)
-
-    def _diagnostics(self, output: ControlOutput, now: float) -> DiagnosticArray:
-        record = ControllerDiagnostics.from_output(
-            output, state=self._state, state_time=self._state_time,
-            failures_total=self.controller.solver_failures, blockage=self.blockage,
-            timeouts_total=self.controller.timeouts)
-        status = DiagnosticStatus()
-        status.name = f'{self.get_name()}: MPC'
-        status.hardware_id = self.get_fully_qualified_name()
-        status.message = record.message
-        status.level = bytes([int(record.level)])
-        status.values = [KeyValue(key=k, value=v) for k, v in record.to_values()]
-        array = DiagnosticArray()
-        array.header.stamp = seconds_to_stamp(max(now, 0.0))
-        array.status = [status]
-        return array
-
-
-def log_line(output: ControlOutput, *, failures: int,
-             goal_error: tuple[float, float]) -> tuple[Level, str]:
-    """Return the level and the line the node logs when the reason changes to output's.
-
-    Args:
-        output: the control step.
-        failures: the controller's solver failures so far.
-        goal_error: (position, heading) error to the end of the plan.
-
-    """
-    reason, message = output.reason, output.message
-    if reason is Reason.CANDIDATE:
-        v, omega = output.u
-        return Level.WARN, (f'{message}: applying its input v = {v:.3f} m/s, omega = '
-                            f'{omega:.3f} rad/s (solver failures so far: {failures})')
-    if reason in (Reason.STALE_ODOM, Reason.STOP, Reason.STALE_SCAN, Reason.NO_SCAN,
-                  Reason.NO_MAP):
-        return Level.WARN, f'{message}: cmd_vel is zero (solver failures so far: {failures})'
-    if reason is Reason.GOAL_REACHED:
-        position, heading = goal_error
-        return Level.OK, f'{message}: {position:.3f} m, {heading:.3f} rad off'
-    if reason is Reason.ERROR:
-        return Level.ERROR, f'{message}; cmd_vel is zero'
-    return Level.OK, message
+        self._publish_outputs(output, now)
 
 
 def main(args: list[str] | None = None) -> int:

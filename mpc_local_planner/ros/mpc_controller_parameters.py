@@ -165,7 +165,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('max_plan_poses', int(_SETTINGS.max_plan_poses),
                   'a plan with more poses is refused (cmd_vel is zero until a valid plan '
                   'comes)', int_range=(2, 10_000_000)),
-    ParameterSpec('frame_id', 'map',
+    ParameterSpec('global_frame', 'map',
                   'frame of local_plan, mpc/obstacles and mpc/footprint, and the frame a plan '
                   'must be in'),
     ParameterSpec('obstacle_sources', ['world'],
@@ -180,7 +180,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('scan_timeout', float(_SETTINGS.scan_timeout),
                   "with 'scan' a source, a scan older than this (s) is stale: cmd_vel is zero "
                   '(and before the first scan)', float_range=(0.001, 3600.0)),
-    ParameterSpec('base_frame_id', BASE_FRAME,
+    ParameterSpec('robot_base_frame', BASE_FRAME,
                   'the robot frame: scans must be in it (laser_pose says where the laser '
                   'sits), and a TwistStamped cmd_vel is in it'),
     ParameterSpec('enable_stamped_cmd_vel', False,

@@ -31,10 +31,12 @@ from typing import NamedTuple, Sequence
 from mpc_local_planner.ros import (
     bag_recorder_node,
     global_planner_node,
+    global_planner_parameters,
     map_server_node,
     mpc_controller_node,
     mpc_controller_parameters,
     unicycle_simulator_node,
+    unicycle_simulator_parameters,
 )
 from mpc_local_planner.ros.parameters import format_default, ParameterSpec
 
@@ -52,9 +54,10 @@ class NodeTable(NamedTuple):
 NODES: tuple[NodeTable, ...] = (
     NodeTable('mpc_controller', mpc_controller_node.SUMMARY,
               mpc_controller_parameters.PARAMETERS),
-    NodeTable('global_planner', global_planner_node.SUMMARY, global_planner_node.PARAMETERS),
+    NodeTable('global_planner', global_planner_node.SUMMARY,
+              global_planner_parameters.PARAMETERS),
     NodeTable('unicycle_simulator', unicycle_simulator_node.SUMMARY,
-              unicycle_simulator_node.PARAMETERS),
+              unicycle_simulator_parameters.PARAMETERS),
     NodeTable('map_server', map_server_node.SUMMARY, map_server_node.PARAMETERS),
     NodeTable('bag_recorder', bag_recorder_node.SUMMARY, bag_recorder_node.PARAMETERS),
 )

@@ -15,22 +15,25 @@
 """Where the robot is in the plan's frame, for the controller and the planner node alike.
 
 The plan is in ``map``; odometry is in ``odom`` and drifts. Three ways to the pose in the
-plan's frame (``frame_id``), chosen at configure (`choose_mode`):
+plan's frame (``global_frame``), chosen at configure (`choose_mode`):
 
 * a localizer's pose topic (``localization_topic``, geometry_msgs/PoseWithCovarianceStamped
-  in ``frame_id``, as AMCL's ``amcl_pose``): its correction map <- odom is applied to the
+  in ``global_frame``, as AMCL's ``amcl_pose``): its correction map <- odom is applied to the
   odometry (perception/localization.py, ROS-free). Chosen whenever the topic is set.
-* tf2 (``tf2_ros`` importable, i.e. a sourced ROS install): ``frame_id -> base_frame_id``
-  (Nav2's ``global_frame -> robot_base_frame``) is looked up, waiting at most
-  ``transform_tolerance`` (Nav2's name) for the latest one. Checked here only against a
-  stand-in of the buffer's interface (``can_transform``, ``lookup_transform``): tf2 is not
-  installable from PyPI.
+* tf2 (``tf2_ros`` importable, i.e. a sourced ROS install): ``global_frame ->
+  robot_base_frame`` (Nav2's names, as its costmaps and controller_server use them) is
+  looked up, waiting at most ``transform_tolerance`` (Nav2's name) for the latest one.
+  Checked here only against a stand-in of the buffer's interface (``can_transform``,
+  ``lookup_transform``), never against tf2_ros itself: tf2 is not installable from PyPI.
 * neither: the odometry is the pose in the plan's frame (the simulator, whose ``odom`` is
-  ``map``), exactly as before. So is odometry whose header.frame_id IS ``frame_id``, with
+  ``map``), exactly as before. So is odometry whose header.frame_id IS ``global_frame``, with
   tf2 too (closed_loop's exact simulator publishes it so): there is nothing to look up.
 
 With a localizer or tf2 and no pose (no localizer message yet, one older than the odometry
-kept, no transform) the controller stops and says why; the planner waits.
+kept, no transform) the controller stops and says why; the planner waits. So they do when
+the localizer falls silent while the robot moves: after ``localization_max_travel`` m or
+``localization_max_rotation`` rad of odometry since its last pose's stamp (AMCL publishes
+after 0.25 m or 0.2 rad of motion, and nothing at rest, so a time limit would not fit it).
 
 A scan's stamp (`RobotPose.at`) is often newer than the latest odometry. Within
 MAX_EXTRAPOLATION_S of it the odometry is extrapolated along its twist (PoseHistory.at; the
@@ -69,15 +72,24 @@ __all__ = ['LocalizationError', 'PoseMode', 'POSE_PARAMETERS', 'RobotPose', 'TF_
 
 TF_AVAILABLE = tf2_ros is not None
 
-# The parameters both nodes declare for it (besides frame_id and base_frame_id).
+# The parameters both nodes declare for it (besides global_frame and robot_base_frame).
 POSE_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('localization_topic', '',
                   "a localizer's pose topic (geometry_msgs/PoseWithCovarianceStamped in "
-                  "frame_id, as AMCL's amcl_pose), composed with odometry as the pose in "
-                  "frame_id; '' = none: tf2's frame_id -> base_frame_id if tf2_ros is "
-                  'importable, else the odometry is that pose; read at configure'),
+                  "global_frame, as AMCL's amcl_pose), composed with odometry as the pose in "
+                  "global_frame; '' = none: tf2's global_frame -> robot_base_frame if tf2_ros "
+                  'is importable, else the odometry is that pose; read at configure'),
+    ParameterSpec('localization_max_travel', 1.0,
+                  'with localization_topic, the odometry travel (m) after the last localizer '
+                  "pose's stamp beyond which the localizer is taken as silent or lost: the "
+                  "controller stops (no_localization) until its next pose; 4 x AMCL's "
+                  'update_min_d; 0 = no limit; read at configure', float_range=(0.0, 1000.0)),
+    ParameterSpec('localization_max_rotation', 0.8,
+                  'with localization_topic, the same for the odometry rotation (rad); 4 x '
+                  "AMCL's update_min_a; 0 = no limit; read at configure",
+                  float_range=(0.0, 1000.0)),
     ParameterSpec('transform_tolerance', 0.1,
-                  "with tf2, how long (s) to wait for frame_id -> base_frame_id (Nav2's "
+                  "with tf2, how long (s) to wait for global_frame -> robot_base_frame (Nav2's "
                   'name); none by then: the controller stops', float_range=(0.0, 10.0)),
 )
 
@@ -87,7 +99,7 @@ class PoseMode(Enum):
 
     ODOMETRY = 'odometry'  # the odometry's frame is the plan's
     LOCALIZER = 'localizer'  # odometry corrected by a localizer's pose topic
-    TF = 'tf'  # tf2's frame_id -> base_frame_id
+    TF = 'tf'  # tf2's global_frame -> robot_base_frame
 
 
 def choose_mode(localization_topic: str, *, tf_available: bool = TF_AVAILABLE) -> PoseMode:
@@ -200,37 +212,41 @@ class RobotPose:
     Args:
         mode: the PoseMode.
         span: seconds of odometry kept (scans' and the localizer's stamps are looked up in it).
-        frame_id: the plan's frame (the localizer's messages must be in it).
+        global_frame: the plan's frame (the localizer's messages must be in it).
         topic: the localizer's topic (LOCALIZER).
         buffer: the tf2 buffer (TF; required then).
-        base_frame_id: the robot's frame (TF).
+        robot_base_frame: the robot's frame (TF).
         tolerance: transform_tolerance (TF).
+        max_travel: localization_max_travel (LOCALIZER; 0 = no limit).
+        max_rotation: localization_max_rotation (LOCALIZER; 0 = no limit).
 
     """
 
-    def __init__(self, mode: PoseMode, *, span: float, frame_id: str, topic: str = '',
-                 buffer: TransformBuffer | None = None, base_frame_id: str = 'base_link',
-                 tolerance: float = 0.1) -> None:
+    def __init__(self, mode: PoseMode, *, span: float, global_frame: str, topic: str = '',
+                 buffer: TransformBuffer | None = None, robot_base_frame: str = 'base_link',
+                 tolerance: float = 0.1, max_travel: float = 0.0,
+                 max_rotation: float = 0.0) -> None:
         self.mode = mode
-        self.frame_id = frame_id
-        self.located = LocalizedPose(span, localized=mode is PoseMode.LOCALIZER, source=topic)
+        self.global_frame = global_frame
+        self.located = LocalizedPose(span, localized=mode is PoseMode.LOCALIZER, source=topic,
+                                     max_travel=max_travel, max_rotation=max_rotation)
         self.tf: TfPose | None = None
-        self._odom_in_plan_frame = False  # the latest odometry's frame is frame_id
+        self._odom_in_plan_frame = False  # the latest odometry's frame is global_frame
         if mode is PoseMode.TF:
             if buffer is None:
                 problem = 'tf2 mode needs a transform buffer'
                 raise ValueError(problem)
-            self.tf = TfPose(buffer, global_frame=frame_id, robot_frame=base_frame_id,
+            self.tf = TfPose(buffer, global_frame=global_frame, robot_frame=robot_base_frame,
                              tolerance=tolerance)
 
     def describe(self) -> str:
         """Say where the pose comes from, for the log at configure."""
         if self.mode is PoseMode.LOCALIZER:
             return (f'the odometry corrected by the localizer on {self.located.source!r} '
-                    f'(pose in {self.frame_id!r})')
+                    f'(pose in {self.global_frame!r})')
         if self.tf is not None:
             return f'tf2: {self.tf.global_frame} -> {self.tf.robot_frame}'
-        return f'the odometry, taken as the pose in {self.frame_id!r}'
+        return f'the odometry, taken as the pose in {self.global_frame!r}'
 
     def clear(self) -> None:
         """Forget the odometry and the localizer's correction."""
@@ -244,7 +260,7 @@ class RobotPose:
         this pose be placed without waiting (PoseHistory.at).
         """
         self.located.add_odometry(time, pose, twist)
-        self._odom_in_plan_frame = frame_id == self.frame_id
+        self._odom_in_plan_frame = frame_id == self.global_frame
 
     @property
     def _tf(self) -> TfPose | None:
@@ -259,7 +275,7 @@ class RobotPose:
                 ValueError) if the odometry kept cannot place it: no pose until one can.
 
         """
-        problem = frame_problem(msg.header.frame_id, self.frame_id, 'localizer poses')
+        problem = frame_problem(msg.header.frame_id, self.global_frame, 'localizer poses')
         if problem is not None:
             raise ValueError(problem)
         pose = pose_to_array(msg.pose.pose)
@@ -273,7 +289,8 @@ class RobotPose:
         (None, None) without odometry (the controller says no odometry, as before).
 
         Raises:
-            LocalizationError: if there is odometry but no pose in the plan's frame.
+            LocalizationError: if there is odometry but no pose in the plan's frame, or the
+                localizer's correction is stale (LocalizedPose.staleness).
 
         """
         if odom is None:
@@ -283,6 +300,9 @@ class RobotPose:
         pose = self.located.pose(odom)
         if pose is None:
             raise LocalizationError(self.located.problem or 'no localizer pose')
+        stale = self.located.staleness()
+        if stale is not None:
+            raise LocalizationError(stale)
         return pose, odom_time
 
     def at(self, stamp: float) -> np.ndarray | None:

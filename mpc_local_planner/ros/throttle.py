@@ -20,7 +20,10 @@ from __future__ import annotations
 import time
 from typing import Callable
 
-__all__ = ['ProblemThrottle']
+__all__ = ['ERROR_THROTTLE_S', 'ProblemThrottle']
+
+# Seconds between two error logs of an input problem that persists (the nodes' default).
+ERROR_THROTTLE_S = 2.0
 
 
 class ProblemThrottle:

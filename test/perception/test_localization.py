@@ -113,3 +113,50 @@ def test_clear_forgets_the_odometry_and_the_correction() -> None:
     located.add_localizer(0.0, np.ones(3))
     located.clear()
     assert located.at(0.0) is None and located.correction is None and located.problem
+
+
+def drive(located: LocalizedPose, start: float, stop: float, *, v: float = 0.0,
+          omega: float = 0.0, dt: float = 0.1) -> None:
+    """Add odometry along a straight line (v) or a turn on the spot (omega), every dt."""
+    for k in range(round((stop - start) / dt) + 1):
+        t = start + k * dt
+        located.add_odometry(t, np.array([v * t, 0.0, omega * t]), (v, omega))
+
+
+def test_a_silent_localizer_is_stale_after_the_odometry_travelled_max_travel() -> None:
+    located = LocalizedPose(2.0, localized=True, source='amcl_pose', max_travel=1.0)
+    drive(located, 0.0, 1.0, v=0.5)
+    located.add_localizer(1.0, np.array([0.5, 0.0, 0.0]))
+    assert located.staleness() is None
+    drive(located, 1.1, 2.9, v=0.5)  # 0.95 m since the pose's stamp: still fresh
+    assert located.travel == pytest.approx(0.95)
+    assert located.staleness() is None
+    drive(located, 3.0, 3.2, v=0.5)  # 1.1 m: the localizer should have spoken by now
+    problem = located.staleness()
+    assert problem is not None and 'amcl_pose' in problem and 'localization_max_travel' in problem
+    assert located.pose(np.array([1.6, 0.0, 0.0])) is not None  # scans are still placed
+    # a late pose counts from its stamp: the 0.4 m travelled since then are not forgotten
+    located.add_localizer(2.8, np.array([1.4, 0.0, 0.0]))
+    assert located.travel == pytest.approx(0.2) and located.staleness() is None
+
+
+def test_a_localizer_silent_at_rest_is_never_stale() -> None:
+    located = LocalizedPose(2.0, localized=True, max_travel=1.0, max_rotation=0.8)
+    drive(located, 0.0, 0.5, v=0.0)
+    located.add_localizer(0.5, np.zeros(3))
+    for t in np.arange(0.6, 1000.0, 0.5):  # as AMCL: nothing while the robot stands
+        located.add_odometry(float(t), np.zeros(3), (0.0, 0.0))
+    assert located.staleness() is None
+
+
+def test_a_turn_on_the_spot_beyond_max_rotation_is_stale_and_zero_turns_the_limit_off(
+) -> None:
+    for limit, stale in ((0.8, True), (0.0, False)):
+        located = LocalizedPose(2.0, localized=True, max_travel=1.0, max_rotation=limit)
+        drive(located, 0.0, 0.1, omega=1.0)
+        located.add_localizer(0.1, np.array([0.0, 0.0, 0.1]))
+        drive(located, 0.2, 1.0, omega=1.0)  # 0.9 rad, turned in 0.1 rad steps
+        assert located.rotation == pytest.approx(0.9)
+        assert (located.staleness() is not None) is stale
+        if stale:
+            assert 'localization_max_rotation' in located.staleness()

@@ -36,22 +36,26 @@ from mpc_local_planner.evaluation.analyze_bag import read_run
 from mpc_local_planner.evaluation.trajectory import read_trajectory_csv, TRAJECTORY_COLUMNS
 from mpc_local_planner.ros.bag_recorder_node import BagRecorderNode
 from mpc_local_planner.ros.closed_loop import (
-    _Monitor,
     check_plannable,
     EXIT_NO_PLAN,
-    flush_recording,
-    LoopOptions,
     main,
-    node_command,
+    run_closed_loop,
+    write_known_map,
+)
+from mpc_local_planner.ros.closed_loop_monitor import (
+    flush_recording,
+    LoopMonitor,
+    recorder_topics,
+)
+from mpc_local_planner.ros.closed_loop_parameters import (
+    LoopOptions,
     node_parameters,
     PAPER_GOAL_TOLERANCES,
     parse_parameter,
     POLYGON_CLEARANCE,
-    recorder_topics,
-    run_closed_loop,
     run_world,
-    write_known_map,
 )
+from mpc_local_planner.ros.closed_loop_processes import node_command
 from mpc_local_planner.ros.qos import DIAGNOSTICS_QOS
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.map_files import load_map
@@ -185,7 +189,7 @@ def test_a_world_named_without_its_suffix_is_found(tmp_path: Path,
 @pytest.mark.dds
 def test_the_diagnostics_that_stop_the_run_reach_the_bag(ros, tmp_path: Path) -> None:
     bag = tmp_path / 'bag'
-    monitor = ros.add(_Monitor(context=ros.context))
+    monitor = ros.add(LoopMonitor(context=ros.context))
     # subscribed, but not spun until the monitor has seen the goal: the worst case of the
     # executor running the monitor's callbacks before the recorder's
     recorder = BagRecorderNode(context=ros.context, parameter_overrides=[
@@ -278,12 +282,12 @@ def test_drift_makes_the_odometry_drift_and_the_nodes_follow_the_localizer(tmp_p
     assert simulator['localizer.rate'] > 0
     assert params['global_planner']['localization_topic'] == 'amcl_pose'
     assert params['mpc_controller']['localization_topic'] == 'amcl_pose'
-    assert simulator['frame_id'] == 'odom'  # drifting odometry is not in map
+    assert simulator['odom_frame'] == 'odom'  # drifting odometry is not in map
     plain = node_parameters(LoopOptions(path='rrt'), UNKNOWN_BOX_FILE, UNKNOWN_BOX)
     assert not any('drift' in name or 'localiz' in name
                    for values in plain.values() for name in values)
     # exact odometry is in map, and says so: a node with tf2 looks nothing up
-    assert plain['unicycle_simulator']['frame_id'] == 'map'
+    assert plain['unicycle_simulator']['odom_frame'] == 'map'
 
 
 def test_reality_reaches_the_simulator_and_a_real_one_runs_with_the_localizer() -> None:
@@ -294,7 +298,7 @@ def test_reality_reaches_the_simulator_and_a_real_one_runs_with_the_localizer() 
     simulator = params['unicycle_simulator']
     assert simulator['reality'] == 'real'
     # noisy, drifting odometry is not in map: the nodes follow the localizer, as with --drift
-    assert simulator['frame_id'] == 'odom' and simulator['localizer.rate'] > 0
+    assert simulator['odom_frame'] == 'odom' and simulator['localizer.rate'] > 0
     assert params['mpc_controller']['localization_topic'] == 'amcl_pose'
     assert not any('odom_drift' in name for name in simulator)  # the preset's drift
     with pytest.raises(ValueError, match='unknown reality'):

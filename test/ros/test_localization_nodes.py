@@ -201,3 +201,43 @@ def test_the_planner_waits_for_the_localizer_then_plans_from_the_pose_in_map(ros
     np.testing.assert_allclose(planner.robot_pose, truth, atol=1e-9)
     start = path_to_poses(probe.plans[-1])[0]
     np.testing.assert_allclose(start[:2], truth[:2], atol=1e-6)
+
+
+def test_the_controller_stops_when_the_localizer_falls_silent_while_moving_then_drives_on(
+        ros) -> None:
+    overrides = [Parameter('use_sim_time', value=True),
+                 Parameter('localization_topic', value='amcl_pose'),
+                 Parameter('localization_max_travel', value=0.3)]
+    node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=overrides))
+    assert autostart(node) is None
+    probe = ros.probe(use_sim_time=True)
+    robot = DriftingRobot(ros, probe)
+    assert ros.spin_until(lambda: probe.plan_pub.get_subscription_count() > 0
+                          and robot.localizer.get_subscription_count() > 0)
+    probe.plan_pub.publish(poses_to_path(PLAN))
+    for _ in range(5):  # odometry kept for the localizer's stamp
+        robot.tick()
+    robot.localize()  # once: then silent, as a dead AMCL
+
+    def silent() -> list:
+        return [d for d in probe.diagnostics if 'silent or lost' in d.message]
+
+    began = time.monotonic()
+    assert robot.run_until(lambda: len(silent()) >= 3)
+    assert all(d.step.reason is Reason.NO_LOCALIZATION for d in silent())
+    assert 'localization_max_travel 0.3' in silent()[0].message
+    errors = [line for line in probe.log_lines('mpc_controller', Log.ERROR)
+              if 'silent or lost' in line]
+    assert 1 <= len(errors) <= 1 + (time.monotonic() - began) / ERROR_THROTTLE_S
+    assert 'zero' in errors[0]
+    # it brakes to a stop and stays there: nothing moves it while the localizer is silent
+    assert robot.run_until(lambda: probe.cmds and not u_from_twist(probe.cmds[-1]).any())
+    stopped = robot.truth.copy()
+    for _ in range(20):
+        robot.tick()
+    np.testing.assert_allclose(robot.truth, stopped, atol=1e-9)
+    # the localizer speaks again: the controller drives on from the corrected pose
+    robot.localize()
+    start = len(probe.diagnostics)
+    assert robot.run_until(lambda: any(d.step.reason is Reason.TRACKING
+                                       for d in probe.diagnostics[start:]))

@@ -47,7 +47,8 @@ from mpc_local_planner.ros.conversions import (
     yaw_to_quaternion,
 )
 from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
-from mpc_local_planner.ros.mpc_controller_node import log_line, MpcControllerNode
+from mpc_local_planner.ros.mpc_controller_node import MpcControllerNode
+from mpc_local_planner.ros.mpc_controller_outputs import log_line
 from mpc_local_planner.ros.mpc_controller_parameters import load_obstacles
 from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.qos import (
@@ -412,9 +413,9 @@ def test_shipped_params_files_mirror_the_defaults_the_nodes_take_from_the_datacl
 
 
 @pytest.mark.parametrize(('name', 'module'), [
-    ('bag_recorder', 'bag_recorder_node'), ('global_planner', 'global_planner_node'),
+    ('bag_recorder', 'bag_recorder_node'), ('global_planner', 'global_planner_parameters'),
     ('mpc_controller', 'mpc_controller_parameters'),
-    ('unicycle_simulator', 'unicycle_simulator_node')])
+    ('unicycle_simulator', 'unicycle_simulator_parameters')])
 def test_shipped_params_files_set_only_declared_parameters_with_their_types(
         name: str, module: str) -> None:
     # ROS ignores a key no node declares: a misspelt one would silently do nothing

@@ -46,7 +46,8 @@ from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PlanSource
 from mpc_local_planner.core.mpc.step import SolveAttempt
 from mpc_local_planner.core.obstacles import first_blocked_segment
-from mpc_local_planner.ros.closed_loop import MODULES, spawn_node
+from mpc_local_planner.ros.closed_loop_parameters import MODULES
+from mpc_local_planner.ros.closed_loop_processes import spawn_node
 from mpc_local_planner.ros.conversions import (
     odometry_to_state,
     path_to_poses,

@@ -97,8 +97,8 @@ class StandInBuffer:
 
 def test_tf2_gives_the_latest_transform_with_its_stamp_waiting_transform_tolerance() -> None:
     buffer = StandInBuffer([transform(1.0, 2.0, 0.5, 10.0), transform(1.5, 2.0, 0.6, 10.5)])
-    source = RobotPose(PoseMode.TF, span=2.0, frame_id='map', buffer=buffer,
-                       base_frame_id='base_link', tolerance=0.25)
+    source = RobotPose(PoseMode.TF, span=2.0, global_frame='map', buffer=buffer,
+                       robot_base_frame='base_link', tolerance=0.25)
     source.add_odometry(10.5, np.array([9.0, 9.0, 0.0]))  # odom: not the pose with tf2
     pose, stamp = source.current(np.array([9.0, 9.0, 0.0]), 10.5)
     np.testing.assert_allclose(pose, [1.5, 2.0, 0.6])
@@ -111,8 +111,8 @@ def test_tf2_gives_the_latest_transform_with_its_stamp_waiting_transform_toleran
 
 def test_a_missing_transform_is_a_localization_error_naming_the_frames() -> None:
     buffer = StandInBuffer([])
-    source = RobotPose(PoseMode.TF, span=2.0, frame_id='map', buffer=buffer,
-                       base_frame_id='base_link', tolerance=0.1)
+    source = RobotPose(PoseMode.TF, span=2.0, global_frame='map', buffer=buffer,
+                       robot_base_frame='base_link', tolerance=0.1)
     assert source.current(None, None) == (None, None)  # no odometry: said as before
     with pytest.raises(LocalizationError, match=r'no transform map -> base_link within '
                                                 r'transform_tolerance \(0.1 s\)'):
@@ -145,7 +145,7 @@ def localizer_message(x: float, y: float, yaw: float, stamp: float,
 
 
 def test_the_localizer_message_corrects_the_odometry_and_another_frame_is_refused() -> None:
-    source = RobotPose(PoseMode.LOCALIZER, span=2.0, frame_id='map', topic='amcl_pose')
+    source = RobotPose(PoseMode.LOCALIZER, span=2.0, global_frame='map', topic='amcl_pose')
     source.add_odometry(1.0, np.array([1.0, 0.0, 0.0]))
     with pytest.raises(LocalizationError, match="no localizer pose yet on 'amcl_pose'"):
         source.current(np.array([1.0, 0.0, 0.0]), 1.0)
@@ -161,8 +161,25 @@ def test_the_localizer_message_corrects_the_odometry_and_another_frame_is_refuse
     np.testing.assert_allclose(source.located.correction, [0.0, 0.0, 0.0], atol=1e-12)
 
 
+def test_a_localizer_silent_while_the_robot_moves_gives_no_pose_until_it_speaks() -> None:
+    source = RobotPose(PoseMode.LOCALIZER, span=2.0, global_frame='map', topic='amcl_pose',
+                       max_travel=1.0, max_rotation=0.8)
+    for k in range(11):  # 0.5 m/s from 0 to 1 s
+        source.add_odometry(k / 10, np.array([k / 20, 0.0, 0.0]), twist=(0.5, 0.0))
+    source.add_localizer(localizer_message(0.0, 0.0, 0.0, 0.0), 0.0)
+    assert source.current(np.array([0.5, 0.0, 0.0]), 1.0)[0] is not None
+    for k in range(11, 23):  # 1.1 m since the localizer's stamp
+        source.add_odometry(k / 10, np.array([k / 20, 0.0, 0.0]), twist=(0.5, 0.0))
+    with pytest.raises(LocalizationError, match="no localizer pose on 'amcl_pose' while the "
+                                                'odometry moved 1.10 m'):
+        source.current(np.array([1.1, 0.0, 0.0]), 2.2)
+    source.add_localizer(localizer_message(1.1, 0.0, 0.0, 2.2), 2.2)
+    pose, _ = source.current(np.array([1.1, 0.0, 0.0]), 2.2)
+    np.testing.assert_allclose(pose, [1.1, 0.0, 0.0], atol=1e-12)
+
+
 def test_without_localizer_or_tf2_the_odometry_is_the_pose_unchanged() -> None:
-    source = RobotPose(PoseMode.ODOMETRY, span=2.0, frame_id='map')
+    source = RobotPose(PoseMode.ODOMETRY, span=2.0, global_frame='map')
     odom = np.array([1.0, 2.0, 3.0])
     source.add_odometry(1.0, odom)
     pose, time = source.current(odom, 0.9)
@@ -173,8 +190,8 @@ def test_without_localizer_or_tf2_the_odometry_is_the_pose_unchanged() -> None:
 
 def test_with_tf2_odometry_already_in_the_plan_frame_is_the_pose_without_a_lookup() -> None:
     buffer = StandInBuffer([])  # no transform at all
-    source = RobotPose(PoseMode.TF, span=2.0, frame_id='map', buffer=buffer,
-                       base_frame_id='base_link', tolerance=0.1)
+    source = RobotPose(PoseMode.TF, span=2.0, global_frame='map', buffer=buffer,
+                       robot_base_frame='base_link', tolerance=0.1)
     odom = np.array([1.0, 2.0, 0.3])
     source.add_odometry(1.0, odom, 'map')  # the exact simulator's odometry
     pose, time = source.current(odom, 1.0)
@@ -187,7 +204,7 @@ def test_with_tf2_odometry_already_in_the_plan_frame_is_the_pose_without_a_looku
 
 
 def test_a_scan_stamp_past_the_odometry_is_extrapolated_along_its_twist_then_waits() -> None:
-    source = RobotPose(PoseMode.ODOMETRY, span=2.0, frame_id='map')
+    source = RobotPose(PoseMode.ODOMETRY, span=2.0, global_frame='map')
     assert source.at(1.0) is None  # no odometry: not yet
     source.add_odometry(1.0, np.array([1.0, 0.0, 0.0]), 'map', (1.0, 0.0))
     np.testing.assert_allclose(source.at(1.08), [1.08, 0.0, 0.0], atol=1e-12)
@@ -197,7 +214,7 @@ def test_a_scan_stamp_past_the_odometry_is_extrapolated_along_its_twist_then_wai
 
 
 def test_with_a_localizer_the_extrapolated_odometry_is_corrected_at_the_stamp() -> None:
-    source = RobotPose(PoseMode.LOCALIZER, span=2.0, frame_id='map', topic='amcl_pose')
+    source = RobotPose(PoseMode.LOCALIZER, span=2.0, global_frame='map', topic='amcl_pose')
     source.add_odometry(1.0, np.array([1.0, 0.0, 0.0]), 'odom', (1.0, 0.0))
     source.add_localizer(localizer_message(1.0, 1.0, math.pi / 2, 1.0), 1.0)
     # map <- odom = (1, 0, pi/2); odom at 1.1 s is (1.1, 0, 0): in map (1, 1.1, pi/2)
@@ -210,8 +227,8 @@ def test_with_a_localizer_the_extrapolated_odometry_is_corrected_at_the_stamp() 
 
 def test_with_tf2_a_stamp_newer_than_the_latest_transform_is_not_yet() -> None:
     buffer = StandInBuffer([transform(1.0, 2.0, 0.5, 10.0)])
-    source = RobotPose(PoseMode.TF, span=2.0, frame_id='map', buffer=buffer,
-                       base_frame_id='base_link', tolerance=0.1)
+    source = RobotPose(PoseMode.TF, span=2.0, global_frame='map', buffer=buffer,
+                       robot_base_frame='base_link', tolerance=0.1)
     assert source.at(10.2) is None  # the transform at 10.2 may still come: wait
     buffer.transforms.append(transform(1.2, 2.0, 0.5, 10.2))
     np.testing.assert_allclose(source.at(10.2), [1.2, 2.0, 0.5])

@@ -22,7 +22,7 @@ import sys
 import pytest
 from rclpy.node import Node
 
-from mpc_local_planner.ros.closed_loop import MODULES
+from mpc_local_planner.ros.closed_loop_parameters import MODULES
 
 pytestmark = pytest.mark.dds  # a node process over DDS
 # Wall seconds a process may take to start or to exit before it counts as hung.

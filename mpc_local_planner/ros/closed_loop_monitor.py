@@ -1,0 +1,179 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""closed_loop's watch on the run: the monitor node, the recorder's topics and its flush.
+
+The monitor learns from the controller's diagnostics when the goal is reached, from the
+planner's when no plan will come, counts the simulator's contacts and, with sensing, keeps
+a few snapshots of what the controller avoided for the figure.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
+from rclpy.executors import Executor
+from rclpy.node import Node
+from std_msgs.msg import UInt32
+from visualization_msgs.msg import Marker, MarkerArray
+
+from mpc_local_planner.core.diagnostics import (
+    CONTROLLER_DIAGNOSTICS_TOPIC,
+    ControllerDiagnostics,
+    PLANNER_DIAGNOSTICS_TOPIC,
+    PlannerDiagnostics,
+)
+from mpc_local_planner.ros.bag_recorder_node import (
+    BagRecorderNode,
+    DEFAULT_LATCHED,
+    DEFAULT_TOPICS,
+    DEFAULT_TYPES,
+)
+from mpc_local_planner.ros.executors import spin_until
+from mpc_local_planner.ros.qos import (
+    CONTACTS_QOS,
+    DIAGNOSTICS_QOS,
+    LOCAL_PLAN_QOS,
+    PLANNER_DIAGNOSTICS_QOS,
+)
+
+__all__ = ['CONTACTS_TOPIC', 'FLUSH_TIMEOUT', 'LoopMonitor', 'SCAN_TOPIC', 'SENSED_SNAPSHOTS',
+           'flush_recording', 'recorder_topics']
+
+# Wall seconds the recorder gets, after the run stops, to write what the monitor has seen.
+FLUSH_TIMEOUT = 5.0
+# Topics the simulator publishes (unicycle_simulator_node's names; not imported, so that
+# this module does not load the nodes before they are needed).
+SCAN_TOPIC = 'scan'
+CONTACTS_TOPIC = 'simulator/contacts'
+# What the controller avoids (mpc_controller_node's OBSTACLES_TOPIC) and the namespace of
+# the obstacles as it takes them in (from the map and the scans with --sensing).
+OBSTACLES_TOPIC = 'mpc/obstacles'
+RAW_NAMESPACE = 'raw'
+# With --sensing, the monitor keeps what the controller avoids at most once per this many
+# simulated seconds; the figure shows SENSED_SNAPSHOTS of them, spread over the run.
+SNAPSHOT_PERIOD = 2.0
+SENSED_SNAPSHOTS = 4
+
+
+def recorder_topics(*, sensing: bool) -> dict[str, list[str]]:
+    """Return the recorder's topics, types and latched topics (scan too with sensing)."""
+    topics = [*DEFAULT_TOPICS, CONTACTS_TOPIC]
+    types = [*DEFAULT_TYPES, 'std_msgs/msg/UInt32']
+    if sensing:
+        topics.append(SCAN_TOPIC)
+        types.append('sensor_msgs/msg/LaserScan')
+    return {'topics': topics, 'types': types,
+            'transient_local_topics': [*DEFAULT_LATCHED, CONTACTS_TOPIC]}
+
+
+def _raw_polygons(msg: MarkerArray) -> list[np.ndarray]:
+    """Return the (K, 2) outlines of the markers in the raw namespace (closed rings opened)."""
+    polygons = []
+    for marker in msg.markers:
+        if marker.ns != RAW_NAMESPACE or marker.action != Marker.ADD or len(marker.points) < 2:
+            continue
+        ring = np.array([(p.x, p.y) for p in marker.points], dtype=float)
+        if len(ring) > 2 and np.allclose(ring[0], ring[-1]):
+            ring = ring[:-1]
+        polygons.append(ring)
+    return polygons
+
+
+class LoopMonitor(Node):
+    """Watch the controller's diagnostics for the goal and the planner's for a failure.
+
+    Also counts the simulator's contacts and, with sensing, keeps what the controller
+    avoids (its raw obstacles) at a few instants for the figure.
+    """
+
+    def __init__(self, *, sensing: bool = False, **kwargs: Any) -> None:
+        super().__init__('closed_loop_monitor', **kwargs)
+        self.goal_reached = False
+        self.replans = 0  # the planner's count of re-plans, as it last reported it
+        self.contacts: int | None = None  # the simulator's count, once heard
+        # (simulated time, raw obstacle outlines) every SNAPSHOT_PERIOD at most
+        self.sensed: list[tuple[float, list[np.ndarray]]] = []
+        self.messages = 0  # diagnostics messages of the controller received
+        self.last_reason = ''
+        self.plan_failure: str | None = None  # why the planner published no plan
+        self._sub = self.create_subscription(DiagnosticArray, CONTROLLER_DIAGNOSTICS_TOPIC,
+                                             self.diagnostics_callback, DIAGNOSTICS_QOS)
+        self._planner_sub = self.create_subscription(
+            DiagnosticArray, PLANNER_DIAGNOSTICS_TOPIC, self.planner_callback,
+            PLANNER_DIAGNOSTICS_QOS)
+        self._contacts_sub = self.create_subscription(UInt32, CONTACTS_TOPIC,
+                                                      self.contacts_callback, CONTACTS_QOS)
+        self._obstacles_sub = None
+        if sensing:
+            self._obstacles_sub = self.create_subscription(
+                MarkerArray, OBSTACLES_TOPIC, self.obstacles_callback, LOCAL_PLAN_QOS)
+
+    def contacts_callback(self, msg: UInt32) -> None:
+        """Keep the simulator's contact count (it only grows)."""
+        self.contacts = max(int(msg.data), self.contacts or 0)
+
+    def obstacles_callback(self, msg: MarkerArray) -> None:
+        """Keep what the controller avoids, once per SNAPSHOT_PERIOD of simulated time."""
+        now = self.sim_time()
+        if self.sensed and now < self.sensed[-1][0] + SNAPSHOT_PERIOD:
+            return
+        polygons = _raw_polygons(msg)
+        if polygons:
+            self.sensed.append((now, polygons))
+
+    @property
+    def diagnostics_topic(self) -> str:
+        """The controller's diagnostics topic, resolved."""
+        return self._sub.topic_name
+
+    def diagnostics_callback(self, msg: DiagnosticArray) -> None:
+        """Note each control step and whether the controller is at the goal."""
+        self.messages += 1
+        for status in msg.status:
+            step = ControllerDiagnostics.from_values((kv.key, kv.value) for kv in status.values)
+            self.last_reason = step.message
+            self.goal_reached = step.goal_reached
+
+    def planner_callback(self, msg: DiagnosticArray) -> None:
+        """Note whether the planner's latest goal failed (a later plan clears it)."""
+        for status in msg.status:
+            outcome = PlannerDiagnostics.from_values((kv.key, kv.value) for kv in status.values)
+            self.replans = max(self.replans, outcome.replans)
+            if outcome.waiting:
+                continue  # waiting for the map: the plan is still to come
+            self.plan_failure = (outcome.detail or 'no plan') if outcome.failed else None
+
+    def sim_time(self) -> float:
+        """Return the current ROS (simulated) time in seconds."""
+        return self.get_clock().now().nanoseconds * 1e-9
+
+
+def flush_recording(executor: Executor, recorder: BagRecorderNode, monitor: LoopMonitor, *,
+                    timeout_sec: float = FLUSH_TIMEOUT) -> bool:
+    """Spin until the recorder holds every controller diagnostics message the monitor saw.
+
+    The run stops on the message that says the goal is reached; without this the executor
+    may never run the recorder's callback for it, and the bag (so metrics.json's
+    controller_goal_reached) would miss the arrival.
+
+    Returns:
+        True if the recorder caught up within timeout_sec.
+
+    """
+    return spin_until(
+        executor, lambda: recorder.counts.get(monitor.diagnostics_topic, 0) >= monitor.messages,
+        timeout_sec=timeout_sec)

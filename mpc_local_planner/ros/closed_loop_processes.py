@@ -1,0 +1,125 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""closed_loop's node processes (``--separate-processes``): start, restart and stop them.
+
+Each node runs as ``python -m <module> --ros-args -p key:=value ...`` (no ros2cli needed),
+its output in a log file; with ``--respawn`` a node that exits is started again, at most
+MAX_RESPAWNS times per run, and never one that refused its parameters.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+from typing import Any
+
+import yaml
+
+from mpc_local_planner.ros.closed_loop_parameters import LoopOptions, MODULES
+from mpc_local_planner.ros.node_main import EXIT_INVALID_PARAMETERS
+
+__all__ = ['CHILD_EXIT_TIMEOUT', 'MAX_RESPAWNS', 'node_command', 'respawn', 'spawn_all',
+           'spawn_node', 'stop_children']
+
+# Wall seconds a child process gets to exit after SIGINT before it is killed.
+CHILD_EXIT_TIMEOUT = 5.0
+# Restarts of node processes per run with --respawn (a crash loop ends the run instead).
+MAX_RESPAWNS = 10
+
+
+def _ros_arg(name: str, value: Any) -> str:
+    if isinstance(value, bool):
+        text = 'true' if value else 'false'
+    elif isinstance(value, (list, tuple)):
+        text = '[' + ','.join(repr(float(v)) if isinstance(v, float) else str(v)
+                              for v in value) + ']'
+    elif isinstance(value, float):
+        text = repr(value)
+    elif isinstance(value, str):
+        # ROS reads a -p value as YAML: quote a string that would read as something else
+        # ('' as nothing, a footprint "[[x, y], ...]" as a nested list)
+        try:
+            plain = yaml.safe_load(value) == value
+        except yaml.YAMLError:
+            plain = False
+        text = value if plain else "'" + value.replace("'", "''") + "'"
+    else:
+        text = str(value)
+    return f'{name}:={text}'
+
+
+def node_command(name: str, parameters: dict[str, Any]) -> list[str]:
+    """Return the command that runs node name (a key of MODULES) with parameters.
+
+    ``python -m <module> --ros-args -p key:=value ...``: no ros2cli or colcon install needed.
+    """
+    command = [sys.executable, '-m', MODULES[name], '--ros-args']
+    for key, value in parameters.items():
+        command += ['-p', _ros_arg(key, value)]
+    return command
+
+
+def spawn_node(name: str, parameters: dict[str, Any], log: Path, *,
+               append: bool = False) -> subprocess.Popen:
+    """Start node name as a process; stdout and stderr go to log."""
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with open(log, 'a' if append else 'w', encoding='utf-8') as stream:
+        if append:
+            stream.write(f'--- {name} started again ---\n')
+            stream.flush()
+        # the child holds its own descriptor once started
+        return subprocess.Popen(node_command(name, parameters), stdout=stream,
+                                stderr=subprocess.STDOUT, env=dict(os.environ))
+
+
+def spawn_all(params: dict[str, dict[str, Any]], logs: Path) -> dict[str, subprocess.Popen]:
+    """Start every node of params that runs as a process (MODULES order); logs in logs/."""
+    return {name: spawn_node(name, params[name], logs / f'{name}.log')
+            for name in MODULES if name in params}
+
+
+def respawn(options: LoopOptions, dead: list[str], children: dict[str, subprocess.Popen],
+             params: dict[str, dict[str, Any]], logs: Path, respawns: list[dict[str, Any]],
+             sim_time: float) -> bool:
+    """Start the dead node processes again if --respawn allows; return False to end the run."""
+    if not options.respawn:
+        return False
+    for name in dead:
+        code = children[name].returncode
+        if code == EXIT_INVALID_PARAMETERS or len(respawns) >= MAX_RESPAWNS:
+            return False
+        respawns.append({'node': name, 'exit_code': code, 'sim_time': sim_time})
+        print(f'closed_loop: {name} exited (code {code}) at {sim_time:.1f} s simulated; '
+              'starting it again', file=sys.stderr, flush=True)
+        children[name] = spawn_node(name, params[name], logs / f'{name}.log', append=True)
+    return True
+
+
+def stop_children(children: list[subprocess.Popen]) -> None:
+    """SIGINT the running children; kill those still running after CHILD_EXIT_TIMEOUT."""
+    for child in children:
+        if child.poll() is None:
+            child.send_signal(signal.SIGINT)
+    deadline = time.monotonic() + CHILD_EXIT_TIMEOUT
+    for child in children:
+        try:
+            child.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait()

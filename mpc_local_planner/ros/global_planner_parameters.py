@@ -1,0 +1,161 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""global_planner's parameters: their table and the checks of single values.
+
+The node (ros/global_planner_node.py) declares PARAMETERS and refuses a set for which
+`parameter_problems` names a problem; combinations (use_scan without use_map, no world
+without use_map) are the node's to judge, with the values in force.
+"""
+
+from __future__ import annotations
+
+import math
+
+from rclpy.parameter import Parameter
+
+from mpc_local_planner.core.footprint import parse_footprint
+from mpc_local_planner.core.paths import analytic_path
+from mpc_local_planner.core.planner import PlannerConfig
+from mpc_local_planner.core.replanning import (
+    PROGRESS_RADIUS,
+    PROGRESS_TIMEOUT,
+)
+from mpc_local_planner.ros.parameters import (
+    DEFAULT_WORLD_FILE,
+    ParameterSpec,
+)
+from mpc_local_planner.ros.robot_pose import (
+    POSE_PARAMETERS,
+)
+from mpc_local_planner.worlds.data_files import resolve_data_file
+from mpc_local_planner.worlds.world import load_world
+
+__all__ = ['PARAMETERS', 'PLANNER_FIELDS', 'parameter_problems']
+
+PLANNER_FIELDS = ('iterations', 'time_limit', 'seed', 'range', 'robot_radius', 'clearance',
+                   'simplify')
+_DEFAULTS = PlannerConfig()  # the single source of the planner's defaults
+
+
+PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('world_file', DEFAULT_WORLD_FILE,
+                  "world YAML/JSON: obstacles and bounds (a path, or a name in the package's "
+                  "config/ or config/worlds/); used at the next plan; '' with use_map (only "
+                  "its robot_radius is used then)"),
+    ParameterSpec('use_map', False,
+                  "plan on the occupancy grid from `map` (unknown cells free) instead of the "
+                  "world's obstacles; applies at the next configure"),
+    ParameterSpec('use_scan', False,
+                  'mark the grid with `scan` returns and clear it along the beams (needs '
+                  'use_map); applies at the next configure'),
+    ParameterSpec('laser_pose', [0.0, 0.0, 0.0],
+                  'pose [x, y, yaw] of the laser in the robot frame (base_link)'),
+    ParameterSpec('robot_base_frame', 'base_link',
+                  'the robot frame: scans must be in it (laser_pose says where the laser '
+                  'sits); read when a scan comes'),
+    ParameterSpec('goal', Parameter.Type.DOUBLE_ARRAY,
+                  'goal [x, y, theta]; setting it plans from the current odometry once the '
+                  'node is active (optional: goal_pose messages do the same)'),
+    ParameterSpec('iterations', _DEFAULTS.iterations, 'RRT* iterations per plan',
+                  int_range=(1, 10_000_000)),
+    ParameterSpec('time_limit', _DEFAULTS.time_limit, 'upper bound on planning time (s)',
+                  float_range=(0.001, 600.0)),
+    ParameterSpec('seed', _DEFAULTS.seed, "seed of OMPL's random numbers (reproducible plans)",
+                  int_range=(0, 2**31 - 1)),
+    ParameterSpec('range', _DEFAULTS.range, 'RRT* extension length (m); 0 = OMPL chooses',
+                  float_range=(0.0, 1e3)),
+    ParameterSpec('robot_radius', _DEFAULTS.robot_radius,
+                  "robot radius (m); the larger of this and the world's is used",
+                  float_range=(0.0, 10.0)),
+    ParameterSpec('footprint', '',
+                  "the robot's convex polygon in base_link, Nav2's form \"[[x, y], ...]\"; '' = "
+                  "the world file's footprint, or a circle of robot_radius"),
+    ParameterSpec('clearance', _DEFAULTS.clearance,
+                  'extra obstacle inflation beyond the radius (m)', float_range=(0.0, 10.0)),
+    ParameterSpec('simplify', _DEFAULTS.simplify, "shortcut the path with OMPL's simplifier"),
+    ParameterSpec('analytic_path', '',
+                  "publish this analytic path (e.g. 'paper_sinusoid') instead of planning; '' "
+                  '= plan with RRT*'),
+    ParameterSpec('global_frame', 'map', 'frame of the plan'),
+    ParameterSpec('replan_check_rate', 2.0,
+                  'how often (Hz) the rest of the plan is checked against the grid (map plus '
+                  'scans) with the rule plans are made with; a blocked plan is re-planned from '
+                  'the current odometry; 0 = never (read at activate)',
+                  float_range=(0.0, 100.0)),
+    ParameterSpec('replan_period', 0.0,
+                  're-plan the goal in force this often (s) even when the plan is clear; 0 = '
+                  'only when blocked or for a new goal', float_range=(0.0, 3600.0)),
+    ParameterSpec('progress_timeout', PROGRESS_TIMEOUT,
+                  "Nav2's progress checker: when the robot, away from the goal, has not moved "
+                  'progress_radius in this many seconds, the goal is re-planned from where it '
+                  "stands (a forward-only robot that coasted past a new plan's start may have "
+                  'no way back onto it); 0 = never', float_range=(0.0, 3600.0)),
+    ParameterSpec('progress_radius', PROGRESS_RADIUS,
+                  'metres that count as progress for progress_timeout, and the distance to '
+                  'the goal within which standing still is arriving',
+                  float_range=(0.0, 100.0)),
+    *POSE_PARAMETERS,
+    ParameterSpec('autostart', True,
+                  'configure and activate at start; false = wait for a lifecycle manager (or '
+                  '`ros2 lifecycle set`)', read_only=True),
+)
+
+
+def _check_laser_pose(pose: list[float]) -> str | None:
+    if len(pose) != 3 or not all(math.isfinite(float(v)) for v in pose):
+        return f'laser_pose must be [x, y, yaw] (3 finite numbers), got {list(pose)}'
+    return None
+
+
+def _check_goal(goal: list[float] | None) -> str | None:
+    if goal is None or len(goal) == 0:
+        return None
+    if len(goal) != 3 or not all(math.isfinite(float(v)) for v in goal):
+        return f'goal must be [x, y, theta] (3 finite numbers) or empty, got {list(goal)}'
+    return None
+
+
+def parameter_problems(parameters: list[Parameter]) -> list[str]:
+    """Return why each parameter's value is refused on its own (empty: none is).
+
+    A malformed goal or laser_pose, a world file that does not load, a footprint that does
+    not parse, an unknown analytic path.
+    """
+    reasons = []
+    for parameter in parameters:
+        if parameter.name == 'goal':
+            reason = _check_goal(parameter.value)
+            if reason:
+                reasons.append(reason)
+        elif parameter.name == 'laser_pose':
+            reason = _check_laser_pose(parameter.value)
+            if reason:
+                reasons.append(reason)
+        elif parameter.name == 'world_file' and parameter.value:
+            try:
+                load_world(resolve_data_file(str(parameter.value)))
+            except Exception as err:  # any failure to load refuses it
+                reasons.append(str(err) or type(err).__name__)
+        elif parameter.name == 'footprint':
+            try:
+                parse_footprint(str(parameter.value))
+            except ValueError as err:
+                reasons.append(str(err))
+        elif parameter.name == 'analytic_path' and parameter.value:
+            try:
+                analytic_path(str(parameter.value))
+            except ValueError as err:
+                reasons.append(str(err))
+    return reasons

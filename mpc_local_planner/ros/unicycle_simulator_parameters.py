@@ -1,0 +1,298 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The unicycle simulator's parameters: their table, their checks, the Reality they describe.
+
+The node (ros/unicycle_simulator_node.py) declares PARAMETERS, refuses values that
+validate_simulator_parameters refuses, and builds its robot's imperfections with
+reality_from_parameters (closed_loop reports the same Reality).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+import math
+from typing import Any
+
+from mpc_local_planner.core.footprint import parse_footprint
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.reality import (
+    Reality,
+    reality_preset,
+    REALITY_PRESETS,
+)
+from mpc_local_planner.ros.parameters import ParameterSpec
+
+__all__ = ['FROM_PRESET', 'LOCALIZER_TOPIC', 'MAX_SCAN_BEAMS', 'PARAMETERS',
+           'REALITY_PARAMETERS', 'SCAN_RANGE_MIN', 'reality_from_parameters',
+           'validate_simulator_parameters']
+
+_MODEL = Unicycle()  # the single source of the saturation defaults
+# The localizer stand-in's topic, as AMCL's.
+LOCALIZER_TOPIC = 'amcl_pose'
+# The simulated laser's closest valid reading (m), as a LaserScan's range_min.
+SCAN_RANGE_MIN = 0.05
+# At most this many beams (a bigger scan is a typo, and would stall every tick).
+MAX_SCAN_BEAMS = 10_000
+# "From the preset" for the reality overrides that cannot be negative (see REALITY_PARAMETERS).
+FROM_PRESET = -1.0
+# Overrides of the preset's fields, each: parameter -> Reality field. A negative value (in
+# a pair: per component) takes the preset's; odom_drift.* and scan.noise_std are older
+# parameters whose default 0 stays: 0 takes the preset's, any other value overrides it.
+_PAIR_OVERRIDES = {'actuator_lag': 'lag', 'acceleration_limits': 'acceleration',
+                   'odom_noise_std': 'odom_noise'}
+_SCALAR_OVERRIDES = {'command_latency': 'latency', 'scan.nan_fraction': 'scan_nan',
+                     'scan.neg_inf_fraction': 'scan_neg_inf', 'scan.loss_fraction': 'scan_loss'}
+_ZERO_IS_PRESET = {'scan.noise_std': 'scan_noise'}
+_DRIFT = ('odom_drift.position', 'odom_drift.heading')
+# Every parameter that shapes the Reality (a change rebuilds it: see post_parameters_callback).
+REALITY_PARAMETERS = frozenset({'reality', 'scan.seed', *_PAIR_OVERRIDES, *_SCALAR_OVERRIDES,
+                                *_ZERO_IS_PRESET, *_DRIFT})
+
+
+PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('initial_pose', [0.0, 0.0, 0.0],
+                  'start pose [x, y, theta] (m, m, rad); read once at start'),
+    ParameterSpec('rate', 50.0,
+                  'integration rate in Hz of simulated time (one step of 1/rate per tick: RK4 '
+                  "with ideal reality, else the exact arc of the wheels' velocity)",
+                  float_range=(1.0, 1000.0)),
+    ParameterSpec('cmd_timeout', 0.5,
+                  'a cmd_vel older than this (s of simulated time) is replaced by zero; '
+                  '0 = never', float_range=(0.0, 60.0)),
+    ParameterSpec('enable_stamped_cmd_vel', False,
+                  "subscribe cmd_vel as geometry_msgs/TwistStamped (Nav2's name); false = "
+                  'Twist; read once at start', read_only=True),
+    ParameterSpec('publish_clock', False,
+                  'drive /clock from the simulation (other nodes then use_sim_time)',
+                  read_only=True),
+    ParameterSpec('real_time_factor', 1.0,
+                  'simulated seconds per wall second when publish_clock is true',
+                  float_range=(0.01, 100.0)),
+    ParameterSpec('v_max', _MODEL.v_max, 'saturation of |linear.x| (m/s)',
+                  float_range=(0.001, 10.0)),
+    ParameterSpec('omega_max', _MODEL.omega_max, 'saturation of |angular.z| (rad/s)',
+                  float_range=(0.001, 50.0)),
+    ParameterSpec('odom_frame', 'odom', 'frame of odom (its header.frame_id)'),
+    ParameterSpec('robot_base_frame', 'base_link',
+                  "robot frame: odom's child_frame_id and the frame of scan (Nav2's name)"),
+    ParameterSpec('world_file', '',
+                  'the TRUE world (known and unknown obstacles) the laser sees and the robot '
+                  "can touch: a path, or a name in the package's config/ or config/worlds/; "
+                  "'' = an empty world; read once at start", read_only=True),
+    ParameterSpec('robot_radius', 0.0,
+                  "radius of the robot's disk for contacts (m) when no polygon footprint "
+                  "applies; the larger of this and the world's robot_radius counts",
+                  float_range=(0.0, 10.0)),
+    ParameterSpec('footprint', '',
+                  'the robot\'s convex polygon for contacts, Nav2\'s form "[[x, y], ...]" in '
+                  "the robot frame (x forward); '' or '[]' = the world file's footprint if it "
+                  'has one, else the circle of robot_radius. Precedence: this parameter, then '
+                  "the world's footprint, then robot_radius"),
+    ParameterSpec('scan.rate', 10.0,
+                  'laser scans per second of simulated time (at most one per tick, so at '
+                  'most rate)', float_range=(0.01, 1000.0)),
+    ParameterSpec('scan.fov', 4.71,
+                  'field of view (rad), in (0, 2 pi]: angle_min = -fov / 2, '
+                  'angle_increment = fov / (beams - 1)'),
+    ParameterSpec('scan.beams', 720, f'beams per scan, 2 to {MAX_SCAN_BEAMS}'),
+    ParameterSpec('scan.range_max', 10.0,
+                  f'farthest reading (m), > range_min = {SCAN_RANGE_MIN}; beyond it a beam '
+                  'reads inf'),
+    ParameterSpec('scan.noise_std', 0.0,
+                  'standard deviation of the Gaussian range noise (m), >= 0; 0 = the '
+                  "reality preset's (ideal: none)"),
+    ParameterSpec('scan.seed', 0,
+                  'seed of every random draw of the simulated reality: range noise, NaN and '
+                  '-inf beams, lost scans, odometry noise (runs are reproducible); the '
+                  'odometry reads it once at start'),
+    ParameterSpec('odom_drift.position', 0.0,
+                  "odometry's distance error as a fraction of the distance travelled (0.05 = "
+                  "5 %: the odometry says 1.05 m per true metre); 0 = the reality preset's "
+                  '(ideal: exact)', float_range=(-0.5, 0.5)),
+    ParameterSpec('odom_drift.heading', 0.0,
+                  "odometry's heading error per metre travelled (rad/m); 0 = the reality "
+                  "preset's (ideal: exact)", float_range=(-1.0, 1.0)),
+    ParameterSpec('reality', 'ideal',
+                  'how real the robot and its laser are, a preset of core/reality.py: '
+                  f'{"|".join(REALITY_PRESETS)} (ideal: commands act at once and exactly, '
+                  'odometry is the pose, the laser is exact); the parameters below override '
+                  'single fields'),
+    ParameterSpec('actuator_lag', [FROM_PRESET, FROM_PRESET],
+                  'first-order time constants [v, omega] (s) of the wheels following the '
+                  "command, >= 0; negative = the preset's"),
+    ParameterSpec('acceleration_limits', [FROM_PRESET, FROM_PRESET],
+                  'limits of |dv/dt| (m/s^2) and |domega/dt| (rad/s^2), > 0 (.inf = none); '
+                  "negative = the preset's"),
+    ParameterSpec('command_latency', FROM_PRESET,
+                  'seconds from a cmd_vel to its reaching the motors (simulated time), >= 0; '
+                  "negative = the preset's"),
+    ParameterSpec('odom_noise_std', [FROM_PRESET, FROM_PRESET],
+                  'standard deviations [m, rad] of the white noise on each published odometry '
+                  "pose, >= 0; negative = the preset's"),
+    ParameterSpec('scan.nan_fraction', FROM_PRESET,
+                  "fraction of beams that read NaN, in [0, 1); negative = the preset's"),
+    ParameterSpec('scan.neg_inf_fraction', FROM_PRESET,
+                  "fraction of beams that read -inf (too close), in [0, 1); negative = the "
+                  "preset's"),
+    ParameterSpec('scan.loss_fraction', FROM_PRESET,
+                  "fraction of scans that are never published, in [0, 1); negative = the "
+                  "preset's"),
+    ParameterSpec('localizer.rate', 0.0,
+                  f'publish the true pose with noise on {LOCALIZER_TOPIC} this often (Hz of '
+                  'simulated time, at most one per tick), a stand-in for AMCL; 0 = off',
+                  float_range=(0.0, 1000.0)),
+    ParameterSpec('localizer.noise_std', 0.01,
+                  "standard deviation of the localizer's Gaussian noise (m, and rad for the "
+                  'heading)', float_range=(0.0, 10.0)),
+    ParameterSpec('localizer.global_frame', 'map',
+                  "frame of the localizer's poses (Nav2's name for the map frame)"),
+    ParameterSpec('localizer.seed', 0, "seed of the localizer's noise",
+                  int_range=(0, 2**31 - 1)),
+)
+
+
+def validate_simulator_parameters(values: dict[str, Any]) -> str | None:
+    """Return why the simulator's parameter values are invalid, or None."""
+    pose = values.get('initial_pose')
+    if pose is not None:
+        pose = list(pose)
+        if len(pose) != 3 or not all(math.isfinite(float(v)) for v in pose):
+            return f'initial_pose must be [x, y, theta] (3 finite numbers), got {pose}'
+    checks = {
+        'scan.fov': (lambda v: 0.0 < v <= 2.0 * math.pi, 'in (0, 2 pi]'),
+        'scan.range_max': (lambda v: SCAN_RANGE_MIN < v < math.inf,
+                           f'finite and > range_min = {SCAN_RANGE_MIN}'),
+        'scan.noise_std': (lambda v: 0.0 <= v < math.inf, 'finite and >= 0'),
+    }
+    for name, (valid, what) in checks.items():
+        value = values.get(name)
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not valid(
+                float(value)):
+            return f'{name} must be a number {what}, got {value!r}'
+    beams = values.get('scan.beams')
+    if beams is not None and (isinstance(beams, bool) or not isinstance(beams, int)
+                              or not 2 <= beams <= MAX_SCAN_BEAMS):
+        return f'scan.beams must be an integer from 2 to {MAX_SCAN_BEAMS}, got {beams!r}'
+    footprint = values.get('footprint')
+    if footprint is not None:
+        if not isinstance(footprint, str):
+            return f'footprint must be a string "[[x, y], ...]", got {footprint!r}'
+        try:
+            parse_footprint(footprint)
+        except ValueError as err:
+            return f'footprint: {err}'
+    seed = values.get('scan.seed')
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+        return f'scan.seed must be an integer >= 0, got {seed!r}'
+    return _validate_reality_parameters(values)
+
+
+def _is_number(value: Any) -> bool:
+    return not isinstance(value, bool) and isinstance(value, (int, float)) and not math.isnan(
+        float(value))
+
+
+def _validate_reality_parameters(values: dict[str, Any]) -> str | None:
+    """Return why a reality parameter is invalid on its own, or None (see PARAMETERS).
+
+    Combinations (scan.nan_fraction + scan.neg_inf_fraction < 1 with the preset's values
+    filled in) are Reality's to check: reality_from_parameters.
+    """
+    name = values.get('reality')
+    if name is not None and (not isinstance(name, str) or name not in REALITY_PRESETS):
+        return (f'reality must be one of {"|".join(REALITY_PRESETS)} (core/reality.py), '
+                f'got {name!r}')
+    pairs = {
+        'actuator_lag': (lambda v: v < math.inf, 'finite and >= 0'),
+        'acceleration_limits': (lambda v: v > 0.0, '> 0 (.inf = no limit)'),
+        'odom_noise_std': (lambda v: v < math.inf, 'finite and >= 0'),
+    }
+    for key, (valid, what) in pairs.items():
+        value = values.get(key)
+        if value is None:
+            continue
+        pair = list(value) if isinstance(value, (list, tuple)) else None
+        if pair is None or len(pair) != 2 or not all(_is_number(v) for v in pair) or not all(
+                float(v) < 0.0 or valid(float(v)) for v in pair):
+            return (f'{key} must be two numbers, each {what} or negative for the '
+                    f"preset's, got {value!r}")
+    scalars = {
+        'command_latency': (lambda v: v < math.inf, 'finite and >= 0'),
+        'scan.nan_fraction': (lambda v: v < 1.0, 'in [0, 1)'),
+        'scan.neg_inf_fraction': (lambda v: v < 1.0, 'in [0, 1)'),
+        'scan.loss_fraction': (lambda v: v < 1.0, 'in [0, 1)'),
+    }
+    for key, (valid, what) in scalars.items():
+        value = values.get(key)
+        if value is None:
+            continue
+        if not _is_number(value) or not (float(value) < 0.0 or valid(float(value))):
+            return f"{key} must be a number, {what}, or negative for the preset's, got {value!r}"
+    for key in _DRIFT:
+        value = values.get(key)
+        if value is not None and (not _is_number(value) or not math.isfinite(float(value))):
+            return f'{key} must be a finite number, got {value!r}'
+    return None
+
+
+def reality_from_parameters(values: dict[str, Any]) -> Reality:
+    """Return the Reality the simulator's parameter values describe.
+
+    The preset named by ``reality`` (default 'ideal'), with each override that is set taking
+    the place of the preset's field: a negative ``actuator_lag``, ``acceleration_limits``,
+    ``odom_noise_std`` (per component), ``command_latency`` or ``scan.*_fraction`` means "the
+    preset's"; for the older ``odom_drift.position``, ``odom_drift.heading`` and
+    ``scan.noise_std``, whose default 0 always meant "exact", 0 means the preset's (so the
+    ideal preset and the old defaults agree). ``scan.seed`` is the seed. Missing names are
+    the preset's.
+
+    Raises:
+        ValueError: for an unknown preset, or values Reality refuses (the reason says which).
+
+    """
+    reason = _validate_reality_parameters(values)
+    if reason is not None:
+        raise ValueError(reason)
+    preset = reality_preset(str(values.get('reality', 'ideal')))
+    changes: dict[str, Any] = {}
+    for key, attribute in _PAIR_OVERRIDES.items():
+        value = values.get(key)
+        if value is not None:
+            changes[attribute] = tuple(
+                float(v) if float(v) >= 0.0 else old
+                for v, old in zip(value, getattr(preset, attribute), strict=True))
+    for key, attribute in _SCALAR_OVERRIDES.items():
+        value = values.get(key)
+        if value is not None and float(value) >= 0.0:
+            changes[attribute] = float(value)
+    for key, attribute in _ZERO_IS_PRESET.items():
+        value = values.get(key)
+        if value is not None and float(value) != 0.0:
+            changes[attribute] = float(value)
+    drift = list(preset.odom_drift)
+    for i, key in enumerate(_DRIFT):
+        value = values.get(key)
+        if value is not None and float(value) != 0.0:
+            drift[i] = float(value)
+    changes['odom_drift'] = tuple(drift)
+    changes['seed'] = int(values.get('scan.seed', 0))
+    try:
+        return replace(preset, **changes)  # Reality.__post_init__ checks the whole
+    except ValueError as err:
+        msg = (f"reality {values.get('reality', 'ideal')!r} with its overrides: {err} "
+               '(scan_nan = scan.nan_fraction, scan_neg_inf = scan.neg_inf_fraction)')
+        raise ValueError(msg) from None
