@@ -65,7 +65,7 @@ WORLD_FILE = resolve_data_file('paper_obstacle.yaml')
 WORLD = load_world(WORLD_FILE)
 
 
-def check_run(out, metrics) -> None:
+def check_run(out, metrics, *, lockstep: bool = True) -> None:
     rows = read_trajectory_csv(out / 'trajectory.csv')
     assert rows.shape[1] == len(TRAJECTORY_COLUMNS) and len(rows) > 20
     # the last measured pose is at the target, by the metric's and by our own reckoning
@@ -82,8 +82,12 @@ def check_run(out, metrics) -> None:
     # timer fires at the first tick at or past each deadline, 0.04 or 0.06 s apart)
     assert np.median(np.diff(rows[:, 0])) == pytest.approx(
         1.0 / ControllerSettings().control_frequency, abs=0.02 + 1e-6)
-    assert np.mean(np.diff(rows[:, 0])) == pytest.approx(
-        1.0 / ControllerSettings().control_frequency, abs=0.01)
+    if lockstep:
+        # in one process the clock waits for the controller; separate processes do not wait
+        # (the simulator's clock runs on while a starved controller misses a tick), so only
+        # the median is a property of the code there
+        assert np.mean(np.diff(rows[:, 0])) == pytest.approx(
+            1.0 / ControllerSettings().control_frequency, abs=0.01)
     # the commands respect the bounds
     assert np.all(np.abs(rows[:, 4]) <= 0.31 + 1e-9) and np.all(np.abs(rows[:, 5]) <= 1.9 + 1e-9)
     on_disk = json.loads((out / 'metrics.json').read_text())
@@ -112,7 +116,7 @@ def test_closed_loop_as_separate_processes_reaches_the_target(tmp_path) -> None:
     code = main(['--out', str(tmp_path), '--path', 'rrt', '--rtf', '4', '--timeout', '90',
                  '--separate-processes'])
     assert code == 0
-    check_run(tmp_path, json.loads((tmp_path / 'metrics.json').read_text()))
+    check_run(tmp_path, json.loads((tmp_path / 'metrics.json').read_text()), lockstep=False)
     assert {p.name for p in (tmp_path / 'logs').iterdir()} == {
         'global_planner.log', 'mpc_controller.log', 'unicycle_simulator.log'}
 
