@@ -26,12 +26,14 @@ from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.obstacles import ConvexPolygon, min_clearance, point_in_any
 from mpc_local_planner.perception.laser import SimulatedLaser
 from mpc_local_planner.perception.scan_obstacles import (
-    classify_beams,
     cluster_bounds,
     ObstacleMemory,
+    scan_to_obstacles,
+)
+from mpc_local_planner.perception.scans import (
+    classify_beams,
     Scan,
     scan_points,
-    scan_to_obstacles,
     ScanError,
     validate_scan,
 )
