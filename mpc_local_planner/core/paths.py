@@ -343,6 +343,11 @@ class WaypointPath(ReferencePath):
         return self._knots.copy()
 
     @property
+    def s_knots(self) -> np.ndarray:
+        """(K,) the path parameter s of each knot: 0 at the start, 1 at the goal."""
+        return self._s_knots.copy()
+
+    @property
     def waypoints(self) -> np.ndarray:
         """(M, 2) the distinct input positions."""
         return self._waypoints.copy()

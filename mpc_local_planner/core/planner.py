@@ -371,7 +371,7 @@ class RrtStarPlanner:
                 # RRT* would converge to this segment anyway; skip the sampling.
                 return np.vstack([start_xy, goal_xy])
             try:
-                waypoints = self._solve(start_xy, goal_xy, self._space.point_free,
+                waypoints = self._rrt_star(start_xy, goal_xy, self._space.point_free,
                                         self._space.segment_free, lambda: '')[0]
             except PlanningError as err:
                 return self._grid_fallback(str(err), None, (start_xy, None), (goal_xy, None))
@@ -383,7 +383,7 @@ class RrtStarPlanner:
             return direct
         rules = FootprintPlan(checks, (start_xy, start_heading), (goal_xy, goal_heading))
         try:
-            candidates = self._solve(start_xy, goal_xy, rules.state_valid,
+            candidates = self._rrt_star(start_xy, goal_xy, rules.state_valid,
                                      rules.motion_valid, rules.failure_hint)
         except PlanningError as err:
             return self._grid_fallback(str(err), rules, (start_xy, start_heading),
@@ -630,11 +630,11 @@ class RrtStarPlanner:
         return FootprintChecks(self.footprint, self.config.clearance,
                                 GridObstacles(self.grid))
 
-    def _solve(self, start_xy: np.ndarray, goal_xy: np.ndarray,
-               state_free: Callable[[np.ndarray], bool],
-               motion_free: Callable[[np.ndarray, np.ndarray], bool],
-               failure_hint: Callable[[], str]) -> list[np.ndarray]:
-        """Run RRT* with this planner's bounds and settings (core/rrt_star.py)."""
+    def _rrt_star(self, start_xy: np.ndarray, goal_xy: np.ndarray,
+                  state_free: Callable[[np.ndarray], bool],
+                  motion_free: Callable[[np.ndarray, np.ndarray], bool],
+                  failure_hint: Callable[[], str]) -> list[np.ndarray]:
+        """Run RRT* (core/rrt_star.py) with this planner's bounds and settings."""
         config = self.config
         return rrt_star(start_xy, goal_xy, bounds=self.bounds, state_free=state_free,
                         motion_free=motion_free, failure_hint=failure_hint, seed=config.seed,

@@ -350,7 +350,7 @@ class Dwa:
         v, omega, in_window = self._samples(pose, current)
         xy, theta = self._arcs(pose, v, omega)  # (S, K+1, 2), (S, K+1)
         sweep = self._sweep(v, omega)
-        clearance = self._clearance(p, xy, theta, sweep + 1e-3)
+        clearance = self.clearance(p, xy, theta, sweep + 1e-3)
         ok = self._admissible(v, sweep, clearance)
         candidates = ok & in_window
         if np.any(candidates):
@@ -413,7 +413,7 @@ class Dwa:
                       axis=-1)
         return xy, pose[2] + turned
 
-    def _clearance(self, robot: np.ndarray, xy: np.ndarray, theta: np.ndarray,
+    def clearance(self, robot: np.ndarray, xy: np.ndarray, theta: np.ndarray,
                    exact_below: np.ndarray) -> np.ndarray:
         """Return a lower bound on the footprint's clearance at each pose (m, <= 0: contact).
 
