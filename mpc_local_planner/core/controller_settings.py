@@ -30,17 +30,13 @@ class ControllerSettings:
     when it is within xy_goal_tolerance of the plan's last position and within
     yaw_goal_tolerance of its heading. Once the position has been met, the robot turns in
     place to the heading (Reason.ROTATE_TO_HEADING) instead of letting the MPC manoeuvre for
-    the last centimetres. The defaults are for a real robot: wheel odometry wanders by 0.5-3 cm
-    and the base answers a command a step late, so with the paper's 2 cm / 0.05 rad (met in
-    its simulation, where the odometry is exact) a robot reached about 0.1 m from the goal and
-    then manoeuvred there (about a hundred reversing commands, 2-3 m of extra travel) without
-    ever arriving. 0.1 m is a few times that noise plus one step's creep at approach speed, and
-    less than half of what Nav2 allows (0.25 m, sized for AMCL-localised robots of half a metre
-    and more); 0.15 rad (8.6 degrees) leaves room for the overshoot of an in-place turn under
-    actuator lag (omega times the lag, a few hundredths of a radian) where Nav2 allows
-    0.25 rad. The paper's scenario keeps its tight 0.02 m / 0.05 rad where it is run
-    (closed_loop's PAPER_GOAL_TOLERANCES, the benchmark's REACHED_POSITION and
-    REACHED_HEADING).
+    the last centimetres. The defaults are for a real robot, whose wheel odometry wanders by
+    0.5-3 cm and whose base answers a command a step late: 0.1 m is a few times that noise plus
+    one step's creep at approach speed (Nav2 allows 0.25 m), and 0.15 rad leaves room for the
+    overshoot of an in-place turn under actuator lag (Nav2 allows 0.25 rad). The paper's
+    0.02 m / 0.05 rad are kept where its scenario is run (closed_loop's
+    PAPER_GOAL_TOLERANCES, the benchmark's REACHED_POSITION and REACHED_HEADING); why not
+    everywhere: docs/design/measurements.md, Goal tolerances.
 
     Attributes:
         xy_goal_tolerance: distance to the plan's last position that counts as arrived (m).

@@ -491,9 +491,9 @@ def within_faces(obstacles: Sequence[ConvexPolygon], max_faces: int) -> list[Con
     polygon). Sharp corners matter because the MPC grows obstacles by shifting their faces:
     a corner of angle alpha moves out by r / sin(alpha / 2), so the sliver a laser makes of
     a face seen at a grazing angle (a parallelogram with 5 degree corners) grows metres long
-    spikes that block a free path (seen: a 0.2 m sliver grew into a 10 m needle that stopped
-    the robot 0.23 m before its goal). The world's obstacles with too many faces are refused
-    instead, with a reason, where the parameters are checked.
+    spikes that block a free path (docs/design/measurements.md, within_faces). The world's
+    obstacles with too many faces are refused instead, with a reason, where the parameters
+    are checked.
     """
     fitted = []
     for obstacle in obstacles:

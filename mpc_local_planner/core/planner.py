@@ -63,9 +63,9 @@ grid search takes over (core/grid_search.py, as Nav2's NavFn and Smac search the
 Dijkstra over the cells where the inscribed disc grown by the clearance clears the occupied
 cells, preferring room by a cost rather than a wider margin, then straight segments along
 those cells kept only where the footprint's sweep and turns are clear (the checks below),
-backing up from a corner the robot cannot turn at. On BARN's hardest worlds (200-299) no
-chain of circumscribed discs joins start and goal in most worlds, so RRT* alone cannot
-succeed there; the grid search finds them all at the start with the cylinders known.
+backing up from a corner the robot cannot turn at. Where no chain of free circumscribed
+discs joins start and goal, RRT* alone cannot succeed and the grid search can
+(docs/design/measurements.md, Grid search fallback).
 
 After solving, `RrtStarPlanner.path_problem` checks every pose of the final path again,
 turns included, and a path that fails is refused with a PlanningError that says where (with

@@ -50,8 +50,7 @@ obstacle) pairs closer than an arc's sweep between two samples, where admissibil
 decided: a circle's exact distance, or the polygons' separating-axis gap (<= 0 exactly on
 overlap, a lower bound on the distance otherwise, off by at most a few percent for BARN's
 octagons). So a rectangular robot is not refused gaps only its circumscribed circle does not
-fit through. About 1.3 ms a call for a circle and 2.5 ms for the Jackal's rectangle with 20
-obstacles, 6 x 20 samples (best of 7, the 2-core development machine).
+fit through (its cost: docs/design/measurements.md, DWA's clearance).
 """
 
 from __future__ import annotations
