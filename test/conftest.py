@@ -21,7 +21,7 @@ test sessions (and other machines) from seeing each other's nodes.
 
 Fixtures: ``ros`` (a fresh context and executor per test; ``ros.probe()`` adds a `Probe` that
 publishes inputs and records outputs, diagnostics and /rosout) and ``ros_module`` (the same,
-per module).
+per module). `SimClock` is the one simulated-clock harness: a test's world subclasses it.
 """
 
 from __future__ import annotations
@@ -51,7 +51,12 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 
-from mpc_local_planner.core.diagnostics import ControllerDiagnostics
+from mpc_local_planner.core.diagnostics import (
+    CONTROLLER_DIAGNOSTICS_TOPIC,
+    ControllerDiagnostics,
+    PLANNER_DIAGNOSTICS_TOPIC,
+    PlannerDiagnostics,
+)
 from mpc_local_planner.ros.conversions import (
     seconds_to_stamp,
     stamp_to_seconds,
@@ -64,6 +69,7 @@ from mpc_local_planner.ros.qos import (
     LOCAL_PLAN_QOS,
     ODOM_QOS,
     PLAN_QOS,
+    PLANNER_DIAGNOSTICS_QOS,
 )
 
 # /rosout as rclpy publishes it (Jazzy): reliable, transient_local, depth 1000.
@@ -96,6 +102,11 @@ class RosHarness:
         while not condition() and time.monotonic() < deadline:
             self.executor.spin_once(timeout_sec=0.05)
         return condition()
+
+    def settle(self) -> None:
+        """Let every node react to what was just published: six short spins (2 ms each)."""
+        for _ in range(6):
+            self.executor.spin_once(timeout_sec=0.002)
 
     @staticmethod
     def tick_until(tick: Callable[[], None], condition: Callable[[], bool],
@@ -143,6 +154,51 @@ def ros_module() -> Iterator[RosHarness]:
         harness.close()
 
 
+class SimClock:
+    """Simulated time owned by a test: the one harness of the tests' simulated worlds.
+
+    Each `tick` advances ``t`` by ``dt``, calls `publish` (what the test's world publishes at
+    the new instant: odometry, scans; a subclass says), publishes /clock and lets every node
+    react (`spin`) before the next instant. `run_until` ticks until a condition holds (a
+    wall-clock timeout only guards against a hang); `run_for` ticks through a span of
+    simulated time.
+
+    Args:
+        ros: the harness whose executor is spun.
+        probe: the Probe that publishes /clock (made with use_sim_time).
+        dt: simulated seconds per tick.
+
+    """
+
+    def __init__(self, ros: RosHarness, probe: Probe, dt: float = 0.05) -> None:
+        self.ros, self.probe, self.dt = ros, probe, dt
+        self.t = 1.0  # 0 is "no time yet" for a node with use_sim_time
+
+    def publish(self) -> None:
+        """Publish what the world publishes at t, before /clock (nothing here)."""
+
+    def spin(self) -> None:
+        """Let every node react to the instant (`RosHarness.settle`)."""
+        self.ros.settle()
+
+    def tick(self) -> None:
+        """Advance time by dt, publish, publish /clock, and let every node react."""
+        self.t += self.dt
+        self.publish()
+        self.probe.publish_clock(self.t)
+        self.spin()
+
+    def run_until(self, condition: Callable[[], bool], timeout: float = 30.0) -> bool:
+        """Tick until condition() holds or timeout wall seconds pass; return condition()."""
+        return self.ros.tick_until(self.tick, condition, timeout)
+
+    def run_for(self, seconds: float) -> None:
+        """Tick until `seconds` of simulated time have passed."""
+        end = self.t + seconds
+        while self.t < end - 1e-9:
+            self.tick()
+
+
 class ReportedStep(NamedTuple):
     """One mpc/diagnostics message as a test reads it: the typed step and its status."""
 
@@ -154,6 +210,9 @@ class ReportedStep(NamedTuple):
 
 class Probe(Node):
     """A test node: publishes what the nodes listen to and keeps what they say.
+
+    What the controller says on mpc/diagnostics is in ``diagnostics`` (`ReportedStep`s), what
+    the planner says on planner/diagnostics in ``planner_outcomes``.
 
     Plans are kept as CDR bytes and deserialised on access (``plans``): a test that sends
     100,000 poses should not spend seconds decoding its own message. Every node's log lines
@@ -174,13 +233,16 @@ class Probe(Node):
         self.raw_plans: list[bytes] = []
         self.local_plans: list[Path] = []
         self.diagnostics: list[ReportedStep] = []
+        self.planner_outcomes: list[PlannerDiagnostics] = []
         self.logs: list[Log] = []
         self.create_subscription(Odometry, 'odom', self.odoms.append, ODOM_QOS)
         self.create_subscription(Twist, 'cmd_vel', self._cmd_vel, CMD_VEL_QOS)
         self.create_subscription(Path, 'plan', self.raw_plans.append, PLAN_QOS, raw=True)
         self.create_subscription(Path, 'local_plan', self.local_plans.append, LOCAL_PLAN_QOS)
-        self.create_subscription(DiagnosticArray, 'mpc/diagnostics', self._diagnostics,
-                                 DIAGNOSTICS_QOS)
+        self.create_subscription(DiagnosticArray, CONTROLLER_DIAGNOSTICS_TOPIC,
+                                 self._diagnostics, DIAGNOSTICS_QOS)
+        self.create_subscription(DiagnosticArray, PLANNER_DIAGNOSTICS_TOPIC,
+                                 self._planner_diagnostics, PLANNER_DIAGNOSTICS_QOS)
         self.create_subscription(Log, '/rosout', self.logs.append, ROSOUT_QOS)
 
     @property
@@ -202,6 +264,10 @@ class Probe(Node):
             step=ControllerDiagnostics.from_values((kv.key, kv.value) for kv in status.values),
             level=int.from_bytes(status.level, 'little'), message=status.message,
             stamp=stamp_to_seconds(msg.header.stamp)))
+
+    def _planner_diagnostics(self, msg: DiagnosticArray) -> None:
+        self.planner_outcomes.append(PlannerDiagnostics.from_values(
+            (kv.key, kv.value) for kv in msg.status[0].values))
 
     def publish_odom(self, state, stamp: float | None = None) -> None:
         """Publish odometry of state (x, y, yaw), stamped now or at stamp (seconds)."""

@@ -13,7 +13,7 @@
 # limitations under the License.
 
 
-"""The layers: only ros/ talks ROS, and each layer imports only the layers below it.
+"""The layers: only ros/ talks ROS, each layer imports only the layers below it, no cycles.
 
 Checked by reading every module's import statements (at any depth, so a lazy import inside a
 function counts too), not by importing the modules.
@@ -91,3 +91,42 @@ def test_each_layer_imports_only_the_layers_below_it(path: Path) -> None:
     used = {name.split('.')[1] for name, _ in _imports(path)
             if name.startswith('mpc_local_planner.') and len(name.split('.')) > 2}
     assert used <= ALLOWED_LAYERS[layer], f'{layer} imports {used - ALLOWED_LAYERS[layer]}'
+
+
+def _module(path: Path) -> str:
+    """Return the dotted name of a module of the package (a package's, for __init__.py)."""
+    parts = path.relative_to(PACKAGE.parent).with_suffix('').parts
+    return '.'.join(parts[:-1] if parts[-1] == '__init__' else parts)
+
+
+def test_no_module_imports_itself_through_others() -> None:
+    # every import counts, a TYPE_CHECKING one too: a cycle ties its modules into one job
+    modules = {_module(path): path for path in MODULES}
+    graph = {}
+    for name, path in modules.items():
+        deps = set()
+        for imported, _ in _imports(path):
+            parts = imported.split('.')
+            while parts and '.'.join(parts) not in modules:
+                parts.pop()
+            target = '.'.join(parts)
+            if parts and target != name and not name.startswith(target + '.'):
+                deps.add(target)  # (a module's own package is not a cycle)
+        graph[name] = deps
+    done: set[str] = set()
+
+    def cycle_from(name: str, trail: list[str]) -> list[str] | None:
+        if name in trail:
+            return [*trail[trail.index(name):], name]
+        if name in done:
+            return None
+        for dep in sorted(graph[name]):
+            found = cycle_from(dep, [*trail, name])
+            if found:
+                return found
+        done.add(name)
+        return None
+
+    for name in sorted(graph):
+        cycle = cycle_from(name, [])
+        assert cycle is None, ' -> '.join(cycle)

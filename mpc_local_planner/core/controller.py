@@ -43,15 +43,15 @@ Safety rules kept here (see the README's "Safety behaviours"):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from enum import Enum
 import math
-from typing import NamedTuple, Sequence
+from typing import Sequence
 
 import numpy as np
 
 from mpc_local_planner.core.braking import Brake
 from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reason
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import MpcSolution, PathReferenceMPC, PlanSource
 from mpc_local_planner.core.obstacles import (
@@ -60,91 +60,17 @@ from mpc_local_planner.core.obstacles import (
     min_clearance,
     ObstacleSet,
 )
+from mpc_local_planner.core.obstacles import within_faces as within_faces  # re-export: see below
 from mpc_local_planner.core.paths import ReferencePath, simplify_polyline, WaypointPath, wrap_angle
 
 __all__ = [
-    'Blockage',
-    'ControllerSettings',
-    'ControlOutput',
     'MAX_COORDINATE',
     'MpcController',
-    'Reason',
     'ROTATE_STEPS',
-    'SHARP_CORNER',
-    'within_faces',
 ]
-
-# Sensed polygons with an interior angle below this (radians) are replaced by their enclosing
-# rectangle before the MPC grows them (see within_faces): growing by r moves a corner of angle
-# alpha by r / sin(alpha / 2), which is 2 r at 60 degrees.
-SHARP_CORNER = math.radians(60.0)
-
-
-class Reason(Enum):
-    """Why the controller commands what it commands (the value is the diagnostics' word).
-
-    Only TRACKING and CANDIDATE apply an MPC input, and ROTATE_TO_HEADING an in-place turn;
-    every other reason stops the robot: a zero command, or, for a moving robot with
-    ControllerSettings.max_decel, the braking command along the last verified plan. Free
-    text about the case (what was wrong with a plan, an exception's message) travels
-    separately, in `ControlOutput.detail`.
-    """
-
-    TRACKING = 'tracking'
-    # The input is the proof's shifted candidate, not a fresh solver solution (verified all
-    # the same; it runs out after N steps). Mostly the solver failed; rarely it converged to
-    # a solution costlier than the candidate.
-    CANDIDATE = 'candidate'
-    NO_PLAN = 'no_plan'
-    NO_ODOM = 'no_odom'
-    STALE_ODOM = 'stale_odom'
-    INVALID_ODOM = 'invalid_odom'
-    INVALID_PLAN = 'invalid_plan'
-    GOAL_REACHED = 'goal_reached'
-    # Within xy_goal_tolerance of the goal, off its heading: the robot turns in place (Nav2
-    # RPP's rotate to heading) instead of the MPC manoeuvring for the last centimetres.
-    ROTATE_TO_HEADING = 'rotate_to_heading'
-    STOP = 'stop'
-    ERROR = 'error'
-    # The laser is a source of obstacles and its latest valid scan is older than scan_timeout
-    # (malformed scans are dropped, so only bad ones coming also ends here), or none came yet.
-    STALE_SCAN = 'stale_scan'
-    NO_SCAN = 'no_scan'
-    # The map is a source of obstacles and no valid map came yet: what it would show is
-    # unknown, as the scan's before the first one.
-    NO_MAP = 'no_map'
-    # Odometry is there but no pose in the plan's frame: a localizer is expected and none
-    # (usable) came, or tf2 has no transform from the plan's frame to the robot's.
-    NO_LOCALIZATION = 'no_localization'
-
-    @property
-    def text(self) -> str:
-        """Say it in words, for logs and DiagnosticStatus.message."""
-        return _REASON_TEXT[self]
-
-    @property
-    def applies_input(self) -> bool:
-        """Whether the command is an input (the MPC's, or the turn to the goal heading)."""
-        return self in (Reason.TRACKING, Reason.CANDIDATE, Reason.ROTATE_TO_HEADING)
-
-
-_REASON_TEXT = {
-    Reason.TRACKING: 'tracking',
-    Reason.CANDIDATE: 'applying the shifted candidate (no cheaper verified solver solution)',
-    Reason.NO_PLAN: 'no plan yet',
-    Reason.NO_ODOM: 'no odometry yet',
-    Reason.STALE_ODOM: 'odometry is stale',
-    Reason.INVALID_ODOM: 'invalid odometry',
-    Reason.INVALID_PLAN: 'invalid plan',
-    Reason.GOAL_REACHED: 'goal reached',
-    Reason.ROTATE_TO_HEADING: 'at the goal position, turning in place to the goal heading',
-    Reason.STOP: 'no feasible input, stopping',
-    Reason.ERROR: 'error',
-    Reason.STALE_SCAN: 'scan is stale',
-    Reason.NO_SCAN: 'no scan yet',
-    Reason.NO_MAP: 'no valid map yet',
-    Reason.NO_LOCALIZATION: "no pose in the plan's frame",
-}
+# Blockage, ControlOutput and Reason (core/control_output.py), ControllerSettings
+# (core/controller_settings.py) and within_faces (core/obstacles.py) stay importable from here
+# for the callers in ros/ and evaluation/ that still import them from this module.
 
 
 # Positions beyond this (metres from the origin) are refused as garbage: a local planner has
@@ -156,180 +82,6 @@ ROTATE_STEPS = 2.0
 # Tolerances of the Ramer-Douglas-Peucker pass that makes a long plan fit the solver's
 # segment capacity, tried in order (metres).
 _SIMPLIFY_TOLERANCES = (0.0, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2)
-
-
-class Blockage(NamedTuple):
-    """Where the remaining plan first meets an obstacle the controller knows.
-
-    Attributes:
-        blocked: whether the plan, from the robot's projection on, meets a grown obstacle.
-        at: arc length (m) along the plan from the robot's projection to the first blocked
-            point; NaN when the plan is clear (or there is no plan or state).
-
-    """
-
-    blocked: bool = False
-    at: float = math.nan
-
-
-def within_faces(obstacles: Sequence[ConvexPolygon], max_faces: int) -> list[ConvexPolygon]:
-    """Return the obstacles, each with at most max_faces faces and no needle-sharp corner.
-
-    A polygon with more faces than the NLP's slots hold (a scan cluster's hull) or with a
-    corner sharper than SHARP_CORNER is replaced by the smallest-area rectangle around it
-    with a side along one of its edges (it contains the polygon: avoiding it avoids the
-    polygon). Sharp corners matter because the MPC grows obstacles by shifting their faces:
-    a corner of angle alpha moves out by r / sin(alpha / 2), so the sliver a laser makes of
-    a face seen at a grazing angle (a parallelogram with 5 degree corners) grows metres long
-    spikes that block a free path (seen: a 0.2 m sliver grew into a 10 m needle that stopped
-    the robot 0.23 m before its goal). The world's obstacles with too many faces are refused
-    instead, with a reason, where the parameters are checked.
-    """
-    fitted = []
-    for obstacle in obstacles:
-        if obstacle.num_faces <= max_faces and _sharpest_corner(obstacle) >= SHARP_CORNER:
-            fitted.append(obstacle)
-            continue
-        fitted.append(_enclosing_rectangle(obstacle))
-    return fitted
-
-
-def _sharpest_corner(obstacle: ConvexPolygon) -> float:
-    """Return the smallest interior angle of a convex polygon, radians."""
-    normals = obstacle.A
-    # interior angle at the vertex between faces i-1 and i: pi minus the turn of the normal
-    cosines = np.einsum('ij,ij->i', normals, np.roll(normals, 1, axis=0))
-    return float(np.min(np.pi - np.arccos(np.clip(cosines, -1.0, 1.0))))
-
-
-def _enclosing_rectangle(obstacle: ConvexPolygon) -> ConvexPolygon:
-    """Return the smallest-area rectangle around the polygon with a side along an edge."""
-    vertices = np.asarray(obstacle.vertices, dtype=float)
-    edges = np.roll(vertices, -1, axis=0) - vertices
-    angles = np.arctan2(edges[:, 1], edges[:, 0])
-    best = None
-    for angle in angles:
-        c, s = math.cos(angle), math.sin(angle)
-        along = vertices @ np.array([c, s])
-        across = vertices @ np.array([-s, c])
-        area = np.ptp(along) * np.ptp(across)
-        if best is None or area < best[0]:
-            best = (area, c, s, along.min(), along.max(), across.min(), across.max())
-    _, c, s, a0, a1, b0, b1 = best
-    u, n = np.array([c, s]), np.array([-s, c])
-    corners = [a0 * u + b0 * n, a1 * u + b0 * n, a1 * u + b1 * n, a0 * u + b1 * n]
-    return ConvexPolygon.from_vertices(corners)
-
-
-class ControlOutput(NamedTuple):
-    """What to command now, and why.
-
-    Attributes:
-        u: (2,) input (v, omega) within the model's bounds; zero unless reason.applies_input.
-        solution: the MPC's solution when it ran, else None.
-        reason: why the command is what it is.
-        detail: free text about the case ('' when the reason says it all), e.g. what is
-            wrong with a refused plan, or an exception's message.
-        fresh: the MPC solved at this call; False between solves (control_frequency above
-            1 / step), where u is the input the last verified plan gives for now, or where a
-            stop brakes along it (u then need not be zero: see `Brake`).
-
-    """
-
-    u: np.ndarray
-    solution: MpcSolution | None
-    reason: Reason
-    detail: str = ''
-    fresh: bool = True
-
-    @property
-    def message(self) -> str:
-        """Return the reason in words, followed by ': detail' when there is one."""
-        return f'{self.reason.text}: {self.detail}' if self.detail else self.reason.text
-
-
-@dataclass(frozen=True)
-class ControllerSettings:
-    """What the controller checks around the MPC.
-
-    Arrival is Nav2's SimpleGoalChecker's (same names, same meaning): the robot has arrived
-    when it is within xy_goal_tolerance of the plan's last position and within
-    yaw_goal_tolerance of its heading. Once the position has been met, the robot turns in
-    place to the heading (Reason.ROTATE_TO_HEADING) instead of letting the MPC manoeuvre for
-    the last centimetres. The defaults are for a real robot: wheel odometry wanders by 0.5-3 cm
-    and the base answers a command a step late, so with the paper's 2 cm / 0.05 rad (met in
-    its simulation, where the odometry is exact) a robot reached about 0.1 m from the goal and
-    then manoeuvred there (about a hundred reversing commands, 2-3 m of extra travel) without
-    ever arriving. 0.1 m is a few times that noise plus one step's creep at approach speed, and
-    less than half of what Nav2 allows (0.25 m, sized for AMCL-localised robots of half a metre
-    and more); 0.15 rad (8.6 degrees) leaves room for the overshoot of an in-place turn under
-    actuator lag (omega times the lag, a few hundredths of a radian) where Nav2 allows
-    0.25 rad. The paper's scenario keeps its tight 0.02 m / 0.05 rad where it is run
-    (closed_loop's PAPER_GOAL_TOLERANCES, the benchmark's REACHED_POSITION and
-    REACHED_HEADING).
-
-    Attributes:
-        xy_goal_tolerance: distance to the plan's last position that counts as arrived (m).
-        yaw_goal_tolerance: heading error to the plan's last heading that counts as arrived
-            (rad); pi or more accepts any heading.
-        stateful: as Nav2's SimpleGoalChecker: once the position tolerance is met it stays
-            met for the plan (the robot only has to turn to the heading, even if noise moves
-            the measured position back out), and once arrived the command stays zero until a
-            new plan comes. False: each step judges the pose afresh, and a pose that drifts
-            out of the tolerances is driven back.
-        odom_timeout: odometry older than this (seconds of ROS time) is stale.
-        turn_length: metres of path parameter per radian turned in place at plan corners.
-        capacity: segments a waypoint plan may have (the solver's size; fixed so that
-            re-plans reuse the built solver).
-        max_plan_poses: a plan with more poses is refused: converting and simplifying it
-            would hold up the control loop (10,000 poses at 5 cm is 500 m).
-        scan_timeout: a scan older than this (seconds of ROS time) is stale, when the
-            laser is a source of obstacles (compute's scan_required).
-        control_frequency: commands per second (Hz). A real base wants them at 10-20 Hz,
-            while the MPC predicts in steps of h (MpcConfig.step, 0.2 s). The MPC solves
-            once a step; the calls between return the input its last verified plan gives
-            for the current time (the plan is piecewise constant over its steps, so this is
-            the plan, applied), after every safety check. 1 / step or less: every call solves.
-        max_decel: the base's deceleration limits (m/s^2, rad/s^2), as Nav2's velocity
-            smoother names them. A stop of a moving robot (stale data, a failure, a rejected
-            candidate) brakes along the last verified plan within them (`Brake`) instead of
-            commanding zero at once, which a real base cannot follow; inf: zero at once.
-
-    """
-
-    xy_goal_tolerance: float = 0.1
-    yaw_goal_tolerance: float = 0.15
-    stateful: bool = True
-    odom_timeout: float = 0.5
-    turn_length: float = 0.25
-    capacity: int = 64
-    max_plan_poses: int = 10_000
-    scan_timeout: float = 0.5
-    control_frequency: float = 20.0
-    max_decel: tuple[float, float] = (math.inf, math.inf)
-
-    def __post_init__(self) -> None:
-        """Refuse non-positive or non-finite tolerances and timeouts, and small capacities."""
-        decel = tuple(float(a) for a in self.max_decel)
-        if len(decel) != 2 or not all(a > 0 for a in decel):
-            msg = f'max_decel must be two values > 0 (inf: none), got {self.max_decel!r}'
-            raise ValueError(msg)
-        object.__setattr__(self, 'max_decel', decel)
-        for name in ('xy_goal_tolerance', 'yaw_goal_tolerance', 'odom_timeout',
-                     'turn_length', 'scan_timeout', 'control_frequency'):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                msg = f'{name} must be > 0 and finite, got {value}'
-                raise ValueError(msg)
-        if not isinstance(self.stateful, bool):
-            msg = f'stateful must be true or false, got {self.stateful!r}'
-            raise ValueError(msg)
-        if self.capacity < 3:
-            msg = f'capacity must be >= 3, got {self.capacity}'
-            raise ValueError(msg)
-        if self.max_plan_poses < 2:
-            msg = f'max_plan_poses must be >= 2, got {self.max_plan_poses}'
-            raise ValueError(msg)
 
 
 class MpcController:

@@ -32,7 +32,7 @@ from typing import Any, Iterable, Mapping, NamedTuple
 
 import numpy as np
 
-from mpc_local_planner.core.controller import Blockage, ControlOutput, Reason
+from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reason
 from mpc_local_planner.core.mpc import PlanSource
 
 __all__ = [

@@ -36,7 +36,7 @@ from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon
 
 if TYPE_CHECKING:
-    from mpc_local_planner.core.planner import FreeSpaceGrid
+    from mpc_local_planner.core.free_space import FreeSpaceGrid
 
 __all__ = ['FootprintChecks', 'FootprintPlan', 'GridObstacles', 'NO_TURN', 'PolygonObstacles',
            'SAME_POINT', 'TurnRange', 'wrap_heading']

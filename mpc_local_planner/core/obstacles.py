@@ -28,6 +28,9 @@ Segments against polygons have one clipper here (`ObstacleSet.segment_hits`, Cyr
 vectorised over segments and obstacles); its `grazing` argument says whether a segment that
 only touches a boundary counts. The planner counts it (its tree edges must keep the full
 clearance); the controller's plan check does not (a plan at exactly the clearance is valid).
+
+`within_faces` fits sensed polygons to the MPC's face slots (``faces_per_obstacle``) and
+replaces needle-sharp ones by their enclosing rectangle before the MPC grows them.
 """
 
 from __future__ import annotations
@@ -50,6 +53,8 @@ __all__ = [
     'point_in_any',
     'polygon_separation',
     'segment_collides',
+    'SHARP_CORNER',
+    'within_faces',
 ]
 
 # With grazing=False, obstacles are shrunk by this much (metres) before clipping, so that a
@@ -469,3 +474,58 @@ def face_weights(normals: np.ndarray, directions: np.ndarray) -> np.ndarray:
     weights[rows, best] = np.maximum(alpha[rows, best], 0.0)
     weights[rows, (best + 1) % len(a)] += np.maximum(beta[rows, best], 0.0)
     return weights
+
+
+# Sensed polygons with an interior angle below this (radians) are replaced by their enclosing
+# rectangle before the MPC grows them (see within_faces): growing by r moves a corner of angle
+# alpha by r / sin(alpha / 2), which is 2 r at 60 degrees.
+SHARP_CORNER = math.radians(60.0)
+
+
+def within_faces(obstacles: Sequence[ConvexPolygon], max_faces: int) -> list[ConvexPolygon]:
+    """Return the obstacles, each with at most max_faces faces and no needle-sharp corner.
+
+    A polygon with more faces than the NLP's slots hold (a scan cluster's hull) or with a
+    corner sharper than SHARP_CORNER is replaced by the smallest-area rectangle around it
+    with a side along one of its edges (it contains the polygon: avoiding it avoids the
+    polygon). Sharp corners matter because the MPC grows obstacles by shifting their faces:
+    a corner of angle alpha moves out by r / sin(alpha / 2), so the sliver a laser makes of
+    a face seen at a grazing angle (a parallelogram with 5 degree corners) grows metres long
+    spikes that block a free path (docs/design/measurements.md, within_faces). The world's
+    obstacles with too many faces are refused instead, with a reason, where the parameters
+    are checked.
+    """
+    fitted = []
+    for obstacle in obstacles:
+        if obstacle.num_faces <= max_faces and _sharpest_corner(obstacle) >= SHARP_CORNER:
+            fitted.append(obstacle)
+            continue
+        fitted.append(_enclosing_rectangle(obstacle))
+    return fitted
+
+
+def _sharpest_corner(obstacle: ConvexPolygon) -> float:
+    """Return the smallest interior angle of a convex polygon, radians."""
+    normals = obstacle.A
+    # interior angle at the vertex between faces i-1 and i: pi minus the turn of the normal
+    cosines = np.einsum('ij,ij->i', normals, np.roll(normals, 1, axis=0))
+    return float(np.min(np.pi - np.arccos(np.clip(cosines, -1.0, 1.0))))
+
+
+def _enclosing_rectangle(obstacle: ConvexPolygon) -> ConvexPolygon:
+    """Return the smallest-area rectangle around the polygon with a side along an edge."""
+    vertices = np.asarray(obstacle.vertices, dtype=float)
+    edges = np.roll(vertices, -1, axis=0) - vertices
+    angles = np.arctan2(edges[:, 1], edges[:, 0])
+    best = None
+    for angle in angles:
+        c, s = math.cos(angle), math.sin(angle)
+        along = vertices @ np.array([c, s])
+        across = vertices @ np.array([-s, c])
+        area = np.ptp(along) * np.ptp(across)
+        if best is None or area < best[0]:
+            best = (area, c, s, along.min(), along.max(), across.min(), across.max())
+    _, c, s, a0, a1, b0, b1 = best
+    u, n = np.array([c, s]), np.array([-s, c])
+    corners = [a0 * u + b0 * n, a1 * u + b0 * n, a1 * u + b1 * n, a0 * u + b1 * n]
+    return ConvexPolygon.from_vertices(corners)

@@ -25,8 +25,8 @@ unwrapped, and s is proportional to length plus turn_length per radian turned. I
 rounded over `smoothing` metres of path parameter so that g_p is continuously
 differentiable: the terminal condition x_N = g_p(s) of a kinked g_p has no derivative at a
 knot, and where the horizon's reach ends at a corner the optimum sits on that knot, where
-Newton's method (fatrop's and IPOPT's) cannot converge (BARN world 0 at 1 m/s: 200
-iterations of each, with no obstacle in the NLP). A knot joins a straight segment and a
+Newton's method (fatrop's and IPOPT's) cannot converge (docs/design/measurements.md, Corner
+smoothing). A knot joins a straight segment and a
 turn, so the rounding only moves the turn's start and end a little along s: the positions
 stay on the polyline, and a pose differs from the sharp polyline's at the same s by at most
 smoothing / 4 in position and smoothing / (4 turn_length) in heading. A footprint with
@@ -63,7 +63,7 @@ __all__ = [
 Symbolic = Any
 PROJECTION_SAMPLES = 2001
 # Metres of path parameter over which a waypoint path's knots are rounded (see the module's
-# note): 2 cm to 10 cm all solved the BARN case.
+# note and docs/design/measurements.md, Corner smoothing).
 CORNER_SMOOTHING = 0.05
 
 
@@ -341,6 +341,11 @@ class WaypointPath(ReferencePath):
     def knots(self) -> np.ndarray:
         """(K, 3) poses at the segment ends, heading unwrapped."""
         return self._knots.copy()
+
+    @property
+    def s_knots(self) -> np.ndarray:
+        """(K,) the path parameter s of each knot: 0 at the start, 1 at the goal."""
+        return self._s_knots.copy()
 
     @property
     def waypoints(self) -> np.ndarray:

@@ -63,9 +63,9 @@ grid search takes over (core/grid_search.py, as Nav2's NavFn and Smac search the
 Dijkstra over the cells where the inscribed disc grown by the clearance clears the occupied
 cells, preferring room by a cost rather than a wider margin, then straight segments along
 those cells kept only where the footprint's sweep and turns are clear (the checks below),
-backing up from a corner the robot cannot turn at. On BARN's hardest worlds (200-299) no
-chain of circumscribed discs joins start and goal in most worlds, so RRT* alone cannot
-succeed there; the grid search finds them all at the start with the cylinders known.
+backing up from a corner the robot cannot turn at. Where no chain of free circumscribed
+discs joins start and goal, RRT* alone cannot succeed and the grid search can
+(docs/design/measurements.md, Grid search fallback).
 
 After solving, `RrtStarPlanner.path_problem` checks every pose of the final path again,
 turns included, and a path that fails is refused with a PlanningError that says where (with
@@ -78,18 +78,12 @@ iteration count (the paper's figure uses 1000) with a wall-clock limit only as a
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Sequence
-import contextlib
+from collections.abc import Callable, Sequence
 import copy
 from dataclasses import dataclass, replace
 import math
-import threading
-from typing import Any, Protocol
 
 import numpy as np
-from ompl import base as ob
-from ompl import geometric as og
-from ompl import util as ou
 
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
@@ -97,30 +91,30 @@ from mpc_local_planner.core.footprint_checks import (
     FootprintChecks,
     FootprintPlan,
     GridObstacles,
-    NO_TURN,
     PolygonObstacles,
-    SAME_POINT,
-    wrap_heading,
+)
+from mpc_local_planner.core.footprint_paths import (
+    footprint_motion,
+    footprint_path_problem,
+    xy_text,
+)
+from mpc_local_planner.core.free_space import (
+    EscapeGrid,
+    FreeSpaceGrid,
+    grid_bounds,
+    grid_space,
+    polygon_space,
 )
 from mpc_local_planner.core.grid_search import clearance_field, pull_string, shortest_cells
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
 from mpc_local_planner.core.paths import remaining_polyline
+from mpc_local_planner.core.rrt_star import MAX_SEED, rrt_star
 
 __all__ = [
-    'EscapeGrid',
-    'FreeSpaceGrid',
     'PlannerConfig',
     'RrtStarPlanner',
-    'grid_bounds',
     'path_length',
 ]
-
-# OMPL ignores seed 0 (it then seeds from the clock), so OMPL gets seed + 1 and every
-# PlannerConfig.seed, including the default 0, is reproducible. Its seeds are 32-bit.
-_MAX_SEED = 2**32 - 2
-# OMPL's RNG seed and log level are process-wide: one plan at a time.
-_OMPL_LOCK = threading.Lock()
-
 
 
 def _footprint_vertices(value: object) -> tuple[tuple[float, float], ...]:
@@ -197,8 +191,8 @@ class PlannerConfig:
             problems.append(f'iterations must be >= 1, got {self.iterations}')
         if not (math.isfinite(self.time_limit) and self.time_limit > 0):
             problems.append(f'time_limit must be > 0 and finite, got {self.time_limit}')
-        if not (isinstance(self.seed, int) and 0 <= self.seed <= _MAX_SEED):
-            problems.append(f'seed must be an integer in [0, {_MAX_SEED}], got {self.seed!r}')
+        if not (isinstance(self.seed, int) and 0 <= self.seed <= MAX_SEED):
+            problems.append(f'seed must be an integer in [0, {MAX_SEED}], got {self.seed!r}')
         for name in ('range', 'robot_radius', 'clearance'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
@@ -252,180 +246,6 @@ def path_length(waypoints: np.ndarray) -> float:
     return float(np.sum(np.linalg.norm(np.diff(pts[:, :2], axis=0), axis=1)))
 
 
-def _hits(obstacles: ObstacleSet, a: np.ndarray, b: np.ndarray) -> bool:
-    """Say whether segment a-b touches an inflated obstacle (grazing counts: full clearance)."""
-    return bool(np.any(obstacles.segment_hits(a, b, grazing=True)))
-
-
-class FreeSpaceGrid(Protocol):
-    """What the planner needs of an inflated occupancy grid (perception's ``PlanningGrid``).
-
-    ``map`` is the grid's geometry (an ``OccupancyMap``: ``origin`` (x, y, yaw) of the
-    lower-left corner, ``resolution``, ``width``, ``height``, ``world_to_cell``,
-    ``contains_cell``); ``occupied`` the (height, width) cells that are obstacles before
-    inflation, ``blocked`` those within ``inflation`` (metres) of one. Points outside the
-    grid are free.
-    """
-
-    inflation: float
-
-    @property
-    def map(self) -> Any:
-        """The grid's geometry (origin, resolution, width, height, world_to_cell)."""
-
-    @property
-    def occupied(self) -> np.ndarray:
-        """(height, width) booleans: the obstacle cells before inflation."""
-
-    @property
-    def blocked(self) -> np.ndarray:
-        """(height, width) booleans: the cells within the inflation of an obstacle cell."""
-
-    def is_free(self, points: np.ndarray) -> np.ndarray:
-        """Say, per (N, 2) point, whether it is free after inflation."""
-
-
-class EscapeGrid(Protocol):
-    """A grid that finds where a robot inside the inflation can start a plan from."""
-
-    def escape_point(self, position: Sequence[float], *, within: float,
-                     margin: float) -> np.ndarray | None:
-        """Return the nearest clear point the robot can drive straight to, or None."""
-
-
-def grid_bounds(grid: FreeSpaceGrid) -> tuple[float, float, float, float]:
-    """Return (xmin, xmax, ymin, ymax) of the grid's extent (its corners, if rotated)."""
-    occupancy = grid.map
-    x0, y0, yaw = (float(v) for v in occupancy.origin)
-    width = occupancy.width * float(occupancy.resolution)
-    height = occupancy.height * float(occupancy.resolution)
-    c, s = math.cos(yaw), math.sin(yaw)
-    local = np.array([[0.0, 0.0], [width, 0.0], [width, height], [0.0, height]])
-    xs = x0 + c * local[:, 0] - s * local[:, 1]
-    ys = y0 + s * local[:, 0] + c * local[:, 1]
-    return float(xs.min()), float(xs.max()), float(ys.min()), float(ys.max())
-
-
-class _Space:
-    """Where a round robot's reference point may be: the queries the planner makes.
-
-    Two kinds: inflated polygons (exact segment tests) and an inflated grid. Holds only
-    NumPy data and plain callables: it must not reference OMPL objects, or the reference
-    cycle through C++ would keep them alive past the plan.
-    """
-
-    def __init__(self, point_free: Callable[[np.ndarray], bool],
-                 segment_free: Callable[[np.ndarray, np.ndarray], bool],
-                 collision: Callable[[np.ndarray], str | None]) -> None:
-        self.point_free = point_free
-        self.segment_free = segment_free
-        self.collision = collision
-
-
-def _polygon_space(obstacles: ObstacleSet, inflation: float) -> _Space:
-    def collision(xy: np.ndarray) -> str | None:
-        index = obstacles.first_containing(xy)
-        if index is None:
-            return None
-        return (f'in collision with obstacle {index} inflated by {inflation:g} m '
-                '(robot_radius + clearance)')
-
-    return _Space(point_free=lambda xy: obstacles.first_containing(xy) is None,
-                  segment_free=lambda a, b: not _hits(obstacles, a, b),
-                  collision=collision)
-
-
-def _cells_crossed(occupancy: Any, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Return (rows, cols) of every cell the segment a-b passes through (may be outside).
-
-    Exact: the segment is cut where it crosses a grid line, and the middle of each piece
-    names one cell it runs through; so no cell is skipped, however little is clipped of it.
-    """
-    x0, y0, yaw = (float(v) for v in occupancy.origin)
-    res = float(occupancy.resolution)
-    c, s = math.cos(yaw), math.sin(yaw)
-    ends = np.array([a, b], dtype=float) - (x0, y0)
-    u = (c * ends[:, 0] + s * ends[:, 1]) / res  # grid coordinates, in cells
-    v = (-s * ends[:, 0] + c * ends[:, 1]) / res
-    cuts = [np.array([0.0, 1.0])]
-    for p0, p1 in ((u[0], u[1]), (v[0], v[1])):
-        if p1 != p0:
-            lines = np.arange(math.ceil(min(p0, p1)), math.floor(max(p0, p1)) + 1)
-            cuts.append((lines - p0) / (p1 - p0))
-    t = np.unique(np.clip(np.concatenate(cuts), 0.0, 1.0))
-    mid = 0.5 * (t[:-1] + t[1:]) if len(t) > 1 else t
-    mid = np.concatenate([mid, [0.0, 1.0]])  # the end points' own cells
-    cols = np.floor(u[0] + mid * (u[1] - u[0])).astype(np.int64)
-    rows = np.floor(v[0] + mid * (v[1] - v[0])).astype(np.int64)
-    return rows, cols
-
-
-def _grid_space(grid: FreeSpaceGrid) -> _Space:
-    occupancy = grid.map
-
-    def point_free(xy: np.ndarray) -> bool:
-        return bool(grid.is_free(xy.reshape(1, 2))[0])
-
-    def segment_free(a: np.ndarray, b: np.ndarray) -> bool:
-        rows, cols = _cells_crossed(occupancy, a, b)
-        inside = occupancy.contains_cell(rows, cols)  # outside the grid counts free
-        return not bool(np.any(grid.blocked[rows[inside], cols[inside]]))
-
-    def collision(xy: np.ndarray) -> str | None:
-        if point_free(xy):
-            return None
-        rows, cols = occupancy.world_to_cell(xy.reshape(1, 2))
-        row, col = int(rows[0]), int(cols[0])
-        where = 'in an occupied cell' if grid.occupied[row, col] else (
-            f'within {grid.inflation:g} m of an occupied cell')
-        return (f'{where} (cell row {row}, column {col}) of the grid inflated by '
-                f'{grid.inflation:g} m (robot_radius + clearance)')
-
-    return _Space(point_free=point_free, segment_free=segment_free, collision=collision)
-
-
-# ----------------------------------------------------------------------- footprint geometry
-# Private helpers for the polygon footprint; they could move to core/footprint.py.
-
-class _ExactMotionValidator(ob.MotionValidator):
-    """OMPL motion validator that tests each edge exactly, by a plain callable.
-
-    Round robot: segment against inflated polygon, or every cell the segment passes through;
-    polygon footprint: the swept polygon and the turns at the start and goal
-    (`FootprintPlan.motion_valid`).
-    """
-
-    def __init__(self, si: ob.SpaceInformation,
-                 motion_free: Callable[[np.ndarray, np.ndarray], bool]) -> None:
-        super().__init__(si)
-        self._motion_free = motion_free
-
-    def checkMotion(self, s1: ob.State, s2: ob.State, *args: object) -> bool:
-        """Return True if the straight motion from s1 to s2 is collision free (OMPL's name)."""
-        a = np.array([s1[0], s1[1]])
-        b = np.array([s2[0], s2[1]])
-        return self._motion_free(a, b)
-
-
-class _StateValidity:
-    """State validity callable: inside the bounds and free by a plain callable.
-
-    A plain callable holding only NumPy data: it must not reference OMPL objects, or the
-    reference cycle through C++ would keep them alive past the plan.
-    """
-
-    def __init__(self, state_free: Callable[[np.ndarray], bool],
-                 bounds: tuple[float, float, float, float]):
-        self._state_free = state_free
-        self._bounds = bounds
-
-    def __call__(self, state: ob.State) -> bool:
-        x, y = state[0], state[1]
-        xmin, xmax, ymin, ymax = self._bounds
-        if not (xmin <= x <= xmax and ymin <= y <= ymax):
-            return False
-        return self._state_free(np.array([x, y]))
-
 
 def _check_bounds(bounds: Sequence[float]) -> tuple[float, float, float, float]:
     """Return the bounds as floats, refusing empty or non-finite ones."""
@@ -435,70 +255,6 @@ def _check_bounds(bounds: Sequence[float]) -> tuple[float, float, float, float]:
         raise ValueError(msg)
     return xmin, xmax, ymin, ymax
 
-
-class _TurnCheck:
-    """The turns in place at one corner from one heading, found lazily, as `TurnRange` does.
-
-    `FootprintChecks.turn_range` allows delta iff no sampled heading k turn_step away on
-    delta's side, with (k - 1/2) turn_step < |delta|, is in collision: only those samples are
-    checked, and each side's samples once (a small turn at a tight corner costs a few
-    polygons, not a full circle).
-    """
-
-    def __init__(self, checks: FootprintChecks, xy: np.ndarray, heading: float) -> None:
-        self._checks = checks
-        self._xy = xy
-        self._heading = heading
-        self._free = checks.state_free(xy)
-        self._clear = [0, 0]  # samples known clear per side (counter-clockwise, clockwise)
-        self._blocked = [math.inf, math.inf]  # the first sample in collision per side
-
-    def allows(self, delta: float) -> bool:
-        """Say whether turning by delta radians (wrapped) is clear."""
-        if self._free or abs(delta) <= NO_TURN:
-            return True
-        checks, side = self._checks, 0 if delta > 0 else 1
-        count = min(math.ceil(abs(delta) / checks.turn_step + 0.5), checks.turn_samples + 1)
-        if count <= self._clear[side]:
-            return True
-        if self._blocked[side] < count:
-            return False
-        steps = np.arange(self._clear[side], max(count, 2 * self._clear[side]))
-        steps = steps[steps <= checks.turn_samples]
-        headings = self._heading + math.copysign(checks.turn_step, delta) * steps
-        c, s = np.cos(headings)[:, None], np.sin(headings)[:, None]
-        x, y = checks.local[None, :, 0], checks.local[None, :, 1]
-        polygons = np.stack([self._xy[0] + c * x - s * y, self._xy[1] + s * x + c * y],
-                            axis=-1)
-        hits = np.flatnonzero(checks.obstacles.polygons_hit(polygons, checks.turn_grow) >= 0)
-        if len(hits):
-            self._blocked[side] = int(steps[hits[0]])
-            self._clear[side] = int(steps[hits[0]])
-        else:
-            self._clear[side] = int(steps[-1]) + 1
-        return count <= self._clear[side]
-
-
-def _distinct(points: np.ndarray) -> np.ndarray:
-    """Drop consecutive points within SAME_POINT of the previous one (as WaypointPath)."""
-    keep = np.concatenate([[True], np.linalg.norm(np.diff(points, axis=0), axis=1)
-                           > SAME_POINT])
-    return points[keep]
-
-
-def _xy(point: np.ndarray) -> str:
-    return f'({point[0]:g}, {point[1]:g})'
-
-
-@contextlib.contextmanager
-def _ompl_log_level(level: ou.LogLevel) -> Iterator[None]:
-    """Set OMPL's (process-wide) log level for a block, then restore it."""
-    previous = ou.getLogLevel()
-    ou.setLogLevel(level)
-    try:
-        yield
-    finally:
-        ou.setLogLevel(previous)
 
 
 class RrtStarPlanner:
@@ -543,7 +299,7 @@ class RrtStarPlanner:
             obstacle.inflate(config.inflation) for obstacle in obstacles
         )
         self._obstacles = ObstacleSet(self.inflated_obstacles)
-        self._space = _polygon_space(self._obstacles, config.inflation)
+        self._space = polygon_space(self._obstacles, config.inflation)
         self._polygon_checks = None if self.footprint.is_circle else FootprintChecks(
             self.footprint, config.clearance, PolygonObstacles(self.obstacles))
 
@@ -582,7 +338,7 @@ class RrtStarPlanner:
             raise ValueError(msg)
         planner = cls([], grid_bounds(grid) if bounds is None else bounds, config=config)
         planner.grid = grid
-        planner._space = _grid_space(grid)
+        planner._space = grid_space(grid)
         return planner
 
     def plan(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
@@ -615,22 +371,20 @@ class RrtStarPlanner:
                 # RRT* would converge to this segment anyway; skip the sampling.
                 return np.vstack([start_xy, goal_xy])
             try:
-                with _OMPL_LOCK, _ompl_log_level(ou.LOG_WARN):
-                    waypoints = self._solve(start_xy, goal_xy, self._space.point_free,
-                                            self._space.segment_free, lambda: '')[0]
+                waypoints = self._rrt_star(start_xy, goal_xy, self._space.point_free,
+                                        self._space.segment_free, lambda: '')[0]
             except PlanningError as err:
                 return self._grid_fallback(str(err), None, (start_xy, None), (goal_xy, None))
             waypoints[0] = start_xy
             waypoints[-1] = goal_xy
             return waypoints
         direct = np.vstack([start_xy, goal_xy])
-        if self._footprint_problem(checks, direct, start_heading, goal_heading) is None:
+        if footprint_path_problem(checks, direct, start_heading, goal_heading) is None:
             return direct
         rules = FootprintPlan(checks, (start_xy, start_heading), (goal_xy, goal_heading))
         try:
-            with _OMPL_LOCK, _ompl_log_level(ou.LOG_WARN):
-                candidates = self._solve(start_xy, goal_xy, rules.state_valid,
-                                         rules.motion_valid, rules.failure_hint)
+            candidates = self._rrt_star(start_xy, goal_xy, rules.state_valid,
+                                     rules.motion_valid, rules.failure_hint)
         except PlanningError as err:
             return self._grid_fallback(str(err), rules, (start_xy, start_heading),
                                        (goal_xy, goal_heading))
@@ -640,7 +394,7 @@ class RrtStarPlanner:
         for waypoints in candidates:
             waypoints[0] = start_xy
             waypoints[-1] = goal_xy
-            problem = self._footprint_problem(checks, waypoints, start_heading, goal_heading)
+            problem = footprint_path_problem(checks, waypoints, start_heading, goal_heading)
             if problem is None:
                 return waypoints
         msg = f'RRT* found a path that the footprint cannot follow, refused: {problem}'
@@ -708,7 +462,7 @@ class RrtStarPlanner:
             points = np.vstack([start_xy, goal_xy])
         points[0], points[-1] = start_xy, goal_xy
         motion_ok = (self._circle_motion(points) if rules is None
-                     else self._footprint_motion(rules, points))
+                     else footprint_motion(rules, points))
         corners = pull_string(points, motion_ok)
         if corners is None:
             return None, (f'{len(cells)} cells connect the start and the goal, but the robot '
@@ -724,44 +478,6 @@ class RrtStarPlanner:
         """Return `pull_string`'s motion check for a round robot: the segment's cells."""
         def motion_ok(i: int, j: int, previous: int | None) -> bool:
             return self._space.segment_free(points[i], points[j])
-        return motion_ok
-
-    @staticmethod
-    def _footprint_motion(rules: FootprintPlan,
-                          points: np.ndarray) -> Callable[[int, int, int | None], bool]:
-        """Return `pull_string`'s motion check for a footprint (`path_problem`'s rules).
-
-        The motion i -> j: the turn in place at i (from the start heading at the start, else
-        from the segment into i), the swept footprint, and the turn to the goal heading
-        where j is the goal.
-        """
-        checks, last = rules.checks, len(points) - 1
-        turns: dict[tuple[int, int], _TurnCheck] = {}
-
-        def motion_ok(i: int, j: int, previous: int | None) -> bool:
-            a, b = points[i], points[j]
-            if math.hypot(b[0] - a[0], b[1] - a[1]) <= SAME_POINT:
-                return False
-            heading = math.atan2(b[1] - a[1], b[0] - a[0])
-            if previous is None:
-                if (rules.start_turns is not None and rules.start_heading is not None
-                        and not rules.start_turns.allows(
-                            wrap_heading(heading - rules.start_heading))):
-                    return False
-            else:
-                p = points[previous]
-                incoming = math.atan2(a[1] - p[1], a[0] - p[0])
-                delta = wrap_heading(heading - incoming)
-                if abs(delta) > NO_TURN:
-                    if (previous, i) not in turns:
-                        turns[previous, i] = _TurnCheck(checks, a, incoming)
-                    if not turns[previous, i].allows(delta):
-                        return False
-            if (j == last and rules.goal_turns is not None and rules.goal_heading is not None
-                    and not rules.goal_turns.allows(
-                        -wrap_heading(rules.goal_heading - heading))):
-                return False
-            return checks.sweep_hit(a, b) < 0
         return motion_ok
 
     def path_problem(self, waypoints: np.ndarray, *, start_heading: float | None = None,
@@ -791,10 +507,10 @@ class RrtStarPlanner:
         if checks is None:
             for i, (a, b) in enumerate(zip(points[:-1], points[1:], strict=True)):
                 if not self._space.segment_free(a, b):
-                    return (f'segment {i} from {_xy(a)} to {_xy(b)} meets the obstacles grown '
-                            f'by {self.config.inflation:g} m (robot_radius + clearance)')
+                    return (f'segment {i} from {xy_text(a)} to {xy_text(b)} meets the obstacles '
+                            f'grown by {self.config.inflation:g} m (robot_radius + clearance)')
             return None
-        return self._footprint_problem(checks, points, start_heading, goal_heading)
+        return footprint_path_problem(checks, points, start_heading, goal_heading)
 
     def replan(self, start: np.ndarray, goal: np.ndarray, *, failures: int = 0,
                grid: EscapeGrid | None = None, escape_distance: float = 1.0) -> np.ndarray:
@@ -816,7 +532,7 @@ class RrtStarPlanner:
         if failures:
             planner = copy.copy(self)
             planner.config = replace(self.config,
-                                     seed=(self.config.seed + failures) % (_MAX_SEED + 1))
+                                     seed=(self.config.seed + failures) % (MAX_SEED + 1))
         try:
             return planner.plan(start, goal)
         except PlanningError:
@@ -914,128 +630,13 @@ class RrtStarPlanner:
         return FootprintChecks(self.footprint, self.config.clearance,
                                 GridObstacles(self.grid))
 
-    @staticmethod
-    def _footprint_problem(checks: FootprintChecks, waypoints: np.ndarray,
-                           start_heading: float | None, goal_heading: float | None) -> str | None:
-        """Check every pose of a waypoint path for a polygon footprint (see `path_problem`).
-
-        The same queries as the planner's motions (`FootprintPlan`), so a path RRT* built
-        passes: segments by the swept polygon, turns by `FootprintChecks.turn_range` (from
-        the start heading, from the incoming heading at a corner, and from the goal heading
-        backwards at the goal).
-        """
-        points = _distinct(np.atleast_2d(np.asarray(waypoints, dtype=float))[:, :2])
-        if len(points) == 1:  # a turn in place only
-            if start_heading is None or goal_heading is None:
-                return None
-            delta = wrap_heading(goal_heading - start_heading)
-            turns = checks.turn_range(points[0], start_heading)
-            if turns.allows(delta):
-                return None
-            return (f'turning in place at {_xy(points[0])} from heading {start_heading:.3g} to '
-                    f'{goal_heading:.3g} rad: {turns.why(delta)}')
-        # math.atan2, as the planner's motions compute it (bit for bit the same headings)
-        headings = [math.atan2(b[1] - a[1], b[0] - a[0])
-                    for a, b in zip(points[:-1], points[1:], strict=True)]
-        if start_heading is not None:
-            delta = wrap_heading(headings[0] - start_heading)
-            turns = checks.turn_range(points[0], start_heading)
-            if not turns.allows(delta):
-                return (f'turning in place at the start {_xy(points[0])} from heading '
-                        f'{start_heading:.3g} to {headings[0]:.3g} rad: {turns.why(delta)}')
-        for i, (a, b) in enumerate(zip(points[:-1], points[1:], strict=True)):
-            hit = checks.sweep_hit(a, b)
-            if hit >= 0:
-                return (f'segment {i} from {_xy(a)} to {_xy(b)}: the footprint driven along it '
-                        f'at heading {headings[i]:.3g} rad meets '
-                        f'{checks.obstacles.describe(hit)} grown by the clearance '
-                        f'{checks.clearance:g} m')
-            if i == 0:
-                continue
-            delta = wrap_heading(headings[i] - headings[i - 1])
-            if abs(delta) <= NO_TURN:
-                continue
-            turns = checks.turn_range(a, headings[i - 1])
-            if not turns.allows(delta):
-                return (f'turning in place at waypoint {i} {_xy(a)} from heading '
-                        f'{headings[i - 1]:.3g} to {headings[i]:.3g} rad: {turns.why(delta)}')
-        if goal_heading is not None:
-            delta = wrap_heading(goal_heading - headings[-1])
-            turns = checks.turn_range(points[-1], goal_heading)
-            if not turns.allows(-delta):
-                return (f'turning in place at the goal {_xy(points[-1])} from heading '
-                        f'{headings[-1]:.3g} to the goal heading {goal_heading:.3g} rad: '
-                        f'{turns.why(-delta)}')
-        return None
-
-    def _solve(self, start_xy: np.ndarray, goal_xy: np.ndarray,
-               state_free: Callable[[np.ndarray], bool],
-               motion_free: Callable[[np.ndarray, np.ndarray], bool],
-               failure_hint: Callable[[], str]) -> list[np.ndarray]:
-        """Run OMPL's RRT*; the caller holds the lock (OMPL's seed is process-wide).
-
-        Returns:
-            The (M, 2) path: with ``simplify``, the simplified one and then RRT*'s own.
-
-        """
+    def _rrt_star(self, start_xy: np.ndarray, goal_xy: np.ndarray,
+                  state_free: Callable[[np.ndarray], bool],
+                  motion_free: Callable[[np.ndarray, np.ndarray], bool],
+                  failure_hint: Callable[[], str]) -> list[np.ndarray]:
+        """Run RRT* (core/rrt_star.py) with this planner's bounds and settings."""
         config = self.config
-        with _ompl_log_level(ou.LOG_NONE):
-            # OMPL logs an error when reseeding after its first use, yet reseeds all the same
-            # (the determinism test checks it): silence the false alarm.
-            ou.RNG.setSeed(config.seed + 1)
-
-        space = ob.RealVectorStateSpace(2)
-        bounds = ob.RealVectorBounds(2)
-        xmin, xmax, ymin, ymax = self.bounds
-        bounds.setLow(0, xmin)
-        bounds.setHigh(0, xmax)
-        bounds.setLow(1, ymin)
-        bounds.setHigh(1, ymax)
-        space.setBounds(bounds)
-
-        setup = og.SimpleSetup(space)
-        info = setup.getSpaceInformation()
-        setup.setStateValidityChecker(_StateValidity(state_free, self.bounds))
-        info.setMotionValidator(_ExactMotionValidator(info, motion_free))
-
-        start_state = space.allocState()
-        goal_state = space.allocState()
-        for i in range(2):
-            start_state[i] = float(start_xy[i])
-            goal_state[i] = float(goal_xy[i])
-        setup.setStartAndGoalStates(start_state, goal_state)
-        setup.setOptimizationObjective(ob.PathLengthOptimizationObjective(info))
-
-        planner = og.RRTstar(info)
-        if config.range > 0:
-            planner.setRange(config.range)
-        setup.setPlanner(planner)
-        setup.setup()
-
-        # No iteration-count condition in OMPL's bindings: RRT* evaluates the condition once
-        # per iteration, so a callable on numIterations() stops after exactly `iterations`.
-        count = planner.numIterations
-        limit = config.iterations
-        by_iterations = ob.PlannerTerminationCondition(lambda: count() >= limit)
-        by_time = ob.timedPlannerTerminationCondition(config.time_limit)
-        status = setup.solve(ob.plannerOrTerminationCondition(by_iterations, by_time))
-
-        if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION:
-            msg = (
-                f'RRT* found no collision-free path from ({start_xy[0]:g}, {start_xy[1]:g}) '
-                f'to ({goal_xy[0]:g}, {goal_xy[1]:g}) in {count()} iterations '
-                f'(limit {limit}, time limit {config.time_limit:g} s): {status.asString()}'
-                f'{failure_hint()}'
-            )
-            raise PlanningError(msg)
-        paths = [self._states(setup)]
-        if config.simplify:
-            setup.simplifySolution()
-            paths.insert(0, self._states(setup))
-        return paths
-
-    @staticmethod
-    def _states(setup: og.SimpleSetup) -> np.ndarray:
-        """Return the solution path's states as (M, 2) points."""
-        states = setup.getSolutionPath().getStates()
-        return np.array([[state[0], state[1]] for state in states], dtype=float)
+        return rrt_star(start_xy, goal_xy, bounds=self.bounds, state_free=state_free,
+                        motion_free=motion_free, failure_hint=failure_hint, seed=config.seed,
+                        iterations=config.iterations, time_limit=config.time_limit,
+                        extension=config.range, simplify=config.simplify)

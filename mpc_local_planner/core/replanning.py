@@ -68,7 +68,7 @@ import numpy as np
 from mpc_local_planner.core.diagnostics import PlanTrigger
 
 if TYPE_CHECKING:
-    from mpc_local_planner.core.planner import EscapeGrid
+    from mpc_local_planner.core.free_space import EscapeGrid
 
 __all__ = [
     'PROGRESS_RADIUS',

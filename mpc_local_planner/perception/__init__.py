@@ -13,4 +13,10 @@
 # limitations under the License.
 
 
-"""What the robot knows: scans and grids to convex obstacles (no rclpy)."""
+"""What the robot knows, without rclpy.
+
+The simulated laser (laser.py, raycast.py), scans read as REP 117 says (scans.py), scans to
+convex obstacles with a memory (scan_obstacles.py), grids to rectangles and the planner's grid
+(grids.py), the obstacles near the robot as the MPC takes them (local_obstacles.py), and the
+robot's pose in the map frame (pose_history.py, localization.py).
+"""

@@ -34,7 +34,7 @@ from scipy.ndimage import binary_dilation, distance_transform_edt
 from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import points_along
-from mpc_local_planner.perception.scan_obstacles import (
+from mpc_local_planner.perception.scans import (
     classify_beams,
     compose_pose,
     Scan,

@@ -45,7 +45,7 @@ import numpy as np
 
 from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.perception.raycast import TrueGeometry
-from mpc_local_planner.perception.scan_obstacles import Scan
+from mpc_local_planner.perception.scans import Scan
 
 if TYPE_CHECKING:
     from mpc_local_planner.worlds.world import Shape

@@ -30,8 +30,7 @@ from typing import Sequence
 
 import numpy as np
 
-from mpc_local_planner.core.controller import within_faces
-from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
+from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, within_faces
 from mpc_local_planner.perception.grids import grid_rectangles
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
 from mpc_local_planner.worlds.map_files import OccupancyMap

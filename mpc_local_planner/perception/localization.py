@@ -46,7 +46,7 @@ import numpy as np
 
 from mpc_local_planner.core.paths import wrap_angle
 from mpc_local_planner.perception.pose_history import PoseHistory
-from mpc_local_planner.perception.scan_obstacles import compose_pose
+from mpc_local_planner.perception.scans import compose_pose
 
 __all__ = ['compose', 'invert', 'LocalizationError', 'LocalizedPose']
 

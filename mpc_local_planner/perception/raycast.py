@@ -76,7 +76,8 @@ class TrueGeometry:
         """Pack the polygons' edges, faces and bounding disks into padded arrays.
 
         Vectorised over all polygons at once: the obstacle memory builds a geometry of what
-        it remembers at every scan, and a Python loop per polygon cost 1.5 ms for 44 of them.
+        it remembers at every scan (a Python loop per polygon: docs/design/measurements.md,
+        TrueGeometry packing).
         """
         count = len(polygons)
         sizes = np.array([p.num_faces for p in polygons], dtype=np.int64)

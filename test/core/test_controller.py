@@ -21,14 +21,9 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.config import MpcConfig
-from mpc_local_planner.core.controller import (
-    ControllerSettings,
-    ControlOutput,
-    MpcController,
-    Reason,
-    ROTATE_STEPS,
-    within_faces,
-)
+from mpc_local_planner.core.control_output import ControlOutput, Reason
+from mpc_local_planner.core.controller import MpcController, ROTATE_STEPS
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path, WaypointPath
@@ -357,38 +352,3 @@ def test_new_obstacles_keep_the_warm_start_and_the_lyapunov_history() -> None:
     same = controller.grown_obstacles
     controller.set_obstacles(list(controller.obstacles))  # the same objects: nothing to do
     assert controller.grown_obstacles == same
-
-
-def test_polygons_with_too_many_faces_become_a_rectangle_around_them() -> None:
-    decagon = ConvexPolygon.from_circle(1.0, 2.0, 0.5, sides=10)
-    box = ConvexPolygon.from_box(0.0, 0.0, 1.0, 1.0)
-    fitted = within_faces([decagon, box], 8)
-    assert fitted[1] is box
-    assert fitted[0].num_faces == 4
-    assert np.all(fitted[0].contains(decagon.vertices, margin=1e-9))
-    area = np.ptp(fitted[0].vertices[:, 0]) * np.ptp(fitted[0].vertices[:, 1])
-    assert area < 1.2 * (2 * 0.5 / np.cos(np.pi / 10)) ** 2
-
-
-def test_a_sliver_with_needle_corners_becomes_its_rectangle_before_it_is_grown() -> None:
-    # a box face seen at a grazing angle, as the laser's hull made it in a stalled run: its
-    # 5 degree corners grew by 0.23 m into a 10 m needle across the robot's free path
-    sliver = ConvexPolygon.from_vertices(
-        [[2.9747, 0.304], [2.7745, 0.3035], [2.8144, 0.3], [3.0145, 0.3]])
-    robot = np.array([[4.34, 0.166]])
-    assert sliver.inflate(0.23).signed_distance_lower_bound(robot)[0] < 0.0
-    (fitted,) = within_faces([sliver], 8)
-    assert fitted.num_faces == 4
-    assert np.all(fitted.contains(sliver.vertices, margin=1e-9))
-    grown = fitted.inflate(0.23)
-    assert np.ptp(grown.vertices[:, 0]) < np.ptp(sliver.vertices[:, 0]) + 2 * 0.23 + 1e-6
-    assert grown.signed_distance_lower_bound(robot)[0] > 1.0
-
-
-def test_well_shaped_polygons_pass_unchanged() -> None:
-    # (every triangle has a corner of at most 60 degrees: triangles become rectangles)
-    thin_box = ConvexPolygon.from_box(0.0, 0.0, 1.0, 0.1)
-    hexagon = ConvexPolygon.from_circle(0.0, 0.0, 0.5, sides=6)
-    fitted = within_faces([thin_box, hexagon], 8)
-    assert fitted[0] is thin_box
-    assert fitted[1] is hexagon

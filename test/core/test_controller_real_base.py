@@ -25,7 +25,9 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.config import MpcConfig
-from mpc_local_planner.core.controller import ControllerSettings, MpcController, Reason
+from mpc_local_planner.core.control_output import Reason
+from mpc_local_planner.core.controller import MpcController
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.reality import Base, Reality
 from mpc_local_planner.evaluation.rollout import rollout, StopRule

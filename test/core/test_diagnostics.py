@@ -20,7 +20,8 @@ import math
 import numpy as np
 
 from mpc_local_planner.core.config import MpcConfig
-from mpc_local_planner.core.controller import Blockage, ControlOutput, MpcController, Reason
+from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reason
+from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.diagnostics import (
     ControllerDiagnostics,
     Key,

@@ -206,7 +206,7 @@ def test_clearance_is_a_lower_bound_exact_at_contact() -> None:
         poses = np.column_stack([rng.uniform(-0.6, 1.6, 400), rng.uniform(-0.6, 1.6, 400),
                                  rng.uniform(-math.pi, math.pi, 400)])
         # Each pose an arc of one sample, every value asked to be exact.
-        bound = dwa._clearance(np.array([0.5, 0.5]), poses[:, None, :2], poses[:, None, 2],
+        bound = dwa.clearance(np.array([0.5, 0.5]), poses[:, None, :2], poses[:, None, 2],
                                np.full(len(poses), np.inf))[:, 0]
         for pose, value in zip(poses, bound, strict=True):
             overlap = any(_overlaps(footprint, pose, o) if footprint.vertices is not None

@@ -14,6 +14,7 @@ from mpc_local_planner.core.obstacles import (
     point_in_any,
     polygon_separation,
     segment_collides,
+    within_faces,
 )
 
 BOX = [ConvexPolygon.from_box(0.0, 0.0, 1.0, 1.0)]
@@ -276,3 +277,38 @@ def test_face_weights_write_any_direction_with_two_adjacent_faces() -> None:
     # a face normal itself is that face alone
     box = ConvexPolygon.from_box(0.0, 0.0, 1.0, 1.0)
     np.testing.assert_allclose(face_weights(box.A, box.A), np.eye(4), atol=1e-12)
+
+
+def test_polygons_with_too_many_faces_become_a_rectangle_around_them() -> None:
+    decagon = ConvexPolygon.from_circle(1.0, 2.0, 0.5, sides=10)
+    box = ConvexPolygon.from_box(0.0, 0.0, 1.0, 1.0)
+    fitted = within_faces([decagon, box], 8)
+    assert fitted[1] is box
+    assert fitted[0].num_faces == 4
+    assert np.all(fitted[0].contains(decagon.vertices, margin=1e-9))
+    area = np.ptp(fitted[0].vertices[:, 0]) * np.ptp(fitted[0].vertices[:, 1])
+    assert area < 1.2 * (2 * 0.5 / np.cos(np.pi / 10)) ** 2
+
+
+def test_a_sliver_with_needle_corners_becomes_its_rectangle_before_it_is_grown() -> None:
+    # a box face seen at a grazing angle, as the laser's hull made it in a stalled run: its
+    # 5 degree corners grew by 0.23 m into a 10 m needle across the robot's free path
+    sliver = ConvexPolygon.from_vertices(
+        [[2.9747, 0.304], [2.7745, 0.3035], [2.8144, 0.3], [3.0145, 0.3]])
+    robot = np.array([[4.34, 0.166]])
+    assert sliver.inflate(0.23).signed_distance_lower_bound(robot)[0] < 0.0
+    (fitted,) = within_faces([sliver], 8)
+    assert fitted.num_faces == 4
+    assert np.all(fitted.contains(sliver.vertices, margin=1e-9))
+    grown = fitted.inflate(0.23)
+    assert np.ptp(grown.vertices[:, 0]) < np.ptp(sliver.vertices[:, 0]) + 2 * 0.23 + 1e-6
+    assert grown.signed_distance_lower_bound(robot)[0] > 1.0
+
+
+def test_well_shaped_polygons_pass_unchanged() -> None:
+    # (every triangle has a corner of at most 60 degrees: triangles become rectangles)
+    thin_box = ConvexPolygon.from_box(0.0, 0.0, 1.0, 0.1)
+    hexagon = ConvexPolygon.from_circle(0.0, 0.0, 0.5, sides=6)
+    fitted = within_faces([thin_box, hexagon], 8)
+    assert fitted[0] is thin_box
+    assert fitted[1] is hexagon

@@ -102,7 +102,7 @@ def test_rounded_corners_keep_the_positions_on_the_polyline_and_the_ends_exact()
     assert path.goal[2] == pytest.approx(sharp.goal[2])
     # the same poses as the sharp polyline away from the knots; near them, within
     # smoothing / 4 of path parameter (position along the path, or turn_length * heading)
-    away = np.min(np.abs(s[:, None] - sharp._s_knots[None, 1:-1]), axis=1) > 0.2
+    away = np.min(np.abs(s[:, None] - sharp.s_knots[None, 1:-1]), axis=1) > 0.2
     np.testing.assert_allclose(poses[away], sharp.pose(s[away]), atol=1e-12)
     scale = np.array([1.0, 1.0, 0.25])
     assert np.max(np.abs(poses - sharp.pose(s)) * scale) <= 0.1 / 4 + 1e-12
@@ -114,7 +114,7 @@ def test_rounded_path_is_differentiable_at_its_knots() -> None:
     sharp = WaypointPath(waypoints, start_heading=0.0, smoothing=1e-9)
     s = ca.SX.sym('s')
     slope = ca.Function('dp', [s], [ca.jacobian(path.symbolic(s, ca.DM(path.parameters())), s)])
-    for knot in sharp._s_knots[1:-1]:  # straight -> turn in place, turn -> straight
+    for knot in sharp.s_knots[1:-1]:  # straight -> turn in place, turn -> straight
         left, right = (np.asarray(slope(knot + d)).ravel() for d in (-1e-9, 1e-9))
         np.testing.assert_allclose(left, right, atol=1e-6)
         # the polyline itself has a kink there: its one-sided slopes differ

@@ -22,9 +22,9 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.errors import PlanningError
+from mpc_local_planner.core.free_space import grid_bounds
 from mpc_local_planner.core.obstacles import ConvexPolygon, point_in_any, segment_collides
 from mpc_local_planner.core.planner import (
-    grid_bounds,
     path_length,
     PlannerConfig,
     RrtStarPlanner,

@@ -27,6 +27,7 @@ import math
 import numpy as np
 import pytest
 
+from mpc_local_planner.core import planner as planner_module
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.obstacles import ConvexPolygon
@@ -226,11 +227,12 @@ def test_a_path_whose_corner_turn_sweeps_into_an_obstacle_is_refused() -> None:
 
 def test_plan_refuses_a_path_from_rrt_star_that_fails_the_final_check(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    # RRT*'s own motions keep corners where the robot can turn; this stands in for a path
-    # that escaped them (e.g. from a future simplifier): the final check must refuse it
+    # RRT*'s own motions keep corners where the robot can turn; this (the OMPL run replaced)
+    # stands in for a path that escaped them (e.g. from a future simplifier): the final
+    # check must refuse it
     planner = RrtStarPlanner([CORNER_BOX, ConvexPolygon.from_box(0.5, 1.5, 0.7, 2.5)],
                              (-1.0, 3.0, -1.0, 4.0), config=TIGHT)
-    monkeypatch.setattr(planner, '_solve', lambda *args: [CORNER_PATH.copy()])
+    monkeypatch.setattr(planner_module, 'rrt_star', lambda *args, **kwargs: [CORNER_PATH.copy()])
 
     with pytest.raises(PlanningError, match=r'cannot follow, refused: turning in place at '
                                             r'waypoint 1 \(1, 1\)'):
@@ -244,7 +246,8 @@ def test_a_simplified_path_that_fails_the_final_check_falls_back_to_rrt_stars_ow
     planner = RrtStarPlanner([CORNER_BOX, ConvexPolygon.from_box(0.5, 1.5, 0.7, 2.5)],
                              (-1.0, 3.0, -1.0, 4.0), config=TIGHT)
     detour = np.array([[0.0, 1.0], [0.0, 3.0], [1.0, 3.0]])
-    monkeypatch.setattr(planner, '_solve', lambda *args: [CORNER_PATH.copy(), detour.copy()])
+    monkeypatch.setattr(planner_module, 'rrt_star',
+                        lambda *args, **kwargs: [CORNER_PATH.copy(), detour.copy()])
 
     waypoints = planner.plan(np.array([0.0, 1.0, 0.0]), np.array([1.0, 3.0, math.pi / 2]))
 

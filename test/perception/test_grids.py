@@ -30,7 +30,7 @@ from mpc_local_planner.perception.grids import (
     PlanningGrid,
 )
 from mpc_local_planner.perception.laser import SimulatedLaser
-from mpc_local_planner.perception.scan_obstacles import Scan
+from mpc_local_planner.perception.scans import Scan
 from mpc_local_planner.worlds.map_files import OccupancyMap
 
 L_SHAPE = np.array([  # row 0 at the bottom

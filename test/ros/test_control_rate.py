@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from typing import Callable
 
+from conftest import SimClock
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
@@ -49,16 +50,15 @@ FREQUENCY = 20.0  # the default control_frequency (Hz)
 DT = 0.01  # simulated seconds per test tick: a fifth of a control period
 
 
-class Base:
-    """Simulated time and a base that follows cmd_vel exactly, publishing odometry.
+class Base(SimClock):
+    """A base that follows cmd_vel exactly, publishing odometry, in the test's simulated time.
 
-    Each tick advances time by DT, moves the pose along the latest cmd_vel (the unicycle),
-    publishes odometry (pose and twist) while `publishing`, then /clock, and spins.
+    Each tick (every DT) moves the pose along the latest cmd_vel (the unicycle) and publishes
+    odometry (pose and twist) while `publishing`.
     """
 
     def __init__(self, ros, probe) -> None:
-        self.ros, self.probe = ros, probe
-        self.t = 1.0  # 0 is "no time yet" for a node with use_sim_time
+        super().__init__(ros, probe, dt=DT)
         self.state = WORLD.start.copy()
         self.model = Unicycle()
         self.publishing = True
@@ -66,20 +66,16 @@ class Base:
     def command(self) -> np.ndarray:
         return u_from_twist(self.probe.cmds[-1]) if self.probe.cmds else np.zeros(2)
 
-    def tick(self) -> None:
+    def publish(self) -> None:
         u = self.command()
         self.state = np.asarray(self.model.step(self.state, u, DT), dtype=float).reshape(3)
-        self.t += DT
         if self.publishing:
             self.probe.odom_pub.publish(state_to_odometry(self.state, u,
                                                           stamp=seconds_to_stamp(self.t)))
-        self.probe.publish_clock(self.t)
-        for _ in range(6):
-            self.ros.executor.spin_once(timeout_sec=0.002)
 
     def run_until(self, condition: Callable[[], bool], timeout: float = 60.0) -> bool:
         """Tick until condition() holds or timeout wall seconds pass; return condition()."""
-        return self.ros.tick_until(self.tick, condition, timeout)
+        return super().run_until(condition, timeout)
 
 
 def start(ros, **params) -> tuple[MpcControllerNode, object, Base]:

@@ -28,6 +28,7 @@ import subprocess
 import sys
 import weakref
 
+from conftest import SimClock
 from geometry_msgs.msg import PolygonStamped, TwistStamped
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
@@ -92,27 +93,15 @@ def get_state(ros, probe: LifecycleProbe) -> str:
     return call(ros, probe.state_client, GetState.Request()).current_state.label
 
 
-class Clock:
-    """Simulated time owned by the test: each tick publishes odometry, then /clock."""
+class Clock(SimClock):
+    """The test's simulated time (conftest's SimClock): each tick publishes odometry."""
 
     def __init__(self, ros, probe) -> None:
-        self.ros, self.probe = ros, probe
-        self.t = 1.0  # 0 is "no time yet" for a node with use_sim_time
+        super().__init__(ros, probe, dt=TICK)
         self.odom = np.array(WORLD.start, dtype=float)
 
-    def tick(self) -> None:
-        self.t += TICK
+    def publish(self) -> None:
         self.probe.publish_odom(self.odom, stamp=self.t)
-        self.probe.publish_clock(self.t)
-        for _ in range(6):
-            self.ros.executor.spin_once(timeout_sec=0.002)
-
-    def run_until(self, condition, timeout: float = 30.0) -> bool:
-        return self.ros.spin_until(lambda: condition() or self.tick(), timeout=timeout)
-
-    def run_for(self, seconds: float) -> None:
-        for _ in range(int(math.ceil(seconds / TICK))):
-            self.tick()
 
 
 def published(node: Node) -> set[str]:

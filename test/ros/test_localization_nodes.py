@@ -25,6 +25,7 @@ import math
 import time
 from typing import Callable
 
+from conftest import SimClock
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 import numpy as np
 import pytest
@@ -58,16 +59,14 @@ DRIFT = np.array([0.3, -0.2, 0.1])
 NO_POSE = "no pose in the plan's frame"
 
 
-class DriftingRobot:
-    """Simulated time and a unicycle driven by cmd_vel; odometry = inverse(DRIFT) * truth.
+class DriftingRobot(SimClock):
+    """A unicycle driven by cmd_vel in simulated time; odometry = inverse(DRIFT) * truth.
 
-    Each tick integrates the latest command over dt, publishes the odometry and /clock,
-    and spins the executor.
+    Each tick integrates the latest command over dt and publishes the odometry.
     """
 
     def __init__(self, ros, probe, dt: float = 0.05) -> None:
-        self.ros, self.probe, self.dt = ros, probe, dt
-        self.t = 1.0
+        super().__init__(ros, probe, dt=dt)
         self.truth = np.array(WORLD.start[:3], dtype=float)
         self.localizer = probe.create_publisher(PoseWithCovarianceStamped, 'amcl_pose',
                                                 LOCALIZER_QOS)
@@ -76,16 +75,12 @@ class DriftingRobot:
     def odometry(self) -> np.ndarray:
         return compose(invert(DRIFT), self.truth)
 
-    def tick(self) -> None:
+    def publish(self) -> None:
         v, omega = u_from_twist(self.probe.cmds[-1]) if self.probe.cmds else (0.0, 0.0)
         x, y, theta = self.truth
         self.truth = np.array([x + v * math.cos(theta) * self.dt,
                                y + v * math.sin(theta) * self.dt, theta + omega * self.dt])
-        self.t += self.dt
         self.probe.publish_odom(self.odometry, stamp=self.t)
-        self.probe.publish_clock(self.t)
-        for _ in range(6):
-            self.ros.executor.spin_once(timeout_sec=0.002)
 
     def localize(self) -> None:
         """Publish the true pose in map, stamped now (odometry of that stamp is kept)."""
@@ -98,14 +93,17 @@ class DriftingRobot:
 
     def run_until(self, condition: Callable[[], bool], timeout: float = 60.0,
                   localize_every: int = 0) -> bool:
-        deadline = time.monotonic() + timeout
+        """Tick until condition() holds (see SimClock), localizing every localize_every ticks."""
         ticks = 0
-        while not condition() and time.monotonic() < deadline:
+
+        def tick() -> None:
+            nonlocal ticks
             self.tick()
             ticks += 1
             if localize_every and ticks % localize_every == 0:
                 self.localize()
-        return condition()
+
+        return self.ros.tick_until(tick, condition, timeout)
 
 
 def test_the_controller_stops_until_the_localizer_speaks_then_follows_the_plan_in_map(

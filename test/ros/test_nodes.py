@@ -17,9 +17,9 @@ from __future__ import annotations
 
 import math
 
-from diagnostic_msgs.msg import DiagnosticArray
+from conftest import Probe
 from geometry_msgs.msg import PoseStamped, Twist
-from nav_msgs.msg import Odometry, Path
+from nav_msgs.msg import Odometry
 import numpy as np
 import pytest
 from rclpy.lifecycle import LifecycleNode
@@ -29,11 +29,7 @@ from rclpy.parameter import Parameter
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.controller import ControlOutput, Reason
 from mpc_local_planner.core.diagnostics import (
-    CONTROLLER_DIAGNOSTICS_TOPIC,
-    ControllerDiagnostics,
     Level,
-    PLANNER_DIAGNOSTICS_TOPIC,
-    PlannerDiagnostics,
 )
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import segment_collides
@@ -42,7 +38,6 @@ from mpc_local_planner.ros.conversions import (
     path_to_poses,
     poses_to_path,
     stamp_to_seconds,
-    state_to_odometry,
     u_from_twist,
     yaw_to_quaternion,
 )
@@ -51,14 +46,6 @@ from mpc_local_planner.ros.mpc_controller_node import MpcControllerNode
 from mpc_local_planner.ros.mpc_controller_outputs import log_line
 from mpc_local_planner.ros.mpc_controller_parameters import load_obstacles
 from mpc_local_planner.ros.node_main import autostart
-from mpc_local_planner.ros.qos import (
-    CMD_VEL_QOS,
-    DIAGNOSTICS_QOS,
-    LOCAL_PLAN_QOS,
-    ODOM_QOS,
-    PLAN_QOS,
-    PLANNER_DIAGNOSTICS_QOS,
-)
 from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
 from mpc_local_planner.worlds.world import paper_world
 
@@ -66,46 +53,6 @@ pytestmark = pytest.mark.dds  # DDS: every test spins nodes in an rclpy context
 WORLD = paper_world()
 PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
                  [2.5, 0.0, WORLD.goal[2]]])
-
-
-class Probe(Node):
-    """A test node: publishes what a node listens to and keeps what it says."""
-
-    def __init__(self, context) -> None:
-        super().__init__('probe', context=context)
-        self.cmd_pub = self.create_publisher(Twist, 'cmd_vel', CMD_VEL_QOS)
-        self.odom_pub = self.create_publisher(Odometry, 'odom', ODOM_QOS)
-        self.plan_pub = self.create_publisher(Path, 'plan', PLAN_QOS)
-        self.goal_pub = self.create_publisher(PoseStamped, 'goal_pose', 10)
-        self.odoms: list[Odometry] = []
-        self.cmds: list[Twist] = []
-        self.plans: list[Path] = []
-        self.local_plans: list[Path] = []
-        self.diagnostics: list[ControllerDiagnostics] = []
-        self.messages: list[str] = []  # DiagnosticStatus.message, one per step
-        self.planner_outcomes: list[PlannerDiagnostics] = []
-        self.create_subscription(Odometry, 'odom', self.odoms.append, ODOM_QOS)
-        self.create_subscription(Twist, 'cmd_vel', self.cmds.append, CMD_VEL_QOS)
-        self.create_subscription(Path, 'plan', self.plans.append, PLAN_QOS)
-        self.create_subscription(Path, 'local_plan', self.local_plans.append, LOCAL_PLAN_QOS)
-        self.create_subscription(DiagnosticArray, CONTROLLER_DIAGNOSTICS_TOPIC, self._diag,
-                                 DIAGNOSTICS_QOS)
-        self.create_subscription(DiagnosticArray, PLANNER_DIAGNOSTICS_TOPIC, self._planner,
-                                 PLANNER_DIAGNOSTICS_QOS)
-
-    def _diag(self, msg: DiagnosticArray) -> None:
-        status = msg.status[0]
-        self.diagnostics.append(ControllerDiagnostics.from_values(
-            (kv.key, kv.value) for kv in status.values))
-        self.messages.append(status.message)
-
-    def _planner(self, msg: DiagnosticArray) -> None:
-        self.planner_outcomes.append(PlannerDiagnostics.from_values(
-            (kv.key, kv.value) for kv in msg.status[0].values))
-
-    def publish_odom(self, state: np.ndarray) -> None:
-        self.odom_pub.publish(state_to_odometry(state, np.zeros(2),
-                                                stamp=self.get_clock().now().to_msg()))
 
 
 def started(node: Node) -> Node:
@@ -130,7 +77,7 @@ def run_simulator(ros, command: tuple[float, float], duration: float) -> list[Od
         Parameter('publish_clock', value=True), Parameter('real_time_factor', value=10.0),
         Parameter('rate', value=50.0), Parameter('cmd_timeout', value=0.0),
         Parameter('initial_pose', value=[1.0, 2.0, 0.5])]))
-    probe = ros.add(Probe(ros.context))
+    probe = ros.probe()
     assert ros.spin_until(lambda: probe.cmd_pub.get_subscription_count() > 0)
     twist = Twist()
     twist.linear.x, twist.angular.z = command
@@ -175,7 +122,7 @@ def make_controller(ros, **params) -> tuple[MpcControllerNode, Probe]:
     overrides = [Parameter(k, value=v) for k, v in params.items()]
     controller = started(ros.add(
         MpcControllerNode(context=ros.context, parameter_overrides=overrides)))
-    probe = ros.add(Probe(ros.context))
+    probe = ros.probe()
     return controller, probe
 
 
@@ -183,9 +130,9 @@ def test_controller_without_a_plan_commands_zero_and_says_why(ros) -> None:
     _, probe = make_controller(ros)
     assert ros.spin_until(lambda: probe.odom_pub.get_subscription_count() > 0)
     probe.publish_odom(WORLD.start)
-    assert ros.spin_until(lambda: any(d.reason is Reason.NO_PLAN for d in probe.diagnostics))
-    index = next(i for i, d in enumerate(probe.diagnostics) if d.reason is Reason.NO_PLAN)
-    assert probe.messages[index] == 'no plan yet' and probe.diagnostics[index].detail == ''
+    assert ros.spin_until(lambda: any(d.step.reason is Reason.NO_PLAN for d in probe.diagnostics))
+    no_plan = next(d for d in probe.diagnostics if d.step.reason is Reason.NO_PLAN)
+    assert no_plan.message == 'no plan yet' and no_plan.step.detail == ''
     assert probe.cmds
     assert all(c.linear.x == 0.0 and c.angular.z == 0.0 for c in probe.cmds)
 
@@ -197,11 +144,11 @@ def test_controller_answers_odometry_and_a_plan_with_a_bounded_cmd_vel(ros) -> N
 
     def driving() -> bool:
         probe.publish_odom(WORLD.start)
-        return any(d.source == 'solver' for d in probe.diagnostics)
+        return any(d.step.source == 'solver' for d in probe.diagnostics)
 
     assert ros.spin_until(driving, timeout=30.0)
     assert ros.spin_until(lambda: len(probe.local_plans) > 0)
-    solved = next(d for d in probe.diagnostics if d.source == 'solver')
+    solved = next(d.step for d in probe.diagnostics if d.step.source == 'solver')
     assert 0.0 <= solved.s <= 1.0
     assert solved.value > 0 and solved.solve_ms > 0 and solved.status
     assert solved.reason is Reason.TRACKING and solved.level is Level.OK
@@ -297,7 +244,7 @@ def test_planner_path_starts_at_odometry_ends_at_goal_and_is_collision_free(ros)
     goal = [float(v) for v in WORLD.goal]
     planner = started(ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
         Parameter('goal', value=goal), Parameter('world_file', value='paper_obstacle.yaml')])))
-    probe = ros.add(Probe(ros.context))
+    probe = ros.probe()
     start = np.array([0.1, -0.2, 0.3])
 
     def planned() -> bool:
@@ -331,7 +278,7 @@ def test_planner_path_starts_at_odometry_ends_at_goal_and_is_collision_free(ros)
 def test_planner_says_on_its_diagnostics_why_no_plan_comes_and_when_one_does(ros) -> None:
     planner = started(ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
         Parameter('world_file', value='paper_obstacle')])))
-    probe = ros.add(Probe(ros.context))
+    probe = ros.probe()
     assert ros.spin_until(lambda: probe.odom_pub.get_subscription_count() > 0)
     probe.publish_odom(WORLD.start)
     assert ros.spin_until(lambda: planner.robot_pose is not None)

@@ -29,6 +29,7 @@ import sys
 import time
 from typing import Callable
 
+from conftest import SimClock
 from geometry_msgs.msg import PoseStamped, Twist
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
@@ -83,25 +84,16 @@ def started(node: Node) -> Node:
     return node
 
 
-class SimClock:
-    """Simulated time owned by the test: each tick publishes odometry (if set), then /clock.
-
-    Args:
-        ros: the harness whose executor is spun between ticks.
-        probe: the Probe that publishes.
-        dt: simulated seconds per tick.
-
-    """
+class OdomClock(SimClock):
+    """The test's simulated time (conftest's SimClock): each tick publishes odometry, if set."""
 
     def __init__(self, ros, probe, dt: float = 0.05) -> None:
-        self.ros, self.probe, self.dt = ros, probe, dt
-        self.t = 1.0  # 0 is "no time yet" for a node with use_sim_time
+        super().__init__(ros, probe, dt=dt)
         self.odom: np.ndarray | Odometry | None = None
         self.last_odom_stamp: float | None = None
 
-    def tick(self) -> None:
-        """Advance time by dt, publish, and let every node react."""
-        self.t += self.dt
+    def publish(self) -> None:
+        """Publish the odometry (a message restamped, or a state) at t."""
         if isinstance(self.odom, Odometry):
             msg = copy.deepcopy(self.odom)
             msg.header.stamp = seconds_to_stamp(self.t)
@@ -110,13 +102,6 @@ class SimClock:
             self.probe.publish_odom(self.odom, stamp=self.t)
         if self.odom is not None:
             self.last_odom_stamp = self.t
-        self.probe.publish_clock(self.t)
-        for _ in range(6):
-            self.ros.executor.spin_once(timeout_sec=0.002)
-
-    def run_until(self, condition: Callable[[], bool], timeout: float = 30.0) -> bool:
-        """Tick until condition() holds or timeout wall seconds pass; return condition()."""
-        return self.ros.tick_until(self.tick, condition, timeout)
 
 
 def check_commands(probe) -> np.ndarray:
@@ -144,13 +129,13 @@ def errors(probe, node: str, text: str) -> list[str]:
     return [line for line in probe.log_lines(node, Log.ERROR) if text in line]
 
 
-def start_controller(ros, **params) -> tuple[MpcControllerNode, object, SimClock]:
+def start_controller(ros, **params) -> tuple[MpcControllerNode, object, OdomClock]:
     """A controller in simulated time with a probe that owns the clock; tracking PLAN."""
     overrides = [Parameter('use_sim_time', value=True)]
     overrides += [Parameter(k, value=v) for k, v in params.items()]
     node = started(ros.add(MpcControllerNode(context=ros.context, parameter_overrides=overrides)))
     probe = ros.probe(use_sim_time=True)
-    clock = SimClock(ros, probe)
+    clock = OdomClock(ros, probe)
     assert ros.spin_until(lambda: probe.plan_pub.get_subscription_count() > 0
                           and probe.odom_pub.get_subscription_count() > 0)
     if not params.get('analytic_path'):
@@ -1019,18 +1004,18 @@ BAD_SCANS = {
 }
 
 
-class ScanningClock(SimClock):
-    """SimClock that also publishes scan(t) on `scan` each tick (before /clock)."""
+class ScanningClock(OdomClock):
+    """OdomClock that also publishes scan(t) on `scan` each tick (before the odometry)."""
 
     def __init__(self, ros, probe, scan_pub) -> None:
         super().__init__(ros, probe)
         self.scan_pub = scan_pub
         self.scan: Callable[[float], LaserScan] | None = None
 
-    def tick(self) -> None:
+    def publish(self) -> None:
         if self.scan is not None:
-            self.scan_pub.publish(self.scan(self.t + self.dt))
-        super().tick()
+            self.scan_pub.publish(self.scan(self.t))
+        super().publish()
 
 
 def start_sensing_controller(ros, sources: list[str]):
@@ -1049,7 +1034,7 @@ def start_sensing_controller(ros, sources: list[str]):
     return node, probe, clock
 
 
-def stands_still(probe, first: int, reason: Reason, seconds: float, clock: SimClock) -> None:
+def stands_still(probe, first: int, reason: Reason, seconds: float, clock: OdomClock) -> None:
     """For `seconds` of simulated time every step commands zero, for reason."""
     end = clock.t + seconds
     assert clock.run_until(lambda: clock.t >= end)

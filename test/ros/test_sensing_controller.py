@@ -24,6 +24,7 @@ import math
 import time
 from typing import Any, Callable
 
+from conftest import SimClock
 from nav_msgs.msg import OccupancyGrid
 import numpy as np
 import pytest
@@ -67,18 +68,20 @@ FOV = math.pi
 BEAMS = 181
 
 
-class World:
-    """The test's robot, laser, clock and listeners, around one controller."""
+class World(SimClock):
+    """The test's robot, laser, clock (conftest's SimClock) and listeners, around one controller.
+
+    Each tick moves the robot on the last command and publishes odometry and a scan.
+    """
 
     def __init__(self, ros, obstacles: list[ConvexPolygon], *, beams: int = BEAMS,
                  **params) -> None:
         overrides = [Parameter('use_sim_time', value=True), Parameter('world_file', value='')]
         overrides += [Parameter(k, value=v) for k, v in params.items()]
-        self.ros = ros
         self.node = ros.add(MpcControllerNode(context=ros.context,
                                               parameter_overrides=overrides))
         assert autostart(self.node) is None
-        self.probe = ros.probe(use_sim_time=True)
+        super().__init__(ros, ros.probe(use_sim_time=True))
         self.io = ros.add(Node('sensing_probe', context=ros.context))
         self.scan_pub = self.io.create_publisher(
             LaserScan, 'scan', QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE))
@@ -89,7 +92,6 @@ class World:
         self.beams = beams
         self.laser = SimulatedLaser(obstacles, fov=FOV, beams=beams, range_max=5.0) \
             if obstacles else None
-        self.t = 1.0
         self.state = np.zeros(3)
         self.drive = True  # integrate the commands
         self.scanning = True  # publish a scan each tick
@@ -120,19 +122,21 @@ class World:
     def u(self) -> np.ndarray:
         return u_from_twist(self.probe.cmds[-1]) if self.probe.cmds else np.zeros(2)
 
-    def tick(self, dt: float = 0.05) -> None:
-        """Advance dt: move the robot on the last command, publish odom, scan, /clock."""
+    def publish(self) -> None:
+        """Move the robot on the last command over dt, publish odom and the scan."""
+        dt = self.dt
         if self.drive:
             v, omega = self.u()
             x, y, th = self.state
             self.state = np.array([x + dt * v * math.cos(th), y + dt * v * math.sin(th),
                                    th + dt * omega])
-        self.t += dt
         self.positions.append(self.state[:2].copy())
         self.probe.publish_odom(self.state, stamp=self.t)
         if self.scanning:
             self.scan_pub.publish(self.scan_message(self.state, self.t))
-        self.probe.publish_clock(self.t)
+
+    def spin(self) -> None:
+        """Spin until the controller has stepped at this instant, then a little more."""
         # lockstep: spin until the controller has stepped at this instant (its diagnostics
         # stamped now), so that a fast-ticking test never runs ahead of the node and leaves
         # its scans queued; a tick the timer skips (clock rounding) ends by the short cap
@@ -144,11 +148,7 @@ class World:
             self.ros.executor.spin_once(timeout_sec=0.002)
 
     def run_until(self, condition: Callable[[], bool], timeout: float = 60.0) -> bool:
-        return self.ros.tick_until(self.tick, condition, timeout)
-
-    def run_for(self, seconds: float) -> None:
-        end = self.t + seconds
-        assert self.run_until(lambda: self.t >= end - 1e-9)
+        return super().run_until(condition, timeout)
 
     # ---------------------------------------------------------------- what the node says
     def steps(self, after: int = 0) -> list:
@@ -265,8 +265,7 @@ def test_a_scan_newer_than_the_odometry_is_placed_along_its_twist_or_waits_for_o
         while not (len(world.markers) > markers_before and any(len(p) for p in world.raw())):
             assert time.monotonic() < deadline, 'no markers'
             clock(sent['clock'] + 0.05)  # control steps, no odometry (none is needed)
-            for _ in range(6):
-                ros.executor.spin_once(timeout_sec=0.002)
+            ros.settle()
         return [p for p in world.raw() if len(p)]
 
     def on_the_wall(pieces: list[np.ndarray]) -> None:

@@ -50,8 +50,7 @@ obstacle) pairs closer than an arc's sweep between two samples, where admissibil
 decided: a circle's exact distance, or the polygons' separating-axis gap (<= 0 exactly on
 overlap, a lower bound on the distance otherwise, off by at most a few percent for BARN's
 octagons). So a rectangular robot is not refused gaps only its circumscribed circle does not
-fit through. About 1.3 ms a call for a circle and 2.5 ms for the Jackal's rectangle with 20
-obstacles, 6 x 20 samples (best of 7, the 2-core development machine).
+fit through (its cost: docs/design/measurements.md, DWA's clearance).
 """
 
 from __future__ import annotations
@@ -350,7 +349,7 @@ class Dwa:
         v, omega, in_window = self._samples(pose, current)
         xy, theta = self._arcs(pose, v, omega)  # (S, K+1, 2), (S, K+1)
         sweep = self._sweep(v, omega)
-        clearance = self._clearance(p, xy, theta, sweep + 1e-3)
+        clearance = self.clearance(p, xy, theta, sweep + 1e-3)
         ok = self._admissible(v, sweep, clearance)
         candidates = ok & in_window
         if np.any(candidates):
@@ -413,7 +412,7 @@ class Dwa:
                       axis=-1)
         return xy, pose[2] + turned
 
-    def _clearance(self, robot: np.ndarray, xy: np.ndarray, theta: np.ndarray,
+    def clearance(self, robot: np.ndarray, xy: np.ndarray, theta: np.ndarray,
                    exact_below: np.ndarray) -> np.ndarray:
         """Return a lower bound on the footprint's clearance at each pose (m, <= 0: contact).
 

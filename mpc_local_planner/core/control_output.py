@@ -1,0 +1,140 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""What the controller answers at each step: the command, and why (`Reason`, an Enum).
+
+`ControlOutput` is `MpcController.compute`'s answer; `Reason` says why the command is what it
+is (its value is the diagnostics' word, its `text` the words for logs); `Blockage` is
+`MpcController.path_blockage`'s answer, where the remaining plan first meets an obstacle.
+"""
+
+from __future__ import annotations
+
+from enum import Enum
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from mpc_local_planner.core.mpc import MpcSolution
+
+__all__ = ['Blockage', 'ControlOutput', 'Reason']
+
+
+class Reason(Enum):
+    """Why the controller commands what it commands (the value is the diagnostics' word).
+
+    Only TRACKING and CANDIDATE apply an MPC input, and ROTATE_TO_HEADING an in-place turn;
+    every other reason stops the robot: a zero command, or, for a moving robot with
+    ControllerSettings.max_decel, the braking command along the last verified plan. Free
+    text about the case (what was wrong with a plan, an exception's message) travels
+    separately, in `ControlOutput.detail`.
+    """
+
+    TRACKING = 'tracking'
+    # The input is the proof's shifted candidate, not a fresh solver solution (verified all
+    # the same; it runs out after N steps). Mostly the solver failed; rarely it converged to
+    # a solution costlier than the candidate.
+    CANDIDATE = 'candidate'
+    NO_PLAN = 'no_plan'
+    NO_ODOM = 'no_odom'
+    STALE_ODOM = 'stale_odom'
+    INVALID_ODOM = 'invalid_odom'
+    INVALID_PLAN = 'invalid_plan'
+    GOAL_REACHED = 'goal_reached'
+    # Within xy_goal_tolerance of the goal, off its heading: the robot turns in place (Nav2
+    # RPP's rotate to heading) instead of the MPC manoeuvring for the last centimetres.
+    ROTATE_TO_HEADING = 'rotate_to_heading'
+    STOP = 'stop'
+    ERROR = 'error'
+    # The laser is a source of obstacles and its latest valid scan is older than scan_timeout
+    # (malformed scans are dropped, so only bad ones coming also ends here), or none came yet.
+    STALE_SCAN = 'stale_scan'
+    NO_SCAN = 'no_scan'
+    # The map is a source of obstacles and no valid map came yet: what it would show is
+    # unknown, as the scan's before the first one.
+    NO_MAP = 'no_map'
+    # Odometry is there but no pose in the plan's frame: a localizer is expected and none
+    # (usable) came, or tf2 has no transform from the plan's frame to the robot's.
+    NO_LOCALIZATION = 'no_localization'
+
+    @property
+    def text(self) -> str:
+        """Say it in words, for logs and DiagnosticStatus.message."""
+        return _REASON_TEXT[self]
+
+    @property
+    def applies_input(self) -> bool:
+        """Whether the command is an input (the MPC's, or the turn to the goal heading)."""
+        return self in (Reason.TRACKING, Reason.CANDIDATE, Reason.ROTATE_TO_HEADING)
+
+
+_REASON_TEXT = {
+    Reason.TRACKING: 'tracking',
+    Reason.CANDIDATE: 'applying the shifted candidate (no cheaper verified solver solution)',
+    Reason.NO_PLAN: 'no plan yet',
+    Reason.NO_ODOM: 'no odometry yet',
+    Reason.STALE_ODOM: 'odometry is stale',
+    Reason.INVALID_ODOM: 'invalid odometry',
+    Reason.INVALID_PLAN: 'invalid plan',
+    Reason.GOAL_REACHED: 'goal reached',
+    Reason.ROTATE_TO_HEADING: 'at the goal position, turning in place to the goal heading',
+    Reason.STOP: 'no feasible input, stopping',
+    Reason.ERROR: 'error',
+    Reason.STALE_SCAN: 'scan is stale',
+    Reason.NO_SCAN: 'no scan yet',
+    Reason.NO_MAP: 'no valid map yet',
+    Reason.NO_LOCALIZATION: "no pose in the plan's frame",
+}
+
+
+class Blockage(NamedTuple):
+    """Where the remaining plan first meets an obstacle the controller knows.
+
+    Attributes:
+        blocked: whether the plan, from the robot's projection on, meets a grown obstacle.
+        at: arc length (m) along the plan from the robot's projection to the first blocked
+            point; NaN when the plan is clear (or there is no plan or state).
+
+    """
+
+    blocked: bool = False
+    at: float = math.nan
+
+
+class ControlOutput(NamedTuple):
+    """What to command now, and why.
+
+    Attributes:
+        u: (2,) input (v, omega) within the model's bounds; zero unless reason.applies_input.
+        solution: the MPC's solution when it ran, else None.
+        reason: why the command is what it is.
+        detail: free text about the case ('' when the reason says it all), e.g. what is
+            wrong with a refused plan, or an exception's message.
+        fresh: the MPC solved at this call; False between solves (control_frequency above
+            1 / step), where u is the input the last verified plan gives for now, or where a
+            stop brakes along it (u then need not be zero: see `Brake`).
+
+    """
+
+    u: np.ndarray
+    solution: MpcSolution | None
+    reason: Reason
+    detail: str = ''
+    fresh: bool = True
+
+    @property
+    def message(self) -> str:
+        """Return the reason in words, followed by ': detail' when there is one."""
+        return f'{self.reason.text}: {self.detail}' if self.detail else self.reason.text

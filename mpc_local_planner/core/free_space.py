@@ -1,0 +1,179 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The free space a planner searches: what it needs of a grid, and a round robot's queries.
+
+`FreeSpaceGrid` and `EscapeGrid` say what the planner and the re-planning policy need of an
+inflated occupancy grid (perception's ``PlanningGrid`` is one); `grid_bounds` is a grid's
+extent. `PointSpace` holds the three queries the planner makes for a round robot's
+reference point, over inflated polygons (`polygon_space`, exact segment tests) or an
+inflated grid (`grid_space`, every cell a segment passes through: `cells_crossed`).
+NumPy only: no OMPL here, so core/footprint_checks.py and core/replanning.py can use the
+protocols without importing the planner.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+import math
+from typing import Any, Protocol
+
+import numpy as np
+
+from mpc_local_planner.core.obstacles import ObstacleSet
+
+__all__ = [
+    'cells_crossed',
+    'EscapeGrid',
+    'FreeSpaceGrid',
+    'grid_bounds',
+    'grid_space',
+    'PointSpace',
+    'polygon_space',
+]
+
+
+def _hits(obstacles: ObstacleSet, a: np.ndarray, b: np.ndarray) -> bool:
+    """Say whether segment a-b touches an inflated obstacle (grazing counts: full clearance)."""
+    return bool(np.any(obstacles.segment_hits(a, b, grazing=True)))
+
+
+class FreeSpaceGrid(Protocol):
+    """What the planner needs of an inflated occupancy grid (perception's ``PlanningGrid``).
+
+    ``map`` is the grid's geometry (an ``OccupancyMap``: ``origin`` (x, y, yaw) of the
+    lower-left corner, ``resolution``, ``width``, ``height``, ``world_to_cell``,
+    ``contains_cell``); ``occupied`` the (height, width) cells that are obstacles before
+    inflation, ``blocked`` those within ``inflation`` (metres) of one. Points outside the
+    grid are free.
+    """
+
+    inflation: float
+
+    @property
+    def map(self) -> Any:
+        """The grid's geometry (origin, resolution, width, height, world_to_cell)."""
+
+    @property
+    def occupied(self) -> np.ndarray:
+        """(height, width) booleans: the obstacle cells before inflation."""
+
+    @property
+    def blocked(self) -> np.ndarray:
+        """(height, width) booleans: the cells within the inflation of an obstacle cell."""
+
+    def is_free(self, points: np.ndarray) -> np.ndarray:
+        """Say, per (N, 2) point, whether it is free after inflation."""
+
+
+class EscapeGrid(Protocol):
+    """A grid that finds where a robot inside the inflation can start a plan from."""
+
+    def escape_point(self, position: Sequence[float], *, within: float,
+                     margin: float) -> np.ndarray | None:
+        """Return the nearest clear point the robot can drive straight to, or None."""
+
+
+def grid_bounds(grid: FreeSpaceGrid) -> tuple[float, float, float, float]:
+    """Return (xmin, xmax, ymin, ymax) of the grid's extent (its corners, if rotated)."""
+    occupancy = grid.map
+    x0, y0, yaw = (float(v) for v in occupancy.origin)
+    width = occupancy.width * float(occupancy.resolution)
+    height = occupancy.height * float(occupancy.resolution)
+    c, s = math.cos(yaw), math.sin(yaw)
+    local = np.array([[0.0, 0.0], [width, 0.0], [width, height], [0.0, height]])
+    xs = x0 + c * local[:, 0] - s * local[:, 1]
+    ys = y0 + s * local[:, 0] + c * local[:, 1]
+    return float(xs.min()), float(xs.max()), float(ys.min()), float(ys.max())
+
+
+class PointSpace:
+    """Where a round robot's reference point may be: the queries the planner makes.
+
+    Two kinds: inflated polygons (exact segment tests) and an inflated grid. Holds only
+    NumPy data and plain callables: it must not reference OMPL objects, or the reference
+    cycle through C++ would keep them alive past the plan.
+    """
+
+    def __init__(self, point_free: Callable[[np.ndarray], bool],
+                 segment_free: Callable[[np.ndarray, np.ndarray], bool],
+                 collision: Callable[[np.ndarray], str | None]) -> None:
+        self.point_free = point_free
+        self.segment_free = segment_free
+        self.collision = collision
+
+
+def polygon_space(obstacles: ObstacleSet, inflation: float) -> PointSpace:
+    """Return the queries over obstacles already inflated by ``inflation`` (exact segments)."""
+    def collision(xy: np.ndarray) -> str | None:
+        index = obstacles.first_containing(xy)
+        if index is None:
+            return None
+        return (f'in collision with obstacle {index} inflated by {inflation:g} m '
+                '(robot_radius + clearance)')
+
+    return PointSpace(point_free=lambda xy: obstacles.first_containing(xy) is None,
+                  segment_free=lambda a, b: not _hits(obstacles, a, b),
+                  collision=collision)
+
+
+def cells_crossed(occupancy: Any, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return (rows, cols) of every cell the segment a-b passes through (may be outside).
+
+    Exact: the segment is cut where it crosses a grid line, and the middle of each piece
+    names one cell it runs through; so no cell is skipped, however little is clipped of it.
+    """
+    x0, y0, yaw = (float(v) for v in occupancy.origin)
+    res = float(occupancy.resolution)
+    c, s = math.cos(yaw), math.sin(yaw)
+    ends = np.array([a, b], dtype=float) - (x0, y0)
+    u = (c * ends[:, 0] + s * ends[:, 1]) / res  # grid coordinates, in cells
+    v = (-s * ends[:, 0] + c * ends[:, 1]) / res
+    cuts = [np.array([0.0, 1.0])]
+    for p0, p1 in ((u[0], u[1]), (v[0], v[1])):
+        if p1 != p0:
+            lines = np.arange(math.ceil(min(p0, p1)), math.floor(max(p0, p1)) + 1)
+            cuts.append((lines - p0) / (p1 - p0))
+    t = np.unique(np.clip(np.concatenate(cuts), 0.0, 1.0))
+    mid = 0.5 * (t[:-1] + t[1:]) if len(t) > 1 else t
+    mid = np.concatenate([mid, [0.0, 1.0]])  # the end points' own cells
+    cols = np.floor(u[0] + mid * (u[1] - u[0])).astype(np.int64)
+    rows = np.floor(v[0] + mid * (v[1] - v[0])).astype(np.int64)
+    return rows, cols
+
+
+def grid_space(grid: FreeSpaceGrid) -> PointSpace:
+    """Return the queries over an inflated grid (a segment by every cell it passes through)."""
+    occupancy = grid.map
+
+    def point_free(xy: np.ndarray) -> bool:
+        return bool(grid.is_free(xy.reshape(1, 2))[0])
+
+    def segment_free(a: np.ndarray, b: np.ndarray) -> bool:
+        rows, cols = cells_crossed(occupancy, a, b)
+        inside = occupancy.contains_cell(rows, cols)  # outside the grid counts free
+        return not bool(np.any(grid.blocked[rows[inside], cols[inside]]))
+
+    def collision(xy: np.ndarray) -> str | None:
+        if point_free(xy):
+            return None
+        rows, cols = occupancy.world_to_cell(xy.reshape(1, 2))
+        row, col = int(rows[0]), int(cols[0])
+        where = 'in an occupied cell' if grid.occupied[row, col] else (
+            f'within {grid.inflation:g} m of an occupied cell')
+        return (f'{where} (cell row {row}, column {col}) of the grid inflated by '
+                f'{grid.inflation:g} m (robot_radius + clearance)')
+
+    return PointSpace(point_free=point_free, segment_free=segment_free, collision=collision)
+
