@@ -114,7 +114,7 @@ from rclpy.lifecycle import LifecycleNode
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from mpc_local_planner.core.controller import ControllerSettings
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import resolve
 from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner

@@ -42,7 +42,7 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker
 
 from mpc_local_planner.perception.grids import grid_from_fields, GridError
-from mpc_local_planner.perception.scan_obstacles import Scan
+from mpc_local_planner.perception.scans import Scan
 from mpc_local_planner.worlds.map_files import OccupancyMap
 
 __all__ = [

@@ -24,7 +24,7 @@ import numpy as np
 from sensor_msgs.msg import LaserScan
 
 from mpc_local_planner.perception.pose_history import MAX_EXTRAPOLATION_S
-from mpc_local_planner.perception.scan_obstacles import check_scan_stamp, validate_scan
+from mpc_local_planner.perception.scans import check_scan_stamp, validate_scan
 from mpc_local_planner.ros.conversions import (
     frame_problem,
     scan_from_message,

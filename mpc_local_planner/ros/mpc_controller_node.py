@@ -95,12 +95,8 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import MarkerArray
 
-from mpc_local_planner.core.controller import (
-    Blockage,
-    ControlOutput,
-    MpcController,
-    Reason,
-)
+from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reason
+from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.diagnostics import (
     CONTROLLER_DIAGNOSTICS_TOPIC,
 )

@@ -31,10 +31,7 @@ from geometry_msgs.msg import Twist, TwistStamped
 import numpy as np
 from visualization_msgs.msg import MarkerArray
 
-from mpc_local_planner.core.controller import (
-    ControlOutput,
-    Reason,
-)
+from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.diagnostics import (
     ControllerDiagnostics,
     Level,

@@ -34,7 +34,7 @@ import math
 from typing import Any
 
 from mpc_local_planner.core.config import MpcConfig, SOLVERS
-from mpc_local_planner.core.controller import ControllerSettings
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.footprint import Footprint, resolve
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon

@@ -60,7 +60,7 @@ from sensor_msgs.msg import LaserScan
 
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.perception.pose_history import MAX_EXTRAPOLATION_S
-from mpc_local_planner.perception.scan_obstacles import (
+from mpc_local_planner.perception.scans import (
     check_scan_stamp,
     classify_beams,
     MAX_BEAMS,

@@ -113,7 +113,7 @@ from mpc_local_planner.core.reality import (
     ScanChannel,
 )
 from mpc_local_planner.perception.laser import contact, SimulatedLaser, TrueGeometry
-from mpc_local_planner.perception.scan_obstacles import Scan
+from mpc_local_planner.perception.scans import Scan
 from mpc_local_planner.ros.conversions import (
     seconds_to_stamp,
     state_to_odometry,

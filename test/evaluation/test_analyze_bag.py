@@ -25,7 +25,7 @@ from rclpy.serialization import serialize_message
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import get_typestore, Stores
 
-from mpc_local_planner.core.controller import ControlOutput, Reason
+from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.diagnostics import BagKey, ControllerDiagnostics
 from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.mpc import PlanSource

@@ -26,7 +26,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 import yaml
 
-from mpc_local_planner.core.controller import ControllerSettings, ControlOutput, Reason
+from mpc_local_planner.core.control_output import ControlOutput, Reason
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.diagnostics import ControllerDiagnostics
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import Footprint, JACKAL, parse_footprint

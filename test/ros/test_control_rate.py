@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 
-from mpc_local_planner.core.controller import Reason
+from mpc_local_planner.core.control_output import Reason
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PlanSource
 from mpc_local_planner.ros.conversions import (

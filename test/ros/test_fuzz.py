@@ -45,7 +45,7 @@ from rclpy.time import Time as RosTime
 from sensor_msgs.msg import LaserScan
 
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.perception.scan_obstacles import (
+from mpc_local_planner.perception.scans import (
     classify_beams,
     scan_points,
     ScanError,

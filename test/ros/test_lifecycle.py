@@ -40,7 +40,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from visualization_msgs.msg import Marker, MarkerArray
 
-from mpc_local_planner.core.controller import Reason
+from mpc_local_planner.core.control_output import Reason
 from mpc_local_planner.ros.conversions import poses_to_path, u_from_twist
 from mpc_local_planner.ros.mpc_controller_node import (
     FOOTPRINT_TOPIC,

@@ -32,7 +32,7 @@ import pytest
 from rcl_interfaces.msg import Log
 from rclpy.parameter import Parameter
 
-from mpc_local_planner.core.controller import Reason
+from mpc_local_planner.core.control_output import Reason
 from mpc_local_planner.perception.localization import compose, invert
 from mpc_local_planner.ros.conversions import (
     path_to_poses,

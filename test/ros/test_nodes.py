@@ -27,7 +27,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from mpc_local_planner.core.config import MpcConfig
-from mpc_local_planner.core.controller import ControlOutput, Reason
+from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.diagnostics import (
     Level,
 )

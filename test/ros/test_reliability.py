@@ -42,7 +42,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import LaserScan
 
-from mpc_local_planner.core.controller import ControllerSettings, Reason
+from mpc_local_planner.core.control_output import Reason
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PlanSource
 from mpc_local_planner.core.mpc.step import SolveAttempt
