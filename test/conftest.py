@@ -154,6 +154,32 @@ def ros_module() -> Iterator[RosHarness]:
         harness.close()
 
 
+class ThrottleClock:
+    """The time the nodes' log throttles see, owned by a test: it moves only by `advance`."""
+
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+    def advance(self, seconds: float) -> None:
+        self.t += seconds
+
+
+@pytest.fixture
+def throttle_clock(monkeypatch: pytest.MonkeyPatch) -> ThrottleClock:
+    """Put every node's ProblemThrottle on a clock the test advances, not on wall time.
+
+    With the clock held, a problem that persists is logged exactly once however long the
+    test takes on a loaded machine.
+    """
+    from mpc_local_planner.ros import throttle
+    clock = ThrottleClock()
+    monkeypatch.setattr(throttle, 'steady_clock', clock)
+    return clock
+
+
 class SimClock:
     """Simulated time owned by a test: the one harness of the tests' simulated worlds.
 
