@@ -44,7 +44,7 @@ from sensor_msgs.msg import LaserScan
 from mpc_local_planner.core.controller import ControllerSettings, Reason
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PlanSource
-from mpc_local_planner.core.mpc.step import SolveAttempt
+from mpc_local_planner.core.mpc.solution import SolveAttempt
 from mpc_local_planner.core.obstacles import first_blocked_segment
 from mpc_local_planner.ros.closed_loop import MODULES, spawn_node
 from mpc_local_planner.ros.conversions import (
