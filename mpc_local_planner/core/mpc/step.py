@@ -94,7 +94,7 @@ from mpc_local_planner.core.mpc.formulation import (
     stage_cost,
     TerminalCondition,
 )
-from mpc_local_planner.core.mpc.nlp_shapes import NlpShapes
+from mpc_local_planner.core.mpc.nlp_shapes import NlpShapes, slot_shape
 from mpc_local_planner.core.mpc.solution import MpcSolution, Rounds, SolveAttempt
 from mpc_local_planner.core.mpc.tries import Situation, Solver, solver_tries, Start, Try
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
@@ -275,16 +275,6 @@ class MpcBase(ABC):
         terminal = self._terminal_condition()
         return (self._config.structure_key(), terminal.family, terminal.num_params)
 
-    def _slot_shape(self, selected: list[ConvexPolygon]) -> tuple[int, int]:
-        """Return (slots, faces) of the NLP that holds the selected obstacles."""
-        c = self._config
-        if not selected:
-            return 0, 0
-        # faces rounded up to a multiple of 4 so that boxes and octagons share few builds
-        faces = max(o.num_faces for o in selected)
-        faces = min(c.faces_per_obstacle, 4 * math.ceil(faces / 4)) if faces > 4 else faces
-        return len(selected), max(faces, 3)
-
     def _build(self, slots: int, faces: int) -> Nlp:
         """Build the NLP of an obstacle shape for the settings in force."""
         terminal = self._terminal_condition()
@@ -303,8 +293,7 @@ class MpcBase(ABC):
     def _nlp_holding(self, active: list[ConvexPolygon]
                      ) -> tuple[Nlp, list[ConvexPolygon]]:
         """Return an NLP for the active obstacles and the ones it holds (see NlpShapes.hold)."""
-        nlp, count = self._shapes.hold(self._slot_shape(active))
-        return nlp, active[:count]
+        return self._shapes.holding(active, self._config.faces_per_obstacle)
 
     def prepare(self, max_obstacles: int | None = None) -> None:
         """Build the NLPs for 0..max_obstacles obstacles in reach, so no control step waits.
@@ -324,7 +313,7 @@ class MpcBase(ABC):
         c = self._config
         count = c.obstacle_slots if max_obstacles is None else max_obstacles
         faces = sorted({4, c.faces_per_obstacle}
-                       | {self._slot_shape([o])[1] for o in self._inflated})
+                       | {slot_shape([o], c.faces_per_obstacle)[1] for o in self._inflated})
         shapes = [(0, 0)] + [(k, f) for k in range(1, count + 1) for f in faces]
         for shape in shapes:
             nlp = self._nlp_for(*shape)
@@ -338,10 +327,21 @@ class MpcBase(ABC):
         for nlp in self._nlps.values():
             nlp.finish_compilation(wait=True)
 
-    def _prepare_nlp(self, active: list[ConvexPolygon], x0: np.ndarray
-                     ) -> tuple[Nlp, np.ndarray, list[ConvexPolygon]]:
-        """Return the NLP for the active obstacles, its parameters and the ones it holds."""
-        nlp, held = self._nlp_holding(active)
+    def _prepare_nlp(self, active: list[ConvexPolygon], x0: np.ndarray, *,
+                     nlp: Nlp | None = None) -> tuple[Nlp, np.ndarray, list[ConvexPolygon]]:
+        """Return the NLP for the active obstacles, its parameters and the ones it holds.
+
+        Args:
+            active: the obstacles to hold, nearest first.
+            x0: the measured state.
+            nlp: the NLP to use, holding all of active in its slots (a resumed round's: the
+                one its cut try ran in); None: the one _nlp_holding picks.
+
+        """
+        if nlp is None:
+            nlp, held = self._nlp_holding(active)
+        else:
+            held = active
         # with an iteration budget, which functions run must not depend on timing either
         nlp.finish_compilation(wait=self._config.budget == 'iterations')
         if nlp.iteration_time <= 0.0:
@@ -538,13 +538,17 @@ class MpcBase(ABC):
         """
         activation = self._activation_distance()
         active = resumed_round(self._unfinished, x0, reachable)
+        # a resumed round runs in the NLP its cut try ran in: the one picked for the obstacles
+        # that round was given may hold them with more faces than those it held need
+        resumed = self._unfinished.nlp if active is not None and self._unfinished else None
         if active is None:
             active = self._clearance.near_trajectory(candidate.x, candidate.u, reachable,
                                                      activation)
         iterations, seconds = 0, 0.0
         previous: Plan | None = None  # the last round's solution, a start for the next
         for round_ in range(MAX_ACTIVATION_ROUNDS + 1):
-            nlp, params, held = self._prepare_nlp(active, x0)
+            nlp, params, held = self._prepare_nlp(active, x0,
+                                                  nlp=resumed if round_ == 0 else None)
             candidate = replace(candidate, mu=self._multipliers(candidate.x, held, nlp))
             w_candidate = self._pack(candidate, nlp)
             # the candidate must clear every reachable obstacle, not only the active ones
@@ -564,9 +568,11 @@ class MpcBase(ABC):
             if not missed:
                 break
             # no further round at the limit, without time for it, or without an NLP with
-            # room for more: the solution stands if it clears every reachable obstacle
-            # (feasible for the full problem, then)
-            if (round_ == MAX_ACTIVATION_ROUNDS or len(held) < len(active)
+            # room for one of the missed obstacles (it would hold the same ones again): the
+            # solution stands if it clears every reachable obstacle (feasible for the full
+            # problem, then)
+            if (round_ == MAX_ACTIVATION_ROUNDS or not self._shapes.holds_more(
+                    active + missed, held, self._config.faces_per_obstacle)
                     or not self._budget.allows()):
                 if self._clearance.penetration(states, inputs, reachable) > FEASIBILITY_TOLERANCE:
                     attempt = attempt._replace(
