@@ -240,6 +240,16 @@ class MpcConfig:
                            v=self.weight_v, omega=self.weight_omega,
                            offset=self.offset_weight)
 
+    def structure_key(self) -> tuple[tuple[str, Any], ...]:
+        """Return the values of STRUCTURAL_FIELDS, hashable: the key the built NLPs depend on.
+
+        Two settings with the same key share their NLPs; a change of key rebuilds them. The
+        solver options (a dict) enter sorted, by repr.
+        """
+        return tuple((name, tuple(sorted((k, repr(v)) for k, v in self.solver_options.items()))
+                      if name == 'solver_options' else getattr(self, name))
+                     for name in sorted(STRUCTURAL_FIELDS))
+
     def with_changes(self, **changes: Any) -> MpcConfig:
         """Return a copy with some fields changed (validated again)."""
         return replace(self, **changes)

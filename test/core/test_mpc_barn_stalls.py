@@ -174,3 +174,38 @@ def test_a_new_plan_at_speed_starts_from_the_motion_in_hand() -> None:
     reasons, output = steps_until_tracking(controller, x)
     assert reasons[-1] is Reason.TRACKING, reasons
     assert np.max(np.abs(output.u)) > 0.1
+
+
+# NLPs the evaluation prepares: up to this many obstacles (sensing_suites.PREPARED_SLOTS).
+PREPARED_SLOTS = 10
+
+
+def test_a_cut_round_in_the_largest_nlp_goes_on_until_it_is_solved() -> None:
+    """Laser-only BARN world 283 at 2 m/s: a robot standing beside a row of cylinders.
+
+    From rest the first constraint-generation round (4 obstacles) solves, the second asks for
+    12 and the largest prepared NLP (10 slots, faces enough for all 12) holds 10: cut. The
+    next step resumed that round with the 10 it held but picked its NLP anew, by their faces
+    (10 slots, 4 faces): not the NLP of the cut try, which started over and was cut; the
+    step after went on with that one, solved it, and made a round that held the same 10
+    again in the other NLP (the missed obstacles did not fit): cut, and so on, step after
+    step, until the run stalled. A resumed round now runs in the NLP its cut try ran in, and
+    a round that would hold the same obstacles again is not made.
+    """
+    case = json.loads((Path(__file__).parent / 'data' / 'barn_283_capped_round.json')
+                      .read_text(encoding='utf-8'))
+    config = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
+                       robot_radius=0.0, budget='iterations', max_solve_iterations=100,
+                       compile=False)
+    settings = ControllerSettings(xy_goal_tolerance=0.05, yaw_goal_tolerance=math.pi,
+                                  capacity=128)
+    controller = MpcController(Unicycle(v_max=2.0, omega_max=4.0, v_min=0.0), config,
+                               settings=settings)
+    controller.set_plan(np.array(case['poses']))
+    controller.mpc.prepare(PREPARED_SLOTS)
+    controller.set_obstacles([ConvexPolygon(A=np.array(o['A']), b=np.array(o['b']),
+                                            vertices=np.array(o['vertices']))
+                              for o in case['obstacles']])
+    reasons, output = steps_until_tracking(controller, np.array(case['x']))
+    assert reasons[-1] is Reason.TRACKING, reasons
+    assert output.u[0] > 0.1

@@ -25,6 +25,7 @@ of test_mpc_tries.py. Nothing here asserts how fast anything is.
 
 from __future__ import annotations
 
+from dataclasses import replace
 import math
 from typing import Any
 
@@ -36,6 +37,7 @@ from mpc_local_planner.core.controller import MpcController, Reason
 from mpc_local_planner.core.diagnostics import ControllerDiagnostics
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import (
+    continuation,
     Decision,
     PathReferenceMPC,
     PlanSource,
@@ -447,7 +449,7 @@ def test_fatrop_gets_fewer_iterations_when_the_full_limit_would_not_fit(
     nlp, params, _ = mpc._prepare_nlp([], x0)
     assert nlp.compiled and nlp.library is not None
     candidate = mpc._candidate(x0)
-    candidate.mu = mpc._multipliers(candidate.x, [], nlp)
+    candidate = replace(candidate, mu=mpc._multipliers(candidate.x, [], nlp))
     w0 = mpc._pack(candidate, nlp)
     assert iteration_levels(200) == [200, 100, 50, 25, 12]
     # not measured yet, or time for all: the full solver
@@ -567,7 +569,7 @@ def test_a_solve_the_budget_cut_goes_on_at_the_next_step_while_the_robot_stands_
         mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES,
                                path=paper_sinusoid())
         if not continuing:
-            monkeypatch.setattr(step_module, 'CONTINUE_TOLERANCE', -1.0)
+            monkeypatch.setattr(continuation, 'CONTINUE_TOLERANCE', -1.0)
         x = mpc.path.start.copy()
         for step in range(12):
             solution = mpc.solve(x)  # x stays: the candidate at rest is standing still

@@ -42,7 +42,6 @@ from mpc_local_planner.core.mpc.formulation import (
     sweep_rate,
     SWEEP_SMOOTHING,
 )
-from mpc_local_planner.core.mpc.step import Plan
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
 from mpc_local_planner.core.paths import AnalyticPath, paper_sinusoid, ReferencePath, WaypointPath
 
@@ -204,33 +203,31 @@ def test_verification_rejects_a_corner_overlap_that_the_inscribed_circle_misses(
     box = ConvexPolygon.from_box(0.23, 0.10, 0.50, 0.50)
     assert box.distance(np.zeros((1, 2)))[0] > 0.215  # the inscribed circle is clear of it
     x, u = standing([0.0, 0.0, 0.0])
-    assert mpc._penetration(x, u, ObstacleSet([box])) == pytest.approx(
+    assert mpc.clearance.penetration(x, u, ObstacleSet([box])) == pytest.approx(
         0.024 + mpc.config.farkas_margin)  # the corner is 0.024 deep along x
-    assert not mpc._collision_free(Plan(x=x, u=u, s=0.0, mu=np.zeros(0), value=0.0),
-                                   ObstacleSet([box]))
     # turned by 90 degrees the polygon is 0.015 clear of it, the circle of r_c would not be
     x, u = standing([0.0, 0.0, np.pi / 2])
     assert box.distance(np.zeros((1, 2)))[0] < JACKAL.radius
-    assert mpc._penetration(x, u, ObstacleSet([box])) == 0.0
+    assert mpc.clearance.penetration(x, u, ObstacleSet([box])) == 0.0
 
 
 def test_the_verified_clearance_follows_the_motion_of_both_adjacent_steps() -> None:
     mpc = PathReferenceMPC(Unicycle(), jackal_config(), path=paper_sinusoid())
     box = ConvexPolygon.from_box(0.28, -0.1, 0.5, 0.1)  # 0.026 ahead of the front face
     x, u = standing([0.0, 0.0, 0.0])
-    assert mpc._penetration(x, u, ObstacleSet([box])) == 0.0  # standing still: clear
+    assert mpc.clearance.penetration(x, u, ObstacleSet([box])) == 0.0  # standing still: clear
     # the poses as given, but the last step drives at 0.31 m/s: x_N needs h/2 0.31 = 0.031
     u[-1] = [0.31, 0.0]
-    assert mpc._penetration(x, u, ObstacleSet([box])) == pytest.approx(
+    assert mpc.clearance.penetration(x, u, ObstacleSet([box])) == pytest.approx(
         0.031 + mpc.config.farkas_margin - 0.026)
     # turning on the spot sweeps the corners: h/2 r_c |omega|
     u[-1] = [0.0, -1.5]
-    assert mpc._penetration(x, u, ObstacleSet([box])) == pytest.approx(
+    assert mpc.clearance.penetration(x, u, ObstacleSet([box])) == pytest.approx(
         H / 2 * JACKAL.radius * 1.5 + mpc.config.farkas_margin - 0.026)
     # the step before x_l counts too: at x_{N-1}, the step N-2 -> N-1
     u[:] = 0.0
     u[-2] = [0.31, 0.0]
-    assert mpc._penetration(x, u, ObstacleSet([box])) > 0.0
+    assert mpc.clearance.penetration(x, u, ObstacleSet([box])) > 0.0
 
 
 def test_the_reach_counts_the_bodys_farthest_corner() -> None:

@@ -46,7 +46,7 @@ from mpc_local_planner.core.control_output import Reason
 from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PlanSource
-from mpc_local_planner.core.mpc.step import SolveAttempt
+from mpc_local_planner.core.mpc.solution import SolveAttempt
 from mpc_local_planner.core.obstacles import first_blocked_segment
 from mpc_local_planner.ros.closed_loop_parameters import MODULES
 from mpc_local_planner.ros.closed_loop_processes import spawn_node

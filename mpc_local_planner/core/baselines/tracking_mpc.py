@@ -30,8 +30,9 @@ import numpy as np
 
 from mpc_local_planner.core.config import CostWeights, MpcConfig
 from mpc_local_planner.core.models import RobotModel
+from mpc_local_planner.core.mpc.candidate import Plan
 from mpc_local_planner.core.mpc.formulation import TerminalCondition
-from mpc_local_planner.core.mpc.step import MpcBase, Plan
+from mpc_local_planner.core.mpc.step import MpcBase
 from mpc_local_planner.core.obstacles import ConvexPolygon
 
 __all__ = ['TrackingMPC', 'target_terminal']

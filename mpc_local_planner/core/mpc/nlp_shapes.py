@@ -28,16 +28,31 @@ them; the MPC checks its solution against all of them.
 
 from __future__ import annotations
 
-from typing import Callable
+import math
+from typing import Callable, Sequence
 
 from mpc_local_planner.core.mpc.backends import Nlp
+from mpc_local_planner.core.obstacles import ConvexPolygon
 
-__all__ = ['MAX_CACHED_NLPS', 'NlpShapes', 'Shape']
+__all__ = ['MAX_CACHED_NLPS', 'NlpShapes', 'Shape', 'slot_shape']
 
 # NLPs kept per MPC (the oldest goes first).
 MAX_CACHED_NLPS = 32
 
 Shape = tuple[int, int]  # (obstacle slots, faces per obstacle)
+
+
+def slot_shape(selected: Sequence[ConvexPolygon], faces_per_obstacle: int) -> Shape:
+    """Return (slots, faces) of the NLP that holds the selected obstacles.
+
+    Faces are rounded up to a multiple of 4 (at most faces_per_obstacle), so that boxes and
+    octagons share few builds.
+    """
+    if not selected:
+        return 0, 0
+    faces = max(o.num_faces for o in selected)
+    faces = min(faces_per_obstacle, 4 * math.ceil(faces / 4)) if faces > 4 else faces
+    return len(selected), max(faces, 3)
 
 
 class NlpShapes:
@@ -99,6 +114,25 @@ class NlpShapes:
             return self.get(shape), slots
         largest = max(enough_faces)
         return nlps[largest], largest[0]
+
+    def holding(self, active: list[ConvexPolygon], faces_per_obstacle: int
+                ) -> tuple[Nlp, list[ConvexPolygon]]:
+        """Return an NLP for the active obstacles (nearest first) and the ones it holds."""
+        nlp, count = self.hold(slot_shape(active, faces_per_obstacle))
+        return nlp, active[:count]
+
+    def holds_more(self, active: list[ConvexPolygon], held: Sequence[ConvexPolygon],
+                   faces_per_obstacle: int) -> bool:
+        """Say whether the NLP for active would hold an obstacle that held does not have.
+
+        Before prepare every NLP holds all it is given (the shape is built), so it would if
+        active has more; once prepared the largest NLP holds the first as many as its slots,
+        which may be those of held again.
+        """
+        if not self.prepared:
+            return len(active) > len(held)
+        _, holding = self.holding(active, faces_per_obstacle)
+        return any(not any(o is h for h in held) for o in holding)
 
     def iteration_time_estimate(self, nlp: Nlp) -> float:
         """Estimate a never-solved NLP's seconds per iteration from the solved ones (0: none).

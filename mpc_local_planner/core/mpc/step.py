@@ -28,12 +28,6 @@ again. A solution of the smaller problem that clears every reachable obstacle is
 for the full one too (the full feasible set is a subset), so nothing is given up but
 variables that could not have been active.
 
-A round robot is a point among obstacles inflated by its radius (and the collision margin).
-A polygonal footprint (config.footprint) is checked exactly instead: the signed distance
-between the polygon at each predicted pose and each obstacle (obstacles.polygon_separation)
-must be at least the clearance the motion needs, farkas_margin + h/2 (|v| + r_c |omega|) for
-both steps next to the pose (exact |.| here; the NLP's smooth one is never smaller).
-
 A step's solving is bounded: in wall time by default (config.budget 'wall', the robot's:
 config.solve_budget(), max_solve_time, half the period by default, counted from the start of
 solve()), or in solver iterations (config.budget 'iterations', the evaluation's:
@@ -51,23 +45,42 @@ share is backends.py's (run_solver): IPOPT to an iteration, fatrop to its measur
 iteration (wall) or to an iteration level (iterations).
 
 The NLP itself is formulation.py (problem (6)); the solvers and their compilation are
-backends.py.
+backends.py; the footprint's clearance along a plan clearance.py; the candidate and the
+guided start candidate.py; the budget budget.py; what a cut solve carries to the next step
+continuation.py. PathReferenceMPC (path_mpc.py) and the tracking baseline say what the
+terminal condition is.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import replace
 import math
 import time
-from typing import Callable, NamedTuple, Sequence
+from typing import Callable, Sequence
 
 import casadi as ca
 import numpy as np
 
-from mpc_local_planner.core.config import MpcConfig, STRUCTURAL_FIELDS
+from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import RobotModel
 from mpc_local_planner.core.mpc.backends import build_nlp, Nlp, run_solver
+from mpc_local_planner.core.mpc.budget import Budget, build_time, solver_of
+from mpc_local_planner.core.mpc.candidate import (
+    guided_guess,
+    Plan,
+    plan_moves,
+    Rollout,
+    shifted_candidate,
+)
+from mpc_local_planner.core.mpc.clearance import Clearance
+from mpc_local_planner.core.mpc.continuation import (
+    MAX_CONTINUED_STEPS,
+    resumed_round,
+    same_polygons,
+    stood_still,
+    Unfinished,
+)
 from mpc_local_planner.core.mpc.decision import (
     decide,
     Decision,
@@ -75,243 +88,24 @@ from mpc_local_planner.core.mpc.decision import (
     PlanSource,
 )
 from mpc_local_planner.core.mpc.formulation import (
-    dual_multipliers,
-    feasible_multipliers,
     formulate,
     obstacle_parameters,
     parameter_vector,
-    path_terminal,
     stage_cost,
-    sweep_rate,
     TerminalCondition,
 )
-from mpc_local_planner.core.mpc.nlp_shapes import NlpShapes
+from mpc_local_planner.core.mpc.nlp_shapes import NlpShapes, slot_shape
+from mpc_local_planner.core.mpc.solution import MpcSolution, Rounds, SolveAttempt
 from mpc_local_planner.core.mpc.tries import Situation, Solver, solver_tries, Start, Try
-from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
-from mpc_local_planner.core.paths import ReferencePath, wrap_angle
+from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
+from mpc_local_planner.core.paths import wrap_angle
 
-__all__ = ['Decision', 'MpcBase', 'MpcSolution', 'PathReferenceMPC', 'Plan', 'PlanSource',
-           'SolveAttempt', 'decide']
+__all__ = ['MpcBase']
 
 # Constraint-violation bound for accepting a solution or a candidate (metres, rad, m/s).
 FEASIBILITY_TOLERANCE = 1e-5
 # Re-solves with more obstacles when a solution came too close to one left out of the NLP.
 MAX_ACTIVATION_ROUNDS = 3
-# Plans whose polygon clearances are memoised within a step (the candidate, the solutions).
-MAX_CACHED_PLANS = 8
-# A solve the budget cut goes on at the next step from where it stopped if the state moved
-# less than this (each component): the robot stood still on the candidate meanwhile.
-CONTINUE_TOLERANCE = 1e-3
-# A cut solve goes on for at most this many steps after its first before it counts as failed
-# here: enough for a solve of up to about three steps' budget to finish, few enough that a
-# hopeless try does not hold back the others (see docs/design/mpc.md, section
-# MAX_CONTINUED_STEPS).
-MAX_CONTINUED_STEPS = 2
-# Inputs below this (m/s, rad/s) stand still: a solver that converged to "wait" leaves
-# 1e-9, not zeros; and a gain of path progress s below PROGRESS_TOLERANCE is none (see
-# _plan_moves).
-STANDING_INPUT = 1e-3
-PROGRESS_TOLERANCE = 1e-6
-
-
-class MpcSolution(NamedTuple):
-    """Result of one control step.
-
-    Attributes:
-        u0: the input to apply now (always within the model's bounds).
-        x_pred: (N+1, nx) predicted states.
-        u_pred: (N, nu) predicted inputs.
-        s: path progress s_k of the artificial steady state (nan for TrackingMPC).
-        value: V_N, the cost of what is applied (the Lyapunov function).
-        success: the applied plan is the solver's (source is PlanSource.SOLVER).
-        status: the solver's return status, and why the candidate was used or the robot stops.
-        solve_time_s: wall time of the NLP solves (the solver calls; solve() as a whole, with
-            its verification and any NLP built mid-step, is bounded by the budget: timed_out).
-        iterations: solver iterations.
-        source: the solver's plan, the proof's shifted candidate, or a stop.
-        lyapunov_ok: V_N(x_k) <= V_N(x_{k-1}) - l(x_{k-1}, u_{k-1}) + tolerance, or None at
-            the first step after a reset.
-        failures: consecutive steps on which the solver gave no verified solution (a verified
-            one that the candidate beat is not a failure: see solver_verified).
-        obstacles_in_reach: obstacles the horizon can reach (all checked geometrically).
-        obstacles_active: those the NLP held as Farkas constraints (see MpcBase.solve()).
-        rounds: NLP solves this step (more than one when obstacles had to be added).
-        solver_verified: the solver returned a verified solution, applied or not.
-        timed_out: the step's budget (config.solve_budget()) ran out before its solving was
-            done: a solve was cut or not started, or a retry or a constraint-generation round
-            was left out. What is applied is verified all the same (the solver's plan only if
-            it cleared every reachable obstacle), else the robot stops.
-        tries: the solver tries the step made, in order, over all its rounds (see tries.py:
-            solver_tries() gives them; the budget may leave some out).
-
-    """
-
-    u0: np.ndarray
-    x_pred: np.ndarray
-    u_pred: np.ndarray
-    s: float
-    value: float
-    success: bool
-    status: str
-    solve_time_s: float
-    iterations: int
-    source: PlanSource
-    lyapunov_ok: bool | None
-    failures: int
-    obstacles_in_reach: int = 0
-    obstacles_active: int = 0
-    rounds: int = 1
-    solver_verified: bool = False
-    timed_out: bool = False
-    tries: tuple[Try, ...] = ()
-
-
-class SolveAttempt(NamedTuple):
-    """The solver's answer after verification."""
-
-    verified: bool  # converged, finite, and within FEASIBILITY_TOLERANCE of every constraint
-    w: np.ndarray  # the decision vector it returned
-    value: float  # its cost (inf unless verified)
-    status: str  # the solver's return status
-    iterations: int
-    seconds: float
-    cut: bool = False  # the budget stopped the solver before it converged
-
-
-class _Unfinished(NamedTuple):
-    """A solve the step's budget cut: where it got to, to go on from at the next step."""
-
-    nlp: Nlp
-    x0: np.ndarray
-    w: np.ndarray
-    solver: Solver  # the solver of the try that was cut
-    held: tuple[ConvexPolygon, ...]  # the obstacles its NLP held, in their slots' order
-    origin: Try  # the try that began it (a continuation's origin is the first one's)
-    steps: int = 1  # the steps it has run in (the first one's and each continuation's)
-
-
-def _stood_still(before: np.ndarray | None, x0: np.ndarray) -> bool:
-    """Say whether the state is where it was (within CONTINUE_TOLERANCE); None: unknown."""
-    return before is not None and float(np.max(np.abs(before - x0))) <= CONTINUE_TOLERANCE
-
-
-def _plan_moves(plan: Plan | None, progress: float) -> bool:
-    """Say whether the plan in force moves the robot on: it drives now, or it advances s.
-
-    A plan that neither drives now (|v_0| <= STANDING_INPUT) nor advanced the path progress
-    beyond the plan before it (progress, the gain in s; a turn in place along the path
-    advances it) waits, and counts as standing: warm starts from it can hold the solver at
-    "wait" for good. At rest the unicycle's linearisation cannot move sideways, so where the
-    path's steady state g_p(s) leaves the robot's heading (a rounded turn-in-place knot) the
-    solver reports success with s frozen, the robot turning to and fro on the spot or not at
-    all, the motion put off to the horizon's end; each step's shifted candidate puts it off
-    again, V_N constant, and the robot stands in open space (see docs/design/mpc.md, section
-    "A waiting plan counts as standing (_plan_moves)"). Counted as standing, the plan gets the
-    cold tries of tries.py, which leave that point. Without a path (progress NaN, the
-    tracking baseline) any input above STANDING_INPUT moves.
-    """
-    if plan is None or not len(plan.u):
-        return False
-    first = np.abs(plan.u[0])
-    if math.isnan(progress):
-        return bool(np.any(first > STANDING_INPUT))
-    return bool(first[0] > STANDING_INPUT or (progress > PROGRESS_TOLERANCE
-                                              and np.any(first > STANDING_INPUT)))
-
-
-def _same_polygons(a: Sequence[ConvexPolygon], b: Sequence[ConvexPolygon]) -> bool:
-    """Say whether two obstacle lists are the same polygons in the same order."""
-    return len(a) == len(b) and all(
-        p.vertices.shape == q.vertices.shape and np.array_equal(p.vertices, q.vertices)
-        for p, q in zip(a, b, strict=True))
-
-
-class _Rounds(NamedTuple):
-    """The outcome of constraint generation: the last NLP, its candidate and its solution."""
-
-    nlp: Nlp
-    params: np.ndarray
-    w_candidate: np.ndarray
-    candidate_ok: bool
-    candidate_value: float
-    attempt: SolveAttempt  # the last round's, with the iterations and time of all rounds
-    active: list[ConvexPolygon]
-    rounds: int
-
-
-class _Budget:
-    """What is left of one control step's solving, and whether the step ran out of it.
-
-    Seconds of a clock (MpcConfig.budget 'wall'), or solver iterations ('iterations': the
-    clock is never read, so the step does the same on any machine). The other is unbounded.
-    """
-
-    def __init__(self, clock: Callable[[], float], *, seconds: float = math.inf,
-                 iterations: float = math.inf) -> None:
-        self._clock = clock
-        self._deadline = clock() + seconds if math.isfinite(seconds) else math.inf
-        self.iterations = iterations  # left
-        self.timed_out = False  # some solving was cut or left out for lack of budget
-
-    @classmethod
-    def of(cls, config: MpcConfig, clock: Callable[[], float]) -> _Budget:
-        """Return the budget of one step under config."""
-        if config.budget == 'iterations':
-            return cls(clock, iterations=config.solve_iterations())
-        return cls(clock, seconds=config.solve_budget())
-
-    def remaining(self) -> float:
-        """Return the seconds left (<= 0 when spent; inf without a time bound)."""
-        if math.isinf(self._deadline):
-            return math.inf
-        return self._deadline - self._clock()
-
-    def spend(self, iterations: int) -> None:
-        """Count a solver call's iterations."""
-        self.iterations -= iterations
-
-    def allows(self, seconds: float = 0.0) -> bool:
-        """Say whether there is budget for more solving; if not, the step has timed out.
-
-        Args:
-            seconds: what the work takes before it can be cut (a build), if known; it does
-                not count against iterations.
-
-        Ask only where work would otherwise run: a no means it is left out.
-        """
-        if self.remaining() > seconds and self.iterations >= 1:
-            return True
-        self.timed_out = True
-        return False
-
-
-def _solver_of(nlp: Nlp, solver: Solver) -> ca.Function | None:
-    """Return the solver function a try runs (None: the NLP's own), building it if need be."""
-    if solver is Solver.IPOPT_FALLBACK:
-        return nlp.fallback_solver()
-    if solver is Solver.IPOPT_COLD:
-        return nlp.cold_solver()
-    return None
-
-
-def _build_time(nlp: Nlp, solver: Solver) -> float:
-    """Return the seconds getting the solver of a try takes before it can run (0: built)."""
-    if solver is Solver.IPOPT_FALLBACK:
-        return nlp.fallback_build_time
-    if solver is Solver.IPOPT_COLD:
-        return nlp.cold_build_time
-    return 0.0
-
-
-@dataclass
-class Plan:
-    """A predicted trajectory with everything needed to shift it (s is nan without a path)."""
-
-    x: np.ndarray  # (N+1, nx)
-    u: np.ndarray  # (N, nu)
-    s: float
-    mu: np.ndarray  # flat multipliers
-    value: float
 
 
 class MpcBase(ABC):
@@ -334,7 +128,7 @@ class MpcBase(ABC):
     def __init__(self, model: RobotModel, config: MpcConfig | None = None, *,
                  obstacles: Sequence[ConvexPolygon] = ()) -> None:
         self._model = model
-        self._budget = _Budget(self.clock)  # solve() starts one per step
+        self._budget = Budget(self.clock)  # solve() starts one per step
         self._tries: list[Try] = []  # the tries of the step in progress
         self._config = config or MpcConfig()
         self._use_footprint()
@@ -343,7 +137,7 @@ class MpcBase(ABC):
         self._shapes = NlpShapes(self._structure, self._build)
         self._last_nlp: Nlp | None = None
         self._last_active: tuple[ConvexPolygon, ...] = ()
-        self._rollouts: dict[tuple[float, int], ca.Function] = {}
+        self._rollout = Rollout(model)
         self._stage_fn = stage_cost(model, self._config.cost_exponent)
         self.set_obstacles(obstacles)
         self.reset()
@@ -384,7 +178,7 @@ class MpcBase(ABC):
         """Apply new settings at the next solve; shape changes rebuild the NLP there."""
         old = self._config
         self._config = config
-        if any(getattr(old, name) != getattr(config, name) for name in STRUCTURAL_FIELDS):
+        if old.structure_key() != config.structure_key():
             self._use_footprint()
             self._shapes.clear()  # the new shapes are built as steps need them
             self._stage_fn = stage_cost(self._model, config.cost_exponent)
@@ -411,16 +205,14 @@ class MpcBase(ABC):
         self._obstacle_set = ObstacleSet(self._inflated)
         self._last_active = ()
 
+    @property
+    def clearance(self) -> Clearance:
+        """The footprint's clearance from obstacles along plans (this step's memos)."""
+        return self._clearance
+
     def _use_footprint(self) -> None:
         """Set up the geometry of config.footprint (nothing for a round robot)."""
-        footprint = self._config.robot_footprint
-        self._body: ConvexPolygon | None = None if footprint.is_circle else footprint.body
-        # r_c: no point of the body is further from the robot's origin
-        self._body_radius = 0.0 if footprint.is_circle else footprint.radius
-        self._sweep_exact = sweep_rate(self._model, self._body_radius)
-        self._sweep_maps: dict[int, ca.Function] = {}
-        self._geometry: dict[bytes, dict[int, tuple[ConvexPolygon, np.ndarray, np.ndarray]]] = {}
-        self._clearance_memo: dict[bytes, np.ndarray] = {}
+        self._clearance = Clearance(self._model, self._config)
 
     def reset(self) -> None:
         """Forget the previous solution (warm start, candidate, Lyapunov history)."""
@@ -429,7 +221,7 @@ class MpcBase(ABC):
         self._previous_value: float | None = None
         self._previous_stage: float = 0.0
         self._failures = 0
-        self._unfinished: _Unfinished | None = None
+        self._unfinished: Unfinished | None = None
         # tries that failed from the state _failed_x0, with their NLP's id (see tries.py;
         # the NLPs live as long as the controller's settings)
         self._failed_here: set[tuple[int, Try]] = set()
@@ -476,23 +268,12 @@ class MpcBase(ABC):
 
     # ----------------------------------------------------------------- the NLPs
     def _structure(self) -> tuple:
-        """Return what the NLP's shape depends on: a change empties the cache."""
-        c = self._config
-        terminal = self._terminal_condition()
-        return (c.horizon, c.step, c.cost_exponent, c.farkas_margin, c.faces_per_obstacle,
-                c.solver, c.max_iterations, c.tolerance, c.compile, c.footprint,
-                tuple(sorted((k, repr(v)) for k, v in c.solver_options.items())),
-                terminal.family, terminal.num_params, c.max_accel)
+        """Return what the NLPs depend on (a change empties the cache).
 
-    def _slot_shape(self, selected: list[ConvexPolygon]) -> tuple[int, int]:
-        """Return (slots, faces) of the NLP that holds the selected obstacles."""
-        c = self._config
-        if not selected:
-            return 0, 0
-        # faces rounded up to a multiple of 4 so that boxes and octagons share few builds
-        faces = max(o.num_faces for o in selected)
-        faces = min(c.faces_per_obstacle, 4 * math.ceil(faces / 4)) if faces > 4 else faces
-        return len(selected), max(faces, 3)
+        The settings' structure_key() and the terminal condition's family and parameter count.
+        """
+        terminal = self._terminal_condition()
+        return (self._config.structure_key(), terminal.family, terminal.num_params)
 
     def _build(self, slots: int, faces: int) -> Nlp:
         """Build the NLP of an obstacle shape for the settings in force."""
@@ -512,8 +293,7 @@ class MpcBase(ABC):
     def _nlp_holding(self, active: list[ConvexPolygon]
                      ) -> tuple[Nlp, list[ConvexPolygon]]:
         """Return an NLP for the active obstacles and the ones it holds (see NlpShapes.hold)."""
-        nlp, count = self._shapes.hold(self._slot_shape(active))
-        return nlp, active[:count]
+        return self._shapes.holding(active, self._config.faces_per_obstacle)
 
     def prepare(self, max_obstacles: int | None = None) -> None:
         """Build the NLPs for 0..max_obstacles obstacles in reach, so no control step waits.
@@ -533,7 +313,7 @@ class MpcBase(ABC):
         c = self._config
         count = c.obstacle_slots if max_obstacles is None else max_obstacles
         faces = sorted({4, c.faces_per_obstacle}
-                       | {self._slot_shape([o])[1] for o in self._inflated})
+                       | {slot_shape([o], c.faces_per_obstacle)[1] for o in self._inflated})
         shapes = [(0, 0)] + [(k, f) for k in range(1, count + 1) for f in faces]
         for shape in shapes:
             nlp = self._nlp_for(*shape)
@@ -547,10 +327,21 @@ class MpcBase(ABC):
         for nlp in self._nlps.values():
             nlp.finish_compilation(wait=True)
 
-    def _prepare_nlp(self, active: list[ConvexPolygon], x0: np.ndarray
-                     ) -> tuple[Nlp, np.ndarray, list[ConvexPolygon]]:
-        """Return the NLP for the active obstacles, its parameters and the ones it holds."""
-        nlp, held = self._nlp_holding(active)
+    def _prepare_nlp(self, active: list[ConvexPolygon], x0: np.ndarray, *,
+                     nlp: Nlp | None = None) -> tuple[Nlp, np.ndarray, list[ConvexPolygon]]:
+        """Return the NLP for the active obstacles, its parameters and the ones it holds.
+
+        Args:
+            active: the obstacles to hold, nearest first.
+            x0: the measured state.
+            nlp: the NLP to use, holding all of active in its slots (a resumed round's: the
+                one its cut try ran in); None: the one _nlp_holding picks.
+
+        """
+        if nlp is None:
+            nlp, held = self._nlp_holding(active)
+        else:
+            held = active
         # with an iteration budget, which functions run must not depend on timing either
         nlp.finish_compilation(wait=self._config.budget == 'iterations')
         if nlp.iteration_time <= 0.0:
@@ -572,12 +363,7 @@ class MpcBase(ABC):
     def _multipliers(self, x: np.ndarray, selected: list[ConvexPolygon],
                      nlp: Nlp) -> np.ndarray:
         """Return multipliers that are feasible for the states x wherever x is clear."""
-        form = nlp.formulation
-        if self._body is not None:
-            _, directions = self._separation(x, selected[:form.slots])
-            return dual_multipliers(x, self._body, selected, form.slots, form.faces,
-                                    self._model.angle_index, directions[1:])
-        return feasible_multipliers(x, selected, form.slots, form.faces)
+        return self._clearance.multipliers(x, selected, nlp.formulation)
 
     # ----------------------------------------------------------------- obstacles in reach
     def _speed_bound(self) -> float:
@@ -590,7 +376,7 @@ class MpcBase(ABC):
         (between the samples too: no point can touch an obstacle beyond this).
         """
         c = self._config
-        reach = self._speed_bound() * c.step * c.horizon + self._body_radius + 1e-3
+        reach = self._speed_bound() * c.step * c.horizon + self._clearance.body_radius + 1e-3
         chosen, _ = self._obstacle_set.near(x0[None, :2], reach)
         return self._obstacle_set.subset(chosen)
 
@@ -603,89 +389,6 @@ class MpcBase(ABC):
         # docs/design/mpc.md, section "Default activation distance")
         return 0.5 * self._speed_bound() * c.step
 
-    def _near_trajectory(self, x: np.ndarray, u: np.ndarray, reachable: ObstacleSet,
-                         distance: float) -> list[ConvexPolygon]:
-        """Return the reachable obstacles within distance of the plan (x, u), nearest first.
-
-        A circle: of the positions x. A polygon: whose clearance from the polygon at some
-        pose x_l exceeds what the motion needs there by at most distance (exact distances,
-        after a cheap bound has left out those further than r_c + distance + that).
-        """
-        if self._body is None:
-            chosen, _ = reachable.near(x[:, :2], distance)
-            return [reachable.obstacles[i] for i in chosen]
-        if not len(reachable):
-            return []
-        # x_0 is not constrained: only its Farkas margin, as for a circle
-        required = np.concatenate([[self._config.farkas_margin], self._required_clearance(x, u)])
-        bound = (reachable.signed_distance_lower_bound(x[:, :2]) - self._body_radius
-                 - required[:, None])
-        near = [reachable.obstacles[i]
-                for i in np.flatnonzero(np.min(bound, axis=0) <= distance)]
-        signed, _ = self._separation(x, near)
-        slack = np.min(signed - required[:, None], axis=0, initial=np.inf)
-        chosen = np.flatnonzero(slack <= distance)
-        order = np.argsort(slack[chosen], kind='stable')
-        return [near[i] for i in chosen[order]]
-
-    # ----------------------------------------------------------------- the polygon footprint
-    def _separation(self, x: np.ndarray, obstacles: Sequence[ConvexPolygon]
-                    ) -> tuple[np.ndarray, np.ndarray]:
-        """Return polygon_separation of the polygon at every pose of x, (N+1, K) and (N+1, K, 2).
-
-        Memoised per plan and obstacle (a step asks about the same candidate and the same
-        solution several times: for the obstacles near it, its verification, its
-        multipliers), so each pair is computed once; emptied at every solve(). An entry holds
-        its obstacle, so that no other object can take over its id() meanwhile.
-        """
-        body = self._body
-        assert body is not None  # only called for a polygonal footprint
-        x = np.asarray(x, dtype=float)
-        key = x.tobytes()
-        if key not in self._geometry and len(self._geometry) >= MAX_CACHED_PLANS:
-            self._geometry.pop(next(iter(self._geometry)))  # the oldest
-        entry = self._geometry.setdefault(key, {})
-        missing = list({id(o): o for o in obstacles if id(o) not in entry}.values())
-        if missing:
-            angle = x[:, self._model.angle_index]
-            cos, sin = np.cos(angle)[:, None], np.sin(angle)[:, None]
-            local = body.vertices
-            corners = np.stack([cos * local[:, 0] - sin * local[:, 1] + x[:, :1],
-                                sin * local[:, 0] + cos * local[:, 1] + x[:, 1:2]], axis=-1)
-            signed, direction = polygon_separation(corners, ObstacleSet(missing))
-            for j, o in enumerate(missing):
-                entry[id(o)] = (o, signed[:, j], direction[:, j])
-        if not obstacles:
-            return np.zeros((len(x), 0)), np.zeros((len(x), 0, 2))
-        columns = [entry[id(o)] for o in obstacles]
-        return (np.stack([c[1] for c in columns], axis=1),
-                np.stack([c[2] for c in columns], axis=1))
-
-    def _required_clearance(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """Return the clearance x_1..x_N need: farkas_margin + h/2 of the faster adjacent step.
-
-        Over a step every point of the body moves at most h sweep_rate(x_l, u_l) (exact |.|
-        here); a pose at least half of that from an obstacle on both of its steps keeps the
-        continuous motion between the samples clear. After x_N, u_N = 0: no motion.
-        """
-        x, u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
-        key = x.tobytes() + u.tobytes()
-        required = self._clearance_memo.get(key)
-        if required is not None:
-            return required
-        n = len(u)
-        rate_map = self._sweep_maps.get(n)
-        if rate_map is None:
-            rate_map = self._sweep_maps[n] = self._sweep_exact.map(n)
-        rates = np.asarray(rate_map(x[:-1].T, u.T)).reshape(-1)
-        after = np.append(rates[1:], 0.0)
-        c = self._config
-        required = c.farkas_margin + c.step / 2 * np.maximum(rates, after)
-        if len(self._clearance_memo) >= MAX_CACHED_PLANS:
-            self._clearance_memo.pop(next(iter(self._clearance_memo)))  # the oldest
-        self._clearance_memo[key] = required
-        return required
-
     # ----------------------------------------------------------------- the candidate
     def _unwrap(self, x: np.ndarray) -> np.ndarray:
         """Put the measured heading on the branch nearest the prediction (or the path)."""
@@ -695,56 +398,22 @@ class MpcBase(ABC):
         x[k] = reference + float(wrap_angle(x[k] - reference))
         return x
 
-    def _rollout(self, x0: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """Simulate the model from x0 under u, in one call of a mapaccum'ed step."""
-        key = (self._config.step, len(u))
-        rollout = self._rollouts.get(key)
-        if rollout is None:
-            step = self._model.discrete(self._config.step)
-            rollout = self._rollouts[key] = step.mapaccum('rollout', len(u))
-        xs = np.asarray(rollout(x0, np.asarray(u, dtype=float).T)).T
-        return np.vstack([x0, xs])
-
     def _candidate(self, x0: np.ndarray) -> Plan:
-        """The proof's candidate: shift the last plan and append the terminal steady state.
+        """Return the proof's candidate from x0 (candidate.shifted_candidate of the last plan).
 
-        Without a last plan: stand still, and end in the steady state of the initial s.
         Its multipliers depend on the NLP (obstacles held): see _multipliers.
         """
-        n = self._config.horizon
-        if self._plan is None:
-            s0 = self._progress(x0)
-            u = np.zeros((n, self._model.nu))
-            x = np.tile(x0, (n + 1, 1))
-            x_s = self._terminal_state(s0)
-            x[-1] = x_s if x_s is not None else x0
-            return Plan(x=x, u=u, s=s0, mu=np.zeros(0), value=math.inf)
-        prev = self._plan
-        _, u_s = self._model.steady_state(prev.x[-1, :3])
-        u = np.vstack([prev.u[1:], np.asarray(u_s, dtype=float).reshape(1, -1)])
-        return Plan(x=self._rollout(x0, u), u=u, s=prev.s, mu=np.zeros(0), value=math.inf)
+        return shifted_candidate(self._model, self._plan, x0, horizon=self._config.horizon,
+                                 step=self._config.step, rollout=self._rollout,
+                                 progress=self._progress, terminal_state=self._terminal_state)
 
     def _guided_guess(self, x0: np.ndarray, active: list[ConvexPolygon], nlp: Nlp) -> Plan:
-        """An infeasible but informative start: the motion in hand, ended on the path.
-
-        After a new path, the inputs of the last plan on the old one shifted by a step (the
-        robot was carrying them out, and they avoid what the old plan avoided); else drive
-        forward at half speed. Either is rolled out from x0, and its last state replaced by
-        the steady state on the path nearest it.
-        """
-        n = self._config.horizon
-        u = np.zeros((n, self._model.nu))
-        carried = self._carried_inputs
-        if carried is not None and len(carried) == n:
-            u[:-1] = carried[1:]
-        else:
-            u[:, 0] = 0.5 * self._model.u_max[0]
-        x = self._rollout(x0, u)
-        s = self._progress(x[-1], s_min=self._progress(x0))
-        terminal = self._terminal_state(s)
-        if terminal is not None:
-            x[-1] = terminal
-        return Plan(x=x, u=u, s=s, mu=self._multipliers(x, active, nlp), value=math.inf)
+        """Return the guided start from x0 (candidate.guided_guess), with nlp's multipliers."""
+        plan = guided_guess(self._model, x0, self._carried_inputs,
+                            horizon=self._config.horizon, step=self._config.step,
+                            rollout=self._rollout, progress=self._progress,
+                            terminal_state=self._terminal_state)
+        return replace(plan, mu=self._multipliers(plan.x, active, nlp))
 
     # ----------------------------------------------------------------- verification
     def _violation(self, w: np.ndarray, params: np.ndarray, obstacles: ObstacleSet,
@@ -761,34 +430,7 @@ class MpcBase(ABC):
         viol_w = np.maximum(form.lbw - w, 0) + np.maximum(w - form.ubw, 0)
         worst = max(np.max(viol, initial=0.0), np.max(viol_w, initial=0.0))
         return max(float(worst),
-                   self._penetration(w[form.layout.x], w[form.layout.u], obstacles))
-
-    def _penetration(self, x: np.ndarray, u: np.ndarray, obstacles: ObstacleSet) -> float:
-        """Return how far the plan's poses x_1..x_N fall short of their clearance (0: clear).
-
-        A circle: the positions against the inflated obstacles, by the Farkas margin. A
-        polygon: the exact distance of the polygon at each pose against the clearance its
-        motion needs (_required_clearance); the exact distances are computed only for the
-        obstacles a cheap bound (r_c around the positions) cannot clear.
-        """
-        if self._body is None:
-            depth = (self._config.farkas_margin
-                     - obstacles.signed_distance_lower_bound(x[1:, :2]))
-            return float(np.max(depth, initial=0.0))
-        if not len(obstacles):
-            return 0.0
-        required = self._required_clearance(x, u)[:, None]
-        bound = obstacles.signed_distance_lower_bound(x[1:, :2]) - self._body_radius
-        unclear = [obstacles.obstacles[i]
-                   for i in np.flatnonzero(np.any(bound < required, axis=0))]
-        if not unclear:
-            return 0.0
-        depth = required - self._separation(x, unclear)[0][1:]
-        return float(np.max(depth, initial=0.0))
-
-    def _collision_free(self, plan: Plan, obstacles: ObstacleSet) -> bool:
-        """Say whether the plan's poses x[1:] clear every given (inflated) obstacle."""
-        return self._penetration(plan.x, plan.u, obstacles) <= 0.0
+                   self._clearance.penetration(w[form.layout.x], w[form.layout.u], obstacles))
 
     def _run_solver(self, nlp: Nlp, w0: np.ndarray, params: np.ndarray,
                     active: ObstacleSet, solver: ca.Function | None = None) -> SolveAttempt:
@@ -825,16 +467,16 @@ class MpcBase(ABC):
         same NLP comes up there and the state has not moved (see tries.py).
         """
         unfinished = self._unfinished
-        continuation: _Unfinished | None = None
+        continuation: Unfinished | None = None
         if unfinished is not None and unfinished.nlp is nlp:
             self._unfinished = None  # continued once, or moved away from
-            if _stood_still(unfinished.x0, x0) and _same_polygons(unfinished.held, active):
+            if stood_still(unfinished.x0, x0) and same_polygons(unfinished.held, active):
                 continuation = unfinished
-        if not _stood_still(self._failed_x0, x0):
+        if not stood_still(self._failed_x0, x0):
             self._failed_here = set()  # the robot moved: every try is worth making again
             self._failed_x0 = x0.copy()
         situation = Situation(
-            plan_moves=_plan_moves(self._plan, self._progress_gain),
+            plan_moves=plan_moves(self._plan, self._progress_gain),
             obstacles_active=bool(active), previous_round=previous is not None,
             has_fallback=nlp.has_fallback,
             continuation=continuation.solver if continuation is not None else None,
@@ -847,8 +489,7 @@ class MpcBase(ABC):
             if start not in starts:
                 if start is Start.PREVIOUS_ROUND:
                     assert previous is not None
-                    previous.mu = self._multipliers(previous.x, active, nlp)
-                    plan = previous
+                    plan = replace(previous, mu=self._multipliers(previous.x, active, nlp))
                 else:
                     plan = self._guided_guess(x0, active, nlp)
                 starts[start] = self._pack(plan, nlp)
@@ -860,11 +501,11 @@ class MpcBase(ABC):
         for attempt_try in solver_tries(situation):
             kind = attempt_try.solver
             first_backend = best is None and kind is Solver.BACKEND
-            if not first_backend and not self._budget.allows(_build_time(nlp, kind)):
+            if not first_backend and not self._budget.allows(build_time(nlp, kind)):
                 continue
             self._tries.append(attempt_try)
             attempt = self._run_solver(nlp, start_of(attempt_try.start), params, active_set,
-                                       _solver_of(nlp, kind))
+                                       solver_of(nlp, kind))
             iterations += attempt.iterations
             seconds += attempt.seconds
             origin = (continuation.origin if attempt_try.start is Start.CONTINUATION
@@ -877,7 +518,7 @@ class MpcBase(ABC):
                 self._failed_here.update({(id(nlp), attempt_try), (id(nlp), origin)})
             if (attempt.cut and not attempt.verified and attempt.iterations > 0
                     and steps <= MAX_CONTINUED_STEPS and np.all(np.isfinite(attempt.w))):
-                self._unfinished = _Unfinished(nlp, x0.copy(), attempt.w, kind, tuple(active),
+                self._unfinished = Unfinished(nlp, x0.copy(), attempt.w, kind, tuple(active),
                                                origin, steps)
             if attempt.verified:
                 best = attempt._replace(status=attempt.status + kind.label)
@@ -889,21 +530,26 @@ class MpcBase(ABC):
 
     # ----------------------------------------------------------------- constraint generation
     def _generate_constraints(self, x0: np.ndarray, candidate: Plan,
-                              reachable: ObstacleSet) -> _Rounds:
+                              reachable: ObstacleSet) -> Rounds:
         """Solve with the obstacles near the candidate; add those the solution came near.
 
         The NLP may hold fewer than asked for (_nlp_holding: no shape is built within a
         prepared step); the solution is then checked against every reachable obstacle.
         """
         activation = self._activation_distance()
-        active = self._resumed_round(x0, reachable)
+        active = resumed_round(self._unfinished, x0, reachable)
+        # a resumed round runs in the NLP its cut try ran in: the one picked for the obstacles
+        # that round was given may hold them with more faces than those it held need
+        resumed = self._unfinished.nlp if active is not None and self._unfinished else None
         if active is None:
-            active = self._near_trajectory(candidate.x, candidate.u, reachable, activation)
+            active = self._clearance.near_trajectory(candidate.x, candidate.u, reachable,
+                                                     activation)
         iterations, seconds = 0, 0.0
         previous: Plan | None = None  # the last round's solution, a start for the next
         for round_ in range(MAX_ACTIVATION_ROUNDS + 1):
-            nlp, params, held = self._prepare_nlp(active, x0)
-            candidate.mu = self._multipliers(candidate.x, held, nlp)
+            nlp, params, held = self._prepare_nlp(active, x0,
+                                                  nlp=resumed if round_ == 0 else None)
+            candidate = replace(candidate, mu=self._multipliers(candidate.x, held, nlp))
             w_candidate = self._pack(candidate, nlp)
             # the candidate must clear every reachable obstacle, not only the active ones
             candidate_ok = (self._violation(w_candidate, params, reachable, nlp)
@@ -917,16 +563,18 @@ class MpcBase(ABC):
                 break
             layout = nlp.formulation.layout
             states, inputs = attempt.w[layout.x], attempt.w[layout.u]
-            missed = [o for o in self._near_trajectory(states, inputs, reachable, activation / 2)
-                      if not any(o is a for a in held)]
+            near = self._clearance.near_trajectory(states, inputs, reachable, activation / 2)
+            missed = [o for o in near if not any(o is a for a in held)]
             if not missed:
                 break
             # no further round at the limit, without time for it, or without an NLP with
-            # room for more: the solution stands if it clears every reachable obstacle
-            # (feasible for the full problem, then)
-            if (round_ == MAX_ACTIVATION_ROUNDS or len(held) < len(active)
+            # room for one of the missed obstacles (it would hold the same ones again): the
+            # solution stands if it clears every reachable obstacle (feasible for the full
+            # problem, then)
+            if (round_ == MAX_ACTIVATION_ROUNDS or not self._shapes.holds_more(
+                    active + missed, held, self._config.faces_per_obstacle)
                     or not self._budget.allows()):
-                if self._penetration(states, inputs, reachable) > FEASIBILITY_TOLERANCE:
+                if self._clearance.penetration(states, inputs, reachable) > FEASIBILITY_TOLERANCE:
                     attempt = attempt._replace(
                         verified=False,
                         status=f'{attempt.status} (hits an obstacle left out of the NLP)')
@@ -934,37 +582,10 @@ class MpcBase(ABC):
             active = active + missed
             previous = Plan(x=states, u=inputs, s=self._progress_of(attempt.w[layout.r[-1]]),
                             mu=np.zeros(0), value=math.inf)
-        return _Rounds(nlp=nlp, params=params, w_candidate=w_candidate,
+        return Rounds(nlp=nlp, params=params, candidate=candidate, w_candidate=w_candidate,
                        candidate_ok=candidate_ok, candidate_value=candidate_value,
                        attempt=attempt._replace(iterations=iterations, seconds=seconds),
                        active=held, rounds=round_ + 1)
-
-    def _resumed_round(self, x0: np.ndarray, reachable: ObstacleSet
-                       ) -> list[ConvexPolygon] | None:
-        """Return the obstacles of the round the budget cut last step, to take it up again.
-
-        Only when the robot has not moved since (the state within CONTINUE_TOLERANCE) and
-        every obstacle that round held is still there, unchanged: then this step starts with
-        that round, and its cut try goes on first (see _optimise), rather than solving the
-        rounds before it again. Without this a step whose rounds need more iterations
-        together than one step has would spend its budget on the same first round at every
-        step, and the cut round would never get further (see docs/design/mpc.md, section
-        "Resuming a cut round (_resumed_round)").
-
-        Returns:
-            The reachable obstacles that round held, in its order, or None.
-
-        """
-        unfinished = self._unfinished
-        if unfinished is None or not _stood_still(unfinished.x0, x0):
-            return None
-        resumed = []
-        for old in unfinished.held:
-            match = next((o for o in reachable.obstacles if _same_polygons((o,), (old,))), None)
-            if match is None:
-                return None
-            resumed.append(match)
-        return resumed
 
     # ----------------------------------------------------------------- the step
     def solve(self, x: np.ndarray, previous_input: np.ndarray | None = None) -> MpcSolution:
@@ -982,15 +603,14 @@ class MpcBase(ABC):
             RuntimeError: if no path (or target) has been set.
 
         """
-        self._budget = budget = _Budget.of(self._config, self.clock)
+        self._budget = budget = Budget.of(self._config, self.clock)
         self._tries = []
         x = np.asarray(x, dtype=float).reshape(-1)
         if x.shape != (self._model.nx,) or not np.all(np.isfinite(x)):
             msg = f'state must be {self._model.nx} finite numbers, got {x}'
             raise ValueError(msg)
         self._terminal_parameters()  # RuntimeError without a path (or target)
-        self._geometry.clear()  # the memos hold this step's plans only
-        self._clearance_memo.clear()
+        self._clearance.clear()  # the memos hold this step's plans only
         x0 = self._unwrap(x)
         self._input_before = self._before(previous_input)
         reachable = self._reachable(x0)
@@ -1002,7 +622,8 @@ class MpcBase(ABC):
             solver_verified=attempt.verified, solver_value=attempt.value,
             candidate_ok=result.candidate_ok, candidate_value=result.candidate_value,
             has_previous_plan=self._plan is not None,
-            candidate_collision_free=self._collision_free(candidate, reachable),
+            candidate_collision_free=self._clearance.penetration(
+                candidate.x, candidate.u, reachable) <= 0.0,
             timed_out=budget.timed_out)
         if decision is Decision.SOLVER:
             self._failures = 0
@@ -1019,9 +640,9 @@ class MpcBase(ABC):
         else:
             # the candidate; off the prediction it was not verified, so its cost is computed
             # here (the proof's bound does not hold for it)
-            candidate.value = (result.candidate_value if result.candidate_ok else float(
-                result.nlp.formulation.cost_fn(result.w_candidate, result.params)))
-            plan = candidate
+            plan = replace(result.candidate, value=(
+                result.candidate_value if result.candidate_ok else float(
+                    result.nlp.formulation.cost_fn(result.w_candidate, result.params))))
 
         lyapunov_ok = None
         if self._previous_value is not None:
@@ -1074,68 +695,3 @@ class MpcBase(ABC):
             obstacles_in_reach=in_reach, obstacles_active=active, timed_out=timed_out,
             tries=tuple(self._tries),
         )
-
-
-class PathReferenceMPC(MpcBase):
-    """The paper's MPC: the prediction ends in a steady state on the path, x_N = g_p(s_k).
-
-    Args:
-        model: the robot model.
-        config: settings (MpcConfig()).
-        obstacles: convex obstacles as described; inflated here by config.inflation().
-        path: the reference path p(s); p(0) should be the robot's start pose.
-
-    """
-
-    def __init__(self, model: RobotModel, config: MpcConfig | None = None, *,
-                 obstacles: Sequence[ConvexPolygon] = (),
-                 path: ReferencePath | None = None) -> None:
-        self._path = path
-        super().__init__(model, config, obstacles=obstacles)
-
-    @property
-    def path(self) -> ReferencePath | None:
-        """The reference path in force (None before one is set)."""
-        return self._path
-
-    def set_path(self, path: ReferencePath) -> None:
-        """Use a new reference path; s restarts at the robot's projection onto it.
-
-        The proof's candidate does not carry over (the old plan does not end on the new
-        path), but the old plan's inputs do, as the guided start (_guided_guess): a robot
-        re-planned at speed is carrying them out.
-        """
-        previous = self._plan
-        self._path = path
-        self.reset()
-        if previous is not None and _plan_moves(previous, math.inf):
-            self._carried_inputs = previous.u.copy()
-
-    def _require_path(self) -> ReferencePath:
-        if self._path is None:
-            msg = 'no reference path: call set_path() first'
-            raise RuntimeError(msg)
-        return self._path
-
-    def _terminal_condition(self) -> TerminalCondition:
-        return path_terminal(self._model, self._require_path())
-
-    def _terminal_parameters(self) -> np.ndarray:
-        return self._require_path().parameters()
-
-    def _progress(self, x: np.ndarray, s_min: float = 0.0) -> float:
-        return self._require_path().project(x[:3], s_min=s_min)
-
-    def _terminal_state(self, s: float) -> np.ndarray | None:
-        x_s, _ = self._model.steady_state(self._require_path().pose(s))
-        return np.asarray(x_s, dtype=float).reshape(-1)
-
-    def _reference_value(self, plan: Plan) -> np.ndarray:
-        return np.array([plan.s])
-
-    def _progress_of(self, r: np.ndarray) -> float:
-        return float(r[0])
-
-    def _heading_reference(self, x: np.ndarray) -> float:
-        path = self._require_path()
-        return float(path.pose(path.project(x[:3]))[2])

@@ -97,7 +97,7 @@ class Situation:
         plan_moves: the plan in force moves the robot now: its first input is not zero (a
             stand-still plan, as applied after a step from rest that did not solve, counts as
             none, and so does a plan that waits and puts its motion off: warm starts from it
-            put it off again at every step, see step._plan_moves).
+            put it off again at every step, see candidate.plan_moves).
         obstacles_active: the NLP holds obstacles (Farkas constraints).
         previous_round: the last constraint-generation round's solution is there (a start
             for this round).

@@ -1,0 +1,151 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The plans a step starts from: the proof's shifted candidate and the guided start.
+
+The proof compares the optimum at k+1 with a candidate: the previous plan shifted by one
+step, with the terminal steady state appended (shifted_candidate). It is feasible by
+construction when the robot carried out the previous plan's first input. The guided start
+(guided_guess) is infeasible but informative: the motion in hand, ended on the path.
+
+Plans are values: nothing here changes a plan it is given; a plan with other multipliers or
+another value is a new one (dataclasses.replace).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from typing import Callable
+
+import casadi as ca
+import numpy as np
+
+from mpc_local_planner.core.models import RobotModel
+
+__all__ = ['Plan', 'PROGRESS_TOLERANCE', 'Rollout', 'STANDING_INPUT', 'guided_guess',
+           'plan_moves', 'shifted_candidate']
+
+# Inputs below this (m/s, rad/s) stand still: a solver that converged to "wait" leaves
+# 1e-9, not zeros; and a gain of path progress s below PROGRESS_TOLERANCE is none (see
+# plan_moves).
+STANDING_INPUT = 1e-3
+PROGRESS_TOLERANCE = 1e-6
+
+# The path progress nearest the pose of a state, at least s_min (nan without a path).
+Progress = Callable[[np.ndarray, float], float]
+# The terminal steady state g_p(s) (None when it is free).
+TerminalState = Callable[[float], 'np.ndarray | None']
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A predicted trajectory with everything needed to shift it (s is nan without a path)."""
+
+    x: np.ndarray  # (N+1, nx)
+    u: np.ndarray  # (N, nu)
+    s: float
+    mu: np.ndarray  # flat multipliers
+    value: float
+
+
+def plan_moves(plan: Plan | None, progress: float) -> bool:
+    """Say whether the plan in force moves the robot on: it drives now, or it advances s.
+
+    A plan that neither drives now (|v_0| <= STANDING_INPUT) nor advanced the path progress
+    beyond the plan before it (progress, the gain in s; a turn in place along the path
+    advances it) waits, and counts as standing: warm starts from it can hold the solver at
+    "wait" for good. At rest the unicycle's linearisation cannot move sideways, so where the
+    path's steady state g_p(s) leaves the robot's heading (a rounded turn-in-place knot) the
+    solver reports success with s frozen, the robot turning to and fro on the spot or not at
+    all, the motion put off to the horizon's end; each step's shifted candidate puts it off
+    again, V_N constant, and the robot stands in open space (see docs/design/mpc.md, section
+    "A waiting plan counts as standing (_plan_moves)"). Counted as standing, the plan gets the
+    cold tries of tries.py, which leave that point. Without a path (progress NaN, the
+    tracking baseline) any input above STANDING_INPUT moves.
+    """
+    if plan is None or not len(plan.u):
+        return False
+    first = np.abs(plan.u[0])
+    if math.isnan(progress):
+        return bool(np.any(first > STANDING_INPUT))
+    return bool(first[0] > STANDING_INPUT or (progress > PROGRESS_TOLERANCE
+                                              and np.any(first > STANDING_INPUT)))
+
+
+class Rollout:
+    """Simulate the model over a horizon, one call of a mapaccum'ed step per rollout.
+
+    Args:
+        model: the robot model.
+
+    """
+
+    def __init__(self, model: RobotModel) -> None:
+        self._model = model
+        self._maps: dict[tuple[float, int], ca.Function] = {}
+
+    def __call__(self, x0: np.ndarray, u: np.ndarray, step: float) -> np.ndarray:
+        """Return the (len(u)+1, nx) states from x0 under the inputs u, each held for step s."""
+        key = (step, len(u))
+        rollout = self._maps.get(key)
+        if rollout is None:
+            discrete = self._model.discrete(step)
+            rollout = self._maps[key] = discrete.mapaccum('rollout', len(u))
+        xs = np.asarray(rollout(x0, np.asarray(u, dtype=float).T)).T
+        return np.vstack([x0, xs])
+
+
+def shifted_candidate(model: RobotModel, previous: Plan | None, x0: np.ndarray, *,
+                      horizon: int, step: float, rollout: Rollout, progress: Progress,
+                      terminal_state: TerminalState) -> Plan:
+    """Return the proof's candidate: shift the last plan and append the terminal steady state.
+
+    Without a last plan: stand still, and end in the steady state of the initial s. The
+    candidate has no multipliers (they depend on the obstacles an NLP holds) and no value
+    (inf) yet.
+    """
+    if previous is None:
+        s0 = progress(x0, 0.0)
+        u = np.zeros((horizon, model.nu))
+        x = np.tile(x0, (horizon + 1, 1))
+        x_s = terminal_state(s0)
+        x[-1] = x_s if x_s is not None else x0
+        return Plan(x=x, u=u, s=s0, mu=np.zeros(0), value=math.inf)
+    _, u_s = model.steady_state(previous.x[-1, :3])
+    u = np.vstack([previous.u[1:], np.asarray(u_s, dtype=float).reshape(1, -1)])
+    return Plan(x=rollout(x0, u, step), u=u, s=previous.s, mu=np.zeros(0), value=math.inf)
+
+
+def guided_guess(model: RobotModel, x0: np.ndarray, carried: np.ndarray | None, *,
+                 horizon: int, step: float, rollout: Rollout, progress: Progress,
+                 terminal_state: TerminalState) -> Plan:
+    """Return an infeasible but informative start: the motion in hand, ended on the path.
+
+    After a new path, carried holds the inputs of the last plan on the old one: they are
+    shifted by a step (the robot was carrying them out, and they avoid what the old plan
+    avoided); else drive forward at half speed. Either is rolled out from x0, and its last
+    state replaced by the steady state on the path nearest it. No multipliers yet.
+    """
+    u = np.zeros((horizon, model.nu))
+    if carried is not None and len(carried) == horizon:
+        u[:-1] = carried[1:]
+    else:
+        u[:, 0] = 0.5 * model.u_max[0]
+    x = rollout(x0, u, step)
+    s = progress(x[-1], progress(x0, 0.0))
+    terminal = terminal_state(s)
+    if terminal is not None:
+        x[-1] = terminal
+    return Plan(x=x, u=u, s=s, mu=np.zeros(0), value=math.inf)

@@ -1,0 +1,190 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The clearance of the robot's footprint from obstacles along a plan.
+
+A round robot is a point among obstacles inflated by its radius (and the collision margin):
+its clearance is the positions' signed distance, which must be at least the Farkas margin.
+A polygonal footprint (config.footprint) is checked exactly: the signed distance between the
+polygon at each predicted pose and each obstacle (obstacles.polygon_separation) must be at
+least the clearance the motion needs, farkas_margin + h/2 (|v| + r_c |omega|) for both steps
+next to the pose (exact |.| here; the NLP's smooth one is never smaller).
+
+Clearance answers the step's geometric questions (which obstacles are near a plan, how far
+a plan falls short, warm-start multipliers) and memoises the exact distances per plan: a
+step asks about the same candidate and the same solutions several times. clear() empties the
+memos; the step calls it at its start, so they never hold more than one step's plans.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import casadi as ca
+import numpy as np
+
+from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.models import RobotModel
+from mpc_local_planner.core.mpc.formulation import (
+    dual_multipliers,
+    feasible_multipliers,
+    Formulation,
+    sweep_rate,
+)
+from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
+
+__all__ = ['Clearance', 'MAX_CACHED_PLANS']
+
+# Plans whose polygon clearances are memoised within a step (the candidate, the solutions).
+MAX_CACHED_PLANS = 8
+
+
+class Clearance:
+    """The footprint of config against obstacles along plans (x, u), memoised per step.
+
+    Args:
+        model: the robot model (its heading index, its sweep rate).
+        config: the settings whose footprint, step and Farkas margin apply.
+
+    """
+
+    def __init__(self, model: RobotModel, config: MpcConfig) -> None:
+        footprint = config.robot_footprint
+        self._model = model
+        self._config = config
+        self.body: ConvexPolygon | None = None if footprint.is_circle else footprint.body
+        # r_c: no point of the body is further from the robot's origin
+        self.body_radius = 0.0 if footprint.is_circle else footprint.radius
+        self._sweep_exact = sweep_rate(model, self.body_radius)
+        self._sweep_maps: dict[int, ca.Function] = {}
+        self._geometry: dict[bytes, dict[int, tuple[ConvexPolygon, np.ndarray, np.ndarray]]] = {}
+        self._clearance_memo: dict[bytes, np.ndarray] = {}
+
+    def clear(self) -> None:
+        """Forget the memoised plans (a step starts: they hold that step's plans only)."""
+        self._geometry.clear()
+        self._clearance_memo.clear()
+
+    def separation(self, x: np.ndarray, obstacles: Sequence[ConvexPolygon]
+                   ) -> tuple[np.ndarray, np.ndarray]:
+        """Return polygon_separation of the polygon at every pose of x, (N+1, K) and (N+1, K, 2).
+
+        Only for a polygonal footprint. Memoised per plan and obstacle, so each pair is
+        computed once per step; an entry holds its obstacle, so that no other object can take
+        over its id() meanwhile.
+        """
+        body = self.body
+        assert body is not None  # only called for a polygonal footprint
+        x = np.asarray(x, dtype=float)
+        key = x.tobytes()
+        if key not in self._geometry and len(self._geometry) >= MAX_CACHED_PLANS:
+            self._geometry.pop(next(iter(self._geometry)))  # the oldest
+        entry = self._geometry.setdefault(key, {})
+        missing = list({id(o): o for o in obstacles if id(o) not in entry}.values())
+        if missing:
+            angle = x[:, self._model.angle_index]
+            cos, sin = np.cos(angle)[:, None], np.sin(angle)[:, None]
+            local = body.vertices
+            corners = np.stack([cos * local[:, 0] - sin * local[:, 1] + x[:, :1],
+                                sin * local[:, 0] + cos * local[:, 1] + x[:, 1:2]], axis=-1)
+            signed, direction = polygon_separation(corners, ObstacleSet(missing))
+            for j, o in enumerate(missing):
+                entry[id(o)] = (o, signed[:, j], direction[:, j])
+        if not obstacles:
+            return np.zeros((len(x), 0)), np.zeros((len(x), 0, 2))
+        columns = [entry[id(o)] for o in obstacles]
+        return (np.stack([c[1] for c in columns], axis=1),
+                np.stack([c[2] for c in columns], axis=1))
+
+    def required(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Return the clearance x_1..x_N need: farkas_margin + h/2 of the faster adjacent step.
+
+        Over a step every point of the body moves at most h sweep_rate(x_l, u_l) (exact |.|
+        here); a pose at least half of that from an obstacle on both of its steps keeps the
+        continuous motion between the samples clear. After x_N, u_N = 0: no motion.
+        """
+        x, u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
+        key = x.tobytes() + u.tobytes()
+        required = self._clearance_memo.get(key)
+        if required is not None:
+            return required
+        n = len(u)
+        rate_map = self._sweep_maps.get(n)
+        if rate_map is None:
+            rate_map = self._sweep_maps[n] = self._sweep_exact.map(n)
+        rates = np.asarray(rate_map(x[:-1].T, u.T)).reshape(-1)
+        after = np.append(rates[1:], 0.0)
+        c = self._config
+        required = c.farkas_margin + c.step / 2 * np.maximum(rates, after)
+        if len(self._clearance_memo) >= MAX_CACHED_PLANS:
+            self._clearance_memo.pop(next(iter(self._clearance_memo)))  # the oldest
+        self._clearance_memo[key] = required
+        return required
+
+    def near_trajectory(self, x: np.ndarray, u: np.ndarray, reachable: ObstacleSet,
+                        distance: float) -> list[ConvexPolygon]:
+        """Return the reachable obstacles within distance of the plan (x, u), nearest first.
+
+        A circle: of the positions x. A polygon: whose clearance from the polygon at some
+        pose x_l exceeds what the motion needs there by at most distance (exact distances,
+        after a cheap bound has left out those further than r_c + distance + that).
+        """
+        if self.body is None:
+            chosen, _ = reachable.near(x[:, :2], distance)
+            return [reachable.obstacles[i] for i in chosen]
+        if not len(reachable):
+            return []
+        # x_0 is not constrained: only its Farkas margin, as for a circle
+        required = np.concatenate([[self._config.farkas_margin], self.required(x, u)])
+        bound = (reachable.signed_distance_lower_bound(x[:, :2]) - self.body_radius
+                 - required[:, None])
+        near = [reachable.obstacles[i]
+                for i in np.flatnonzero(np.min(bound, axis=0) <= distance)]
+        signed, _ = self.separation(x, near)
+        slack = np.min(signed - required[:, None], axis=0, initial=np.inf)
+        chosen = np.flatnonzero(slack <= distance)
+        order = np.argsort(slack[chosen], kind='stable')
+        return [near[i] for i in chosen[order]]
+
+    def penetration(self, x: np.ndarray, u: np.ndarray, obstacles: ObstacleSet) -> float:
+        """Return how far the plan's poses x_1..x_N fall short of their clearance (0: clear).
+
+        A circle: the positions against the inflated obstacles, by the Farkas margin. A
+        polygon: the exact distance of the polygon at each pose against the clearance its
+        motion needs (required()); the exact distances are computed only for the obstacles
+        a cheap bound (r_c around the positions) cannot clear.
+        """
+        if self.body is None:
+            depth = (self._config.farkas_margin
+                     - obstacles.signed_distance_lower_bound(x[1:, :2]))
+            return float(np.max(depth, initial=0.0))
+        if not len(obstacles):
+            return 0.0
+        required = self.required(x, u)[:, None]
+        bound = obstacles.signed_distance_lower_bound(x[1:, :2]) - self.body_radius
+        unclear = [obstacles.obstacles[i]
+                   for i in np.flatnonzero(np.any(bound < required, axis=0))]
+        if not unclear:
+            return 0.0
+        depth = required - self.separation(x, unclear)[0][1:]
+        return float(np.max(depth, initial=0.0))
+
+    def multipliers(self, x: np.ndarray, selected: list[ConvexPolygon],
+                    form: Formulation) -> np.ndarray:
+        """Return multipliers of form that are feasible for the states x wherever x is clear."""
+        if self.body is not None:
+            _, directions = self.separation(x, selected[:form.slots])
+            return dual_multipliers(x, self.body, selected, form.slots, form.faces,
+                                    self._model.angle_index, directions[1:])
+        return feasible_multipliers(x, selected, form.slots, form.faces)

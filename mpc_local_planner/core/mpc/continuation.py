@@ -1,0 +1,95 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""What a solve the step's budget cut carries to the next step, and when it may go on.
+
+A cut solve (Unfinished) goes on at the next step from its last iterate only while the robot
+stands where it was (the state within CONTINUE_TOLERANCE: it stood still on the candidate
+meanwhile), with the same NLP holding the same obstacles, for at most MAX_CONTINUED_STEPS
+steps after its first. The next step then also starts its constraint generation with the
+round that was cut (resumed_round), not with the rounds before it.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple, Sequence
+
+import numpy as np
+
+from mpc_local_planner.core.mpc.backends import Nlp
+from mpc_local_planner.core.mpc.tries import Solver, Try
+from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
+
+__all__ = ['CONTINUE_TOLERANCE', 'MAX_CONTINUED_STEPS', 'Unfinished', 'resumed_round',
+           'same_polygons', 'stood_still']
+
+# A solve the budget cut goes on at the next step from where it stopped if the state moved
+# less than this (each component): the robot stood still on the candidate meanwhile.
+CONTINUE_TOLERANCE = 1e-3
+# A cut solve goes on for at most this many steps after its first before it counts as failed
+# here: enough for a solve of up to about three steps' budget to finish, few enough that a
+# hopeless try does not hold back the others (see docs/design/mpc.md, section
+# MAX_CONTINUED_STEPS).
+MAX_CONTINUED_STEPS = 2
+
+
+class Unfinished(NamedTuple):
+    """A solve the step's budget cut: where it got to, to go on from at the next step."""
+
+    nlp: Nlp
+    x0: np.ndarray
+    w: np.ndarray
+    solver: Solver  # the solver of the try that was cut
+    held: tuple[ConvexPolygon, ...]  # the obstacles its NLP held, in their slots' order
+    origin: Try  # the try that began it (a continuation's origin is the first one's)
+    steps: int = 1  # the steps it has run in (the first one's and each continuation's)
+
+
+def stood_still(before: np.ndarray | None, x0: np.ndarray) -> bool:
+    """Say whether the state is where it was (within CONTINUE_TOLERANCE); None: unknown."""
+    return before is not None and float(np.max(np.abs(before - x0))) <= CONTINUE_TOLERANCE
+
+
+def same_polygons(a: Sequence[ConvexPolygon], b: Sequence[ConvexPolygon]) -> bool:
+    """Say whether two obstacle lists are the same polygons in the same order."""
+    return len(a) == len(b) and all(
+        p.vertices.shape == q.vertices.shape and np.array_equal(p.vertices, q.vertices)
+        for p, q in zip(a, b, strict=True))
+
+
+def resumed_round(unfinished: Unfinished | None, x0: np.ndarray, reachable: ObstacleSet
+                  ) -> list[ConvexPolygon] | None:
+    """Return the obstacles of the round the budget cut last step, to take it up again.
+
+    Only when the robot has not moved since (the state within CONTINUE_TOLERANCE) and
+    every obstacle that round held is still there, unchanged: then this step starts with
+    that round, and its cut try goes on first, rather than solving the rounds before it
+    again. Without this a step whose rounds need more iterations together than one step has
+    would spend its budget on the same first round at every step, and the cut round would
+    never get further (see docs/design/mpc.md, section "Resuming a cut round
+    (_resumed_round)").
+
+    Returns:
+        The reachable obstacles that round held, in its order, or None.
+
+    """
+    if unfinished is None or not stood_still(unfinished.x0, x0):
+        return None
+    resumed = []
+    for old in unfinished.held:
+        match = next((o for o in reachable.obstacles if same_polygons((o,), (old,))), None)
+        if match is None:
+            return None
+        resumed.append(match)
+    return resumed

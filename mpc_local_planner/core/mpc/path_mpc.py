@@ -1,0 +1,97 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The paper's MPC: MpcBase with the terminal condition x_N = g_p(s_k) on a reference path."""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.models import RobotModel
+from mpc_local_planner.core.mpc.candidate import Plan, plan_moves
+from mpc_local_planner.core.mpc.formulation import path_terminal, TerminalCondition
+from mpc_local_planner.core.mpc.step import MpcBase
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.paths import ReferencePath
+
+__all__ = ['PathReferenceMPC']
+
+
+class PathReferenceMPC(MpcBase):
+    """The paper's MPC: the prediction ends in a steady state on the path, x_N = g_p(s_k).
+
+    Args:
+        model: the robot model.
+        config: settings (MpcConfig()).
+        obstacles: convex obstacles as described; inflated here by config.inflation().
+        path: the reference path p(s); p(0) should be the robot's start pose.
+
+    """
+
+    def __init__(self, model: RobotModel, config: MpcConfig | None = None, *,
+                 obstacles: Sequence[ConvexPolygon] = (),
+                 path: ReferencePath | None = None) -> None:
+        self._path = path
+        super().__init__(model, config, obstacles=obstacles)
+
+    @property
+    def path(self) -> ReferencePath | None:
+        """The reference path in force (None before one is set)."""
+        return self._path
+
+    def set_path(self, path: ReferencePath) -> None:
+        """Use a new reference path; s restarts at the robot's projection onto it.
+
+        The proof's candidate does not carry over (the old plan does not end on the new
+        path), but the old plan's inputs do, as the guided start (_guided_guess): a robot
+        re-planned at speed is carrying them out.
+        """
+        previous = self._plan
+        self._path = path
+        self.reset()
+        if previous is not None and plan_moves(previous, math.inf):
+            self._carried_inputs = previous.u.copy()
+
+    def _require_path(self) -> ReferencePath:
+        if self._path is None:
+            msg = 'no reference path: call set_path() first'
+            raise RuntimeError(msg)
+        return self._path
+
+    def _terminal_condition(self) -> TerminalCondition:
+        return path_terminal(self._model, self._require_path())
+
+    def _terminal_parameters(self) -> np.ndarray:
+        return self._require_path().parameters()
+
+    def _progress(self, x: np.ndarray, s_min: float = 0.0) -> float:
+        return self._require_path().project(x[:3], s_min=s_min)
+
+    def _terminal_state(self, s: float) -> np.ndarray | None:
+        x_s, _ = self._model.steady_state(self._require_path().pose(s))
+        return np.asarray(x_s, dtype=float).reshape(-1)
+
+    def _reference_value(self, plan: Plan) -> np.ndarray:
+        return np.array([plan.s])
+
+    def _progress_of(self, r: np.ndarray) -> float:
+        return float(r[0])
+
+    def _heading_reference(self, x: np.ndarray) -> float:
+        path = self._require_path()
+        return float(path.pose(path.project(x[:3]))[2])
