@@ -32,11 +32,12 @@
 - **Periodic**: otherwise, with ``replan_period`` > 0, the goal in force is re-planned at the
   first check at least ``replan_period`` seconds after the plan in force was made.
 - **No progress** (Nav2's progress checker): otherwise, with ``progress_timeout`` > 0, when
-  the robot, farther than ``progress_radius`` from the goal, has not moved
-  ``progress_radius`` from where it was ``progress_timeout`` seconds ago, the goal is
-  re-planned from where it stands. The rule counts only once the robot has moved
-  ``progress_radius`` since the plan was made (a controller that starts late is not a robot
-  that is stuck); after a no-progress re-plan it goes on counting. A real robot that
+  the robot, farther than ``progress_radius`` from the goal, has neither moved
+  ``progress_radius`` nor turned ``progress_angle`` from where it was ``progress_timeout``
+  seconds ago (Nav2's PoseProgressChecker), the goal is re-planned from where it stands.
+  The rule counts only once the robot has moved or turned that much since the plan was
+  made (a controller that starts late is not a robot that is stuck; one that turned in
+  place and then stood is); after a no-progress re-plan it goes on counting. A real robot that
   re-planned while moving coasts on past the new plan's start; a forward-only one may then
   have the plan behind it, and its controller no verified way back onto it. The clock of
   this rule restarts at each attempt, so a robot that cannot be helped is re-planned once
@@ -71,6 +72,7 @@ if TYPE_CHECKING:
     from mpc_local_planner.core.free_space import EscapeGrid
 
 __all__ = [
+    'PROGRESS_ANGLE',
     'PROGRESS_RADIUS',
     'PROGRESS_TIMEOUT',
     'ReplanDecision',
@@ -89,6 +91,10 @@ TIME_EPSILON = 1e-9
 # and less than a third of the Jackal's length.
 PROGRESS_TIMEOUT = 5.0
 PROGRESS_RADIUS = 0.25
+# A turn of this many radians counts as progress too (Nav2's PoseProgressChecker,
+# required_movement_angle): a robot that turned in place since its plan was made has moved,
+# and one that turned and then stood is stuck, whether or not it ever drove.
+PROGRESS_ANGLE = 0.5
 
 
 class ReplanningPlanner(Protocol):
@@ -122,6 +128,8 @@ class ReplanSettings:
             movement_time_allowance).
         progress_radius: Metres that count as progress (Nav2's required_movement_radius),
             and the distance to the goal within which standing still is arriving.
+        progress_angle: Radians of turn that count as progress too (Nav2's
+            PoseProgressChecker required_movement_angle); 0 = position only.
 
     """
 
@@ -131,11 +139,12 @@ class ReplanSettings:
     slack: float = TIME_EPSILON
     progress_timeout: float = 0.0
     progress_radius: float = 0.25
+    progress_angle: float = PROGRESS_ANGLE
 
     def __post_init__(self) -> None:
         """Refuse negative or non-finite periods."""
         for name in ('check_period', 'replan_period', 'escape_distance', 'slack',
-                     'progress_timeout', 'progress_radius'):
+                     'progress_timeout', 'progress_radius', 'progress_angle'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 problem = f'{name} must be finite and >= 0, got {value}'
@@ -217,7 +226,7 @@ class Replanner:
         # where the robot was when progress was last measured, and when (No progress)
         self._anchor: np.ndarray | None = None
         self._anchor_time = -math.inf
-        self._moved = False  # the robot has moved progress_radius since the plan was made
+        self._moved = False  # moved progress_radius or turned progress_angle since the plan
 
     @property
     def plan(self) -> np.ndarray | None:
@@ -292,10 +301,10 @@ class Replanner:
         settings = self.settings
         if settings.progress_timeout <= 0.0 or self._goal is None:
             return False
-        position = np.asarray(start, dtype=float)[:2]
-        if self._anchor is None or float(np.hypot(*(position - self._anchor))) \
-                >= settings.progress_radius:
-            self._anchor, self._anchor_time = position.copy(), now
+        pose = np.asarray(start, dtype=float)[:3]
+        position = pose[:2]
+        if self._anchor is None or self._progressed(pose):
+            self._anchor, self._anchor_time = pose.copy(), now
             self._moved = True
             return False
         if not self._moved:
@@ -306,6 +315,14 @@ class Replanner:
             return False
         self._anchor_time = now  # once per progress_timeout, whatever the attempt gives
         return True
+
+    def _progressed(self, pose: np.ndarray) -> bool:
+        """Say whether pose is progress_radius, or progress_angle of turn, from the anchor."""
+        settings, anchor = self.settings, self._anchor
+        if float(np.hypot(*(pose[:2] - anchor[:2]))) >= settings.progress_radius:
+            return True
+        turned = abs(math.remainder(float(pose[2] - anchor[2]), math.tau))
+        return settings.progress_angle > 0.0 and turned >= settings.progress_angle
 
     def _attempt(self, planner: ReplanningPlanner, start: np.ndarray, goal: np.ndarray,
                  trigger: PlanTrigger, *, now: float, grid: EscapeGrid | None = None,
@@ -330,7 +347,7 @@ class Replanner:
         seconds = time.perf_counter() - started
         waypoints = np.asarray(waypoints, dtype=float)
         self._plan, self._goal, self._plan_time = waypoints, goal, now
-        self._anchor, self._anchor_time = start[:2].copy(), now
+        self._anchor, self._anchor_time = start[:3].copy(), now
         self._moved = trigger is PlanTrigger.NO_PROGRESS  # standing already: it counts on
         if trigger is PlanTrigger.GOAL:
             self._checked = now

@@ -235,7 +235,8 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
             replan_period=float(self.get_parameter('replan_period').value),
             escape_distance=ESCAPE_DISTANCE,
             progress_timeout=float(self.get_parameter('progress_timeout').value),
-            progress_radius=float(self.get_parameter('progress_radius').value))
+            progress_radius=float(self.get_parameter('progress_radius').value),
+            progress_angle=float(self.get_parameter('progress_angle').value))
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Load the world, build the planner, create the publishers and subscriptions.
@@ -387,13 +388,14 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         Unconfigured, nothing is built: configure reads the parameters as they then are.
         """
         names = {p.name for p in parameters}
-        if names & {'replan_period', 'progress_timeout', 'progress_radius'}:
+        if names & {'replan_period', 'progress_timeout', 'progress_radius', 'progress_angle'}:
             # at the next check (replan_check_rate: at activate)
             self.replanner.settings = replace(
                 self.replanner.settings,
                 replan_period=float(self.get_parameter('replan_period').value),
                 progress_timeout=float(self.get_parameter('progress_timeout').value),
-                progress_radius=float(self.get_parameter('progress_radius').value))
+                progress_radius=float(self.get_parameter('progress_radius').value),
+                progress_angle=float(self.get_parameter('progress_angle').value))
         if not self._configured:
             return
         for name in ('use_map', 'use_scan'):

@@ -29,6 +29,7 @@ from mpc_local_planner.core.footprint import parse_footprint
 from mpc_local_planner.core.paths import analytic_path
 from mpc_local_planner.core.planner import PlannerConfig
 from mpc_local_planner.core.replanning import (
+    PROGRESS_ANGLE,
     PROGRESS_RADIUS,
     PROGRESS_TIMEOUT,
 )
@@ -98,14 +99,19 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   're-plan the goal in force this often (s) even when the plan is clear; 0 = '
                   'only when blocked or for a new goal', float_range=(0.0, 3600.0)),
     ParameterSpec('progress_timeout', PROGRESS_TIMEOUT,
-                  "Nav2's progress checker: when the robot, away from the goal, has not moved "
-                  'progress_radius in this many seconds, the goal is re-planned from where it '
+                  "Nav2's progress checker: when the robot, away from the goal, has neither "
+                  'moved progress_radius nor turned progress_angle in this many seconds, the '
+                  'goal is re-planned from where it '
                   "stands (a forward-only robot that coasted past a new plan's start may have "
                   'no way back onto it); 0 = never', float_range=(0.0, 3600.0)),
     ParameterSpec('progress_radius', PROGRESS_RADIUS,
                   'metres that count as progress for progress_timeout, and the distance to '
                   'the goal within which standing still is arriving',
                   float_range=(0.0, 100.0)),
+    ParameterSpec('progress_angle', PROGRESS_ANGLE,
+                  "radians of turn that count as progress (Nav2's PoseProgressChecker "
+                  'required_movement_angle): a robot that turned in place and then stood is '
+                  'stuck; 0 = only the position counts', float_range=(0.0, 6.3)),
     *POSE_PARAMETERS,
     ParameterSpec('autostart', True,
                   'configure and activate at start; false = wait for a lifecycle manager (or '

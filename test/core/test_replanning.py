@@ -277,6 +277,36 @@ def test_a_robot_that_has_not_moved_since_its_plan_is_waiting_for_its_controller
             is not ReplanOutcome.PLANNED
 
 
+def test_a_robot_that_turned_in_place_and_then_stood_is_re_planned_from_where_it_stands():
+    """Nav2's PoseProgressChecker: a turn of progress_angle is progress; standing after it is not.
+
+    The recorded case: a robot wedged beside cylinders turns in place towards its new plan,
+    cannot turn further, and stands; it never drove progress_radius since the plan.
+    """
+    planner = _NoProgressPlanner()
+    replanner = Replanner(ReplanSettings(check_period=0.5, progress_timeout=5.0,
+                                         progress_radius=0.25, progress_angle=0.5))
+    replanner.plan_goal(planner, np.zeros(3), np.array([10.0, 0.0, 0.0]), now=0.0)
+    turned = np.array([0.0, 0.0, 0.6])
+    planned = [0.5 * k for k in range(1, 40)
+               if replanner.check(planner, turned if k > 1 else np.array([0.0, 0.0, 0.3]),
+                                  now=0.5 * k).outcome is ReplanOutcome.PLANNED]
+    assert planned[:2] == [6.0, 11.0]  # turned by 1.0 s, stood: re-planned 5 s later
+    np.testing.assert_array_equal(planner.starts[1], turned)
+    # turning back and forth by more than progress_angle is progress: no re-plan
+    replanner = Replanner(ReplanSettings(check_period=0.5, progress_timeout=5.0))
+    replanner.plan_goal(planner, np.zeros(3), np.array([10.0, 0.0, 0.0]), now=0.0)
+    for k in range(1, 40):
+        pose = np.array([0.0, 0.0, 0.6 * (k % 2)])
+        assert replanner.check(planner, pose, now=0.5 * k).outcome is not ReplanOutcome.PLANNED
+    # with progress_angle 0 only the position counts (Nav2's SimpleProgressChecker)
+    replanner = Replanner(ReplanSettings(check_period=0.5, progress_timeout=5.0,
+                                         progress_angle=0.0))
+    replanner.plan_goal(planner, np.zeros(3), np.array([10.0, 0.0, 0.0]), now=0.0)
+    assert not any(replanner.check(planner, turned, now=0.5 * k).outcome
+                   is ReplanOutcome.PLANNED for k in range(1, 40))
+
+
 class _NoProgressPlanner:
     """A planner whose plans are always clear: only the progress rule can re-plan."""
 
