@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.footprint import JACKAL
-from mpc_local_planner.evaluation import evaluate
+from mpc_local_planner.evaluation import evaluate, suite_runs
 from mpc_local_planner.evaluation import sensing_suites as suites
 from mpc_local_planner.evaluation.rollout import Outcome
 from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -80,7 +80,7 @@ def test_without_sensing_the_unknown_box_is_hit() -> None:
 
 def test_barn_for_the_challenge_knows_no_obstacle_beforehand() -> None:
     robot = dataclasses.replace(suites.ROBOTS['jackal'])
-    world = suites.barn_sensing_world(evaluate.DEFAULT_BARN_DIR / 'world_000.json', robot)
+    world = suites.barn_sensing_world(suite_runs.DEFAULT_BARN_DIR / 'world_000.json', robot)
     assert world.obstacles == () and len(world.unknown_obstacles) > 50
     assert np.allclose(world.footprint.vertices, JACKAL.vertices)
     assert any(type(shape).__name__ == 'Circle' for shape in world.physical_shapes())
