@@ -99,6 +99,12 @@ MAP_RESOLUTION = 0.05
 PLANNER_CLEARANCE = 0.1
 POLYGON_CLEARANCE = 0.05
 PLANNER_ITERATIONS = 3000
+# The planner's wall-time limit in the suites (s): far above what PLANNER_ITERATIONS take
+# (under a second on an idle machine), so that the iterations bound planning whatever the
+# load, as EVALUATION_BUDGET bounds the MPC's solving. With the planner's default (5 s), on a
+# two-core machine loaded to 11 most plans were cut by it: the runs, and the unknown suite's
+# worlds (drawn with plans), changed with the load.
+PLANNER_TIME_LIMIT = 60.0
 PLANNER_RANGE = 0.5
 PATH_CAPACITY = 128
 # Unknown suite: the random suite's workspace, start and goal; its success tolerance.
@@ -184,7 +190,8 @@ def _grid_planner(occupancy: OccupancyMap, robot: Robot, bounds: tuple[float, fl
                   seed: int) -> tuple[PlanningGrid, RrtStarPlanner]:
     """Return the planner's grid of a map and the RRT* planner on it (the navigator's)."""
     config = PlannerConfig(
-        iterations=PLANNER_ITERATIONS, seed=seed, range=PLANNER_RANGE,
+        iterations=PLANNER_ITERATIONS, time_limit=PLANNER_TIME_LIMIT, seed=seed,
+        range=PLANNER_RANGE,
         robot_radius=robot.footprint.radius if robot.footprint.is_circle else 0.0,
         footprint=_vertices(robot.footprint),
         clearance=PLANNER_CLEARANCE if robot.footprint.is_circle else POLYGON_CLEARANCE)
@@ -232,7 +239,8 @@ def unknown_world(index: int, seed: int, *, robot: Robot | None = None) -> World
             unknown.append(_random_polygon(rng, float(centre[0]), float(centre[1]), 0.2, 0.45))
         if any(np.any(o.distance(ends) < clear) for o in unknown):
             continue
-        config = PlannerConfig(iterations=PLANNER_ITERATIONS, seed=index, range=PLANNER_RANGE,
+        config = PlannerConfig(iterations=PLANNER_ITERATIONS, time_limit=PLANNER_TIME_LIMIT,
+                               seed=index, range=PLANNER_RANGE,
                                robot_radius=robot.footprint.radius,
                                clearance=PLANNER_CLEARANCE)
         try:
