@@ -28,7 +28,10 @@ is exact; a real one does not:
   (``odom_drift``), and published with white noise (``odom_noise``: what wheel slip and
   encoder quantisation look like to a controller at 50 Hz);
 - **the laser**: Gaussian range noise, beams that read NaN (an erroneous reading, REP 117) or
-  -inf (too close), and whole scans that never arrive.
+  -inf (too close), and whole scans that never arrive;
+- **a localizer** (`Localizer`, AMCL's stand-in): since odometry drifts, a robot that is not
+  ideal is told where it is in ``map`` by a localizer, late and noisy; composed with
+  odometry (perception/localization.py) it gives the pose in the plan's frame.
 
 `REALITY_PRESETS` gives four levels; `Reality.ideal` (all off) is what every simulation was
 before, and with it a `Base` reproduces the model's own step exactly.
@@ -66,11 +69,26 @@ from mpc_local_planner.core.models import Unicycle, unicycle_arc
 
 __all__ = [
     'Base',
+    'Localizer',
+    'LOCALIZER_NOISE',
+    'LOCALIZER_RATE',
+    'POSE_ERROR',
     'REALITY_PRESETS',
     'Reality',
     'reality_preset',
     'ScanChannel',
+    'true_goal_tolerance',
 ]
+
+# The localizer stand-in of every localized run (closed_loop with --drift or a non-ideal
+# --reality, the suites with a non-ideal reality): AMCL updates a moving robot's pose a few
+# times a second (5 Hz) to about a centimetre in a well-mapped place (noise on x, y, and in
+# rad on theta).
+LOCALIZER_RATE = 5.0
+LOCALIZER_NOISE = 0.01
+# How far a localized pose estimate may be from the truth (m): the localizer's noise (3
+# sigma, 3 cm) and odometry's jitter and drift between two of its poses.
+POSE_ERROR = 0.05
 
 
 @dataclass(frozen=True)
@@ -364,3 +382,64 @@ class ScanChannel:
             ranges[(draw >= reality.scan_nan)
                    & (draw < reality.scan_nan + reality.scan_neg_inf)] = -np.inf
         return ranges
+
+
+class Localizer:
+    """A localizer's stand-in (AMCL's ``amcl_pose``): the TRUE pose with noise, at a rate.
+
+    What the unicycle_simulator node publishes with ``localizer.rate`` and
+    ``localizer.noise_std`` (closed_loop sets them to LOCALIZER_RATE and LOCALIZER_NOISE):
+    Gaussian noise of the same standard deviation on x, y (m) and theta (rad), its own seeded
+    stream. Time is the caller's, as a `Base`'s: a pose is due at 0 (the localizer has its
+    initial pose before the robot moves) and then every 1 / rate seconds.
+
+    Args:
+        rate: poses per second (> 0).
+        noise_std: standard deviation of the noise (m, and rad for the heading).
+        seed: seed of the noise (a run's reality seed: runs are reproducible).
+
+    """
+
+    def __init__(self, rate: float = LOCALIZER_RATE, noise_std: float = LOCALIZER_NOISE,
+                 seed: int = 0) -> None:
+        if not (math.isfinite(rate) and rate > 0.0):
+            msg = f'rate must be > 0 and finite, got {rate}'
+            raise ValueError(msg)
+        if not (math.isfinite(noise_std) and noise_std >= 0.0):
+            msg = f'noise_std must be >= 0 and finite, got {noise_std}'
+            raise ValueError(msg)
+        self.rate = float(rate)
+        self.noise_std = float(noise_std)
+        # its own stream: the base's and the laser's draws do not shift it
+        self._rng = np.random.default_rng([int(seed), 2])
+        self._next = 0.0
+
+    def measure(self, time: float, pose: Sequence[float]) -> np.ndarray | None:
+        """Return the localizer's pose (x, y, theta in map) at time if one is due, else None.
+
+        Args:
+            time: now (s); calls come in time order.
+            pose: the TRUE pose now.
+
+        """
+        if time < self._next - 1e-9:
+            return None
+        period = 1.0 / self.rate
+        while self._next <= time + 1e-9:
+            self._next += period
+        return np.asarray(pose, dtype=float)[:3] + self._rng.normal(0.0, self.noise_std, 3)
+
+
+def true_goal_tolerance(arrival_tolerance: float) -> float:
+    """Return how close the TRUE robot must end to the goal when it arrives on an estimate.
+
+    ONE definition for closed_loop and the suites. A localized robot (odometry corrected by
+    a localizer) declares arrival when its ESTIMATE is within arrival_tolerance of the goal;
+    the estimate may be off by POSE_ERROR, so the truth is held to arrival_tolerance +
+    POSE_ERROR. closed_loop judges its runs so (the controller's xy_goal_tolerance, 0.1 m on
+    a real robot, and 0.05 m with --drift alone); the suites judge the truth against the
+    task's tolerance (the unknown suite's 0.1 m) and so give their controllers an arrival
+    tolerance no larger than the task's minus POSE_ERROR: true_goal_tolerance(arrival) is at
+    most the task's tolerance, and a run is judged as closed_loop would judge it.
+    """
+    return float(arrival_tolerance) + POSE_ERROR

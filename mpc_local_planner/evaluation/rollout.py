@@ -43,6 +43,14 @@ stop rule and contacts judge the truth; the controller never sees it). h is then
 period (1 / control_frequency), and stall_steps counts periods of stall_period seconds
 (StopRule.stall_period), so that a stall lasts as long in seconds at any control rate.
 
+Odometry that drifts is not the pose in ``map``, where the plan and the obstacles are: the
+nodes then compose it with a localizer's poses (perception/localization.py), and so does the
+rollout given a `Localizer` (core/reality.py, the simulator's stand-in for AMCL): at each
+control instant the odometry (and its twist) goes into a `LocalizedPose`, a localizer pose
+due then (the TRUE pose with noise) updates its correction map <- odom at that instant, and
+the controller gets the latest odometry through the correction: the pose in ``map``, as the
+controller and planner nodes compute it with ``localization_topic``.
+
 Nothing here reads a clock but to report step times. The MPCs of the evaluation suites bound
 a step's solving by solver iterations (EVALUATION_BUDGET, MpcConfig.budget 'iterations'), not
 by wall time as the robot does: the same command gives the same runs on any machine under any
@@ -62,10 +70,12 @@ from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.mpc.backends import compile_wait_seconds
 from mpc_local_planner.core.paths import wrap_angle
 from mpc_local_planner.evaluation.trajectory import trajectory_row
+from mpc_local_planner.perception.localization import LocalizedPose
 
 if TYPE_CHECKING:
     from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit
     from mpc_local_planner.core.obstacles import ConvexPolygon
+    from mpc_local_planner.core.reality import Base, Localizer
 
 __all__ = [
     'as_controller',
@@ -93,6 +103,8 @@ EVALUATION_BUDGET = 'iterations'
 # stopped for good away from the goal.
 STALL_INPUT = 1e-4
 STALL_STEPS = 25
+# Seconds of odometry kept for the localizer's stamps (the nodes' ODOM_HISTORY_S).
+ODOM_HISTORY = 2.0
 
 Clearance = Callable[[np.ndarray], np.ndarray]
 
@@ -286,6 +298,7 @@ def rollout(
     h: float,
     rule: StopRule,
     clearance: Clearance | None = None,
+    localizer: Localizer | None = None,
 ) -> Rollout:
     """Run controller and model in closed loop until the stop rule ends the run.
 
@@ -300,15 +313,26 @@ def rollout(
         clearance: poses (n, 3) -> clearance of the robot's footprint from the true
             obstacles (<= 0 is contact), or None to ignore collisions (measure them from the
             rows instead).
+        localizer: with a real base, the localizer whose poses correct odometry (the
+            controller gets the pose in map, see the module docstring); None: the controller
+            gets odometry as it is.
 
     Returns:
         The outcome, the rows and the controller's answers.
 
+    Raises:
+        ValueError: for a localizer without a real base (an ideal plant has no odometry).
+
     """
+    base = model if callable(getattr(model, 'advance', None)) else None
+    if localizer is not None and base is None:
+        msg = 'a localizer corrects odometry: it needs a real base as the plant'
+        raise ValueError(msg)
     stepper = as_controller(controller)
     goal = np.asarray(goal, dtype=float)
-    base = model if callable(getattr(model, 'advance', None)) else None
     x = np.asarray(start, dtype=float).copy() if base is None else base.pose.copy()
+    located = LocalizedPose(ODOM_HISTORY, localized=True, source='localizer') \
+        if localizer is not None else None
     last = rule.steps(h)
     still_needed = rule.still_steps(h)
     rows: list[np.ndarray] = []
@@ -318,7 +342,7 @@ def rollout(
     outcome, note = Outcome.TIME_LIMIT, ''
     for k in range(last + 1):
         t = k * h
-        measured = x if base is None else base.odometry()[0]
+        measured = x if base is None else _measure(base, t, localizer, located)
         started = time.perf_counter()
         waited = compile_wait_seconds()  # a first use of an NLP on a fresh machine
         try:
@@ -360,6 +384,23 @@ def rollout(
             x = base.pose.copy()
     return Rollout(outcome=outcome, rows=np.array(rows, dtype=float), steps=tuple(steps),
                    step_times=np.array(step_times, dtype=float), h=float(h), note=note)
+
+
+def _measure(base: Base, t: float, localizer: Localizer | None,
+             located: LocalizedPose | None) -> np.ndarray:
+    """Return the pose the controller gets at t: odometry, or in map through the localizer."""
+    odom, twist = base.odometry()
+    if localizer is None or located is None:
+        return odom
+    located.add_odometry(t, odom, twist)
+    fix = localizer.measure(t, base.pose)
+    if fix is not None:
+        located.add_localizer(t, fix)
+    pose = located.pose(odom)
+    if pose is None:  # the localizer's first pose is due at 0: never without a correction
+        msg = located.problem or 'no localizer pose'
+        raise RuntimeError(msg)
+    return pose
 
 
 def polygon_clearance(obstacles: Sequence[ConvexPolygon], robot_radius: float) -> Clearance:

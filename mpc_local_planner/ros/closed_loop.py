@@ -75,7 +75,9 @@ LOCALIZER_NOISE noise at LOCALIZER_RATE Hz on ``amcl_pose``, and the planner and
 controller compose it with odometry (``localization_topic``). Contacts are the true pose's;
 ``metrics.json`` has the run's ``drift`` and, in one process, the simulator's true final
 pose and its distance to the goal (``true_final_pose``, ``true_goal_error``), which must then
-be within TRUE_GOAL_TOLERANCE for the run to succeed.
+be within reality.true_goal_tolerance of the arrival tolerance for the run to succeed
+(0.05 + POSE_ERROR = 0.1 m: what the drifted odometry, or the controller, believes is not
+enough).
 
 With ``--reality {ideal,mild,real,harsh}`` (default ideal) the simulator's robot and laser
 are that preset of core/reality.py (the simulator's ``reality`` parameter: command latency,
@@ -83,7 +85,8 @@ actuator lag, acceleration limits, odometry noise and drift, laser noise, NaN/-i
 lost scans), the same model the ROS-free rollout uses. A preset whose odometry is not exact
 (all but ideal) is run as ``--drift`` is: odometry in ``odom``, the localizer stand-in on
 ``amcl_pose`` followed by the planner and the controller, and the true final pose within
-TRUE_GOAL_TOLERANCE for success (``--drift RATE`` then overrides the preset's drift).
+true_goal_tolerance of the controller's arrival tolerance for success (the node's default
+0.1 m: 0.15 m) (``--drift RATE`` then overrides the preset's drift).
 ``metrics.json`` records the preset in ``reality`` (and its values in ``reality_values``);
 ``--param unicycle_simulator.NAME:=VALUE`` overrides single fields (``scan.seed`` seeds it).
 
@@ -118,7 +121,7 @@ from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import resolve
 from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
-from mpc_local_planner.core.reality import reality_preset, REALITY_PRESETS
+from mpc_local_planner.core.reality import reality_preset, REALITY_PRESETS, true_goal_tolerance
 from mpc_local_planner.evaluation.analyze_bag import analyze, read_run, summary
 from mpc_local_planner.evaluation.plotting import plot_runs
 from mpc_local_planner.ros.bag_recorder_node import (
@@ -154,14 +157,6 @@ EXIT_NO_PLAN = 2
 DEFAULT_TIME_LIMIT = 60.0
 # Cell side (m) of the map of the known obstacles that --sensing serves.
 MAP_RESOLUTION = 0.05
-# With --drift in one process, a run succeeds only if the TRUE robot ends this close (m) to
-# the goal: what the drifted odometry (or the controller) believes is not enough.
-TRUE_GOAL_TOLERANCE = 0.1
-# With a real robot (--reality other than ideal) the controller arrives within its node
-# defaults (xy_goal_tolerance 0.1 m, yaw_goal_tolerance 0.15 rad) as the pose estimate says;
-# the true robot must end within that plus REAL_POSE_ERROR, what the estimate may be off by
-# (the localizer stand-in's 1 cm noise, odometry's jitter between its corrections).
-REAL_POSE_ERROR = 0.05
 
 
 @dataclass
@@ -335,8 +330,8 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
     success = (bool(metrics.get('reached')) and not metrics.get('collision')
                and not monitor.contacts)
     if localized(options) and truth:
-        allowed = tolerances[0] + REAL_POSE_ERROR if real else TRUE_GOAL_TOLERANCE
-        success = success and run_info['true_goal_error'] <= allowed
+        # arrival is declared on the estimate: the truth within it plus its error
+        success = success and run_info['true_goal_error'] <= true_goal_tolerance(tolerances[0])
     return LoopResult(metrics=metrics, stop_reason=stop_reason, wall_time=wall_time,
                       sim_time=sim_time, out=out, success=success)
 

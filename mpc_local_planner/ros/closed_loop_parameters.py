@@ -30,14 +30,13 @@ from typing import Any
 import yaml
 
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
-from mpc_local_planner.core.reality import reality_preset
+from mpc_local_planner.core.reality import LOCALIZER_NOISE, LOCALIZER_RATE, reality_preset
 from mpc_local_planner.ros.parameters import DEFAULT_WORLD_FILE
 from mpc_local_planner.worlds.world import load_world, World
 
-__all__ = ['DEFAULT_DRIFT', 'DEFAULT_WORLD', 'LOCALIZER_NOISE', 'LOCALIZER_RATE',
-           'LOCALIZER_TOPIC', 'LoopOptions', 'MODULES', 'PAPER_GOAL_TOLERANCES',
-           'POLYGON_CLEARANCE', 'footprint_parameter', 'localized', 'node_parameters',
-           'parse_parameter', 'run_world']
+__all__ = ['DEFAULT_DRIFT', 'DEFAULT_WORLD', 'LOCALIZER_TOPIC', 'LoopOptions', 'MODULES',
+           'PAPER_GOAL_TOLERANCES', 'POLYGON_CLEARANCE', 'footprint_parameter', 'localized',
+           'node_parameters',           'parse_parameter', 'run_world']
 
 DEFAULT_WORLD = DEFAULT_WORLD_FILE
 # The localizer stand-in's topic (unicycle_simulator's, as AMCL's).
@@ -46,11 +45,10 @@ LOCALIZER_TOPIC = 'amcl_pose'
 POLYGON_CLEARANCE = 0.05
 # The controller's arrival on the paper's scenario (see the module docstring).
 PAPER_GOAL_TOLERANCES = {'xy_goal_tolerance': 0.02, 'yaw_goal_tolerance': 0.05}
-# --drift: the odometry's drift when the option comes without a rate, and the localizer
-# stand-in's rate (Hz) and noise (m, rad).
+# --drift: the odometry's drift when the option comes without a rate. The localizer
+# stand-in's rate and noise are core/reality.py's LOCALIZER_RATE and LOCALIZER_NOISE, which
+# the suites' rollout uses too.
 DEFAULT_DRIFT = 0.05
-LOCALIZER_RATE = 5.0
-LOCALIZER_NOISE = 0.01
 
 MODULES = {
     'map_server': 'mpc_local_planner.ros.map_server_node',

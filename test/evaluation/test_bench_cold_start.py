@@ -25,7 +25,8 @@ from pathlib import Path
 
 import pytest
 
-from mpc_local_planner.evaluation.bench import COLD_START_ARGS, main, TARGET_COLD_START_S
+from mpc_local_planner.evaluation.bench import main
+from mpc_local_planner.evaluation.bench_runs import COLD_START_ARGS, TARGET_COLD_START_S
 
 
 def test_cold_start_section_reports_cold_and_warm(tmp_path: Path,

@@ -28,11 +28,10 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.footprint import JACKAL
-from mpc_local_planner.evaluation.bench import (
+from mpc_local_planner.evaluation.bench import FOOTPRINT_HEADER, main
+from mpc_local_planner.evaluation.bench_runs import (
     bench_footprint,
-    FOOTPRINT_HEADER,
     FOOTPRINT_SCENARIOS,
-    main,
     TARGET_FOOTPRINT_SOLVE_MS,
     TARGET_FOOTPRINT_STEP_MS,
 )

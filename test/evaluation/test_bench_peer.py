@@ -20,9 +20,9 @@ import pytest
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.paths import paper_sinusoid
-from mpc_local_planner.evaluation.bench import (
+from mpc_local_planner.evaluation.bench import HEADER
+from mpc_local_planner.evaluation.bench_runs import (
     closed_loop,
-    HEADER,
     paper_obstacle,
     PEER,
     STEP,

@@ -25,7 +25,8 @@ from pathlib import Path
 
 import pytest
 
-from mpc_local_planner.evaluation.bench import CONTROL_FREQUENCY, main, SECTIONS, STEP
+from mpc_local_planner.evaluation.bench import main, SECTIONS
+from mpc_local_planner.evaluation.bench_runs import CONTROL_FREQUENCY, STEP
 
 FIGURES = {'median', 'p99', 'max'}
 

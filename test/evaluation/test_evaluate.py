@@ -20,9 +20,10 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.obstacles import ConvexPolygon
-from mpc_local_planner.evaluation.evaluate import barn_score, CSV_COLUMNS, main
+from mpc_local_planner.evaluation.evaluate import main
 from mpc_local_planner.evaluation.known_map_worlds import assumption_1, random_world, shortcut
 from mpc_local_planner.evaluation.rollout import Outcome
+from mpc_local_planner.evaluation.suite_runs import barn_score, CSV_COLUMNS
 from mpc_local_planner.worlds.data_files import BARN_DIR
 
 BARN_DIR = BARN_DIR

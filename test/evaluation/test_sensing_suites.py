@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.footprint import JACKAL
-from mpc_local_planner.evaluation import evaluate
+from mpc_local_planner.evaluation import evaluate, suite_runs
 from mpc_local_planner.evaluation import sensing_suites as suites
 from mpc_local_planner.evaluation.rollout import Outcome
 from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -80,7 +80,7 @@ def test_without_sensing_the_unknown_box_is_hit() -> None:
 
 def test_barn_for_the_challenge_knows_no_obstacle_beforehand() -> None:
     robot = dataclasses.replace(suites.ROBOTS['jackal'])
-    world = suites.barn_sensing_world(evaluate.DEFAULT_BARN_DIR / 'world_000.json', robot)
+    world = suites.barn_sensing_world(suite_runs.DEFAULT_BARN_DIR / 'world_000.json', robot)
     assert world.obstacles == () and len(world.unknown_obstacles) > 50
     assert np.allclose(world.footprint.vertices, JACKAL.vertices)
     assert any(type(shape).__name__ == 'Circle' for shape in world.physical_shapes())
@@ -120,3 +120,39 @@ def test_the_figure_draws_the_sensed_obstacles_every_plan_and_the_footprint(tmp_
     target = suites.plot_navigation_runs(tmp_path / 'runs.png', [('unknown box', world)],
                                          'proposed', CIRCLE, prepare=False)
     assert target.is_file() and target.stat().st_size > 10_000
+
+
+def test_every_controller_arrives_where_a_localized_truth_still_succeeds() -> None:
+    from mpc_local_planner.core.reality import true_goal_tolerance
+
+    world = suites.unknown_world(0, 0)
+    robot = suites.ROBOTS['jackal']
+    tolerance = float(world.goal_tolerance or suites.GOAL_TOLERANCE)
+    mpc = suites._local_controller('proposed', robot, world, prepare=False)
+    arrivals = [mpc.controller.settings.xy_goal_tolerance]
+    for name in ('pure_pursuit', 'dwa'):
+        local = suites._local_controller(name, robot, world, prepare=False)
+        local.follow(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))
+        config = getattr(local.follower, 'config', None)
+        arrivals.append(getattr(config, 'goal_tolerance', None) or config.xy_goal_tolerance)
+    assert all(true_goal_tolerance(a) <= tolerance + 1e-12 for a in arrivals)
+
+
+def test_a_real_robot_navigates_on_odometry_corrected_by_the_localizer(monkeypatch) -> None:
+    from mpc_local_planner.core.reality import Localizer
+
+    given = {}
+    real_rollout = suites.rollout
+
+    def spy(*args, **kwargs):
+        given.update(kwargs)
+        return real_rollout(*args, **kwargs)
+
+    monkeypatch.setattr(suites, 'rollout', spy)
+    world = suites.unknown_world(0, 0)
+    robot = suites.ROBOTS['jackal']
+    result = suites.run_navigation(world, 'dwa', robot, prepare=False, reality='real')
+    assert isinstance(given['localizer'], Localizer)
+    assert result.run.reached and result.contacts == 0
+    suites.run_navigation(world, 'dwa', robot, prepare=False, reality='ideal')
+    assert given['localizer'] is None

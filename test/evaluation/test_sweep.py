@@ -28,7 +28,8 @@ import time
 
 import pytest
 
-from mpc_local_planner.evaluation.evaluate import CSV_COLUMNS, main
+from mpc_local_planner.evaluation.evaluate import main
+from mpc_local_planner.evaluation.suite_runs import CSV_COLUMNS
 from mpc_local_planner.evaluation.sweep import CLUSTER_INSTALL_HINT, RunTable
 
 WORLDS = '0-3'

@@ -1,0 +1,326 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""One run of a suite: a Task (a world and a controller) in closed loop, and its runs.csv row.
+
+The `evaluate` command sweeps Tasks over worlds and controllers (locally or on a Dask
+cluster, which pickles `run_task` by its name in this module, with its per-process MPC
+caches) and summarises the rows. A navigation Task (``--suite unknown``, ``--suite worlds``,
+``--sensing``) runs the navigation stack of `sensing_suites`; the others follow the reference
+path planned once on the known map (`known_map_worlds`) with the paper's MPC, the tracking
+MPC or pure pursuit, through `rollout`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit, PurePursuitConfig
+from mpc_local_planner.core.baselines.tracking_mpc import TrackingMPC
+from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.mpc import PathReferenceMPC
+from mpc_local_planner.core.paths import WaypointPath
+from mpc_local_planner.core.planner import PlanningError
+from mpc_local_planner.evaluation.known_map_worlds import (
+    barn_world,
+    polyline_length,
+    random_world,
+    ROBOT_RADIUS,
+    Scenario,
+)
+from mpc_local_planner.evaluation.metrics import compute_metrics
+from mpc_local_planner.evaluation.rollout import (
+    circle_clearance,
+    Clearance,
+    EVALUATION_BUDGET,
+    MpcAdapter,
+    Outcome,
+    polygon_clearance,
+    PurePursuitAdapter,
+    rollout,
+    RolloutController,
+    StopRule,
+)
+from mpc_local_planner.evaluation.trajectory import write_trajectory_csv
+from mpc_local_planner.worlds.data_files import BARN_DIR
+
+__all__ = [
+    'barn_score',
+    'CONTROLLERS',
+    'CSV_COLUMNS',
+    'DEFAULT_BARN_DIR',
+    'empty_row',
+    'KNOWN_MAP_CONTROLLERS',
+    'run_navigation_task',
+    'run_task',
+    'save_world',
+    'saved_world_path',
+    'SUITES',
+    'Task',
+]
+
+CONTROLLERS = ('proposed', 'tracking', 'pure_pursuit', 'dwa')
+# The known-map suites run the first three (DWA runs with sensing, on re-planned paths).
+KNOWN_MAP_CONTROLLERS = ('proposed', 'tracking', 'pure_pursuit')
+SUITES = ('random', 'barn', 'unknown', 'worlds')
+CSV_COLUMNS = (
+    'controller', 'world', 'success', 'collision', 'time', 'path_length', 'min_clearance',
+    'solve_ms_median', 'solve_ms_max', 'barn_score', 'assumption_1', 'reference_length',
+    'final_distance', 'steps', 'stop_reason', 'planner_clearance', 'solver_failures', 'v_max',
+    'robot', 'sensing', 'contacts', 'replans', 'replan_failures', 'step_ms_median',
+    'step_ms_max', 'plan_s_max', 'name', 'reality',
+)
+DEFAULT_BARN_DIR = BARN_DIR
+PATH_CAPACITY = 128
+
+
+@dataclass(frozen=True)
+class Task:
+    """One closed-loop run: a world and a controller."""
+
+    suite: str
+    world: int
+    controller: str
+    seed: int = 0
+    v_max: float = 0.31
+    omega_max: float = 1.9
+    barn_dir: str = ''  # '' for the worlds shipped with the package, wherever it runs
+    trajectory_dir: str = ''
+    merge: bool = False
+    sensing: bool = False
+    robot: str = 'circle'
+    world_file: str = ''
+    budget: str = EVALUATION_BUDGET  # MpcConfig.budget of the MPCs
+    reality: str = 'ideal'  # core/reality.py preset: how real the robot is (navigation runs)
+
+    @property
+    def navigation(self) -> bool:
+        """Run through the navigation stack (laser, re-planning) rather than a fixed path."""
+        return self.sensing or self.suite in ('unknown', 'worlds')
+
+
+def barn_score(success: bool, time_s: float | None, barn_path_length: float) -> float:
+    """Return the BARN challenge's score of one run.
+
+    The challenge's formula: success * t_opt / clip(t, 2 t_opt, 8 t_opt), with
+    t_opt = barn_path_length / 2 and barn_path_length the FULL reference path (start -> the
+    world's path file -> goal, as the challenge's run.py adds the two legs). A successful run
+    faster than 2 t_opt scores the cap, 0.5.
+    """
+    if not success or time_s is None:
+        return 0.0
+    t_opt = barn_path_length / 2.0
+    return float(t_opt / np.clip(time_s, 2.0 * t_opt, 8.0 * t_opt))
+
+
+def _barn_file(task: Task) -> Path:
+    """Return the task's BARN world file, on the machine that runs it."""
+    return Path(task.barn_dir or DEFAULT_BARN_DIR) / f'world_{task.world:03d}.json'
+
+
+def _scenario(task: Task, margin: float) -> Scenario:
+    if task.suite == 'random':
+        return random_world(task.world, task.seed, margin=margin)
+    return barn_world(_barn_file(task), seed=task.seed, margin=margin, merge=task.merge)
+
+
+def _clearance_fn(scenario: Scenario) -> Clearance:
+    """Return points (n, 2) -> clearance of the robot circle from the true obstacles."""
+    if scenario.cylinders is not None:
+        return circle_clearance(scenario.cylinders, scenario.cylinder_radius, ROBOT_RADIUS)
+    return polygon_clearance(scenario.obstacles, ROBOT_RADIUS)
+
+
+# Per worker process: one MPC per (controller, bounds), reused across worlds so the NLPs it
+# builds (one per obstacle count in reach) are built once, not once per run.
+_MPC_CACHE: dict[tuple, PathReferenceMPC | TrackingMPC] = {}
+_PREPARED: set[tuple] = set()
+PREPARED_SLOTS = 4
+
+
+def _controller(task: Task, scenario: Scenario, model: Unicycle,
+                config: MpcConfig) -> RolloutController:
+    """Return the task's controller with the rollout's step interface."""
+    if task.controller == 'pure_pursuit':
+        return PurePursuitAdapter(PurePursuit(scenario.waypoints, PurePursuitConfig(
+            v_max=model.v_max, omega_max=model.omega_max,
+            goal_tolerance=min(0.03, scenario.goal_tolerance / 2))))
+    if task.controller not in ('proposed', 'tracking'):
+        msg = f'unknown controller {task.controller!r}'
+        raise ValueError(msg)
+    key = (task.controller, model.v_max, model.omega_max, config.budget)
+    mpc = _MPC_CACHE.get(key)
+    if task.controller == 'tracking':
+        if mpc is None:
+            mpc = _MPC_CACHE[key] = TrackingMPC(model, config, target=scenario.goal)
+        mpc.set_target(scenario.goal)
+    else:
+        path = WaypointPath(scenario.waypoints, start_heading=float(scenario.start[2]),
+                            goal_heading=float(scenario.goal[2]), capacity=PATH_CAPACITY)
+        if mpc is None:
+            mpc = _MPC_CACHE[key] = PathReferenceMPC(model, config, path=path)
+        mpc.set_path(path)
+    # every obstacle: the MPC checks those within reach and gives multipliers to those near
+    # its candidate trajectory (constraint generation, see mpc.py)
+    mpc.set_obstacles(scenario.obstacles)
+    if key not in _PREPARED:
+        # build the NLPs before the first run, as a robot does at start-up: built mid-step
+        # they would cost that step its time budget (their compilation goes on in the
+        # background, as in the node: waiting for it takes minutes on a fresh machine)
+        mpc.prepare(PREPARED_SLOTS)
+        _PREPARED.add(key)
+    mpc.reset()
+    return MpcAdapter(mpc)
+
+
+def empty_row(task: Task, scenario: Scenario | None, reason: str) -> dict[str, Any]:
+    """Return the row of a run that did not run (or failed): its identity and the reason."""
+    row = dict.fromkeys(CSV_COLUMNS, '')
+    row.update(controller=task.controller, world=task.world, success=False, collision=False,
+               stop_reason=reason, v_max=task.v_max, robot=task.robot, sensing=task.sensing)
+    if scenario is not None:
+        row['name'] = scenario.name
+        row.update(assumption_1=scenario.assumption_1,
+                   planner_clearance=scenario.planner_clearance)
+        if scenario.barn_path_length is not None:
+            row['barn_score'] = 0.0
+    return row
+
+
+def run_navigation_task(task: Task) -> dict[str, Any]:
+    """Run one world x controller through the navigation stack; return its runs.csv row."""
+    from mpc_local_planner.evaluation import sensing_suites as suites
+    from mpc_local_planner.worlds.world import load_world
+
+    robot = replace(suites.ROBOTS[task.robot], v_max=task.v_max, omega_max=task.omega_max)
+    barn_length = None
+    if task.suite == 'unknown':
+        world = suites.unknown_world(task.world, task.seed, robot=robot)
+    elif task.suite == 'worlds':
+        world = load_world(task.world_file)
+        world = replace(world, footprint=robot.footprint, robot_radius=0.0)
+    else:
+        path = _barn_file(task)
+        world = suites.barn_sensing_world(path, robot)
+        barn_length = float(json.loads(path.read_text(encoding='utf-8'))['barn_path_length'])
+    row = dict.fromkeys(CSV_COLUMNS, '')
+    row.update(controller=task.controller, world=task.world, name=world.name,
+               robot=task.robot, sensing=task.sensing or task.suite == 'unknown',
+               v_max=robot.v_max, reality=task.reality)
+    try:
+        result = suites.run_navigation(world, task.controller, robot,
+                                       sensing=bool(row['sensing']), seed=task.seed,
+                                       budget=task.budget, reality=task.reality)
+    except PlanningError as err:
+        row.update(success=False, collision=False, stop_reason=f'no plan: {err}',
+                   barn_score=0.0 if barn_length is not None else '')
+        return row
+    run = result.run
+    data = run.rows
+    goal = np.asarray(world.goal, dtype=float)
+    metrics = compute_metrics(data, goal=goal, obstacles=(),
+                              solver_failures=run.solver_failures)
+    if task.trajectory_dir:
+        folder = Path(task.trajectory_dir)
+        folder.mkdir(parents=True, exist_ok=True)
+        write_trajectory_csv(folder / f'{task.controller}_{task.world:03d}.csv', data)
+        plans = result.navigator.log.plans if result.navigator is not None else []
+        for number, (_, waypoints, _) in enumerate(plans):
+            np.savetxt(folder / f'plan_{task.controller}_{task.world:03d}_{number}.csv',
+                       waypoints, delimiter=',', header='x,y', comments='')
+    row.update(
+        success=run.reached, collision=result.contacts > 0, time=run.end_time,
+        path_length=metrics['path_length'], min_clearance=result.min_clearance,
+        solve_ms_median=metrics['solve_ms_median'], solve_ms_max=metrics['solve_ms_max'],
+        final_distance=math.hypot(data[-1, 1] - goal[0], data[-1, 2] - goal[1]),
+        steps=len(data), solver_failures=run.solver_failures,
+        stop_reason=run.outcome.value + (f': {run.note}' if run.note else ''),
+        **suites.result_fields(result))
+    if barn_length is not None:
+        row['barn_score'] = barn_score(run.reached, run.end_time if run.reached else None,
+                                       barn_length)
+    return row
+
+
+def run_task(task: Task) -> dict[str, Any]:
+    """Run one world x controller in closed loop and return its runs.csv row."""
+    if task.navigation:
+        return run_navigation_task(task)
+    model = Unicycle(v_max=task.v_max, omega_max=task.omega_max)
+    config = MpcConfig().with_changes(robot_radius=ROBOT_RADIUS, budget=task.budget)
+    margin = config.inflation(model.v_max) - ROBOT_RADIUS
+    scenario = _scenario(task, margin)
+    if task.controller != 'tracking' and scenario.waypoints is None:
+        return empty_row(task, scenario, 'no reference path: ' + scenario.note)
+    controller = _controller(task, scenario, model, config)
+    clearance = _clearance_fn(scenario)
+    goal = np.asarray(scenario.goal, dtype=float)
+    # success is a position within the goal tolerance: neither suite asks for a heading
+    rule = StopRule(time_limit=scenario.time_limit,
+                    position_tolerance=scenario.goal_tolerance)
+    run = rollout(controller, model, scenario.start, goal, h=config.step, rule=rule,
+                  clearance=clearance)
+    data = run.rows
+    metrics = compute_metrics(data, goal=goal, obstacles=(),
+                              solver_failures=run.solver_failures)
+    min_clear = float(np.min(clearance(data[:, 1:3])))
+    success = run.reached
+    success_time = run.end_time if success else None
+    ref_len = polyline_length(scenario.waypoints) if scenario.waypoints is not None else None
+    if task.trajectory_dir:
+        folder = Path(task.trajectory_dir)
+        folder.mkdir(parents=True, exist_ok=True)
+        write_trajectory_csv(folder / f'{task.controller}_{task.world:03d}.csv', data)
+        if scenario.waypoints is not None:
+            np.savetxt(folder / f'path_{task.world:03d}.csv', scenario.waypoints,
+                       delimiter=',', header='x,y', comments='')
+        if task.suite == 'random':
+            save_world(folder, scenario, task.world)
+    row = empty_row(task, scenario, run.outcome.value + (f': {run.note}' if run.note else ''))
+    row.update(
+        success=success, collision=run.outcome is Outcome.COLLISION or min_clear <= 0.0,
+        time=run.end_time,
+        path_length=metrics['path_length'], min_clearance=min_clear,
+        solve_ms_median=metrics['solve_ms_median'], solve_ms_max=metrics['solve_ms_max'],
+        reference_length=ref_len,
+        final_distance=math.hypot(data[-1, 1] - goal[0], data[-1, 2] - goal[1]),
+        steps=len(data), solver_failures=run.solver_failures,
+        contacts=int(run.outcome is Outcome.COLLISION or min_clear <= 0.0), replans=0,
+        step_ms_median=float(np.median(run.step_times)) * 1e3 if len(run.step_times) else '',
+        step_ms_max=float(np.max(run.step_times)) * 1e3 if len(run.step_times) else '')
+    if scenario.barn_path_length is not None:
+        row['barn_score'] = barn_score(success, success_time, scenario.barn_path_length)
+    return row
+
+
+def saved_world_path(folder: Path, world: int) -> Path:
+    """Return where save_world writes a random world beside its runs."""
+    return folder / f'world_{world:03d}.json'
+
+
+def save_world(folder: Path, scenario: Scenario, world: int) -> None:
+    """Write what a random world's figure needs (obstacles, start, goal) beside its runs."""
+    data = {'name': scenario.name, 'bounds': list(scenario.bounds),
+            'obstacles': [o.vertices.tolist() for o in scenario.obstacles],
+            'start': np.asarray(scenario.start, dtype=float).tolist(),
+            'goal': np.asarray(scenario.goal, dtype=float).tolist(),
+            'goal_tolerance': scenario.goal_tolerance}
+    saved_world_path(folder, world).write_text(json.dumps(data) + '\n', encoding='utf-8')
