@@ -81,6 +81,7 @@ from mpc_local_planner.core.mpc.formulation import (
     obstacle_parameters,
     parameter_vector,
     path_terminal,
+    rate_limited_inputs,
     stage_cost,
     sweep_rate,
     TerminalCondition,
@@ -725,11 +726,19 @@ class MpcBase(ABC):
         return Plan(x=self._rollout(x0, u), u=u, s=prev.s, mu=np.zeros(0), value=math.inf)
 
     def _guided_guess(self, x0: np.ndarray, active: list[ConvexPolygon], nlp: Nlp) -> Plan:
-        """An infeasible but informative start: the motion in hand, ended on the path.
+        """An infeasible but informative start: the motion in hand, ended on the path."""
+        plan = self._guided_motion(x0)
+        plan.mu = self._multipliers(plan.x, active, nlp)
+        return plan
+
+    def _guided_motion(self, x0: np.ndarray) -> Plan:
+        """The guided start's states and inputs (its multipliers depend on the NLP).
 
         After a new path, the inputs of the last plan on the old one shifted by a step (the
         robot was carrying them out, and they avoid what the old plan avoided); else drive
-        forward at half speed. Either is rolled out from x0, and its last state replaced by
+        forward at half speed. With max_accel, moved into the rate bounds from the input
+        before (rate_limited_inputs: a base at rest does not jump to half speed, and the
+        plan must end at rest). Either is rolled out from x0, and its last state replaced by
         the steady state on the path nearest it.
         """
         n = self._config.horizon
@@ -739,12 +748,15 @@ class MpcBase(ABC):
             u[:-1] = carried[1:]
         else:
             u[:, 0] = 0.5 * self._model.u_max[0]
+        if self._input_before is not None:
+            u = rate_limited_inputs(u, self._input_before,
+                                    np.asarray(self._config.max_accel) * self._config.step)
         x = self._rollout(x0, u)
         s = self._progress(x[-1], s_min=self._progress(x0))
         terminal = self._terminal_state(s)
         if terminal is not None:
             x[-1] = terminal
-        return Plan(x=x, u=u, s=s, mu=self._multipliers(x, active, nlp), value=math.inf)
+        return Plan(x=x, u=u, s=s, mu=np.zeros(0), value=math.inf)
 
     # ----------------------------------------------------------------- verification
     def _violation(self, w: np.ndarray, params: np.ndarray, obstacles: ObstacleSet,
@@ -899,6 +911,14 @@ class MpcBase(ABC):
         active = self._resumed_round(x0, reachable)
         if active is None:
             active = self._near_trajectory(candidate.x, candidate.u, reachable, activation)
+            if not _plan_moves(self._plan, self._progress_gain):
+                # the candidate stands still (a new path, a stop): near it are no obstacles
+                # the solution will meet; those near the motion in hand are (a robot
+                # re-planned at speed cannot stop at once: its first round held none and
+                # three rounds overran the step, docs/real_robot.md)
+                guided = self._guided_motion(x0)
+                active = active + [o for o in self._near_trajectory(
+                    guided.x, guided.u, reachable, activation) if not any(o is a for a in active)]
         iterations, seconds = 0, 0.0
         previous: Plan | None = None  # the last round's solution, a start for the next
         for round_ in range(MAX_ACTIVATION_ROUNDS + 1):
