@@ -911,11 +911,13 @@ class MpcBase(ABC):
         active = self._resumed_round(x0, reachable)
         if active is None:
             active = self._near_trajectory(candidate.x, candidate.u, reachable, activation)
-            if not _plan_moves(self._plan, self._progress_gain):
-                # the candidate stands still (a new path, a stop): near it are no obstacles
-                # the solution will meet; those near the motion in hand are (a robot
-                # re-planned at speed cannot stop at once: its first round held none and
-                # three rounds overran the step, docs/real_robot.md)
+            before = self._input_before
+            if (before is not None and np.any(np.abs(before) > STANDING_INPUT)
+                    and not _plan_moves(self._plan, self._progress_gain)):
+                # the candidate stands still (a new path) but with max_accel the robot
+                # cannot: the solution goes on with the motion in hand, among the obstacles
+                # near it (a re-plan at speed held none near the candidate, and its rounds
+                # overran the step, docs/real_robot.md)
                 guided = self._guided_motion(x0)
                 active = active + [o for o in self._near_trajectory(
                     guided.x, guided.u, reachable, activation) if not any(o is a for a in active)]
