@@ -88,7 +88,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "the base's acceleration limits [v, omega] (m/s^2, rad/s^2; Nav2 "
                   "velocity_smoother's name): the NLP bounds each input change by "
                   "max_accel step, so the plan is one the base can follow; [0.0, 0.0] = "
-                  f"none (inputs may jump, the paper's model); {_SHAPE}"),
+                  "none (inputs may jump, the paper's model; config/jackal.yaml turns "
+                  f"it on for a Jackal); {_SHAPE}"),
     ParameterSpec('max_decel', list(RATE_LIMIT_OFF),
                   "the base's deceleration limits [v, omega] (m/s^2, rad/s^2, magnitudes; "
                   "Nav2 velocity_smoother's name): a stop of a moving robot (stale or "

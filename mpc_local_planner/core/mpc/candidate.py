@@ -130,19 +130,23 @@ def shifted_candidate(model: RobotModel, previous: Plan | None, x0: np.ndarray, 
 
 def guided_guess(model: RobotModel, x0: np.ndarray, carried: np.ndarray | None, *,
                  horizon: int, step: float, rollout: Rollout, progress: Progress,
-                 terminal_state: TerminalState) -> Plan:
+                 terminal_state: TerminalState,
+                 rate_limit: Callable[[np.ndarray], np.ndarray] | None = None) -> Plan:
     """Return an infeasible but informative start: the motion in hand, ended on the path.
 
     After a new path, carried holds the inputs of the last plan on the old one: they are
     shifted by a step (the robot was carrying them out, and they avoid what the old plan
-    avoided); else drive forward at half speed. Either is rolled out from x0, and its last
-    state replaced by the steady state on the path nearest it. No multipliers yet.
+    avoided); else drive forward at half speed. rate_limit, if given, then moves the inputs
+    into what the robot can do (max_accel). They are rolled out from x0, and the last state
+    replaced by the steady state on the path nearest it. No multipliers yet.
     """
     u = np.zeros((horizon, model.nu))
     if carried is not None and len(carried) == horizon:
         u[:-1] = carried[1:]
     else:
         u[:, 0] = 0.5 * model.u_max[0]
+    if rate_limit is not None:
+        u = rate_limit(u)
     x = rollout(x0, u, step)
     s = progress(x[-1], progress(x0, 0.0))
     terminal = terminal_state(s)

@@ -75,7 +75,7 @@ from mpc_local_planner.core.paths import ReferencePath
 __all__ = [
     'Formulation', 'Layout', 'SWEEP_SMOOTHING', 'TerminalCondition', 'dual_multipliers',
     'feasible_multipliers', 'formulate', 'obstacle_parameters', 'parameter_vector',
-    'path_terminal', 'stage_cost', 'sweep_rate', 'symbolic_weights',
+    'path_terminal', 'rate_limited_inputs', 'stage_cost', 'sweep_rate', 'symbolic_weights',
 ]
 
 # eps of the smooth |z| ~ sqrt(z^2 + eps^2) in the NLP's motion-dependent clearance (m/s and
@@ -526,6 +526,35 @@ def _layout(size: int, n: int, nx: int, nr: int, nz: int, nu: int, nm: int,
                   u=np.array(us), mu=np.array(mus).reshape(n, nm),
                   c=np.array(cs, dtype=int).reshape(n, nc),
                   prev=np.array(qs, dtype=int).reshape(n + 1, npv))
+
+
+def rate_limited_inputs(u: np.ndarray, u_before: np.ndarray, rate: np.ndarray) -> np.ndarray:
+    """Return inputs moved into the rate rows of (6g) (max_accel) as far as they can be.
+
+    Forwards from u_before (|u_0 - u_before| <= rate, |u_{l+1} - u_l| <= rate), then
+    backwards from u_N = 0 (|u_{N-1}| <= rate): each input clipped into its neighbour's band.
+    The result keeps every row whenever a stop from u_before fits in the horizon
+    (|u_before| <= N rate); a start that jumps (from rest to half speed at once, or that
+    ends moving) breaks them, and the solver begins its restoration there instead of near
+    the motion the base can make.
+
+    Args:
+        u: (N, nu) inputs.
+        u_before: (nu,) the input the bounds start from (the NLP's u_prev).
+        rate: (nu,) max_accel h.
+
+    """
+    out = np.array(u, dtype=float)
+    rate = np.asarray(rate, dtype=float)
+    before = np.asarray(u_before, dtype=float).reshape(-1)
+    for k in range(len(out)):
+        out[k] = np.clip(out[k], before - rate, before + rate)
+        before = out[k]
+    after = np.zeros_like(rate)  # u_N = 0
+    for k in reversed(range(len(out))):
+        out[k] = np.clip(out[k], after - rate, after + rate)
+        after = out[k]
+    return out
 
 
 def parameter_vector(x0: np.ndarray, weights: CostWeights, obstacles: np.ndarray,

@@ -72,6 +72,7 @@ from mpc_local_planner.core.mpc.candidate import (
     plan_moves,
     Rollout,
     shifted_candidate,
+    STANDING_INPUT,
 )
 from mpc_local_planner.core.mpc.clearance import Clearance
 from mpc_local_planner.core.mpc.continuation import (
@@ -91,6 +92,7 @@ from mpc_local_planner.core.mpc.formulation import (
     formulate,
     obstacle_parameters,
     parameter_vector,
+    rate_limited_inputs,
     stage_cost,
     TerminalCondition,
 )
@@ -409,11 +411,28 @@ class MpcBase(ABC):
 
     def _guided_guess(self, x0: np.ndarray, active: list[ConvexPolygon], nlp: Nlp) -> Plan:
         """Return the guided start from x0 (candidate.guided_guess), with nlp's multipliers."""
-        plan = guided_guess(self._model, x0, self._carried_inputs,
+        plan = self._guided_motion(x0)
+        return replace(plan, mu=self._multipliers(plan.x, active, nlp))
+
+    def _guided_motion(self, x0: np.ndarray) -> Plan:
+        """Return the guided start's states and inputs; its multipliers depend on the NLP.
+
+        With max_accel, its inputs are moved into the rate bounds from the input before
+        (formulation.rate_limited_inputs): a base at rest does not jump to half speed, and
+        the plan must end at rest.
+        """
+        rate_limit = None
+        if self._input_before is not None:
+            before = self._input_before
+            rate = np.asarray(self._config.max_accel) * self._config.step
+
+            def rate_limit(u: np.ndarray) -> np.ndarray:
+                return rate_limited_inputs(u, before, rate)
+
+        return guided_guess(self._model, x0, self._carried_inputs,
                             horizon=self._config.horizon, step=self._config.step,
                             rollout=self._rollout, progress=self._progress,
-                            terminal_state=self._terminal_state)
-        return replace(plan, mu=self._multipliers(plan.x, active, nlp))
+                            terminal_state=self._terminal_state, rate_limit=rate_limit)
 
     # ----------------------------------------------------------------- verification
     def _violation(self, w: np.ndarray, params: np.ndarray, obstacles: ObstacleSet,
@@ -544,6 +563,16 @@ class MpcBase(ABC):
         if active is None:
             active = self._clearance.near_trajectory(candidate.x, candidate.u, reachable,
                                                      activation)
+            before = self._input_before
+            if (before is not None and np.any(np.abs(before) > STANDING_INPUT)
+                    and not plan_moves(self._plan, self._progress_gain)):
+                # the candidate stands still (a new path) but with max_accel the robot
+                # cannot: the solution goes on with the motion in hand, among the obstacles
+                # near it (docs/real_robot.md)
+                guided = self._guided_motion(x0)
+                active = active + [o for o in self._clearance.near_trajectory(
+                    guided.x, guided.u, reachable, activation)
+                    if not any(o is a for a in active)]
         iterations, seconds = 0, 0.0
         previous: Plan | None = None  # the last round's solution, a start for the next
         for round_ in range(MAX_ACTIVATION_ROUNDS + 1):

@@ -1,0 +1,74 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""Recorded states of a real base with bounded input rates: the MPC must solve them in a step.
+
+test/core/data/barn_real_replan_at_speed.json: laser-only BARN at 2 m/s on the `real` base,
+at the step where a re-plan reached the robot at speed (1.5 m/s). With max_accel the robot
+cannot stop at once; the stand-still candidate's first constraint-generation round held no
+obstacle near it, and its rounds overran the step's 100 iterations. The robot braked off
+the new path and stood until the run stalled. The first round now also holds the obstacles
+near the motion in hand (the old plan's inputs, within the rate bounds).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.footprint import JACKAL
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.mpc import PathReferenceMPC, PlanSource
+from mpc_local_planner.core.mpc.formulation import rate_limited_inputs
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.paths import WaypointPath
+
+STATES = json.loads((Path(__file__).parent / 'data' / 'barn_real_replan_at_speed.json')
+                    .read_text(encoding='utf-8'))
+
+
+@pytest.mark.parametrize('world', ['world_024', 'world_066'])
+def test_a_re_plan_at_speed_with_bounded_input_rates_is_solved_within_a_step(world: str) -> None:
+    case = STATES[world]
+    config = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
+                       robot_radius=0.0, budget='iterations', max_solve_iterations=100,
+                       collision_margin=0.03, max_accel=(4.0, 12.0))
+    path = WaypointPath(np.array(case['waypoints']), start_heading=case['start_heading'],
+                        goal_heading=case['goal_heading'], turn_length=case['turn_length'],
+                        capacity=case['capacity'])
+    mpc = PathReferenceMPC(Unicycle(v_max=2.0, omega_max=4.0, v_min=0.0), config,
+                           obstacles=[ConvexPolygon.from_vertices(np.array(v))
+                                      for v in case['obstacles']], path=path)
+    # set_path keeps the inputs of the last plan on the old path (the motion in hand)
+    mpc._carried_inputs = np.array(case['carried'])
+    solution = mpc.solve(np.array(case['x']), previous_input=np.array(case['u_before']))
+    assert solution.source is PlanSource.SOLVER, solution.status
+    rate = np.array(config.max_accel) * config.step
+    changes = np.diff(np.vstack([case['u_before'], solution.u_pred, np.zeros(2)]), axis=0)
+    assert np.all(np.abs(changes) <= rate + 1e-6)
+
+
+def test_rate_limited_inputs_start_from_the_input_before_and_end_at_rest() -> None:
+    rate = np.array([0.4, 1.2])
+    u = rate_limited_inputs(np.tile([1.0, 0.0], (10, 1)), np.zeros(2), rate)
+    changes = np.diff(np.vstack([np.zeros(2), u, np.zeros(2)]), axis=0)
+    assert np.all(np.abs(changes) <= rate + 1e-12)
+    assert u[:, 0].max() == pytest.approx(1.0)  # it still drives where it can
+    # from speed: it brakes within the bounds
+    u = rate_limited_inputs(np.zeros((10, 2)), np.array([1.6, -1.0]), rate)
+    changes = np.diff(np.vstack([[1.6, -1.0], u, np.zeros(2)]), axis=0)
+    assert np.all(np.abs(changes) <= rate + 1e-12)

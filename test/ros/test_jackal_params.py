@@ -1,0 +1,50 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""config/jackal.yaml: the Jackal's parameters are the ones the suites measure on a real base."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+import yaml
+
+from mpc_local_planner.core.footprint import JACKAL
+from mpc_local_planner.core.reality import reality_preset
+from mpc_local_planner.evaluation import sensing_suites
+from mpc_local_planner.ros.mpc_controller_parameters import build_settings, DEFAULTS, PARAMETERS
+from mpc_local_planner.worlds.data_files import resolve_data_file
+
+
+def jackal_values() -> dict[str, Any]:
+    """Return the defaults with config/jackal.yaml over them (as two --params-file do)."""
+    text = resolve_data_file('jackal.yaml').read_text(encoding='utf-8')
+    given = yaml.safe_load(text)['mpc_controller']['ros__parameters']
+    declared = {spec.name for spec in PARAMETERS}
+    assert set(given) <= declared, f'undeclared: {sorted(set(given) - declared)}'
+    return {**DEFAULTS, **given}
+
+
+def test_the_jackal_file_bounds_input_rates_as_the_suites_do_on_the_real_base() -> None:
+    config, model, settings = build_settings(jackal_values())
+    base = reality_preset('real').acceleration_limits
+    assert base is not None
+    assert config.max_accel == pytest.approx(
+        [sensing_suites.REALITY_ACCEL_FACTOR * a for a in base])
+    assert settings.max_decel == pytest.approx(base)
+    assert config.collision_margin == pytest.approx(sensing_suites.REALITY_MARGIN)
+    jackal = sensing_suites.ROBOTS['jackal']
+    assert config.robot_footprint.vertices.tolist() == JACKAL.vertices.tolist()
+    assert model.u_min[0] == 0.0 and not jackal.reverses
+    assert (model.u_max[0], model.u_max[1]) == (2.0, 4.0)  # the suites' BARN runs
