@@ -14,11 +14,18 @@
 
 """The budget of one control step's solving, and what a solver try costs before it runs.
 
-Seconds of a clock (MpcConfig.budget 'wall', the robot's), or solver iterations
-('iterations', the evaluation's: the clock is never read, so a step does the same on any
-machine under any load). The other is unbounded. A try's solver may have to be built first
-(an IPOPT not built ahead): build_time() says how long that takes, which counts against wall
-time only.
+Seconds of a clock (MpcConfig.budget 'wall', the robot's: config.solve_budget(),
+max_solve_time, half the period by default, counted from the start of solve()), or solver
+iterations ('iterations', the evaluation's: config.solve_iterations(), spent by the
+iterations each try makes; the clock is never read, builds are free and a step waits for its
+NLP's compilation, so a step does the same on any machine under any load). The other is
+unbounded. The first NLP solve gets what is left when it starts (an NLP built mid-step has
+spent its share of wall time: MpcBase.prepare() builds them ahead); the retries (a second
+start, the IPOPT fallback, further constraint-generation rounds) run only while some is
+left. A try's solver may have to be built first (an IPOPT not built ahead): build_time()
+says how long that takes, which counts against wall time only. How closely a solver keeps
+to its share is backends.py's (run_solver): IPOPT to an iteration, fatrop to its measured
+time per iteration (wall) or to an iteration level (iterations).
 """
 
 from __future__ import annotations

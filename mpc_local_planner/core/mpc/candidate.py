@@ -33,8 +33,9 @@ import casadi as ca
 import numpy as np
 
 from mpc_local_planner.core.models import RobotModel
+from mpc_local_planner.core.mpc.formulation import rate_limited_inputs
 
-__all__ = ['Plan', 'PROGRESS_TOLERANCE', 'Rollout', 'STANDING_INPUT', 'guided_guess',
+__all__ = ['Plan', 'PROGRESS_TOLERANCE', 'Rollout', 'STANDING_INPUT', 'guided_guess', 'rate_start',
            'plan_moves', 'shifted_candidate']
 
 # Inputs below this (m/s, rad/s) stand still: a solver that converged to "wait" leaves
@@ -131,25 +132,43 @@ def shifted_candidate(model: RobotModel, previous: Plan | None, x0: np.ndarray, 
 def guided_guess(model: RobotModel, x0: np.ndarray, carried: np.ndarray | None, *,
                  horizon: int, step: float, rollout: Rollout, progress: Progress,
                  terminal_state: TerminalState,
-                 rate_limit: Callable[[np.ndarray], np.ndarray] | None = None) -> Plan:
+                 rate_bounds: tuple[np.ndarray, np.ndarray] | None = None) -> Plan:
     """Return an infeasible but informative start: the motion in hand, ended on the path.
 
     After a new path, carried holds the inputs of the last plan on the old one: they are
     shifted by a step (the robot was carrying them out, and they avoid what the old plan
-    avoided); else drive forward at half speed. rate_limit, if given, then moves the inputs
-    into what the robot can do (max_accel). They are rolled out from x0, and the last state
-    replaced by the steady state on the path nearest it. No multipliers yet.
+    avoided); else drive forward at half speed. rate_bounds, (the input before, max_accel h)
+    if given, then moves the inputs into the rate bounds (formulation.rate_limited_inputs: a
+    base at rest does not jump to half speed, and the plan must end at rest). They are rolled
+    out from x0, and the last state replaced by the steady state on the path nearest it. No
+    multipliers yet.
     """
     u = np.zeros((horizon, model.nu))
     if carried is not None and len(carried) == horizon:
         u[:-1] = carried[1:]
     else:
         u[:, 0] = 0.5 * model.u_max[0]
-    if rate_limit is not None:
-        u = rate_limit(u)
+    if rate_bounds is not None:
+        u = rate_limited_inputs(u, *rate_bounds)
     x = rollout(x0, u, step)
     s = progress(x[-1], progress(x0, 0.0))
     terminal = terminal_state(s)
     if terminal is not None:
         x[-1] = terminal
     return Plan(x=x, u=u, s=s, mu=np.zeros(0), value=math.inf)
+
+
+def rate_start(model: RobotModel, previous_input: np.ndarray | None,
+               plan: Plan | None) -> np.ndarray:
+    """Return the input max_accel's rate bounds start from.
+
+    The input the robot was last given (clipped into the model's bounds) when it is a
+    finite (nu,) vector; else the plan in force's first input; else rest.
+    """
+    if previous_input is not None:
+        u = np.asarray(previous_input, dtype=float).reshape(-1)
+        if u.shape == (model.nu,) and np.all(np.isfinite(u)):
+            return np.clip(u, model.u_min, model.u_max)
+    if plan is not None:
+        return np.asarray(plan.u[0], dtype=float).copy()
+    return np.zeros(model.nu)

@@ -28,21 +28,12 @@ again. A solution of the smaller problem that clears every reachable obstacle is
 for the full one too (the full feasible set is a subset), so nothing is given up but
 variables that could not have been active.
 
-A step's solving is bounded: in wall time by default (config.budget 'wall', the robot's:
-config.solve_budget(), max_solve_time, half the period by default, counted from the start of
-solve()), or in solver iterations (config.budget 'iterations', the evaluation's:
-config.solve_iterations(), spent by the iterations each try makes; no clock is read, builds
-are free and a step waits for its NLP's compilation, so a step does the same on any machine
-under any load). The first NLP solve gets what is left of it when it starts (an NLP built
-mid-step has spent its share of wall time: prepare() builds them ahead); the retries (a
-second start, the IPOPT fallback, further constraint-generation rounds) run only while some
-is left. Which tries an NLP solve makes, in which order, is tries.py's
-table (solver_tries); _optimise only makes them. Once the budget is spent, decide() applies
-the verified shifted candidate (CANDIDATE_TIMEOUT), or stops if there is none, and the
-solution says so (MpcSolution.timed_out). Nothing unverified is ever applied: the budget
-only decides how hard the step tries to beat the candidate. How closely a solver keeps to its
-share is backends.py's (run_solver): IPOPT to an iteration, fatrop to its measured time per
-iteration (wall) or to an iteration level (iterations).
+A step's solving is bounded (budget.py: wall time on the robot, solver iterations in the
+evaluation). Which tries an NLP solve makes, in which order, is tries.py's table
+(solver_tries); _optimise only makes them. Once the budget is spent, decide() applies the
+verified shifted candidate (CANDIDATE_TIMEOUT), or stops if there is none. Nothing
+unverified is ever applied: the budget only decides how hard the step tries to beat the
+candidate.
 
 The NLP itself is formulation.py (problem (6)); the solvers and their compilation are
 backends.py; the footprint's clearance along a plan clearance.py; the candidate and the
@@ -70,6 +61,7 @@ from mpc_local_planner.core.mpc.candidate import (
     guided_guess,
     Plan,
     plan_moves,
+    rate_start,
     Rollout,
     shifted_candidate,
     STANDING_INPUT,
@@ -92,7 +84,6 @@ from mpc_local_planner.core.mpc.formulation import (
     formulate,
     obstacle_parameters,
     parameter_vector,
-    rate_limited_inputs,
     stage_cost,
     TerminalCondition,
 )
@@ -415,24 +406,13 @@ class MpcBase(ABC):
         return replace(plan, mu=self._multipliers(plan.x, active, nlp))
 
     def _guided_motion(self, x0: np.ndarray) -> Plan:
-        """Return the guided start's states and inputs; its multipliers depend on the NLP.
-
-        With max_accel, its inputs are moved into the rate bounds from the input before
-        (formulation.rate_limited_inputs): a base at rest does not jump to half speed, and
-        the plan must end at rest.
-        """
-        rate_limit = None
-        if self._input_before is not None:
-            before = self._input_before
-            rate = np.asarray(self._config.max_accel) * self._config.step
-
-            def rate_limit(u: np.ndarray) -> np.ndarray:
-                return rate_limited_inputs(u, before, rate)
-
+        """Return the guided start's states and inputs, within max_accel's rate bounds."""
+        rate = (None if self._input_before is None else
+                (self._input_before, np.asarray(self._config.max_accel) * self._config.step))
         return guided_guess(self._model, x0, self._carried_inputs,
                             horizon=self._config.horizon, step=self._config.step,
                             rollout=self._rollout, progress=self._progress,
-                            terminal_state=self._terminal_state, rate_limit=rate_limit)
+                            terminal_state=self._terminal_state, rate_bounds=rate)
 
     # ----------------------------------------------------------------- verification
     def _violation(self, w: np.ndarray, params: np.ndarray, obstacles: ObstacleSet,
@@ -697,13 +677,7 @@ class MpcBase(ABC):
         """Return the input the rate bounds start from (None without max_accel)."""
         if self._config.max_accel is None:
             return None
-        if previous_input is not None:
-            u = np.asarray(previous_input, dtype=float).reshape(-1)
-            if u.shape == (self._model.nu,) and np.all(np.isfinite(u)):
-                return np.clip(u, self._model.u_min, self._model.u_max)
-        if self._plan is not None:
-            return np.asarray(self._plan.u[0], dtype=float).copy()
-        return np.zeros(self._model.nu)
+        return rate_start(self._model, previous_input, self._plan)
 
     def _stop(self, x0: np.ndarray, status: str, attempt: SolveAttempt, in_reach: int,
               active: int, *, timed_out: bool = False) -> MpcSolution:
