@@ -60,7 +60,6 @@ from mpc_local_planner.core.obstacles import (
     min_clearance,
     ObstacleSet,
 )
-from mpc_local_planner.core.obstacles import within_faces as within_faces  # re-export: see below
 from mpc_local_planner.core.paths import ReferencePath, simplify_polyline, WaypointPath, wrap_angle
 
 __all__ = [
@@ -68,9 +67,6 @@ __all__ = [
     'MpcController',
     'ROTATE_STEPS',
 ]
-# Blockage, ControlOutput and Reason (core/control_output.py), ControllerSettings
-# (core/controller_settings.py) and within_faces (core/obstacles.py) stay importable from here
-# for the callers in ros/ and evaluation/ that still import them from this module.
 
 
 # Positions beyond this (metres from the origin) are refused as garbage: a local planner has

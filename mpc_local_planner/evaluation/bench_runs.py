@@ -34,18 +34,15 @@ from typing import Any
 import numpy as np
 
 from mpc_local_planner.core.config import MpcConfig
-from mpc_local_planner.core.controller import (
-    ControllerSettings,
-    MpcController,
-    Reason,
-    within_faces,
-)
+from mpc_local_planner.core.control_output import Reason
+from mpc_local_planner.core.controller import MpcController
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC
 from mpc_local_planner.core.mpc.backends import COMPILE_FLAGS, NO_OBSTACLE_COMPILE_FLAGS
-from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.obstacles import ConvexPolygon, within_faces
 from mpc_local_planner.core.paths import paper_sinusoid, ReferencePath, wrap_angle
 from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
 from mpc_local_planner.evaluation.opti_peer import OptiMpc

@@ -49,7 +49,8 @@ from typing import Any, Protocol, Sequence
 
 import numpy as np
 
-from mpc_local_planner.core.controller import MpcController, Reason
+from mpc_local_planner.core.control_output import Reason
+from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.diagnostics import PlanTrigger
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import Footprint
@@ -71,7 +72,8 @@ from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.perception.laser import JACKAL_FOV, SimulatedLaser
 from mpc_local_planner.perception.local_obstacles import LocalObstacles
 from mpc_local_planner.perception.raycast import TrueGeometry
-from mpc_local_planner.perception.scan_obstacles import ObstacleMemory, Scan
+from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
+from mpc_local_planner.perception.scans import Scan
 from mpc_local_planner.worlds.map_files import OccupancyMap
 
 __all__ = [

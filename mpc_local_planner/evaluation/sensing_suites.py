@@ -48,7 +48,8 @@ import numpy as np
 from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit, PurePursuitConfig
 from mpc_local_planner.core.baselines.tracking_mpc import TrackingMPC
 from mpc_local_planner.core.config import MpcConfig
-from mpc_local_planner.core.controller import ControllerSettings, MpcController
+from mpc_local_planner.core.controller import MpcController
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.models import Unicycle

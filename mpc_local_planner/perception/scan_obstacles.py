@@ -53,14 +53,9 @@ from mpc_local_planner.perception.scans import (
     compose_pose,
     Scan,
     scan_points,
+    ScanError,
+    validate_scan,
 )
-
-# Re-exported for the callers in ros/ that still import them from here (as are Scan and
-# classify_beams, used here too).
-from mpc_local_planner.perception.scans import check_scan_stamp as check_scan_stamp
-from mpc_local_planner.perception.scans import MAX_BEAMS as MAX_BEAMS
-from mpc_local_planner.perception.scans import ScanError as ScanError
-from mpc_local_planner.perception.scans import validate_scan as validate_scan
 
 __all__ = [
     'ObstacleMemory',

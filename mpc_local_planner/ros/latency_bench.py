@@ -48,7 +48,7 @@ from mpc_local_planner.core.diagnostics import (
 )
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.paths import paper_sinusoid
-from mpc_local_planner.evaluation.bench import stats, STEP
+from mpc_local_planner.evaluation.bench_runs import stats, STEP
 from mpc_local_planner.ros.conversions import seconds_to_stamp, state_to_odometry
 from mpc_local_planner.ros.executors import spin_until
 from mpc_local_planner.ros.qos import CLOCK_QOS, CMD_VEL_QOS, DIAGNOSTICS_QOS, ODOM_QOS

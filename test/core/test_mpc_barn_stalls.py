@@ -32,12 +32,9 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.config import MpcConfig
-from mpc_local_planner.core.controller import (
-    ControllerSettings,
-    ControlOutput,
-    MpcController,
-    Reason,
-)
+from mpc_local_planner.core.control_output import ControlOutput, Reason
+from mpc_local_planner.core.controller import MpcController
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon

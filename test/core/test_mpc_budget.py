@@ -33,7 +33,8 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.config import MpcConfig, STRUCTURAL_FIELDS
-from mpc_local_planner.core.controller import MpcController, Reason
+from mpc_local_planner.core.control_output import Reason
+from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.diagnostics import ControllerDiagnostics
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import (
