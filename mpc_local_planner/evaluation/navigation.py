@@ -60,6 +60,7 @@ from mpc_local_planner.core.paths import waypoints_to_poses
 from mpc_local_planner.core.planner import RrtStarPlanner
 from mpc_local_planner.core.reality import Base, ScanChannel
 from mpc_local_planner.core.replanning import (
+    PROGRESS_ANGLE,
     PROGRESS_RADIUS,
     PROGRESS_TIMEOUT,
     ReplanDecision,
@@ -110,6 +111,7 @@ class NavigationSettings:
         progress_timeout: Re-plan from where the robot stands when it has not moved
             progress_radius in this many seconds (the node's progress_timeout); 0 = never.
         progress_radius: Metres that count as progress (the node's progress_radius).
+        progress_angle: Radians of turn that count as progress (the node's progress_angle).
 
     """
 
@@ -125,6 +127,7 @@ class NavigationSettings:
     scan_period: float | None = None
     progress_timeout: float = PROGRESS_TIMEOUT
     progress_radius: float = PROGRESS_RADIUS
+    progress_angle: float = PROGRESS_ANGLE
 
     def replan_settings(self) -> ReplanSettings:
         """Return the re-planner's settings (without sensing the grid never changes: no checks).
@@ -135,7 +138,8 @@ class NavigationSettings:
         return ReplanSettings(
             check_period=self.replan_check_period if self.sense else 0.0,
             replan_period=self.replan_period, escape_distance=self.escape_distance,
-            progress_timeout=self.progress_timeout, progress_radius=self.progress_radius)
+            progress_timeout=self.progress_timeout, progress_radius=self.progress_radius,
+            progress_angle=self.progress_angle)
 
 
 class LocalController(Protocol):

@@ -30,6 +30,7 @@ from rclpy.parameter import Parameter
 from mpc_local_planner.core.diagnostics import PlanTrigger
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.replanning import (
+    PROGRESS_ANGLE,
     PROGRESS_RADIUS,
     PROGRESS_TIMEOUT,
     Replanner,
@@ -195,5 +196,6 @@ def test_the_navigators_settings_map_onto_the_nodes_defaults(ros) -> None:
     assert navigation.escape_distance == node.replanner.settings.escape_distance
     assert navigation.progress_timeout == node.replanner.settings.progress_timeout
     assert navigation.progress_radius == node.replanner.settings.progress_radius
+    assert navigation.progress_angle == node.replanner.settings.progress_angle == PROGRESS_ANGLE
     # without sensing the grid never changes: the navigator never checks (a rate of 0)
     assert NavigationSettings(sense=False).replan_settings().check_period == 0.0
