@@ -362,21 +362,16 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
         A_list.append(ca.reshape(obs[base:base + 2 * faces], faces, 2))
         b_list.append(obs[base + 2 * faces:base + 3 * faces])
 
-    # ---- decision variables, stage by stage
-    Z = [ca.SX.sym(f'z{k}', nz + (nc if k >= 1 else 0) + npv) for k in range(n + 1)]
+    # ---- decision variables, stage by stage, in the order _blocks writes once
+    blocks = _blocks(n, nx, nr, nz, nu, nm, nc, npv)
+    Z = [ca.SX.sym(f'z{k}', sum(size for _, size in blocks[k]['z'])) for k in range(n + 1)]
     # q_l, the input before stage l, at the end of z_l
-    Q = [Z[k][nz + (nc if k >= 1 else 0):] for k in range(n + 1)]
+    Q = [Z[k][Z[k].numel() - npv:] for k in range(n + 1)]
     U = [ca.SX.sym(f'u{k}', nu) for k in range(n)]  # u_N = u_s is a constant, (6d)-(6e)
     MU = [None] + [ca.SX.sym(f'mu{k}', nm) for k in range(1, n + 1)]
-    order: list[ca.SX] = []
-    for k in range(n + 1):
-        order.append(Z[k])
-        if k < n:
-            order.append(U[k])
-        if k >= 1:
-            order.append(MU[k])
-    w = ca.vertcat(*order)
-    layout = _layout(w.numel(), n, nx, nr, nz, nu, nm, nc, npv)
+    symbols = {'z': Z, 'u': U, 'mu': MU}
+    w = ca.vertcat(*(symbols[kind][k] for k in range(n + 1) for kind in blocks[k]))
+    layout = _layout(blocks, n, nu, nm, nc, npv)
 
     g, lbg, ubg = [], [], []
     ng_stage = []
@@ -500,32 +495,45 @@ def _polygon_rows(add: Callable[[ca.SX, float, float], int], x_l: ca.SX, angle: 
     return rows
 
 
-def _layout(size: int, n: int, nx: int, nr: int, nz: int, nu: int, nm: int,
-            nc: int = 0, npv: int = 0) -> Layout:
-    """Return the indices of x, r, the carried x_s, u, mu, sweep rates and inputs in w."""
-    index = np.arange(size)
-    xs, rs, ss, us, mus, cs, qs = [], [], [], [], [], [], []
-    offset = 0
+def _blocks(n: int, nx: int, nr: int, nz: int, nu: int, nm: int, nc: int,
+            npv: int) -> list[dict[str, list[tuple[str, int]]]]:
+    """Return the order of w, the one place it is written: per stage k, its blocks in order.
+
+    Stage k holds z_k (x_k, the reference copy r_k, the carried steady state, for k >= 1 the
+    sweep rate c_k, and the input before the stage), then u_k (k < N), then mu_k (k >= 1),
+    each block as (field, size) parts.
+    """
+    stages = []
     for k in range(n + 1):
-        xs.append(index[offset:offset + nx])
-        rs.append(index[offset + nx:offset + nx + nr])
-        ss.append(index[offset + nx + nr:offset + nz])
-        offset += nz
+        z = [('x', nx), ('r', nr), ('xs', nz - nx - nr)]
         if k >= 1:
-            cs.append(index[offset:offset + nc])
-            offset += nc
-        qs.append(index[offset:offset + npv])
-        offset += npv
+            z.append(('c', nc))
+        z.append(('prev', npv))
+        stage = {'z': z}
         if k < n:
-            us.append(index[offset:offset + nu])
-            offset += nu
+            stage['u'] = [('u', nu)]
         if k >= 1:
-            mus.append(index[offset:offset + nm])
-            offset += nm
-    return Layout(x=np.array(xs), r=np.array(rs), xs=np.array(ss, dtype=int).reshape(n + 1, -1),
-                  u=np.array(us), mu=np.array(mus).reshape(n, nm),
-                  c=np.array(cs, dtype=int).reshape(n, nc),
-                  prev=np.array(qs, dtype=int).reshape(n + 1, npv))
+            stage['mu'] = [('mu', nm)]
+        stages.append(stage)
+    return stages
+
+
+def _layout(blocks: list[dict[str, list[tuple[str, int]]]], n: int, nu: int, nm: int,
+            nc: int, npv: int) -> Layout:
+    """Return the indices of x, r, the carried x_s, u, mu, sweep rates and inputs in w."""
+    fields: dict[str, list[np.ndarray]] = {name: [] for name in
+                                           ('x', 'r', 'xs', 'u', 'mu', 'c', 'prev')}
+    offset = 0
+    for stage in blocks:
+        for parts in stage.values():
+            for name, size in parts:
+                fields[name].append(np.arange(offset, offset + size))
+                offset += size
+    return Layout(x=np.array(fields['x']), r=np.array(fields['r']),
+                  xs=np.array(fields['xs'], dtype=int).reshape(n + 1, -1),
+                  u=np.array(fields['u']), mu=np.array(fields['mu']).reshape(n, nm),
+                  c=np.array(fields['c'], dtype=int).reshape(n, nc),
+                  prev=np.array(fields['prev'], dtype=int).reshape(n + 1, npv))
 
 
 def rate_limited_inputs(u: np.ndarray, u_before: np.ndarray, rate: np.ndarray) -> np.ndarray:
