@@ -26,7 +26,9 @@
 Each run is an evaluation.rollout (stopping within STOP_POSITION_TOLERANCE and
 STOP_HEADING_TOLERANCE of the target, headings wrapped) and writes metrics.json (with the
 rollout's outcome) and trajectory.csv (evaluation/trajectory.py) in its own folder; each
-experiment draws a PNG with all its runs.
+experiment draws a PNG with all its runs. A step's solving is bounded by solver iterations
+(``--budget iterations``, the default, as evaluate's), so the runs are the same on any machine
+under any load; ``--budget wall`` gives the robot's wall-time budget.
 """
 
 from __future__ import annotations
@@ -41,7 +43,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from mpc_local_planner.core.baselines.tracking_mpc import TrackingMPC
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import BUDGETS, MpcConfig
 from mpc_local_planner.core.models import RobotModel, Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC
 from mpc_local_planner.core.obstacles import ConvexPolygon
@@ -49,7 +51,13 @@ from mpc_local_planner.core.paths import analytic_path, WaypointPath
 from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
 from mpc_local_planner.evaluation.metrics import compute_metrics
 from mpc_local_planner.evaluation.plotting import plot_runs
-from mpc_local_planner.evaluation.rollout import Outcome, polygon_clearance, rollout, StopRule
+from mpc_local_planner.evaluation.rollout import (
+    EVALUATION_BUDGET,
+    Outcome,
+    polygon_clearance,
+    rollout,
+    StopRule,
+)
 from mpc_local_planner.evaluation.trajectory import write_trajectory_csv
 from mpc_local_planner.worlds.world import load_world, World
 
@@ -248,8 +256,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--out', type=Path, default=Path('out/experiments'))
     parser.add_argument('--solver', default=None, help='MPC backend (MpcConfig.solver)')
     parser.add_argument('--seed', type=int, default=0, help='RRT* seed (rrt experiment)')
+    parser.add_argument('--budget', choices=BUDGETS, default=EVALUATION_BUDGET,
+                        help="a step's solving: solver iterations (the same runs under any "
+                             "load) or the robot's wall time (MpcConfig.budget)")
     args = parser.parse_args(argv)
-    base = MpcConfig() if args.solver is None else MpcConfig(solver=args.solver)
+    base = MpcConfig(budget=args.budget)
+    if args.solver is not None:
+        base = base.with_changes(solver=args.solver)
     names = list(EXPERIMENTS) if args.experiment == 'all' else [args.experiment]
     for name in names:
         folder = args.out / name
