@@ -390,7 +390,8 @@ class SensingResult:
 def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool = True,
                    seed: int = 0, h: float = 0.2, prepare: bool = True,
                    budget: str = EVALUATION_BUDGET,
-                   reality: str | Reality = 'ideal') -> SensingResult:
+                   reality: str | Reality = 'ideal',
+                   localized: bool | None = None) -> SensingResult:
     """Drive robot through world with the named controller, perception and re-planning.
 
     Args:
@@ -414,6 +415,9 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
             ScanChannel, and every controller sees odometry, not the true pose; when the
             odometry is not exact, corrected by a `Localizer` (the simulator's stand-in
             for AMCL, as closed_loop runs it): the pose in map, as the nodes compose it.
+        localized: Whether a robot whose odometry is not exact has that localizer; None:
+            it has. BARN's robot has none (odometry and a laser, no map, a goal relative to
+            its start and reached within 1 m): suite_runs passes False for BARN.
 
     """
     if isinstance(reality, str):
@@ -440,7 +444,7 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
                     stall_steps=int(STALL_SECONDS / period))
     # odometry that drifts is corrected by a localizer, as closed_loop --reality runs the
     # nodes (its poses seeded per run, as the base's)
-    localizer = Localizer(seed=seed) if real and not reality.ideal_base else None
+    localizer = Localizer(seed=seed) if localized is not False and real and not reality.ideal_base else None
     run = rollout(navigator, base if base is not None else model, world.start, world.goal,
                   h=period, rule=rule, clearance=clearance, localizer=localizer)
     closest = float(np.min(clearance(run.rows[:, 1:4])))

@@ -228,7 +228,9 @@ def run_navigation_task(task: Task) -> dict[str, Any]:
     try:
         result = suites.run_navigation(world, task.controller, robot,
                                        sensing=bool(row['sensing']), seed=task.seed,
-                                       budget=task.budget, reality=task.reality)
+                                       budget=task.budget, reality=task.reality,
+                                       # BARN's robot has odometry and a laser, no localizer
+                                       localized=task.suite != 'barn')
     except PlanningError as err:
         row.update(success=False, collision=False, stop_reason=f'no plan: {err}',
                    barn_score=0.0 if barn_length is not None else '')
