@@ -444,7 +444,8 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
                     stall_steps=int(STALL_SECONDS / period))
     # odometry that drifts is corrected by a localizer, as closed_loop --reality runs the
     # nodes (its poses seeded per run, as the base's)
-    localizer = Localizer(seed=seed) if localized is not False and real and not reality.ideal_base else None
+    drifts = real and not reality.ideal_base
+    localizer = Localizer(seed=seed) if drifts and localized is not False else None
     run = rollout(navigator, base if base is not None else model, world.start, world.goal,
                   h=period, rule=rule, clearance=clearance, localizer=localizer)
     closest = float(np.min(clearance(run.rows[:, 1:4])))
