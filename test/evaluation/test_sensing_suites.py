@@ -156,3 +156,25 @@ def test_a_real_robot_navigates_on_odometry_corrected_by_the_localizer(monkeypat
     assert result.run.reached and result.contacts == 0
     suites.run_navigation(world, 'dwa', robot, prepare=False, reality='ideal')
     assert given['localizer'] is None
+    # BARN's robot has no localizer: odometry only, even on a real base
+    suites.run_navigation(world, 'dwa', robot, prepare=False, reality='real', localized=False)
+    assert given['localizer'] is None
+
+
+def test_the_barn_suite_runs_on_odometry_and_the_unknown_suite_with_the_localizer(
+        monkeypatch) -> None:
+    from mpc_local_planner.evaluation import suite_runs
+
+    asked = []
+
+    def fake(world, controller, robot, **kwargs):
+        asked.append(kwargs['localized'])
+        raise suite_runs.PlanningError('stop here')
+
+    monkeypatch.setattr(suites, 'run_navigation', fake)
+    for suite in ('barn', 'unknown'):
+        row = suite_runs.run_navigation_task(suite_runs.Task(
+            suite=suite, world=0, controller='dwa', sensing=True, robot='jackal',
+            reality='real'))
+        assert row['stop_reason'] == 'no plan: stop here'
+    assert asked == [False, True]
