@@ -72,7 +72,7 @@ def plan_moves(plan: Plan | None, progress: float) -> bool:
     solver reports success with s frozen, the robot turning to and fro on the spot or not at
     all, the motion put off to the horizon's end; each step's shifted candidate puts it off
     again, V_N constant, and the robot stands in open space (see docs/design/mpc.md, section
-    "A waiting plan counts as standing (_plan_moves)"). Counted as standing, the plan gets the
+    "A waiting plan counts as standing (plan_moves)"). Counted as standing, the plan gets the
     cold tries of tries.py, which leave that point. Without a path (progress NaN, the
     tracking baseline) any input above STANDING_INPUT moves.
     """
