@@ -28,6 +28,7 @@ from typing import Any
 from mpc_local_planner.core.footprint import parse_footprint
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.reality import (
+    LOCALIZER_NOISE,
     Reality,
     reality_preset,
     REALITY_PRESETS,
@@ -153,7 +154,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   f'publish the true pose with noise on {LOCALIZER_TOPIC} this often (Hz of '
                   'simulated time, at most one per tick), a stand-in for AMCL; 0 = off',
                   float_range=(0.0, 1000.0)),
-    ParameterSpec('localizer.noise_std', 0.01,
+    ParameterSpec('localizer.noise_std', LOCALIZER_NOISE,
                   "standard deviation of the localizer's Gaussian noise (m, and rad for the "
                   'heading)', float_range=(0.0, 10.0)),
     ParameterSpec('localizer.global_frame', 'map',
