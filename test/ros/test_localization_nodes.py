@@ -105,10 +105,12 @@ class DriftingRobot(SimClock):
         return self.ros.tick_until(tick, condition, timeout)
 
 
-def test_the_controller_stops_until_the_localizer_speaks_then_follows_the_plan_in_map(
-        ros, throttle_clock) -> None:
+def start_localized_controller(ros, **params) -> tuple[MpcControllerNode, object,
+                                                           DriftingRobot]:
+    """A controller in simulated time on amcl_pose's localizer, given PLAN (params override)."""
     overrides = [Parameter('use_sim_time', value=True),
                  Parameter('localization_topic', value='amcl_pose')]
+    overrides += [Parameter(k, value=v) for k, v in params.items()]
     node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=overrides))
     assert autostart(node) is None
     probe = ros.probe(use_sim_time=True)
@@ -116,6 +118,12 @@ def test_the_controller_stops_until_the_localizer_speaks_then_follows_the_plan_i
     assert ros.spin_until(lambda: probe.plan_pub.get_subscription_count() > 0
                           and robot.localizer.get_subscription_count() > 0)
     probe.plan_pub.publish(poses_to_path(PLAN))
+    return node, probe, robot
+
+
+def test_the_controller_stops_until_the_localizer_speaks_then_follows_the_plan_in_map(
+        ros, throttle_clock) -> None:
+    node, probe, robot = start_localized_controller(ros)
 
     # odometry and a plan, no localizer yet: zero commands, the reason said, one error
 
@@ -201,16 +209,7 @@ def test_the_planner_waits_for_the_localizer_then_plans_from_the_pose_in_map(ros
 
 def test_the_controller_stops_when_the_localizer_falls_silent_while_moving_then_drives_on(
         ros, throttle_clock) -> None:
-    overrides = [Parameter('use_sim_time', value=True),
-                 Parameter('localization_topic', value='amcl_pose'),
-                 Parameter('localization_max_travel', value=0.3)]
-    node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=overrides))
-    assert autostart(node) is None
-    probe = ros.probe(use_sim_time=True)
-    robot = DriftingRobot(ros, probe)
-    assert ros.spin_until(lambda: probe.plan_pub.get_subscription_count() > 0
-                          and robot.localizer.get_subscription_count() > 0)
-    probe.plan_pub.publish(poses_to_path(PLAN))
+    node, probe, robot = start_localized_controller(ros, localization_max_travel=0.3)
     for _ in range(5):  # odometry kept for the localizer's stamp
         robot.tick()
     robot.localize()  # once: then silent, as a dead AMCL
