@@ -43,25 +43,22 @@ from mpc_local_planner.ros.bag_recorder_node import (
     DEFAULT_TYPES,
 )
 from mpc_local_planner.ros.executors import spin_until
+from mpc_local_planner.ros.mpc_controller_outputs import OBSTACLES_TOPIC
 from mpc_local_planner.ros.qos import (
     CONTACTS_QOS,
     DIAGNOSTICS_QOS,
     LOCAL_PLAN_QOS,
     PLANNER_DIAGNOSTICS_QOS,
 )
+from mpc_local_planner.ros.unicycle_simulator_parameters import CONTACTS_TOPIC, SCAN_TOPIC
 
-__all__ = ['CONTACTS_TOPIC', 'FLUSH_TIMEOUT', 'LoopMonitor', 'SCAN_TOPIC', 'SENSED_SNAPSHOTS',
+__all__ = ['FLUSH_TIMEOUT', 'LoopMonitor', 'SENSED_SNAPSHOTS',
            'flush_recording', 'recorder_topics']
 
 # Wall seconds the recorder gets, after the run stops, to write what the monitor has seen.
 FLUSH_TIMEOUT = 5.0
-# Topics the simulator publishes (unicycle_simulator_node's names; not imported, so that
-# this module does not load the nodes before they are needed).
-SCAN_TOPIC = 'scan'
-CONTACTS_TOPIC = 'simulator/contacts'
-# What the controller avoids (mpc_controller_node's OBSTACLES_TOPIC) and the namespace of
-# the obstacles as it takes them in (from the map and the scans with --sensing).
-OBSTACLES_TOPIC = 'mpc/obstacles'
+# The namespace of the obstacles the controller takes in (from the map and the scans with
+# --sensing) on OBSTACLES_TOPIC.
 RAW_NAMESPACE = 'raw'
 # With --sensing, the monitor keeps what the controller avoids at most once per this many
 # simulated seconds; the figure shows SENSED_SNAPSHOTS of them, spread over the run.

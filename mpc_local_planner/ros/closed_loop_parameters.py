@@ -32,15 +32,14 @@ import yaml
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
 from mpc_local_planner.core.reality import LOCALIZER_NOISE, LOCALIZER_RATE, reality_preset
 from mpc_local_planner.ros.parameters import DEFAULT_WORLD_FILE
+from mpc_local_planner.ros.unicycle_simulator_parameters import LOCALIZER_TOPIC
 from mpc_local_planner.worlds.world import load_world, World
 
-__all__ = ['DEFAULT_DRIFT', 'DEFAULT_WORLD', 'LOCALIZER_TOPIC', 'LoopOptions', 'MODULES',
+__all__ = ['DEFAULT_DRIFT', 'DEFAULT_WORLD', 'LoopOptions', 'MODULES',
            'PAPER_GOAL_TOLERANCES', 'POLYGON_CLEARANCE', 'footprint_parameter', 'localized',
-           'node_parameters',           'parse_parameter', 'run_world']
+           'node_parameters', 'parse_parameter', 'run_world']
 
 DEFAULT_WORLD = DEFAULT_WORLD_FILE
-# The localizer stand-in's topic (unicycle_simulator's, as AMCL's).
-LOCALIZER_TOPIC = 'amcl_pose'
 # The planner's clearance (m) for a polygon robot (see the module docstring).
 POLYGON_CLEARANCE = 0.05
 # The controller's arrival on the paper's scenario (see the module docstring).

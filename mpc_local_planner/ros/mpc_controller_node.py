@@ -116,7 +116,7 @@ from mpc_local_planner.ros.conversions import (
     stamp_to_seconds,
 )
 from mpc_local_planner.ros.lifecycle import ManagedNode
-from mpc_local_planner.ros.mpc_controller_outputs import ControllerOutputs
+from mpc_local_planner.ros.mpc_controller_outputs import ControllerOutputs, OBSTACLES_TOPIC
 from mpc_local_planner.ros.mpc_controller_parameters import (
     build_settings,
     check_obstacles,
@@ -154,12 +154,11 @@ from mpc_local_planner.ros.robot_pose import (
 from mpc_local_planner.ros.throttle import ERROR_THROTTLE_S, ProblemThrottle
 
 __all__ = ['ERROR_THROTTLE_S', 'EXIT_INVALID_PARAMETERS', 'FOOTPRINT_TOPIC', 'MpcControllerNode',
-           'OBSTACLES_TOPIC', 'main']
+           'main']
 
 # Wall seconds the exiting process waits for subscribers to acknowledge its zero cmd_vel.
 EXIT_ACK_TIMEOUT_S = 1.0
 # What the controller avoids (MarkerArray) and the robot's outline (PolygonStamped).
-OBSTACLES_TOPIC = 'mpc/obstacles'
 FOOTPRINT_TOPIC = 'mpc/footprint'
 # Streams like local_plan: reliable, volatile, depth 10.
 MARKERS_QOS = LOCAL_PLAN_QOS

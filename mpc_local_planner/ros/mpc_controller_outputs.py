@@ -46,7 +46,11 @@ from mpc_local_planner.ros.conversions import (
     twist_stamped_from_u,
 )
 
-__all__ = ['ControllerOutputs', 'MARKER_STYLE', 'OBSTACLE_REFRESH_STEPS', 'log_line']
+__all__ = ['ControllerOutputs', 'MARKER_STYLE', 'OBSTACLE_REFRESH_STEPS', 'OBSTACLES_TOPIC',
+           'log_line']
+
+# What the controller avoids, as markers (closed_loop's monitor reads it too).
+OBSTACLES_TOPIC = 'mpc/obstacles'
 
 # mpc/obstacles goes out when what it shows changes, and at least every this many control
 # steps (for an RViz that subscribes late: the topic is volatile).

@@ -131,24 +131,23 @@ from mpc_local_planner.ros.qos import (
 )
 from mpc_local_planner.ros.throttle import ProblemThrottle
 from mpc_local_planner.ros.unicycle_simulator_parameters import (
+    CONTACTS_TOPIC,
     LOCALIZER_TOPIC,
     PARAMETERS,
     reality_from_parameters,
     REALITY_PARAMETERS,
     SCAN_RANGE_MIN,
+    SCAN_TOPIC,
     validate_simulator_parameters,
 )
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world, World
 
-__all__ = ['CONTACTS_TOPIC', 'SCAN_PUBLISHER_QOS', 'SCAN_TOPIC', 'SUMMARY',
-           'UnicycleSimulatorNode', 'laser_scan_msg', 'main']
+__all__ = ['SCAN_PUBLISHER_QOS', 'SUMMARY', 'UnicycleSimulatorNode', 'laser_scan_msg', 'main']
 
 # At most this many integration steps catch up a late tick (real-time mode).
 MAX_CATCH_UP_STEPS = 10
 
-SCAN_TOPIC = 'scan'
-CONTACTS_TOPIC = 'simulator/contacts'
 # The publisher side of ``scan``: reliable, volatile, depth 10 (best-effort readers match).
 SCAN_PUBLISHER_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                                 durability=DurabilityPolicy.VOLATILE,

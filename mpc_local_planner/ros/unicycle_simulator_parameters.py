@@ -35,12 +35,16 @@ from mpc_local_planner.core.reality import (
 )
 from mpc_local_planner.ros.parameters import ParameterSpec
 
-__all__ = ['FROM_PRESET', 'LOCALIZER_TOPIC', 'MAX_SCAN_BEAMS', 'PARAMETERS',
-           'REALITY_PARAMETERS', 'SCAN_RANGE_MIN', 'reality_from_parameters',
+__all__ = ['CONTACTS_TOPIC', 'FROM_PRESET', 'LOCALIZER_TOPIC', 'MAX_SCAN_BEAMS', 'PARAMETERS',
+           'REALITY_PARAMETERS', 'SCAN_RANGE_MIN', 'SCAN_TOPIC', 'reality_from_parameters',
            'validate_simulator_parameters']
 
 _MODEL = Unicycle()  # the single source of the saturation defaults
-# The localizer stand-in's topic, as AMCL's.
+# The topics the simulator publishes besides odom and clock (here, not in the node, so that
+# closed_loop can name them without loading the node): the laser, the contact count, and the
+# localizer stand-in's, as AMCL's.
+SCAN_TOPIC = 'scan'
+CONTACTS_TOPIC = 'simulator/contacts'
 LOCALIZER_TOPIC = 'amcl_pose'
 # The simulated laser's closest valid reading (m), as a LaserScan's range_min.
 SCAN_RANGE_MIN = 0.05

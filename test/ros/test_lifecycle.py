@@ -42,11 +42,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from mpc_local_planner.core.control_output import Reason
 from mpc_local_planner.ros.conversions import poses_to_path, u_from_twist
-from mpc_local_planner.ros.mpc_controller_node import (
-    FOOTPRINT_TOPIC,
-    MpcControllerNode,
-    OBSTACLES_TOPIC,
-)
+from mpc_local_planner.ros.mpc_controller_node import FOOTPRINT_TOPIC, MpcControllerNode
+from mpc_local_planner.ros.mpc_controller_outputs import OBSTACLES_TOPIC
 from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.qos import CMD_VEL_QOS, LOCAL_PLAN_QOS
 from mpc_local_planner.worlds.world import paper_world

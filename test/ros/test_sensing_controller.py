@@ -46,10 +46,8 @@ from mpc_local_planner.ros.conversions import (
     u_from_twist,
     yaw_to_quaternion,
 )
-from mpc_local_planner.ros.mpc_controller_node import (
-    MpcControllerNode,
-    OBSTACLES_TOPIC,
-)
+from mpc_local_planner.ros.mpc_controller_node import MpcControllerNode
+from mpc_local_planner.ros.mpc_controller_outputs import OBSTACLES_TOPIC
 from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.qos import LOCAL_PLAN_QOS, MAP_QOS
 

@@ -37,11 +37,8 @@ from std_msgs.msg import UInt32
 from mpc_local_planner.core.footprint import Footprint, JACKAL, parse_footprint
 from mpc_local_planner.ros.conversions import stamp_to_seconds, twist_from_u
 from mpc_local_planner.ros.qos import CONTACTS_QOS, SCAN_QOS
-from mpc_local_planner.ros.unicycle_simulator_node import (
-    CONTACTS_TOPIC,
-    SCAN_TOPIC,
-    UnicycleSimulatorNode,
-)
+from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
+from mpc_local_planner.ros.unicycle_simulator_parameters import CONTACTS_TOPIC, SCAN_TOPIC
 
 pytestmark = pytest.mark.dds  # topics over DDS
 

@@ -37,10 +37,11 @@ from sensor_msgs.msg import LaserScan
 from mpc_local_planner.core.reality import REALITY_PRESETS
 from mpc_local_planner.ros.conversions import stamp_to_seconds, twist_from_u, twist_stamped_from_u
 from mpc_local_planner.ros.qos import CMD_VEL_QOS, LOCALIZER_QOS
-from mpc_local_planner.ros.unicycle_simulator_node import SCAN_TOPIC, UnicycleSimulatorNode
+from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
 from mpc_local_planner.ros.unicycle_simulator_parameters import (
     LOCALIZER_TOPIC,
     reality_from_parameters,
+    SCAN_TOPIC,
     validate_simulator_parameters,
 )
 
