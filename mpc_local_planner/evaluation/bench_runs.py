@@ -41,7 +41,7 @@ from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC
-from mpc_local_planner.core.mpc.backends import COMPILE_FLAGS, NO_OBSTACLE_COMPILE_FLAGS
+from mpc_local_planner.core.mpc.compilation import COMPILE_FLAGS, NO_OBSTACLE_COMPILE_FLAGS
 from mpc_local_planner.core.obstacles import ConvexPolygon, within_faces
 from mpc_local_planner.core.paths import paper_sinusoid, ReferencePath, wrap_angle
 from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner

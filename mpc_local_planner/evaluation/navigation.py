@@ -54,7 +54,7 @@ from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.diagnostics import PlanTrigger
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import Footprint
-from mpc_local_planner.core.mpc.backends import compile_wait_seconds
+from mpc_local_planner.core.mpc.compilation import compile_wait_seconds
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import waypoints_to_poses
 from mpc_local_planner.core.planner import RrtStarPlanner

@@ -67,7 +67,7 @@ from typing import Any, Callable, NamedTuple, Protocol, Sequence, TYPE_CHECKING
 import numpy as np
 
 from mpc_local_planner.core.errors import PlanningError
-from mpc_local_planner.core.mpc.backends import compile_wait_seconds
+from mpc_local_planner.core.mpc.compilation import compile_wait_seconds
 from mpc_local_planner.core.paths import wrap_angle
 from mpc_local_planner.evaluation.trajectory import trajectory_row
 from mpc_local_planner.perception.localization import LocalizedPose
@@ -250,7 +250,7 @@ class Rollout(NamedTuple):
         rows: (n, 9) trajectory rows (trajectory.TRAJECTORY_COLUMNS), one per step.
         steps: the controller's answers, one per row (STOPPED: one fewer).
         step_times: wall time of each controller call, seconds (adapter included; without
-            a wait for an NLP's compilation, backends.compile_wait_seconds).
+            a wait for an NLP's compilation, compilation.compile_wait_seconds).
         h: the step length, seconds.
         note: why the controller stopped (STOPPED), else ''.
 

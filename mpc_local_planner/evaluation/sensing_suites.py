@@ -335,7 +335,7 @@ def _prepare(mpc: Any, budget: str = EVALUATION_BUDGET) -> None:
     compiled functions whatever the timing, and the rest compile in the background in the
     order they were built. On a fresh machine the first BARN run no longer waits for the 21
     shapes (minutes), only for the few it uses; the wait is not counted in the step times
-    (backends.compile_wait_seconds).
+    (compilation.compile_wait_seconds).
     """
     mpc.prepare(PREPARED_SLOTS)
     if budget != 'iterations':

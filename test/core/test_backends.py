@@ -24,7 +24,7 @@ import pytest
 
 from mpc_local_planner.core.config import MpcConfig, SOLVERS
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.mpc import backends, PathReferenceMPC, PlanSource
+from mpc_local_planner.core.mpc import compilation, PathReferenceMPC, PlanSource
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import paper_sinusoid
 
@@ -95,11 +95,11 @@ def test_processes_wanting_the_same_library_compile_it_once(tmp_path, monkeypatc
         library.write_text('built')  # what gcc would leave
         return library
 
-    monkeypatch.setattr(backends, '_run_compiler', compiler)
+    monkeypatch.setattr(compilation, '_run_compiler', compiler)
     library = tmp_path / 'mpc_nlp_test.so'
     # each call opens the lock file itself, as another process would
     with ThreadPoolExecutor(max_workers=2) as pool:
-        results = list(pool.map(lambda _: backends._compile('int f;', library), range(2)))
+        results = list(pool.map(lambda _: compilation._compile('int f;', library), range(2)))
     assert results == [library, library]
     assert runs == ['int f;']  # the second found the library when its turn came
 
@@ -108,9 +108,9 @@ def test_a_waiter_compiles_its_queued_job_itself_and_the_wait_is_counted(
         tmp_path, monkeypatch) -> None:
     started: list[str] = []
     gate = threading.Event()
-    real = backends._run_compiler  # for what earlier tests left in the queue
+    real = compilation._run_compiler  # for what earlier tests left in the queue
 
-    def compiler(source: str, library, flags=backends.COMPILE_FLAGS):
+    def compiler(source: str, library, flags=compilation.COMPILE_FLAGS):
         if source not in ('first', 'second'):
             return real(source, library, flags)
         started.append(source)
@@ -119,14 +119,14 @@ def test_a_waiter_compiles_its_queued_job_itself_and_the_wait_is_counted(
         library.write_text('built')
         return library
 
-    monkeypatch.setattr(backends, '_run_compiler', compiler)
-    first = backends._submit_compilation('first', tmp_path / 'mpc_nlp_first.so')
-    second = backends._submit_compilation('second', tmp_path / 'mpc_nlp_second.so')
-    waited = backends.compile_wait_seconds()
-    backends._wait_for(second)  # not behind the first: run here
+    monkeypatch.setattr(compilation, '_run_compiler', compiler)
+    first = compilation.submit_compilation('first', tmp_path / 'mpc_nlp_first.so')
+    second = compilation.submit_compilation('second', tmp_path / 'mpc_nlp_second.so')
+    waited = compilation.compile_wait_seconds()
+    compilation.wait_for(second)  # not behind the first: run here
     assert second.result() == tmp_path / 'mpc_nlp_second.so'
     assert not first.done()
-    assert backends.compile_wait_seconds() >= waited
+    assert compilation.compile_wait_seconds() >= waited
     gate.set()
     assert first.result(timeout=10.0) == tmp_path / 'mpc_nlp_first.so'
     assert sorted(started) == ['first', 'second']  # each compiled once
@@ -146,7 +146,7 @@ def test_a_cached_library_is_found_without_generating_its_source(
     def no_source(*args: object) -> str:
         raise AssertionError('the source was generated again')
 
-    monkeypatch.setattr(backends, '_nlp_source', no_source)
+    monkeypatch.setattr(compilation, 'nlp_source', no_source)
     again = PathReferenceMPC(model, config, path=path)._nlp_for(0, 0)
     assert again.compiled and again.pending is None
     assert again.library == nlp.library

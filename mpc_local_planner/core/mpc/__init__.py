@@ -15,7 +15,7 @@
 
 """The paper's MPC (problem (6)) and its guard.
 
-formulation.py is problem (6), backends.py runs it (solvers, compiled functions),
+formulation.py is problem (6), backends.py runs it (solvers), compilation.py compiles it,
 nlp_shapes.py keeps one NLP per obstacle shape, step.py is one control step (verification,
 constraint generation, the decision) for the terminal condition path_mpc.py gives, with
 candidate.py (the proof's shifted candidate, the guided start), clearance.py (the footprint
@@ -25,7 +25,7 @@ of its NLP solves (which start with which solver, in which order), decision.py i
 (what is applied).
 """
 
-from mpc_local_planner.core.mpc.backends import compile_cache_dir
+from mpc_local_planner.core.mpc.compilation import compile_cache_dir
 from mpc_local_planner.core.mpc.decision import decide, Decision, PlanSource
 from mpc_local_planner.core.mpc.path_mpc import PathReferenceMPC
 from mpc_local_planner.core.mpc.solution import MpcSolution

@@ -17,8 +17,8 @@
 The formulation does not depend on the backend: fatrop (structure-exploiting, the default)
 and IPOPT (the reference, and the fallback when fatrop fails) get the same NLP. With
 config.compile the NLP's functions are generated as C, compiled by gcc in a daemon thread and
-kept on disk (compile_cache_dir()), so that a restarted controller loads them at once; until
-the library is there, CasADi's interpreted functions run.
+kept on disk (compilation.py), so that a restarted controller loads them at once; until the
+library is there, CasADi's interpreted functions run.
 
 Each solver call can be given a time limit and an iteration limit (run_solver's time_limit
 and iteration_limit: what is left of the control step's budget, MpcConfig.budget). IPOPT is
@@ -35,22 +35,14 @@ limit is always kept, by an interpreted copy if need be.
 
 from __future__ import annotations
 
-import atexit
-from collections import deque
 from concurrent.futures import Future
 from dataclasses import dataclass, field
-import fcntl
 import hashlib
 import json
 import logging
 import math
-import multiprocessing.util
 import os
 from pathlib import Path
-import signal
-import subprocess
-import tempfile
-import threading
 import time
 from typing import Any, Callable, NamedTuple
 
@@ -58,24 +50,14 @@ import casadi as ca
 import numpy as np
 
 from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.mpc import compilation
 from mpc_local_planner.core.mpc.formulation import Formulation
 
-__all__ = ['Nlp', 'SolverRun', 'backend_options', 'build_nlp', 'compile_cache_dir',
-           'compile_flags', 'compile_wait_seconds', 'iteration_levels', 'run_solver', 'stage_size']
+__all__ = ['Nlp', 'SolverRun', 'backend_options', 'build_nlp', 'compile_flags',
+           'iteration_levels', 'run_solver', 'stage_size']
 
 _LOG = logging.getLogger(__name__)
 
-# C compiler and flags for config.compile (compile_flags); CC overrides the compiler as usual.
-# NLPs with obstacle slots: -O0, not -O2: gcc took 5x less time on the Jackal's polygon NLPs
-# (4.6 s instead of 25.6 s for 3 boxes, 17 s instead of 88 s for 10 octagons, on 2 loaded
-# cores) and the solves 1.2x more (most of such a solve is the solver's own linear algebra,
-# compiled with the solver), with the same results to the bit (x86-64: no -ffast-math, no
-# fused multiply-add); see docs/results.md, "Cold start".
-COMPILE_FLAGS = ('-O0', '-fPIC', '-shared')
-# The NLP without obstacles: -O1. The smallest (gcc 10 s at -O1, 12 s at -O2, compiled
-# first, while the others are built), the most used (half of a BARN run's solves), and the
-# one where the generated functions are most of a solve: 1.56x at -O0, 1.00x at -O1.
-NO_OBSTACLE_COMPILE_FLAGS = ('-O1', '-fPIC', '-shared')
 # Iteration limits of the copies a call with little time left runs instead of the full solver
 # (fatrop: no time limit of its own), as fractions of config.max_iterations: halving keeps the
 # copies few (one per level and NLP, built when first needed) and wastes at most half of what
@@ -335,7 +317,7 @@ class Nlp:
         self.pending = None
         try:
             if not future.done():
-                _wait_for(future)
+                compilation.wait_for(future)
             library = future.result()
             self.solver = ca.nlpsol('mpc', self.plugin, str(library), self.options)
             self.compiled = True
@@ -468,33 +450,24 @@ def run_solver(nlp: Nlp, w0: np.ndarray, params: np.ndarray,
 
 
 # ----------------------------------------------------------------------------- compilation
-def compile_cache_dir() -> Path:
-    """Return where compiled NLPs are kept ($MPC_LOCAL_PLANNER_CACHE or ~/.cache/...)."""
-    env = os.environ.get('MPC_LOCAL_PLANNER_CACHE')
-    if env:
-        return Path(env)
-    base = os.environ.get('XDG_CACHE_HOME') or str(Path.home() / '.cache')
-    return Path(base) / 'mpc_local_planner'
-
-
 def _start_compilation(nlp: Nlp) -> None:
     """Use a cached compiled library now, or compile one in the background.
 
-    The library is named by the hash of its C source (_library_path); generating the source
-    took a third of a warm start (0.2-0.4 s a shape, 14 s of 47 for the 21 shapes of a BARN
-    run), so a pointer file named by a cheaper key (_problem_key: the NLP's serialized
+    The library is named by the hash of its C source (compilation.library_path); generating
+    the source took a third of a warm start (0.2-0.4 s a shape, 14 s of 47 for the 21 shapes
+    of a BARN run), so a pointer file named by a cheaper key (_problem_key: the NLP's serialized
     expressions, 35x faster) finds it without generating the source again.
     """
     try:
-        pointer = _pointer_path(_problem_key(nlp))
-        library = _pointed_library(pointer)
+        pointer = compilation.pointer_path(_problem_key(nlp))
+        library = compilation.pointed_library(pointer)
         if library is None:
-            source = _nlp_source(nlp.formulation.problem, nlp.solver)
+            source = compilation.nlp_source(nlp.formulation.problem, nlp.solver)
             flags = compile_flags(nlp)
-            library = _library_path(source, flags)
-            _write_pointer(pointer, library)
+            library = compilation.library_path(source, flags)
+            compilation.write_pointer(pointer, library)
             if not library.exists():
-                nlp.pending = _submit_compilation(source, library, flags)
+                nlp.pending = compilation.submit_compilation(source, library, flags)
                 return
         nlp.solver = ca.nlpsol('mpc', nlp.plugin, str(library), nlp.options)
         nlp.compiled = True
@@ -505,7 +478,9 @@ def _start_compilation(nlp: Nlp) -> None:
 
 def compile_flags(nlp: Nlp) -> tuple[str, ...]:
     """Return gcc's flags for this NLP (part of its library's cache key)."""
-    return NO_OBSTACLE_COMPILE_FLAGS if nlp.formulation.slots == 0 else COMPILE_FLAGS
+    if nlp.formulation.slots == 0:
+        return compilation.NO_OBSTACLE_COMPILE_FLAGS
+    return compilation.COMPILE_FLAGS
 
 
 def _problem_key(nlp: Nlp) -> str:
@@ -525,182 +500,3 @@ def _problem_key(nlp: Nlp) -> str:
                                                              default=repr),
              function.serialize()]
     return hashlib.sha256('\n'.join(parts).encode()).hexdigest()[:24]
-
-
-def _pointer_path(key: str) -> Path:
-    return compile_cache_dir() / f'mpc_nlp_{key}.key'
-
-
-def _pointed_library(pointer: Path) -> Path | None:
-    """Return the library a pointer file names, if both are there."""
-    try:
-        library = pointer.parent / pointer.read_text(encoding='utf-8').strip()
-    except OSError:
-        return None
-    return library if library.suffix == '.so' and library.exists() else None
-
-
-def _write_pointer(pointer: Path, library: Path) -> None:
-    """Write the pointer file atomically (two processes may write the same one)."""
-    pointer.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile('w', dir=pointer.parent, suffix='.tmp', delete=False,
-                                     encoding='utf-8') as f:
-        f.write(library.name)
-    os.replace(f.name, pointer)
-
-
-def _nlp_source(problem: dict, solver: ca.Function) -> str:
-    """Return C code of the NLP functions the solver plugin evaluates (and the oracle)."""
-    generator = ca.CodeGenerator('mpc_nlp.c', {'with_header': False})
-    generator.add(ca.Function('nlp', [problem['x'], problem['p']],
-                              [problem['f'], problem['g']], ['x', 'p'], ['f', 'g']))
-    for name in solver.get_function():
-        generator.add(solver.get_function(name))
-    return generator.dump()
-
-
-def _library_path(source: str, flags: tuple[str, ...] = COMPILE_FLAGS) -> Path:
-    """Return the cache file of this source (its hash, with CasADi, compiler and flags)."""
-    compiler = os.environ.get('CC', 'gcc')
-    key = hashlib.sha256('\n'.join(
-        [ca.__version__, compiler, *flags, source]).encode()).hexdigest()[:24]
-    return compile_cache_dir() / f'mpc_nlp_{key}.so'
-
-
-class _CompileJob(Future):
-    """A compilation: its result (the library) once run, by the queue or by a waiter."""
-
-    def __init__(self, source: str, library: Path, flags: tuple[str, ...]) -> None:
-        super().__init__()
-        self._work: tuple[str, Path, tuple[str, ...]] | None = (source, library, flags)
-        self._claim = threading.Lock()
-
-    def run(self) -> None:
-        """Compile, unless it is (being) done already: whoever comes first runs it."""
-        with self._claim:
-            work, self._work = self._work, None
-        if work is None:
-            return
-        try:
-            self.set_result(_compile(*work))
-        except BaseException as err:  # handed to the waiting solver
-            self.set_exception(err)
-
-
-# Compilations not yet started, in the order they were asked for; one daemon thread runs
-# them one at a time (the machine may have two cores and a control loop to run), and a
-# step that needs one still queued runs it itself (Nlp.finish_compilation(wait=True)).
-_QUEUE: deque[_CompileJob] = deque()
-_QUEUE_READY = threading.Condition()
-_WORKER: list[threading.Thread] = []
-# seconds spent waiting for compilations, in any thread (see compile_wait_seconds)
-_WAITED = [0.0]
-
-
-def compile_wait_seconds() -> float:
-    """Return the seconds callers have waited for compilations so far in this process.
-
-    A rollout subtracts what a control step waited for its NLP's compilation from the
-    step's time: the wait happens once per NLP on a fresh machine, not in a robot's loop.
-    """
-    return _WAITED[0]
-
-
-def _wait_for(job: Future) -> None:
-    start = time.perf_counter()
-    if isinstance(job, _CompileJob):
-        job.run()  # still queued: now, here; else this returns at once
-    try:
-        job.exception()  # blocks until done
-    finally:
-        _WAITED[0] += time.perf_counter() - start
-
-
-def _queue_worker() -> None:
-    while True:
-        with _QUEUE_READY:
-            while not _QUEUE:
-                _QUEUE_READY.wait()
-            job = _QUEUE.popleft()
-        job.run()
-
-
-def _submit_compilation(source: str, library: Path,
-                        flags: tuple[str, ...] = COMPILE_FLAGS) -> Future:
-    """Queue a compilation for the daemon thread: a node stopped with Ctrl-C must not wait.
-
-    A ThreadPoolExecutor's workers are joined at interpreter exit, which kept a stopped
-    controller alive for the whole compilation; a daemon thread is simply dropped (the
-    library is renamed into place atomically, so an interrupted build leaves no bad file).
-    """
-    job = _CompileJob(source, library, flags)
-    with _QUEUE_READY:
-        if not _WORKER or not _WORKER[0].is_alive():
-            _WORKER[:] = [threading.Thread(target=_queue_worker, name='mpc_compile',
-                                           daemon=True)]
-            _WORKER[0].start()
-        _QUEUE.append(job)
-        _QUEUE_READY.notify()
-    return job
-
-
-def _compile(source: str, library: Path, flags: tuple[str, ...] = COMPILE_FLAGS) -> Path:
-    """Compile source into library (atomically: a half-written file is never loaded).
-
-    Processes that want the same library (an evaluation's workers, two nodes) take turns on
-    a lock file beside it: the first compiles, the others find the library when their turn
-    comes instead of running gcc on the same source at the same time.
-    """
-    library.parent.mkdir(parents=True, exist_ok=True)
-    with open(library.with_suffix('.lock'), 'w') as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file is closed
-        if library.exists():
-            return library
-        return _run_compiler(source, library, flags)
-
-
-def _run_compiler(source: str, library: Path, flags: tuple[str, ...] = COMPILE_FLAGS) -> Path:
-    compiler = os.environ.get('CC', 'gcc')
-    with tempfile.TemporaryDirectory(dir=library.parent) as tmp:
-        c_file = Path(tmp) / 'mpc_nlp.c'
-        c_file.write_text(source)
-        out = Path(tmp) / library.name
-        with subprocess.Popen([compiler, *flags, str(c_file), '-o', str(out), '-lm'],
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                              start_new_session=True) as process:  # gcc and its cc1: a group
-            _RUNNING.add(process)
-            try:
-                _, stderr = process.communicate(timeout=600)
-            except subprocess.TimeoutExpired:
-                _kill(process)
-                raise
-            finally:
-                _RUNNING.discard(process)
-        if process.returncode != 0:
-            msg = f'{compiler} failed ({process.returncode}): {stderr.strip()[:500]}'
-            raise RuntimeError(msg)
-        os.replace(out, library)
-    return library
-
-
-# Compilers running in this process's threads: stopped when it exits (an evaluation's
-# worker ends with compilations still queued; its gcc would go on, orphaned, for nothing:
-# the temporary folder it writes to is removed at exit). Pool workers leave through
-# multiprocessing's exit function, which runs no atexit handler: both are registered.
-_RUNNING: set[subprocess.Popen] = set()
-
-
-def _kill(process: subprocess.Popen) -> None:
-    try:
-        os.killpg(process.pid, signal.SIGKILL)
-    except OSError:  # gone already
-        pass
-
-
-def _stop_compilers() -> None:
-    for process in list(_RUNNING):
-        _kill(process)
-
-
-atexit.register(_stop_compilers)
-multiprocessing.util.Finalize(None, _stop_compilers, exitpriority=10)
