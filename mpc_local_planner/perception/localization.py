@@ -30,12 +30,15 @@ controller stops and says why (`LocalizedPose.problem`).
 
 A localizer can also fall silent: AMCL publishes only after the robot has moved
 (``update_min_d`` 0.25 m, ``update_min_a`` 0.2 rad), so silence at rest is normal and a
-timeout in seconds would stop a robot that waits. What is measured instead is the odometry
-travelled since the last localizer pose's stamp (``max_travel`` metres, ``max_rotation``
-radians; `LocalizedPose.staleness`): beyond a few times AMCL's update thresholds the
-correction is stale, the localizer lost or dead, and the drift since then uncorrected.
-The count starts at the localizer's stamp, not its arrival, so a late pose counts the travel
-made while it was on its way.
+timeout in seconds would stop a robot that waits. What is measured instead is how far the
+odometry has moved from where it was at the last localizer pose's stamp (``max_travel``
+metres, ``max_rotation`` radians; `LocalizedPose.staleness`): beyond a few times AMCL's update
+thresholds the correction is stale, the localizer lost or dead, and the drift since then
+uncorrected. The distance is the net displacement, as AMCL's thresholds measure it, not the
+path length: noise on the odometry's pose at rest then adds nothing, where summed sample by
+sample it would grow without bound. The largest displacement since the stamp is kept, so a
+robot that moved away and came back stays stale. The count starts at the localizer's stamp,
+not its arrival, so a late pose counts the motion made while it was on its way.
 """
 
 from __future__ import annotations
@@ -79,9 +82,9 @@ class LocalizedPose:
         localized: a localizer is expected: no pose until its first message. False: the
             odometry is the pose in the plan's frame (the correction is the identity).
         source: the localizer's name in messages (its topic).
-        max_travel: metres of odometry travel after the last localizer pose's stamp beyond
-            which its correction is stale (`staleness`); 0 = no limit.
-        max_rotation: the same in radians of odometry rotation; 0 = no limit.
+        max_travel: metres the odometry may move from its pose at the last localizer pose's
+            stamp before that correction is stale (`staleness`); 0 = no limit.
+        max_rotation: the same in radians of heading; 0 = no limit.
 
     """
 
@@ -95,8 +98,11 @@ class LocalizedPose:
         self.correction: np.ndarray | None = None
         self.problem: str | None = None
         self.corrections = 0  # localizer poses taken
-        self.travel = 0.0  # m of odometry since the last localizer pose's stamp
-        self.rotation = 0.0  # rad of odometry since then
+        # the largest net displacement (m) and turn (rad) of the odometry from its pose at
+        # the last localizer pose's stamp (the anchor)
+        self.travel = 0.0
+        self.rotation = 0.0
+        self._anchor: np.ndarray | None = None
         self.clear()
 
     def clear(self) -> None:
@@ -106,19 +112,27 @@ class LocalizedPose:
         self.problem = f'no localizer pose yet on {self.source!r}' if self.localized else None
         self.corrections = 0
         self.travel = self.rotation = 0.0
+        self._anchor = None
 
     def add_odometry(self, time: float, pose: np.ndarray,
                      twist: np.ndarray | tuple[float, float] | None = None) -> None:
         """Keep an odometry pose (x, y, theta in odom) at time, with its twist (v, omega).
 
         The twist lets a scan's stamp just past the newest odometry be placed (PoseHistory).
-        A pose newer than the newest adds its step to the travel since the localizer's pose.
+        A pose newer than the newest may raise the largest displacement from the anchor.
         """
-        newest = self.odometry.newest_pose() if time > self.odometry.newest else None
+        forward = time > self.odometry.newest
         self.odometry.add(time, pose, twist)
-        if newest is not None:  # a step forward (a clock jump back starts anew)
-            self.travel += math.hypot(pose[0] - newest[0], pose[1] - newest[1])
-            self.rotation += abs(float(wrap_angle(pose[2] - newest[2])))
+        if forward:  # a step forward (a clock jump back starts anew)
+            self._moved_to(np.asarray(pose[:3], dtype=float))
+
+    def _moved_to(self, pose: np.ndarray) -> None:
+        """Raise travel and rotation to pose's displacement from the anchor, if larger."""
+        if self._anchor is None:
+            return
+        self.travel = max(self.travel, math.hypot(pose[0] - self._anchor[0],
+                                                  pose[1] - self._anchor[1]))
+        self.rotation = max(self.rotation, abs(float(wrap_angle(pose[2] - self._anchor[2]))))
 
     def add_localizer(self, time: float, pose: np.ndarray) -> np.ndarray:
         """Take a localizer pose (x, y, theta in the plan's frame) at time; return the correction.
@@ -145,10 +159,10 @@ class LocalizedPose:
             self.correction = compose(np.asarray(pose[:3], dtype=float), invert(odom))
             self.problem = None
             self.corrections += 1
-            # the travel since its stamp: from the odometry then to the newest (a chord)
-            newest = self.odometry.newest_pose()
-            self.travel = math.hypot(newest[0] - odom[0], newest[1] - odom[1])
-            self.rotation = abs(float(wrap_angle(newest[2] - odom[2])))
+            # the motion since its stamp: from the odometry then to the newest
+            self._anchor = np.asarray(odom[:3], dtype=float)
+            self.travel = self.rotation = 0.0
+            self._moved_to(self.odometry.newest_pose())
             return self.correction.copy()
         self.correction, self.problem = None, problem
         raise LocalizationError(problem)
@@ -156,8 +170,8 @@ class LocalizedPose:
     def staleness(self) -> str | None:
         """Return why the correction in force is stale (None: it is not, or no limit applies).
 
-        Stale when the odometry has travelled more than max_travel, or turned more than
-        max_rotation, since the last localizer pose's stamp: the localizer should have
+        Stale when the odometry has moved more than max_travel, or turned more than
+        max_rotation, from its pose at the last localizer pose's stamp: the localizer should have
         spoken by then (AMCL does after 0.25 m or 0.2 rad), so it is silent or lost, and the
         drift since is not corrected. A new localizer pose ends it.
         """

@@ -80,8 +80,9 @@ POSE_PARAMETERS: tuple[ParameterSpec, ...] = (
                   "global_frame; '' = none: tf2's global_frame -> robot_base_frame if tf2_ros "
                   'is importable, else the odometry is that pose; read at configure'),
     ParameterSpec('localization_max_travel', 1.0,
-                  'with localization_topic, the odometry travel (m) after the last localizer '
-                  "pose's stamp beyond which the localizer is taken as silent or lost: the "
+                  "with localization_topic, how far (m) the odometry may move from its pose at "
+                  "the last localizer pose's stamp (net, as AMCL measures) before the "
+                  "localizer is taken as silent or lost: the "
                   "controller stops (no_localization) until its next pose; 4 x AMCL's "
                   'update_min_d; 0 = no limit; read at configure', float_range=(0.0, 1000.0)),
     ParameterSpec('localization_max_rotation', 0.8,

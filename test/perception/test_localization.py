@@ -149,6 +149,31 @@ def test_a_localizer_silent_at_rest_is_never_stale() -> None:
     assert located.staleness() is None
 
 
+def test_noisy_odometry_at_rest_never_adds_up_to_travel() -> None:
+    # white noise on the odometry's pose (1 cm, 0.01 rad a sample, 50 Hz for an hour): summed
+    # sample by sample it would be ~700 m; the displacement from the anchor stays centimetres
+    rng = np.random.default_rng(7)
+    located = LocalizedPose(2.0, localized=True, max_travel=1.0, max_rotation=0.8)
+    located.add_odometry(0.0, np.zeros(3), (0.0, 0.0))
+    located.add_localizer(0.0, np.zeros(3))
+    for k in range(1, 180_000):
+        located.add_odometry(k * 0.02, rng.normal(0.0, 0.01, 3), (0.0, 0.0))
+    assert located.travel < 0.1 and located.rotation < 0.1
+    assert located.staleness() is None
+
+
+def test_a_robot_that_moved_away_and_back_without_a_localizer_pose_stays_stale() -> None:
+    located = LocalizedPose(2.0, localized=True, max_travel=1.0, max_rotation=0.8)
+    drive(located, 0.0, 0.1, v=0.5)
+    located.add_localizer(0.1, np.array([0.05, 0.0, 0.0]))
+    drive(located, 0.2, 2.4, v=0.5)  # 1.15 m out
+    assert located.staleness() is not None
+    for k, x in enumerate(np.linspace(1.1, 0.05, 12)):  # and back to where it was localized
+        located.add_odometry(2.5 + 0.1 * k, np.array([x, 0.0, 0.0]), (-0.5, 0.0))
+    assert located.travel == pytest.approx(1.15)
+    assert located.staleness() is not None
+
+
 def test_a_turn_on_the_spot_beyond_max_rotation_is_stale_and_zero_turns_the_limit_off(
 ) -> None:
     for limit, stale in ((0.8, True), (0.0, False)):
