@@ -180,12 +180,13 @@ class MpcLocal:
         solution = output.solution
         if not output.fresh and solution is not None:
             # between solves (control_frequency): the verified plan's input, nothing solved
+            # (solve_time_s NaN: the solve statistics are over solves only)
             return ControlStep(u=output.u, s=float(solution.s), value=float(solution.value),
-                               solve_time_s=0.0, success=True, detail=output)
+                               success=True, detail=output)
         if solution is None:
             # no solve: a failure unless at the goal or turning in place to its heading
             done = output.reason in (Reason.GOAL_REACHED, Reason.ROTATE_TO_HEADING)
-            return ControlStep(u=output.u, success=done, solve_time_s=0.0, detail=output)
+            return ControlStep(u=output.u, success=done, detail=output)
         return ControlStep(
             u=output.u, s=float(solution.s), value=float(solution.value),
             solve_time_s=float(solution.solve_time_s),

@@ -1,0 +1,56 @@
+# Copyright 2026 mpc_local_planner developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The suites' adapter of the paper's controller (evaluation.navigation.MpcLocal)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.controller import MpcController
+from mpc_local_planner.core.controller_settings import ControllerSettings
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.evaluation.metrics import compute_metrics
+from mpc_local_planner.evaluation.navigation import MpcLocal
+from mpc_local_planner.evaluation.trajectory import trajectory_row
+from mpc_local_planner.worlds.world import paper_world
+
+WORLD = paper_world()
+MODEL = Unicycle()
+PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
+                 [2.5, 0.0, WORLD.goal[2]]])
+PERIOD = 0.05  # 20 Hz: three calls of four hold the plan of the step h = 0.2 s
+
+
+def test_calls_that_hold_the_plan_solve_nothing_and_leave_the_solve_statistics_alone():
+    controller = MpcController(MODEL, MpcConfig(), obstacles=WORLD.obstacles,
+                               settings=ControllerSettings(control_frequency=20.0))
+    local = MpcLocal(controller)
+    local.follow(PLAN)
+    x = np.array(WORLD.start, dtype=float)
+    rows = []
+    for k in range(12):
+        step = local.command(x, k * PERIOD)
+        rows.append(trajectory_row(k * PERIOD, x, step.u, s=step.s, value=step.value,
+                                   solve_ms=1e3 * step.solve_time_s))
+        x = MODEL.step(x, step.u, PERIOD)
+    solved = [k for k, row in enumerate(rows) if math.isfinite(row[-1])]
+    assert solved == [0, 4, 8]
+    assert all(rows[k][-1] > 0.0 for k in solved)
+    # the median is over the solves, not dragged to 0 by the held calls
+    metrics = compute_metrics(np.array(rows), goal=np.array(WORLD.goal), obstacles=[])
+    assert metrics['solve_ms_median'] == np.median([rows[k][-1] for k in solved])
