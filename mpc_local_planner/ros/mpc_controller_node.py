@@ -288,7 +288,7 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
         self._pose_source = self._make_robot_pose(values)
         self._forget_inputs()
         self._local = LocalObstacles(
-            config.faces_per_obstacle,
+            config.solving.faces_per_obstacle,
             memory=ObstacleMemory(float(values['obstacle_memory'])) if 'scan' in sources
             else None)
         if values['analytic_path']:

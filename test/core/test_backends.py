@@ -22,7 +22,7 @@ import threading
 import numpy as np
 import pytest
 
-from mpc_local_planner.core.config import MpcConfig, SOLVERS
+from mpc_local_planner.core.config import MpcConfig, SOLVERS, SolverSettings
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import compilation, PathReferenceMPC, PlanSource
 from mpc_local_planner.core.obstacles import ConvexPolygon
@@ -36,7 +36,9 @@ def run_paper_scenario(solver: str, *, compile_functions: bool) -> dict:
     """Run the paper's obstacle scenario in closed loop; return what the tests check."""
     model, path = Unicycle(), paper_sinusoid()
     box = ConvexPolygon.from_box(1.0, -1.0, 1.5, 1.0)
-    mpc = PathReferenceMPC(model, MpcConfig(solver=solver, compile=compile_functions),
+    mpc = PathReferenceMPC(model,
+                           MpcConfig(solving=SolverSettings(solver=solver,
+                                                            compile=compile_functions)),
                            obstacles=[box], path=path)
     x = path.start.copy()
     length, values, lyapunov, sources, positions = 0.0, [], [], [], [x[:2]]
@@ -78,7 +80,8 @@ def test_compilation_failure_falls_back_to_the_interpreter(
     monkeypatch.setenv('MPC_LOCAL_PLANNER_CACHE', str(tmp_path))
     monkeypatch.setenv('CC', 'no-such-compiler-mpc-local-planner')
     model, path = Unicycle(), paper_sinusoid()
-    mpc = PathReferenceMPC(model, MpcConfig(horizon=5, compile=True), path=path)
+    mpc = PathReferenceMPC(model, MpcConfig(horizon=5, solving=SolverSettings(compile=True)),
+                           path=path)
     sol = mpc.solve(path.start)
     mpc.wait_compiled()
     sol = mpc.solve(model.step(path.start, sol.u0, H))
@@ -136,7 +139,7 @@ def test_a_cached_library_is_found_without_generating_its_source(
         tmp_path, monkeypatch) -> None:
     monkeypatch.setenv('MPC_LOCAL_PLANNER_CACHE', str(tmp_path))
     model, path = Unicycle(), paper_sinusoid()
-    config = MpcConfig(horizon=5, compile=True)
+    config = MpcConfig(horizon=5, solving=SolverSettings(compile=True))
     first = PathReferenceMPC(model, config, path=path)
     nlp = first._nlp_for(0, 0)
     first.wait_compiled()

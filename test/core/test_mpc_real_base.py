@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC, PlanSource
@@ -45,8 +45,8 @@ STATES = json.loads((Path(__file__).parent / 'data' / 'barn_real_replan_at_speed
 def test_a_re_plan_at_speed_with_bounded_input_rates_is_solved_within_a_step(world: str) -> None:
     case = STATES[world]
     config = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
-                       robot_radius=0.0, budget='iterations', max_solve_iterations=100,
-                       collision_margin=0.03, max_accel=(4.0, 12.0))
+                       robot_radius=0.0, collision_margin=0.03, max_accel=(4.0, 12.0),
+                       solving=SolverSettings(budget='iterations', max_solve_iterations=100))
     path = WaypointPath(np.array(case['waypoints']), start_heading=case['start_heading'],
                         goal_heading=case['goal_heading'], turn_length=case['turn_length'],
                         capacity=case['capacity'])

@@ -14,7 +14,7 @@
 
 """Compiling an NLP's functions to C, and the cache of compiled libraries on disk.
 
-With MpcConfig.compile the NLP's functions are generated as C (nlp_source), compiled by gcc
+With SolverSettings.compile the NLP's functions are generated as C (nlp_source), compiled by gcc
 (the flags: COMPILE_FLAGS, NO_OBSTACLE_COMPILE_FLAGS) in one daemon thread, one compilation
 at a time (submit_compilation; a step that needs one still queued runs it itself, wait_for),
 and kept in compile_cache_dir() under the hash of their source (library_path), found again

@@ -150,11 +150,11 @@ class MpcBase(ABC):
     def backend(self) -> str:
         """The NLP backend of the last solve, '+compiled' once compiled.
 
-        config.solver, or IPOPT for a shape beyond config.fatrop_stage_limit.
+        config.solving.solver, or IPOPT for a shape beyond its fatrop_stage_limit.
         """
         nlp = self._last_nlp
         if nlp is None:
-            return self._config.solver
+            return self._config.solving.solver
         return nlp.backend + ('+compiled' if nlp.compiled else '')
 
     @property
@@ -183,10 +183,10 @@ class MpcBase(ABC):
         """Replace the obstacles (as described, not inflated).
 
         Raises:
-            ValueError: if an obstacle has more faces than config.faces_per_obstacle.
+            ValueError: if an obstacle has more faces than config.solving.faces_per_obstacle.
 
         """
-        faces = self._config.faces_per_obstacle
+        faces = self._config.solving.faces_per_obstacle
         for obstacle in obstacles:
             if obstacle.num_faces > faces:
                 msg = (f'an obstacle has {obstacle.num_faces} faces, more than '
@@ -272,7 +272,7 @@ class MpcBase(ABC):
         """Build the NLP of an obstacle shape for the settings in force."""
         terminal = self._terminal_condition()
         return build_nlp(formulate(self._model, self._config, terminal, slots, faces),
-                         self._config)
+                         self._config.solving)
 
     @property
     def _nlps(self) -> dict[tuple[int, int], Nlp]:
@@ -286,7 +286,7 @@ class MpcBase(ABC):
     def _nlp_holding(self, active: list[ConvexPolygon]
                      ) -> tuple[Nlp, list[ConvexPolygon]]:
         """Return an NLP for the active obstacles and the ones it holds (see NlpShapes.hold)."""
-        return self._shapes.holding(active, self._config.faces_per_obstacle)
+        return self._shapes.holding(active, self._config.solving.faces_per_obstacle)
 
     def prepare(self, max_obstacles: int | None = None) -> None:
         """Build the NLPs for 0..max_obstacles obstacles in reach, so no control step waits.
@@ -300,10 +300,11 @@ class MpcBase(ABC):
         the NLP holds the nearest ones and the solution is checked against all of them.
 
         Args:
-            max_obstacles: the largest count to prepare (config.obstacle_slots by default).
+            max_obstacles: the largest count to prepare (config.solving.obstacle_slots by
+                default).
 
         """
-        c = self._config
+        c = self._config.solving
         count = c.obstacle_slots if max_obstacles is None else max_obstacles
         faces = sorted({4, c.faces_per_obstacle}
                        | {slot_shape([o], c.faces_per_obstacle)[1] for o in self._inflated})
@@ -336,7 +337,7 @@ class MpcBase(ABC):
         else:
             held = active
         # with an iteration budget, which functions run must not depend on timing either
-        nlp.finish_compilation(wait=self._config.budget == 'iterations')
+        nlp.finish_compilation(wait=self._config.solving.budget == 'iterations')
         if nlp.iteration_time <= 0.0:
             # never solved: its fatrop is bounded by its siblings' time per iteration
             nlp.iteration_time = self._shapes.iteration_time_estimate(nlp)
@@ -375,8 +376,8 @@ class MpcBase(ABC):
 
     def _activation_distance(self) -> float:
         c = self._config
-        if c.activation_distance is not None:
-            return c.activation_distance
+        if c.solving.activation_distance is not None:
+            return c.solving.activation_distance
         # half a step (v_max h / 2): few re-solves with few obstacles in the NLP, where a
         # wider band holds many more and builds many more NLP shapes (see
         # docs/design/mpc.md, section "Default activation distance")
@@ -581,7 +582,7 @@ class MpcBase(ABC):
             # solution stands if it clears every reachable obstacle (feasible for the full
             # problem, then)
             if (round_ == MAX_ACTIVATION_ROUNDS or not self._shapes.holds_more(
-                    active + missed, held, self._config.faces_per_obstacle)
+                    active + missed, held, self._config.solving.faces_per_obstacle)
                     or not self._budget.allows()):
                 if self._clearance.penetration(states, inputs, reachable) > FEASIBILITY_TOLERANCE:
                     attempt = attempt._replace(
