@@ -141,7 +141,7 @@ def test_a_cached_library_is_found_without_generating_its_source(
     model, path = Unicycle(), paper_sinusoid()
     config = MpcConfig(horizon=5, solving=SolverSettings(compile=True))
     first = PathReferenceMPC(model, config, path=path)
-    nlp = first._nlp_for(0, 0)
+    nlp = first.nlp_for(0, 0)
     first.wait_compiled()
     assert nlp.compiled and nlp.library is not None
     assert [p.read_text() for p in tmp_path.glob('*.key')] == [nlp.library.name]
@@ -150,6 +150,6 @@ def test_a_cached_library_is_found_without_generating_its_source(
         raise AssertionError('the source was generated again')
 
     monkeypatch.setattr(compilation, 'nlp_source', no_source)
-    again = PathReferenceMPC(model, config, path=path)._nlp_for(0, 0)
+    again = PathReferenceMPC(model, config, path=path).nlp_for(0, 0)
     assert again.compiled and again.pending is None
     assert again.library == nlp.library

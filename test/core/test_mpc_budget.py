@@ -25,7 +25,6 @@ of test_mpc_tries.py. Nothing here asserts how fast anything is.
 
 from __future__ import annotations
 
-from dataclasses import replace
 import math
 from typing import Any
 
@@ -277,8 +276,8 @@ def test_a_fallback_is_built_mid_step_only_if_its_build_fits_in_what_is_left(
 def test_prepare_builds_the_fallbacks_ahead() -> None:
     mpc = paper_mpc()
     mpc.prepare(1)
-    assert mpc._nlps and all(nlp.fallback is not None for nlp in mpc._nlps.values())
-    assert all(nlp.fallback_build_time == 0.0 for nlp in mpc._nlps.values())
+    assert mpc.nlps and all(nlp.fallback is not None for nlp in mpc.nlps.values())
+    assert all(nlp.fallback_build_time == 0.0 for nlp in mpc.nlps.values())
 
 
 def test_a_constraint_generation_round_is_left_out_once_the_budget_is_spent(
@@ -410,9 +409,7 @@ def test_the_controller_counts_timeouts_and_the_diagnostics_publish_the_count() 
 # ----------------------------------------------------------------------------- the solvers
 def test_ipopt_is_stopped_at_its_time_limit() -> None:
     mpc = paper_mpc(solver='ipopt', horizon=3)
-    x0 = mpc.path.start
-    nlp, params, _ = mpc._prepare_nlp([], x0)
-    w0 = mpc._pack(mpc._guided_guess(x0, [], nlp), nlp)
+    nlp, params, w0 = mpc.solver_problem(mpc.path.start)
     untimed = run_solver(nlp, w0, params)
     assert untimed.success and not untimed.cut
     stopped = run_solver(nlp, w0, params, time_limit=1e-9)
@@ -433,9 +430,7 @@ def test_ipopt_is_stopped_at_its_time_limit() -> None:
 
 def test_the_ipopt_fallback_is_stopped_at_its_time_limit() -> None:
     mpc = paper_mpc(horizon=3)  # fatrop, with IPOPT as its fallback
-    x0 = mpc.path.start
-    nlp, params, _ = mpc._prepare_nlp([], x0)
-    w0 = mpc._pack(mpc._guided_guess(x0, [], nlp), nlp)
+    nlp, params, w0 = mpc.solver_problem(mpc.path.start)
     stopped = run_solver(nlp, w0, params, nlp.fallback_solver(), time_limit=1e-9)
     assert stopped.cut and stopped.status == 'User_Requested_Stop'
     assert nlp.deadline is not None and nlp.deadline.at == math.inf  # cleared after the call
@@ -455,11 +450,8 @@ def test_fatrop_gets_fewer_iterations_when_the_full_limit_would_not_fit(
     x0 = np.array([0.0, 0.0, 0.944])  # on the path's start, heading 0.5 mrad off
     mpc.prepare(0)
     mpc.wait_compiled()
-    nlp, params, _ = mpc._prepare_nlp([], x0)
+    nlp, params, w0 = mpc.solver_problem(x0, start=Start.CANDIDATE)
     assert nlp.compiled and nlp.library is not None
-    candidate = mpc._candidate(x0)
-    candidate = replace(candidate, mu=mpc._multipliers(candidate.x, [], nlp))
-    w0 = mpc._pack(candidate, nlp)
     assert iteration_levels(200) == [200, 100, 50, 25, 12]
     # not measured yet, or time for all: the full solver
     assert nlp.solver_within(1e-3) == (nlp.solver, 200)
@@ -486,7 +478,7 @@ def test_fatrop_gets_fewer_iterations_when_the_full_limit_would_not_fit(
 
 def test_the_time_per_iteration_rises_at_once_and_falls_slowly() -> None:
     mpc = paper_mpc(horizon=3)
-    nlp, _, _ = mpc._prepare_nlp([], mpc.path.start)
+    nlp = mpc.solver_problem(mpc.path.start).nlp
     nlp.iteration_time = 0.0
     nlp.record_iterations(0.01, 10)
     assert nlp.iteration_time == pytest.approx(1e-3)
@@ -513,13 +505,13 @@ def test_a_prepared_step_never_builds_an_nlp_shape_and_holds_the_nearest_obstacl
                                               activation_distance=5.0))
     mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
     mpc.prepare(1)
-    prepared = set(mpc._nlps)
+    prepared = set(mpc.nlps)
     formulated: list[tuple] = []
     monkeypatch.setattr(step_module, 'formulate', lambda *args: formulated.append(args))
     x = mpc.path.start.copy()
     for _ in range(3):  # nothing is built, step after step
         solution = mpc.solve(x)
-        assert set(mpc._nlps) == prepared
+        assert set(mpc.nlps) == prepared
         assert len(mpc.last_active_obstacles) == 1  # the nearest one held
         assert solution.source is not PlanSource.STOP
         plan = np.asarray(solution.x_pred)
@@ -534,7 +526,7 @@ def test_before_prepare_a_step_builds_the_shape_it_needs() -> None:
                                               activation_distance=5.0))
     mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
     mpc.solve(mpc.path.start)
-    assert (3, 4) in mpc._nlps
+    assert (3, 4) in mpc.nlps
     assert len(mpc.last_active_obstacles) == 3
 
 
@@ -543,10 +535,10 @@ def test_a_shape_never_solved_is_bounded_by_its_siblings_time_per_iteration() ->
                                               activation_distance=5.0))
     mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
     mpc.prepare(3)
-    one, three = mpc._nlps[(1, 4)], mpc._nlps[(3, 4)]
+    one, three = mpc.nlps[(1, 4)], mpc.nlps[(3, 4)]
     one.iteration_time = 0.002
     assert three.iteration_time == 0.0
-    mpc._prepare_nlp(THREE_BOXES, mpc.path.start)
+    assert mpc.solver_problem(mpc.path.start, THREE_BOXES).nlp is three
     size = three.formulation.lbw.shape[0] / one.formulation.lbw.shape[0]
     assert size > 1.0
     assert three.iteration_time == pytest.approx(0.002 * size)
@@ -558,7 +550,7 @@ def test_shapes_with_stages_beyond_the_fatrop_limit_are_solved_by_ipopt() -> Non
     config = MpcConfig(solving=SolverSettings(compile=False, max_solve_time=NO_TIME_LIMIT,
                                               activation_distance=5.0, fatrop_stage_limit=10))
     mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
-    small, big = mpc._nlp_for(1, 4), mpc._nlp_for(2, 4)
+    small, big = mpc.nlp_for(1, 4), mpc.nlp_for(2, 4)
     assert stage_size(small.formulation.structure) == 10
     assert (small.plugin, small.has_fallback) == ('fatrop', True)
     assert stage_size(big.formulation.structure) == 14

@@ -236,13 +236,13 @@ def test_the_reach_counts_the_bodys_farthest_corner() -> None:
     beyond = ConvexPolygon.from_box(reach + JACKAL.radius + 0.01, 0.5, 3.0, 0.7)
     polygon = PathReferenceMPC(Unicycle(), jackal_config(), obstacles=[inside, beyond],
                                path=paper_sinusoid())
-    assert polygon._reachable(np.zeros(3)).obstacles == [inside]
+    assert polygon.reachable_obstacles(np.zeros(3)) == [inside]
     point = PathReferenceMPC(Unicycle(),
                              MpcConfig(collision_margin=0.0,
                                        solving=SolverSettings(compile=False)),
                              obstacles=[inside, beyond], path=paper_sinusoid())
     assert polygon.inflated_obstacles == (inside, beyond)  # no radius, no default margin
-    assert point._reachable(np.zeros(3)).obstacles == []
+    assert point.reachable_obstacles(np.zeros(3)) == []
 
 
 def test_an_explicit_collision_margin_inflates_the_obstacles_of_a_polygon() -> None:
@@ -383,15 +383,16 @@ def test_changing_the_footprint_rebuilds_the_nlp() -> None:
                                                             max_solve_time=NO_TIME_LIMIT)),
                            obstacles=[PAPER_BOX], path=path)
     mpc.solve(path.start)
-    assert mpc._last_nlp.formulation.robot_faces == 0
+    assert mpc.last_nlp.formulation.robot_faces == 0
     mpc.update_config(mpc.config.with_changes(footprint=[list(v) for v in JACKAL_VERTICES]))
-    assert not mpc._nlps  # structural: rebuilt at the next solve
+    assert not mpc.nlps  # structural: rebuilt at the next solve
     sol = mpc.solve(path.start)
-    assert mpc._last_nlp.formulation.robot_faces == 4
+    assert mpc.last_nlp.formulation.robot_faces == 4
     assert sol.source is PlanSource.SOLVER
     # the same polygon again (as a tuple now) changes nothing: the plan is kept
     mpc.update_config(mpc.config.with_changes(footprint=JACKAL_VERTICES))
-    assert mpc._nlps and mpc._plan is not None
+    assert mpc.nlps
+    assert mpc.solve(path.start).lyapunov_ok is not None  # the plan's value was kept
     mpc.update_config(mpc.config.with_changes(footprint=()))
     assert mpc.solve(path.start).source is PlanSource.SOLVER
-    assert mpc._last_nlp.formulation.robot_faces == 0
+    assert mpc.last_nlp.formulation.robot_faces == 0

@@ -54,7 +54,7 @@ def test_a_re_plan_at_speed_with_bounded_input_rates_is_solved_within_a_step(wor
                            obstacles=[ConvexPolygon.from_vertices(np.array(v))
                                       for v in case['obstacles']], path=path)
     # set_path keeps the inputs of the last plan on the old path (the motion in hand)
-    mpc._carried_inputs = np.array(case['carried'])
+    mpc.set_path(path, carried_inputs=np.array(case['carried']))
     solution = mpc.solve(np.array(case['x']), previous_input=np.array(case['u_before']))
     assert solution.source is PlanSource.SOLVER, solution.status
     rate = np.array(config.max_accel) * config.step
