@@ -90,7 +90,7 @@ def test_compilation_failure_falls_back_to_the_interpreter(
     assert 'compiling the MPC NLP failed' in caplog.text
 
 
-def test_processes_wanting_the_same_library_compile_it_once(tmp_path, monkeypatch) -> None:
+def test_processes_wanting_the_same_library_compile_it_once(tmp_path) -> None:
     runs: list[str] = []
 
     def compiler(source: str, library, flags=None):
@@ -98,33 +98,30 @@ def test_processes_wanting_the_same_library_compile_it_once(tmp_path, monkeypatc
         library.write_text('built')  # what gcc would leave
         return library
 
-    monkeypatch.setattr(compilation, '_run_compiler', compiler)
     library = tmp_path / 'mpc_nlp_test.so'
     # each call opens the lock file itself, as another process would
     with ThreadPoolExecutor(max_workers=2) as pool:
-        results = list(pool.map(lambda _: compilation._compile('int f;', library), range(2)))
+        results = list(pool.map(lambda _: compilation.compile_library(
+            'int f;', library, compiler=compiler), range(2)))
     assert results == [library, library]
     assert runs == ['int f;']  # the second found the library when its turn came
 
 
-def test_a_waiter_compiles_its_queued_job_itself_and_the_wait_is_counted(
-        tmp_path, monkeypatch) -> None:
+def test_a_waiter_compiles_its_queued_job_itself_and_the_wait_is_counted(tmp_path) -> None:
     started: list[str] = []
     gate = threading.Event()
-    real = compilation._run_compiler  # for what earlier tests left in the queue
 
     def compiler(source: str, library, flags=compilation.COMPILE_FLAGS):
-        if source not in ('first', 'second'):
-            return real(source, library, flags)
         started.append(source)
         if source == 'first':
             gate.wait(10.0)  # the queue's thread is busy with the first job
         library.write_text('built')
         return library
 
-    monkeypatch.setattr(compilation, '_run_compiler', compiler)
-    first = compilation.submit_compilation('first', tmp_path / 'mpc_nlp_first.so')
-    second = compilation.submit_compilation('second', tmp_path / 'mpc_nlp_second.so')
+    first = compilation.submit_compilation('first', tmp_path / 'mpc_nlp_first.so',
+                                           compiler=compiler)
+    second = compilation.submit_compilation('second', tmp_path / 'mpc_nlp_second.so',
+                                            compiler=compiler)
     waited = compilation.compile_wait_seconds()
     compilation.wait_for(second)  # not behind the first: run here
     assert second.result() == tmp_path / 'mpc_nlp_second.so'
