@@ -12,10 +12,14 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""MPC settings as a frozen dataclass, with one validator shared by code and ROS parameters.
+"""MPC settings as frozen dataclasses, each with a validator shared by code and ROS parameters.
 
-The node's on-set-parameters callback and the library both call validate_mpc_config, so a
-value refused at run time is refused for the same reason as in a script.
+MpcConfig is the problem (horizon, step, cost, robot shape, margins, input rates) and holds a
+SolverSettings, how it is solved (which obstacles the NLPs hold, the backend, its limits, the
+step's budget), as acados keeps ocp.model, ocp.cost and ocp.constraints apart from
+ocp.solver_options. The node's on-set-parameters callback and the library both construct
+them, so a value refused at run time is refused for the same reason (validate_mpc_config,
+validate_solver_settings) as in a script.
 """
 
 from __future__ import annotations
@@ -27,13 +31,14 @@ from typing import Any, NamedTuple, Sequence
 
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
 
-__all__ = ['BUDGETS', 'CostWeights', 'MpcConfig', 'STRUCTURAL_FIELDS', 'validate_mpc_config']
+__all__ = ['BUDGETS', 'CostWeights', 'MpcConfig', 'STRUCTURAL_FIELDS', 'STRUCTURAL_SOLVER_FIELDS',
+           'SolverSettings', 'validate_mpc_config', 'validate_solver_settings']
 
 # 'fatrop' (structure-exploiting interior point) is the fastest that gives IPOPT's closed loop;
 # 'ipopt' is the reference. SQP is not offered: from rest, where every derivative of the
 # quartic cost vanishes, it stops or stalls (see docs/design/mpc.md, section SOLVERS).
 SOLVERS = ('fatrop', 'ipopt')
-# What bounds a control step's solving (MpcConfig.budget): wall time, the robot's, or solver
+# What bounds a control step's solving (SolverSettings.budget): wall time, the robot's, or solver
 # iterations, the same on any machine and under any load (the evaluation's).
 BUDGETS = ('wall', 'iterations')
 # Seconds one solver iteration typically takes, to turn the wall budget into an iteration
@@ -71,8 +76,97 @@ class CostWeights(NamedTuple):
 
 
 @dataclass(frozen=True)
+class SolverSettings:
+    """How the MPC's problem is solved: the NLPs' shape, the backend, its limits, the budget.
+
+    The obstacle slots, the faces per slot and the activation distance are here, not in
+    MpcConfig: they shape the NLPs and choose which obstacles one holds, while the problem
+    (clear of every obstacle in reach, each solution checked against all of them) stays the
+    same.
+
+    Attributes:
+        obstacle_slots: the obstacle counts prepare() builds NLPs for in advance (one NLP
+            per count of obstacles near the trajectory and face count), and the most a step
+            holds once prepared (the nearest; its solution is checked against all obstacles
+            in reach).
+        faces_per_obstacle: half-planes per obstacle slot (larger polygons are refused).
+        activation_distance: obstacles within this distance of the candidate trajectory get
+            Farkas multipliers in the NLP; the others within reach are checked and added
+            when a solution comes within half of it (None: v_max h / 2). For a polygon, the
+            distance is what its exact clearance exceeds the clearance the motion needs by.
+        solver: NLP backend, one of SOLVERS.
+        fatrop_stage_limit: with solver 'fatrop', an NLP shape whose stages have more
+            variables than this is solved by IPOPT instead. fatrop's Riccati recursion costs
+            about the cube of a stage's size, IPOPT's sparse factorisation about its size, so
+            beyond some stage size IPOPT is the faster (see docs/design/mpc.md, section
+            fatrop_stage_limit). Each obstacle adds its faces plus the robot's as
+            multipliers (a box beside the Jackal: 8).
+        max_iterations: solver iteration limit per solve.
+        tolerance: solver and verification tolerance.
+        compile: compile the NLP's functions to C with the system compiler ($CC or gcc), in
+            the background, cached on disk (see mpc.compile_cache_dir); until it is done, or
+            if it fails (a logged warning), the interpreted functions are used.
+        max_solve_time: wall-time budget of one control step's solving, in seconds, from the
+            start of the MPC's solve(); None means step / 2 (see MpcConfig.solve_budget()).
+            The first NLP solve gets what is left of it (an NLP built mid-step has used its
+            share); the retries (other starts, the IPOPT fallback, further
+            constraint-generation rounds) run only while some is left; once it is spent the
+            verified shifted candidate is applied (or the robot stops), and the step counts
+            as timed out (MpcSolution.timed_out). Not structural: the solvers get the time
+            left at each call, nothing is rebuilt. Used with budget 'wall' only.
+        budget: what bounds a step's solving, one of BUDGETS. 'wall' (the default, the
+            robot's): seconds of wall time, max_solve_time; what a step achieves then depends
+            on the machine and its load. 'iterations': solver iterations,
+            MpcConfig.solve_iterations(); every try spends the iterations it made, and
+            nothing in a step reads a clock, so the same inputs give the same outputs on any
+            machine under any load (the evaluation's: runs are reproducible). CPU time would
+            not do: it too grows under contention (caches, memory bandwidth). A step then
+            waits for the background compilation of an NLP it needs (the compiled and the
+            interpreted functions may round differently), and builds of the IPOPTs mid-step
+            are free. Not structural.
+        max_solve_iterations: with budget 'iterations', the solver iterations of one
+            control step (every try and round together); None means the wall budget's
+            worth on a typical machine (see MpcConfig.solve_iterations()).
+        solver_options: extra options passed to casadi.nlpsol (override the defaults).
+
+    """
+
+    obstacle_slots: int = 4
+    faces_per_obstacle: int = 8
+    activation_distance: float | None = None
+    solver: str = 'fatrop'
+    fatrop_stage_limit: int = 50
+    max_iterations: int = 200
+    tolerance: float = 1e-8
+    compile: bool = True
+    max_solve_time: float | None = None
+    budget: str = 'wall'
+    max_solve_iterations: int | None = None
+    solver_options: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
+
+    def __post_init__(self) -> None:
+        problems = validate_solver_settings(self)
+        if problems:
+            msg = 'invalid MPC solver settings: ' + '; '.join(problems)
+            raise ValueError(msg)
+
+    def structure_key(self) -> tuple[tuple[str, Any], ...]:
+        """Return the values of STRUCTURAL_SOLVER_FIELDS by name, sorted and hashable.
+
+        The solver options (a dict) enter sorted, by repr.
+        """
+        return tuple((name, tuple(sorted((k, repr(v)) for k, v in self.solver_options.items()))
+                      if name == 'solver_options' else getattr(self, name))
+                     for name in sorted(STRUCTURAL_SOLVER_FIELDS))
+
+    def with_changes(self, **changes: Any) -> SolverSettings:
+        """Return a copy with some fields changed (validated again)."""
+        return replace(self, **changes)
+
+
+@dataclass(frozen=True)
 class MpcConfig:
-    """Settings of the MPC (the paper's Section IV values by default).
+    """Settings of the MPC: its problem (the paper's Section IV values by default) and solving.
 
     Attributes:
         horizon: prediction steps N.
@@ -96,54 +190,13 @@ class MpcConfig:
             none for a polygon (its NLP asks for a clearance that follows the motion).
         farkas_margin: the Farkas constraint asks (A p - b)^T mu >= this (metres); a polygon's
             dual bound asks for this plus the motion's h/2 (|v| + r_c |omega|).
-        obstacle_slots: the obstacle counts prepare() builds NLPs for in advance (one NLP
-            per count of obstacles near the trajectory and face count), and the most a step
-            holds once prepared (the nearest; its solution is checked against all obstacles
-            in reach).
-        faces_per_obstacle: half-planes per obstacle slot (larger polygons are refused).
-        solver: NLP backend, one of SOLVERS.
-        fatrop_stage_limit: with solver 'fatrop', an NLP shape whose stages have more
-            variables than this is solved by IPOPT instead. fatrop's Riccati recursion costs
-            about the cube of a stage's size, IPOPT's sparse factorisation about its size, so
-            beyond some stage size IPOPT is the faster (see docs/design/mpc.md, section
-            fatrop_stage_limit). Each obstacle adds its faces plus the robot's as
-            multipliers (a box beside the Jackal: 8).
-        max_iterations: solver iteration limit per solve.
-        tolerance: solver and verification tolerance.
-        activation_distance: obstacles within this distance of the candidate trajectory get
-            Farkas multipliers in the NLP; the others within reach are checked and added
-            when a solution comes within half of it (None: v_max h / 2). For a polygon, the
-            distance is what its exact clearance exceeds the clearance the motion needs by.
-        compile: compile the NLP's functions to C with the system compiler ($CC or gcc), in
-            the background, cached on disk (see mpc.compile_cache_dir); until it is done, or
-            if it fails (a logged warning), the interpreted functions are used.
-        max_solve_time: wall-time budget of one control step's solving, in seconds, from the
-            start of the MPC's solve(); None means step / 2 (see solve_budget()). The first NLP
-            solve gets what is left of it (an NLP built mid-step has used its share); the
-            retries (other starts, the IPOPT fallback, further constraint-generation rounds)
-            run only while some is left; once it is spent the verified shifted candidate is
-            applied (or the robot stops), and the step counts as timed out
-            (MpcSolution.timed_out). Not structural: the solvers get the time left at each
-            call, nothing is rebuilt. Used with budget 'wall' only.
-        budget: what bounds a step's solving, one of BUDGETS. 'wall' (the default, the
-            robot's): seconds of wall time, max_solve_time; what a step achieves then depends
-            on the machine and its load. 'iterations': solver iterations,
-            solve_iterations(); every try spends the iterations it made, and nothing in a
-            step reads a clock, so the same inputs give the same outputs on any machine
-            under any load (the evaluation's: runs are reproducible). CPU time would not do:
-            it too grows under contention (caches, memory bandwidth). A step then waits for
-            the background compilation of an NLP it needs (the compiled and the interpreted
-            functions may round differently), and builds of the IPOPTs mid-step are free.
-            Not structural.
-        max_solve_iterations: with budget 'iterations', the solver iterations of one
-            control step (every try and round together); None means the wall budget's
-            worth on a typical machine (see solve_iterations()).
-        solver_options: extra options passed to casadi.nlpsol (override the defaults).
         max_accel: None (inputs may jump, the paper's model), or the largest change of v
             (m/s^2) and omega (rad/s^2) per second: a real base cannot follow a jump. The
             NLP then bounds |u_0 - u_prev| and |u_{l+1} - u_l| by max_accel h, and
             |u_{N-1}| too (u_N = 0), with u_prev the input commanded over the step before
             (or the measured twist after a stop): see formulation.formulate.
+        solving: how the problem is solved (SolverSettings: the NLPs' obstacle slots and
+            faces, the backend and its limits, the step's budget).
 
     """
 
@@ -159,19 +212,8 @@ class MpcConfig:
     footprint: tuple[tuple[float, float], ...] = ()
     collision_margin: float | None = None
     farkas_margin: float = 1e-4
-    obstacle_slots: int = 4
-    faces_per_obstacle: int = 8
-    solver: str = 'fatrop'
-    fatrop_stage_limit: int = 50
-    max_iterations: int = 200
-    tolerance: float = 1e-8
-    activation_distance: float | None = None
-    compile: bool = True
-    max_solve_time: float | None = None
-    budget: str = 'wall'
-    max_solve_iterations: int | None = None
     max_accel: tuple[float, float] | None = None
-    solver_options: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
+    solving: SolverSettings = field(default_factory=SolverSettings)
 
     def __post_init__(self) -> None:
         # frozen: normalise with object.__setattr__, so that a list (from YAML, a ROS
@@ -217,21 +259,22 @@ class MpcConfig:
         return v_max * self.step * self.horizon + self.inflation(v_max) + body
 
     def solve_budget(self) -> float:
-        """Return the seconds one control step may spend solving: max_solve_time, or step / 2.
+        """Return the seconds one control step may spend solving: solving.max_solve_time, or h / 2.
 
         Half the period by default, so that a step that uses all of it still leaves the other
         half for verification, sensing and publishing before the next one is due.
         """
-        return self.step / 2 if self.max_solve_time is None else float(self.max_solve_time)
+        limit = self.solving.max_solve_time
+        return self.step / 2 if limit is None else float(limit)
 
     def solve_iterations(self) -> int:
         """Return the solver iterations one control step may make (budget 'iterations').
 
-        max_solve_iterations, or solve_budget() at ITERATION_SECONDS an iteration: what the
-        wall budget allows on a typical machine (0.1 s: 100 iterations).
+        solving.max_solve_iterations, or solve_budget() at ITERATION_SECONDS an iteration:
+        what the wall budget allows on a typical machine (0.1 s: 100 iterations).
         """
-        if self.max_solve_iterations is not None:
-            return int(self.max_solve_iterations)
+        if self.solving.max_solve_iterations is not None:
+            return int(self.solving.max_solve_iterations)
         return max(1, round(self.solve_budget() / ITERATION_SECONDS))
 
     def cost_weights(self) -> CostWeights:
@@ -241,25 +284,32 @@ class MpcConfig:
                            offset=self.offset_weight)
 
     def structure_key(self) -> tuple[tuple[str, Any], ...]:
-        """Return the values of STRUCTURAL_FIELDS, hashable: the key the built NLPs depend on.
+        """Return the key the built NLPs depend on, hashable.
 
-        Two settings with the same key share their NLPs; a change of key rebuilds them. The
-        solver options (a dict) enter sorted, by repr.
+        The values of STRUCTURAL_FIELDS and of the solving's STRUCTURAL_SOLVER_FIELDS, by
+        name, in one sorted tuple. Two settings with the same key share their NLPs; a change
+        of key rebuilds them.
         """
-        return tuple((name, tuple(sorted((k, repr(v)) for k, v in self.solver_options.items()))
-                      if name == 'solver_options' else getattr(self, name))
-                     for name in sorted(STRUCTURAL_FIELDS))
+        own = tuple((name, getattr(self, name)) for name in STRUCTURAL_FIELDS)
+        return tuple(sorted(own + self.solving.structure_key(), key=lambda item: item[0]))
 
     def with_changes(self, **changes: Any) -> MpcConfig:
         """Return a copy with some fields changed (validated again)."""
         return replace(self, **changes)
 
+    def with_solving(self, **changes: Any) -> MpcConfig:
+        """Return a copy whose solving has some fields changed (validated again)."""
+        return replace(self, solving=self.solving.with_changes(**changes))
 
-# Fields whose change alters the NLP's shape: changing them rebuilds the solver.
+
+# Fields of MpcConfig (STRUCTURAL_FIELDS) and of SolverSettings (STRUCTURAL_SOLVER_FIELDS)
+# whose change alters the NLP's shape: changing them rebuilds the solver.
 STRUCTURAL_FIELDS = frozenset(
-    {'horizon', 'step', 'cost_exponent', 'farkas_margin', 'obstacle_slots',
-     'faces_per_obstacle', 'solver', 'max_iterations', 'tolerance', 'solver_options',
-     'compile', 'footprint', 'fatrop_stage_limit', 'max_accel'}
+    {'horizon', 'step', 'cost_exponent', 'farkas_margin', 'footprint', 'max_accel'}
+)
+STRUCTURAL_SOLVER_FIELDS = frozenset(
+    {'obstacle_slots', 'faces_per_obstacle', 'solver', 'max_iterations', 'tolerance',
+     'solver_options', 'compile', 'fatrop_stage_limit'}
 )
 
 
@@ -282,13 +332,22 @@ def _as_vertex_tuple(value: Any) -> Any:
         return value
 
 
-def validate_mpc_config(config: MpcConfig) -> list[str]:
-    """Return the reasons config is invalid (empty when it is valid)."""
+def _non_finite(settings: MpcConfig | SolverSettings) -> list[str]:
+    """Return a reason for each float field of settings that is not finite."""
     problems: list[str] = []
-    for f in fields(config):
-        value = getattr(config, f.name)
+    for f in fields(settings):
+        value = getattr(settings, f.name)
         if isinstance(value, float) and not math.isfinite(value):
             problems.append(f'{f.name} must be finite, got {value}')
+    return problems
+
+
+def validate_mpc_config(config: MpcConfig) -> list[str]:
+    """Return the reasons config is invalid (empty when it is valid).
+
+    Its solving is validated when it is constructed (validate_solver_settings).
+    """
+    problems = _non_finite(config)
     if not (isinstance(config.horizon, int) and config.horizon >= 1):
         problems.append(f'horizon must be an integer >= 1, got {config.horizon!r}')
     if not config.step > 0:
@@ -314,34 +373,42 @@ def validate_mpc_config(config: MpcConfig) -> list[str]:
         problems.append(f'collision_margin must be >= 0, got {config.collision_margin}')
     if not config.farkas_margin > 0:
         problems.append(f'farkas_margin must be > 0, got {config.farkas_margin}')
-    if not config.fatrop_stage_limit >= 1:
-        problems.append(f'fatrop_stage_limit must be >= 1, got {config.fatrop_stage_limit}')
-    if not config.obstacle_slots >= 0:
-        problems.append(f'obstacle_slots must be >= 0, got {config.obstacle_slots}')
-    if config.activation_distance is not None and not config.activation_distance >= 0:
-        problems.append(f'activation_distance must be >= 0, got {config.activation_distance}')
-    if not config.faces_per_obstacle >= 3:
-        problems.append(f'faces_per_obstacle must be >= 3, got {config.faces_per_obstacle}')
-    if config.solver not in SOLVERS:
-        problems.append(f'solver must be one of {SOLVERS}, got {config.solver!r}')
-    if not config.max_iterations >= 1:
-        problems.append(f'max_iterations must be >= 1, got {config.max_iterations}')
-    if not config.tolerance > 0:
-        problems.append(f'tolerance must be > 0, got {config.tolerance}')
-    budget = config.max_solve_time
-    # a non-finite float is already refused above, for every field alike
-    if budget is not None and (isinstance(budget, bool) or not isinstance(budget, (int, float))
-                               or (math.isfinite(budget) and not budget > 0)):
-        problems.append(f'max_solve_time must be None or a number > 0 (seconds), '
-                        f'got {budget!r}')
-    if config.budget not in BUDGETS:
-        problems.append(f'budget must be one of {BUDGETS}, got {config.budget!r}')
     accel = config.max_accel
     if accel is not None and not (isinstance(accel, tuple) and len(accel) == 2 and all(
             isinstance(a, float) and math.isfinite(a) and a > 0 for a in accel)):
         problems.append(f'max_accel must be None or two finite numbers > 0 (m/s^2, '
                         f'rad/s^2), got {accel!r}')
-    iterations = config.max_solve_iterations
+    if not isinstance(config.solving, SolverSettings):
+        problems.append(f'solving must be a SolverSettings, got {config.solving!r}')
+    return problems
+
+
+def validate_solver_settings(settings: SolverSettings) -> list[str]:
+    """Return the reasons settings are invalid (empty when they are valid)."""
+    problems = _non_finite(settings)
+    if not settings.fatrop_stage_limit >= 1:
+        problems.append(f'fatrop_stage_limit must be >= 1, got {settings.fatrop_stage_limit}')
+    if not settings.obstacle_slots >= 0:
+        problems.append(f'obstacle_slots must be >= 0, got {settings.obstacle_slots}')
+    if settings.activation_distance is not None and not settings.activation_distance >= 0:
+        problems.append(f'activation_distance must be >= 0, got {settings.activation_distance}')
+    if not settings.faces_per_obstacle >= 3:
+        problems.append(f'faces_per_obstacle must be >= 3, got {settings.faces_per_obstacle}')
+    if settings.solver not in SOLVERS:
+        problems.append(f'solver must be one of {SOLVERS}, got {settings.solver!r}')
+    if not settings.max_iterations >= 1:
+        problems.append(f'max_iterations must be >= 1, got {settings.max_iterations}')
+    if not settings.tolerance > 0:
+        problems.append(f'tolerance must be > 0, got {settings.tolerance}')
+    budget = settings.max_solve_time
+    # a non-finite float is already refused above, for every field alike
+    if budget is not None and (isinstance(budget, bool) or not isinstance(budget, (int, float))
+                               or (math.isfinite(budget) and not budget > 0)):
+        problems.append(f'max_solve_time must be None or a number > 0 (seconds), '
+                        f'got {budget!r}')
+    if settings.budget not in BUDGETS:
+        problems.append(f'budget must be one of {BUDGETS}, got {settings.budget!r}')
+    iterations = settings.max_solve_iterations
     if iterations is not None and (isinstance(iterations, bool)
                                    or not isinstance(iterations, int) or iterations < 1):
         problems.append(f'max_solve_iterations must be None or an integer >= 1, '

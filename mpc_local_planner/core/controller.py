@@ -33,7 +33,7 @@ Safety rules kept here (see the README's "Safety behaviours"):
   obstacles (and before the first one, there is no scan: the robot does not drive blind);
 - the proof's shifted candidate is applied for at most N consecutive solver failures: its
   inputs run out after N shifts, and then the robot stops;
-- a step's solving is bounded by the MPC's budget (MpcConfig.max_solve_time): past it the
+- a step's solving is bounded by the MPC's budget (SolverSettings.max_solve_time): past it the
   shifted candidate is applied (a failure as above), and `timeouts` counts those steps;
 - every command is finite and within the model's bounds, else it is zero;
 - the in-place turn to the goal heading is given only where it cannot touch an obstacle (a
@@ -187,7 +187,7 @@ class MpcController:
     def timeouts(self) -> int:
         """Control steps since construction whose solving ran out of its time budget.
 
-        Counted from MpcSolution.timed_out: the budget (MpcConfig.max_solve_time, half the
+        Counted from MpcSolution.timed_out: the budget (SolverSettings.max_solve_time, half the
         period by default) cut a solve or left a retry out. Such a step applies the verified
         shifted candidate (counted in solver_failures too), or rarely a solver plan found
         before the cut; a count that grows says the machine is too slow (or too loaded) for
@@ -220,7 +220,7 @@ class MpcController:
         same objects, as when no new scan or map came) change nothing.
 
         Raises:
-            ValueError: if an obstacle has more faces than config.faces_per_obstacle (see
+            ValueError: if an obstacle has more faces than config.solving.faces_per_obstacle (see
                 within_faces).
 
         """
@@ -326,14 +326,14 @@ class MpcController:
     def prepare(self) -> None:
         """Build the NLPs a run will need now, so that no control step waits for a build.
 
-        Uses the MPC's prepare() when it has one: up to config.obstacle_slots obstacles in
+        Uses the MPC's prepare() when it has one: up to config.solving.obstacle_slots obstacles in
         reach, boxes and sensed polygons alike (the laser's obstacles come later); else
         solves nothing and the first control step builds.
         """
         prepare = getattr(self._mpc, 'prepare', None)
         if prepare is None or self._path is None:
             return
-        prepare(self._config.obstacle_slots)
+        prepare(self._config.solving.obstacle_slots)
 
     def clear_path(self) -> None:
         """Forget the plan: the controller commands zero until a new one comes."""

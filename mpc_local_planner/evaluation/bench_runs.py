@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.control_output import Reason
 from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.controller_settings import ControllerSettings
@@ -148,7 +148,7 @@ def closed_loop(solver: str, horizon: int, obstacles: list[ConvexPolygon], *,
                 max_steps: int, compile_functions: bool = True) -> dict[str, Any]:
     """Run the paper's scenario in closed loop (evaluation.rollout); return timings and outcome.
 
-    solver is a backend of MpcConfig.solver or PEER (the `OptiMpc` peer). A first closed loop
+    solver is a backend of SolverSettings.solver or PEER (the `OptiMpc` peer). A first closed loop
     builds (for the package's backends, and compiles) the NLPs it meets, and the peer's
     IPOPT instance; the timed one reuses them, the peer starting cold again. A run
     ends within REACHED_POSITION and REACHED_HEADING of the target (headings wrapped) or
@@ -159,7 +159,8 @@ def closed_loop(solver: str, horizon: int, obstacles: list[ConvexPolygon], *,
         config = MpcConfig(horizon=horizon, step=STEP)
         controller: Any = OptiMpc(model, config, obstacles, path)
     else:
-        config = MpcConfig(horizon=horizon, step=STEP, solver=solver, compile=compile_functions)
+        config = MpcConfig(horizon=horizon, step=STEP,
+                           solving=SolverSettings(solver=solver, compile=compile_functions))
         controller = PathReferenceMPC(model, config, obstacles=obstacles, path=path)
     runs = 2
     # No stall rule: a controller that stops in front of the box has its solves there timed
@@ -349,7 +350,8 @@ def _control_run(world: World, poses: np.ndarray, steps: int, controller: MpcCon
         start = time.perf_counter()
         if scan is not None:
             memory.update(scan, x)
-            nearby = within_faces(memory.obstacles(x[:2], reach), config.faces_per_obstacle)
+            nearby = within_faces(memory.obstacles(x[:2], reach),
+                                  config.solving.faces_per_obstacle)
         middle = time.perf_counter()
         if scan is not None:
             controller.set_obstacles(nearby)
@@ -411,7 +413,7 @@ def bench_scan_control(steps: int) -> dict[str, Any]:
     controller.mpc.wait_compiled()
     controller.clear_path()
     result = _control_run(world, poses, steps, controller)
-    return {'world': BARN_WORLD, 'horizon': config.horizon, 'solver': config.solver,
+    return {'world': BARN_WORLD, 'horizon': config.horizon, 'solver': config.solving.solver,
             'reference': kind, 'target_ms': TARGET_CONTROL_STEP_MS, **result}
 
 
@@ -450,7 +452,7 @@ def bench_footprint(scenario: str, steps: int, *, footprint: Footprint = JACKAL,
     poses, kind = _reference(world, footprint)
     vertices = tuple((float(px), float(py)) for px, py in np.asarray(footprint.vertices))
     config = MpcConfig(horizon=FOOTPRINT_HORIZON, step=STEP, footprint=vertices,
-                       compile=compile_functions)
+                       solving=SolverSettings(compile=compile_functions))
     # the paper's rows stop within REACHED_POSITION and REACHED_HEADING; BARN scores the
     # position only, as bench_scan_control does
     tolerances = ((REACHED_POSITION, REACHED_HEADING) if scenario == 'paper'
@@ -472,7 +474,8 @@ def bench_footprint(scenario: str, steps: int, *, footprint: Footprint = JACKAL,
     return {'scenario': scenario, 'label': label,
             'world': 'paper_obstacle' if scenario == 'paper' else BARN_WORLD,
             'footprint': [list(v) for v in vertices], 'horizon': config.horizon,
-            'solver': config.solver if not compile_functions else f'{config.solver}+compiled',
+            'solver': config.solving.solver if not compile_functions
+            else f'{config.solving.solver}+compiled',
             'obstacles': 'scan' if sensing else 'known', 'reference': kind,
             'max_steps': steps, 'warmup_s': warmup_s,
             'target_solve_ms': TARGET_FOOTPRINT_SOLVE_MS,
@@ -514,7 +517,8 @@ def bench_control_rate(calls: int, *, compile_functions: bool = True) -> dict[st
     plan's input after the safety checks. An untimed first run builds (and compiles) the
     NLPs. Reported apart: the solving calls, the holding calls, and all calls together.
     """
-    config = MpcConfig(horizon=RATE_HORIZON, step=STEP, compile=compile_functions)
+    config = MpcConfig(horizon=RATE_HORIZON, step=STEP,
+                       solving=SolverSettings(compile=compile_functions))
     settings = ControllerSettings(xy_goal_tolerance=REACHED_POSITION,
                                   yaw_goal_tolerance=REACHED_HEADING,
                                   control_frequency=CONTROL_FREQUENCY)
@@ -526,7 +530,8 @@ def bench_control_rate(calls: int, *, compile_functions: bool = True) -> dict[st
     run = _rate_run(controller, calls)
     solves, holds = run['solve_calls'], run['hold_calls']
     return {'frequency': CONTROL_FREQUENCY, 'step': STEP, 'horizon': config.horizon,
-            'solver': config.solver if not compile_functions else f'{config.solver}+compiled',
+            'solver': config.solving.solver if not compile_functions
+            else f'{config.solving.solver}+compiled',
             'max_calls': calls, 'calls': run['calls'], 'reached': run['reached'],
             'solves': len(solves), 'holds': len(holds),
             # p99: a timer's period must hold the tail, not the median

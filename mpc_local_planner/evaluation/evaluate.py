@@ -43,7 +43,7 @@ polyline, no obstacle constraints). Each run is an evaluation.rollout: it stops 
 still; the ``stop_reason`` column holds the rollout's Outcome value.
 
 Reproducible: the MPCs bound a control step's solving by solver iterations
-(``--budget iterations``, the default: MpcConfig.budget, the wall budget's worth on a typical
+(``--budget iterations``, the default: SolverSettings.budget, the wall budget's worth on a typical
 machine), so the same command gives the same runs on any machine under any load; ``--budget
 wall`` bounds it by wall time as the robot does, on this machine as loaded now (four such
 runs of BARN with sensing at 2 m/s gave 95 to 98 successes).

@@ -43,7 +43,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from mpc_local_planner.core.baselines.tracking_mpc import TrackingMPC
-from mpc_local_planner.core.config import BUDGETS, MpcConfig
+from mpc_local_planner.core.config import BUDGETS, MpcConfig, SolverSettings
 from mpc_local_planner.core.models import RobotModel, Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC
 from mpc_local_planner.core.obstacles import ConvexPolygon
@@ -128,7 +128,7 @@ def run_closed_loop(
     result.metrics['outcome'] = run.outcome.value
     result.metrics['horizon'] = controller.config.horizon
     result.metrics['step'] = h
-    result.metrics['solver'] = controller.config.solver
+    result.metrics['solver'] = controller.config.solving.solver
     return result
 
 
@@ -254,15 +254,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                                      description=__doc__.split('\n\n')[0])
     parser.add_argument('experiment', choices=[*EXPERIMENTS, 'all'])
     parser.add_argument('--out', type=Path, default=Path('out/experiments'))
-    parser.add_argument('--solver', default=None, help='MPC backend (MpcConfig.solver)')
+    parser.add_argument('--solver', default=None, help='MPC backend (SolverSettings.solver)')
     parser.add_argument('--seed', type=int, default=0, help='RRT* seed (rrt experiment)')
     parser.add_argument('--budget', choices=BUDGETS, default=EVALUATION_BUDGET,
                         help="a step's solving: solver iterations (the same runs under any "
-                             "load) or the robot's wall time (MpcConfig.budget)")
+                             "load) or the robot's wall time (SolverSettings.budget)")
     args = parser.parse_args(argv)
-    base = MpcConfig(budget=args.budget)
+    base = MpcConfig(solving=SolverSettings(budget=args.budget))
     if args.solver is not None:
-        base = base.with_changes(solver=args.solver)
+        base = base.with_solving(solver=args.solver)
     names = list(EXPERIMENTS) if args.experiment == 'all' else [args.experiment]
     for name in names:
         folder = args.out / name

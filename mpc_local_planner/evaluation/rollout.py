@@ -52,7 +52,7 @@ the controller gets the latest odometry through the correction: the pose in ``ma
 controller and planner nodes compute it with ``localization_topic``.
 
 Nothing here reads a clock but to report step times. The MPCs of the evaluation suites bound
-a step's solving by solver iterations (EVALUATION_BUDGET, MpcConfig.budget 'iterations'), not
+a step's solving by solver iterations (EVALUATION_BUDGET, SolverSettings.budget 'iterations'), not
 by wall time as the robot does: the same command gives the same runs on any machine under any
 load (with wall time, four runs of BARN with sensing at 2 m/s gave 95 to 98 successes).
 """
@@ -95,7 +95,7 @@ __all__ = [
     'StopRule',
 ]
 
-# The MPC budget of the evaluation suites (MpcConfig.budget): solver iterations, the
+# The MPC budget of the evaluation suites (SolverSettings.budget): solver iterations, the
 # wall budget's worth on a typical machine (MpcConfig.solve_iterations()), the same under any
 # load. 'wall' gives the robot's conditions on this machine, as it is loaded now.
 EVALUATION_BUDGET = 'iterations'

@@ -47,7 +47,7 @@ import numpy as np
 
 from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit, PurePursuitConfig
 from mpc_local_planner.core.baselines.tracking_mpc import TrackingMPC
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.errors import PlanningError
@@ -296,10 +296,11 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
         model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max,
                          v_min=None if robot.reverses else 0.0)
         config = MpcConfig(robot_radius=robot.footprint.radius if robot.footprint.is_circle
-                           else 0.0, footprint=_vertices(robot.footprint), budget=budget,
+                           else 0.0, footprint=_vertices(robot.footprint),
                            collision_margin=REALITY_MARGIN if reality is not None else None,
                            max_accel=tuple(REALITY_ACCEL_FACTOR * a for a in accel)
-                           if accel is not None and name == 'proposed' else None)
+                           if accel is not None and name == 'proposed' else None,
+                           solving=SolverSettings(budget=budget))
         if name == 'proposed':
             settings = ControllerSettings(xy_goal_tolerance=MPC_ARRIVAL,
                                           yaw_goal_tolerance=math.pi,
@@ -331,7 +332,7 @@ def _prepare(mpc: Any, budget: str = EVALUATION_BUDGET) -> None:
     With a wall budget, wait for every compilation before the first run (compiled and
     interpreted functions take different times, and the budget is time). With the
     'iterations' budget the runs start at once: a step that needs an NLP waits for its
-    compilation (MpcConfig.budget; the queued one is compiled first), so every solve runs the
+    compilation (SolverSettings.budget; the queued one is compiled first), so every solve runs the
     compiled functions whatever the timing, and the rest compile in the background in the
     order they were built. On a fresh machine the first BARN run no longer waits for the 21
     shapes (minutes), only for the few it uses; the wait is not counted in the step times
@@ -405,7 +406,7 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
         prepare: Build and compile the MPC's NLPs before the run (once per process), as a
             robot does at start-up; off, they are built when first needed (mid-run: slow
             first steps), which is enough for tests that do not time steps.
-        budget: What bounds an MPC step's solving (MpcConfig.budget): 'iterations', the
+        budget: What bounds an MPC step's solving (SolverSettings.budget): 'iterations', the
             same on any machine under any load, or 'wall', the robot's.
         reality: How real the robot is (core/reality.py: a preset's name or a Reality).
             Ideal: the model takes each command exactly every h, odometry is the pose, the

@@ -34,7 +34,7 @@ import numpy as np
 
 from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit, PurePursuitConfig
 from mpc_local_planner.core.baselines.tracking_mpc import TrackingMPC
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC
 from mpc_local_planner.core.paths import WaypointPath
@@ -108,7 +108,7 @@ class Task:
     sensing: bool = False
     robot: str = 'circle'
     world_file: str = ''
-    budget: str = EVALUATION_BUDGET  # MpcConfig.budget of the MPCs
+    budget: str = EVALUATION_BUDGET  # SolverSettings.budget of the MPCs
     reality: str = 'ideal'  # core/reality.py preset: how real the robot is (navigation runs)
 
     @property
@@ -166,7 +166,7 @@ def _controller(task: Task, scenario: Scenario, model: Unicycle,
     if task.controller not in ('proposed', 'tracking'):
         msg = f'unknown controller {task.controller!r}'
         raise ValueError(msg)
-    key = (task.controller, model.v_max, model.omega_max, config.budget)
+    key = (task.controller, model.v_max, model.omega_max, config.solving.budget)
     mpc = _MPC_CACHE.get(key)
     if task.controller == 'tracking':
         if mpc is None:
@@ -267,7 +267,7 @@ def run_task(task: Task) -> dict[str, Any]:
     if task.navigation:
         return run_navigation_task(task)
     model = Unicycle(v_max=task.v_max, omega_max=task.omega_max)
-    config = MpcConfig().with_changes(robot_radius=ROBOT_RADIUS, budget=task.budget)
+    config = MpcConfig(robot_radius=ROBOT_RADIUS, solving=SolverSettings(budget=task.budget))
     margin = config.inflation(model.v_max) - ROBOT_RADIUS
     scenario = _scenario(task, margin)
     if task.controller != 'tracking' and scenario.waypoints is None:

@@ -41,7 +41,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rosgraph_msgs.msg import Clock
 
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import SolverSettings
 from mpc_local_planner.core.diagnostics import (
     CONTROLLER_DIAGNOSTICS_TOPIC,
     ControllerDiagnostics,
@@ -80,7 +80,8 @@ def measure_controller_latency(steps: int = 100) -> dict[str, Any]:
     os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')})
     cmd = [sys.executable, '-m', 'mpc_local_planner.ros.mpc_controller_node', '--ros-args',
            '-p', 'use_sim_time:=true', '-p', 'analytic_path:=paper_sinusoid',
-           '-p', 'world_file:=worlds/paper_obstacle.yaml', '-p', f'solver:={MpcConfig().solver}',
+           '-p', 'world_file:=worlds/paper_obstacle.yaml',
+           '-p', f'solver:={SolverSettings().solver}',
            '-p', f'step:={STEP}', '-p', 'odom_timeout:=1000.0']
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True)

@@ -288,7 +288,7 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
         self._pose_source = self._make_robot_pose(values)
         self._forget_inputs()
         self._local = LocalObstacles(
-            config.faces_per_obstacle,
+            config.solving.faces_per_obstacle,
             memory=ObstacleMemory(float(values['obstacle_memory'])) if 'scan' in sources
             else None)
         if values['analytic_path']:
@@ -484,6 +484,16 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
     def _control_period(self) -> float:
         """Return the control timer's period (s of ROS time): 1 / control_frequency."""
         return 1.0 / float(self.get_parameter('control_frequency').value)
+
+    @property
+    def control_period_ns(self) -> int | None:
+        """The running control timer's period in nanoseconds (None while there is none)."""
+        return None if self._timer is None else int(self._timer.timer_period_ns)
+
+    @property
+    def odom_state(self) -> np.ndarray | None:
+        """A copy of the latest valid odometry's state (odom frame); None without one."""
+        return None if self._odom_state is None else self._odom_state.copy()
 
     def _make_timer(self) -> None:
         """(Re)start the control timer at control_frequency (the MPC's step is apart)."""

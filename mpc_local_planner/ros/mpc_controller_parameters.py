@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from mpc_local_planner.core.config import MpcConfig, SOLVERS
+from mpc_local_planner.core.config import MpcConfig, SOLVERS, SolverSettings
 from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.footprint import Footprint, resolve
 from mpc_local_planner.core.models import Unicycle
@@ -51,13 +51,14 @@ __all__ = ['BASE_FRAME', 'DEFAULTS', 'OBSTACLE_SOURCES', 'PARAMETERS', 'RATE_LIM
 BASE_FRAME = 'base_link'
 # What obstacle_sources may list.
 OBSTACLE_SOURCES = ('world', 'scan', 'map')
-# Parameter -> field of MpcConfig, Unicycle and ControllerSettings.
+# Parameter -> field of MpcConfig, its SolverSettings, Unicycle and ControllerSettings (the
+# parameters are flat: one namespace, whichever dataclass a field lives in).
 _MPC_FIELDS = {
     'horizon': 'horizon', 'step': 'step', 'weights.position': 'weight_position',
     'weights.heading': 'weight_heading', 'weights.v': 'weight_v', 'weights.omega': 'weight_omega',
-    'offset_weight': 'offset_weight', 'robot_radius': 'robot_radius', 'solver': 'solver',
-    'max_iterations': 'max_iterations', 'obstacle_slots': 'obstacle_slots',
+    'offset_weight': 'offset_weight', 'robot_radius': 'robot_radius',
 }
+_SOLVER_FIELDS = ('solver', 'max_iterations', 'obstacle_slots')
 _MODEL_FIELDS = ('v_max', 'omega_max')
 _SETTINGS_FIELDS = ('xy_goal_tolerance', 'yaw_goal_tolerance', 'odom_timeout',
                     'scan_timeout', 'control_frequency')
@@ -141,10 +142,10 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('analytic_path', '',
                   "follow this analytic path (e.g. 'paper_sinusoid') instead of the plan "
                   "topic; '' = use plan"),
-    ParameterSpec('solver', str(_CONFIG.solver), f'NLP solver, one of {SOLVERS}'),
-    ParameterSpec('max_iterations', int(_CONFIG.max_iterations),
+    ParameterSpec('solver', str(_CONFIG.solving.solver), f'NLP solver, one of {SOLVERS}'),
+    ParameterSpec('max_iterations', int(_CONFIG.solving.max_iterations),
                   f'solver iterations per solve; {_SHAPE}', int_range=(1, 100000)),
-    ParameterSpec('obstacle_slots', int(_CONFIG.obstacle_slots),
+    ParameterSpec('obstacle_slots', int(_CONFIG.solving.obstacle_slots),
                   'the most obstacles one solve holds, the nearest (its solution is checked '
                   'against all in reach): the NLPs for 0..this many are built with each plan, '
                   'so that no control step builds one; a change rebuilds them as steps need '
@@ -265,26 +266,39 @@ def build_settings(values: dict[str, Any], *, world_radius: float = 0.0,
     robot_footprint).
 
     Raises:
-        ValueError: with every reason the values are invalid (validate_mpc_config's rules,
-            the footprint's, the model's and the controller's).
+        ValueError: with every reason the values are invalid (validate_solver_settings' and
+            validate_mpc_config's rules, the footprint's, the model's and the controller's).
 
     """
     mpc_kwargs = {field: values[name] for name, field in _MPC_FIELDS.items()}
     mpc_kwargs['horizon'] = int(mpc_kwargs['horizon'])
-    mpc_kwargs['max_iterations'] = int(mpc_kwargs['max_iterations'])
-    mpc_kwargs['obstacle_slots'] = int(mpc_kwargs['obstacle_slots'])
+    solver_kwargs = {name: values[name] for name in _SOLVER_FIELDS}
+    solver_kwargs['max_iterations'] = int(solver_kwargs['max_iterations'])
+    solver_kwargs['obstacle_slots'] = int(solver_kwargs['obstacle_slots'])
     for key in ('step', 'weight_position', 'weight_heading', 'weight_v', 'weight_omega',
                 'offset_weight'):
         mpc_kwargs[key] = float(mpc_kwargs[key])
     margin = float(values['collision_margin'])
     mpc_kwargs['collision_margin'] = None if margin < 0 else margin
     budget = float(values['max_solve_time'])
-    mpc_kwargs['max_solve_time'] = None if budget <= 0 else budget
+    solver_kwargs['max_solve_time'] = None if budget <= 0 else budget
     mpc_kwargs['robot_radius'] = max(float(values['robot_radius']), world_radius)
     mpc_kwargs['footprint'] = robot_footprint(values['footprint'], world_footprint)
     mpc_kwargs['max_accel'] = rate_limit('max_accel', values['max_accel'])
     decel = rate_limit('max_decel', values['max_decel'])
-    config = MpcConfig(**mpc_kwargs)  # raises ValueError with validate_mpc_config's reasons
+    # each raises ValueError with its validator's reasons; both are collected
+    problems: list[str] = []
+    try:
+        solving = SolverSettings(**solver_kwargs)
+    except ValueError as err:
+        problems.append(str(err))
+        solving = SolverSettings()
+    try:
+        config = MpcConfig(**mpc_kwargs, solving=solving)
+    except ValueError as err:
+        problems.append(str(err))
+    if problems:
+        raise ValueError('; '.join(problems))
     model = Unicycle(**{name: float(values[name]) for name in _MODEL_FIELDS},
                      v_min=None if values['allow_reversing'] else 0.0)
     settings = ControllerSettings(**{k: float(values[k]) for k in _SETTINGS_FIELDS},
@@ -301,9 +315,9 @@ def check_obstacles(obstacles: list[ConvexPolygon], config: MpcConfig) -> None:
     the change can no longer be refused.
     """
     for index, obstacle in enumerate(obstacles):
-        if obstacle.num_faces > config.faces_per_obstacle:
+        if obstacle.num_faces > config.solving.faces_per_obstacle:
             msg = (f'obstacle {index} has {obstacle.num_faces} faces, more than '
-                   f'faces_per_obstacle ({config.faces_per_obstacle})')
+                   f'faces_per_obstacle ({config.solving.faces_per_obstacle})')
             raise ValueError(msg)
 
 

@@ -96,6 +96,24 @@ MAX_SCAN_BYTES = 2 * 4 * MAX_BEAMS + 4096
 class ControllerSensing:
     """MpcControllerNode's intake of scan and map, and the obstacles it hands over."""
 
+    @property
+    def scan_stamp(self) -> float | None:
+        """The stamp of the latest scan placed and used (s of ROS time; None: none yet)."""
+        return self._scan_stamp
+
+    @property
+    def scan_time(self) -> float | None:
+        """What scan_timeout is measured from (None: no usable scan yet).
+
+        The latest usable scan's stamp, never later than its arrival (see _use_scan).
+        """
+        return self._scan_time
+
+    @property
+    def pending_scans(self) -> int:
+        """How many valid scans wait for odometry that covers their stamps."""
+        return len(self._pending_scans)
+
     def scan_callback(self, msg: LaserScan | bytes) -> None:
         """Take a scan: placed now if the odometry covers its stamp, else it waits.
 

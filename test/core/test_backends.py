@@ -22,7 +22,7 @@ import threading
 import numpy as np
 import pytest
 
-from mpc_local_planner.core.config import MpcConfig, SOLVERS
+from mpc_local_planner.core.config import MpcConfig, SOLVERS, SolverSettings
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import compilation, PathReferenceMPC, PlanSource
 from mpc_local_planner.core.obstacles import ConvexPolygon
@@ -36,7 +36,9 @@ def run_paper_scenario(solver: str, *, compile_functions: bool) -> dict:
     """Run the paper's obstacle scenario in closed loop; return what the tests check."""
     model, path = Unicycle(), paper_sinusoid()
     box = ConvexPolygon.from_box(1.0, -1.0, 1.5, 1.0)
-    mpc = PathReferenceMPC(model, MpcConfig(solver=solver, compile=compile_functions),
+    mpc = PathReferenceMPC(model,
+                           MpcConfig(solving=SolverSettings(solver=solver,
+                                                            compile=compile_functions)),
                            obstacles=[box], path=path)
     x = path.start.copy()
     length, values, lyapunov, sources, positions = 0.0, [], [], [], [x[:2]]
@@ -78,7 +80,8 @@ def test_compilation_failure_falls_back_to_the_interpreter(
     monkeypatch.setenv('MPC_LOCAL_PLANNER_CACHE', str(tmp_path))
     monkeypatch.setenv('CC', 'no-such-compiler-mpc-local-planner')
     model, path = Unicycle(), paper_sinusoid()
-    mpc = PathReferenceMPC(model, MpcConfig(horizon=5, compile=True), path=path)
+    mpc = PathReferenceMPC(model, MpcConfig(horizon=5, solving=SolverSettings(compile=True)),
+                           path=path)
     sol = mpc.solve(path.start)
     mpc.wait_compiled()
     sol = mpc.solve(model.step(path.start, sol.u0, H))
@@ -87,7 +90,7 @@ def test_compilation_failure_falls_back_to_the_interpreter(
     assert 'compiling the MPC NLP failed' in caplog.text
 
 
-def test_processes_wanting_the_same_library_compile_it_once(tmp_path, monkeypatch) -> None:
+def test_processes_wanting_the_same_library_compile_it_once(tmp_path) -> None:
     runs: list[str] = []
 
     def compiler(source: str, library, flags=None):
@@ -95,33 +98,30 @@ def test_processes_wanting_the_same_library_compile_it_once(tmp_path, monkeypatc
         library.write_text('built')  # what gcc would leave
         return library
 
-    monkeypatch.setattr(compilation, '_run_compiler', compiler)
     library = tmp_path / 'mpc_nlp_test.so'
     # each call opens the lock file itself, as another process would
     with ThreadPoolExecutor(max_workers=2) as pool:
-        results = list(pool.map(lambda _: compilation._compile('int f;', library), range(2)))
+        results = list(pool.map(lambda _: compilation.compile_library(
+            'int f;', library, compiler=compiler), range(2)))
     assert results == [library, library]
     assert runs == ['int f;']  # the second found the library when its turn came
 
 
-def test_a_waiter_compiles_its_queued_job_itself_and_the_wait_is_counted(
-        tmp_path, monkeypatch) -> None:
+def test_a_waiter_compiles_its_queued_job_itself_and_the_wait_is_counted(tmp_path) -> None:
     started: list[str] = []
     gate = threading.Event()
-    real = compilation._run_compiler  # for what earlier tests left in the queue
 
     def compiler(source: str, library, flags=compilation.COMPILE_FLAGS):
-        if source not in ('first', 'second'):
-            return real(source, library, flags)
         started.append(source)
         if source == 'first':
             gate.wait(10.0)  # the queue's thread is busy with the first job
         library.write_text('built')
         return library
 
-    monkeypatch.setattr(compilation, '_run_compiler', compiler)
-    first = compilation.submit_compilation('first', tmp_path / 'mpc_nlp_first.so')
-    second = compilation.submit_compilation('second', tmp_path / 'mpc_nlp_second.so')
+    first = compilation.submit_compilation('first', tmp_path / 'mpc_nlp_first.so',
+                                           compiler=compiler)
+    second = compilation.submit_compilation('second', tmp_path / 'mpc_nlp_second.so',
+                                            compiler=compiler)
     waited = compilation.compile_wait_seconds()
     compilation.wait_for(second)  # not behind the first: run here
     assert second.result() == tmp_path / 'mpc_nlp_second.so'
@@ -136,9 +136,9 @@ def test_a_cached_library_is_found_without_generating_its_source(
         tmp_path, monkeypatch) -> None:
     monkeypatch.setenv('MPC_LOCAL_PLANNER_CACHE', str(tmp_path))
     model, path = Unicycle(), paper_sinusoid()
-    config = MpcConfig(horizon=5, compile=True)
+    config = MpcConfig(horizon=5, solving=SolverSettings(compile=True))
     first = PathReferenceMPC(model, config, path=path)
-    nlp = first._nlp_for(0, 0)
+    nlp = first.nlp_for(0, 0)
     first.wait_compiled()
     assert nlp.compiled and nlp.library is not None
     assert [p.read_text() for p in tmp_path.glob('*.key')] == [nlp.library.name]
@@ -147,6 +147,6 @@ def test_a_cached_library_is_found_without_generating_its_source(
         raise AssertionError('the source was generated again')
 
     monkeypatch.setattr(compilation, 'nlp_source', no_source)
-    again = PathReferenceMPC(model, config, path=path)._nlp_for(0, 0)
+    again = PathReferenceMPC(model, config, path=path).nlp_for(0, 0)
     assert again.compiled and again.pending is None
     assert again.library == nlp.library

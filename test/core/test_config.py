@@ -21,7 +21,7 @@ import math
 import numpy as np
 import pytest
 
-from mpc_local_planner.core.config import MpcConfig, STRUCTURAL_FIELDS
+from mpc_local_planner.core.config import MpcConfig, SolverSettings, STRUCTURAL_FIELDS
 
 JACKAL_VERTICES = ((0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215), (0.254, -0.215))
 
@@ -95,3 +95,15 @@ def test_the_reach_of_a_polygon_counts_its_farthest_corner() -> None:
     assert circle.reach(v_max) == pytest.approx(v_max * 0.2 * 10 + 0.2 + v_max * 0.1)
     polygon = MpcConfig(footprint=JACKAL_VERTICES)
     assert polygon.reach(v_max) == pytest.approx(v_max * 0.2 * 10 + math.hypot(0.254, 0.215))
+
+
+def test_the_solver_settings_are_validated_apart_and_their_structure_is_in_the_key() -> None:
+    config = MpcConfig()
+    assert config.with_solving(max_iterations=50).structure_key() != config.structure_key()
+    # the budget is not structural: nothing is rebuilt for it
+    assert config.with_solving(max_solve_time=1.0).structure_key() == config.structure_key()
+    assert config.with_solving(solver='ipopt').solving == SolverSettings(solver='ipopt')
+    with pytest.raises(ValueError, match='invalid MPC solver settings: solver must be one of'):
+        config.with_solving(solver='sqp')
+    with pytest.raises(ValueError, match='solving must be a SolverSettings'):
+        MpcConfig(solving={'solver': 'ipopt'})

@@ -20,7 +20,7 @@ import math
 import numpy as np
 import pytest
 
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.controller import MpcController, ROTATE_STEPS
 from mpc_local_planner.core.controller_settings import ControllerSettings
@@ -33,7 +33,7 @@ from mpc_local_planner.worlds.world import load_world, paper_world
 WORLD = paper_world()
 # Time enough for any solve: these tests are about the controller's decisions, not about the
 # solve time budget (test_mpc_budget.py), and must not depend on how loaded the machine is.
-CONFIG = MpcConfig(max_solve_time=3600.0)
+CONFIG = MpcConfig(solving=SolverSettings(max_solve_time=3600.0))
 # A plan around the paper's box (above it), headings as the planner sends them.
 PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
                  [2.5, 0.0, WORLD.goal[2]]])

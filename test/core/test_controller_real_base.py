@@ -24,7 +24,7 @@ import math
 import numpy as np
 import pytest
 
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.control_output import Reason
 from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.controller_settings import ControllerSettings
@@ -35,7 +35,7 @@ from mpc_local_planner.worlds.world import paper_world
 
 WORLD = paper_world()
 MODEL = Unicycle()  # the paper's Turtlebot: 0.31 m/s, 1.9 rad/s
-CONFIG = MpcConfig(max_solve_time=3600.0)
+CONFIG = MpcConfig(solving=SolverSettings(max_solve_time=3600.0))
 PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
                  [2.5, 0.0, WORLD.goal[2]]])
 PERIOD = 0.05  # 20 Hz

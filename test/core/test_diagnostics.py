@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reason
 from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.diagnostics import (
@@ -51,7 +51,8 @@ def test_every_key_names_a_record_field_in_order() -> None:
 
 def test_a_solved_step_survives_the_round_trip_through_strings() -> None:
     # time enough for the solve: the round trip, not the solve time budget, is tested here
-    controller = MpcController(config=MpcConfig(max_solve_time=3600.0), obstacles=WORLD.obstacles)
+    controller = MpcController(config=MpcConfig(solving=SolverSettings(max_solve_time=3600.0)),
+                               obstacles=WORLD.obstacles)
     controller.set_path(analytic_path('paper_sinusoid'))
     output = controller.compute(WORLD.start, 0.0)
     assert output.reason is Reason.TRACKING

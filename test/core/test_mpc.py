@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.baselines import TrackingMPC
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC, PlanSource
 from mpc_local_planner.core.mpc import step as step_module
@@ -16,7 +16,7 @@ from mpc_local_planner.evaluation.experiments import run_closed_loop
 BOX = ConvexPolygon.from_box(1.0, -1.0, 1.5, 1.0)
 # Time enough for any solve: these closed loops test the MPC's behaviour, which must not
 # depend on how loaded the machine is (the solve time budget: test_mpc_budget.py).
-CONFIG = MpcConfig(max_solve_time=3600.0)
+CONFIG = MpcConfig(solving=SolverSettings(max_solve_time=3600.0))
 
 
 @pytest.fixture(scope='module')
@@ -141,14 +141,14 @@ def _paper_run(config: MpcConfig, label: str):
 
 def test_obstacles_left_out_of_the_nlp_are_added_when_the_solution_comes_near() -> None:
     """Constraint generation: with no obstacle active up front, the box still is avoided."""
-    run = _paper_run(CONFIG.with_changes(activation_distance=0.0), 'lazy')
+    run = _paper_run(CONFIG.with_solving(activation_distance=0.0), 'lazy')
     assert run.metrics['reached']
     assert run.metrics['min_clearance'] > 0.0
     assert run.metrics['lyapunov_violations'] == 0
 
 
 def test_lazy_obstacles_give_the_closed_loop_of_all_obstacles_in_the_nlp(proposed_run) -> None:
-    run = _paper_run(CONFIG.with_changes(activation_distance=10.0), 'eager')
+    run = _paper_run(CONFIG.with_solving(activation_distance=10.0), 'eager')
     assert run.metrics['reached']
     assert run.metrics['path_length'] == pytest.approx(
         proposed_run.metrics['path_length'], rel=1e-3)
@@ -195,9 +195,9 @@ BARN_0_STALL = np.array([-2.87439976, 7.96106054, 1.25414747])
 @pytest.mark.parametrize('solver', ['fatrop', 'ipopt'])
 def test_a_cold_start_whose_reach_ends_at_a_plan_corner_is_solved(solver: str) -> None:
     path = WaypointPath(BARN_0_PLAN, start_heading=1.931, goal_heading=1.571)
-    config = MpcConfig(solver=solver, compile=False, max_solve_time=3600.0,
-                       footprint=((0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215),
-                                  (0.254, -0.215)))
+    config = MpcConfig(footprint=((0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215),
+                                  (0.254, -0.215)),
+                       solving=SolverSettings(solver=solver, compile=False, max_solve_time=3600.0))
     mpc = PathReferenceMPC(Unicycle(v_max=1.0, omega_max=2.0), config, path=path)
     solution = mpc.solve(BARN_0_STALL)
     assert solution.source is PlanSource.SOLVER, solution.status
@@ -220,9 +220,9 @@ BARN_2_BOXES = [ConvexPolygon.from_vertices(np.array(v)) for v in (
 def test_a_cold_start_among_obstacles_tries_the_cold_ipopt_first_and_is_solved() -> None:
     path = WaypointPath(np.array([[-2.25, 3.0], [-2.25, 13.0]]), start_heading=1.57,
                         goal_heading=np.pi / 2, capacity=128)
-    config = MpcConfig(compile=False, max_solve_time=3600.0,
-                       footprint=((0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215),
-                                  (0.254, -0.215)))
+    config = MpcConfig(footprint=((0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215),
+                                  (0.254, -0.215)),
+                       solving=SolverSettings(compile=False, max_solve_time=3600.0))
     mpc = PathReferenceMPC(Unicycle(v_max=1.0, omega_max=2.0), config, obstacles=BARN_2_BOXES,
                            path=path)
     solution = mpc.solve(BARN_2_STALL)
@@ -230,4 +230,4 @@ def test_a_cold_start_among_obstacles_tries_the_cold_ipopt_first_and_is_solved()
     assert '(IPOPT cold start)' in solution.status
     assert solution.u0[0] > 0.5
     # no failing fatrop run of 200 iterations came first
-    assert solution.iterations < config.max_iterations
+    assert solution.iterations < config.solving.max_iterations

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.controller_settings import ControllerSettings
@@ -54,7 +54,8 @@ def barn_controller() -> MpcController:
     drives forwards only (Robot.reverses), which these states predate.
     """
     config = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
-                       robot_radius=0.0, budget='iterations', max_solve_iterations=100)
+                       robot_radius=0.0,
+                       solving=SolverSettings(budget='iterations', max_solve_iterations=100))
     settings = ControllerSettings(xy_goal_tolerance=0.05, yaw_goal_tolerance=math.pi,
                                   capacity=128)
     return MpcController(Unicycle(v_max=2.0, omega_max=4.0), config, settings=settings)
@@ -97,7 +98,8 @@ LEAVES_WITHIN_STEPS = 40
 def forward_only_controller(case: dict) -> MpcController:
     """Return the evaluation's MPC for the Jackal driving forwards only, with case's plan."""
     config = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
-                       robot_radius=0.0, budget='iterations', max_solve_iterations=100)
+                       robot_radius=0.0,
+                       solving=SolverSettings(budget='iterations', max_solve_iterations=100))
     settings = ControllerSettings(xy_goal_tolerance=0.05, yaw_goal_tolerance=math.pi,
                                   capacity=128)
     controller = MpcController(Unicycle(v_max=2.0, omega_max=4.0, v_min=0.0), config,
@@ -192,8 +194,9 @@ def test_a_cut_round_in_the_largest_nlp_goes_on_until_it_is_solved() -> None:
     case = json.loads((Path(__file__).parent / 'data' / 'barn_283_capped_round.json')
                       .read_text(encoding='utf-8'))
     config = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
-                       robot_radius=0.0, budget='iterations', max_solve_iterations=100,
-                       compile=False)
+                       robot_radius=0.0,
+                       solving=SolverSettings(budget='iterations', max_solve_iterations=100,
+                                              compile=False))
     settings = ControllerSettings(xy_goal_tolerance=0.05, yaw_goal_tolerance=math.pi,
                                   capacity=128)
     controller = MpcController(Unicycle(v_max=2.0, omega_max=4.0, v_min=0.0), config,

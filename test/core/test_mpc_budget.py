@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The solve budget of a control step (MpcConfig.budget): behaviour, not speed.
+"""The solve budget of a control step (SolverSettings.budget): behaviour, not speed.
 
 Two kinds: wall time (max_solve_time, the robot's) and solver iterations
 (max_solve_iterations, the evaluation's: the same on any machine). Where a test needs the
@@ -25,14 +25,13 @@ of test_mpc_tries.py. Nothing here asserts how fast anything is.
 
 from __future__ import annotations
 
-from dataclasses import replace
 import math
 from typing import Any
 
 import numpy as np
 import pytest
 
-from mpc_local_planner.core.config import MpcConfig, STRUCTURAL_FIELDS
+from mpc_local_planner.core.config import MpcConfig, SolverSettings, STRUCTURAL_SOLVER_FIELDS
 from mpc_local_planner.core.control_output import Reason
 from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.diagnostics import ControllerDiagnostics
@@ -114,9 +113,10 @@ class FakeSolver:
                          iterations=self.iterations, seconds=0.0)
 
 
-def paper_mpc(**changes: Any) -> PathReferenceMPC:
+def paper_mpc(horizon: int = MpcConfig.horizon, **solving: Any) -> PathReferenceMPC:
     """The paper's MPC around its box, interpreted functions (deterministic, no gcc)."""
-    config = MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT).with_changes(**changes)
+    config = MpcConfig(horizon=horizon, solving=SolverSettings(
+        compile=False, max_solve_time=NO_TIME_LIMIT).with_changes(**solving))
     return PathReferenceMPC(Unicycle(), config, obstacles=[BOX], path=paper_sinusoid())
 
 
@@ -132,41 +132,44 @@ def drive(mpc: PathReferenceMPC, steps: int) -> tuple[np.ndarray, Any]:
 
 # ----------------------------------------------------------------------------- the setting
 def test_the_budget_is_half_the_period_unless_given_and_must_be_positive() -> None:
-    assert MpcConfig().max_solve_time is None
+    assert MpcConfig().solving.max_solve_time is None
     assert MpcConfig().solve_budget() == pytest.approx(0.1)
     assert MpcConfig(step=0.1).solve_budget() == pytest.approx(0.05)
-    assert MpcConfig(max_solve_time=0.03).solve_budget() == pytest.approx(0.03)
-    assert MpcConfig(max_solve_time=2).solve_budget() == 2.0
+    assert MpcConfig(solving=SolverSettings(max_solve_time=0.03)).solve_budget() == \
+        pytest.approx(0.03)
+    assert MpcConfig(solving=SolverSettings(max_solve_time=2)).solve_budget() == 2.0
     for bad in (0.0, -0.1, 'fast', True):
         with pytest.raises(ValueError, match='max_solve_time must be None or a number > 0'):
-            MpcConfig(max_solve_time=bad)
+            MpcConfig(solving=SolverSettings(max_solve_time=bad))
     with pytest.raises(ValueError, match='max_solve_time must be finite'):
-        MpcConfig(max_solve_time=math.inf)
+        MpcConfig(solving=SolverSettings(max_solve_time=math.inf))
 
 
 def test_the_budget_is_wall_time_unless_iterations_are_asked_for() -> None:
-    assert MpcConfig().budget == 'wall'
+    assert MpcConfig().solving.budget == 'wall'
     # the wall budget's worth: 0.1 s at 1 ms an iteration
-    assert MpcConfig(budget='iterations').solve_iterations() == 100
-    assert MpcConfig(budget='iterations', step=0.1).solve_iterations() == 50
-    assert MpcConfig(budget='iterations', max_solve_iterations=7).solve_iterations() == 7
+    assert MpcConfig(solving=SolverSettings(budget='iterations')).solve_iterations() == 100
+    assert MpcConfig(step=0.1,
+                     solving=SolverSettings(budget='iterations')).solve_iterations() == 50
+    assert MpcConfig(solving=SolverSettings(budget='iterations',
+                                            max_solve_iterations=7)).solve_iterations() == 7
     with pytest.raises(ValueError, match="budget must be one of \\('wall', 'iterations'\\)"):
-        MpcConfig(budget='cpu')
+        MpcConfig(solving=SolverSettings(budget='cpu'))
     for bad in (0, -3, 2.5, True, 'many'):
         with pytest.raises(ValueError, match='max_solve_iterations must be None or an integer'):
-            MpcConfig(max_solve_iterations=bad)
+            MpcConfig(solving=SolverSettings(max_solve_iterations=bad))
 
 
 def test_a_new_budget_rebuilds_nothing_and_keeps_the_warm_start(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    assert not {'max_solve_time', 'budget', 'max_solve_iterations'} & STRUCTURAL_FIELDS
+    assert not {'max_solve_time', 'budget', 'max_solve_iterations'} & STRUCTURAL_SOLVER_FIELDS
     mpc = paper_mpc()
     x, _ = drive(mpc, 2)
     formulated: list[tuple] = []
     monkeypatch.setattr(step_module, 'formulate', lambda *args: formulated.append(args))
     for changes in ({'max_solve_time': 0.05}, {'budget': 'iterations'},
                     {'max_solve_iterations': 500}):
-        mpc.update_config(mpc.config.with_changes(**changes))
+        mpc.update_config(mpc.config.with_solving(**changes))
         solution = mpc.solve(x)
         assert solution.lyapunov_ok is not None  # the history was kept
         x = mpc.model.step(x, solution.u0, H)
@@ -178,7 +181,7 @@ def test_a_tiny_budget_cuts_the_solver_and_applies_the_verified_shifted_candidat
     mpc = paper_mpc()
     x, last = drive(mpc, 3)
     assert last.source is PlanSource.SOLVER and not last.timed_out
-    mpc.update_config(mpc.config.with_changes(max_solve_time=TINY))
+    mpc.update_config(mpc.config.with_solving(max_solve_time=TINY))
     for k in range(1, 4):
         solution = mpc.solve(x)
         assert solution.timed_out and not solution.solver_verified
@@ -209,7 +212,7 @@ def test_the_retry_chain_is_left_out_once_the_budget_is_spent(
     x, _ = drive(mpc, 3)
     clock = FakeClock()
     mpc.clock = clock
-    mpc.update_config(mpc.config.with_changes(max_solve_time=100.0))
+    mpc.update_config(mpc.config.with_solving(max_solve_time=100.0))
     # with time to spare a failed solve is retried with the IPOPT fallback
     monkeypatch.setattr(step_module, 'run_solver', FakeSolver())
     spare = mpc.solve(x)
@@ -253,7 +256,7 @@ def test_a_fallback_is_built_mid_step_only_if_its_build_fits_in_what_is_left(
     x, _ = drive(mpc, 3)
     clock = FakeClock()
     mpc.clock = clock
-    mpc.update_config(mpc.config.with_changes(max_solve_time=0.1))
+    mpc.update_config(mpc.config.with_solving(max_solve_time=0.1))
     solver = FakeSolver()
     monkeypatch.setattr(step_module, 'run_solver', solver)
     mpc.solve(x)  # finds the NLP of this state (and builds its fallback: time was left)
@@ -264,7 +267,7 @@ def test_a_fallback_is_built_mid_step_only_if_its_build_fits_in_what_is_left(
     assert solution.tries == (CANDIDATE_BACKEND,) and nlp.fallback is None
     assert solution.timed_out and solution.source is PlanSource.CANDIDATE
     # an iteration budget does not count builds: the fallback is built and tried
-    mpc.update_config(mpc.config.with_changes(budget='iterations'))
+    mpc.update_config(mpc.config.with_solving(budget='iterations'))
     solution = mpc.solve(x)
     assert solution.tries == (CANDIDATE_BACKEND, CANDIDATE_FALLBACK)
     assert nlp.fallback is not None
@@ -273,8 +276,8 @@ def test_a_fallback_is_built_mid_step_only_if_its_build_fits_in_what_is_left(
 def test_prepare_builds_the_fallbacks_ahead() -> None:
     mpc = paper_mpc()
     mpc.prepare(1)
-    assert mpc._nlps and all(nlp.fallback is not None for nlp in mpc._nlps.values())
-    assert all(nlp.fallback_build_time == 0.0 for nlp in mpc._nlps.values())
+    assert mpc.nlps and all(nlp.fallback is not None for nlp in mpc.nlps.values())
+    assert all(nlp.fallback_build_time == 0.0 for nlp in mpc.nlps.values())
 
 
 def test_a_constraint_generation_round_is_left_out_once_the_budget_is_spent(
@@ -291,7 +294,7 @@ def test_a_constraint_generation_round_is_left_out_once_the_budget_is_spent(
     x, _ = drive(hurried, rounds_at)
     clock = FakeClock()
     hurried.clock = clock
-    hurried.update_config(hurried.config.with_changes(max_solve_time=100.0))
+    hurried.update_config(hurried.config.with_solving(max_solve_time=100.0))
 
     def slow_solver(*args: Any, **kwargs: Any) -> SolverRun:
         run = run_solver(*args, **kwargs)
@@ -312,7 +315,7 @@ def test_an_iteration_budget_is_spent_by_the_iterations_made_and_never_reads_a_c
     mpc = paper_mpc()
     x, _ = drive(mpc, 3)
     mpc.clock = no_clock
-    mpc.update_config(mpc.config.with_changes(budget='iterations', max_solve_iterations=10))
+    mpc.update_config(mpc.config.with_solving(budget='iterations', max_solve_iterations=10))
     # a failed try of 4 iterations leaves 6 for the fallback
     solver = FakeSolver(iterations=4)
     monkeypatch.setattr(step_module, 'run_solver', solver)
@@ -335,7 +338,7 @@ def test_ipopt_and_fatrop_keep_to_an_iteration_budget() -> None:
         mpc.clock = no_clock
         first = mpc.solve(x0)  # from rest IPOPT cold goes first: this makes a plan that moves
         assert first.success and np.any(first.u_pred)
-        mpc.update_config(mpc.config.with_changes(max_solve_iterations=3))
+        mpc.update_config(mpc.config.with_solving(max_solve_iterations=3))
         # off the prediction: the backend from the shifted candidate needs more than 3
         solution = mpc.solve(first.x_pred[1] + np.array([0.05, -0.05, 0.2]))
         assert solution.timed_out and not solution.success
@@ -370,24 +373,26 @@ def test_with_a_generous_budget_the_paper_run_is_the_run_without_a_clock() -> No
         assert result.metrics['reached']
         return result.rows, solutions
 
-    rows, solutions = run(MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT))
+    rows, solutions = run(MpcConfig(
+        solving=SolverSettings(compile=False, max_solve_time=NO_TIME_LIMIT)))
     assert not any(s.timed_out for s in solutions)
     assert all(s.source is PlanSource.SOLVER for s in solutions)
-    rows_without, _ = run(MpcConfig(compile=False, budget='iterations',
-                                    max_solve_iterations=10**6), clock=no_clock)
+    rows_without, _ = run(MpcConfig(solving=SolverSettings(
+        compile=False, budget='iterations', max_solve_iterations=10**6)), clock=no_clock)
     applied = [TRAJECTORY_INDEX[name] for name in TRAJECTORY_COLUMNS if name != 'solve_ms']
     np.testing.assert_array_equal(rows[:, applied], rows_without[:, applied])
 
 
 # ----------------------------------------------------------------------------- counted
 def test_the_controller_counts_timeouts_and_the_diagnostics_publish_the_count() -> None:
-    controller = MpcController(config=MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT),
+    controller = MpcController(config=MpcConfig(solving=SolverSettings(
+                                   compile=False, max_solve_time=NO_TIME_LIMIT)),
                                obstacles=[BOX])
     controller.set_path(paper_sinusoid())
     x = paper_sinusoid().start
     output = controller.compute(x, 0.0)
     assert output.reason is Reason.TRACKING and controller.timeouts == 0
-    controller.update_config(controller.config.with_changes(max_solve_time=TINY))
+    controller.update_config(controller.config.with_solving(max_solve_time=TINY))
     for k in range(1, 3):
         x = controller.model.step(x, output.u, H)
         output = controller.compute(x, k * H)
@@ -404,9 +409,7 @@ def test_the_controller_counts_timeouts_and_the_diagnostics_publish_the_count() 
 # ----------------------------------------------------------------------------- the solvers
 def test_ipopt_is_stopped_at_its_time_limit() -> None:
     mpc = paper_mpc(solver='ipopt', horizon=3)
-    x0 = mpc.path.start
-    nlp, params, _ = mpc._prepare_nlp([], x0)
-    w0 = mpc._pack(mpc._guided_guess(x0, [], nlp), nlp)
+    nlp, params, w0 = mpc.solver_problem(mpc.path.start)
     untimed = run_solver(nlp, w0, params)
     assert untimed.success and not untimed.cut
     stopped = run_solver(nlp, w0, params, time_limit=1e-9)
@@ -427,9 +430,7 @@ def test_ipopt_is_stopped_at_its_time_limit() -> None:
 
 def test_the_ipopt_fallback_is_stopped_at_its_time_limit() -> None:
     mpc = paper_mpc(horizon=3)  # fatrop, with IPOPT as its fallback
-    x0 = mpc.path.start
-    nlp, params, _ = mpc._prepare_nlp([], x0)
-    w0 = mpc._pack(mpc._guided_guess(x0, [], nlp), nlp)
+    nlp, params, w0 = mpc.solver_problem(mpc.path.start)
     stopped = run_solver(nlp, w0, params, nlp.fallback_solver(), time_limit=1e-9)
     assert stopped.cut and stopped.status == 'User_Requested_Stop'
     assert nlp.deadline is not None and nlp.deadline.at == math.inf  # cleared after the call
@@ -442,16 +443,15 @@ def test_fatrop_gets_fewer_iterations_when_the_full_limit_would_not_fit(
         monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
     """A start from which this horizon-3 NLP needs about 30 fatrop iterations (not 12)."""
     monkeypatch.setenv('MPC_LOCAL_PLANNER_CACHE', str(tmp_path))
-    mpc = PathReferenceMPC(Unicycle(), MpcConfig(horizon=3, max_solve_time=NO_TIME_LIMIT),
+    mpc = PathReferenceMPC(Unicycle(),
+                           MpcConfig(horizon=3,
+                                     solving=SolverSettings(max_solve_time=NO_TIME_LIMIT)),
                            path=paper_sinusoid())
     x0 = np.array([0.0, 0.0, 0.944])  # on the path's start, heading 0.5 mrad off
     mpc.prepare(0)
     mpc.wait_compiled()
-    nlp, params, _ = mpc._prepare_nlp([], x0)
+    nlp, params, w0 = mpc.solver_problem(x0, start=Start.CANDIDATE)
     assert nlp.compiled and nlp.library is not None
-    candidate = mpc._candidate(x0)
-    candidate = replace(candidate, mu=mpc._multipliers(candidate.x, [], nlp))
-    w0 = mpc._pack(candidate, nlp)
     assert iteration_levels(200) == [200, 100, 50, 25, 12]
     # not measured yet, or time for all: the full solver
     assert nlp.solver_within(1e-3) == (nlp.solver, 200)
@@ -478,7 +478,7 @@ def test_fatrop_gets_fewer_iterations_when_the_full_limit_would_not_fit(
 
 def test_the_time_per_iteration_rises_at_once_and_falls_slowly() -> None:
     mpc = paper_mpc(horizon=3)
-    nlp, _, _ = mpc._prepare_nlp([], mpc.path.start)
+    nlp = mpc.solver_problem(mpc.path.start).nlp
     nlp.iteration_time = 0.0
     nlp.record_iterations(0.01, 10)
     assert nlp.iteration_time == pytest.approx(1e-3)
@@ -501,16 +501,17 @@ THREE_BOXES = [ConvexPolygon.from_box(0.4, -0.3, 0.6, 0.0),
 def test_a_prepared_step_never_builds_an_nlp_shape_and_holds_the_nearest_obstacles(
         monkeypatch: pytest.MonkeyPatch) -> None:
     # every obstacle in reach is active: three, but only shapes for up to one are prepared
-    config = MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT, activation_distance=5.0)
+    config = MpcConfig(solving=SolverSettings(compile=False, max_solve_time=NO_TIME_LIMIT,
+                                              activation_distance=5.0))
     mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
     mpc.prepare(1)
-    prepared = set(mpc._nlps)
+    prepared = set(mpc.nlps)
     formulated: list[tuple] = []
     monkeypatch.setattr(step_module, 'formulate', lambda *args: formulated.append(args))
     x = mpc.path.start.copy()
     for _ in range(3):  # nothing is built, step after step
         solution = mpc.solve(x)
-        assert set(mpc._nlps) == prepared
+        assert set(mpc.nlps) == prepared
         assert len(mpc.last_active_obstacles) == 1  # the nearest one held
         assert solution.source is not PlanSource.STOP
         plan = np.asarray(solution.x_pred)
@@ -521,21 +522,23 @@ def test_a_prepared_step_never_builds_an_nlp_shape_and_holds_the_nearest_obstacl
 
 
 def test_before_prepare_a_step_builds_the_shape_it_needs() -> None:
-    config = MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT, activation_distance=5.0)
+    config = MpcConfig(solving=SolverSettings(compile=False, max_solve_time=NO_TIME_LIMIT,
+                                              activation_distance=5.0))
     mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
     mpc.solve(mpc.path.start)
-    assert (3, 4) in mpc._nlps
+    assert (3, 4) in mpc.nlps
     assert len(mpc.last_active_obstacles) == 3
 
 
 def test_a_shape_never_solved_is_bounded_by_its_siblings_time_per_iteration() -> None:
-    config = MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT, activation_distance=5.0)
+    config = MpcConfig(solving=SolverSettings(compile=False, max_solve_time=NO_TIME_LIMIT,
+                                              activation_distance=5.0))
     mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
     mpc.prepare(3)
-    one, three = mpc._nlps[(1, 4)], mpc._nlps[(3, 4)]
+    one, three = mpc.nlps[(1, 4)], mpc.nlps[(3, 4)]
     one.iteration_time = 0.002
     assert three.iteration_time == 0.0
-    mpc._prepare_nlp(THREE_BOXES, mpc.path.start)
+    assert mpc.solver_problem(mpc.path.start, THREE_BOXES).nlp is three
     size = three.formulation.lbw.shape[0] / one.formulation.lbw.shape[0]
     assert size > 1.0
     assert three.iteration_time == pytest.approx(0.002 * size)
@@ -544,10 +547,10 @@ def test_a_shape_never_solved_is_bounded_by_its_siblings_time_per_iteration() ->
 # ----------------------------------------------------------------------------- big stages
 def test_shapes_with_stages_beyond_the_fatrop_limit_are_solved_by_ipopt() -> None:
     # the paper's MPC: a stage of 6 variables, 4 more per box (its faces' multipliers)
-    config = MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT, activation_distance=5.0,
-                       fatrop_stage_limit=10)
+    config = MpcConfig(solving=SolverSettings(compile=False, max_solve_time=NO_TIME_LIMIT,
+                                              activation_distance=5.0, fatrop_stage_limit=10))
     mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
-    small, big = mpc._nlp_for(1, 4), mpc._nlp_for(2, 4)
+    small, big = mpc.nlp_for(1, 4), mpc.nlp_for(2, 4)
     assert stage_size(small.formulation.structure) == 10
     assert (small.plugin, small.has_fallback) == ('fatrop', True)
     assert stage_size(big.formulation.structure) == 14
@@ -565,8 +568,8 @@ def test_a_solve_the_budget_cut_goes_on_at_the_next_step_while_the_robot_stands_
     # on from where the cut try stopped and finishes; started over, it never does (the
     # continuation is primal only: with 5 neither finishes)
     def steps_to_move(continuing: bool) -> int | None:
-        config = MpcConfig(compile=False, activation_distance=5.0, budget='iterations',
-                           max_solve_iterations=10)
+        config = MpcConfig(solving=SolverSettings(compile=False, activation_distance=5.0,
+                                                  budget='iterations', max_solve_iterations=10))
         mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES,
                                path=paper_sinusoid())
         if not continuing:
@@ -590,7 +593,8 @@ def test_after_a_stand_still_plan_the_next_step_starts_as_from_rest(
     # a step from rest that does not solve applies the stand-still candidate; the step after
     # it must try IPOPT's cold start first, as from rest, not the warm tries from that
     # candidate (fatrop failed from it at every step after a re-plan at 2 m/s on BARN)
-    config = MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT, activation_distance=5.0)
+    config = MpcConfig(solving=SolverSettings(compile=False, max_solve_time=NO_TIME_LIMIT,
+                                              activation_distance=5.0))
     mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
     monkeypatch.setattr(step_module, 'run_solver', FakeSolver(iterations=1))
     x = mpc.path.start.copy()
@@ -604,8 +608,8 @@ def test_a_cut_solve_goes_on_after_a_step_that_stopped_the_robot() -> None:
     # off the path no stand-still candidate is feasible: a step that does not solve stops
     # (and starts over); the robot stands still, so the cut solve still goes on next step
     # (world 43 at 2 m/s on BARN stood still for good without it)
-    config = MpcConfig(compile=False, activation_distance=5.0, budget='iterations',
-                       max_solve_iterations=10)
+    config = MpcConfig(solving=SolverSettings(compile=False, activation_distance=5.0,
+                                              budget='iterations', max_solve_iterations=10))
     mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
     x = mpc.path.start + np.array([0.0, 0.05, 0.0])
     stopped = mpc.solve(x)

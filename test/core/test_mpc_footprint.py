@@ -26,7 +26,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import Decision, PathReferenceMPC, PlanSource
@@ -60,8 +60,8 @@ NO_TIME_LIMIT = 3600.0
 
 def jackal_config(**changes: object) -> MpcConfig:
     """The Jackal's footprint, interpreted functions (gcc would take longer than the test)."""
-    return MpcConfig(footprint=JACKAL_VERTICES, compile=False,
-                     max_solve_time=NO_TIME_LIMIT).with_changes(**changes)
+    return MpcConfig(footprint=JACKAL_VERTICES, solving=SolverSettings(
+        compile=False, max_solve_time=NO_TIME_LIMIT)).with_changes(**changes)
 
 
 def clearance(poses: np.ndarray, obstacles: list[ConvexPolygon]) -> np.ndarray:
@@ -236,11 +236,13 @@ def test_the_reach_counts_the_bodys_farthest_corner() -> None:
     beyond = ConvexPolygon.from_box(reach + JACKAL.radius + 0.01, 0.5, 3.0, 0.7)
     polygon = PathReferenceMPC(Unicycle(), jackal_config(), obstacles=[inside, beyond],
                                path=paper_sinusoid())
-    assert polygon._reachable(np.zeros(3)).obstacles == [inside]
-    point = PathReferenceMPC(Unicycle(), MpcConfig(compile=False, collision_margin=0.0),
+    assert polygon.reachable_obstacles(np.zeros(3)) == [inside]
+    point = PathReferenceMPC(Unicycle(),
+                             MpcConfig(collision_margin=0.0,
+                                       solving=SolverSettings(compile=False)),
                              obstacles=[inside, beyond], path=paper_sinusoid())
     assert polygon.inflated_obstacles == (inside, beyond)  # no radius, no default margin
-    assert point._reachable(np.zeros(3)).obstacles == []
+    assert point.reachable_obstacles(np.zeros(3)) == []
 
 
 def test_an_explicit_collision_margin_inflates_the_obstacles_of_a_polygon() -> None:
@@ -304,7 +306,7 @@ def gap_path(offset: float) -> ReferencePath:
 ])
 def test_the_jackal_drives_through_a_gap_of_0_60_m(solver: str,
                                                    activation: float | None) -> None:
-    config = jackal_config(solver=solver, activation_distance=activation)
+    config = jackal_config().with_solving(solver=solver, activation_distance=activation)
     path = gap_path(0.3)
     mpc = PathReferenceMPC(Unicycle(), config, obstacles=GAP_BOXES, path=path)
     run = drive(mpc, np.array([0.0, 0.3, 0.0]), 70, GAP_BOXES)
@@ -376,18 +378,21 @@ def test_the_jackal_reaches_the_target_in_the_papers_world_on_a_path_it_fits() -
 
 def test_changing_the_footprint_rebuilds_the_nlp() -> None:
     path = paper_sinusoid()
-    mpc = PathReferenceMPC(Unicycle(), MpcConfig(compile=False, max_solve_time=NO_TIME_LIMIT),
+    mpc = PathReferenceMPC(Unicycle(),
+                           MpcConfig(solving=SolverSettings(compile=False,
+                                                            max_solve_time=NO_TIME_LIMIT)),
                            obstacles=[PAPER_BOX], path=path)
     mpc.solve(path.start)
-    assert mpc._last_nlp.formulation.robot_faces == 0
+    assert mpc.last_nlp.formulation.robot_faces == 0
     mpc.update_config(mpc.config.with_changes(footprint=[list(v) for v in JACKAL_VERTICES]))
-    assert not mpc._nlps  # structural: rebuilt at the next solve
+    assert not mpc.nlps  # structural: rebuilt at the next solve
     sol = mpc.solve(path.start)
-    assert mpc._last_nlp.formulation.robot_faces == 4
+    assert mpc.last_nlp.formulation.robot_faces == 4
     assert sol.source is PlanSource.SOLVER
     # the same polygon again (as a tuple now) changes nothing: the plan is kept
     mpc.update_config(mpc.config.with_changes(footprint=JACKAL_VERTICES))
-    assert mpc._nlps and mpc._plan is not None
+    assert mpc.nlps
+    assert mpc.solve(path.start).lyapunov_ok is not None  # the plan's value was kept
     mpc.update_config(mpc.config.with_changes(footprint=()))
     assert mpc.solve(path.start).source is PlanSource.SOLVER
-    assert mpc._last_nlp.formulation.robot_faces == 0
+    assert mpc.last_nlp.formulation.robot_faces == 0

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC, PlanSource
@@ -45,8 +45,8 @@ STATES = json.loads((Path(__file__).parent / 'data' / 'barn_real_replan_at_speed
 def test_a_re_plan_at_speed_with_bounded_input_rates_is_solved_within_a_step(world: str) -> None:
     case = STATES[world]
     config = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
-                       robot_radius=0.0, budget='iterations', max_solve_iterations=100,
-                       collision_margin=0.03, max_accel=(4.0, 12.0))
+                       robot_radius=0.0, collision_margin=0.03, max_accel=(4.0, 12.0),
+                       solving=SolverSettings(budget='iterations', max_solve_iterations=100))
     path = WaypointPath(np.array(case['waypoints']), start_heading=case['start_heading'],
                         goal_heading=case['goal_heading'], turn_length=case['turn_length'],
                         capacity=case['capacity'])
@@ -54,7 +54,7 @@ def test_a_re_plan_at_speed_with_bounded_input_rates_is_solved_within_a_step(wor
                            obstacles=[ConvexPolygon.from_vertices(np.array(v))
                                       for v in case['obstacles']], path=path)
     # set_path keeps the inputs of the last plan on the old path (the motion in hand)
-    mpc._carried_inputs = np.array(case['carried'])
+    mpc.set_path(path, carried_inputs=np.array(case['carried']))
     solution = mpc.solve(np.array(case['x']), previous_input=np.array(case['u_before']))
     assert solution.source is PlanSource.SOLVER, solution.status
     rate = np.array(config.max_accel) * config.step

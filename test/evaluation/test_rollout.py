@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC
@@ -190,7 +190,8 @@ def test_the_same_rollout_twice_is_the_same_with_the_iteration_budget() -> None:
     assert EVALUATION_BUDGET == 'iterations'
     path, model = paper_sinusoid(), Unicycle()
     box = ConvexPolygon.from_box(1.0, -1.0, 1.5, 1.0)
-    config = MpcConfig(compile=False, budget=EVALUATION_BUDGET, max_solve_iterations=12)
+    config = MpcConfig(solving=SolverSettings(compile=False, budget=EVALUATION_BUDGET,
+                                              max_solve_iterations=12))
 
     def unreadable() -> float:
         msg = 'the clock was read'

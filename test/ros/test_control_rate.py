@@ -97,7 +97,7 @@ def start(ros, **params) -> tuple[MpcControllerNode, object, Base]:
 
 def test_the_timer_runs_at_control_frequency_and_the_mpc_solves_once_per_step(ros) -> None:
     node, probe, base = start(ros)
-    assert node._timer.timer_period_ns == round(1e9 / FREQUENCY)
+    assert node.control_period_ns == round(1e9 / FREQUENCY)
     first, since = len(probe.diagnostics), base.t
     span = 1.0  # simulated seconds counted: five steps, twenty control periods
     assert base.run_until(lambda: base.t >= since + span + 2 * DT)

@@ -184,6 +184,16 @@ def test_map_obstacles_a_polygons_corner_can_reach_are_handed_to_the_mpc(ros) ->
 
 def test_max_solve_time_reaches_the_mpc_config_and_minus_one_means_half_the_step() -> None:
     config, _, _ = build_settings({**DEFAULTS, 'max_solve_time': 0.05})
-    assert config.max_solve_time == 0.05 and config.solve_budget() == 0.05
+    assert config.solving.max_solve_time == 0.05 and config.solve_budget() == 0.05
     config, _, _ = build_settings(dict(DEFAULTS))
-    assert config.max_solve_time is None and config.solve_budget() == DEFAULTS['step'] / 2
+    assert config.solving.max_solve_time is None and config.solve_budget() == DEFAULTS['step'] / 2
+
+
+def test_the_flat_parameters_fill_the_solver_settings_and_every_reason_is_given() -> None:
+    config, _, _ = build_settings({**DEFAULTS, 'solver': 'ipopt', 'max_iterations': 50,
+                                   'obstacle_slots': 2})
+    assert (config.solving.solver, config.solving.max_iterations,
+            config.solving.obstacle_slots) == ('ipopt', 50, 2)
+    # a problem value and a solver value both wrong: both reasons, not the first only
+    with pytest.raises(ValueError, match=r'solver must be one of .*step must be > 0'):
+        build_settings({**DEFAULTS, 'solver': 'sqp', 'step': 0.0})

@@ -511,12 +511,12 @@ def test_controller_survives_random_scans_and_grids_and_publishes_bounded_twists
             msg.ranges = event[2]
             if kind == 'broken scan':
                 setattr(msg, *event[3])
-            stamp, before = stamp_to_seconds(msg.header.stamp), node._scan_stamp
+            stamp, before = stamp_to_seconds(msg.header.stamp), node.scan_stamp
             node.scan_callback(serialize_message(msg))
             if kind == 'broken scan':
-                assert node._scan_stamp == before, event[3]  # refused
+                assert node.scan_stamp == before, event[3]  # refused
             elif node.pose_at(stamp) is not None and (before is None or stamp >= before):
-                assert node._scan_stamp == stamp  # used (only an older scan is skipped)
+                assert node.scan_stamp == stamp  # used (only an older scan is skipped)
         elif kind == 'good odom':
             msg = Odometry()
             msg.header.frame_id = 'odom'

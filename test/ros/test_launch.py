@@ -159,7 +159,7 @@ def _make_node(executable: str, ros: Any) -> Any:
 
 def _declared_parameters(executable: str, ros: Any) -> set[str]:
     """Return the parameter names a node of the executable declares (the real node)."""
-    return set(_make_node(executable, ros)._parameters)
+    return set(_make_node(executable, ros).list_parameters([], 0).names)  # 0: every depth
 
 
 def test_there_are_a_simulation_and_a_navigation_launch_file() -> None:

@@ -220,7 +220,7 @@ def test_controller_takes_nav2s_goal_checker_parameters_at_run_time(ros) -> None
 def test_controller_takes_its_rate_and_the_bases_limits_at_run_time(ros) -> None:
     controller, _ = make_controller(ros)
     # the defaults: 20 Hz, no limits ([0.0, 0.0] is none: a double array cannot be None)
-    assert controller._timer.timer_period_ns == 50_000_000
+    assert controller.control_period_ns == 50_000_000
     assert controller.controller.settings.control_frequency == 20.0
     assert controller.controller.settings.max_decel == (math.inf, math.inf)
     assert controller.controller.config.max_accel is None
@@ -228,13 +228,13 @@ def test_controller_takes_its_rate_and_the_bases_limits_at_run_time(ros) -> None
                                          Parameter('max_accel', value=[2.0, 3.0]),
                                          Parameter('max_decel', value=[1.5, 2.5])])
     assert all(r.successful for r in results), [r.reason for r in results]
-    assert controller._timer.timer_period_ns == 100_000_000  # the timer was restarted
+    assert controller.control_period_ns == 100_000_000  # the timer was restarted
     assert controller.controller.settings.control_frequency == 10.0
     assert controller.controller.settings.max_decel == (1.5, 2.5)
     assert controller.controller.config.max_accel == (2.0, 3.0)  # the NLPs rebuild
     result = controller.set_parameters([Parameter('step', value=0.1)])[0]
     assert result.successful, result.reason
-    assert controller._timer.timer_period_ns == 100_000_000  # control_frequency's, not step's
+    assert controller.control_period_ns == 100_000_000  # control_frequency's, not step's
     result = controller.set_parameters([Parameter('max_accel', value=[0.0, 0.0])])[0]
     assert result.successful, result.reason
     assert controller.controller.config.max_accel is None

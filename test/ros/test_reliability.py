@@ -46,7 +46,8 @@ from mpc_local_planner.core.control_output import Reason
 from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PlanSource
-from mpc_local_planner.core.mpc.solution import SolveAttempt
+from mpc_local_planner.core.mpc import step as step_module
+from mpc_local_planner.core.mpc.backends import SolverRun
 from mpc_local_planner.core.obstacles import first_blocked_segment
 from mpc_local_planner.ros.closed_loop_parameters import MODULES
 from mpc_local_planner.ros.closed_loop_processes import spawn_node
@@ -352,10 +353,10 @@ def test_simulator_stops_the_robot_when_cmd_vel_stops_for_cmd_timeout(ros) -> No
 
 
 # ----------------------------------------------------------------------------- 3. solver failure
-def failing_solver(nlp, w0, params, active, solver=None):
-    """Stand-in for PathReferenceMPC._run_solver: every NLP solve fails (IPOPT's too)."""
-    return SolveAttempt(verified=False, w=np.asarray(w0, dtype=float), value=math.inf,
-                        status='injected failure', iterations=0, seconds=0.0)
+def failing_solver(nlp, w0, params, solver=None, **limits):
+    """Stand-in for backends.run_solver in the MPC's step: every NLP solve fails (IPOPT's too)."""
+    return SolverRun(w=np.asarray(w0, dtype=float).reshape(-1), value=math.inf, success=False,
+                     status='injected failure', iterations=0, seconds=0.0)
 
 
 def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_then_stop(
@@ -379,7 +380,7 @@ def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_th
     verified = node.last_output.solution  # the last plan the solver gave
     patched_at = node.get_clock().now().nanoseconds * 1e-9
     failures_before = node.controller.solver_failures
-    monkeypatch.setattr(node.controller.mpc, '_run_solver', failing_solver)
+    monkeypatch.setattr(step_module, 'run_solver', failing_solver)
 
     def after_patch() -> list[dict]:
         return [d for d in probe.diagnostics if d.stamp > patched_at]

@@ -190,7 +190,7 @@ def test_a_wall_seen_by_the_laser_is_placed_with_the_pose_at_the_scan_stamp_and_
     def wall_shown() -> bool:
         return any(len(v) and np.min(v[:, 0]) < 2.0 for v in world.raw())
 
-    assert ros.spin_until(lambda: world.node._scan_time is not None, timeout=10.0)
+    assert ros.spin_until(lambda: world.node.scan_time is not None, timeout=10.0)
     assert world.run_until(wall_shown, timeout=20.0)
     pieces = [v for v in world.raw() if len(v)]
     near = np.vstack(pieces)
@@ -251,12 +251,12 @@ def test_a_scan_newer_than_the_odometry_is_placed_along_its_twist_or_waits_for_o
         world.probe.publish_clock(sent['clock'])
 
     def odometry_received() -> bool:
-        return node._odom_state is not None and node._odom_state[0] >= x(
+        return node.odom_state is not None and node.odom_state[0] >= x(
             sent['odometry']) - 1e-9
 
     def placed(stamp: float, markers_before: int) -> list[np.ndarray]:
         """The raw markers once the scan stamped stamp is used and the markers resent."""
-        assert ros.spin_until(lambda: (node._scan_stamp or 0.0) >= stamp - 1e-9,
+        assert ros.spin_until(lambda: (node.scan_stamp or 0.0) >= stamp - 1e-9,
                               timeout=10.0)
         deadline = time.monotonic() + 30.0
         while not (len(world.markers) > markers_before and any(len(p) for p in world.raw())):
@@ -281,7 +281,7 @@ def test_a_scan_newer_than_the_odometry_is_placed_along_its_twist_or_waits_for_o
     clock(t_scan)
     world.scan_pub.publish(world.scan_message(np.array([x(t_scan), 0.0, 0.0]), t_scan))
     on_the_wall(placed(t_scan, len(world.markers)))
-    scan_time = node._scan_time
+    scan_time = node.scan_time
     assert scan_time == pytest.approx(t_scan)
 
     # the odometry catches up with the clock, then a scan 0.5 s after the newest: beyond
@@ -293,17 +293,17 @@ def test_a_scan_newer_than_the_odometry_is_placed_along_its_twist_or_waits_for_o
     t_ahead = t0 + 0.5
     clock(t_ahead)
     world.scan_pub.publish(world.scan_message(np.array([x(t_ahead), 0.0, 0.0]), t_ahead))
-    assert ros.spin_until(lambda: len(getattr(node, '_pending_scans', ())) == 1
-                          or node._scan_stamp > t_scan, timeout=10.0)
-    assert node._scan_stamp == pytest.approx(t_scan)  # not placed with the pose at t0
-    assert node._scan_time == scan_time  # and it renews nothing while it waits
+    assert ros.spin_until(lambda: node.pending_scans == 1
+                          or node.scan_stamp > t_scan, timeout=10.0)
+    assert node.scan_stamp == pytest.approx(t_scan)  # not placed with the pose at t0
+    assert node.scan_time == scan_time  # and it renews nothing while it waits
     # the odometry's burst: 20 Hz from t0 to past the scan, all at once
     for k in range(1, 12):
         odometry(t0 + 0.05 * k)
     clock(sent['odometry'])
     on_the_wall(placed(t_ahead, len(world.markers)))
-    assert not node._pending_scans
-    assert node._scan_time == pytest.approx(t_ahead)
+    assert node.pending_scans == 0
+    assert node.scan_time == pytest.approx(t_ahead)
 
 
 # ----------------------------------------------------------------------------- (b)

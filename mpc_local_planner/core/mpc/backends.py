@@ -16,12 +16,12 @@
 
 The formulation does not depend on the backend: fatrop (structure-exploiting, the default)
 and IPOPT (the reference, and the fallback when fatrop fails) get the same NLP. With
-config.compile the NLP's functions are generated as C, compiled by gcc in a daemon thread and
+settings.compile the NLP's functions are generated as C, compiled by gcc in a daemon thread and
 kept on disk (compilation.py), so that a restarted controller loads them at once; until the
 library is there, CasADi's interpreted functions run.
 
 Each solver call can be given a time limit and an iteration limit (run_solver's time_limit
-and iteration_limit: what is left of the control step's budget, MpcConfig.budget). IPOPT is
+and iteration_limit: what is left of the control step's budget, SolverSettings.budget). IPOPT is
 stopped by an iteration callback that reads the limits of the call in progress (its own
 max_wall_time and max_iter options are fixed when the solver is built): past the time, or
 after so many iterations exactly. Fatrop has no time limit (CasADi refuses max_wall_time and
@@ -49,7 +49,7 @@ from typing import Any, Callable, NamedTuple
 import casadi as ca
 import numpy as np
 
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import SolverSettings
 from mpc_local_planner.core.mpc import compilation
 from mpc_local_planner.core.mpc.formulation import Formulation
 
@@ -59,7 +59,7 @@ __all__ = ['Nlp', 'SolverRun', 'backend_options', 'build_nlp', 'compile_flags',
 _LOG = logging.getLogger(__name__)
 
 # Iteration limits of the copies a call with little time left runs instead of the full solver
-# (fatrop: no time limit of its own), as fractions of config.max_iterations: halving keeps the
+# (fatrop: no time limit of its own), as fractions of settings.max_iterations: halving keeps the
 # copies few (one per level and NLP, built when first needed) and wastes at most half of what
 # the time left would allow.
 ITERATION_LEVELS = (0.5, 0.25, 0.125, 0.0625)
@@ -73,7 +73,7 @@ ITERATION_TIME_DECAY = 0.9
 _USER_STOP = 'User_Requested_Stop'
 
 
-def _ipopt_options(config: MpcConfig, *, cold: bool = False) -> dict[str, Any]:
+def _ipopt_options(settings: SolverSettings, *, cold: bool = False) -> dict[str, Any]:
     """Return IPOPT's options: from the proof's candidate (warm), or from an infeasible start.
 
     Warm: the initial guess is the candidate, feasible by construction, so the interior-point
@@ -87,8 +87,8 @@ def _ipopt_options(config: MpcConfig, *, cold: bool = False) -> dict[str, Any]:
     options = {
         'ipopt.print_level': 0,
         'ipopt.sb': 'yes',
-        'ipopt.max_iter': config.max_iterations,
-        'ipopt.tol': config.tolerance,
+        'ipopt.max_iter': settings.max_iterations,
+        'ipopt.tol': settings.tolerance,
         'ipopt.acceptable_tol': 1e-6,
     }
     if cold:
@@ -99,7 +99,7 @@ def _ipopt_options(config: MpcConfig, *, cold: bool = False) -> dict[str, Any]:
     return options
 
 
-def _fatrop_options(config: MpcConfig, structure: dict) -> dict[str, Any]:
+def _fatrop_options(settings: SolverSettings, structure: dict) -> dict[str, Any]:
     return {
         'structure_detection': 'manual',
         'N': structure['N'],
@@ -112,34 +112,34 @@ def _fatrop_options(config: MpcConfig, structure: dict) -> dict[str, Any]:
         'fatrop': {
             'print_level': 0,
             'mu_init': 1e-2,
-            'max_iter': config.max_iterations,
-            'tol': config.tolerance,
+            'max_iter': settings.max_iterations,
+            'tol': settings.tolerance,
         },
     }
 
 
-def backend_options(config: MpcConfig, structure: dict) -> tuple[str, dict[str, Any]]:
-    """Return (nlpsol plugin, options) for config.solver.
+def backend_options(settings: SolverSettings, structure: dict) -> tuple[str, dict[str, Any]]:
+    """Return (nlpsol plugin, options) for settings.solver.
 
     Args:
-        config: the solver's name, iteration limit, tolerance and extra options.
+        settings: the solver's name, iteration limit, tolerance and extra options.
         structure: the formulation's stage sizes (Formulation.structure), for fatrop.
 
     Raises:
-        ValueError: if config.solver is not a known backend.
+        ValueError: if settings.solver is not a known backend.
 
     """
     common = {'print_time': False, 'error_on_fail': False}
-    name = config.solver
+    name = settings.solver
     if name == 'ipopt':
-        plugin, options = 'ipopt', _ipopt_options(config)
+        plugin, options = 'ipopt', _ipopt_options(settings)
     elif name == 'fatrop':
-        plugin, options = 'fatrop', _fatrop_options(config, structure)
+        plugin, options = 'fatrop', _fatrop_options(settings, structure)
     else:
         msg = f'unknown solver {name!r}'
         raise ValueError(msg)
     options.update(common)
-    options.update(config.solver_options)
+    options.update(settings.solver_options)
     return plugin, options
 
 
@@ -335,7 +335,7 @@ def _with_iteration_limit(options: dict[str, Any], limit: int) -> dict[str, Any]
 
 
 def _iteration_limit(plugin: str, options: dict[str, Any], default: int) -> int:
-    """Return the iteration limit the options give the plugin (config.solver_options may)."""
+    """Return the iteration limit the options give the plugin (settings.solver_options may)."""
     inner = options.get(plugin, {})
     if isinstance(inner, dict) and 'max_iter' in inner:
         return int(inner['max_iter'])
@@ -347,36 +347,36 @@ def stage_size(structure: dict) -> int:
     return max(nx + nu for nx, nu in zip(structure['nx'], structure['nu'], strict=True))
 
 
-def build_nlp(formulation: Formulation, config: MpcConfig) -> Nlp:
-    """Create the solver of config.solver for the formulation (and start compiling it).
+def build_nlp(formulation: Formulation, settings: SolverSettings) -> Nlp:
+    """Create the solver of settings.solver for the formulation (and start compiling it).
 
-    fatrop with stages larger than config.fatrop_stage_limit is IPOPT instead (see there):
+    fatrop with stages larger than settings.fatrop_stage_limit is IPOPT instead (see there):
     with 10 boxes held, fatrop's iterations were 3x IPOPT's and a warm solve overran the
     step's budget, where even fatrop's smallest iteration limit did not fit.
     """
     start = time.perf_counter()
     problem, structure = formulation.problem, formulation.structure
-    if config.solver == 'fatrop' and stage_size(structure) > config.fatrop_stage_limit:
-        config = config.with_changes(solver='ipopt')
-    plugin, options = backend_options(config, structure)
+    if settings.solver == 'fatrop' and stage_size(structure) > settings.fatrop_stage_limit:
+        settings = settings.with_changes(solver='ipopt')
+    plugin, options = backend_options(settings, structure)
     deadline = _Deadline(problem)
     if plugin == 'ipopt':
         options.setdefault('iteration_callback', deadline)
     nlp = Nlp(formulation=formulation, solver=ca.nlpsol('mpc', plugin, problem, options),
-              backend=config.solver, plugin=plugin, options=options, deadline=deadline,
-              max_iterations=_iteration_limit(plugin, options, config.max_iterations))
-    if config.solver != 'ipopt':
+              backend=settings.solver, plugin=plugin, options=options, deadline=deadline,
+              max_iterations=_iteration_limit(plugin, options, settings.max_iterations))
+    if settings.solver != 'ipopt':
         # a structure-exploiting backend is fast but less robust far from its warm start
         # (seen: fatrop failing near the box's corner under timing jitter); IPOPT, the
         # reference, gets the same problem before the controller gives up. Built on first
         # use: building it with every NLP doubled the start-up time.
-        fb_plugin, fb_options = backend_options(config.with_changes(solver='ipopt'), structure)
+        fb_plugin, fb_options = backend_options(settings.with_changes(solver='ipopt'), structure)
         fb_options.setdefault('iteration_callback', deadline)
         nlp.fallback_factory = lambda: ca.nlpsol('mpc_fallback', fb_plugin, problem, fb_options)
-    cold_options = {**_ipopt_options(config, cold=True), 'print_time': False,
+    cold_options = {**_ipopt_options(settings, cold=True), 'print_time': False,
                     'error_on_fail': False, 'iteration_callback': deadline}
     nlp.cold_factory = lambda: ca.nlpsol('mpc_cold', 'ipopt', problem, cold_options)
-    if config.compile:
+    if settings.compile:
         _start_compilation(nlp)
     nlp.build_time_s = time.perf_counter() - start
     return nlp

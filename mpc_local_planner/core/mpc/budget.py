@@ -14,7 +14,7 @@
 
 """The budget of one control step's solving, and what a solver try costs before it runs.
 
-Seconds of a clock (MpcConfig.budget 'wall', the robot's: config.solve_budget(),
+Seconds of a clock (SolverSettings.budget 'wall', the robot's: config.solve_budget(),
 max_solve_time, half the period by default, counted from the start of solve()), or solver
 iterations ('iterations', the evaluation's: config.solve_iterations(), spent by the
 iterations each try makes; the clock is never read, builds are free and a step waits for its
@@ -62,7 +62,7 @@ class Budget:
     @classmethod
     def of(cls, config: MpcConfig, clock: Callable[[], float]) -> Budget:
         """Return the budget of one step under config."""
-        if config.budget == 'iterations':
+        if config.solving.budget == 'iterations':
             return cls(clock, iterations=config.solve_iterations())
         return cls(clock, seconds=config.solve_budget())
 

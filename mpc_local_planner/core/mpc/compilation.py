@@ -14,7 +14,7 @@
 
 """Compiling an NLP's functions to C, and the cache of compiled libraries on disk.
 
-With MpcConfig.compile the NLP's functions are generated as C (nlp_source), compiled by gcc
+With SolverSettings.compile the NLP's functions are generated as C (nlp_source), compiled by gcc
 (the flags: COMPILE_FLAGS, NO_OBSTACLE_COMPILE_FLAGS) in one daemon thread, one compilation
 at a time (submit_compilation; a step that needs one still queued runs it itself, wait_for),
 and kept in compile_cache_dir() under the hash of their source (library_path), found again
@@ -37,12 +37,14 @@ import subprocess
 import tempfile
 import threading
 import time
+from typing import Callable
 
 import casadi as ca
 
-__all__ = ['COMPILE_FLAGS', 'NO_OBSTACLE_COMPILE_FLAGS', 'compile_cache_dir',
-           'compile_wait_seconds', 'library_path', 'nlp_source', 'pointed_library',
-           'pointer_path', 'submit_compilation', 'wait_for', 'write_pointer']
+__all__ = ['COMPILE_FLAGS', 'NO_OBSTACLE_COMPILE_FLAGS', 'Compiler', 'compile_cache_dir',
+           'compile_library', 'compile_wait_seconds', 'library_path', 'nlp_source',
+           'pointed_library', 'pointer_path', 'run_compiler', 'submit_compilation',
+           'wait_for', 'write_pointer']
 
 # C compiler and flags for config.compile (compile_flags); CC overrides the compiler as usual.
 # NLPs with obstacle slots: -O0, not -O2: gcc took 5x less time on the Jackal's polygon NLPs
@@ -106,12 +108,18 @@ def library_path(source: str, flags: tuple[str, ...] = COMPILE_FLAGS) -> Path:
     return compile_cache_dir() / f'mpc_nlp_{key}.so'
 
 
+# What turns a C source into a library: (source, library, flags) -> library (run_compiler).
+Compiler = Callable[[str, Path, tuple[str, ...]], Path]
+
+
 class _CompileJob(Future):
     """A compilation: its result (the library) once run, by the queue or by a waiter."""
 
-    def __init__(self, source: str, library: Path, flags: tuple[str, ...]) -> None:
+    def __init__(self, source: str, library: Path, flags: tuple[str, ...],
+                 compiler: Compiler) -> None:
         super().__init__()
         self._work: tuple[str, Path, tuple[str, ...]] | None = (source, library, flags)
+        self._compiler = compiler
         self._claim = threading.Lock()
 
     def run(self) -> None:
@@ -121,7 +129,7 @@ class _CompileJob(Future):
         if work is None:
             return
         try:
-            self.set_result(_compile(*work))
+            self.set_result(compile_library(*work, compiler=self._compiler))
         except BaseException as err:  # handed to the waiting solver
             self.set_exception(err)
 
@@ -166,14 +174,16 @@ def _queue_worker() -> None:
 
 
 def submit_compilation(source: str, library: Path,
-                        flags: tuple[str, ...] = COMPILE_FLAGS) -> Future:
+                       flags: tuple[str, ...] = COMPILE_FLAGS, *,
+                       compiler: Compiler | None = None) -> Future:
     """Queue a compilation for the daemon thread: a node stopped with Ctrl-C must not wait.
 
     A ThreadPoolExecutor's workers are joined at interpreter exit, which kept a stopped
     controller alive for the whole compilation; a daemon thread is simply dropped (the
     library is renamed into place atomically, so an interrupted build leaves no bad file).
+    compiler runs the compiler (run_compiler when None), as in compile_library.
     """
-    job = _CompileJob(source, library, flags)
+    job = _CompileJob(source, library, flags, compiler or run_compiler)
     with _QUEUE_READY:
         if not _WORKER or not _WORKER[0].is_alive():
             _WORKER[:] = [threading.Thread(target=_queue_worker, name='mpc_compile',
@@ -184,22 +194,31 @@ def submit_compilation(source: str, library: Path,
     return job
 
 
-def _compile(source: str, library: Path, flags: tuple[str, ...] = COMPILE_FLAGS) -> Path:
+def compile_library(source: str, library: Path, flags: tuple[str, ...] = COMPILE_FLAGS, *,
+                    compiler: Compiler | None = None) -> Path:
     """Compile source into library (atomically: a half-written file is never loaded).
 
     Processes that want the same library (an evaluation's workers, two nodes) take turns on
     a lock file beside it: the first compiles, the others find the library when their turn
-    comes instead of running gcc on the same source at the same time.
+    comes instead of running gcc on the same source at the same time. compiler runs the
+    compiler (run_compiler when None; a test gives a stand-in).
     """
     library.parent.mkdir(parents=True, exist_ok=True)
     with open(library.with_suffix('.lock'), 'w') as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file is closed
         if library.exists():
             return library
-        return _run_compiler(source, library, flags)
+        return (compiler or run_compiler)(source, library, flags)
 
 
-def _run_compiler(source: str, library: Path, flags: tuple[str, ...] = COMPILE_FLAGS) -> Path:
+def run_compiler(source: str, library: Path, flags: tuple[str, ...] = COMPILE_FLAGS) -> Path:
+    """Run the system compiler ($CC, else gcc) on source with flags; return library.
+
+    Raises:
+        RuntimeError: if the compiler fails (with its message).
+        subprocess.TimeoutExpired: if it takes longer than ten minutes (it is killed).
+
+    """
     compiler = os.environ.get('CC', 'gcc')
     with tempfile.TemporaryDirectory(dir=library.parent) as tmp:
         c_file = Path(tmp) / 'mpc_nlp.c'

@@ -54,17 +54,25 @@ class PathReferenceMPC(MpcBase):
         """The reference path in force (None before one is set)."""
         return self._path
 
-    def set_path(self, path: ReferencePath) -> None:
+    def set_path(self, path: ReferencePath, carried_inputs: np.ndarray | None = None) -> None:
         """Use a new reference path; s restarts at the robot's projection onto it.
 
         The proof's candidate does not carry over (the old plan does not end on the new
         path), but the old plan's inputs do, as the guided start (_guided_guess): a robot
         re-planned at speed is carrying them out.
+
+        Args:
+            path: the new reference path.
+            carried_inputs: the inputs (N x nu) the robot is carrying out, for the guided
+                start; None: the old plan's if it moves (a recorded state gives its own).
+
         """
         previous = self._plan
         self._path = path
         self.reset()
-        if previous is not None and plan_moves(previous, math.inf):
+        if carried_inputs is not None:
+            self._carried_inputs = np.array(carried_inputs, dtype=float)
+        elif previous is not None and plan_moves(previous, math.inf):
             self._carried_inputs = previous.u.copy()
 
     def _require_path(self) -> ReferencePath:

@@ -48,7 +48,8 @@ from abc import ABC, abstractmethod
 from dataclasses import replace
 import math
 import time
-from typing import Callable, Sequence
+from types import MappingProxyType
+from typing import Callable, Mapping, NamedTuple, Sequence
 
 import casadi as ca
 import numpy as np
@@ -93,12 +94,20 @@ from mpc_local_planner.core.mpc.tries import Situation, Solver, solver_tries, St
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
 from mpc_local_planner.core.paths import wrap_angle
 
-__all__ = ['MpcBase']
+__all__ = ['MpcBase', 'SolverProblem']
 
 # Constraint-violation bound for accepting a solution or a candidate (metres, rad, m/s).
 FEASIBILITY_TOLERANCE = 1e-5
 # Re-solves with more obstacles when a solution came too close to one left out of the NLP.
 MAX_ACTIVATION_ROUNDS = 3
+
+
+class SolverProblem(NamedTuple):
+    """What a solve hands the solver (see MpcBase.solver_problem)."""
+
+    nlp: Nlp  # the NLP holding the obstacles
+    params: np.ndarray  # its parameter vector: state, weights, obstacles, terminal condition
+    w0: np.ndarray  # the start, packed as the NLP's decision vector
 
 
 class MpcBase(ABC):
@@ -150,11 +159,11 @@ class MpcBase(ABC):
     def backend(self) -> str:
         """The NLP backend of the last solve, '+compiled' once compiled.
 
-        config.solver, or IPOPT for a shape beyond config.fatrop_stage_limit.
+        config.solving.solver, or IPOPT for a shape beyond its fatrop_stage_limit.
         """
         nlp = self._last_nlp
         if nlp is None:
-            return self._config.solver
+            return self._config.solving.solver
         return nlp.backend + ('+compiled' if nlp.compiled else '')
 
     @property
@@ -166,6 +175,11 @@ class MpcBase(ABC):
     def last_active_obstacles(self) -> tuple[ConvexPolygon, ...]:
         """The inflated obstacles the last solve held as Farkas constraints (its NLP's)."""
         return self._last_active
+
+    @property
+    def last_nlp(self) -> Nlp | None:
+        """The NLP of the last solve (or solver_problem), None before the first."""
+        return self._last_nlp
 
     def update_config(self, config: MpcConfig) -> None:
         """Apply new settings at the next solve; shape changes rebuild the NLP there."""
@@ -183,10 +197,10 @@ class MpcBase(ABC):
         """Replace the obstacles (as described, not inflated).
 
         Raises:
-            ValueError: if an obstacle has more faces than config.faces_per_obstacle.
+            ValueError: if an obstacle has more faces than config.solving.faces_per_obstacle.
 
         """
-        faces = self._config.faces_per_obstacle
+        faces = self._config.solving.faces_per_obstacle
         for obstacle in obstacles:
             if obstacle.num_faces > faces:
                 msg = (f'an obstacle has {obstacle.num_faces} faces, more than '
@@ -272,21 +286,21 @@ class MpcBase(ABC):
         """Build the NLP of an obstacle shape for the settings in force."""
         terminal = self._terminal_condition()
         return build_nlp(formulate(self._model, self._config, terminal, slots, faces),
-                         self._config)
+                         self._config.solving)
 
     @property
-    def _nlps(self) -> dict[tuple[int, int], Nlp]:
-        """The NLPs built for the settings in force, by shape (slots, faces)."""
-        return self._shapes.built()
+    def nlps(self) -> Mapping[tuple[int, int], Nlp]:
+        """The NLPs built for the settings in force, by shape (slots, faces); read-only."""
+        return MappingProxyType(self._shapes.built())
 
-    def _nlp_for(self, slots: int, faces: int) -> Nlp:
+    def nlp_for(self, slots: int, faces: int) -> Nlp:
         """Return the NLP for this obstacle shape, built (or fetched from the cache) now."""
         return self._shapes.get((slots, faces))
 
     def _nlp_holding(self, active: list[ConvexPolygon]
                      ) -> tuple[Nlp, list[ConvexPolygon]]:
         """Return an NLP for the active obstacles and the ones it holds (see NlpShapes.hold)."""
-        return self._shapes.holding(active, self._config.faces_per_obstacle)
+        return self._shapes.holding(active, self._config.solving.faces_per_obstacle)
 
     def prepare(self, max_obstacles: int | None = None) -> None:
         """Build the NLPs for 0..max_obstacles obstacles in reach, so no control step waits.
@@ -300,16 +314,17 @@ class MpcBase(ABC):
         the NLP holds the nearest ones and the solution is checked against all of them.
 
         Args:
-            max_obstacles: the largest count to prepare (config.obstacle_slots by default).
+            max_obstacles: the largest count to prepare (config.solving.obstacle_slots by
+                default).
 
         """
-        c = self._config
+        c = self._config.solving
         count = c.obstacle_slots if max_obstacles is None else max_obstacles
         faces = sorted({4, c.faces_per_obstacle}
                        | {slot_shape([o], c.faces_per_obstacle)[1] for o in self._inflated})
         shapes = [(0, 0)] + [(k, f) for k in range(1, count + 1) for f in faces]
         for shape in shapes:
-            nlp = self._nlp_for(*shape)
+            nlp = self.nlp_for(*shape)
             nlp.fallback_solver()
             if shape[0]:
                 nlp.cold_solver()
@@ -317,7 +332,7 @@ class MpcBase(ABC):
 
     def wait_compiled(self) -> None:
         """Block until the background compilations of the built NLPs are done (or failed)."""
-        for nlp in self._nlps.values():
+        for nlp in self.nlps.values():
             nlp.finish_compilation(wait=True)
 
     def _prepare_nlp(self, active: list[ConvexPolygon], x0: np.ndarray, *,
@@ -336,7 +351,7 @@ class MpcBase(ABC):
         else:
             held = active
         # with an iteration budget, which functions run must not depend on timing either
-        nlp.finish_compilation(wait=self._config.budget == 'iterations')
+        nlp.finish_compilation(wait=self._config.solving.budget == 'iterations')
         if nlp.iteration_time <= 0.0:
             # never solved: its fatrop is bounded by its siblings' time per iteration
             nlp.iteration_time = self._shapes.iteration_time_estimate(nlp)
@@ -346,6 +361,35 @@ class MpcBase(ABC):
                                   obstacle_parameters(held, form.slots, form.faces),
                                   self._terminal_parameters(), self._input_before)
         return nlp, params, held
+
+    def solver_problem(self, x0: np.ndarray, obstacles: Sequence[ConvexPolygon] = (),
+                       start: Start = Start.GUIDED) -> SolverProblem:
+        """Return the NLP a solve from x0 holding these obstacles runs, its parameters, a start.
+
+        To run a solver outside solve() (backends.run_solver), as a benchmark or a test does.
+        The NLP is the one a step would pick (built now if need be; it becomes last_nlp).
+
+        Args:
+            x0: the measured state.
+            obstacles: the (inflated) obstacles to hold, nearest first.
+            start: Start.GUIDED (the guided start) or Start.CANDIDATE (the proof's shifted
+                candidate of the plan in force), with multipliers for the obstacles held.
+
+        Raises:
+            ValueError: for another start (those need a step in progress).
+
+        """
+        x0 = np.asarray(x0, dtype=float)
+        nlp, params, held = self._prepare_nlp(list(obstacles), x0)
+        if start is Start.GUIDED:
+            plan = self._guided_guess(x0, held, nlp)
+        elif start is Start.CANDIDATE:
+            plan = self._candidate(x0)
+            plan = replace(plan, mu=self._multipliers(plan.x, held, nlp))
+        else:
+            msg = f'solver_problem gives the guided or the candidate start, not {start}'
+            raise ValueError(msg)
+        return SolverProblem(nlp, params, self._pack(plan, nlp))
 
     def _pack(self, plan: Plan, nlp: Nlp) -> np.ndarray:
         form = nlp.formulation
@@ -362,6 +406,10 @@ class MpcBase(ABC):
     def _speed_bound(self) -> float:
         return float(np.max(np.abs(self._model.u_max[:1])))
 
+    def reachable_obstacles(self, x0: np.ndarray) -> list[ConvexPolygon]:
+        """Return the inflated obstacles the horizon can reach from x0, nearest first."""
+        return list(self._reachable(np.asarray(x0, dtype=float)).obstacles)
+
     def _reachable(self, x0: np.ndarray) -> ObstacleSet:
         """Return the inflated obstacles the horizon can reach, nearest first.
 
@@ -375,8 +423,8 @@ class MpcBase(ABC):
 
     def _activation_distance(self) -> float:
         c = self._config
-        if c.activation_distance is not None:
-            return c.activation_distance
+        if c.solving.activation_distance is not None:
+            return c.solving.activation_distance
         # half a step (v_max h / 2): few re-solves with few obstacles in the NLP, where a
         # wider band holds many more and builds many more NLP shapes (see
         # docs/design/mpc.md, section "Default activation distance")
@@ -581,7 +629,7 @@ class MpcBase(ABC):
             # solution stands if it clears every reachable obstacle (feasible for the full
             # problem, then)
             if (round_ == MAX_ACTIVATION_ROUNDS or not self._shapes.holds_more(
-                    active + missed, held, self._config.faces_per_obstacle)
+                    active + missed, held, self._config.solving.faces_per_obstacle)
                     or not self._budget.allows()):
                 if self._clearance.penetration(states, inputs, reachable) > FEASIBILITY_TOLERANCE:
                     attempt = attempt._replace(
