@@ -27,7 +27,8 @@ from typing import Any, NamedTuple, Sequence
 
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
 
-__all__ = ['BUDGETS', 'CostWeights', 'MpcConfig', 'STRUCTURAL_FIELDS', 'validate_mpc_config']
+__all__ = ['BUDGETS', 'CostWeights', 'INPUT_HOLDS', 'MpcConfig', 'STRUCTURAL_FIELDS',
+           'validate_mpc_config']
 
 # 'fatrop' (structure-exploiting interior point) is the fastest that gives IPOPT's closed loop;
 # 'ipopt' is the reference. SQP is not offered: from rest, where every derivative of the
@@ -36,6 +37,9 @@ SOLVERS = ('fatrop', 'ipopt')
 # What bounds a control step's solving (MpcConfig.budget): wall time, the robot's, or solver
 # iterations, the same on any machine and under any load (the evaluation's).
 BUDGETS = ('wall', 'iterations')
+# How an input acts over a step (MpcConfig.input_hold): held constant (the paper's), or a
+# linear ramp from the input before it (a velocity a rate-limited base can follow).
+INPUT_HOLDS = ('zero', 'first_order')
 # Seconds one solver iteration typically takes, to turn the wall budget into an iteration
 # allowance (MpcConfig.solve_iterations()): the typical time of an iteration in the steps the
 # wall budget binds (large NLPs), so the default 0.1 s is 100 iterations (see
@@ -144,6 +148,14 @@ class MpcConfig:
             NLP then bounds |u_0 - u_prev| and |u_{l+1} - u_l| by max_accel h, and
             |u_{N-1}| too (u_N = 0), with u_prev the input commanded over the step before
             (or the measured twist after a stop): see formulation.formulate.
+        input_hold: how an input acts over a step, one of INPUT_HOLDS. 'zero' (the paper's):
+            u_l is held constant over step l, so the velocity jumps at each sample. 'first_order'
+            (requires max_accel): the velocity ramps linearly over step l from the knot before,
+            q_l (q_0 = u_prev, the velocity the last plan gives for now), to u_l; the rate rows
+            |u_l - q_l| <= max_accel h then bound the acceleration of a piecewise-linear
+            velocity, which a rate-limited, lagging base can follow, and the plan ends at
+            rest with u_{N-1} = 0 (x_N is reached at the velocity u_{N-1}). See
+            docs/design/mpc.md, section "First-order hold".
 
     """
 
@@ -171,6 +183,7 @@ class MpcConfig:
     budget: str = 'wall'
     max_solve_iterations: int | None = None
     max_accel: tuple[float, float] | None = None
+    input_hold: str = 'zero'
     solver_options: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -259,7 +272,7 @@ class MpcConfig:
 STRUCTURAL_FIELDS = frozenset(
     {'horizon', 'step', 'cost_exponent', 'farkas_margin', 'obstacle_slots',
      'faces_per_obstacle', 'solver', 'max_iterations', 'tolerance', 'solver_options',
-     'compile', 'footprint', 'fatrop_stage_limit', 'max_accel'}
+     'compile', 'footprint', 'fatrop_stage_limit', 'max_accel', 'input_hold'}
 )
 
 
@@ -341,6 +354,10 @@ def validate_mpc_config(config: MpcConfig) -> list[str]:
             isinstance(a, float) and math.isfinite(a) and a > 0 for a in accel)):
         problems.append(f'max_accel must be None or two finite numbers > 0 (m/s^2, '
                         f'rad/s^2), got {accel!r}')
+    if config.input_hold not in INPUT_HOLDS:
+        problems.append(f'input_hold must be one of {INPUT_HOLDS}, got {config.input_hold!r}')
+    elif config.input_hold == 'first_order' and accel is None:
+        problems.append("input_hold 'first_order' needs max_accel (the ramps' rate bounds)")
     iterations = config.max_solve_iterations
     if iterations is not None and (isinstance(iterations, bool)
                                    or not isinstance(iterations, int) or iterations < 1):
