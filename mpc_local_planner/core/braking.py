@@ -49,6 +49,7 @@ class Brake:
     def __init__(self, max_decel: tuple[float, float]) -> None:
         self.max_decel = np.asarray(max_decel, dtype=float)
         self._inputs: np.ndarray | None = None
+        self._first: np.ndarray | None = None
         self._h = 0.0
         self._tau = 0.0
         self._scale = 0.0
@@ -59,14 +60,25 @@ class Brake:
         """The robot is braking (the scale has not reached zero)."""
         return self._inputs is not None and self._scale > 0.0
 
-    def start(self, inputs: np.ndarray, h: float, elapsed: float) -> None:
+    def start(self, inputs: np.ndarray, h: float, elapsed: float,
+              first: np.ndarray | None = None) -> None:
         """Brake along a plan of piecewise constant inputs (N, 2) of step h, elapsed s in.
+
+        With first, the plan is a first-order hold (MpcConfig.input_hold): its velocity ramps
+        from first to inputs[0] over the first step, then from knot to knot; the curve is
+        the same at any speed scale, so braking on it works alike.
 
         The rate at which the scale falls makes the largest input of the plan decelerate at
         its limit: every command's |d(sigma u_i)/dt| from braking is at most max_decel_i.
+        (The plan's own accelerations come on top, scaled by sigma: within its max_accel.)
         """
         inputs = np.asarray(inputs, dtype=float).reshape(-1, 2)
-        peak = np.max(np.abs(inputs), axis=0) if len(inputs) else np.zeros(2)
+        self._first = None if first is None else np.asarray(first, dtype=float).reshape(2)
+        if self._first is not None:
+            inputs_all = np.vstack([self._first.reshape(1, 2), inputs])
+        else:
+            inputs_all = inputs
+        peak = np.max(np.abs(inputs_all), axis=0) if len(inputs_all) else np.zeros(2)
         rates = np.where(peak > 0.0, self.max_decel / np.maximum(peak, 1e-12), math.inf)
         self._rate = float(np.min(rates))
         self._inputs = inputs
@@ -86,6 +98,14 @@ class Brake:
         dt = max(float(dt), 0.0)
         self._tau += self._scale * dt
         self._scale = max(self._scale - self._rate * dt, 0.0)
+        if self._first is not None and self._h > 0:
+            # the ramp through the knots first, u_0, ..., u_{N-1}
+            index = int(self._tau / self._h)
+            if index >= len(self._inputs) or self._scale <= 0.0:
+                return np.zeros(2)
+            start = self._first if index == 0 else self._inputs[index - 1]
+            frac = self._tau / self._h - index
+            return self._scale * (start + frac * (self._inputs[index] - start))
         index = int(self._tau / self._h + 1e-9) if self._h > 0 else len(self._inputs)
         if index >= len(self._inputs) or self._scale <= 0.0:
             return np.zeros(2)

@@ -31,8 +31,9 @@ from typing import Any, NamedTuple, Sequence
 
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
 
-__all__ = ['BUDGETS', 'CostWeights', 'MpcConfig', 'STRUCTURAL_FIELDS', 'STRUCTURAL_SOLVER_FIELDS',
-           'SolverSettings', 'validate_mpc_config', 'validate_solver_settings']
+__all__ = ['BUDGETS', 'CostWeights', 'INPUT_HOLDS', 'MpcConfig', 'STRUCTURAL_FIELDS',
+           'STRUCTURAL_SOLVER_FIELDS', 'SolverSettings', 'validate_mpc_config',
+           'validate_solver_settings']
 
 # 'fatrop' (structure-exploiting interior point) is the fastest that gives IPOPT's closed loop;
 # 'ipopt' is the reference. SQP is not offered: from rest, where every derivative of the
@@ -41,6 +42,9 @@ SOLVERS = ('fatrop', 'ipopt')
 # What bounds a control step's solving (SolverSettings.budget): wall time, the robot's, or solver
 # iterations, the same on any machine and under any load (the evaluation's).
 BUDGETS = ('wall', 'iterations')
+# How an input acts over a step (MpcConfig.input_hold): held constant (the paper's), or a
+# linear ramp from the input before it (a velocity a rate-limited base can follow).
+INPUT_HOLDS = ('zero', 'first_order')
 # Seconds one solver iteration typically takes, to turn the wall budget into an iteration
 # allowance (MpcConfig.solve_iterations()): the typical time of an iteration in the steps the
 # wall budget binds (large NLPs), so the default 0.1 s is 100 iterations (see
@@ -195,6 +199,14 @@ class MpcConfig:
             NLP then bounds |u_0 - u_prev| and |u_{l+1} - u_l| by max_accel h, and
             |u_{N-1}| too (u_N = 0), with u_prev the input commanded over the step before
             (or the measured twist after a stop): see formulation.formulate.
+        input_hold: how an input acts over a step, one of INPUT_HOLDS. 'zero' (the paper's):
+            u_l is held constant over step l, so the velocity jumps at each sample. 'first_order'
+            (requires max_accel): the velocity ramps linearly over step l from the knot before,
+            q_l (q_0 = u_prev, the velocity the last plan gives for now), to u_l; the rate rows
+            |u_l - q_l| <= max_accel h then bound the acceleration of a piecewise-linear
+            velocity, which a rate-limited, lagging base can follow, and the plan ends at
+            rest with u_{N-1} = 0 (x_N is reached at the velocity u_{N-1}). See
+            docs/design/mpc.md, section "First-order hold".
         solving: how the problem is solved (SolverSettings: the NLPs' obstacle slots and
             faces, the backend and its limits, the step's budget).
 
@@ -213,6 +225,7 @@ class MpcConfig:
     collision_margin: float | None = None
     farkas_margin: float = 1e-4
     max_accel: tuple[float, float] | None = None
+    input_hold: str = 'zero'
     solving: SolverSettings = field(default_factory=SolverSettings)
 
     def __post_init__(self) -> None:
@@ -305,7 +318,7 @@ class MpcConfig:
 # Fields of MpcConfig (STRUCTURAL_FIELDS) and of SolverSettings (STRUCTURAL_SOLVER_FIELDS)
 # whose change alters the NLP's shape: changing them rebuilds the solver.
 STRUCTURAL_FIELDS = frozenset(
-    {'horizon', 'step', 'cost_exponent', 'farkas_margin', 'footprint', 'max_accel'}
+    {'horizon', 'step', 'cost_exponent', 'farkas_margin', 'footprint', 'max_accel', 'input_hold'}
 )
 STRUCTURAL_SOLVER_FIELDS = frozenset(
     {'obstacle_slots', 'faces_per_obstacle', 'solver', 'max_iterations', 'tolerance',
@@ -378,6 +391,10 @@ def validate_mpc_config(config: MpcConfig) -> list[str]:
             isinstance(a, float) and math.isfinite(a) and a > 0 for a in accel)):
         problems.append(f'max_accel must be None or two finite numbers > 0 (m/s^2, '
                         f'rad/s^2), got {accel!r}')
+    if config.input_hold not in INPUT_HOLDS:
+        problems.append(f'input_hold must be one of {INPUT_HOLDS}, got {config.input_hold!r}')
+    elif config.input_hold == 'first_order' and accel is None:
+        problems.append("input_hold 'first_order' needs max_accel (the ramps' rate bounds)")
     if not isinstance(config.solving, SolverSettings):
         problems.append(f'solving must be a SolverSettings, got {config.solving!r}')
     return problems

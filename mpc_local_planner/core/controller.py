@@ -473,7 +473,9 @@ class MpcController:
             held = self._held
             # (a clock that jumped back solves at once: the held plan's time is not now's)
             if held is not None and 0.0 <= now - self._held_time < self._hold_period():
-                return held._replace(fresh=False)
+                return held._replace(u=self._planned_input(held.solution,
+                                                           now - self._held_time),
+                                     fresh=False)
             stopped = self._stopped
             if stopped is not None and 0.0 <= now - stopped[0] < self._hold_period():
                 # the solver found no verified input at this step: keep braking (or
@@ -505,7 +507,7 @@ class MpcController:
             # stop, and let the next step start over from the measured state
             return self._idle(Reason.STOP, 'the shifted candidate ran out', now=now,
                               solution=solution)
-        u = np.asarray(solution.u0, dtype=float).reshape(-1)
+        u = self._planned_input(solution, 0.0)
         if u.shape != (2,) or not np.all(np.isfinite(u)):
             return self._idle(Reason.ERROR, f'non-finite input {u}', now=now,
                               solution=solution)
@@ -516,6 +518,19 @@ class MpcController:
         self._stopped = None
         self._brake.stop()
         return output
+
+    def _planned_input(self, solution: MpcSolution | None, elapsed: float) -> np.ndarray:
+        """Return the command elapsed seconds after the solve of solution.
+
+        A zero hold: its first input (the plan holds it over the step). A first-order hold
+        (solution.u_before set): the plan's velocity ramp at elapsed + actuation_delay, led
+        by the base's latency and lag so that the base's velocity follows the ramp.
+        """
+        assert solution is not None
+        if solution.u_before is None:
+            return np.asarray(solution.u0, dtype=float).reshape(-1)
+        u = solution.velocity_at(elapsed + self.settings.actuation_delay, self._config.step)
+        return np.clip(u, self._model.u_min, self._model.u_max)
 
     def _input_before(self) -> np.ndarray | None:
         """Return what the MPC's rate bounds start from (MpcConfig.max_accel).
@@ -566,8 +581,10 @@ class MpcController:
         else:
             if not self._brake.active and self._held is not None \
                     and self._held.solution is not None:
-                self._brake.start(self._held.solution.u_pred, self._config.step,
-                                  now - self._held_time)
+                plan = self._held.solution
+                lead = 0.0 if plan.u_before is None else self.settings.actuation_delay
+                self._brake.start(plan.u_pred, self._config.step,
+                                  now - self._held_time + lead, plan.u_before)
             last = self._last_call if self._last_call is not None else now
             u = np.clip(self._brake.command(now - last), self._model.u_min, self._model.u_max)
         if keep_warm_start:

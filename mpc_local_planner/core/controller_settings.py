@@ -64,6 +64,11 @@ class ControllerSettings:
             smoother names them. A stop of a moving robot (stale data, a failure, a rejected
             candidate) brakes along the last verified plan within them (`Brake`) instead of
             commanding zero at once, which a real base cannot follow; inf: zero at once.
+        actuation_delay: with a first-order hold (MpcConfig.input_hold 'first_order'), how
+            far ahead of now the plan's velocity ramp is commanded (s): the base's command
+            latency plus its lag's time constant (a first-order lag follows a ramp that much
+            behind), so that the velocity the base reaches is the one the plan predicts. 0:
+            the ramp's value now; ignored with a zero hold (the plan's inputs as they are).
 
     """
 
@@ -77,6 +82,7 @@ class ControllerSettings:
     scan_timeout: float = 0.5
     control_frequency: float = 20.0
     max_decel: tuple[float, float] = (math.inf, math.inf)
+    actuation_delay: float = 0.0
 
     def __post_init__(self) -> None:
         """Refuse non-positive or non-finite tolerances and timeouts, and small capacities."""
@@ -91,6 +97,9 @@ class ControllerSettings:
             if not (math.isfinite(value) and value > 0):
                 msg = f'{name} must be > 0 and finite, got {value}'
                 raise ValueError(msg)
+        if not (math.isfinite(self.actuation_delay) and self.actuation_delay >= 0):
+            msg = f'actuation_delay must be >= 0 and finite, got {self.actuation_delay}'
+            raise ValueError(msg)
         if not isinstance(self.stateful, bool):
             msg = f'stateful must be true or false, got {self.stateful!r}'
             raise ValueError(msg)

@@ -31,7 +31,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-__all__ = ['KinematicBicycle', 'RobotModel', 'STRAIGHT_OMEGA', 'Unicycle', 'rk4', 'unicycle_arc']
+__all__ = ['KinematicBicycle', 'RobotModel', 'STRAIGHT_OMEGA', 'Unicycle', 'ramp_rk4', 'rk4',
+           'unicycle_arc']
 
 Symbolic = Any  # a CasADi SX/MX expression or a NumPy array
 
@@ -41,6 +42,20 @@ def rk4(rhs: ca.Function, x: Symbolic, u: Symbolic, h: float) -> Symbolic:
     k1 = rhs(x, u)
     k2 = rhs(x + h / 2 * k1, u)
     k3 = rhs(x + h / 2 * k2, u)
+    k4 = rhs(x + h * k3, u)
+    return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+def ramp_rk4(rhs: ca.Function, x: Symbolic, q: Symbolic, u: Symbolic, h: float) -> Symbolic:
+    """Integrate dx/dt = rhs(x, v(t)) over one step h with v ramping linearly from q to u.
+
+    Classical RK4 with the input at the times it samples: q at the start, the mean (q + u) / 2
+    at the midpoint, u at the end (a first-order hold; q = u is rk4).
+    """
+    mid = (q + u) / 2
+    k1 = rhs(x, q)
+    k2 = rhs(x + h / 2 * k1, mid)
+    k3 = rhs(x + h / 2 * k2, mid)
     k4 = rhs(x + h * k3, u)
     return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
 
@@ -108,6 +123,14 @@ class RobotModel(ABC):
         """Return the RK4 discretisation at step h as a CasADi Function F(x, u) -> x_next."""
         return _discrete(self, float(h))
 
+    def discrete_ramp(self, h: float) -> ca.Function:
+        """Return the first-order-hold step F(x, q, u) -> x_next: the input ramps from q to u.
+
+        Two RK4 sub-steps of h / 2 (ramp_rk4), so that a turn at the Jackal's limits over a
+        ramp stays within a millimetre of the exact motion.
+        """
+        return _discrete_ramp(self, float(h))
+
     def saturate(self, u: np.ndarray) -> np.ndarray:
         """Clip an input to the bounds (what real motor drivers do)."""
         return np.clip(np.asarray(u, dtype=float), self.u_min, self.u_max)
@@ -128,6 +151,18 @@ def _discrete(model: RobotModel, h: float) -> ca.Function:
     u = ca.SX.sym('u', model.nu)
     x_next = rk4(model.rhs_function(), x, u, h)
     return ca.Function('F', [x, u], [x_next], ['x', 'u'], ['x_next'])
+
+
+@lru_cache(maxsize=64)
+def _discrete_ramp(model: RobotModel, h: float) -> ca.Function:
+    x = ca.SX.sym('x', model.nx)
+    q = ca.SX.sym('q', model.nu)
+    u = ca.SX.sym('u', model.nu)
+    rhs = model.rhs_function()
+    mid = (q + u) / 2
+    x_mid = ramp_rk4(rhs, x, q, mid, h / 2)
+    x_next = ramp_rk4(rhs, x_mid, mid, u, h / 2)
+    return ca.Function('F_ramp', [x, q, u], [x_next], ['x', 'q', 'u'], ['x_next'])
 
 
 @dataclass(frozen=True)

@@ -132,11 +132,15 @@ REALITY_SUBSTEP = 0.01
 # the model exactly, not the robot's departures from it).
 REALITY_MARGIN = 0.03
 # The paper's MPC's input-rate bounds on a real base, as a multiple of the base's
-# acceleration limits. At the base's own limits a standing robot's NLP often found no
-# verified plan (7 of 8 hard BARN worlds stalled); without bounds its commands jumped and the
-# lagging base left the verified motion (3 contacts in BARN 0-99); at twice them, all 5
-# worlds that failed either way were reached, with no contact (docs/real_robot.md).
-REALITY_ACCEL_FACTOR = 2.0
+# acceleration limits, and how its inputs act over a step (MpcConfig.input_hold). With a
+# zero hold at the base's own limits a standing robot's NLP often found no verified plan
+# (7 of 8 hard BARN worlds stalled); without bounds its commands jumped and the lagging base
+# left the verified motion (3 contacts in BARN 0-99); at twice them 97 of 0-99, no contact,
+# but the base could not follow the jumps. With a first-order hold the velocity ramps between
+# the knots, commanded actuation_delay() ahead: at the base's own limits it follows the plan,
+# and 99 of 0-99 were reached, no contact (docs/real_robot.md).
+REALITY_ACCEL_FACTOR = 1.0
+REALITY_INPUT_HOLD = 'first_order'
 
 
 @dataclass(frozen=True)
@@ -284,13 +288,16 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
 
     With a real base (reality), the paper's MPC is told its deceleration limits (stops
     brake along the last verified plan, ControllerSettings.max_decel), bounds its input rates
-    at REALITY_ACCEL_FACTOR times the base's (MpcConfig.max_accel) and keeps a collision
-    margin for the base's lag (REALITY_MARGIN); see docs/real_robot.md for how these were
-    chosen.
+    at REALITY_ACCEL_FACTOR times the base's (MpcConfig.max_accel) with the input hold
+    REALITY_INPUT_HOLD (a first-order hold's ramp commanded actuation_delay() ahead) and
+    keeps a collision margin for the base's lag (REALITY_MARGIN); see docs/real_robot.md for
+    how these were chosen.
     """
     accel = reality.acceleration_limits if reality is not None else None
+    hold = REALITY_INPUT_HOLD if accel is not None and name == 'proposed' else 'zero'
+    delay = actuation_delay(reality) if hold == 'first_order' and reality is not None else 0.0
     key = (name, robot.name, robot.v_max, robot.omega_max, robot.reverses, prepare, budget,
-           accel, reality is not None)
+           accel, reality is not None, hold, REALITY_ACCEL_FACTOR, delay)
     mpc = _MPC_CACHE.get(key)
     if mpc is None:
         model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max,
@@ -300,12 +307,14 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
                            collision_margin=REALITY_MARGIN if reality is not None else None,
                            max_accel=tuple(REALITY_ACCEL_FACTOR * a for a in accel)
                            if accel is not None and name == 'proposed' else None,
+                           input_hold=hold,
                            solving=SolverSettings(budget=budget))
         if name == 'proposed':
             settings = ControllerSettings(xy_goal_tolerance=MPC_ARRIVAL,
                                           yaw_goal_tolerance=math.pi,
                                           capacity=PATH_CAPACITY,
-                                          max_decel=accel or (math.inf, math.inf))
+                                          max_decel=accel or (math.inf, math.inf),
+                                          actuation_delay=delay)
             mpc = MpcController(model, config, settings=settings)
             mpc.set_plan(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))  # the NLPs' path family
             core = mpc.mpc
@@ -324,6 +333,15 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
         mpc.set_obstacles([])
         mpc.reset()
     return mpc
+
+
+def actuation_delay(reality: Reality) -> float:
+    """Return how far ahead a first-order hold's ramp is commanded on this base (s).
+
+    Its latency plus its slower lag's time constant: a command acts latency late, and a
+    first-order lag follows a ramp its time constant behind.
+    """
+    return float(reality.latency + max(reality.lag))
 
 
 def _prepare(mpc: Any, budget: str = EVALUATION_BUDGET) -> None:

@@ -36,7 +36,9 @@ the input commanded before (or the measured twist of the latest odometry after a
 the plan is one the base can follow; with ``max_decel`` every stop of a moving robot (stale,
 invalid or missing input, a failure) brakes along the last verified plan within those
 limits (core/braking.py) instead of commanding zero at once, which a base with finite
-deceleration could not follow anyway: it would coast into space no plan checked.
+deceleration could not follow anyway: it would coast into space no plan checked. With
+``input_hold`` 'first_order' the velocity ramps between the plan's knots and cmd_vel is the
+ramp ``actuation_delay`` ahead (the base's latency plus lag), so the base moves as predicted.
 
 The robot's pose in the plan's frame (``global_frame``) comes from a localizer's pose topic
 (``localization_topic``) composed with odometry, from tf2 when importable, or else is the

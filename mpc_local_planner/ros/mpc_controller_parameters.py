@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from mpc_local_planner.core.config import MpcConfig, SOLVERS, SolverSettings
+from mpc_local_planner.core.config import INPUT_HOLDS, MpcConfig, SOLVERS, SolverSettings
 from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.footprint import Footprint, resolve
 from mpc_local_planner.core.models import Unicycle
@@ -57,11 +57,12 @@ _MPC_FIELDS = {
     'horizon': 'horizon', 'step': 'step', 'weights.position': 'weight_position',
     'weights.heading': 'weight_heading', 'weights.v': 'weight_v', 'weights.omega': 'weight_omega',
     'offset_weight': 'offset_weight', 'robot_radius': 'robot_radius',
+    'input_hold': 'input_hold',
 }
 _SOLVER_FIELDS = ('solver', 'max_iterations', 'obstacle_slots')
 _MODEL_FIELDS = ('v_max', 'omega_max')
 _SETTINGS_FIELDS = ('xy_goal_tolerance', 'yaw_goal_tolerance', 'odom_timeout',
-                    'scan_timeout', 'control_frequency')
+                    'scan_timeout', 'control_frequency', 'actuation_delay')
 # collision_margin None (v_max step / 2) is -1 as a parameter: a double cannot be None.
 _AUTO_MARGIN = -1.0
 # max_accel / max_decel of [0.0, 0.0]: no limit (a double array cannot be None).
@@ -91,6 +92,18 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "max_accel step, so the plan is one the base can follow; [0.0, 0.0] = "
                   "none (inputs may jump, the paper's model; config/jackal.yaml turns "
                   f"it on for a Jackal); {_SHAPE}"),
+    ParameterSpec('input_hold', str(_CONFIG.input_hold),
+                  f"how an input acts over a step, one of {INPUT_HOLDS}: 'zero' holds it "
+                  "(the paper's model: the velocity jumps at each sample); 'first_order' "
+                  'ramps the velocity linearly from the input before (needs max_accel: then '
+                  'an acceleration bound the base can follow at its own limits, and the '
+                  'predictions match a lagging base; config/jackal.yaml turns it on); '
+                  f'{_SHAPE}'),
+    ParameterSpec('actuation_delay', float(_SETTINGS.actuation_delay),
+                  "with input_hold 'first_order': how far ahead of now the plan's velocity "
+                  "ramp is commanded (s): the base's command latency plus its lag's time "
+                  'constant, so that the velocity it reaches is the predicted one; ignored '
+                  'with a zero hold; next control tick', float_range=(0.0, 5.0)),
     ParameterSpec('max_decel', list(RATE_LIMIT_OFF),
                   "the base's deceleration limits [v, omega] (m/s^2, rad/s^2, magnitudes; "
                   "Nav2 velocity_smoother's name): a stop of a moving robot (stale or "

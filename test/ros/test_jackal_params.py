@@ -43,6 +43,10 @@ def test_the_jackal_file_bounds_input_rates_as_the_suites_do_on_the_real_base() 
     assert config.max_accel == pytest.approx(
         [sensing_suites.REALITY_ACCEL_FACTOR * a for a in base])
     assert settings.max_decel == pytest.approx(base)
+    # the first-order hold, its ramp led by the base's latency + lag, as the suites run it
+    assert config.input_hold == sensing_suites.REALITY_INPUT_HOLD
+    assert settings.actuation_delay == pytest.approx(
+        sensing_suites.actuation_delay(reality_preset('real')))
     assert config.collision_margin == pytest.approx(sensing_suites.REALITY_MARGIN)
     jackal = sensing_suites.ROBOTS['jackal']
     assert config.robot_footprint.vertices.tolist() == JACKAL.vertices.tolist()

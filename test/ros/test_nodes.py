@@ -192,6 +192,9 @@ def test_controller_applies_a_new_horizon_at_the_next_solve(ros) -> None:
     ('max_decel', [-2.0, -3.0], 'magnitudes'),  # Nav2's velocity_smoother writes them < 0
     ('max_decel', [math.inf, 3.0], 'max_decel must be [v, omega]'),
     ('max_decel', [2.0, 3.0, 0.0], 'max_decel must be [v, omega]'),
+    ('input_hold', 'linear', 'input_hold must be one of'),
+    ('input_hold', 'first_order', 'needs max_accel'),  # max_accel is off by default
+    ('actuation_delay', -0.1, 'out of range'),
 ])
 def test_controller_refuses_invalid_parameters_with_a_reason(ros, name, value, reason) -> None:
     controller, _ = make_controller(ros)
@@ -214,6 +217,18 @@ def test_controller_takes_nav2s_goal_checker_parameters_at_run_time(ros) -> None
     settings = controller.controller.settings
     assert (settings.xy_goal_tolerance, settings.yaw_goal_tolerance) == (0.25, 0.3)
     assert settings.stateful is False
+
+
+def test_controller_takes_the_first_order_hold_and_its_lead_at_run_time(ros) -> None:
+    controller, _ = make_controller(ros)
+    assert controller.controller.config.input_hold == 'zero'
+    result = controller.set_parameters_atomically([
+        Parameter('max_accel', value=[2.0, 6.0]), Parameter('input_hold', value='first_order'),
+        Parameter('actuation_delay', value=0.15)])
+    assert result.successful, result.reason
+    assert controller.controller.config.input_hold == 'first_order'
+    assert controller.controller.config.max_accel == (2.0, 6.0)
+    assert controller.controller.settings.actuation_delay == 0.15
 
 
 # ----------------------------------------------------------------------------- planner

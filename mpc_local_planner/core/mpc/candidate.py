@@ -95,27 +95,45 @@ class Rollout:
 
     def __init__(self, model: RobotModel) -> None:
         self._model = model
-        self._maps: dict[tuple[float, int], ca.Function] = {}
+        self._maps: dict[tuple[float, int, bool], ca.Function] = {}
 
-    def __call__(self, x0: np.ndarray, u: np.ndarray, step: float) -> np.ndarray:
-        """Return the (len(u)+1, nx) states from x0 under the inputs u, each held for step s."""
-        key = (step, len(u))
+    def __call__(self, x0: np.ndarray, u: np.ndarray, step: float,
+                 first: np.ndarray | None = None) -> np.ndarray:
+        """Return the (len(u)+1, nx) states from x0 under the inputs u, each held for step s.
+
+        With first (a first-order hold, MpcConfig.input_hold): the input ramps over each step
+        from the one before it (first before u_0) to u_l (model.discrete_ramp).
+        """
+        u = np.asarray(u, dtype=float)
+        key = (step, len(u), first is not None)
         rollout = self._maps.get(key)
         if rollout is None:
-            discrete = self._model.discrete(step)
+            if first is None:
+                discrete = self._model.discrete(step)
+            else:
+                nu = self._model.nu
+                x, qu = ca.SX.sym('x', self._model.nx), ca.SX.sym('qu', 2 * nu)
+                discrete = ca.Function('F', [x, qu], [self._model.discrete_ramp(step)(
+                    x, qu[:nu], qu[nu:])])
             rollout = self._maps[key] = discrete.mapaccum('rollout', len(u))
-        xs = np.asarray(rollout(x0, np.asarray(u, dtype=float).T)).T
+        if first is None:
+            columns = u.T
+        else:
+            before = np.vstack([np.asarray(first, dtype=float).reshape(1, -1), u[:-1]])
+            columns = np.hstack([before, u]).T
+        xs = np.asarray(rollout(x0, columns)).T
         return np.vstack([x0, xs])
 
 
 def shifted_candidate(model: RobotModel, previous: Plan | None, x0: np.ndarray, *,
                       horizon: int, step: float, rollout: Rollout, progress: Progress,
-                      terminal_state: TerminalState) -> Plan:
+                      terminal_state: TerminalState, first_order: bool = False) -> Plan:
     """Return the proof's candidate: shift the last plan and append the terminal steady state.
 
     Without a last plan: stand still, and end in the steady state of the initial s. The
     candidate has no multipliers (they depend on the obstacles an NLP holds) and no value
-    (inf) yet.
+    (inf) yet. With first_order (a first-order hold) the shifted knots are rolled out from
+    the last plan's first knot, u_0: the velocity that plan gives for now.
     """
     if previous is None:
         s0 = progress(x0, 0.0)
@@ -126,13 +144,16 @@ def shifted_candidate(model: RobotModel, previous: Plan | None, x0: np.ndarray, 
         return Plan(x=x, u=u, s=s0, mu=np.zeros(0), value=math.inf)
     _, u_s = model.steady_state(previous.x[-1, :3])
     u = np.vstack([previous.u[1:], np.asarray(u_s, dtype=float).reshape(1, -1)])
-    return Plan(x=rollout(x0, u, step), u=u, s=previous.s, mu=np.zeros(0), value=math.inf)
+    first = previous.u[0] if first_order else None
+    return Plan(x=rollout(x0, u, step, first), u=u, s=previous.s, mu=np.zeros(0),
+                value=math.inf)
 
 
 def guided_guess(model: RobotModel, x0: np.ndarray, carried: np.ndarray | None, *,
                  horizon: int, step: float, rollout: Rollout, progress: Progress,
                  terminal_state: TerminalState,
-                 rate_bounds: tuple[np.ndarray, np.ndarray] | None = None) -> Plan:
+                 rate_bounds: tuple[np.ndarray, np.ndarray] | None = None,
+                 first_order: bool = False) -> Plan:
     """Return an infeasible but informative start: the motion in hand, ended on the path.
 
     After a new path, carried holds the inputs of the last plan on the old one: they are
@@ -141,7 +162,8 @@ def guided_guess(model: RobotModel, x0: np.ndarray, carried: np.ndarray | None, 
     if given, then moves the inputs into the rate bounds (formulation.rate_limited_inputs: a
     base at rest does not jump to half speed, and the plan must end at rest). They are rolled
     out from x0, and the last state replaced by the steady state on the path nearest it. No
-    multipliers yet.
+    multipliers yet. With first_order (a first-order hold; rate_bounds required) the inputs
+    are knots ramped from the input before, and the last one is 0.
     """
     u = np.zeros((horizon, model.nu))
     if carried is not None and len(carried) == horizon:
@@ -149,8 +171,8 @@ def guided_guess(model: RobotModel, x0: np.ndarray, carried: np.ndarray | None, 
     else:
         u[:, 0] = 0.5 * model.u_max[0]
     if rate_bounds is not None:
-        u = rate_limited_inputs(u, *rate_bounds)
-    x = rollout(x0, u, step)
+        u = rate_limited_inputs(u, *rate_bounds, first_order=first_order)
+    x = rollout(x0, u, step, rate_bounds[0] if first_order and rate_bounds else None)
     s = progress(x[-1], progress(x0, 0.0))
     terminal = terminal_state(s)
     if terminal is not None:

@@ -40,6 +40,7 @@ from mpc_local_planner.core.mpc.formulation import (
     dual_multipliers,
     feasible_multipliers,
     Formulation,
+    ramp_sweep_rate,
     sweep_rate,
 )
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
@@ -66,15 +67,27 @@ class Clearance:
         self.body: ConvexPolygon | None = None if footprint.is_circle else footprint.body
         # r_c: no point of the body is further from the robot's origin
         self.body_radius = 0.0 if footprint.is_circle else footprint.radius
-        self._sweep_exact = sweep_rate(model, self.body_radius)
+        # a first-order hold (MpcConfig.input_hold): the velocity of step l ramps from the
+        # input before it; the first step's, before, is the step's u_prev (set_before)
+        self._first_order = (config.input_hold == 'first_order'
+                             and config.max_accel is not None)
+        self._sweep_exact = (ramp_sweep_rate if self._first_order else sweep_rate)(
+            model, self.body_radius)
         self._sweep_maps: dict[int, ca.Function] = {}
+        self._before = np.zeros(model.nu)
         self._geometry: dict[bytes, dict[int, tuple[ConvexPolygon, np.ndarray, np.ndarray]]] = {}
         self._clearance_memo: dict[bytes, np.ndarray] = {}
 
-    def clear(self) -> None:
-        """Forget the memoised plans (a step starts: they hold that step's plans only)."""
+    def clear(self, before: np.ndarray | None = None) -> None:
+        """Forget the memoised plans (a step starts: they hold that step's plans only).
+
+        before: with a first-order hold, the velocity the step's plans start from (u_prev):
+        the first ramp runs from it.
+        """
         self._geometry.clear()
         self._clearance_memo.clear()
+        if before is not None:
+            self._before = np.asarray(before, dtype=float).reshape(-1).copy()
 
     def separation(self, x: np.ndarray, obstacles: Sequence[ConvexPolygon]
                    ) -> tuple[np.ndarray, np.ndarray]:
@@ -112,7 +125,9 @@ class Clearance:
 
         Over a step every point of the body moves at most h sweep_rate(x_l, u_l) (exact |.|
         here); a pose at least half of that from an obstacle on both of its steps keeps the
-        continuous motion between the samples clear. After x_N, u_N = 0: no motion.
+        continuous motion between the samples clear. After x_N, u_N = 0: no motion. With a
+        first-order hold, the rate of the faster end of each ramp (ramp_sweep_rate), the
+        first ramp from the step's u_prev (clear()).
         """
         x, u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
         key = x.tobytes() + u.tobytes()
@@ -123,7 +138,11 @@ class Clearance:
         rate_map = self._sweep_maps.get(n)
         if rate_map is None:
             rate_map = self._sweep_maps[n] = self._sweep_exact.map(n)
-        rates = np.asarray(rate_map(x[:-1].T, u.T)).reshape(-1)
+        if self._first_order:
+            before = np.vstack([self._before.reshape(1, -1), u[:-1]])
+            rates = np.asarray(rate_map(x[:-1].T, before.T, u.T)).reshape(-1)
+        else:
+            rates = np.asarray(rate_map(x[:-1].T, u.T)).reshape(-1)
         after = np.append(rates[1:], 0.0)
         c = self._config
         required = c.farkas_margin + c.step / 2 * np.maximum(rates, after)

@@ -75,7 +75,8 @@ from mpc_local_planner.core.paths import ReferencePath
 __all__ = [
     'Formulation', 'Layout', 'SWEEP_SMOOTHING', 'TerminalCondition', 'dual_multipliers',
     'feasible_multipliers', 'formulate', 'obstacle_parameters', 'parameter_vector',
-    'path_terminal', 'rate_limited_inputs', 'stage_cost', 'sweep_rate', 'symbolic_weights',
+    'path_terminal', 'ramp_sweep_rate', 'rate_limited_inputs', 'stage_cost', 'sweep_rate',
+    'symbolic_weights',
 ]
 
 # eps of the smooth |z| ~ sqrt(z^2 + eps^2) in the NLP's motion-dependent clearance (m/s and
@@ -199,6 +200,32 @@ def sweep_rate(model: RobotModel, radius: float, smoothing: float | None = None
     return ca.Function('sweep_rate', [x, u], [value])
 
 
+def ramp_sweep_rate(model: RobotModel, radius: float, smoothing: float | None = None
+                    ) -> ca.Function:
+    """Return the speed bound of every body point over a first-order-hold step, of (x, q, u).
+
+    The velocity ramps linearly from q to u, so each |rate| is largest at one end: the bound
+    is max(|p'(q)|, |p'(u)|) + radius max(|theta'(q)|, |theta'(u)|), both taken at x as in
+    sweep_rate (the unicycle's |p'| = |v| does not depend on the heading). Smoothed, each
+    max(a, b) is (a + b + sqrt((a - b)^2 + eps^2)) / 2 of the smoothed |.|: never below it.
+    """
+    x = ca.SX.sym('x', model.nx)
+    q, u = ca.SX.sym('q', model.nu), ca.SX.sym('u', model.nu)
+    eps2 = 0.0 if smoothing is None else smoothing ** 2
+    ends = []
+    for v in (q, u):
+        rates = model.rhs(x, v)
+        speed2, turn = rates[0] ** 2 + rates[1] ** 2, rates[model.angle_index]
+        ends.append((ca.sqrt(speed2 + eps2), ca.sqrt(turn ** 2 + eps2)))
+    if smoothing is None:
+        value = ca.fmax(ends[0][0], ends[1][0]) + radius * ca.fmax(ends[0][1], ends[1][1])
+    else:
+        def smax(a: ca.SX, b: ca.SX) -> ca.SX:
+            return (a + b + ca.sqrt((a - b) ** 2 + eps2)) / 2
+        value = smax(ends[0][0], ends[1][0]) + radius * smax(ends[0][1], ends[1][1])
+    return ca.Function('ramp_sweep_rate', [x, q, u], [value])
+
+
 class Layout(NamedTuple):
     """Indices of each variable in the NLP's decision vector w."""
 
@@ -229,8 +256,11 @@ class Formulation:
             multipliers is its faces' Farkas mu (circle), or its faces' lambda followed by
             the robot's faces' mu (polygon).
         sweep_fn: the smoothed sweep_rate(x, u) the polygon's NLP carries from one stage to
-            the next, mapped over the N steps (columns x_0..x_{N-1}, u_0..u_{N-1}); None for
-            a circle.
+            the next, mapped over the N steps (columns x_0..x_{N-1}, u_0..u_{N-1}); with
+            first_order ramp_sweep_rate(x, q, u) (columns q_0..q_{N-1} too); None for a
+            circle.
+        first_order: the inputs are first-order-hold knots (MpcConfig.input_hold): the
+            velocity of step l ramps from q_l (the input before, q_0 = u_prev) to u_l.
         lbw: lower bounds of w.
         ubw: upper bounds of w.
         lbg: lower bounds of the constraints.
@@ -254,6 +284,7 @@ class Formulation:
     g_fn: ca.Function
     robot_faces: int = 0
     sweep_fn: ca.Function | None = None
+    first_order: bool = False
 
     @property
     def block(self) -> int:
@@ -286,7 +317,13 @@ class Formulation:
             w[self.layout.prev] = np.vstack([np.asarray(u_prev, dtype=float).reshape(1, -1),
                                              np.asarray(u, dtype=float)])
         w[self.layout.mu] = mu.reshape(self.layout.mu.shape)
-        if self.sweep_fn is not None:
+        if self.sweep_fn is not None and self.first_order:
+            before = np.vstack([np.asarray(u_prev, dtype=float).reshape(1, -1),
+                                np.asarray(u, dtype=float)[:-1]])
+            rates = self.sweep_fn(np.asarray(x[:-1], dtype=float).T, before.T,
+                                  np.asarray(u, dtype=float).T)
+            w[self.layout.c[:, 0]] = np.asarray(rates).reshape(-1)
+        elif self.sweep_fn is not None:
             rates = self.sweep_fn(np.asarray(x[:-1], dtype=float).T,
                                   np.asarray(u, dtype=float).T)
             w[self.layout.c[:, 0]] = np.asarray(rates).reshape(-1)
@@ -314,6 +351,13 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
     proof's shifted candidate keeps them (its inputs u_1..u_{N-1}, 0 follow u_0, which was
     commanded), so the guarantee holds for the commanded inputs.
 
+    With config.input_hold 'first_order' the inputs are the knots of a piecewise-linear
+    velocity: step l integrates the model with the velocity ramping from q_l to u_l
+    (model.discrete_ramp), the rate rows bound its acceleration, and stage N asks q_N =
+    u_{N-1} = 0 (x_N is reached at that velocity: the steady state needs it at rest). A
+    polygon's clearance covers the faster end of each ramp (ramp_sweep_rate). The shifted
+    candidate (knots u_1..u_{N-1}, 0 from q_0 = u_0) keeps every row.
+
     Args:
         model: the robot model (f, bounds Z, steady states).
         config: horizon N, step h, cost exponent, Farkas margin and footprint.
@@ -335,17 +379,21 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
         body = footprint.body  # {y : G y <= g}, unit rows, robot frame
         G, g_body = ca.DM(body.A), ca.DM(body.b)
         robot_faces = body.num_faces
-        sweep = sweep_rate(model, footprint.radius, SWEEP_SMOOTHING)
+        sweep = (ramp_sweep_rate if config.input_hold == 'first_order' and
+                 config.max_accel is not None else sweep_rate)(
+            model, footprint.radius, SWEEP_SMOOTHING)
     else:
         robot_faces = 0
         sweep = None
     nc = 1 if polygon else 0  # the carried sweep rate of z_1..z_N
     npv = nu if config.max_accel is not None else 0  # the carried input before each stage
+    first_order = npv > 0 and config.input_hold == 'first_order'
     rate = (np.asarray(config.max_accel, dtype=float) * config.step if npv
             else np.zeros(0))
     block = faces + robot_faces
     nm = block * slots
-    f = model.discrete(config.step)  # RK4 over one step h
+    # RK4 over one step h; with a first-order hold, of the ramp from q_l to u_l
+    f = model.discrete_ramp(config.step) if first_order else model.discrete(config.step)
     stage = stage_cost(model, config.cost_exponent)
     half_step = config.step / 2
 
@@ -387,14 +435,16 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
     for k in range(n + 1):
         x_l, r_l = Z[k][:nx], Z[k][nx:nx + nr]
         x_s = Z[k][nx + nr:nz] if ns else terminal.steady_state(r_l, p_path)
+        # the inputs of step k: u_k, or the ramp from q_k to u_k
+        step_inputs = (Q[k], U[k]) if first_order and k < n else (U[k],) if k < n else ()
         if k < n:
             # (6a), cost (5): + l(x_l - x_s, u_l - u_s)
             cost = cost + stage(x_l, U[k], x_s, w_weights)
             # (6c): x_{l+1} = f(x_l, u_l); and r_{l+1} = r_l (one reference, and its steady
             # state when carried); a polygon also carries this step's sweep rate
-            carried = ([x_s] if ns else []) + ([sweep(x_l, U[k])] if polygon else []) + (
-                [U[k]] if npv else [])
-            add(Z[k + 1] - ca.vertcat(f(x_l, U[k]), r_l, *carried), 0.0, 0.0)
+            carried = ([x_s] if ns else []) + ([sweep(x_l, *step_inputs)] if polygon
+                                               else []) + ([U[k]] if npv else [])
+            add(Z[k + 1] - ca.vertcat(f(x_l, *step_inputs), r_l, *carried), 0.0, 0.0)
         rows = 0
         if npv:
             # (6g) for a real base: each input within max_accel h of the one before it
@@ -402,8 +452,10 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
             if k == 0:
                 rows += add(Q[0] - u_prev, 0.0, 0.0)
             change = U[k] - Q[k] if k < n else Q[k]
+            # a first-order hold reaches x_N at the velocity q_N = u_{N-1}: it must be 0
+            bound = np.zeros(nu) if first_order and k == n else rate
             for i in range(nu):
-                rows += add(change[i], -rate[i], rate[i])
+                rows += add(change[i], -bound[i], bound[i])
         if k == 0:
             # (6b): x_0 = x(k)
             rows += add(x_l - x_k, 0.0, 0.0)
@@ -412,7 +464,8 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
                                   G, g_body, config.farkas_margin,
                                   # the step before x_l, and the one after it (u_N = 0: none)
                                   [half_step * Z[k][nz]]
-                                  + ([half_step * sweep(x_l, U[k])] if k < n else []))
+                                  + ([half_step * sweep(x_l, *step_inputs)] if k < n
+                                     else []))
         else:
             # (6h) via Farkas (8), l = 1..N: p_l is outside {A p <= b} iff some mu >= 0 with
             # sum(mu) = 1 has (A p_l - b)^T mu > 0 (without sum(mu) = 1, mu = 0 would do)
@@ -462,6 +515,7 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
         cost_fn=ca.Function('cost', [w, params], [cost]),
         g_fn=ca.Function('g', [w, params], [g_all]),
         robot_faces=robot_faces, sweep_fn=None if sweep is None else sweep.map(n),
+        first_order=first_order,
     )
 
 
@@ -536,7 +590,8 @@ def _layout(blocks: list[dict[str, list[tuple[str, int]]]], n: int, nu: int, nm:
                   prev=np.array(fields['prev'], dtype=int).reshape(n + 1, npv))
 
 
-def rate_limited_inputs(u: np.ndarray, u_before: np.ndarray, rate: np.ndarray) -> np.ndarray:
+def rate_limited_inputs(u: np.ndarray, u_before: np.ndarray, rate: np.ndarray, *,
+                        first_order: bool = False) -> np.ndarray:
     """Return inputs moved into the rate rows of (6g) (max_accel) as far as they can be.
 
     Forwards from u_before (|u_0 - u_before| <= rate, |u_{l+1} - u_l| <= rate), then
@@ -550,6 +605,8 @@ def rate_limited_inputs(u: np.ndarray, u_before: np.ndarray, rate: np.ndarray) -
         u: (N, nu) inputs.
         u_before: (nu,) the input the bounds start from (the NLP's u_prev).
         rate: (nu,) max_accel h.
+        first_order: the inputs are first-order-hold knots: the last one, u_{N-1}, is the
+            velocity at x_N and must be 0 itself (instead of within rate of u_N = 0).
 
     """
     out = np.array(u, dtype=float)
@@ -559,7 +616,11 @@ def rate_limited_inputs(u: np.ndarray, u_before: np.ndarray, rate: np.ndarray) -
         out[k] = np.clip(out[k], before - rate, before + rate)
         before = out[k]
     after = np.zeros_like(rate)  # u_N = 0
-    for k in reversed(range(len(out))):
+    last = len(out)
+    if first_order and last:
+        out[-1] = 0.0  # u_{N-1} = 0
+        last -= 1
+    for k in reversed(range(last)):
         out[k] = np.clip(out[k], after - rate, after + rate)
         after = out[k]
     return out

@@ -62,6 +62,9 @@ class MpcSolution(NamedTuple):
             it cleared every reachable obstacle), else the robot stops.
         tries: the solver tries the step made, in order, over all its rounds (see tries.py:
             solver_tries() gives them; the budget may leave some out).
+        u_before: with a first-order hold (MpcConfig.input_hold), the velocity the plan
+            starts from (its q_0 = u_prev): the velocity ramps from it to u_pred[0] over the
+            first step, then through u_pred (see velocity_at); None with a zero hold.
 
     """
 
@@ -83,6 +86,27 @@ class MpcSolution(NamedTuple):
     solver_verified: bool = False
     timed_out: bool = False
     tries: tuple[Try, ...] = ()
+    u_before: np.ndarray | None = None
+
+    def velocity_at(self, t: float, step: float) -> np.ndarray:
+        """Return the plan's input t seconds after its start (steps of length step).
+
+        A zero hold: u_pred[l] over step l. A first-order hold (u_before set): the linear
+        ramp through the knots u_before, u_pred[0], ..., u_pred[N-1]. Past the horizon: the
+        last input (0 for a first-order hold, whose plans end at rest).
+        """
+        u = np.asarray(self.u_pred, dtype=float)
+        if not len(u):
+            return np.asarray(self.u0, dtype=float).copy()
+        tau = max(float(t), 0.0) / step
+        if self.u_before is None:
+            return u[min(int(tau + 1e-9), len(u) - 1)].copy()
+        knots = np.vstack([np.asarray(self.u_before, dtype=float).reshape(1, -1), u])
+        index = int(tau)
+        if index >= len(u):
+            return knots[-1].copy()
+        frac = tau - index
+        return knots[index] + frac * (knots[index + 1] - knots[index])
 
 
 class SolveAttempt(NamedTuple):

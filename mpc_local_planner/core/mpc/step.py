@@ -446,7 +446,8 @@ class MpcBase(ABC):
         """
         return shifted_candidate(self._model, self._plan, x0, horizon=self._config.horizon,
                                  step=self._config.step, rollout=self._rollout,
-                                 progress=self._progress, terminal_state=self._terminal_state)
+                                 progress=self._progress, terminal_state=self._terminal_state,
+                                 first_order=self._first_order)
 
     def _guided_guess(self, x0: np.ndarray, active: list[ConvexPolygon], nlp: Nlp) -> Plan:
         """Return the guided start from x0 (candidate.guided_guess), with nlp's multipliers."""
@@ -460,7 +461,8 @@ class MpcBase(ABC):
         return guided_guess(self._model, x0, self._carried_inputs,
                             horizon=self._config.horizon, step=self._config.step,
                             rollout=self._rollout, progress=self._progress,
-                            terminal_state=self._terminal_state, rate_bounds=rate)
+                            terminal_state=self._terminal_state, rate_bounds=rate,
+                            first_order=self._first_order)
 
     # ----------------------------------------------------------------- verification
     def _violation(self, w: np.ndarray, params: np.ndarray, obstacles: ObstacleSet,
@@ -667,9 +669,10 @@ class MpcBase(ABC):
             msg = f'state must be {self._model.nx} finite numbers, got {x}'
             raise ValueError(msg)
         self._terminal_parameters()  # RuntimeError without a path (or target)
-        self._clearance.clear()  # the memos hold this step's plans only
         x0 = self._unwrap(x)
         self._input_before = self._before(previous_input)
+        # the memos hold this step's plans only (a first-order hold's ramps start from u_prev)
+        self._clearance.clear(self._input_before)
         reachable = self._reachable(x0)
         candidate = self._candidate(x0)
         result = self._generate_constraints(x0, candidate, reachable)
@@ -719,13 +722,24 @@ class MpcBase(ABC):
             obstacles_in_reach=len(reachable), obstacles_active=len(result.active),
             rounds=result.rounds, solver_verified=attempt.verified,
             timed_out=budget.timed_out, tries=tuple(self._tries),
+            u_before=(None if not self._first_order or self._input_before is None
+                      else self._input_before.copy()),
         )
 
     def _before(self, previous_input: np.ndarray | None) -> np.ndarray | None:
         """Return the input the rate bounds start from (None without max_accel)."""
         if self._config.max_accel is None:
             return None
+        if self._first_order and self._plan is not None:
+            # a first-order hold: the velocity the plan in force gives for now (its first
+            # knot), which the shifted candidate's first ramp starts from
+            return np.asarray(self._plan.u[0], dtype=float).copy()
         return rate_start(self._model, previous_input, self._plan)
+
+    @property
+    def _first_order(self) -> bool:
+        """The inputs are first-order-hold knots (MpcConfig.input_hold 'first_order')."""
+        return self._config.input_hold == 'first_order' and self._config.max_accel is not None
 
     def _stop(self, x0: np.ndarray, status: str, attempt: SolveAttempt, in_reach: int,
               active: int, *, timed_out: bool = False) -> MpcSolution:
