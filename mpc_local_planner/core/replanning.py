@@ -346,13 +346,10 @@ class Replanner:
             if trigger is PlanTrigger.GOAL:
                 waypoints = planner.plan(start, goal)
             else:
-                # only a caller that holds obstacles passes them (planners without the
-                # keyword still serve the others)
-                extra = {'local_obstacles': held} if held else {}
                 waypoints = planner.replan(start, goal, failures=self.consecutive_failures,
                                            grid=grid,
                                            escape_distance=self.settings.escape_distance,
-                                           **extra)
+                                           local_obstacles=held)
         except Exception as err:  # PlanningError; a bug too: the caller decides
             seconds = time.perf_counter() - started
             if trigger is not PlanTrigger.GOAL:
