@@ -174,10 +174,11 @@ class PlannerConfig:
         start_clearance: With a footprint, the distance every pose of a plan keeps from the
             obstacles the local controller holds, when a plan is given them
             (``local_obstacles``: the MPC's convex pieces, near the robot), metres; a start
-            already closer keeps half what it has. Those pieces may reach farther than the
-            planner's grid (a rectangle along a row of cylinders covers the hollows between
-            them), and a turn the grid allows but they do not is one the controller cannot
-            make: the robot stood there, re-planned the same way at every attempt.
+            already closer keeps what it has (`held_checks`). Those pieces may reach
+            farther than the planner's grid (a rectangle along a row of cylinders covers the
+            hollows between them), and a turn the grid allows but they do not is one the
+            controller cannot make: the robot stood there, re-planned the same way at every
+            attempt.
         drive_on_heading_distance: With a footprint, how far a plan may first drive
             straight on a heading the start's turns allow, to where the robot can turn, when
             no plan leaves the start otherwise (Nav2's DriveOnHeading behaviour, planned and
