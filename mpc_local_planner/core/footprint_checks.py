@@ -38,8 +38,8 @@ from mpc_local_planner.core.obstacles import ConvexPolygon
 if TYPE_CHECKING:
     from mpc_local_planner.core.free_space import FreeSpaceGrid
 
-__all__ = ['FootprintChecks', 'FootprintPlan', 'GridObstacles', 'HeldObstacles', 'NO_TURN',
-           'PolygonObstacles', 'SAME_POINT', 'TurnRange', 'wrap_heading']
+__all__ = ['FootprintChecks', 'FootprintPlan', 'GridObstacles', 'HeldChecks', 'HeldObstacles',
+           'NO_TURN', 'PolygonObstacles', 'SAME_POINT', 'TurnRange', 'wrap_heading']
 
 # Consecutive waypoints closer than this are one point, and turns smaller than this (rad) no
 # turn: the tolerances WaypointPath (core/paths.py) builds its turn-in-place knots with.
@@ -365,6 +365,14 @@ class TurnRange:
         return (f'the footprint meets {hit} when turned {side} by more than {abs(limit):.3g} '
                 f'of the {abs(delta):.3g} rad')
 
+    def within(self, other: TurnRange) -> TurnRange:
+        """Return the turns both ranges allow (each limit with what ends it)."""
+        low, low_hit = ((self.low, self.low_hit) if self.low >= other.low
+                        else (other.low, other.low_hit))
+        high, high_hit = ((self.high, self.high_hit) if self.high <= other.high
+                          else (other.high, other.high_hit))
+        return TurnRange(low=low, high=high, low_hit=low_hit, high_hit=high_hit)
+
 
 class FootprintChecks:
     """The pose checks of a convex polygon footprint against one set of obstacles.
@@ -453,6 +461,40 @@ class FootprintChecks:
             names.append(self.obstacles.describe(int(side[k])) +
                          f' grown by the clearance {self.clearance:g} m')
         return TurnRange(low=-limits[1], high=limits[0], low_hit=names[1], high_hit=names[0])
+
+
+class HeldChecks(FootprintChecks):
+    """`FootprintChecks` against the planner's obstacles and the pieces a controller holds.
+
+    Poses and straight motions meet either (`HeldObstacles`); the turns in place clear at
+    a position are those clear of both, each found as its own checks find them (the
+    planner's: anywhere where its grid's inflated layer is free; the pieces': anywhere
+    where the circumscribed disc keeps their clearance from them), so that the pieces never
+    make the planner's own answer stricter.
+
+    Args:
+        footprint: The robot's polygon.
+        clearance: The planner's clearance.
+        planner: The planner's obstacles.
+        held: The pieces.
+        held_clearance: The clearance kept from the pieces (may be below 0 for a start
+            already that close: then its turns keep what the start has, and motions keep
+            them from touching).
+
+    """
+
+    def __init__(self, footprint: Footprint, clearance: float,
+                 planner: PolygonObstacles | GridObstacles, held: PolygonObstacles,
+                 held_clearance: float) -> None:
+        super().__init__(footprint, clearance,
+                         HeldObstacles(planner, held, offset=clearance - held_clearance))
+        self.planner_checks = FootprintChecks(footprint, clearance, planner)
+        self.held_checks = FootprintChecks(footprint, held_clearance, held)
+
+    def turn_range(self, xy: np.ndarray, heading: float) -> TurnRange:
+        """Return the turns clear of the planner's obstacles and of the pieces."""
+        return self.planner_checks.turn_range(xy, heading).within(
+            self.held_checks.turn_range(xy, heading))
 
 
 class FootprintPlan:

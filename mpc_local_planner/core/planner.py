@@ -91,7 +91,7 @@ from mpc_local_planner.core.footprint_checks import (
     FootprintChecks,
     FootprintPlan,
     GridObstacles,
-    HeldObstacles,
+    HeldChecks,
     PolygonObstacles,
 )
 from mpc_local_planner.core.footprint_paths import (
@@ -179,11 +179,12 @@ class PlannerConfig:
             hollows between them), and a turn the grid allows but they do not is one the
             controller cannot make: the robot stood there, re-planned the same way at every
             attempt.
-        drive_on_heading_distance: With a footprint, how far a plan may first drive
-            straight on a heading the start's turns allow, to where the robot can turn, when
-            no plan leaves the start otherwise (Nav2's DriveOnHeading behaviour, planned and
-            checked as part of the path), metres; 0 = never. A forward-only robot whose
-            start allows no turn towards the way out goes on to where it can turn.
+        drive_on_heading_distance: With a footprint and ``local_obstacles``, how far a plan
+            may first drive straight on a heading the start's turns allow, to where the
+            robot can turn, when no plan leaves the start otherwise (Nav2's DriveOnHeading
+            behaviour, planned and checked as part of the path), metres; 0 = never. A
+            forward-only robot whose start allows no turn towards the way out goes on to
+            where it can turn. (Without them a re-plan escapes as before: `replan`.)
 
     """
 
@@ -381,7 +382,8 @@ class RrtStarPlanner:
                 place to theta (if given).
             local_obstacles: The obstacles the local controller holds (as sensed, not
                 grown). With a footprint and a start heading, every pose must also keep
-                config.start_clearance from them (`held_checks`).
+                config.start_clearance from them (`held_checks`), and where no plan leaves
+                the start, one may first drive on (`_drive_on_heading`).
 
         Returns:
             (M, 2) waypoints, M >= 2, with the first equal to start[:2] and the last equal to
@@ -416,6 +418,8 @@ class RrtStarPlanner:
             return self._footprint_plan(checks, (start_xy, start_heading),
                                         (goal_xy, goal_heading))
         except PlanningError:
+            if not len(local_obstacles):
+                raise
             waypoints = self._drive_on_heading(checks, (start_xy, start_heading),
                                                (goal_xy, goal_heading))
             if waypoints is None:
@@ -628,9 +632,8 @@ class RrtStarPlanner:
             return checks
         sampling = checks.turn_grow - checks.clearance  # what a turn's samples are grown by
         clearance = min(self.config.start_clearance, standing - sampling - _HELD_SLACK)
-        return FootprintChecks(self.footprint, checks.clearance,
-                               HeldObstacles(checks.obstacles, PolygonObstacles(local_obstacles),
-                                             offset=checks.clearance - clearance))
+        return HeldChecks(self.footprint, checks.clearance, checks.obstacles,
+                          PolygonObstacles(local_obstacles), clearance)
 
     def replan(self, start: np.ndarray, goal: np.ndarray, *, failures: int = 0,
                grid: EscapeGrid | None = None, escape_distance: float = 1.0,
@@ -645,11 +648,11 @@ class RrtStarPlanner:
         escape_distance, never closer to an obstacle than inscribed_radius or than the robot
         already is) and begins with that short segment.
 
-        With local_obstacles (the local controller's convex pieces), a plan that keeps
-        config.start_clearance from them comes first (`plan`, `held_checks`): a robot
-        among pieces that reach past the grid, where the grid allows a turn they forbid,
-        is sent on by motions it can make. Where there is none, the plan is made as
-        without them, as before.
+        With local_obstacles (the local controller's convex pieces), a plan that does not
+        keep config.start_clearance from them too (`held_problem`: a turn the grid allows
+        but they forbid, by a robot among pieces that reach past the grid) gives way to
+        one that does (`plan` with them), where there is one: the robot is sent on by
+        motions it can make. A plan that keeps it stays as it is.
 
         Raises:
             PlanningError: as plan() does, when no escape helps either.
@@ -660,13 +663,8 @@ class RrtStarPlanner:
             planner = copy.copy(self)
             planner.config = replace(self.config,
                                      seed=(self.config.seed + failures) % (MAX_SEED + 1))
-        if len(local_obstacles) and not self.footprint.is_circle:
-            try:
-                return planner.plan(start, goal, local_obstacles=local_obstacles)
-            except PlanningError:
-                pass
         try:
-            return planner.plan(start, goal)
+            waypoints = planner.plan(start, goal)
         except PlanningError:
             if grid is None:
                 raise
@@ -675,6 +673,27 @@ class RrtStarPlanner:
             if escape is None:
                 raise
             return np.vstack([np.asarray(start, dtype=float)[:2], planner.plan(escape, goal)])
+        if (not len(local_obstacles)
+                or planner.held_problem(waypoints, start, goal, local_obstacles) is None):
+            return waypoints
+        try:  # a plan the controller's obstacles allow, where there is one
+            return planner.plan(start, goal, local_obstacles=local_obstacles)
+        except PlanningError:
+            return waypoints
+
+    def held_problem(self, waypoints: np.ndarray, start: np.ndarray, goal: np.ndarray,
+                     local_obstacles: Sequence[ConvexPolygon]) -> str | None:
+        """Say why a path from start fails `held_checks`, or None (None for a circle too)."""
+        checks = self._footprint_checks()
+        if checks is None:
+            return None
+        checks = self.held_checks(checks, start, local_obstacles)
+        start_pose = np.asarray(start, dtype=float).reshape(-1)
+        goal_pose = np.asarray(goal, dtype=float).reshape(-1)
+        return footprint_path_problem(
+            checks, np.atleast_2d(np.asarray(waypoints, dtype=float))[:, :2],
+            float(start_pose[2]) if len(start_pose) > 2 else None,
+            float(goal_pose[2]) if len(goal_pose) > 2 else None)
 
     def rest_problem(self, plan: np.ndarray, position: Sequence[float]) -> str | None:
         """Say why the rest of a plan no longer passes this planner's check, or None.

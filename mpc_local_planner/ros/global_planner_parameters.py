@@ -93,9 +93,10 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'is one the controller cannot make; a start already closer keeps what it has',
                   float_range=(0.0, 1.0)),
     ParameterSpec('drive_on_heading_distance', _DEFAULTS.drive_on_heading_distance,
-                  "with a footprint on the grid, how far (m) a plan may first drive straight "
-                  "on a heading the start's turns allow, to where the robot can turn, when no "
-                  "plan leaves the start otherwise (Nav2's DriveOnHeading); 0 = never",
+                  "with a footprint and use_scan, how far (m) a re-plan kept clear of the "
+                  "convex pieces (start_clearance) may first drive straight on a heading the "
+                  "start's turns allow, to where the robot can turn, when no plan leaves the "
+                  "start otherwise (Nav2's DriveOnHeading); 0 = never",
                   float_range=(0.0, 10.0)),
     ParameterSpec('obstacle_memory', 5.0,
                   'with use_scan, seconds a convex piece seen by the laser is remembered for '
