@@ -18,10 +18,11 @@ began with a turn in place that the planner's grid allowed (the true cylinders a
 away) but the MPC's convex pieces did not (a rectangle along a diagonal row of cylinders
 covers the hollows between them, 7 cm past their surface). The MPC turned until its
 footprint met that rectangle and stood there, 1.4 mm from it; every no-progress re-plan
-gave the same path, and the run stalled. The planner now takes the obstacles the local
-controller holds (``local_obstacles``): every pose keeps ``start_clearance`` from them, a
-start already closer keeps what it has, and a start whose turns do not reach the way out
-first drives on to where it can turn (``drive_on_heading_distance``).
+gave the same path, and the run stalled. A re-plan now takes the obstacles the local
+controller holds (``local_obstacles``): a plan they refuse is made again with every pose
+``start_clearance`` from them (a start already closer keeps what it has), and a start whose
+turns do not reach the way out first drives on to where it can turn
+(``drive_on_heading_distance``).
 """
 
 from __future__ import annotations
