@@ -38,8 +38,8 @@ from mpc_local_planner.core.obstacles import ConvexPolygon
 if TYPE_CHECKING:
     from mpc_local_planner.core.free_space import FreeSpaceGrid
 
-__all__ = ['FootprintChecks', 'FootprintPlan', 'GridObstacles', 'NO_TURN', 'PolygonObstacles',
-           'SAME_POINT', 'TurnRange', 'wrap_heading']
+__all__ = ['FootprintChecks', 'FootprintPlan', 'GridObstacles', 'HeldChecks', 'HeldObstacles',
+           'NO_TURN', 'PolygonObstacles', 'SAME_POINT', 'TurnRange', 'wrap_heading']
 
 # Consecutive waypoints closer than this are one point, and turns smaller than this (rad) no
 # turn: the tolerances WaypointPath (core/paths.py) builds its turn-in-place knots with.
@@ -283,6 +283,64 @@ class GridObstacles:
         return f'the occupied cell (row {row}, column {col})'
 
 
+# HeldObstacles numbers the held pieces from here on, past any grid cell's flat index.
+_HELD_BASE = 1 << 48
+
+
+class HeldObstacles:
+    """The planner's obstacles and the pieces a local controller holds, each at its clearance.
+
+    The planner's (a grid's cells or polygons) answer as they are; the held convex pieces
+    (the MPC's, as sensed) answer every query with the distance asked for less ``offset``
+    (the planner's clearance less theirs; never below touching): so one `FootprintChecks`
+    keeps the planner's clearance from its own obstacles and a smaller one from the pieces.
+    A hit on a piece is numbered _HELD_BASE + its index.
+    """
+
+    def __init__(self, planner: PolygonObstacles | GridObstacles, held: PolygonObstacles,
+                 offset: float) -> None:
+        self.planner = planner
+        self.held = held
+        self.offset = float(offset)
+
+    def _grow(self, grow: float) -> float:
+        return max(grow - self.offset, 0.0)
+
+    def any_near(self, low: np.ndarray, high: np.ndarray, grow: float) -> bool:
+        """Say whether either may be within grow of the box [low, high]."""
+        return (self.planner.any_near(low, high, grow)
+                or self.held.any_near(low, high, self._grow(grow)))
+
+    def polygons_hit(self, polygons: np.ndarray, grow: float) -> np.ndarray:
+        """Return, per polygon, the first obstacle or piece it meets (-1: none)."""
+        hits = self.planner.polygons_hit(polygons, grow)
+        rest = np.flatnonzero(hits < 0)
+        if len(rest):
+            held = self.held.polygons_hit(polygons[rest], self._grow(grow))
+            hits[rest] = np.where(held >= 0, held + _HELD_BASE, -1)
+        return hits
+
+    def disc_hit(self, xy: np.ndarray, radius: float) -> int:
+        """Return the first obstacle or piece within radius of xy, or -1."""
+        hit = self.planner.disc_hit(xy, radius)
+        if hit >= 0:
+            return hit
+        held = self.held.disc_hit(xy, self._grow(radius))
+        return held + _HELD_BASE if held >= 0 else -1
+
+    def state_free(self, xy: np.ndarray, radius: float) -> bool:
+        """Say whether the robot can turn at xy among both."""
+        return (self.planner.state_free(xy, radius)
+                and self.held.state_free(xy, self._grow(radius)))
+
+    def describe(self, index: int) -> str:
+        """Name what was hit."""
+        if index >= _HELD_BASE:
+            return (f"the local controller's obstacle {index - _HELD_BASE} (less "
+                    f'{self.offset:.3g} m)')
+        return self.planner.describe(index)
+
+
 @dataclass(frozen=True)
 class TurnRange:
     """The turns in place that are clear at a position, from a heading: [low, high] radians.
@@ -307,6 +365,14 @@ class TurnRange:
         return (f'the footprint meets {hit} when turned {side} by more than {abs(limit):.3g} '
                 f'of the {abs(delta):.3g} rad')
 
+    def within(self, other: TurnRange) -> TurnRange:
+        """Return the turns both ranges allow (each limit with what ends it)."""
+        low, low_hit = ((self.low, self.low_hit) if self.low >= other.low
+                        else (other.low, other.low_hit))
+        high, high_hit = ((self.high, self.high_hit) if self.high <= other.high
+                          else (other.high, other.high_hit))
+        return TurnRange(low=low, high=high, low_hit=low_hit, high_hit=high_hit)
+
 
 class FootprintChecks:
     """The pose checks of a convex polygon footprint against one set of obstacles.
@@ -318,7 +384,7 @@ class FootprintChecks:
     """
 
     def __init__(self, footprint: Footprint, clearance: float,
-                 obstacles: PolygonObstacles | GridObstacles) -> None:
+                 obstacles: PolygonObstacles | GridObstacles | HeldObstacles) -> None:
         assert footprint.vertices is not None
         self.local = footprint.vertices
         self.radius = footprint.radius
@@ -395,6 +461,40 @@ class FootprintChecks:
             names.append(self.obstacles.describe(int(side[k])) +
                          f' grown by the clearance {self.clearance:g} m')
         return TurnRange(low=-limits[1], high=limits[0], low_hit=names[1], high_hit=names[0])
+
+
+class HeldChecks(FootprintChecks):
+    """`FootprintChecks` against the planner's obstacles and the pieces a controller holds.
+
+    Poses and straight motions meet either (`HeldObstacles`); the turns in place clear at
+    a position are those clear of both, each found as its own checks find them (the
+    planner's: anywhere where its grid's inflated layer is free; the pieces': anywhere
+    where the circumscribed disc keeps their clearance from them), so that the pieces never
+    make the planner's own answer stricter.
+
+    Args:
+        footprint: The robot's polygon.
+        clearance: The planner's clearance.
+        planner: The planner's obstacles.
+        held: The pieces.
+        held_clearance: The clearance kept from the pieces (may be below 0 for a start
+            already that close: then its turns keep what the start has, and motions keep
+            them from touching).
+
+    """
+
+    def __init__(self, footprint: Footprint, clearance: float,
+                 planner: PolygonObstacles | GridObstacles, held: PolygonObstacles,
+                 held_clearance: float) -> None:
+        super().__init__(footprint, clearance,
+                         HeldObstacles(planner, held, offset=clearance - held_clearance))
+        self.planner_checks = FootprintChecks(footprint, clearance, planner)
+        self.held_checks = FootprintChecks(footprint, held_clearance, held)
+
+    def turn_range(self, xy: np.ndarray, heading: float) -> TurnRange:
+        """Return the turns clear of the planner's obstacles and of the pieces."""
+        return self.planner_checks.turn_range(xy, heading).within(
+            self.held_checks.turn_range(xy, heading))
 
 
 class FootprintPlan:

@@ -91,6 +91,7 @@ from mpc_local_planner.core.footprint_checks import (
     FootprintChecks,
     FootprintPlan,
     GridObstacles,
+    HeldChecks,
     PolygonObstacles,
 )
 from mpc_local_planner.core.footprint_paths import (
@@ -106,7 +107,7 @@ from mpc_local_planner.core.free_space import (
     polygon_space,
 )
 from mpc_local_planner.core.grid_search import clearance_field, pull_string, shortest_cells
-from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
+from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
 from mpc_local_planner.core.paths import remaining_polyline
 from mpc_local_planner.core.rrt_star import MAX_SEED, rrt_star
 
@@ -170,6 +171,20 @@ class PlannerConfig:
             (Nav2's ``footprint``; its string form, a list of pairs or a polygon `Footprint`
             are accepted and stored as a tuple, so the config stays hashable). Empty: a
             circle of robot_radius. A polygon takes precedence over robot_radius, as in Nav2.
+        start_clearance: With a footprint, the distance every pose of a plan keeps from the
+            obstacles the local controller holds, when a plan is given them
+            (``local_obstacles``: the MPC's convex pieces, near the robot), metres; a start
+            already closer keeps what it has (`held_checks`). Those pieces may reach
+            farther than the planner's grid (a rectangle along a row of cylinders covers the
+            hollows between them), and a turn the grid allows but they do not is one the
+            controller cannot make: the robot stood there, re-planned the same way at every
+            attempt.
+        drive_on_heading_distance: With a footprint and ``local_obstacles``, how far a plan
+            may first drive straight on a heading the start's turns allow, to where the
+            robot can turn, when no plan leaves the start otherwise (Nav2's DriveOnHeading
+            behaviour, planned and checked as part of the path), metres; 0 = never. A
+            forward-only robot whose start allows no turn towards the way out goes on to
+            where it can turn. (Without them a re-plan escapes as before: `replan`.)
 
     """
 
@@ -181,6 +196,8 @@ class PlannerConfig:
     clearance: float = 0.1
     simplify: bool = False
     footprint: tuple[tuple[float, float], ...] = ()
+    start_clearance: float = 0.01
+    drive_on_heading_distance: float = 1.0
 
     def __post_init__(self) -> None:
         """Refuse settings that OMPL would misread or silently ignore."""
@@ -193,7 +210,8 @@ class PlannerConfig:
             problems.append(f'time_limit must be > 0 and finite, got {self.time_limit}')
         if not (isinstance(self.seed, int) and 0 <= self.seed <= MAX_SEED):
             problems.append(f'seed must be an integer in [0, {MAX_SEED}], got {self.seed!r}')
-        for name in ('range', 'robot_radius', 'clearance'):
+        for name in ('range', 'robot_radius', 'clearance', 'start_clearance',
+                     'drive_on_heading_distance'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 problems.append(f'{name} must be >= 0 and finite, got {value}')
@@ -236,6 +254,17 @@ class PlannerConfig:
         if footprint.is_circle:
             return footprint.radius
         return float(np.min(footprint.body.b))
+
+
+# RrtStarPlanner._drive_on_heading: headings tried per half turn, lengths up to
+# drive_on_heading_distance, and the most grid searches from the points reached.
+DRIVE_ON_HEADING_SAMPLES = 12
+DRIVE_ON_HEADING_STEPS = 5
+DRIVE_ON_HEADING_TRIES = 6
+
+# A start standing closer to the held obstacles than start_clearance keeps its clearance less
+# this (metres), so that its own pose passes the checks.
+_HELD_SLACK = 1e-4
 
 
 def path_length(waypoints: np.ndarray) -> float:
@@ -341,7 +370,8 @@ class RrtStarPlanner:
         planner._space = grid_space(grid)
         return planner
 
-    def plan(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    def plan(self, start: np.ndarray, goal: np.ndarray, *,
+             local_obstacles: Sequence[ConvexPolygon] = ()) -> np.ndarray:
         """Plan a collision-free polyline from start to goal.
 
         Args:
@@ -350,6 +380,10 @@ class RrtStarPlanner:
                 from it (no turn if theta is not given).
             goal: Goal pose (x, y[, theta]); with a footprint the path ends turning in
                 place to theta (if given).
+            local_obstacles: The obstacles the local controller holds (as sensed, not
+                grown). With a footprint and a start heading, every pose must also keep
+                config.start_clearance from them (`held_checks`), and where no plan leaves
+                the start, one may first drive on (`_drive_on_heading`).
 
         Returns:
             (M, 2) waypoints, M >= 2, with the first equal to start[:2] and the last equal to
@@ -364,6 +398,8 @@ class RrtStarPlanner:
 
         """
         checks = self._footprint_checks()  # on a grid: one snapshot for the whole plan
+        if checks is not None and len(local_obstacles):
+            checks = self.held_checks(checks, start, local_obstacles)
         start_xy, start_heading = self._endpoint(start, 'start', checks)
         goal_xy, goal_heading = self._endpoint(goal, 'goal', checks)
         if checks is None:
@@ -378,6 +414,22 @@ class RrtStarPlanner:
             waypoints[0] = start_xy
             waypoints[-1] = goal_xy
             return waypoints
+        try:
+            return self._footprint_plan(checks, (start_xy, start_heading),
+                                        (goal_xy, goal_heading))
+        except PlanningError:
+            if not len(local_obstacles):
+                raise
+            waypoints = self._drive_on_heading(checks, (start_xy, start_heading),
+                                               (goal_xy, goal_heading))
+            if waypoints is None:
+                raise
+            return waypoints
+
+    def _footprint_plan(self, checks: FootprintChecks, start: tuple[np.ndarray, float | None],
+                        goal: tuple[np.ndarray, float | None]) -> np.ndarray:
+        """Plan for a footprint: the straight line, RRT*, then the grid search (`plan`)."""
+        (start_xy, start_heading), (goal_xy, goal_heading) = start, goal
         direct = np.vstack([start_xy, goal_xy])
         if footprint_path_problem(checks, direct, start_heading, goal_heading) is None:
             return direct
@@ -400,6 +452,50 @@ class RrtStarPlanner:
         msg = f'RRT* found a path that the footprint cannot follow, refused: {problem}'
         return self._grid_fallback(msg, rules, (start_xy, start_heading),
                                    (goal_xy, goal_heading))
+
+    def _drive_on_heading(self, checks: FootprintChecks,
+                          start: tuple[np.ndarray, float | None],
+                          goal: tuple[np.ndarray, float | None]) -> np.ndarray | None:
+        """Return a path that first drives straight on to where the robot can turn, or None.
+
+        For a start whose turns in place do not reach the way out (a tight start: the
+        footprint cannot turn there towards it): straight motions on headings the start's
+        turns allow, DRIVE_ON_HEADING_STEPS long up to config.drive_on_heading_distance,
+        to a point where the robot can turn to any heading, nearest first and, at each
+        length, the smallest turn first; from the first such point the grid search finds
+        a way on (at most DRIVE_ON_HEADING_TRIES searched), the whole path is checked
+        again. Only on a grid, with a start heading.
+        """
+        (start_xy, start_heading), (goal_xy, goal_heading) = start, goal
+        reach = self.config.drive_on_heading_distance
+        if self.grid is None or start_heading is None or not reach > 0.0:
+            return None
+        turns = checks.turn_range(start_xy, start_heading)
+        if math.isinf(turns.low) and math.isinf(turns.high):
+            return None  # it can turn anywhere: driving on first is no help
+        deltas = np.arange(-DRIVE_ON_HEADING_SAMPLES, DRIVE_ON_HEADING_SAMPLES + 1) * (
+            math.pi / DRIVE_ON_HEADING_SAMPLES)
+        deltas = deltas[np.argsort(np.abs(deltas), kind='stable')]
+        deltas = [float(d) for d in deltas if turns.allows(float(d))]
+        lengths = np.arange(1, DRIVE_ON_HEADING_STEPS + 1) * (reach / DRIVE_ON_HEADING_STEPS)
+        tries = 0
+        for length in lengths:
+            for delta in deltas:
+                heading = start_heading + delta
+                point = start_xy + length * np.array([math.cos(heading), math.sin(heading)])
+                if not (checks.state_free(point) and checks.sweep_hit(start_xy, point) < 0):
+                    continue
+                tries += 1
+                rules = FootprintPlan(checks, (point, None), (goal_xy, goal_heading))
+                rest, _ = self._grid_route(rules, (point, None), (goal_xy, goal_heading))
+                if rest is not None:
+                    waypoints = np.vstack([start_xy, rest])
+                    if footprint_path_problem(checks, waypoints, start_heading,
+                                              goal_heading) is None:
+                        return waypoints
+                if tries >= DRIVE_ON_HEADING_TRIES:
+                    return None
+        return None
 
     def _grid_fallback(self, failure: str, rules: FootprintPlan | None,
                        start: tuple[np.ndarray, float | None],
@@ -468,8 +564,10 @@ class RrtStarPlanner:
             return None, (f'{len(cells)} cells connect the start and the goal, but the robot '
                           'cannot follow them')
         waypoints = points[corners]
-        problem = self.path_problem(waypoints, start_heading=start_heading,
-                                    goal_heading=goal_heading)
+        problem = (self.path_problem(waypoints, start_heading=start_heading,
+                                     goal_heading=goal_heading) if rules is None
+                   else footprint_path_problem(rules.checks, waypoints, start_heading,
+                                               goal_heading))
         if problem is not None:  # pull_string asks the same questions: a safeguard
             return None, f'the path through the cells fails the final check: {problem}'
         return waypoints, ''
@@ -512,8 +610,34 @@ class RrtStarPlanner:
             return None
         return footprint_path_problem(checks, points, start_heading, goal_heading)
 
+    def held_checks(self, checks: FootprintChecks, start: np.ndarray,
+                    local_obstacles: Sequence[ConvexPolygon]) -> FootprintChecks:
+        """Return checks that keep config.start_clearance from the held obstacles too.
+
+        The local controller's convex pieces may reach farther than the planner's obstacles
+        (a grid marks the cells the laser hit; a piece is a rectangle along a row of them),
+        and a path the controller's own obstacles forbid is one it cannot follow. A start
+        already closer to them than config.start_clearance plus the turn checks' sampling
+        allowance keeps what it has, less a tenth of a millimetre, so that it may turn
+        away from a piece it stands beside; the clearance never goes below touching. A
+        start without a heading, or one that already meets a piece (a stale memory), gets
+        the planner's checks alone.
+        """
+        pose = np.asarray(start, dtype=float).reshape(-1)
+        if len(pose) < 3 or not np.all(np.isfinite(pose[:3])):
+            return checks
+        held = ObstacleSet(tuple(local_obstacles))
+        standing = float(np.min(polygon_separation(self.footprint.at(pose[:3]), held)[0]))
+        if not standing > 0.0:
+            return checks
+        sampling = checks.turn_grow - checks.clearance  # what a turn's samples are grown by
+        clearance = min(self.config.start_clearance, standing - sampling - _HELD_SLACK)
+        return HeldChecks(self.footprint, checks.clearance, checks.obstacles,
+                          PolygonObstacles(local_obstacles), clearance)
+
     def replan(self, start: np.ndarray, goal: np.ndarray, *, failures: int = 0,
-               grid: EscapeGrid | None = None, escape_distance: float = 1.0) -> np.ndarray:
+               grid: EscapeGrid | None = None, escape_distance: float = 1.0,
+               local_obstacles: Sequence[ConvexPolygon] = ()) -> np.ndarray:
         """Plan again from where the robot is (global_planner and the navigator both do).
 
         After failures failed re-plans the seed moves on by their count: the same seed on
@@ -523,6 +647,12 @@ class RrtStarPlanner:
         then starts from the nearest clear cell the robot can drive straight to (within
         escape_distance, never closer to an obstacle than inscribed_radius or than the robot
         already is) and begins with that short segment.
+
+        With local_obstacles (the local controller's convex pieces), a plan that does not
+        keep config.start_clearance from them too (`held_problem`: a turn the grid allows
+        but they forbid, by a robot among pieces that reach past the grid) gives way to
+        one that does (`plan` with them), where there is one: the robot is sent on by
+        motions it can make. A plan that keeps it stays as it is.
 
         Raises:
             PlanningError: as plan() does, when no escape helps either.
@@ -534,7 +664,7 @@ class RrtStarPlanner:
             planner.config = replace(self.config,
                                      seed=(self.config.seed + failures) % (MAX_SEED + 1))
         try:
-            return planner.plan(start, goal)
+            waypoints = planner.plan(start, goal)
         except PlanningError:
             if grid is None:
                 raise
@@ -543,6 +673,27 @@ class RrtStarPlanner:
             if escape is None:
                 raise
             return np.vstack([np.asarray(start, dtype=float)[:2], planner.plan(escape, goal)])
+        if (not len(local_obstacles)
+                or planner.held_problem(waypoints, start, goal, local_obstacles) is None):
+            return waypoints
+        try:  # a plan the controller's obstacles allow, where there is one
+            return planner.plan(start, goal, local_obstacles=local_obstacles)
+        except PlanningError:
+            return waypoints
+
+    def held_problem(self, waypoints: np.ndarray, start: np.ndarray, goal: np.ndarray,
+                     local_obstacles: Sequence[ConvexPolygon]) -> str | None:
+        """Say why a path from start fails `held_checks`, or None (None for a circle too)."""
+        checks = self._footprint_checks()
+        if checks is None:
+            return None
+        checks = self.held_checks(checks, start, local_obstacles)
+        start_pose = np.asarray(start, dtype=float).reshape(-1)
+        goal_pose = np.asarray(goal, dtype=float).reshape(-1)
+        return footprint_path_problem(
+            checks, np.atleast_2d(np.asarray(waypoints, dtype=float))[:, :2],
+            float(start_pose[2]) if len(start_pose) > 2 else None,
+            float(goal_pose[2]) if len(goal_pose) > 2 else None)
 
     def rest_problem(self, plan: np.ndarray, position: Sequence[float]) -> str | None:
         """Say why the rest of a plan no longer passes this planner's check, or None.

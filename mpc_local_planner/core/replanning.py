@@ -44,6 +44,10 @@
   per ``progress_timeout``.
 - **Re-plans** go through ``RrtStarPlanner.replan``: from the robot's pose, or from the
   nearest clear point within ``escape_distance`` when the robot stands within the clearance.
+  The caller may pass the obstacles its local controller holds (the MPC's convex pieces):
+  a re-plan then starts with a turn in place those pieces allow, where there is such a
+  plan (a robot wedged among them, which the planner's grid would turn where the controller
+  cannot, is sent on by a first motion it can make).
 - **Failures**: a failed re-plan keeps the plan in force (and is checked again at the next
   check). Consecutive failed re-plans move the planner's seed on by their count (the same
   seed on the same grid would fail the same way); any plan made, for a goal or a re-plan,
@@ -70,6 +74,7 @@ from mpc_local_planner.core.diagnostics import PlanTrigger
 
 if TYPE_CHECKING:
     from mpc_local_planner.core.free_space import EscapeGrid
+    from mpc_local_planner.core.obstacles import ConvexPolygon
 
 __all__ = [
     'PROGRESS_ANGLE',
@@ -104,7 +109,8 @@ class ReplanningPlanner(Protocol):
         """Return (M, 2) waypoints from start to goal; raise PlanningError if none."""
 
     def replan(self, start: np.ndarray, goal: np.ndarray, *, failures: int = 0,
-               grid: EscapeGrid | None = None, escape_distance: float = 1.0) -> np.ndarray:
+               grid: EscapeGrid | None = None, escape_distance: float = 1.0,
+               local_obstacles: Sequence[ConvexPolygon] = ()) -> np.ndarray:
         """Plan again from where the robot is, the seed moved on by failures."""
 
     def rest_problem(self, plan: np.ndarray, position: Sequence[float]) -> str | None:
@@ -264,7 +270,8 @@ class Replanner:
         return self._attempt(planner, start, goal, PlanTrigger.GOAL, now=now)
 
     def check(self, planner: ReplanningPlanner, start: np.ndarray, *, now: float,
-              grid: EscapeGrid | None = None) -> ReplanDecision:
+              grid: EscapeGrid | None = None,
+              local_obstacles: Sequence[ConvexPolygon] = ()) -> ReplanDecision:
         """Check the plan in force if a check is due, and re-plan it when it must be.
 
         Args:
@@ -272,6 +279,9 @@ class Replanner:
             start: The robot's pose (x, y, theta).
             now: The caller's time, seconds.
             grid: The grid a re-plan may escape on (None: no escape).
+            local_obstacles: The obstacles the local controller holds (as sensed): a
+                re-plan's turn at the start is one they allow, where there is such a plan
+                (`RrtStarPlanner.replan`).
 
         Returns:
             NOT_DUE, CLEAR, or the re-plan's PLANNED or FAILED (trigger BLOCKED, PERIODIC
@@ -283,17 +293,18 @@ class Replanner:
                 or now - self._checked < settings.check_period - settings.slack):
             return ReplanDecision(ReplanOutcome.NOT_DUE)
         self._checked = now
+        held = tuple(local_obstacles)
         problem = planner.rest_problem(self._plan, start)
         if problem is not None:
             return self._attempt(planner, start, self._goal, PlanTrigger.BLOCKED, now=now,
-                                 grid=grid, problem=problem)
+                                 grid=grid, problem=problem, held=held)
         if (settings.replan_period > 0.0
                 and now - self._plan_time >= settings.replan_period - TIME_EPSILON):
             return self._attempt(planner, start, self._goal, PlanTrigger.PERIODIC, now=now,
-                                 grid=grid)
+                                 grid=grid, held=held)
         if self._no_progress(start, now):
             return self._attempt(planner, start, self._goal, PlanTrigger.NO_PROGRESS, now=now,
-                                 grid=grid)
+                                 grid=grid, held=held)
         return ReplanDecision(ReplanOutcome.CLEAR)
 
     def _no_progress(self, start: np.ndarray, now: float) -> bool:
@@ -326,7 +337,8 @@ class Replanner:
 
     def _attempt(self, planner: ReplanningPlanner, start: np.ndarray, goal: np.ndarray,
                  trigger: PlanTrigger, *, now: float, grid: EscapeGrid | None = None,
-                 problem: str | None = None) -> ReplanDecision:
+                 problem: str | None = None,
+                 held: tuple[ConvexPolygon, ...] = ()) -> ReplanDecision:
         start = np.array(start, dtype=float)
         goal = np.array(goal, dtype=float)
         started = time.perf_counter()
@@ -336,7 +348,8 @@ class Replanner:
             else:
                 waypoints = planner.replan(start, goal, failures=self.consecutive_failures,
                                            grid=grid,
-                                           escape_distance=self.settings.escape_distance)
+                                           escape_distance=self.settings.escape_distance,
+                                           local_obstacles=held)
         except Exception as err:  # PlanningError; a bug too: the caller decides
             seconds = time.perf_counter() - started
             if trigger is not PlanTrigger.GOAL:

@@ -26,14 +26,16 @@ rollout's controller):
 2. the scan goes into the planner's grid (map plus scans, `PlanningGrid`) and into the
    controller's obstacle memory (`ObstacleMemory`), both told the robot's footprint, as the
    nodes are (returns inside it are the robot itself);
-3. the planner follows the global_planner node's re-planning policy, through the same
+3. the controller's obstacle memory takes the scan, and the map's and the memory's
+   obstacles near the robot are assembled (`LocalObstacles`, as the controller node
+   assembles them);
+4. the planner follows the global_planner node's re-planning policy, through the same
    `Replanner` (core/replanning.py): every ``replan_check_period`` it checks the rest of its
    plan (`RrtStarPlanner.rest_problem`) and re-plans from the pose when it is blocked (and
-   every ``replan_period``, if set); the first plan is made at the first step, on the map
-   alone (before the first scan), as the node plans a goal that comes before the laser has
-   shown anything;
-4. the local controller gets the map's and the memory's obstacles near the robot
-   (`LocalObstacles`, as the controller node assembles them) and answers.
+   every ``replan_period``, if set), with a first turn those obstacles allow where it can;
+   the first plan is made at the first step, on the map alone (before the first scan), as
+   the node plans a goal that comes before the laser has shown anything;
+5. the local controller gets those obstacles and answers.
 
 The local controllers are adapters (`LocalController`): the paper's MPC through the same
 `MpcController` the node runs, the tracking MPC (it tracks the goal, not the plan), pure
@@ -367,13 +369,17 @@ class Navigator:
         scan = self._scan(x, t)
         if scan is not None:
             self.grid.add_scan(scan, x, body=self.footprint)
-        self._adopt(self.replanner.check(self.planner, x, now=t, grid=self.grid), x, t)
         started = time.perf_counter()
-        waited = compile_wait_seconds()  # a first use of an NLP on a fresh machine
         if scan is not None:
             self.memory.update(scan, x, body=self.footprint)
             self.obstacles.scan_updated()
         nearby = self.obstacles.near(x[:2], self.local.reach + self.settings.sensing_margin)
+        perceived = time.perf_counter() - started
+        # a re-plan's first turn is one the controller's obstacles allow (Replanner.check)
+        self._adopt(self.replanner.check(self.planner, x, now=t, grid=self.grid,
+                                         local_obstacles=nearby), x, t)
+        started = time.perf_counter() - perceived
+        waited = compile_wait_seconds()  # a first use of an NLP on a fresh machine
         self.local.avoid(nearby)
         if self.base is None:
             answer = self.local.command(np.asarray(x, dtype=float), t)

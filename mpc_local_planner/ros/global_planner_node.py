@@ -104,6 +104,7 @@ from mpc_local_planner.core.replanning import (
     ReplanSettings,
 )
 from mpc_local_planner.perception.grids import PlanningGrid
+from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
 from mpc_local_planner.ros.conversions import (
     frame_problem,
     grid_from_message,
@@ -180,6 +181,8 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         self._use_scan = False
         self._world: World | None = None
         self._grid: PlanningGrid | None = None
+        # with use_scan: the convex pieces the scans make, as the controller remembers them
+        self._memory: ObstacleMemory | None = None
         self._planner: RrtStarPlanner | None = None
         self._plan_pub: LifecyclePublisher | None = None
         self._diag_pub: LifecyclePublisher | None = None
@@ -245,6 +248,8 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         """
         self._use_map = bool(self.get_parameter('use_map').value)
         self._use_scan = bool(self.get_parameter('use_scan').value)
+        self._memory = (ObstacleMemory(float(self.get_parameter('obstacle_memory').value))
+                        if self._use_scan else None)
         try:
             if self._use_scan and not self._use_map:
                 problem = 'use_scan needs use_map (scans mark the cells of the map)'
@@ -344,6 +349,7 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
             self._tf_listener = None
         self._planner = None
         self._grid = None
+        self._memory = None
         self._world = None
         self._state = None
         self._pose_source.clear()
@@ -428,7 +434,8 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         values['iterations'] = int(values['iterations'])
         values['seed'] = int(values['seed'])
         values['simplify'] = bool(values['simplify'])
-        for key in ('time_limit', 'range', 'clearance'):
+        for key in ('time_limit', 'range', 'clearance', 'start_clearance',
+                    'drive_on_heading_distance'):
             values[key] = float(values[key])
         footprint = resolve(str(self.get_parameter('footprint').value),
                             world_footprint=self._world.footprint if self._world else None)
@@ -611,8 +618,11 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         start = self._start()
         if start is None:
             return
+        # a re-plan's first turn is one the controller's obstacles allow (its pieces, as
+        # this node's scans make them)
+        held = self._memory.obstacles() if self._memory is not None else ()
         self._adopt(self.replanner.check(self._planner, start, now=self._now(),
-                                         grid=self._grid))
+                                         grid=self._grid, local_obstacles=held))
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9

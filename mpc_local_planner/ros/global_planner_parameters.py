@@ -46,7 +46,7 @@ from mpc_local_planner.worlds.world import load_world
 __all__ = ['PARAMETERS', 'PLANNER_FIELDS', 'parameter_problems']
 
 PLANNER_FIELDS = ('iterations', 'time_limit', 'seed', 'range', 'robot_radius', 'clearance',
-                   'simplify')
+                   'simplify', 'start_clearance', 'drive_on_heading_distance')
 _DEFAULTS = PlannerConfig()  # the single source of the planner's defaults
 
 
@@ -86,6 +86,22 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('clearance', _DEFAULTS.clearance,
                   'extra obstacle inflation beyond the radius (m)', float_range=(0.0, 10.0)),
     ParameterSpec('simplify', _DEFAULTS.simplify, "shortcut the path with OMPL's simplifier"),
+    ParameterSpec('start_clearance', _DEFAULTS.start_clearance,
+                  'with a footprint and use_scan, the distance (m) a re-plan keeps from the '
+                  "convex pieces the laser's returns make (the controller's obstacles, "
+                  'remembered for obstacle_memory s): a turn the grid allows but they forbid '
+                  'is one the controller cannot make; a start already closer keeps what it has',
+                  float_range=(0.0, 1.0)),
+    ParameterSpec('drive_on_heading_distance', _DEFAULTS.drive_on_heading_distance,
+                  "with a footprint and use_scan, how far (m) a re-plan kept clear of the "
+                  "convex pieces (start_clearance) may first drive straight on a heading the "
+                  "start's turns allow, to where the robot can turn, when no plan leaves the "
+                  "start otherwise (Nav2's DriveOnHeading); 0 = never",
+                  float_range=(0.0, 10.0)),
+    ParameterSpec('obstacle_memory', 5.0,
+                  'with use_scan, seconds a convex piece seen by the laser is remembered for '
+                  "start_clearance (the controller's obstacle_memory); read at configure",
+                  float_range=(0.01, 3600.0)),
     ParameterSpec('analytic_path', '',
                   "publish this analytic path (e.g. 'paper_sinusoid') instead of planning; '' "
                   '= plan with RRT*'),

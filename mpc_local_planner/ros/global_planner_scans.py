@@ -103,9 +103,10 @@ class PlannerScans:
                     continue
                 # returns inside the robot are the robot: the planner's footprint says where
                 body = self._planner.footprint if self._planner is not None else None
-                self._grid.add_scan(scan, pose,
-                                    laser_pose=list(self.get_parameter('laser_pose').value),
-                                    body=body)
+                laser_pose = list(self.get_parameter('laser_pose').value)
+                self._grid.add_scan(scan, pose, laser_pose=laser_pose, body=body)
+                if self._memory is not None:  # the controller's convex pieces, for re-plans
+                    self._memory.update(scan, pose, laser_pose=laser_pose, body=body)
             except LocalizationError as err:  # not the scan's fault: said where plans wait
                 self.get_logger().info(f"scan dropped: no pose in the plan's frame ({err})",
                                        throttle_duration_sec=2.0)

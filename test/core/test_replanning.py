@@ -42,6 +42,7 @@ class FakePlanner:
         self.fail = False
         self.replan_failures: list[int] = []
         self.escapes: list[tuple[Any, float]] = []
+        self.held: list[tuple[Any, ...]] = []
         self.count = 0
 
     def _path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
@@ -55,9 +56,11 @@ class FakePlanner:
         return self._path(start, goal)
 
     def replan(self, start: np.ndarray, goal: np.ndarray, *, failures: int = 0,
-               grid: Any = None, escape_distance: float = 1.0) -> np.ndarray:
+               grid: Any = None, escape_distance: float = 1.0,
+               local_obstacles: Sequence[Any] = ()) -> np.ndarray:
         self.replan_failures.append(failures)
         self.escapes.append((grid, escape_distance))
+        self.held.append(tuple(local_obstacles))
         return self._path(start, goal)
 
     def rest_problem(self, plan: np.ndarray, position: Sequence[float]) -> str | None:
@@ -89,6 +92,15 @@ def test_a_blocked_plan_is_replanned_at_the_next_check() -> None:
     assert decision.trigger is PlanTrigger.BLOCKED and decision.problem == planner.blocked
     np.testing.assert_array_equal(replanner.plan, decision.waypoints)
     assert replanner.replans == 1 and planner.escapes == [('grid', 1.0)]
+
+
+def test_a_re_plan_is_given_the_obstacles_the_local_controller_holds() -> None:
+    # the planner keeps its start clear of them too (RrtStarPlanner.replan)
+    replanner, planner = planned()
+    planner.blocked = 'blocked'
+    replanner.check(planner, START, now=0.5, local_obstacles=['piece'])
+    replanner.check(planner, START, now=1.0)
+    assert planner.held == [('piece',), ()]
 
 
 def test_a_clear_plan_stays() -> None:
@@ -317,7 +329,8 @@ class _NoProgressPlanner:
         self.starts.append(np.array(start))
         return np.array([start[:2], goal[:2]])
 
-    def replan(self, start, goal, *, failures=0, grid=None, escape_distance=1.0):
+    def replan(self, start, goal, *, failures=0, grid=None, escape_distance=1.0,
+               local_obstacles=()):
         return self.plan(start, goal)
 
     def rest_problem(self, plan, position):

@@ -208,6 +208,10 @@ def test_planner_avoids_an_obstacle_a_scan_shows_and_the_map_lacks(ros) -> None:
     scan = scan_message([box], pose, stamp)
     assert ros.spin_until(lambda: probe.scan_pub.publish(scan) or planner.scan_count > 0,
                           timeout=TIMEOUT)
+    # the scan made the controller's convex pieces too (re-plans keep start_clearance)
+    assert all(piece.distance(np.array([[5.0, 3.0]]))[0] < 0.1
+               for piece in planner._memory.obstacles())
+    assert planner._memory.obstacles()
 
     waypoints = next_plan(ros, planner, probe, goal_message(9.0, 3.1))
     assert len(waypoints) > 2

@@ -79,7 +79,8 @@ class ScriptedPlanner:
         return self._path(start, goal)
 
     def replan(self, start: np.ndarray, goal: np.ndarray, *, failures: int = 0,
-               grid: Any = None, escape_distance: float = 1.0) -> np.ndarray:
+               grid: Any = None, escape_distance: float = 1.0,
+               local_obstacles: Sequence[Any] = ()) -> np.ndarray:
         self.calls.append((self.now, 'replan', failures))
         return self._path(start, goal)
 
