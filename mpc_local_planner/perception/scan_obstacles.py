@@ -358,6 +358,11 @@ class ObstacleMemory:
     def __len__(self) -> int:
         return len(self._entries)
 
+    @property
+    def stamp(self) -> float:
+        """The stamp of the newest scan taken (-inf before the first, or after clear())."""
+        return self._stamp
+
     def clear(self) -> None:
         """Forget everything (e.g. when the map frame jumps)."""
         self._entries = []

@@ -119,11 +119,7 @@ from mpc_local_planner.ros.global_planner_parameters import (
     PARAMETERS,
     PLANNER_FIELDS,
 )
-from mpc_local_planner.ros.global_planner_scans import (
-    ODOM_HISTORY_S,
-    PENDING_SCANS,
-    PlannerScans,
-)
+from mpc_local_planner.ros.global_planner_scans import PlannerScans
 from mpc_local_planner.ros.lifecycle import ManagedNode
 from mpc_local_planner.ros.node_main import destroy_on_failure, run_node
 from mpc_local_planner.ros.parameters import (
@@ -142,6 +138,8 @@ from mpc_local_planner.ros.robot_pose import (
     choose_mode,
     LocalizationError,
     make_buffer,
+    ODOM_HISTORY_S,
+    PENDING_SCANS,
     PoseMode,
     RobotPose,
 )

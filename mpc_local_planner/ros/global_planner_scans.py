@@ -20,6 +20,8 @@ subscription, the grid and the pose source these use.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from sensor_msgs.msg import LaserScan
 
@@ -32,20 +34,16 @@ from mpc_local_planner.ros.conversions import (
 )
 from mpc_local_planner.ros.robot_pose import (
     LocalizationError,
+    ODOM_HISTORY_S,
 )
 
-__all__ = ['ODOM_HISTORY_S', 'PENDING_SCANS', 'PlannerScans', 'SCAN_POSE_TOLERANCE']
+__all__ = ['PlannerScans', 'SCAN_POSE_TOLERANCE']
 
-# Seconds of odometry kept to place scans.
-ODOM_HISTORY_S = 2.0
 # A scan farther than this (seconds) from every kept odometry stamp is dropped: the pose it
 # would be placed with is not the robot's at the scan. A scan newer than the odometry by
 # more than MAX_EXTRAPOLATION_S waits instead, and is discarded if no odometry has covered
 # its stamp by the time it is this old (by this node's clock).
 SCAN_POSE_TOLERANCE = 0.5
-# Scans kept waiting for odometry that covers their stamps (the latest; an older one falls
-# out), as the controller keeps them.
-PENDING_SCANS = 3
 
 
 class PlannerScans:
@@ -106,7 +104,7 @@ class PlannerScans:
                 laser_pose = list(self.get_parameter('laser_pose').value)
                 self._grid.add_scan(scan, pose, laser_pose=laser_pose, body=body)
                 if self._memory is not None:  # the controller's convex pieces, for re-plans
-                    self._memory.update(scan, pose, laser_pose=laser_pose, body=body)
+                    self._remember(scan, pose, laser_pose, body)
             except LocalizationError as err:  # not the scan's fault: said where plans wait
                 self.get_logger().info(f"scan dropped: no pose in the plan's frame ({err})",
                                        throttle_duration_sec=2.0)
@@ -117,6 +115,21 @@ class PlannerScans:
             self._problems.resolve('scan')
             self.scan_count += 1
         self._pending_scans.extend(waiting)
+
+    def _remember(self, scan: Any, pose: np.ndarray, laser_pose: list[float],
+                  body: Any) -> None:
+        """Add a placed scan to the obstacle memory, as the controller does.
+
+        A scan a little older than the newest remembered (out of order) adds nothing: the
+        memory holds a newer view. One older by more than the odometry kept means the clock
+        jumped back (a restarted simulation, a bag played again): the memory starts anew
+        instead of refusing every scan from then on.
+        """
+        if scan.stamp < self._memory.stamp:
+            if self._memory.stamp - scan.stamp <= ODOM_HISTORY_S:
+                return
+            self._memory.clear()
+        self._memory.update(scan, pose, laser_pose=laser_pose, body=body)
 
     def _refuse_scan(self, err: Exception) -> None:
         """Say (throttled) that a scan was dropped."""

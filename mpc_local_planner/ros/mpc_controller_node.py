@@ -127,11 +127,7 @@ from mpc_local_planner.ros.mpc_controller_parameters import (
     load_robot,
     PARAMETERS,
 )
-from mpc_local_planner.ros.mpc_controller_sensing import (
-    ControllerSensing,
-    ODOM_HISTORY_S,
-    PENDING_SCANS,
-)
+from mpc_local_planner.ros.mpc_controller_sensing import ControllerSensing
 from mpc_local_planner.ros.node_main import destroy_on_failure, EXIT_INVALID_PARAMETERS, run_node
 from mpc_local_planner.ros.parameters import (
     declare_parameters,
@@ -150,6 +146,8 @@ from mpc_local_planner.ros.robot_pose import (
     choose_mode,
     LocalizationError,
     make_buffer,
+    ODOM_HISTORY_S,
+    PENDING_SCANS,
     PoseMode,
     RobotPose,
 )

@@ -73,17 +73,11 @@ from mpc_local_planner.ros.conversions import (
     scan_from_message,
     SCANS,
 )
+from mpc_local_planner.ros.robot_pose import ODOM_HISTORY_S
 from mpc_local_planner.ros.throttle import ERROR_THROTTLE_S
 
-__all__ = ['ControllerSensing', 'MAX_SCAN_BYTES', 'ODOM_HISTORY_S', 'PENDING_SCANS',
-           'SENSING_MARGIN']
+__all__ = ['ControllerSensing', 'MAX_SCAN_BYTES', 'SENSING_MARGIN']
 
-# Seconds of odometry kept to find the pose at a scan's stamp.
-ODOM_HISTORY_S = 2.0
-# Scans kept waiting for odometry that covers their stamps (the latest; an older one falls
-# out). A few: at 10-40 Hz, three scans span 75-300 ms, more than odometry is normally late,
-# and a waiting scan older than scan_timeout is discarded anyway.
-PENDING_SCANS = 3
 # Metres beyond the horizon's reach (MpcConfig.reach: v_max N h, the inflation and a
 # polygon's circumscribed radius) within which map cells and remembered scan obstacles are
 # handed to the MPC.

@@ -67,10 +67,18 @@ try:  # a sourced ROS install; PyPI has no tf2_ros
 except ImportError:  # pragma: no cover - depends on the installation
     tf2_ros = None
 
-__all__ = ['LocalizationError', 'PoseMode', 'POSE_PARAMETERS', 'RobotPose', 'TF_AVAILABLE',
-           'TfPose', 'choose_mode', 'make_buffer', 'transform_to_pose']
+__all__ = ['LocalizationError', 'ODOM_HISTORY_S', 'PENDING_SCANS', 'PoseMode', 'POSE_PARAMETERS',
+           'RobotPose', 'TF_AVAILABLE', 'TfPose', 'choose_mode', 'make_buffer',
+           'transform_to_pose']
 
 TF_AVAILABLE = tf2_ros is not None
+# Seconds of odometry both nodes keep (RobotPose's span), to place each scan and localizer
+# pose at its stamp.
+ODOM_HISTORY_S = 2.0
+# Scans a node keeps waiting for odometry that covers their stamps (the latest; an older one
+# falls out). A few: at 10-40 Hz, three scans span 75-300 ms, more than odometry is normally
+# late, and a waiting scan too old is discarded anyway.
+PENDING_SCANS = 3
 
 # The parameters both nodes declare for it (besides global_frame and robot_base_frame).
 POSE_PARAMETERS: tuple[ParameterSpec, ...] = (

@@ -402,3 +402,19 @@ def test_planner_refuses_scans_whose_beams_do_not_match_their_angles_or_from_the
     # the same scan, right: taken
     assert ros.spin_until(lambda: probe.scan_pub.publish(scan_message([box], pose, stamp))
                           or planner.scan_count > 0, timeout=TIMEOUT)
+
+
+def test_planner_takes_scans_again_after_the_clock_jumped_back(ros) -> None:
+    """A restarted simulation, or a bag played again: stamps start over, 10 s earlier.
+
+    The odometry history and the obstacle memory (the controller's pieces, for re-plans)
+    start anew; scans are placed and counted as before, none is refused as older than the
+    last one. The callbacks are called directly: nothing else arrives in between.
+    """
+    planner, _probe, pose, stamp = scanning_planner(ros)
+    box = ConvexPolygon.from_box(5.0, 1.5, 5.3, 4.5)
+    for t in (stamp + 0.1, stamp - 10.0, stamp - 9.9):
+        count = planner.scan_count
+        planner.odom_callback(state_to_odometry(pose, np.zeros(2), stamp=seconds_to_stamp(t)))
+        planner.scan_callback(scan_message([box], pose, t))
+        assert planner.scan_count == count + 1, t
