@@ -25,6 +25,7 @@ import struct
 from typing import Sequence
 
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import (
     Point,
     Point32,
@@ -47,6 +48,7 @@ from mpc_local_planner.worlds.map_files import OccupancyMap
 
 __all__ = [
     'delete_all_marker',
+    'diagnostic_array',
     'frame_problem',
     'SCANS',
     'grid_from_message',
@@ -373,6 +375,21 @@ def delete_all_marker(*, frame_id: str, stamp: Time) -> Marker:
     marker.header.stamp = stamp
     marker.action = Marker.DELETEALL
     return marker
+
+
+def diagnostic_array(*, name: str, hardware_id: str, level: int, message: str,
+                     values: Sequence[tuple[str, str]], stamp: Time) -> DiagnosticArray:
+    """Return a DiagnosticArray of one status (what each node publishes on its diagnostics)."""
+    status = DiagnosticStatus()
+    status.name = name
+    status.hardware_id = hardware_id
+    status.level = bytes([int(level)])
+    status.message = message
+    status.values = [KeyValue(key=k, value=v) for k, v in values]
+    array = DiagnosticArray()
+    array.header.stamp = stamp
+    array.status = [status]
+    return array
 
 
 def scan_beam_count(data: bytes) -> int | None:

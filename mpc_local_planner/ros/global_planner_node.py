@@ -76,7 +76,7 @@ from dataclasses import replace
 import sys
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 import numpy as np
@@ -106,6 +106,7 @@ from mpc_local_planner.core.replanning import (
 from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
 from mpc_local_planner.ros.conversions import (
+    diagnostic_array,
     frame_problem,
     grid_from_message,
     odometry_to_state,
@@ -679,16 +680,10 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         self.last_outcome = outcome
         if self._diag_pub is None:
             return
-        status = DiagnosticStatus()
-        status.name = f'{self.get_name()}: RRT*'
-        status.hardware_id = self.get_fully_qualified_name()
-        status.level = bytes([int(outcome.level)])
-        status.message = outcome.detail
-        status.values = [KeyValue(key=k, value=v) for k, v in outcome.to_values()]
-        array = DiagnosticArray()
-        array.header.stamp = self.get_clock().now().to_msg()
-        array.status = [status]
-        self._diag_pub.publish(array)
+        self._diag_pub.publish(diagnostic_array(
+            name=f'{self.get_name()}: RRT*', hardware_id=self.get_fully_qualified_name(),
+            level=outcome.level, message=outcome.detail, values=outcome.to_values(),
+            stamp=self.get_clock().now().to_msg()))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Twist, TwistStamped
 import numpy as np
 from visualization_msgs.msg import MarkerArray
@@ -38,6 +38,7 @@ from mpc_local_planner.core.diagnostics import (
 )
 from mpc_local_planner.ros.conversions import (
     delete_all_marker,
+    diagnostic_array,
     polygon_marker,
     polygon_stamped,
     poses_to_path,
@@ -176,13 +177,8 @@ class ControllerOutputs:
             output, state=self._state, state_time=self._state_time,
             failures_total=self.controller.solver_failures, blockage=self.blockage,
             timeouts_total=self.controller.timeouts)
-        status = DiagnosticStatus()
-        status.name = f'{self.get_name()}: MPC'
-        status.hardware_id = self.get_fully_qualified_name()
-        status.message = record.message
-        status.level = bytes([int(record.level)])
-        status.values = [KeyValue(key=k, value=v) for k, v in record.to_values()]
-        array = DiagnosticArray()
-        array.header.stamp = seconds_to_stamp(max(now, 0.0))
-        array.status = [status]
-        return array
+        return diagnostic_array(name=f'{self.get_name()}: MPC',
+                                hardware_id=self.get_fully_qualified_name(),
+                                level=record.level, message=record.message,
+                                values=record.to_values(),
+                                stamp=seconds_to_stamp(max(now, 0.0)))
