@@ -44,7 +44,8 @@ from mpc_local_planner.core.mpc import PathReferenceMPC
 from mpc_local_planner.core.mpc.compilation import COMPILE_FLAGS, NO_OBSTACLE_COMPILE_FLAGS
 from mpc_local_planner.core.obstacles import ConvexPolygon, within_faces
 from mpc_local_planner.core.paths import paper_sinusoid, ReferencePath, wrap_angle
-from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
+from mpc_local_planner.core.planner import RrtStarPlanner
+from mpc_local_planner.core.planner_config import PlannerConfig
 from mpc_local_planner.evaluation.opti_peer import OptiMpc
 from mpc_local_planner.evaluation.rollout import rollout, StopRule
 from mpc_local_planner.perception.laser import contact, SimulatedLaser

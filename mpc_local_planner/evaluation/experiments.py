@@ -48,7 +48,8 @@ from mpc_local_planner.core.models import RobotModel, Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path, WaypointPath
-from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
+from mpc_local_planner.core.planner import RrtStarPlanner
+from mpc_local_planner.core.planner_config import PlannerConfig
 from mpc_local_planner.evaluation.metrics import compute_metrics
 from mpc_local_planner.evaluation.plotting import plot_runs
 from mpc_local_planner.evaluation.rollout import (

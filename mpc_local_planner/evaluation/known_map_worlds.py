@@ -37,11 +37,8 @@ from typing import Sequence
 import numpy as np
 
 from mpc_local_planner.core.obstacles import ConvexPolygon, segment_collides
-from mpc_local_planner.core.planner import (
-    PlannerConfig,
-    PlanningError,
-    RrtStarPlanner,
-)
+from mpc_local_planner.core.planner import PlanningError, RrtStarPlanner
+from mpc_local_planner.core.planner_config import PlannerConfig
 
 __all__ = [
     'assumption_1',

@@ -54,7 +54,8 @@ from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
-from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
+from mpc_local_planner.core.planner import RrtStarPlanner
+from mpc_local_planner.core.planner_config import PlannerConfig
 from mpc_local_planner.core.reality import (
     Base,
     Localizer,

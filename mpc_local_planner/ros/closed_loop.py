@@ -120,7 +120,8 @@ from rclpy.parameter import Parameter
 from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import resolve
-from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
+from mpc_local_planner.core.planner import RrtStarPlanner
+from mpc_local_planner.core.planner_config import PlannerConfig
 from mpc_local_planner.core.reality import reality_preset, REALITY_PRESETS, true_goal_tolerance
 from mpc_local_planner.evaluation.analyze_bag import analyze, read_run, summary
 from mpc_local_planner.evaluation.plotting import plot_runs

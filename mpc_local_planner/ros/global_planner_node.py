@@ -96,7 +96,8 @@ from mpc_local_planner.core.diagnostics import (
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import resolve
 from mpc_local_planner.core.paths import analytic_path, waypoints_to_poses
-from mpc_local_planner.core.planner import path_length, PlannerConfig, RrtStarPlanner
+from mpc_local_planner.core.planner import path_length, RrtStarPlanner
+from mpc_local_planner.core.planner_config import PlannerConfig
 from mpc_local_planner.core.replanning import (
     ReplanDecision,
     Replanner,

@@ -27,7 +27,7 @@ from rclpy.parameter import Parameter
 
 from mpc_local_planner.core.footprint import parse_footprint
 from mpc_local_planner.core.paths import analytic_path
-from mpc_local_planner.core.planner import PlannerConfig
+from mpc_local_planner.core.planner_config import PlannerConfig
 from mpc_local_planner.core.replanning import (
     PROGRESS_ANGLE,
     PROGRESS_RADIUS,

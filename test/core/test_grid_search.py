@@ -39,7 +39,8 @@ from mpc_local_planner.core.grid_search import (
     shortest_cells,
 )
 from mpc_local_planner.core.paths import WaypointPath
-from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
+from mpc_local_planner.core.planner import RrtStarPlanner
+from mpc_local_planner.core.planner_config import PlannerConfig
 from mpc_local_planner.perception.grids import grid_rectangles, PlanningGrid
 from mpc_local_planner.worlds.data_files import BARN_DIR
 from mpc_local_planner.worlds.map_files import OccupancyMap, rasterize_world

@@ -37,7 +37,8 @@ import pytest
 from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
 from mpc_local_planner.core.paths import WaypointPath
-from mpc_local_planner.core.planner import PlannerConfig, RrtStarPlanner
+from mpc_local_planner.core.planner import RrtStarPlanner
+from mpc_local_planner.core.planner_config import PlannerConfig
 from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.worlds.data_files import BARN_DIR
 from mpc_local_planner.worlds.map_files import OccupancyMap
