@@ -35,8 +35,8 @@ import numpy as np
 from mpc_local_planner.core.models import RobotModel
 from mpc_local_planner.core.mpc.formulation import rate_limited_inputs
 
-__all__ = ['Plan', 'PROGRESS_TOLERANCE', 'Rollout', 'STANDING_INPUT', 'guided_guess', 'rate_start',
-           'plan_moves', 'shifted_candidate']
+__all__ = ['Plan', 'PROGRESS_TOLERANCE', 'Rollout', 'STANDING_INPUT', 'guided_guess',
+           'path_following_inputs', 'plan_moves', 'rate_start', 'shifted_candidate']
 
 # Inputs below this (m/s, rad/s) stand still: a solver that converged to "wait" leaves
 # 1e-9, not zeros; and a gain of path progress s below PROGRESS_TOLERANCE is none (see
@@ -163,11 +163,20 @@ def guided_guess(model: RobotModel, x0: np.ndarray, carried: np.ndarray | None, 
     base at rest does not jump to half speed, and the plan must end at rest). They are rolled
     out from x0, and the last state replaced by the steady state on the path nearest it. No
     multipliers yet. With first_order (a first-order hold; rate_bounds required) the inputs
-    are knots ramped from the input before, and the last one is 0.
+    are knots ramped from the input before, and the last one is 0; and without carried
+    inputs the start follows the path (path_following_inputs) instead of driving straight
+    ahead: a robot standing off the path's heading (after a stop, or a re-plan whose path
+    begins with a turn) drove the straight start off the path, among obstacles the plan
+    never passes, and IPOPT from it ran out of every step's budget or declared the NLP
+    infeasible (laser-only BARN world 62 on the real base, docs/design/mpc.md).
     """
     u = np.zeros((horizon, model.nu))
     if carried is not None and len(carried) == horizon:
         u[:-1] = carried[1:]
+    elif first_order and rate_bounds is not None and not math.isnan(progress(x0, 0.0)):
+        u = path_following_inputs(model, x0, rate_bounds, horizon=horizon, step=step,
+                                  rollout=rollout, progress=progress,
+                                  terminal_state=terminal_state)
     else:
         u[:, 0] = 0.5 * model.u_max[0]
     if rate_bounds is not None:
@@ -178,6 +187,67 @@ def guided_guess(model: RobotModel, x0: np.ndarray, carried: np.ndarray | None, 
     if terminal is not None:
         x[-1] = terminal
     return Plan(x=x, u=u, s=s, mu=np.zeros(0), value=math.inf)
+
+
+# How far ahead along the path (metres, turns counted at 0.25 m per radian) the path-following
+# start aims, and the distance below which it aims at the path's heading rather than at the
+# point (a turn in place).
+FOLLOW_LOOKAHEAD = 0.3
+FOLLOW_AIM_DISTANCE = 0.05
+# Heading error (rad) beyond which the path-following start turns in place before it drives.
+FOLLOW_TURN_FIRST = 0.5
+
+
+def _ahead(terminal_state: TerminalState, s: float) -> np.ndarray:
+    """Return the steady state g_p(s') FOLLOW_LOOKAHEAD along the path from g_p(s)."""
+    here = terminal_state(s)
+    assert here is not None
+    ds, ahead = 1e-3, here
+    while s < 1.0:
+        ahead = terminal_state(min(s + ds, 1.0))
+        assert ahead is not None
+        gap = (float(np.hypot(*(ahead[:2] - here[:2])))
+               + 0.25 * abs(float(ahead[2] - here[2])))
+        if gap >= FOLLOW_LOOKAHEAD or s + ds >= 1.0:
+            break
+        ds *= 2.0
+    return ahead
+
+
+def path_following_inputs(model: RobotModel, x0: np.ndarray,
+                          rate_bounds: tuple[np.ndarray, np.ndarray], *, horizon: int,
+                          step: float, rollout: Rollout, progress: Progress,
+                          terminal_state: TerminalState) -> np.ndarray:
+    """Return first-order-hold knots that follow the path from x0, within the rate bounds.
+
+    A pure-pursuit rollout on the model: at each step aim at the path FOLLOW_LOOKAHEAD
+    ahead of the robot's projection (at its point, or at its heading when the point is
+    within FOLLOW_AIM_DISTANCE: a turn in place), turn towards it, and drive at half speed
+    once the heading error is below FOLLOW_TURN_FIRST. Each knot is clipped within max_accel
+    h of the one before (from the input before, rate_bounds[0]); the caller ends them at
+    rest (formulation.rate_limited_inputs).
+    """
+    before = np.asarray(rate_bounds[0], dtype=float).reshape(-1)
+    rate = np.asarray(rate_bounds[1], dtype=float).reshape(-1)
+    u_min, u_max = np.asarray(model.u_min, dtype=float), np.asarray(model.u_max, dtype=float)
+    k_angle = model.angle_index
+    u = np.zeros((horizon, model.nu))
+    x = np.asarray(x0, dtype=float).copy()
+    s = progress(x, 0.0)
+    for k in range(horizon):
+        s = progress(x, s)
+        target = _ahead(terminal_state, s)
+        offset = target[:2] - x[:2]
+        aim = (math.atan2(offset[1], offset[0]) if float(np.hypot(*offset)) > FOLLOW_AIM_DISTANCE
+               else float(target[2]))
+        error = math.remainder(aim - float(x[k_angle]), 2.0 * math.pi)
+        wanted = np.zeros(model.nu)
+        wanted[0] = 0.5 * u_max[0] * math.cos(error) if abs(error) < FOLLOW_TURN_FIRST else 0.0
+        wanted[1] = error / (2.0 * step)
+        u[k] = np.clip(np.clip(wanted, before - rate, before + rate), u_min, u_max)
+        x = rollout(x, u[k:k + 1], step, before)[-1]
+        before = u[k]
+    return u
 
 
 def rate_start(model: RobotModel, previous_input: np.ndarray | None,

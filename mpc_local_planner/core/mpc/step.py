@@ -594,11 +594,16 @@ class MpcBase(ABC):
             active = self._clearance.near_trajectory(candidate.x, candidate.u, reachable,
                                                      activation)
             before = self._input_before
-            if (before is not None and np.any(np.abs(before) > STANDING_INPUT)
+            if (before is not None
+                    and (np.any(np.abs(before) > STANDING_INPUT) or self._first_order)
                     and not plan_moves(self._plan, self._progress_gain)):
                 # the candidate stands still (a new path) but with max_accel the robot
                 # cannot: the solution goes on with the motion in hand, among the obstacles
-                # near it (docs/real_robot.md)
+                # near it (docs/real_robot.md). With a first-order hold the guided start
+                # follows the path from rest too (candidate.path_following_inputs), and the
+                # solution leaves the robot's spot along it: the obstacles near that motion
+                # are held from the first round, or it comes near them, and the rounds that
+                # add them spend the step's budget (laser-only BARN world 55, real base)
                 guided = self._guided_motion(x0)
                 active = active + [o for o in self._clearance.near_trajectory(
                     guided.x, guided.u, reachable, activation)
