@@ -449,7 +449,7 @@ def face_weights(normals: np.ndarray, directions: np.ndarray) -> np.ndarray:
     cone, and the cones of all vertices cover the plane; so any direction w is
     alpha a_i + beta a_{i+1} with alpha, beta >= 0 for the vertex where the polygon's support
     point in direction w is. Those are the multipliers that make the duality bound of two
-    polygons exact (see formulation.dual_multipliers).
+    polygons exact (see nlp_values.dual_multipliers).
 
     Args:
         normals: (n, 2) unit outward normals of a convex polygon, counter-clockwise (face i

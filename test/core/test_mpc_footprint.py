@@ -33,14 +33,16 @@ from mpc_local_planner.core.mpc import Decision, PathReferenceMPC, PlanSource
 from mpc_local_planner.core.mpc import step as step_module
 from mpc_local_planner.core.mpc.backends import SolverRun
 from mpc_local_planner.core.mpc.formulation import (
-    dual_multipliers,
     formulate,
     Formulation,
-    obstacle_parameters,
-    parameter_vector,
     path_terminal,
     sweep_rate,
     SWEEP_SMOOTHING,
+)
+from mpc_local_planner.core.mpc.nlp_values import (
+    dual_multipliers,
+    obstacle_parameters,
+    parameter_vector,
 )
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
 from mpc_local_planner.core.paths import AnalyticPath, paper_sinusoid, ReferencePath, WaypointPath

@@ -23,13 +23,11 @@ import pytest
 
 from mpc_local_planner.core.config import CostWeights, MpcConfig
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.mpc.formulation import (
+from mpc_local_planner.core.mpc.formulation import formulate, path_terminal, stage_cost
+from mpc_local_planner.core.mpc.nlp_values import (
     feasible_multipliers,
-    formulate,
     obstacle_parameters,
     parameter_vector,
-    path_terminal,
-    stage_cost,
 )
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import paper_sinusoid, WaypointPath

@@ -46,7 +46,7 @@ from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC, PlanSource
 from mpc_local_planner.core.mpc.candidate import path_following_inputs, Rollout
-from mpc_local_planner.core.mpc.formulation import rate_limited_inputs
+from mpc_local_planner.core.mpc.nlp_values import rate_limited_inputs
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import WaypointPath
 

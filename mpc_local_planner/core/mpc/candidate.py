@@ -33,7 +33,7 @@ import casadi as ca
 import numpy as np
 
 from mpc_local_planner.core.models import RobotModel
-from mpc_local_planner.core.mpc.formulation import rate_limited_inputs
+from mpc_local_planner.core.mpc.nlp_values import rate_limited_inputs
 
 __all__ = ['Plan', 'PROGRESS_TOLERANCE', 'Rollout', 'STANDING_INPUT', 'guided_guess',
            'path_following_inputs', 'plan_moves', 'rate_start', 'shifted_candidate']
@@ -159,7 +159,7 @@ def guided_guess(model: RobotModel, x0: np.ndarray, carried: np.ndarray | None, 
     After a new path, carried holds the inputs of the last plan on the old one: they are
     shifted by a step (the robot was carrying them out, and they avoid what the old plan
     avoided); else drive forward at half speed. rate_bounds, (the input before, max_accel h)
-    if given, then moves the inputs into the rate bounds (formulation.rate_limited_inputs: a
+    if given, then moves the inputs into the rate bounds (nlp_values.rate_limited_inputs: a
     base at rest does not jump to half speed, and the plan must end at rest). They are rolled
     out from x0, and the last state replaced by the steady state on the path nearest it. No
     multipliers yet. With first_order (a first-order hold; rate_bounds required) the inputs
@@ -225,7 +225,7 @@ def path_following_inputs(model: RobotModel, x0: np.ndarray,
     within FOLLOW_AIM_DISTANCE: a turn in place), turn towards it, and drive at half speed
     once the heading error is below FOLLOW_TURN_FIRST. Each knot is clipped within max_accel
     h of the one before (from the input before, rate_bounds[0]); the caller ends them at
-    rest (formulation.rate_limited_inputs).
+    rest (nlp_values.rate_limited_inputs).
     """
     before = np.asarray(rate_bounds[0], dtype=float).reshape(-1)
     rate = np.asarray(rate_bounds[1], dtype=float).reshape(-1)

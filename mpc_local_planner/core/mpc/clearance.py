@@ -36,13 +36,8 @@ import numpy as np
 
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import RobotModel
-from mpc_local_planner.core.mpc.formulation import (
-    dual_multipliers,
-    feasible_multipliers,
-    Formulation,
-    ramp_sweep_rate,
-    sweep_rate,
-)
+from mpc_local_planner.core.mpc.formulation import Formulation, ramp_sweep_rate, sweep_rate
+from mpc_local_planner.core.mpc.nlp_values import dual_multipliers, feasible_multipliers
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
 
 __all__ = ['Clearance', 'MAX_CACHED_PLANS']

@@ -81,14 +81,9 @@ from mpc_local_planner.core.mpc.decision import (
     LYAPUNOV_TOLERANCE,
     PlanSource,
 )
-from mpc_local_planner.core.mpc.formulation import (
-    formulate,
-    obstacle_parameters,
-    parameter_vector,
-    stage_cost,
-    TerminalCondition,
-)
+from mpc_local_planner.core.mpc.formulation import formulate, stage_cost, TerminalCondition
 from mpc_local_planner.core.mpc.nlp_shapes import NlpShapes, slot_shape
+from mpc_local_planner.core.mpc.nlp_values import obstacle_parameters, parameter_vector
 from mpc_local_planner.core.mpc.solution import MpcSolution, Rounds, SolveAttempt
 from mpc_local_planner.core.mpc.tries import Situation, Solver, solver_tries, Start, Try
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
