@@ -20,7 +20,6 @@ where the plan predicts; and the paper's zero hold builds the NLP it built befor
 
 from __future__ import annotations
 
-from dataclasses import replace
 import hashlib
 import math
 
@@ -35,6 +34,7 @@ from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC, PlanSource
 from mpc_local_planner.core.mpc.formulation import formulate, path_terminal
+from mpc_local_planner.core.mpc.tries import Start
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
 from mpc_local_planner.core.paths import paper_sinusoid, WaypointPath
 from mpc_local_planner.core.reality import Base, Reality
@@ -103,16 +103,13 @@ def test_the_shifted_candidate_of_a_first_order_solution_is_feasible() -> None:
         np.testing.assert_allclose(x, solution.x_pred[1], atol=1e-6)
         before = solution.u_pred[0]
         # the proof's candidate from there: every row of the NLP holds, obstacles cleared
-        mpc._input_before = mpc._before(None)
-        np.testing.assert_allclose(mpc._input_before, before)
-        mpc.clearance.clear(mpc._input_before)
-        candidate = mpc._candidate(mpc._unwrap(x))
-        np.testing.assert_allclose(candidate.x[:-1], solution.x_pred[1:], atol=1e-6)
+        problem = mpc.solver_problem(x, mpc.inflated_obstacles, start=Start.CANDIDATE)
+        layout = problem.nlp.formulation.layout
+        np.testing.assert_allclose(problem.w0[layout.x][:-1], solution.x_pred[1:], atol=1e-6)
+        np.testing.assert_allclose(problem.w0[layout.prev][0], before)  # its first ramp's start
         reachable = ObstacleSet(list(mpc.inflated_obstacles))
-        nlp, params, held = mpc._prepare_nlp(list(mpc.inflated_obstacles), candidate.x[0])
-        candidate = replace(candidate, mu=mpc._multipliers(candidate.x, held, nlp))
-        w = mpc._pack(candidate, nlp)
-        assert mpc._violation(w, params, reachable, nlp) <= 1e-5
+        assert mpc.clearance.violation(problem.nlp.formulation, problem.w0, problem.params,
+                                       reachable) <= 1e-5
 
 
 def test_the_tracking_baseline_builds_with_a_first_order_hold() -> None:

@@ -45,8 +45,8 @@ from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC, PlanSource
-from mpc_local_planner.core.mpc.candidate import path_following_inputs, Rollout
 from mpc_local_planner.core.mpc.nlp_values import rate_limited_inputs
+from mpc_local_planner.core.mpc.tries import Start
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import WaypointPath
 
@@ -119,12 +119,11 @@ def test_a_standing_robot_off_the_paths_heading_is_solved_from_rest_within_a_ste
 def test_the_path_following_start_turns_towards_the_path_within_the_rate_bounds() -> None:
     case = STANDING['world_062']
     mpc = _standing_mpc(case)
-    x0 = np.array(case['x'])
     config = mpc.config
     rate = np.array(config.max_accel) * config.step
-    u = path_following_inputs(mpc.model, x0, (np.zeros(2), rate), horizon=config.horizon,
-                              step=config.step, rollout=Rollout(mpc.model),
-                              progress=mpc._progress, terminal_state=mpc._terminal_state)
+    # the guided start of a robot at rest without carried inputs (path_following_inputs)
+    problem = mpc.solver_problem(np.array(case['x']), start=Start.GUIDED)
+    u = problem.w0[problem.nlp.formulation.layout.u]
     changes = np.diff(np.vstack([np.zeros(2), u]), axis=0)
     assert np.all(np.abs(changes) <= rate + 1e-12)
     # the path's first segment leaves about 1.6 rad clockwise of the robot's heading: it

@@ -146,6 +146,38 @@ class Clearance:
         self._clearance_memo[key] = required
         return required
 
+    def violation(self, form: Formulation, w: np.ndarray, params: np.ndarray,
+                  obstacles: ObstacleSet) -> float:
+        """Return the largest violation of form's rows and bounds at w, collisions geometric.
+
+        The geometric check does not trust the multipliers: whatever the solver did with
+        them, every predicted position l = 1..N must clear every given obstacle (those of the
+        NLP, or every reachable one).
+        """
+        g = np.asarray(form.g_fn(w, params)).reshape(-1)
+        viol = np.maximum(form.lbg - g, 0) + np.maximum(g - form.ubg, 0)
+        viol_w = np.maximum(form.lbw - w, 0) + np.maximum(w - form.ubw, 0)
+        worst = max(np.max(viol, initial=0.0), np.max(viol_w, initial=0.0))
+        return max(float(worst),
+                   self.penetration(w[form.layout.x], w[form.layout.u], obstacles))
+
+    def first_round(self, candidate_x: np.ndarray, candidate_u: np.ndarray,
+                    guided: tuple[np.ndarray, np.ndarray] | None, reachable: ObstacleSet,
+                    distance: float) -> list[ConvexPolygon]:
+        """Return the obstacles a step's first constraint-generation round holds.
+
+        Those within distance of the candidate, and, when guided (states, inputs) is given,
+        of that motion too: a robot that cannot stop at once (max_accel) whose candidate stands
+        still, or one whose first-order-hold solution leaves its spot along the path, comes
+        near obstacles the candidate does not, and the rounds that add them spend the step's
+        budget (docs/real_robot.md; laser-only BARN world 55, real base).
+        """
+        active = self.near_trajectory(candidate_x, candidate_u, reachable, distance)
+        if guided is not None:
+            active = active + [o for o in self.near_trajectory(*guided, reachable, distance)
+                               if not any(o is a for a in active)]
+        return active
+
     def near_trajectory(self, x: np.ndarray, u: np.ndarray, reachable: ObstacleSet,
                         distance: float) -> list[ConvexPolygon]:
         """Return the reachable obstacles within distance of the plan (x, u), nearest first.

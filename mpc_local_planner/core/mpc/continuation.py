@@ -31,8 +31,8 @@ from mpc_local_planner.core.mpc.backends import Nlp
 from mpc_local_planner.core.mpc.tries import Solver, Try
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
 
-__all__ = ['CONTINUE_TOLERANCE', 'MAX_CONTINUED_STEPS', 'Unfinished', 'resumed_round',
-           'same_polygons', 'stood_still']
+__all__ = ['CONTINUE_TOLERANCE', 'MAX_CONTINUED_STEPS', 'SpotMemory', 'Unfinished',
+           'resumed_round', 'same_polygons', 'stood_still']
 
 # A solve the budget cut goes on at the next step from where it stopped if the state moved
 # less than this (each component): the robot stood still on the candidate meanwhile.
@@ -54,6 +54,72 @@ class Unfinished(NamedTuple):
     held: tuple[ConvexPolygon, ...]  # the obstacles its NLP held, in their slots' order
     origin: Try  # the try that began it (a continuation's origin is the first one's)
     steps: int = 1  # the steps it has run in (the first one's and each continuation's)
+
+
+class SpotMemory:
+    """What the solver tried where the robot stands: a cut solve to go on with, and failures.
+
+    A control step asks it for the continuation its NLP may go on with (`continuation`), and
+    which tries already failed here (`failed`, for tries.solver_tries to put last), then
+    records each try it made (`record`). Moving on forgets both. A stop keeps it (the robot
+    stands still, and the next step is here again); a reset of the MPC starts a new one.
+    """
+
+    def __init__(self) -> None:
+        self.unfinished: Unfinished | None = None
+        # tries that failed from the state _x0, with their NLP's id (the NLPs live as long as
+        # the controller's settings)
+        self._failed: set[tuple[int, Try]] = set()
+        self._x0: np.ndarray | None = None
+
+    def continuation(self, nlp: Nlp, x0: np.ndarray, held: Sequence[ConvexPolygon]
+                     ) -> Unfinished | None:
+        """Return the cut solve nlp goes on with from x0 holding held (None: none).
+
+        A cut solve is offered once: to the step after it, in its own NLP, if the robot has
+        not moved and the NLP holds the same obstacles. A robot that moved makes every try
+        worth making again.
+        """
+        unfinished, continuation = self.unfinished, None
+        if unfinished is not None and unfinished.nlp is nlp:
+            self.unfinished = None  # continued once, or moved away from
+            if stood_still(unfinished.x0, x0) and same_polygons(unfinished.held, held):
+                continuation = unfinished
+        if not stood_still(self._x0, x0):
+            self._failed = set()
+            self._x0 = x0.copy()
+        return continuation
+
+    def failed(self, nlp: Nlp) -> frozenset[Try]:
+        """Return the tries that failed here in nlp."""
+        return frozenset(t for n, t in self._failed if n == id(nlp))
+
+    def record(self, nlp: Nlp, x0: np.ndarray, made: Try, origin: Try, steps: int, *,
+               verified: bool, cut: bool, iterations: int, w: np.ndarray,
+               held: Sequence[ConvexPolygon]) -> None:
+        """Record a try: a failure here, or a cut solve to go on with at the next step.
+
+        Args:
+            nlp: the NLP it ran in.
+            x0: the state it ran from.
+            made: the try.
+            origin: the try that began it (made, or a continuation's first).
+            steps: the steps it has run in, this one included.
+            verified: it gave a verified solution.
+            cut: the budget cut it.
+            iterations: the iterations it made.
+            w: its last iterate.
+            held: the obstacles its NLP held, in their slots' order.
+
+        """
+        if not verified and (not cut or steps > MAX_CONTINUED_STEPS):
+            # failed outright, or cut in every step it was given: not first again while
+            # the robot stands here
+            self._failed.update({(id(nlp), made), (id(nlp), origin)})
+        if (cut and not verified and iterations > 0 and steps <= MAX_CONTINUED_STEPS
+                and np.all(np.isfinite(w))):
+            self.unfinished = Unfinished(nlp, x0.copy(), w, made.solver, tuple(held), origin,
+                                         steps)
 
 
 def stood_still(before: np.ndarray | None, x0: np.ndarray) -> bool:

@@ -24,7 +24,7 @@ from __future__ import annotations
 from enum import Enum
 import math
 
-__all__ = ['Decision', 'LYAPUNOV_TOLERANCE', 'PlanSource', 'decide']
+__all__ = ['Decision', 'LYAPUNOV_TOLERANCE', 'LyapunovRecord', 'PlanSource', 'decide']
 
 # Slack on the closed-loop decrease check, relative to V_N plus an absolute floor.
 LYAPUNOV_TOLERANCE = 1e-6
@@ -104,3 +104,26 @@ def decide(*, solver_verified: bool, solver_value: float, candidate_ok: bool,
     if has_previous_plan and candidate_collision_free:
         return Decision.CANDIDATE_OFF_PREDICTION
     return Decision.STOP
+
+
+class LyapunovRecord:
+    """The last applied plan's value V_N and first stage cost: what the next value must keep.
+
+    The proof's decrease (the paper's Theorem 1): V_N(k+1) <= V_N(k) - l(x_0, u_0), checked
+    within LYAPUNOV_TOLERANCE relative to the bound. A reset of the MPC starts a new record.
+    """
+
+    def __init__(self) -> None:
+        self.value: float | None = None
+        self.stage = 0.0
+
+    def check(self, value: float) -> bool | None:
+        """Say whether value keeps the decrease (None: no plan applied before)."""
+        if self.value is None:
+            return None
+        bound = self.value - self.stage
+        return value <= bound + LYAPUNOV_TOLERANCE * (1 + abs(bound))
+
+    def keep(self, value: float, stage: float) -> None:
+        """Record the plan applied now: its value and its first stage cost."""
+        self.value, self.stage = float(value), float(stage)

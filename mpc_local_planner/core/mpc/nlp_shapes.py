@@ -87,6 +87,28 @@ class NlpShapes:
             self._key = key
         return self._nlps
 
+    def prepare(self, shapes: list[Shape]) -> None:
+        """Build these shapes' NLPs and their IPOPTs; from then on hold() builds nothing.
+
+        The IPOPTs: the fallback of each, and the cold start of each that holds obstacles.
+        """
+        for shape in shapes:
+            nlp = self.get(shape)
+            nlp.fallback_solver()
+            if shape[0]:
+                nlp.cold_solver()
+        self.prepared = True
+
+    def ready(self, nlp: Nlp, *, wait: bool) -> None:
+        """Make nlp ready to solve: its compiled functions, and a time per iteration.
+
+        The compiled functions are waited for if wait. A never-solved NLP's time per
+        iteration is bounded by its siblings' (iteration_time_estimate).
+        """
+        nlp.finish_compilation(wait=wait)
+        if nlp.iteration_time <= 0.0:
+            nlp.iteration_time = self.iteration_time_estimate(nlp)
+
     def get(self, shape: Shape) -> Nlp:
         """Return the NLP of this shape, built now if it is not yet."""
         nlp = self.built().get(shape)

@@ -68,17 +68,11 @@ from mpc_local_planner.core.mpc.candidate import (
     STANDING_INPUT,
 )
 from mpc_local_planner.core.mpc.clearance import Clearance
-from mpc_local_planner.core.mpc.continuation import (
-    MAX_CONTINUED_STEPS,
-    resumed_round,
-    same_polygons,
-    stood_still,
-    Unfinished,
-)
+from mpc_local_planner.core.mpc.continuation import resumed_round, SpotMemory
 from mpc_local_planner.core.mpc.decision import (
     decide,
     Decision,
-    LYAPUNOV_TOLERANCE,
+    LyapunovRecord,
     PlanSource,
 )
 from mpc_local_planner.core.mpc.formulation import formulate, stage_cost, TerminalCondition
@@ -220,14 +214,9 @@ class MpcBase(ABC):
         """Forget the previous solution (warm start, candidate, Lyapunov history)."""
         self._plan: Plan | None = None
         self._progress_gain = math.nan  # the gain in s of the plan in force over the one before
-        self._previous_value: float | None = None
-        self._previous_stage: float = 0.0
+        self._lyapunov = LyapunovRecord()
         self._failures = 0
-        self._unfinished: Unfinished | None = None
-        # tries that failed from the state _failed_x0, with their NLP's id (see tries.py;
-        # the NLPs live as long as the controller's settings)
-        self._failed_here: set[tuple[int, Try]] = set()
-        self._failed_x0: np.ndarray | None = None
+        self._spot = SpotMemory()  # a cut solve to go on with, the tries failed here
         # the inputs of the last plan on the previous path (set_path keeps them): the guided
         # start drives them from the robot's state, see _guided_guess
         self._carried_inputs: np.ndarray | None = None
@@ -317,13 +306,7 @@ class MpcBase(ABC):
         count = c.obstacle_slots if max_obstacles is None else max_obstacles
         faces = sorted({4, c.faces_per_obstacle}
                        | {slot_shape([o], c.faces_per_obstacle)[1] for o in self._inflated})
-        shapes = [(0, 0)] + [(k, f) for k in range(1, count + 1) for f in faces]
-        for shape in shapes:
-            nlp = self.nlp_for(*shape)
-            nlp.fallback_solver()
-            if shape[0]:
-                nlp.cold_solver()
-        self._shapes.prepared = True
+        self._shapes.prepare([(0, 0)] + [(k, f) for k in range(1, count + 1) for f in faces])
 
     def wait_compiled(self) -> None:
         """Block until the background compilations of the built NLPs are done (or failed)."""
@@ -346,10 +329,7 @@ class MpcBase(ABC):
         else:
             held = active
         # with an iteration budget, which functions run must not depend on timing either
-        nlp.finish_compilation(wait=self._config.solving.budget == 'iterations')
-        if nlp.iteration_time <= 0.0:
-            # never solved: its fatrop is bounded by its siblings' time per iteration
-            nlp.iteration_time = self._shapes.iteration_time_estimate(nlp)
+        self._shapes.ready(nlp, wait=self._config.solving.budget == 'iterations')
         self._last_nlp = nlp
         form = nlp.formulation
         params = parameter_vector(x0, self._config.cost_weights(),
@@ -362,7 +342,8 @@ class MpcBase(ABC):
         """Return the NLP a solve from x0 holding these obstacles runs, its parameters, a start.
 
         To run a solver outside solve() (backends.run_solver), as a benchmark or a test does.
-        The NLP is the one a step would pick (built now if need be; it becomes last_nlp).
+        The NLP is the one a step would pick (built now if need be; it becomes last_nlp), and
+        the rate bounds start where a step's would (with max_accel: the plan in force's).
 
         Args:
             x0: the measured state.
@@ -375,6 +356,8 @@ class MpcBase(ABC):
 
         """
         x0 = np.asarray(x0, dtype=float)
+        self._input_before = self._before(None)
+        self._clearance.clear(self._input_before)
         nlp, params, held = self._prepare_nlp(list(obstacles), x0)
         if start is Start.GUIDED:
             plan = self._guided_guess(x0, held, nlp)
@@ -460,22 +443,6 @@ class MpcBase(ABC):
                             first_order=self._first_order)
 
     # ----------------------------------------------------------------- verification
-    def _violation(self, w: np.ndarray, params: np.ndarray, obstacles: ObstacleSet,
-                   nlp: Nlp) -> float:
-        """Return the largest constraint violation, collisions checked geometrically.
-
-        The geometric check does not trust the multipliers: whatever the solver did with
-        them, every predicted position l = 1..N must clear every given obstacle (those of the
-        NLP, or every reachable one).
-        """
-        form = nlp.formulation
-        g = np.asarray(form.g_fn(w, params)).reshape(-1)
-        viol = np.maximum(form.lbg - g, 0) + np.maximum(g - form.ubg, 0)
-        viol_w = np.maximum(form.lbw - w, 0) + np.maximum(w - form.ubw, 0)
-        worst = max(np.max(viol, initial=0.0), np.max(viol_w, initial=0.0))
-        return max(float(worst),
-                   self._clearance.penetration(w[form.layout.x], w[form.layout.u], obstacles))
-
     def _run_solver(self, nlp: Nlp, w0: np.ndarray, params: np.ndarray,
                     active: ObstacleSet, solver: ca.Function | None = None) -> SolveAttempt:
         """Solve from w0 (with the NLP's solver, or the given one) and verify the answer.
@@ -489,8 +456,8 @@ class MpcBase(ABC):
         budget.spend(run.iterations)
         if run.cut:
             budget.timed_out = True
-        verified = (run.success
-                    and self._violation(run.w, params, active, nlp) <= FEASIBILITY_TOLERANCE)
+        verified = (run.success and self._clearance.violation(
+            nlp.formulation, run.w, params, active) <= FEASIBILITY_TOLERANCE)
         return SolveAttempt(verified=verified, w=run.w, value=run.value if verified else math.inf,
                             status=run.status, iterations=run.iterations, seconds=run.seconds,
                             cut=run.cut)
@@ -510,21 +477,13 @@ class MpcBase(ABC):
         A try the budget cut is kept (_Unfinished) for the next step to go on with, if the
         same NLP comes up there and the state has not moved (see tries.py).
         """
-        unfinished = self._unfinished
-        continuation: Unfinished | None = None
-        if unfinished is not None and unfinished.nlp is nlp:
-            self._unfinished = None  # continued once, or moved away from
-            if stood_still(unfinished.x0, x0) and same_polygons(unfinished.held, active):
-                continuation = unfinished
-        if not stood_still(self._failed_x0, x0):
-            self._failed_here = set()  # the robot moved: every try is worth making again
-            self._failed_x0 = x0.copy()
+        continuation = self._spot.continuation(nlp, x0, active)
         situation = Situation(
             plan_moves=plan_moves(self._plan, self._progress_gain),
             obstacles_active=bool(active), previous_round=previous is not None,
             has_fallback=nlp.has_fallback,
             continuation=continuation.solver if continuation is not None else None,
-            failed=frozenset(t for n, t in self._failed_here if n == id(nlp)))
+            failed=self._spot.failed(nlp))
         starts: dict[Start, np.ndarray] = {Start.CANDIDATE: w_candidate}
         if continuation is not None:
             starts[Start.CONTINUATION] = continuation.w
@@ -556,14 +515,9 @@ class MpcBase(ABC):
                       else attempt_try)
             steps = (continuation.steps + 1 if attempt_try.start is Start.CONTINUATION
                      and continuation is not None else 1)
-            if not attempt.verified and (not attempt.cut or steps > MAX_CONTINUED_STEPS):
-                # failed outright, or cut in every step it was given: not first again while
-                # the robot stands here
-                self._failed_here.update({(id(nlp), attempt_try), (id(nlp), origin)})
-            if (attempt.cut and not attempt.verified and attempt.iterations > 0
-                    and steps <= MAX_CONTINUED_STEPS and np.all(np.isfinite(attempt.w))):
-                self._unfinished = Unfinished(nlp, x0.copy(), attempt.w, kind, tuple(active),
-                                               origin, steps)
+            self._spot.record(nlp, x0, attempt_try, origin, steps, verified=attempt.verified,
+                              cut=attempt.cut, iterations=attempt.iterations, w=attempt.w,
+                              held=active)
             if attempt.verified:
                 best = attempt._replace(status=attempt.status + kind.label)
                 break
@@ -581,28 +535,23 @@ class MpcBase(ABC):
         prepared step); the solution is then checked against every reachable obstacle.
         """
         activation = self._activation_distance()
-        active = resumed_round(self._unfinished, x0, reachable)
+        unfinished = self._spot.unfinished
+        active = resumed_round(unfinished, x0, reachable)
         # a resumed round runs in the NLP its cut try ran in: the one picked for the obstacles
         # that round was given may hold them with more faces than those it held need
-        resumed = self._unfinished.nlp if active is not None and self._unfinished else None
+        resumed = unfinished.nlp if active is not None and unfinished else None
         if active is None:
-            active = self._clearance.near_trajectory(candidate.x, candidate.u, reachable,
-                                                     activation)
-            before = self._input_before
+            # the candidate stands still (a new path) but with max_accel the robot cannot:
+            # the solution goes on with the motion in hand; with a first-order hold it leaves
+            # the robot's spot along the path from rest too (path_following_inputs)
+            before, guided = self._input_before, None
             if (before is not None
                     and (np.any(np.abs(before) > STANDING_INPUT) or self._first_order)
                     and not plan_moves(self._plan, self._progress_gain)):
-                # the candidate stands still (a new path) but with max_accel the robot
-                # cannot: the solution goes on with the motion in hand, among the obstacles
-                # near it (docs/real_robot.md). With a first-order hold the guided start
-                # follows the path from rest too (candidate.path_following_inputs), and the
-                # solution leaves the robot's spot along it: the obstacles near that motion
-                # are held from the first round, or it comes near them, and the rounds that
-                # add them spend the step's budget (laser-only BARN world 55, real base)
-                guided = self._guided_motion(x0)
-                active = active + [o for o in self._clearance.near_trajectory(
-                    guided.x, guided.u, reachable, activation)
-                    if not any(o is a for a in active)]
+                motion = self._guided_motion(x0)
+                guided = (motion.x, motion.u)
+            active = self._clearance.first_round(candidate.x, candidate.u, guided, reachable,
+                                                 activation)
         iterations, seconds = 0, 0.0
         previous: Plan | None = None  # the last round's solution, a start for the next
         for round_ in range(MAX_ACTIVATION_ROUNDS + 1):
@@ -611,8 +560,8 @@ class MpcBase(ABC):
             candidate = replace(candidate, mu=self._multipliers(candidate.x, held, nlp))
             w_candidate = self._pack(candidate, nlp)
             # the candidate must clear every reachable obstacle, not only the active ones
-            candidate_ok = (self._violation(w_candidate, params, reachable, nlp)
-                            <= FEASIBILITY_TOLERANCE)
+            candidate_ok = (self._clearance.violation(nlp.formulation, w_candidate, params,
+                                                      reachable) <= FEASIBILITY_TOLERANCE)
             candidate_value = (float(nlp.formulation.cost_fn(w_candidate, params))
                                if candidate_ok else math.inf)
             attempt = self._optimise(nlp, w_candidate, params, x0, held, previous)
@@ -704,13 +653,9 @@ class MpcBase(ABC):
                 result.candidate_value if result.candidate_ok else float(
                     result.nlp.formulation.cost_fn(result.w_candidate, result.params))))
 
-        lyapunov_ok = None
-        if self._previous_value is not None:
-            bound = self._previous_value - self._previous_stage
-            lyapunov_ok = plan.value <= bound + LYAPUNOV_TOLERANCE * (1 + abs(bound))
+        lyapunov_ok = self._lyapunov.check(plan.value)
         weights = np.array(self._config.cost_weights().as_vector())
-        self._previous_stage = float(self._stage_fn(plan.x[0], plan.u[0], plan.x[-1], weights))
-        self._previous_value = plan.value
+        self._lyapunov.keep(plan.value, self._stage_fn(plan.x[0], plan.u[0], plan.x[-1], weights))
         self._progress_gain = (plan.s - self._plan.s) if self._plan is not None else math.nan
         self._plan = plan
         return MpcSolution(
@@ -747,11 +692,11 @@ class MpcBase(ABC):
         n = self._config.horizon
         _, u_s = self._model.steady_state(x0[:3])
         u_s = np.asarray(u_s, dtype=float).reshape(-1)
-        kept = self._failures, self._unfinished, self._failed_here, self._failed_x0
+        kept = self._failures, self._spot
         self.reset()
         # the robot stands still: a solve the budget cut goes on at the next step, and the
         # tries that failed here go last
-        self._failures, self._unfinished, self._failed_here, self._failed_x0 = kept
+        self._failures, self._spot = kept
         return MpcSolution(
             u0=u_s, x_pred=np.tile(x0, (n + 1, 1)), u_pred=np.tile(u_s, (n, 1)),
             s=math.nan, value=math.nan, success=False, status=status,
