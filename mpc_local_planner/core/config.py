@@ -261,6 +261,16 @@ class MpcConfig:
         margin = v_max * self.step / 2 if self.collision_margin is None else self.collision_margin
         return self.robot_radius + margin
 
+    def activation_distance(self, v_max: float) -> float:
+        """Return how near a plan an obstacle must come to be held in the NLP (metres).
+
+        solving.activation_distance, or half a step, v_max h / 2: few re-solves with few
+        obstacles in the NLP, where a wider band holds many more and builds many more NLP
+        shapes (see docs/design/mpc.md, section "Default activation distance").
+        """
+        given = self.solving.activation_distance
+        return 0.5 * v_max * self.step if given is None else float(given)
+
     def reach(self, v_max: float) -> float:
         """Return how far from the robot's origin an obstacle (as described) can matter.
 

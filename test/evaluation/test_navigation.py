@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.models import Unicycle
@@ -37,7 +37,8 @@ PERIOD = 0.05  # 20 Hz: three calls of four hold the plan of the step h = 0.2 s
 
 
 def test_calls_that_hold_the_plan_solve_nothing_and_leave_the_solve_statistics_alone():
-    controller = MpcController(MODEL, MpcConfig(), obstacles=WORLD.obstacles,
+    config = MpcConfig(solving=SolverSettings(budget='iterations'))  # the same under any load
+    controller = MpcController(MODEL, config, obstacles=WORLD.obstacles,
                                settings=ControllerSettings(control_frequency=20.0))
     local = MpcLocal(controller)
     local.follow(PLAN)
@@ -50,7 +51,7 @@ def test_calls_that_hold_the_plan_solve_nothing_and_leave_the_solve_statistics_a
         x = MODEL.step(x, step.u, PERIOD)
     solved = [k for k, row in enumerate(rows) if math.isfinite(row[-1])]
     assert solved == [0, 4, 8]
-    assert all(rows[k][-1] > 0.0 for k in solved)
+    assert all(rows[k][-1] >= 0.0 for k in solved)
     # the median is over the solves, not dragged to 0 by the held calls
     metrics = compute_metrics(np.array(rows), goal=np.array(WORLD.goal), obstacles=[])
     assert metrics['solve_ms_median'] == np.median([rows[k][-1] for k in solved])

@@ -399,15 +399,6 @@ class MpcBase(ABC):
         chosen, _ = self._obstacle_set.near(x0[None, :2], reach)
         return self._obstacle_set.subset(chosen)
 
-    def _activation_distance(self) -> float:
-        c = self._config
-        if c.solving.activation_distance is not None:
-            return c.solving.activation_distance
-        # half a step (v_max h / 2): few re-solves with few obstacles in the NLP, where a
-        # wider band holds many more and builds many more NLP shapes (see
-        # docs/design/mpc.md, section "Default activation distance")
-        return 0.5 * self._speed_bound() * c.step
-
     # ----------------------------------------------------------------- the candidate
     def _unwrap(self, x: np.ndarray) -> np.ndarray:
         """Put the measured heading on the branch nearest the prediction (or the path)."""
@@ -534,7 +525,7 @@ class MpcBase(ABC):
         The NLP may hold fewer than asked for (_nlp_holding: no shape is built within a
         prepared step); the solution is then checked against every reachable obstacle.
         """
-        activation = self._activation_distance()
+        activation = self._config.activation_distance(self._speed_bound())
         unfinished = self._spot.unfinished
         active = resumed_round(unfinished, x0, reachable)
         # a resumed round runs in the NLP its cut try ran in: the one picked for the obstacles
