@@ -35,6 +35,8 @@ import math
 
 import numpy as np
 
+from mpc_local_planner.core.models import held_input
+
 __all__ = ['Brake']
 
 
@@ -98,15 +100,8 @@ class Brake:
         dt = max(float(dt), 0.0)
         self._tau += self._scale * dt
         self._scale = max(self._scale - self._rate * dt, 0.0)
-        if self._first is not None and self._h > 0:
-            # the ramp through the knots first, u_0, ..., u_{N-1}
-            index = int(self._tau / self._h)
-            if index >= len(self._inputs) or self._scale <= 0.0:
-                return np.zeros(2)
-            start = self._first if index == 0 else self._inputs[index - 1]
-            frac = self._tau / self._h - index
-            return self._scale * (start + frac * (self._inputs[index] - start))
-        index = int(self._tau / self._h + 1e-9) if self._h > 0 else len(self._inputs)
-        if index >= len(self._inputs) or self._scale <= 0.0:
+        if self._h <= 0 or self._scale <= 0.0:
             return np.zeros(2)
-        return self._scale * self._inputs[index]
+        # the plan's input (a first-order hold: its ramp through first, u_0, ..., u_{N-1})
+        u = held_input(self._inputs, self._tau / self._h, self._first)
+        return np.zeros(2) if u is None else self._scale * u

@@ -31,8 +31,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-__all__ = ['KinematicBicycle', 'RobotModel', 'STRAIGHT_OMEGA', 'Unicycle', 'ramp_rk4', 'rk4',
-           'unicycle_arc']
+__all__ = ['KinematicBicycle', 'RobotModel', 'STRAIGHT_OMEGA', 'Unicycle', 'held_input',
+           'ramp_rk4', 'rk4', 'unicycle_arc']
 
 Symbolic = Any  # a CasADi SX/MX expression or a NumPy array
 
@@ -58,6 +58,26 @@ def ramp_rk4(rhs: ca.Function, x: Symbolic, q: Symbolic, u: Symbolic, h: float) 
     k3 = rhs(x + h / 2 * k2, mid)
     k4 = rhs(x + h * k3, u)
     return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+def held_input(inputs: np.ndarray, tau: float,
+               first: np.ndarray | None = None) -> np.ndarray | None:
+    """Return the input tau steps into a plan of inputs (N, nu), or None past its end.
+
+    A zero hold (first None): inputs[l] over step l (a step's end, to rounding, is the next
+    step). A first-order hold: the ramp from first to inputs[0] over step 0, then from knot
+    to knot (MpcConfig.input_hold). What the controller commands between solves, and what
+    braking scales, are read here.
+    """
+    inputs = np.asarray(inputs, dtype=float)
+    if first is None:
+        index = int(tau + 1e-9)
+        return inputs[index].copy() if index < len(inputs) else None
+    index = int(tau)
+    if index >= len(inputs):
+        return None
+    start = np.asarray(first, dtype=float) if index == 0 else inputs[index - 1]
+    return start + (tau - index) * (inputs[index] - start)
 
 
 class RobotModel(ABC):

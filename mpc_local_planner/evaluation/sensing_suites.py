@@ -139,7 +139,8 @@ REALITY_MARGIN = 0.03
 # left the verified motion (3 contacts in BARN 0-99); at twice them 97 of 0-99, no contact,
 # but the base could not follow the jumps. With a first-order hold the velocity ramps between
 # the knots, commanded actuation_delay() ahead: at the base's own limits it follows the plan,
-# and 99 of 0-99 were reached, no contact (docs/real_robot.md).
+# and with a solve from rest that follows the path, all of 0-99 were reached, no contact
+# (docs/real_robot.md).
 REALITY_ACCEL_FACTOR = 1.0
 REALITY_INPUT_HOLD = 'first_order'
 

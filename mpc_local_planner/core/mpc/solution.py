@@ -24,6 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from mpc_local_planner.core.models import held_input
 from mpc_local_planner.core.mpc.backends import Nlp
 from mpc_local_planner.core.mpc.candidate import Plan
 from mpc_local_planner.core.mpc.decision import PlanSource
@@ -98,15 +99,8 @@ class MpcSolution(NamedTuple):
         u = np.asarray(self.u_pred, dtype=float)
         if not len(u):
             return np.asarray(self.u0, dtype=float).copy()
-        tau = max(float(t), 0.0) / step
-        if self.u_before is None:
-            return u[min(int(tau + 1e-9), len(u) - 1)].copy()
-        knots = np.vstack([np.asarray(self.u_before, dtype=float).reshape(1, -1), u])
-        index = int(tau)
-        if index >= len(u):
-            return knots[-1].copy()
-        frac = tau - index
-        return knots[index] + frac * (knots[index + 1] - knots[index])
+        held = held_input(u, max(float(t), 0.0) / step, self.u_before)
+        return u[-1].copy() if held is None else held
 
 
 class SolveAttempt(NamedTuple):
