@@ -88,6 +88,7 @@ from mpc_local_planner.evaluation.suite_runs import (
     DEFAULT_BARN_DIR,
     empty_row,
     KNOWN_MAP_CONTROLLERS,
+    parse_worlds,
     run_task,
     saved_world_path,
     SUITES,
@@ -269,18 +270,6 @@ def plot_suite_runs(out: Path, suite: str, worlds: Sequence[int], *,
     return target
 
 
-def _parse_worlds(text: str) -> list[int]:
-    worlds: list[int] = []
-    for part in text.split(','):
-        part = part.strip()
-        if '-' in part:
-            lo, hi = (int(v) for v in part.split('-', 1))
-            worlds.extend(range(lo, hi + 1))
-        elif part:
-            worlds.append(int(part))
-    return worlds
-
-
 def _read_rows(path: Path) -> list[dict[str, Any]]:
     with open(path, newline='') as stream:
         return list(csv.DictReader(stream))
@@ -350,13 +339,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                         omega_max=args.omega_max or robot.omega_max)
         controller = (args.controllers or 'proposed').split(',')[0]
         panels = [(f'BARN world {w}', suites.barn_sensing_world(
-            args.barn_dir / f'world_{w:03d}.json', robot)) for w in _parse_worlds(args.plot)]
+            args.barn_dir / f'world_{w:03d}.json', robot)) for w in parse_worlds(args.plot)]
         print(suites.plot_navigation_runs(args.out / 'barn_sensing_runs.png', panels,
                                           controller, robot, seed=args.seed))
         return 0
     if args.plot:
         try:
-            target = plot_suite_runs(args.out, args.suite, _parse_worlds(args.plot),
+            target = plot_suite_runs(args.out, args.suite, parse_worlds(args.plot),
                                      barn_dir=args.barn_dir)
         except FileNotFoundError as err:
             parser.error(str(err))
@@ -401,7 +390,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         worlds = list(range(len(world_files)))
         barn_dir = ''
     else:
-        worlds = _parse_worlds(args.worlds)
+        worlds = parse_worlds(args.worlds)
         barn_dir = str(args.barn_dir.resolve())
         missing = [w for w in worlds if not (args.barn_dir / f'world_{w:03d}.json').is_file()]
         if missing:

@@ -33,17 +33,18 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 import json
-import math
 from typing import Any
 from unittest import mock
 
 import numpy as np
 
+from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.control_output import Reason
 from mpc_local_planner.core.reality import Base
 from mpc_local_planner.evaluation import navigation
 from mpc_local_planner.evaluation import sensing_suites as suites
-from mpc_local_planner.evaluation.suite_runs import barn_score, DEFAULT_BARN_DIR
+from mpc_local_planner.evaluation.suite_runs import barn_score, DEFAULT_BARN_DIR, parse_worlds
+from mpc_local_planner.perception.localization import compose, invert
 
 __all__ = ['VARIANTS', 'relative_motion', 'run_variant']
 
@@ -59,10 +60,7 @@ VARIANTS = {
 
 def relative_motion(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Return pose b in the frame of pose a: (dx, dy, dtheta), dtheta wrapped."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    d = np.asarray(b[:2], dtype=float) - np.asarray(a[:2], dtype=float)
-    turn = (b[2] - a[2] + math.pi) % (2 * math.pi) - math.pi
-    return np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1], turn])
+    return compose(invert(np.asarray(a[:3], dtype=float)), np.asarray(b[:3], dtype=float))
 
 
 def run_variant(worlds: list[int], hold: str, factor: float, *, reality: str = 'real',
@@ -105,7 +103,7 @@ def run_variant(worlds: list[int], hold: str, factor: float, *, reality: str = '
                                            localized=False)
             times = np.array([t for t, _ in poses])
             truth = np.array([p for _, p in poses])
-            h = 0.2
+            h = MpcConfig().step  # the suites' MPC's step
             for t, predicted in predictions:
                 i, j = np.searchsorted(times, [t - 1e-6, t + h - 1e-6])
                 if j >= len(times) or abs(times[i] - t) > 1e-6 or abs(times[j] - t - h) > 1e-6:
@@ -124,14 +122,6 @@ def run_variant(worlds: list[int], hold: str, factor: float, *, reality: str = '
     return {'errors': values, 'outcomes': outcomes}
 
 
-def _worlds(text: str) -> list[int]:
-    out: list[int] = []
-    for part in text.split(','):
-        lo, _, hi = part.partition('-')
-        out.extend(range(int(lo), int(hi or lo) + 1))
-    return out
-
-
 def main(argv: list[str] | None = None) -> None:
     """Print the prediction errors of each variant over the given BARN worlds."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -140,7 +130,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument('--variants', default='zoh-2x,foh-1x',
                         help='comma-separated names of VARIANTS')
     args = parser.parse_args(argv)
-    worlds = _worlds(args.worlds)
+    worlds = parse_worlds(args.worlds)
     print('| variant | solves | position median / p95 / max (m) | '
           'heading median / p95 / max (rad) | reached | contacts |')
     print('|---|---|---|---|---|---|')

@@ -64,6 +64,7 @@ from mpc_local_planner.worlds.data_files import BARN_DIR
 
 __all__ = [
     'barn_score',
+    'parse_worlds',
     'CONTROLLERS',
     'CSV_COLUMNS',
     'DEFAULT_BARN_DIR',
@@ -115,6 +116,19 @@ class Task:
     def navigation(self) -> bool:
         """Run through the navigation stack (laser, re-planning) rather than a fixed path."""
         return self.sensing or self.suite in ('unknown', 'worlds')
+
+
+def parse_worlds(text: str) -> list[int]:
+    """Return the world numbers of a list like '0-99,200-299' or '3,7,10-12', in order."""
+    worlds: list[int] = []
+    for part in text.split(','):
+        part = part.strip()
+        if '-' in part:
+            lo, hi = (int(v) for v in part.split('-', 1))
+            worlds.extend(range(lo, hi + 1))
+        elif part:
+            worlds.append(int(part))
+    return worlds
 
 
 def barn_score(success: bool, time_s: float | None, barn_path_length: float) -> float:
