@@ -300,6 +300,11 @@ class MpcConfig:
             return int(self.solving.max_solve_iterations)
         return max(1, round(self.solve_budget() / ITERATION_SECONDS))
 
+    @property
+    def first_order_hold(self) -> bool:
+        """The inputs are first-order-hold knots (input_hold 'first_order', with max_accel)."""
+        return self.input_hold == 'first_order' and self.max_accel is not None
+
     def cost_weights(self) -> CostWeights:
         """Return the cost weights by name (the solver reads them as a parameter)."""
         return CostWeights(position=self.weight_position, heading=self.weight_heading,

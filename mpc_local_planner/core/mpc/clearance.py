@@ -63,9 +63,8 @@ class Clearance:
         # r_c: no point of the body is further from the robot's origin
         self.body_radius = 0.0 if footprint.is_circle else footprint.radius
         # a first-order hold (MpcConfig.input_hold): the velocity of step l ramps from the
-        # input before it; the first step's, before, is the step's u_prev (set_before)
-        self._first_order = (config.input_hold == 'first_order'
-                             and config.max_accel is not None)
+        # input before it; the first step's, before, is the step's u_prev (clear())
+        self._first_order = config.first_order_hold
         self._sweep_exact = (ramp_sweep_rate if self._first_order else sweep_rate)(
             model, self.body_radius)
         self._sweep_maps: dict[int, ca.Function] = {}

@@ -372,15 +372,14 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
         body = footprint.body  # {y : G y <= g}, unit rows, robot frame
         G, g_body = ca.DM(body.A), ca.DM(body.b)
         robot_faces = body.num_faces
-        sweep = (ramp_sweep_rate if config.input_hold == 'first_order' and
-                 config.max_accel is not None else sweep_rate)(
+        sweep = (ramp_sweep_rate if config.first_order_hold else sweep_rate)(
             model, footprint.radius, SWEEP_SMOOTHING)
     else:
         robot_faces = 0
         sweep = None
     nc = 1 if polygon else 0  # the carried sweep rate of z_1..z_N
     npv = nu if config.max_accel is not None else 0  # the carried input before each stage
-    first_order = npv > 0 and config.input_hold == 'first_order'
+    first_order = config.first_order_hold
     rate = (np.asarray(config.max_accel, dtype=float) * config.step if npv
             else np.zeros(0))
     block = faces + robot_faces

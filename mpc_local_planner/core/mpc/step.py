@@ -675,7 +675,7 @@ class MpcBase(ABC):
     @property
     def _first_order(self) -> bool:
         """The inputs are first-order-hold knots (MpcConfig.input_hold 'first_order')."""
-        return self._config.input_hold == 'first_order' and self._config.max_accel is not None
+        return self._config.first_order_hold
 
     def _stop(self, x0: np.ndarray, status: str, attempt: SolveAttempt, in_reach: int,
               active: int, *, timed_out: bool = False) -> MpcSolution:
