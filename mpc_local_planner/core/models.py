@@ -85,6 +85,9 @@ class RobotModel(ABC):
 
     A state's first three components are the pose (x, y, theta) in this package; other
     models may add states after them (a bicycle's steering angle, a velocity).
+
+    A model is immutable and hashable by value (a frozen dataclass): its discretisations
+    and the NLPs built on it are kept per model (core/mpc/built_nlps.py).
     """
 
     state_names: tuple[str, ...]

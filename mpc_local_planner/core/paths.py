@@ -37,6 +37,7 @@ planner checked: 2.9 cm for the Jackal at the defaults, within the planner's cle
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+import hashlib
 import math
 from typing import Any, Callable
 
@@ -168,11 +169,15 @@ class AnalyticPath(ReferencePath):
         self._expression = expression
         s = ca.SX.sym('s')
         self._function = ca.Function(name, [s], [ca.vec(expression(s))])
+        # the expression is in the NLP: two paths of one name but other numbers (two
+        # amplitudes of a sinusoid) must not share a solver
+        digest = hashlib.sha256(self._function.serialize().encode()).hexdigest()[:16]
+        self._family = f'analytic:{name}:{digest}'
 
     @property
     def family(self) -> str:
-        """One family per analytic path."""
-        return f'analytic:{self._name}'
+        """One family per expression: its name and the hash of the serialized expression."""
+        return self._family
 
     @property
     def name(self) -> str:

@@ -16,8 +16,9 @@
 """The paper's MPC (problem (6)) and its guard.
 
 formulation.py is problem (6), backends.py runs it (solvers), compilation.py compiles it,
-nlp_shapes.py keeps one NLP per obstacle shape, step.py is one control step (verification,
-constraint generation, the decision) for the terminal condition path_mpc.py gives, with
+nlp_shapes.py keeps one NLP per obstacle shape, built_nlps.py shares the built ones between
+the MPCs of a process, step.py is one control step (verification, constraint generation, the
+decision) for the terminal condition path_mpc.py gives, with
 candidate.py (the proof's shifted candidate, the guided start), clearance.py (the footprint
 against obstacles), budget.py (a step's solving budget) and continuation.py (a cut solve
 going on at the next step); solution.py is what a step returns, tries.py the solver strategy

@@ -36,13 +36,14 @@ limit is always kept, by an interpreted copy if need be.
 from __future__ import annotations
 
 from concurrent.futures import Future
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import hashlib
 import json
 import logging
 import math
 import os
 from pathlib import Path
+import threading
 import time
 from typing import Any, Callable, NamedTuple
 
@@ -149,21 +150,42 @@ class _Deadline(ca.Callback):
     Or once `max_iterations` iterations are done (IPOPT calls it at iteration 0 too: the
     call after `max_iterations` stops it, and it reports as many). One per NLP (its inputs
     are the solver's outputs, sized by the NLP), shared by the IPOPT solvers of that NLP;
-    run_solver sets the limits for the call in progress and clears them after.
+    run_solver sets the limits for the call in progress and clears them after. The limits are
+    the calling thread's (IPOPT calls back in the thread that called it): MPCs share their
+    solvers (built_nlps.py), and two of them solving in two threads keep their own limits.
     """
 
     def __init__(self, problem: dict) -> None:
         ca.Callback.__init__(self)
         nx, ng, npar = (int(problem[k].numel()) for k in ('x', 'g', 'p'))
         self._sizes = {'x': nx, 'f': 1, 'g': ng, 'lam_x': nx, 'lam_g': ng, 'lam_p': npar}
-        self.at = math.inf  # time.perf_counter() seconds
-        self.max_iterations = math.inf
-        self.calls = 0  # in the call in progress
+        self._call = threading.local()
         self.construct('mpc_deadline', {})
 
     def arm(self, at: float = math.inf, max_iterations: float = math.inf) -> None:
-        """Set the limits of the next call (the defaults clear them)."""
-        self.at, self.max_iterations, self.calls = at, max_iterations, 0
+        """Set the limits of this thread's next call (the defaults clear them).
+
+        Args:
+            at: time.perf_counter() seconds after which the call stops.
+            max_iterations: iterations after which it stops.
+
+        """
+        self._call.at, self._call.max_iterations, self._call.calls = at, max_iterations, 0
+
+    @property
+    def at(self) -> float:
+        """This thread's time limit (time.perf_counter() seconds; inf: none)."""
+        return getattr(self._call, 'at', math.inf)
+
+    @property
+    def max_iterations(self) -> float:
+        """This thread's iteration limit (inf: none)."""
+        return getattr(self._call, 'max_iterations', math.inf)
+
+    @property
+    def calls(self) -> int:
+        """Iterations reported in this thread's call in progress (or last call)."""
+        return getattr(self._call, 'calls', 0)
 
     def get_n_in(self) -> int:
         return ca.nlpsol_n_out()
@@ -181,9 +203,24 @@ class _Deadline(ca.Callback):
         return ca.Sparsity.dense(self._sizes[ca.nlpsol_out(i)], 1)
 
     def eval(self, arg: list) -> list:
-        self.calls += 1
+        self._call.calls = self.calls + 1
         stop = self.calls > self.max_iterations or time.perf_counter() > self.at
         return [1.0 if stop else 0.0]
+
+
+def _built_once(factory: Callable[[], ca.Function] | None
+                ) -> Callable[[], ca.Function] | None:
+    """Return factory, calling it at most once: later calls return what it built."""
+    if factory is None:
+        return None
+    built: list[ca.Function] = []
+
+    def once() -> ca.Function:
+        if not built:
+            built.append(factory())
+        return built[0]
+
+    return once
 
 
 def iteration_levels(max_iterations: int) -> list[int]:
@@ -220,6 +257,29 @@ class Nlp:
     limited: dict[int, ca.Function] = field(default_factory=dict)
     # seconds per iteration measured on this NLP's primary solver (0: not yet measured)
     iteration_time: float = 0.0
+
+    def shareable(self) -> Nlp:
+        """Make this just-built record the template of the records MPCs share (built_nlps.py).
+
+        Its IPOPT factories then build once for every record, and its formulation's bounds
+        become read-only (every record reads them).
+        """
+        self.fallback_factory = _built_once(self.fallback_factory)
+        self.cold_factory = _built_once(self.cold_factory)
+        form = self.formulation
+        for bounds in (form.lbw, form.ubw, form.lbg, form.ubg):
+            bounds.setflags(write=False)
+        return self
+
+    def share(self) -> Nlp:
+        """Return a new record of this template as build_nlp would: its solvers, shared.
+
+        Its IPOPTs are not set yet (the first fallback_solver() or cold_solver() gets the
+        shared one), its time per iteration is not measured, and its compiled solver is the
+        template's: loaded if the compilation is done, else swapped in when it is.
+        """
+        self.finish_compilation()
+        return replace(self, fallback=None, cold=None, iteration_time=0.0)
 
     def fallback_solver(self) -> ca.Function | None:
         """Return the IPOPT fallback, building it the first time it is needed."""

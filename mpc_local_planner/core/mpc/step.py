@@ -58,6 +58,7 @@ from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import RobotModel
 from mpc_local_planner.core.mpc.backends import build_nlp, Nlp, run_solver
 from mpc_local_planner.core.mpc.budget import Budget, build_time, solver_of
+from mpc_local_planner.core.mpc.built_nlps import problem_key, shared_nlp
 from mpc_local_planner.core.mpc.candidate import (
     guided_guess,
     Plan,
@@ -267,10 +268,14 @@ class MpcBase(ABC):
         return (self._config.structure_key(), terminal.family, terminal.num_params)
 
     def _build(self, slots: int, faces: int) -> Nlp:
-        """Build the NLP of an obstacle shape for the settings in force."""
-        terminal = self._terminal_condition()
-        return build_nlp(formulate(self._model, self._config, terminal, slots, faces),
-                         self._config.solving)
+        """Return the NLP of an obstacle shape for the settings in force (own record).
+
+        Built now, unless an MPC of this process built the same problem (built_nlps.py).
+        """
+        model, config, terminal = self._model, self._config, self._terminal_condition()
+        return shared_nlp(problem_key(model, config, terminal, slots, faces),
+                          lambda: build_nlp(formulate(model, config, terminal, slots, faces),
+                                            config.solving))
 
     @property
     def nlps(self) -> Mapping[tuple[int, int], Nlp]:
