@@ -317,6 +317,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--budget', choices=BUDGETS, default=EVALUATION_BUDGET,
                         help='what bounds an MPC step: solver iterations (reproducible, the '
                         "default) or wall time (the robot's; outcomes move with the load)")
+    parser.add_argument('--compile', action=argparse.BooleanOptionalAction, default=True,
+                        help="compile the NLPs' functions with gcc (SolverSettings.compile, the "
+                        "default); --no-compile runs CasADi's interpreted functions: the "
+                        "same solutions, slower solves, no C compiler and no wait for it")
     parser.add_argument('--reality', choices=tuple(REALITY_PRESETS), default='ideal',
                         help='how real the robot is (core/reality.py presets): lag, latency, '
                              'acceleration limits, odometry noise and drift, laser noise and '
@@ -401,7 +405,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         barn_dir = ''  # the shipped worlds: each worker finds its own copy
     template = Task(args.suite, 0, '', args.seed, args.v_max, args.omega_max, barn_dir,
                     trajectories, args.merge, sensing=args.sensing, robot=args.robot,
-                    budget=args.budget, reality=args.reality)
+                    budget=args.budget, compile=args.compile, reality=args.reality)
     tasks = [replace(template, world=w, controller=c,
                      world_file=world_files[w] if world_files else '')
              for w in worlds for c in controllers]

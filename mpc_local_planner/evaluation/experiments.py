@@ -260,8 +260,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--budget', choices=BUDGETS, default=EVALUATION_BUDGET,
                         help="a step's solving: solver iterations (the same runs under any "
                              "load) or the robot's wall time (SolverSettings.budget)")
+    parser.add_argument('--compile', action=argparse.BooleanOptionalAction, default=True,
+                        help="compile the NLPs' functions with gcc (SolverSettings.compile, the "
+                        "default); --no-compile runs CasADi's interpreted functions: the "
+                        "same solutions, slower solves, no C compiler and no wait for it")
     args = parser.parse_args(argv)
-    base = MpcConfig(solving=SolverSettings(budget=args.budget))
+    base = MpcConfig(solving=SolverSettings(budget=args.budget, compile=args.compile))
     if args.solver is not None:
         base = base.with_solving(solver=args.solver)
     names = list(EXPERIMENTS) if args.experiment == 'all' else [args.experiment]

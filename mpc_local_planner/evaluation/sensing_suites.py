@@ -285,7 +285,8 @@ _MPC_CACHE: dict[tuple[str, str], Any] = {}
 
 
 def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
-         budget: str = EVALUATION_BUDGET, reality: Reality | None = None) -> Any:
+         budget: str = EVALUATION_BUDGET, compile: bool = True,
+         reality: Reality | None = None) -> Any:
     """Return the cached MpcController or TrackingMPC for the robot, reset for a new run.
 
     With a real base (reality), the paper's MPC is told its deceleration limits (stops
@@ -299,7 +300,7 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
     hold = REALITY_INPUT_HOLD if accel is not None and name == 'proposed' else 'zero'
     delay = actuation_delay(reality) if hold == 'first_order' and reality is not None else 0.0
     key = (name, robot.name, robot.v_max, robot.omega_max, robot.reverses, prepare, budget,
-           accel, reality is not None, hold, REALITY_ACCEL_FACTOR, delay)
+           compile, accel, reality is not None, hold, REALITY_ACCEL_FACTOR, delay)
     mpc = _MPC_CACHE.get(key)
     if mpc is None:
         model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max,
@@ -310,7 +311,7 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
                            max_accel=tuple(REALITY_ACCEL_FACTOR * a for a in accel)
                            if accel is not None and name == 'proposed' else None,
                            input_hold=hold,
-                           solving=SolverSettings(budget=budget))
+                           solving=SolverSettings(budget=budget, compile=compile))
         if name == 'proposed':
             settings = ControllerSettings(xy_goal_tolerance=MPC_ARRIVAL,
                                           yaw_goal_tolerance=math.pi,
@@ -364,14 +365,15 @@ def _prepare(mpc: Any, budget: str = EVALUATION_BUDGET) -> None:
 
 
 def _local_controller(name: str, robot: Robot, world: World, *, prepare: bool = True,
-                      budget: str = EVALUATION_BUDGET,
+                      budget: str = EVALUATION_BUDGET, compile: bool = True,
                       reality: Reality | None = None) -> LocalController:
     """Return the named local controller for the robot (tuned to a real base's limits)."""
     if name == 'proposed':
         return MpcLocal(_mpc(name, robot, world, prepare=prepare, budget=budget,
-                             reality=reality))
+                             compile=compile, reality=reality))
     if name == 'tracking':
-        return TrackingLocal(_mpc(name, robot, world, prepare=prepare, budget=budget))
+        return TrackingLocal(_mpc(name, robot, world, prepare=prepare, budget=budget,
+                                  compile=compile))
     tolerance = 0.5 * float(world.goal_tolerance or GOAL_TOLERANCE)
     if name == 'pure_pursuit':
         pursuit = PurePursuitConfig(v_max=robot.v_max, omega_max=robot.omega_max,
@@ -410,7 +412,7 @@ class SensingResult:
 
 def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool = True,
                    seed: int = 0, h: float = 0.2, prepare: bool = True,
-                   budget: str = EVALUATION_BUDGET,
+                   budget: str = EVALUATION_BUDGET, compile: bool = True,
                    reality: str | Reality = 'ideal',
                    localized: bool | None = None) -> SensingResult:
     """Drive robot through world with the named controller, perception and re-planning.
@@ -428,6 +430,8 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
             first steps), which is enough for tests that do not time steps.
         budget: What bounds an MPC step's solving (SolverSettings.budget): 'iterations', the
             same on any machine under any load, or 'wall', the robot's.
+        compile: Compile the MPC's functions (SolverSettings.compile); off, the interpreted
+            ones compute the same solutions, more slowly, without gcc.
         reality: How real the robot is (core/reality.py: a preset's name or a Reality).
             Ideal: the model takes each command exactly every h, odometry is the pose, the
             laser is exact (every suite before). Otherwise the robot is a `Base` with that
@@ -448,7 +452,7 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
         _empty_map(world.bounds)
     grid, planner = _grid_planner(known, robot, world.bounds, seed)
     local = _local_controller(controller, robot, world, prepare=prepare, budget=budget,
-                              reality=reality if real else None)
+                              compile=compile, reality=reality if real else None)
     model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max)
     base = Base(model, reality.with_seed(seed), world.start, dt=REALITY_SUBSTEP) if real \
         else None

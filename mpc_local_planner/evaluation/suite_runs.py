@@ -110,6 +110,7 @@ class Task:
     robot: str = 'circle'
     world_file: str = ''
     budget: str = EVALUATION_BUDGET  # SolverSettings.budget of the MPCs
+    compile: bool = True  # SolverSettings.compile of the MPCs
     reality: str = 'ideal'  # core/reality.py preset: how real the robot is (navigation runs)
 
     @property
@@ -180,7 +181,8 @@ def _controller(task: Task, scenario: Scenario, model: Unicycle,
     if task.controller not in ('proposed', 'tracking'):
         msg = f'unknown controller {task.controller!r}'
         raise ValueError(msg)
-    key = (task.controller, model.v_max, model.omega_max, config.solving.budget)
+    key = (task.controller, model.v_max, model.omega_max, config.solving.budget,
+           config.solving.compile)
     mpc = _MPC_CACHE.get(key)
     if task.controller == 'tracking':
         if mpc is None:
@@ -242,7 +244,8 @@ def run_navigation_task(task: Task) -> dict[str, Any]:
     try:
         result = suites.run_navigation(world, task.controller, robot,
                                        sensing=bool(row['sensing']), seed=task.seed,
-                                       budget=task.budget, reality=task.reality,
+                                       budget=task.budget, compile=task.compile,
+                                       reality=task.reality,
                                        # BARN's robot has odometry and a laser, no localizer
                                        localized=task.suite != 'barn')
     except PlanningError as err:
@@ -281,7 +284,8 @@ def run_task(task: Task) -> dict[str, Any]:
     if task.navigation:
         return run_navigation_task(task)
     model = Unicycle(v_max=task.v_max, omega_max=task.omega_max)
-    config = MpcConfig(robot_radius=ROBOT_RADIUS, solving=SolverSettings(budget=task.budget))
+    config = MpcConfig(robot_radius=ROBOT_RADIUS,
+                       solving=SolverSettings(budget=task.budget, compile=task.compile))
     margin = config.inflation(model.v_max) - ROBOT_RADIUS
     scenario = _scenario(task, margin)
     if task.controller != 'tracking' and scenario.waypoints is None:

@@ -25,6 +25,8 @@ import pytest
 from mpc_local_planner.core.config import MpcConfig, SOLVERS, SolverSettings
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import compilation, PathReferenceMPC, PlanSource
+from mpc_local_planner.core.mpc.backends import run_solver
+from mpc_local_planner.core.mpc.built_nlps import clear_shared_nlps
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import paper_sinusoid
 
@@ -147,6 +149,27 @@ def test_a_cached_library_is_found_without_generating_its_source(
         raise AssertionError('the source was generated again')
 
     monkeypatch.setattr(compilation, 'nlp_source', no_source)
+    clear_shared_nlps()  # a restarted controller: a new process, nothing built in memory
     again = PathReferenceMPC(model, config, path=path).nlp_for(0, 0)
     assert again.compiled and again.pending is None
     assert again.library == nlp.library
+
+
+def test_the_compiled_functions_give_the_interpreted_solution_to_the_bit(
+        tmp_path, monkeypatch) -> None:
+    """Interpreted and compiled, one NLP's solve is the same: a test may skip gcc's wait."""
+    monkeypatch.setenv('MPC_LOCAL_PLANNER_CACHE', str(tmp_path))
+    model, path = Unicycle(), paper_sinusoid()
+    box = ConvexPolygon.from_box(1.0, -1.0, 1.5, 1.0)
+    config = MpcConfig(horizon=5, solving=SolverSettings(compile=True))
+    mpc = PathReferenceMPC(model, config, obstacles=[box], path=path)
+    x = path.start.copy()
+    problem = mpc.solver_problem(x, mpc.inflated_obstacles)
+    interpreted = problem.nlp.solver
+    mpc.wait_compiled()
+    assert problem.nlp.compiled and problem.nlp.solver is not interpreted
+    by_interpreter = run_solver(problem.nlp, problem.w0, problem.params, interpreted)
+    compiled = run_solver(problem.nlp, problem.w0, problem.params)
+    assert by_interpreter.success and compiled.success
+    assert by_interpreter.iterations == compiled.iterations
+    np.testing.assert_array_equal(compiled.w, by_interpreter.w)

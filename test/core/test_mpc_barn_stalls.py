@@ -50,12 +50,16 @@ WITHIN_STEPS = 10
 def barn_controller() -> MpcController:
     """Return the evaluation's MPC on laser-only BARN as it was when these were recorded.
 
+    Interpreted (compile=False): the compiled functions' numbers (test_backends), and no wait
+    for gcc on a fresh machine.
+
     The Jackal at 2 m/s, 100 iterations a step, reversing allowed: the suite's Jackal now
     drives forwards only (Robot.reverses), which these states predate.
     """
     config = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
                        robot_radius=0.0,
-                       solving=SolverSettings(budget='iterations', max_solve_iterations=100))
+                       solving=SolverSettings(budget='iterations', max_solve_iterations=100,
+                                              compile=False))
     settings = ControllerSettings(xy_goal_tolerance=0.05, yaw_goal_tolerance=math.pi,
                                   capacity=128)
     return MpcController(Unicycle(v_max=2.0, omega_max=4.0), config, settings=settings)
@@ -99,7 +103,8 @@ def forward_only_controller(case: dict) -> MpcController:
     """Return the evaluation's MPC for the Jackal driving forwards only, with case's plan."""
     config = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
                        robot_radius=0.0,
-                       solving=SolverSettings(budget='iterations', max_solve_iterations=100))
+                       solving=SolverSettings(budget='iterations', max_solve_iterations=100,
+                                              compile=False))
     settings = ControllerSettings(xy_goal_tolerance=0.05, yaw_goal_tolerance=math.pi,
                                   capacity=128)
     controller = MpcController(Unicycle(v_max=2.0, omega_max=4.0, v_min=0.0), config,

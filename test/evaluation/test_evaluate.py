@@ -39,10 +39,15 @@ def _rows(folder):
 @pytest.fixture(scope='module')
 def random_out(tmp_path_factory):
     out = tmp_path_factory.mktemp('random')
+    cache = tmp_path_factory.mktemp('compile_cache')
     # The tracking baseline runs until the time limit where it gets stuck: too slow here.
-    assert main(['--suite', 'random', '--count', '2', '--seed', '3', '--out', str(out),
-                 '--controllers', 'proposed,pure_pursuit', '--jobs', '1',
-                 '--save-trajectories']) == 0
+    # Interpreted: the compiled runs' numbers, without gcc's wait.
+    with pytest.MonkeyPatch.context() as env:
+        env.setenv('MPC_LOCAL_PLANNER_CACHE', str(cache))
+        assert main(['--suite', 'random', '--count', '2', '--seed', '3', '--out', str(out),
+                     '--controllers', 'proposed,pure_pursuit', '--jobs', '1',
+                     '--save-trajectories', '--no-compile']) == 0
+    assert not list(cache.iterdir())  # --no-compile: nothing was compiled
     return out
 
 
@@ -88,9 +93,10 @@ def test_random_worlds_are_reproducible_and_block_the_straight_line() -> None:
 
 
 def test_barn_world_from_the_test_data(tmp_path) -> None:
+    # interpreted (the compiled runs' numbers); test_bench_cold_start runs it compiled
     assert main(['--suite', 'barn', '--worlds', '0', '--barn-dir', str(BARN_DIR),
                  '--controllers', 'proposed,pure_pursuit', '--out', str(tmp_path),
-                 '--jobs', '1', '--save-trajectories']) == 0
+                 '--jobs', '1', '--save-trajectories', '--no-compile']) == 0
     rows = _rows(tmp_path)
     assert [r['controller'] for r in rows] == ['proposed', 'pure_pursuit']
     proposed = rows[0]

@@ -37,7 +37,8 @@ PERIOD = 0.05  # 20 Hz: three calls of four hold the plan of the step h = 0.2 s
 
 
 def test_calls_that_hold_the_plan_solve_nothing_and_leave_the_solve_statistics_alone():
-    config = MpcConfig(solving=SolverSettings(budget='iterations'))  # the same under any load
+    # the same under any load; interpreted: the compiled functions' numbers, without gcc
+    config = MpcConfig(solving=SolverSettings(budget='iterations', compile=False))
     controller = MpcController(MODEL, config, obstacles=WORLD.obstacles,
                                settings=ControllerSettings(control_frequency=20.0))
     local = MpcLocal(controller)
