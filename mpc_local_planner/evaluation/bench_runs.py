@@ -41,6 +41,7 @@ from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC
+from mpc_local_planner.core.mpc.built_nlps import clear_shared_nlps
 from mpc_local_planner.core.mpc.compilation import COMPILE_FLAGS, NO_OBSTACLE_COMPILE_FLAGS
 from mpc_local_planner.core.obstacles import ConvexPolygon, within_faces
 from mpc_local_planner.core.paths import paper_sinusoid, ReferencePath, wrap_angle
@@ -162,6 +163,7 @@ def closed_loop(solver: str, horizon: int, obstacles: list[ConvexPolygon], *,
     else:
         config = MpcConfig(horizon=horizon, step=STEP,
                            solving=SolverSettings(solver=solver, compile=compile_functions))
+        clear_shared_nlps()  # the first run builds its NLPs, as in a new process
         controller = PathReferenceMPC(model, config, obstacles=obstacles, path=path)
     runs = 2
     # No stall rule: a controller that stops in front of the box has its solves there timed
@@ -463,6 +465,7 @@ def bench_footprint(scenario: str, steps: int, *, footprint: Footprint = JACKAL,
                                   capacity=2 * len(poses) + 1)
     sensing = scenario == 'barn'
     known = () if sensing else world.obstacles
+    clear_shared_nlps()  # warmup_s: the NLPs' builds, as in a new process
     controller = MpcController(Unicycle(), config, obstacles=known, settings=settings)
     started = time.perf_counter()
     _control_run(world, poses, steps, controller, sensing=sensing)  # builds the NLPs
