@@ -37,6 +37,7 @@ from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.diagnostics import ControllerDiagnostics
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import (
+    built_nlps,
     continuation,
     Decision,
     PathReferenceMPC,
@@ -165,8 +166,9 @@ def test_a_new_budget_rebuilds_nothing_and_keeps_the_warm_start(
     assert not {'max_solve_time', 'budget', 'max_solve_iterations'} & STRUCTURAL_SOLVER_FIELDS
     mpc = paper_mpc()
     x, _ = drive(mpc, 2)
+    built = dict(mpc.nlps)
     formulated: list[tuple] = []
-    monkeypatch.setattr(step_module, 'formulate', lambda *args: formulated.append(args))
+    monkeypatch.setattr(built_nlps, 'formulate', lambda *args: formulated.append(args))
     for changes in ({'max_solve_time': 0.05}, {'budget': 'iterations'},
                     {'max_solve_iterations': 500}):
         mpc.update_config(mpc.config.with_solving(**changes))
@@ -174,6 +176,7 @@ def test_a_new_budget_rebuilds_nothing_and_keeps_the_warm_start(
         assert solution.lyapunov_ok is not None  # the history was kept
         x = mpc.model.step(x, solution.u0, H)
     assert formulated == []  # nothing was built again
+    assert all(mpc.nlps[shape] is nlp for shape, nlp in built.items())  # nor fetched again
 
 
 # ----------------------------------------------------------------------------- a spent budget
@@ -505,13 +508,14 @@ def test_a_prepared_step_never_builds_an_nlp_shape_and_holds_the_nearest_obstacl
                                               activation_distance=5.0))
     mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
     mpc.prepare(1)
-    prepared = set(mpc.nlps)
+    prepared = dict(mpc.nlps)
     formulated: list[tuple] = []
-    monkeypatch.setattr(step_module, 'formulate', lambda *args: formulated.append(args))
+    monkeypatch.setattr(built_nlps, 'formulate', lambda *args: formulated.append(args))
     x = mpc.path.start.copy()
     for _ in range(3):  # nothing is built, step after step
         solution = mpc.solve(x)
-        assert set(mpc.nlps) == prepared
+        assert mpc.nlps.keys() == prepared.keys()  # the same shapes, the same NLPs
+        assert all(mpc.nlps[shape] is nlp for shape, nlp in prepared.items())
         assert len(mpc.last_active_obstacles) == 1  # the nearest one held
         assert solution.source is not PlanSource.STOP
         plan = np.asarray(solution.x_pred)

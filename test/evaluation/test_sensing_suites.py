@@ -56,7 +56,8 @@ def test_unknown_worlds_are_reproducible_and_their_first_plan_meets_an_unknown_o
 def test_the_laser_reveals_what_the_map_lacks_and_the_planner_replans_around_it(
         controller: str) -> None:
     world = load_world(resolve_data_file('unknown_box.yaml'))
-    result = suites.run_navigation(world, controller, CIRCLE, prepare=False)
+    # interpreted: the compiled functions' solutions, without gcc's wait on a fresh machine
+    result = suites.run_navigation(world, controller, CIRCLE, prepare=False, compile=False)
     assert result.run.outcome is Outcome.REACHED, result.run.note
     assert result.contacts == 0 and result.min_clearance > 0.0
     log = result.navigator.log

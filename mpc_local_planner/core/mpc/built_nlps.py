@@ -38,13 +38,13 @@ from __future__ import annotations
 from collections import OrderedDict
 import os
 import threading
-from typing import Callable, Hashable
+from typing import Hashable
 
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import RobotModel
 from mpc_local_planner.core.mpc import compilation
-from mpc_local_planner.core.mpc.backends import Nlp
-from mpc_local_planner.core.mpc.formulation import TerminalCondition
+from mpc_local_planner.core.mpc.backends import build_nlp, Nlp
+from mpc_local_planner.core.mpc.formulation import formulate, TerminalCondition
 
 __all__ = ['MAX_SHARED_PROBLEMS', 'clear_shared_nlps', 'problem_key', 'shared_nlp']
 
@@ -68,20 +68,26 @@ def problem_key(model: RobotModel, config: MpcConfig, terminal: TerminalConditio
             compiled)
 
 
-def shared_nlp(key: Hashable, build: Callable[[], Nlp]) -> Nlp:
-    """Return an own record of the NLP of key: built now the first time, shared after.
+def shared_nlp(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
+               slots: int, faces: int) -> Nlp:
+    """Return an own record of the NLP of this problem: built now the first time, shared after.
 
     Args:
-        key: problem_key() of what build builds.
-        build: builds the NLP (build_nlp of the formulation).
+        model: the robot model.
+        config: the MPC's settings (its problem and how it is solved).
+        terminal: the terminal condition and offset cost.
+        slots: obstacles the NLP holds.
+        faces: half-planes per obstacle.
 
     """
+    key = problem_key(model, config, terminal, slots, faces)
     with _LOCK:
         template = _BUILT.get(key)
         if template is not None:
             _BUILT.move_to_end(key)
     if template is None:
-        template = build().shareable()
+        template = build_nlp(formulate(model, config, terminal, slots, faces),
+                             config.solving).shareable()
         with _LOCK:
             template = _BUILT.setdefault(key, template)
             while len(_BUILT) > MAX_SHARED_PROBLEMS:

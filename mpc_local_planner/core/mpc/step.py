@@ -56,9 +56,9 @@ import numpy as np
 
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import RobotModel
-from mpc_local_planner.core.mpc.backends import build_nlp, Nlp, run_solver
+from mpc_local_planner.core.mpc.backends import Nlp, run_solver
 from mpc_local_planner.core.mpc.budget import Budget, build_time, solver_of
-from mpc_local_planner.core.mpc.built_nlps import problem_key, shared_nlp
+from mpc_local_planner.core.mpc.built_nlps import shared_nlp
 from mpc_local_planner.core.mpc.candidate import (
     guided_guess,
     Plan,
@@ -76,7 +76,7 @@ from mpc_local_planner.core.mpc.decision import (
     LyapunovRecord,
     PlanSource,
 )
-from mpc_local_planner.core.mpc.formulation import formulate, stage_cost, TerminalCondition
+from mpc_local_planner.core.mpc.formulation import stage_cost, TerminalCondition
 from mpc_local_planner.core.mpc.nlp_shapes import NlpShapes, slot_shape
 from mpc_local_planner.core.mpc.nlp_values import obstacle_parameters, parameter_vector
 from mpc_local_planner.core.mpc.solution import MpcSolution, Rounds, SolveAttempt
@@ -272,10 +272,7 @@ class MpcBase(ABC):
 
         Built now, unless an MPC of this process built the same problem (built_nlps.py).
         """
-        model, config, terminal = self._model, self._config, self._terminal_condition()
-        return shared_nlp(problem_key(model, config, terminal, slots, faces),
-                          lambda: build_nlp(formulate(model, config, terminal, slots, faces),
-                                            config.solving))
+        return shared_nlp(self._model, self._config, self._terminal_condition(), slots, faces)
 
     @property
     def nlps(self) -> Mapping[tuple[int, int], Nlp]:
