@@ -157,10 +157,10 @@ class _GridFrame(NamedTuple):
 
 def _cells_crossed(frame: _GridFrame, a: Sequence[float], b: Sequence[float]
                    ) -> tuple[list[int], list[int]]:
-    """cells_crossed on plain floats: the planner asks it of every edge it tries.
+    """cells_crossed on plain floats, as lists: the planner asks it of every edge it tries.
 
-    A segment crosses tens of cells, where NumPy's per-call overhead was most of the cost
-    (75 us a segment); the arithmetic is the same, operation for operation, so the cells are.
+    A segment crosses tens of cells, too few for NumPy's per-call cost to pay. The arithmetic
+    is cells_crossed's, operation for operation, so the cells are too.
     """
     x0, y0, c, s, res = frame
     ax, ay = float(a[0]) - x0, float(a[1]) - y0

@@ -15,11 +15,11 @@
 """The NLPs built in this process, shared by every MPC of the same model and problem.
 
 Building a shape's solvers (the formulation, CasADi's derivatives, the set-up of fatrop and
-of its two IPOPTs) takes tens of ms; preparing an MPC builds every shape it may meet, about
-0.8 s for the paper's settings. A lifecycle node configured again, an evaluation's next world
-and a test's next controller would pay that again for the same problem. Here the first build
-of a problem is kept (the last MAX_SHARED_PROBLEMS of them) and every MPC after it gets the
-same solvers at once.
+of its two IPOPTs) takes tens of ms, and preparing an MPC builds every shape it may meet
+(docs/design/mpc.md, section "Shared NLPs"). A lifecycle node configured again, an
+evaluation's next world and a test's next controller would pay that again for the same
+problem. Here the first build of a problem is kept (the last MAX_SHARED_PROBLEMS of them) and
+every MPC after it gets the same solvers at once.
 
 What each MPC gets is its own `Nlp` record (`Nlp.share`), exactly as a build would give it:
 its time per iteration is measured anew, its IPOPTs are set at first use, its compiled
