@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 from sensor_msgs.msg import LaserScan
 
+from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.perception.pose_history import MAX_EXTRAPOLATION_S
 from mpc_local_planner.perception.scans import check_scan_stamp, validate_scan
 from mpc_local_planner.ros.conversions import (
@@ -47,7 +48,26 @@ SCAN_POSE_TOLERANCE = 0.5
 
 
 class PlannerScans:
-    """GlobalPlannerNode's intake of scans: read, wait for a pose, mark the grid."""
+    """GlobalPlannerNode's intake of scans: read, wait for a pose, mark the grid.
+
+    And what the node's users (and tests) read of it: the pieces the scans made, the scans
+    waiting for a pose, and the latest odometry, which places them.
+    """
+
+    @property
+    def held_obstacles(self) -> tuple[ConvexPolygon, ...]:
+        """The convex pieces the scans made (obstacle_memory): re-plans keep clear of them."""
+        return tuple(self._memory.obstacles()) if self._memory is not None else ()
+
+    @property
+    def pending_scan_count(self) -> int:
+        """Valid scans waiting for odometry that covers their stamps."""
+        return len(self._pending_scans)
+
+    @property
+    def odom_state(self) -> np.ndarray | None:
+        """A copy of the latest valid odometry's state (odom frame); None without one."""
+        return None if self._state is None else self._state.copy()
 
     def scan_callback(self, msg: LaserScan) -> None:
         """Mark and clear the grid with a scan, placed with the pose at its stamp.

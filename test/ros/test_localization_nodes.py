@@ -181,7 +181,7 @@ def test_the_planner_waits_for_the_localizer_then_plans_from_the_pose_in_map(ros
 
     def odometry_kept() -> bool:
         probe.publish_odom(odometry)
-        return planner._state is not None  # the odometry came; no pose in map yet
+        return planner.odom_state is not None  # the odometry came; no pose in map yet
 
     assert ros.spin_until(odometry_kept)
     assert planner.robot_pose is None

@@ -47,6 +47,7 @@ from mpc_local_planner.ros.conversions import (
 from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
 from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.qos import MAP_QOS, PLANNER_DIAGNOSTICS_QOS, SCAN_QOS
+from mpc_local_planner.ros.throttle import ProblemThrottle
 
 pytestmark = pytest.mark.dds  # topics over DDS
 
@@ -184,7 +185,8 @@ def test_planner_waits_for_the_map_then_plans_around_its_wall_with_the_clearance
     assert planner.grid is not None and planner.grid.map.width == 200
 
 
-def test_planner_avoids_an_obstacle_a_scan_shows_and_the_map_lacks(ros) -> None:
+def test_planner_avoids_an_obstacle_a_scan_shows_and_the_map_lacks(
+        ros, throttle_clock) -> None:
     planner, probe, pose, stamp = scanning_planner(ros)
 
     assert len(next_plan(ros, planner, probe, goal_message(9.0, 3.0))) == 2  # nothing seen
@@ -199,8 +201,11 @@ def test_planner_avoids_an_obstacle_a_scan_shows_and_the_map_lacks(ros) -> None:
     box = ConvexPolygon.from_box(5.0, 1.5, 5.3, 4.5)  # in the world, not in the map
     elsewhere = scan_message([box], pose, stamp)
     elsewhere.header.frame_id = 'laser'
-    planner._problems.resolve('scan')  # the next problem is reported at once
-    assert ros.spin_until(lambda: probe.scan_pub.publish(elsewhere) or any(
+    # a throttle period passes between two scans: each problem is reported (scans of the
+    # case before may still be queued)
+    period = ProblemThrottle().period
+    assert ros.spin_until(lambda: probe.scan_pub.publish(elsewhere)
+                          or throttle_clock.advance(period) or any(
         "frame 'laser' is not 'base_link'" in line
         for line in probe.log_lines('global_planner', Log.ERROR)), timeout=TIMEOUT)
     assert planner.scan_count == 0
@@ -210,8 +215,8 @@ def test_planner_avoids_an_obstacle_a_scan_shows_and_the_map_lacks(ros) -> None:
                           timeout=TIMEOUT)
     # the scan made the controller's convex pieces too (re-plans keep start_clearance)
     assert all(piece.distance(np.array([[5.0, 3.0]]))[0] < 0.1
-               for piece in planner._memory.obstacles())
-    assert planner._memory.obstacles()
+               for piece in planner.held_obstacles)
+    assert planner.held_obstacles
 
     waypoints = next_plan(ros, planner, probe, goal_message(9.0, 3.1))
     assert len(waypoints) > 2
@@ -350,7 +355,7 @@ def test_planner_places_a_scan_newer_than_the_odometry_once_odometry_covers_its_
     """
     planner, _probe, pose, _ = scanning_planner(ros)
     box = ConvexPolygon.from_box(5.0, 1.5, 5.3, 4.5)
-    t0, v = planner._now(), 1.0
+    t0, v = planner.get_clock().now().nanoseconds * 1e-9, 1.0
 
     def odometry(t: float) -> None:  # driving along +x at v from pose at t0
         planner.odom_callback(state_to_odometry(pose + [v * (t - t0), 0.0, 0.0],
@@ -360,16 +365,16 @@ def test_planner_places_a_scan_newer_than_the_odometry_once_odometry_covers_its_
     count = planner.scan_count
     t_scan = t0 + 0.15
     planner.scan_callback(scan_message([box], pose + [v * (t_scan - t0), 0.0, 0.0], t_scan))
-    assert planner.scan_count == count and len(planner._pending_scans) == 1
+    assert planner.scan_count == count and planner.pending_scan_count == 1
     assert not planner.grid.occupied.any()
     odometry(t0 + 0.1)  # covers up to t0 + 0.1 + MAX_EXTRAPOLATION_S
-    assert planner.scan_count == count + 1 and not planner._pending_scans
+    assert planner.scan_count == count + 1 and planner.pending_scan_count == 0
     columns = np.nonzero(planner.grid.occupied.any(axis=0))[0]
     assert columns.min() * RESOLUTION == pytest.approx(5.0, abs=RESOLUTION)
 
 
 def test_planner_refuses_scans_whose_beams_do_not_match_their_angles_or_from_the_future(
-        ros) -> None:
+        ros, throttle_clock) -> None:
     planner, probe, pose, stamp = scanning_planner(ros)
     box = ConvexPolygon.from_box(5.0, 1.5, 5.3, 4.5)
 
@@ -389,14 +394,17 @@ def test_planner_refuses_scans_whose_beams_do_not_match_their_angles_or_from_the
              (cut(scan_message([box], pose, stamp), 60), 'scan has 60 ranges'),
              (backwards(scan_message([box], pose, stamp)), "increment's sign leads away"),
              (ahead(scan_message([box], pose, stamp)), 'in the future')]
+    # a throttle period passes between two scans: each problem is reported (scans of the
+    # case before may still be queued)
+    period = ProblemThrottle().period
     for bad, text in cases:
-        planner._problems.resolve('scan')  # the next problem is reported at once
 
         def said(text: str = text) -> bool:
             return any('scan dropped' in line and text in line
                        for line in probe.log_lines('global_planner', Log.ERROR))
 
-        assert ros.spin_until(lambda bad=bad, said=said: probe.scan_pub.publish(bad) or said(),
+        assert ros.spin_until(lambda bad=bad, said=said: probe.scan_pub.publish(bad)
+                              or throttle_clock.advance(period) or said(),
                               timeout=TIMEOUT), probe.log_lines('global_planner')
         assert planner.scan_count == 0
     # the same scan, right: taken
