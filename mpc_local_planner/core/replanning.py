@@ -35,11 +35,12 @@
   the robot, farther than ``progress_radius`` from the goal, has neither moved
   ``progress_radius`` nor turned ``progress_angle`` from where it was ``progress_timeout``
   seconds ago (Nav2's PoseProgressChecker), the goal is re-planned from where it stands.
-  The rule counts only once the robot has moved or turned that much since the plan was
-  made (a controller that starts late is not a robot that is stuck; one that turned in
-  place and then stood is); after a no-progress re-plan it goes on counting. A real robot that
-  re-planned while moving coasts on past the new plan's start; a forward-only one may then
-  have the plan behind it, and its controller no verified way back onto it. The clock of
+  After a new goal's plan the rule counts only once the robot has moved or turned that much
+  (a controller that starts late is not a robot that is stuck; one that turned in place and
+  then stood is); after a re-plan it counts at once, as the controller was running. A real
+  robot that re-planned while moving coasts on past the new plan's start, maybe by less than
+  ``progress_radius``; a forward-only one may then have the plan behind it, and its
+  controller no verified way back onto it. The clock of
   this rule restarts at each attempt, so a robot that cannot be helped is re-planned once
   per ``progress_timeout``.
 - **Re-plans** go through ``RrtStarPlanner.replan``: from the robot's pose, or from the
@@ -361,7 +362,11 @@ class Replanner:
         waypoints = np.asarray(waypoints, dtype=float)
         self._plan, self._goal, self._plan_time = waypoints, goal, now
         self._anchor, self._anchor_time = start[:3].copy(), now
-        self._moved = trigger is PlanTrigger.NO_PROGRESS  # standing already: it counts on
+        # a new goal's plan waits for its controller to move the robot; a re-plan replaces a
+        # plan the controller was following, so standing from its start counts at once (a
+        # robot that re-planned while moving may coast less than progress_radius past the
+        # new plan's start and stand there, the plan behind it)
+        self._moved = trigger is not PlanTrigger.GOAL
         if trigger is PlanTrigger.GOAL:
             self._checked = now
         else:

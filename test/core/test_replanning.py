@@ -319,6 +319,33 @@ def test_a_robot_that_turned_in_place_and_then_stood_is_re_planned_from_where_it
                    is ReplanOutcome.PLANNED for k in range(1, 40))
 
 
+def test_a_robot_that_coasts_past_a_re_plans_start_and_stands_is_re_planned_from_there():
+    """A re-plan replaces a plan the controller was following: standing after it counts at once.
+
+    The recorded case (unknown-obstacle suite world 46, real base at 2 m/s): re-planned
+    (blocked) at 0.86 m/s from (1.19, 0.50), the robot braked to a stand 0.2 m on, less
+    than progress_radius, with the new plan's start behind it and a 2.3 rad turn to make
+    beside an obstacle; its MPC found no verified plan there, and the no-progress rule,
+    waiting for the robot to move since the plan, never re-planned (106 solver failures,
+    stalled 4.7 m from the goal).
+    """
+    planner = _NoProgressPlanner()
+    replanner = Replanner(ReplanSettings(check_period=0.5, progress_timeout=5.0,
+                                         progress_radius=0.25, progress_angle=0.5))
+    goal = np.array([6.0, 0.0, 0.0])
+    replanner.plan_goal(planner, np.array([0.0, 0.0, 0.0]), goal, now=0.0)
+    planner.blocked = 'blocked'
+    moving = np.array([1.188, 0.497, 0.766])
+    decision = replanner.check(planner, moving, now=1.5)
+    assert decision.outcome is ReplanOutcome.PLANNED and decision.trigger is PlanTrigger.BLOCKED
+    planner.blocked = None
+    stood = np.array([1.34, 0.605, 0.656])
+    planned = [t for t in np.arange(2.0, 12.0, 0.5)
+               if replanner.check(planner, stood, now=float(t)).outcome is ReplanOutcome.PLANNED]
+    assert planned[:2] == [6.5, 11.5]  # 5 s after the re-plan, then once per progress_timeout
+    np.testing.assert_array_equal(planner.starts[-1], stood)
+
+
 class _NoProgressPlanner:
     """A planner whose plans are always clear: only the progress rule can re-plan."""
 
@@ -334,4 +361,4 @@ class _NoProgressPlanner:
         return self.plan(start, goal)
 
     def rest_problem(self, plan, position):
-        return None
+        return getattr(self, 'blocked', None)
