@@ -495,7 +495,8 @@ def result_fields(result: SensingResult) -> dict[str, Any]:
 
 
 def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controller: str,
-                         robot: Robot, *, seed: int = 0, prepare: bool = True) -> Path:
+                         robot: Robot, *, seed: int = 0, prepare: bool = True,
+                         compile: bool = True) -> Path:
     """Draw laser-only runs: the true obstacles, what was sensed, every plan, the footprint.
 
     Each world is run again (the runs are deterministic) with the navigator's log at hand:
@@ -510,6 +511,7 @@ def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controll
         robot: Its footprint and speed limits.
         seed: The planner's seed.
         prepare: Build the MPC's NLPs before the runs (see run_navigation).
+        compile: Compile the MPC's functions (see run_navigation).
 
     Returns:
         target.
@@ -527,7 +529,8 @@ def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controll
 
     fig, axes = plt.subplots(1, len(worlds), figsize=(3.0 * len(worlds), 6.5), squeeze=False)
     for ax, (title, world) in zip(axes[0], worlds, strict=True):
-        result = run_navigation(world, controller, robot, seed=seed, prepare=prepare)
+        result = run_navigation(world, controller, robot, seed=seed, prepare=prepare,
+                                compile=compile)
         for shape in world.physical_shapes():
             if isinstance(shape, Circle):
                 ax.add_patch(CirclePatch((shape.x, shape.y), shape.radius, color='0.6'))
