@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
+import os
 import threading
 
 import numpy as np
@@ -173,3 +174,16 @@ def test_the_compiled_functions_give_the_interpreted_solution_to_the_bit(
     assert by_interpreter.success and compiled.success
     assert by_interpreter.iterations == compiled.iterations
     np.testing.assert_array_equal(compiled.w, by_interpreter.w)
+
+
+def test_the_compiler_runs_at_a_lower_cpu_priority(tmp_path, monkeypatch) -> None:
+    """A background compilation leaves the CPU to the control loop (COMPILE_NICENESS)."""
+    seen = tmp_path / 'niceness'
+    compiler = tmp_path / 'cc'
+    compiler.write_text(f'#!/bin/sh\nnice > {seen}\nexec gcc "$@"\n')
+    compiler.chmod(0o755)
+    monkeypatch.setenv('CC', str(compiler))
+    library = compilation.run_compiler('int f(void) { return 1; }', tmp_path / 'f.so')
+    assert library.is_file()
+    # nice caps at 19
+    assert int(seen.read_text()) == min(19, os.nice(0) + compilation.COMPILE_NICENESS)

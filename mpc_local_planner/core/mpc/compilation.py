@@ -32,6 +32,7 @@ import hashlib
 import multiprocessing.util
 import os
 from pathlib import Path
+import shutil
 import signal
 import subprocess
 import tempfile
@@ -41,11 +42,14 @@ from typing import Callable
 
 import casadi as ca
 
-__all__ = ['COMPILE_FLAGS', 'NO_OBSTACLE_COMPILE_FLAGS', 'Compiler', 'compile_cache_dir',
-           'compile_library', 'compile_wait_seconds', 'library_path', 'nlp_source',
-           'pointed_library', 'pointer_path', 'run_compiler', 'submit_compilation',
-           'wait_for', 'write_pointer']
+__all__ = ['COMPILE_FLAGS', 'COMPILE_NICENESS', 'NO_OBSTACLE_COMPILE_FLAGS', 'Compiler',
+           'compile_cache_dir', 'compile_library', 'compile_wait_seconds', 'library_path',
+           'nlp_source', 'pointed_library', 'pointer_path', 'run_compiler',
+           'submit_compilation', 'wait_for', 'write_pointer']
 
+# How much lower the compiler's CPU priority is than its process's (nice -n): a background
+# compilation must not take a core from a robot's control loop or its other nodes.
+COMPILE_NICENESS = 10
 # C compiler and flags for config.compile (compile_flags); CC overrides the compiler as usual.
 # NLPs with obstacle slots: -O0, not -O2: gcc took 5x less time on the Jackal's polygon NLPs
 # (4.6 s instead of 25.6 s for 3 boxes, 17 s instead of 88 s for 10 octagons, on 2 loaded
@@ -214,6 +218,9 @@ def compile_library(source: str, library: Path, flags: tuple[str, ...] = COMPILE
 def run_compiler(source: str, library: Path, flags: tuple[str, ...] = COMPILE_FLAGS) -> Path:
     """Run the system compiler ($CC, else gcc) on source with flags; return library.
 
+    At COMPILE_NICENESS (through `nice`, where there is one): the compiler gets what the
+    control loop and the other processes leave of the CPU.
+
     Raises:
         RuntimeError: if the compiler fails (with its message).
         subprocess.TimeoutExpired: if it takes longer than ten minutes (it is killed).
@@ -224,8 +231,12 @@ def run_compiler(source: str, library: Path, flags: tuple[str, ...] = COMPILE_FL
         c_file = Path(tmp) / 'mpc_nlp.c'
         c_file.write_text(source)
         out = Path(tmp) / library.name
-        with subprocess.Popen([compiler, *flags, str(c_file), '-o', str(out), '-lm'],
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        command = [compiler, *flags, str(c_file), '-o', str(out), '-lm']
+        nice = shutil.which('nice')
+        if nice is not None:
+            command = [nice, '-n', str(COMPILE_NICENESS), *command]
+        with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True,
                               start_new_session=True) as process:  # gcc and its cc1: a group
             _RUNNING.add(process)
             try:
