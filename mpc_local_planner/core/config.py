@@ -245,9 +245,7 @@ class MpcConfig:
     @cached_property
     def robot_footprint(self) -> Footprint:
         """The robot's shape: Footprint.polygon(footprint), or a circle of robot_radius."""
-        if self.footprint:
-            return Footprint.polygon(self.footprint)
-        return Footprint.circle(self.robot_radius)
+        return parse_footprint(self.footprint, self.robot_radius)
 
     def inflation(self, v_max: float) -> float:
         """Return the distance obstacles are grown by.

@@ -139,9 +139,7 @@ class PlannerConfig:
     @property
     def robot_footprint(self) -> Footprint:
         """The robot the planner plans for: the polygon, or a circle of robot_radius."""
-        if self.footprint:
-            return Footprint.polygon(self.footprint)
-        return Footprint.circle(self.robot_radius)
+        return parse_footprint(self.footprint, self.robot_radius)
 
     @property
     def inflation(self) -> float:
