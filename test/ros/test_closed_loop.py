@@ -114,7 +114,11 @@ def test_closed_loop_in_one_process_reaches_the_paper_target_faster_than_real_ti
 
 @pytest.mark.dds
 def test_closed_loop_as_separate_processes_reaches_the_target(tmp_path) -> None:
-    code = main(['--out', str(tmp_path), '--path', 'rrt', '--rtf', '4', '--timeout', '90',
+    # twice real time: the simulator's clock does not wait for the other processes, and at
+    # four times, on 2 loaded cores, the controller missed over half of its ticks (a clean
+    # clone's test run, median command interval 0.08 s); at twice 1-2 % with a process
+    # burning a core beside it
+    code = main(['--out', str(tmp_path), '--path', 'rrt', '--rtf', '2', '--timeout', '90',
                  '--separate-processes'])
     assert code == 0
     check_run(tmp_path, json.loads((tmp_path / 'metrics.json').read_text()), lockstep=False)
