@@ -238,8 +238,8 @@ def test_bad_odometry_stops_the_robot_with_one_error_and_it_resumes(
         clock.odom = WORLD.start.copy()
 
     check_refusal(ros, probe, clock, 'invalid odometry', text, restore)
-    assert any('odometry is valid again' in line
-               for line in probe.log_lines('mpc_controller', Log.INFO))
+    assert ros.spin_until(lambda: any('odometry is valid again' in line
+                                      for line in probe.log_lines('mpc_controller', Log.INFO)))
 
 
 @pytest.mark.parametrize('case', list(BAD_PLANS))
@@ -407,7 +407,8 @@ def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_th
     assert steps[-1].step.failures_total >= failures_before + horizon + 1
     assert ros.spin_until(lambda: abs(probe.odoms[-1].twist.twist.linear.x) < 1e-12
                           and abs(probe.odoms[-1].twist.twist.angular.z) < 1e-12)
-    assert any(Reason.STOP.text in line for line in probe.log_lines('mpc_controller', Log.WARN))
+    assert ros.spin_until(lambda: any(Reason.STOP.text in line for line in
+                                      probe.log_lines('mpc_controller', Log.WARN)))
     check_commands(probe)
 
     # the solver is back: the robot drives on
@@ -1078,10 +1079,14 @@ def test_with_the_map_a_source_the_controller_waits_for_a_valid_map_and_says_so_
     bad.data = [0] * 7  # not width x height
     probe.map_pub.publish(bad)
     stands_still(probe, 0, Reason.NO_MAP, 3.0, clock)
-    said = [line for line in probe.log_lines('mpc_controller', Log.WARN)
-            if line.startswith(Reason.NO_MAP.text)]
-    assert len(said) == 1 and 'cmd_vel is zero' in said[0], said
-    assert errors(probe, 'mpc_controller', 'invalid map')
+
+    def said() -> list[str]:
+        return [line for line in probe.log_lines('mpc_controller', Log.WARN)
+                if line.startswith(Reason.NO_MAP.text)]
+
+    # /rosout is a topic of its own: wait for the lines, then count them
+    assert ros.spin_until(lambda: said() and errors(probe, 'mpc_controller', 'invalid map'))
+    assert len(said()) == 1 and 'cmd_vel is zero' in said()[0], said()
     good = copy.deepcopy(bad)
     good.info.origin.position.x = good.info.origin.position.y = -5.0
     good.info.width = good.info.height = 100

@@ -172,6 +172,9 @@ def test_contacts_through_the_narrow_gap_are_counted_with_the_true_footprint(
     assert ros.spin_until(lambda: sim.sim_time > t + 0.5, timeout=TIMEOUT)
     assert sim.contacts == expected and counts == list(range(expected + 1))
     assert sim.state[1] == 0.0 and sim.state[2] == 0.0  # it really drove straight
+    # /rosout is a topic of its own: wait for its lines, then count them
+    assert ros.spin_until(lambda: len(probe.log_lines('unicycle_simulator', Log.ERROR))
+                          >= expected, timeout=TIMEOUT)
     errors = probe.log_lines('unicycle_simulator', Log.ERROR)
     assert len(errors) == expected
     if expected:
