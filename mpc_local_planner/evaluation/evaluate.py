@@ -38,9 +38,12 @@ planned once (their worlds are built in `known_map_worlds`).
 
 Controllers: ``proposed`` (PathReferenceMPC on the RRT* WaypointPath), ``tracking`` (the
 TrackingMPC baseline, target only) and ``pure_pursuit`` (lookahead pure pursuit of the same
-polyline, no obstacle constraints). Each run is an evaluation.rollout: it stops at success
-(position only), at first contact, at the time limit, or after STALL_STEPS steps standing
-still; the ``stop_reason`` column holds the rollout's Outcome value.
+polyline, no obstacle constraints); with sensing also ``dwa`` (Nav2 DWB's critics) and
+``regulated_pure_pursuit`` (Nav2's RPP: curvature-regulated speed, velocity-scaled
+lookahead, collision detection on the sensed obstacles). Each run is an evaluation.rollout:
+it stops at success (position only), at first contact, at the time limit, or after
+STALL_STEPS steps standing still; the ``stop_reason`` column holds the rollout's Outcome
+value.
 
 Reproducible: the MPCs bound a control step's solving by solver iterations
 (``--budget iterations``, the default: SolverSettings.budget, the wall budget's worth on a typical

@@ -224,7 +224,7 @@ class PathFollowerLocal:
     """A path follower with ``command(x) -> u`` (pure pursuit, DWA).
 
     Made for the first plan; later plans go to its ``set_path`` when it has one (the DWA
-    keeps its current velocity across plans), else a new one is made (pure pursuit).
+    keeps its current velocity across plans, pure pursuit its speed), else a new one is made.
 
     Args:
         make: waypoints (M, 2) -> the controller for that plan.

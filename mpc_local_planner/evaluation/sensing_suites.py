@@ -379,6 +379,17 @@ def _local_controller(name: str, robot: Robot, world: World, *, prepare: bool = 
         pursuit = PurePursuitConfig(v_max=robot.v_max, omega_max=robot.omega_max,
                                     goal_tolerance=min(0.03, tolerance))
         return PathFollowerLocal(lambda waypoints: PurePursuit(waypoints, pursuit))
+    if name == 'regulated_pure_pursuit':
+        pursuit = PurePursuitConfig.regulated(robot.v_max, robot.omega_max,
+                                              footprint=robot.footprint,
+                                              goal_tolerance=min(0.03, tolerance))
+        # as a user configures RPP: its collision check sees the local costmap's obstacles
+        # (the sensed ones, as the DWA and the MPC get them), its lookahead the measured speed
+        reach = (min(robot.v_max * pursuit.collision_time, pursuit.max_lookahead)
+                 + robot.footprint.radius)
+        return PathFollowerLocal(lambda waypoints: PurePursuit(waypoints, pursuit),
+                                 reach=reach, uses_obstacles=True,
+                                 takes_velocity=reality is not None)
     if name == 'dwa':
         from mpc_local_planner.core.baselines.dwa import Dwa, DwaConfig
 
@@ -419,7 +430,8 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
 
     Args:
         world: Known obstacles (the planner's map) and unknown ones (only the laser sees).
-        controller: ``proposed``, ``tracking``, ``pure_pursuit`` or ``dwa``.
+        controller: ``proposed``, ``tracking``, ``pure_pursuit``, ``dwa`` or
+            ``regulated_pure_pursuit``.
         robot: Its footprint and speed limits (the world's own footprint is not used).
         sensing: The laser is on (scans mark the planner's grid and fill the controller's
             memory); off, only the map of the known obstacles is known.

@@ -78,8 +78,9 @@ __all__ = [
     'Task',
 ]
 
-CONTROLLERS = ('proposed', 'tracking', 'pure_pursuit', 'dwa')
-# The known-map suites run the first three (DWA runs with sensing, on re-planned paths).
+CONTROLLERS = ('proposed', 'tracking', 'pure_pursuit', 'dwa', 'regulated_pure_pursuit')
+# The known-map suites run the first three (DWA and Nav2's regulated pure pursuit run with
+# sensing, on re-planned paths: they take the sensed obstacles).
 KNOWN_MAP_CONTROLLERS = ('proposed', 'tracking', 'pure_pursuit')
 SUITES = ('random', 'barn', 'unknown', 'worlds')
 CSV_COLUMNS = (
