@@ -21,11 +21,7 @@ regulated one (RPP) scales its lookahead and speed as Nav2 does and checks its a
 import numpy as np
 import pytest
 
-from mpc_local_planner.core.baselines.pure_pursuit import (
-    arc_poses,
-    PurePursuit,
-    PurePursuitConfig,
-)
+from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit, PurePursuitConfig
 from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
@@ -145,14 +141,6 @@ def test_a_turn_in_place_that_would_sweep_into_an_obstacle_is_refused() -> None:
     # a post 0.27-0.31 m ahead: the nose clears it, the corners (0.333 m out) do not
     follower.set_obstacles([ConvexPolygon.from_box(0.27, -0.02, 0.31, 0.02)])
     assert not follower.command(x).any() and follower.collision_ahead
-
-
-def test_arc_poses_are_the_unicycles_exact_arcs() -> None:
-    half_circle = arc_poses([0.0, 0.0, 0.0], 1.0, 1.0, np.array([np.pi / 2, np.pi]))
-    np.testing.assert_allclose(half_circle, [[1.0, 1.0, np.pi / 2], [0.0, 2.0, np.pi]],
-                               atol=1e-12)
-    line = arc_poses([1.0, 2.0, np.pi / 2], 0.5, 0.0, np.array([2.0]))
-    np.testing.assert_allclose(line, [[1.0, 3.0, np.pi / 2]], atol=1e-12)
 
 
 @pytest.mark.parametrize('field, value', [

@@ -52,10 +52,11 @@ from typing import Sequence
 import numpy as np
 
 from mpc_local_planner.core.footprint import CIRCLE, Footprint
+from mpc_local_planner.core.models import unicycle_arc
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
 from mpc_local_planner.core.paths import distinct_waypoints, project_ahead, wrap_angle
 
-__all__ = ['arc_poses', 'PurePursuit', 'PurePursuitConfig']
+__all__ = ['PurePursuit', 'PurePursuitConfig']
 
 
 @dataclass(frozen=True)
@@ -294,19 +295,7 @@ class PurePursuit:
             times = np.arange(1, int(c.collision_time / step) + 1) * step
         if not len(times):
             return False
-        poses = arc_poses(x, v, omega, times)
+        poses = np.array([unicycle_arc(x, v, omega, float(t)) for t in times])
         separation, _ = polygon_separation(c.footprint.at_poses(poses), self._obstacles)
         return bool(np.any(separation <= 0.0))
 
-
-def arc_poses(x: Sequence[float], v: float, omega: float, times: np.ndarray) -> np.ndarray:
-    """Return the unicycle's poses (len(times), 3) after each time on the arc of (v, omega)."""
-    x0, y0, theta0 = (float(value) for value in x[:3])
-    t = np.asarray(times, dtype=float)
-    theta = theta0 + omega * t
-    if abs(omega) < 1e-9:
-        return np.column_stack([x0 + v * t * math.cos(theta0),
-                                y0 + v * t * math.sin(theta0), theta])
-    radius = v / omega
-    return np.column_stack([x0 + radius * (np.sin(theta) - math.sin(theta0)),
-                            y0 - radius * (np.cos(theta) - math.cos(theta0)), theta])
