@@ -23,7 +23,7 @@ p(t)^{-1} p(t + h) of the TRUE pose. Relative motions, so that odometry's drift 
 
     PYTHONPATH=. python3 -m mpc_local_planner.evaluation.prediction_error --worlds 0-9
 
-prints, per variant (zero hold at REALITY_ACCEL_FACTOR 2 as the Jackal ran before, the
+prints, per variant (the zero hold at twice the base's limits as the Jackal ran before, the
 first-order hold at the base's own limits), the median, 95th percentile and maximum of the
 position and heading errors (docs/real_robot.md, "Predictions against the base").
 """
@@ -34,27 +34,25 @@ import argparse
 from dataclasses import replace
 import json
 from typing import Any
-from unittest import mock
 
 import numpy as np
 
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.control_output import Reason
-from mpc_local_planner.core.reality import Base
-from mpc_local_planner.evaluation import navigation
 from mpc_local_planner.evaluation import sensing_suites as suites
+from mpc_local_planner.evaluation.rollout import Rollout
 from mpc_local_planner.evaluation.suite_runs import barn_score, DEFAULT_BARN_DIR, parse_worlds
 from mpc_local_planner.perception.localization import compose, invert
 
-__all__ = ['VARIANTS', 'relative_motion', 'run_variant']
+__all__ = ['VARIANTS', 'one_step_errors', 'relative_motion', 'run_variant']
 
-# name: (REALITY_INPUT_HOLD, REALITY_ACCEL_FACTOR): the zero hold at twice the base's limits
-# (the Jackal before), the first-order hold at them; and the other two for comparison
+# name: how the MPC is set up for the base: the zero hold at twice the base's limits (the
+# Jackal before), the first-order hold at them; and the other two for comparison
 VARIANTS = {
-    'zoh-2x': ('zero', 2.0),
-    'foh-1x': ('first_order', 1.0),
-    'zoh-1x': ('zero', 1.0),
-    'foh-2x': ('first_order', 2.0),
+    'zoh-2x': suites.RealBaseMpc(input_hold='zero', accel_factor=2.0),
+    'foh-1x': suites.RealBaseMpc(input_hold='first_order', accel_factor=1.0),
+    'zoh-1x': suites.RealBaseMpc(input_hold='zero', accel_factor=1.0),
+    'foh-2x': suites.RealBaseMpc(input_hold='first_order', accel_factor=2.0),
 }
 
 
@@ -63,61 +61,54 @@ def relative_motion(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return compose(invert(np.asarray(a[:3], dtype=float)), np.asarray(b[:3], dtype=float))
 
 
-def run_variant(worlds: list[int], hold: str, factor: float, *, reality: str = 'real',
+def one_step_errors(run: Rollout, h: float) -> list[tuple[float, float]]:
+    """Return (position, heading) errors of each applied plan's first step h against the truth.
+
+    The run's rows hold the true pose at each control instant and its steps the controller's
+    answers, one per row. Each solve that applied a plan (TRACKING or CANDIDATE, fresh: a
+    stop's prediction stands while the base brakes) is compared, as relative motions, with
+    the true motion from its instant to the row h later; solves with no row h later (the
+    run's end) are left out.
+    """
+    times, truth = run.rows[:, 0], run.rows[:, 1:4]
+    errors = []
+    for row, step in enumerate(run.steps):
+        detail = step.detail
+        if (step.prediction is None or detail is None or not detail.fresh
+                or detail.reason not in (Reason.TRACKING, Reason.CANDIDATE)):
+            continue
+        later = int(np.searchsorted(times, times[row] + h - 1e-6))
+        if later >= len(times) or abs(times[later] - times[row] - h) > 1e-6:
+            continue
+        x_pred = np.asarray(step.prediction)
+        predicted = relative_motion(x_pred[0], x_pred[1])
+        actual = relative_motion(truth[row], truth[later])
+        errors.append((float(np.hypot(*(predicted[:2] - actual[:2]))),
+                       abs(float(predicted[2] - actual[2]))))
+    return errors
+
+
+def run_variant(worlds: list[int], variant: suites.RealBaseMpc, *, reality: str = 'real',
                 v_max: float = 2.0, omega_max: float = 4.0) -> dict[str, Any]:
-    """Run BARN worlds with one variant; return the errors and the runs' outcomes."""
-    suites._MPC_CACHE.clear()
-    poses: list[tuple[float, np.ndarray]] = []
-    predictions: list[tuple[float, np.ndarray]] = []
-    original_advance = Base.advance
-    original_command = navigation.MpcLocal.command
-
-    def advance(self: Base, until: float) -> None:
-        original_advance(self, until)
-        poses.append((self.time, self.pose.copy()))
-
-    def command(self: Any, x: np.ndarray, t: float, velocity: np.ndarray | None = None
-                ) -> Any:
-        step = original_command(self, x, t, velocity)
-        # the solves that applied a plan (a stop's prediction stands while the base brakes)
-        if (step.prediction is not None and step.detail.fresh
-                and step.detail.reason in (Reason.TRACKING, Reason.CANDIDATE)):
-            x_pred = np.asarray(step.prediction)
-            predictions.append((t, relative_motion(x_pred[0], x_pred[1])))
-        return step
-
+    """Run BARN worlds with the MPC set up as variant; return the errors and the outcomes."""
     robot = replace(suites.ROBOTS['jackal'], v_max=v_max, omega_max=omega_max)
+    h = MpcConfig().step  # the suites' MPC's step
+    errors: list[tuple[float, float]] = []
     outcomes = []
-    with mock.patch.object(suites, 'REALITY_INPUT_HOLD', hold), \
-            mock.patch.object(suites, 'REALITY_ACCEL_FACTOR', factor), \
-            mock.patch.object(Base, 'advance', advance), \
-            mock.patch.object(navigation.MpcLocal, 'command', command):
-        errors = []
-        for index in worlds:
-            poses.clear()
-            predictions.clear()
-            path = DEFAULT_BARN_DIR / f'world_{index:03d}.json'
-            world = suites.barn_sensing_world(path, robot)
-            result = suites.run_navigation(world, 'proposed', robot, sensing=True, seed=0,
-                                           budget='iterations', reality=reality,
-                                           localized=False)
-            times = np.array([t for t, _ in poses])
-            truth = np.array([p for _, p in poses])
-            h = MpcConfig().step  # the suites' MPC's step
-            for t, predicted in predictions:
-                i, j = np.searchsorted(times, [t - 1e-6, t + h - 1e-6])
-                if j >= len(times) or abs(times[i] - t) > 1e-6 or abs(times[j] - t - h) > 1e-6:
-                    continue
-                actual = relative_motion(truth[i], truth[j])
-                errors.append((float(np.hypot(*(predicted[:2] - actual[:2]))),
-                               abs(float(predicted[2] - actual[2]))))
-            run = result.run
-            length = float(json.loads(path.read_text(encoding='utf-8'))['barn_path_length'])
-            success = run.outcome.name == 'REACHED'
-            outcomes.append({'world': index, 'outcome': run.outcome.name,
-                             'contacts': result.contacts,
-                             'time': float(run.rows[-1, 0]),
-                             'score': barn_score(success, float(run.rows[-1, 0]), length)})
+    for index in worlds:
+        path = DEFAULT_BARN_DIR / f'world_{index:03d}.json'
+        world = suites.barn_sensing_world(path, robot)
+        result = suites.run_navigation(world, 'proposed', robot, sensing=True, seed=0,
+                                       budget='iterations', reality=reality,
+                                       localized=False, real_base=variant)
+        run = result.run
+        errors += one_step_errors(run, h)
+        length = float(json.loads(path.read_text(encoding='utf-8'))['barn_path_length'])
+        success = run.outcome.name == 'REACHED'
+        outcomes.append({'world': index, 'outcome': run.outcome.name,
+                         'contacts': result.contacts,
+                         'time': float(run.rows[-1, 0]),
+                         'score': barn_score(success, float(run.rows[-1, 0]), length)})
     values = np.array(errors) if errors else np.zeros((0, 2))
     return {'errors': values, 'outcomes': outcomes}
 
@@ -135,8 +126,7 @@ def main(argv: list[str] | None = None) -> None:
           'heading median / p95 / max (rad) | reached | contacts |')
     print('|---|---|---|---|---|---|')
     for name in args.variants.split(','):
-        hold, factor = VARIANTS[name]
-        result = run_variant(worlds, hold, factor, reality=args.reality)
+        result = run_variant(worlds, VARIANTS[name], reality=args.reality)
         e = result['errors']
         pos, head = (np.percentile(e[:, k], [50, 95, 100]) if len(e) else [np.nan] * 3
                      for k in (0, 1))

@@ -87,6 +87,7 @@ from mpc_local_planner.worlds.world import load_barn_world, World
 
 __all__ = [
     'MAP_RESOLUTION',
+    'RealBaseMpc',
     'Robot',
     'ROBOTS',
     'SensingResult',
@@ -143,6 +144,20 @@ REALITY_MARGIN = 0.03
 # (docs/real_robot.md).
 REALITY_ACCEL_FACTOR = 1.0
 REALITY_INPUT_HOLD = 'first_order'
+
+
+@dataclass(frozen=True)
+class RealBaseMpc:
+    """How the paper's MPC is set up for a real base (the suites' choice by default).
+
+    Attributes:
+        input_hold: How its inputs act over a step (MpcConfig.input_hold).
+        accel_factor: Its input-rate bounds as a multiple of the base's acceleration limits.
+
+    """
+
+    input_hold: str = REALITY_INPUT_HOLD
+    accel_factor: float = REALITY_ACCEL_FACTOR
 
 
 @dataclass(frozen=True)
@@ -286,21 +301,21 @@ _MPC_CACHE: dict[tuple[str, str], Any] = {}
 
 def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
          budget: str = EVALUATION_BUDGET, compile: bool = True,
-         reality: Reality | None = None) -> Any:
+         reality: Reality | None = None, real_base: RealBaseMpc = RealBaseMpc()) -> Any:
     """Return the cached MpcController or TrackingMPC for the robot, reset for a new run.
 
     With a real base (reality), the paper's MPC is told its deceleration limits (stops
     brake along the last verified plan, ControllerSettings.max_decel), bounds its input rates
-    at REALITY_ACCEL_FACTOR times the base's (MpcConfig.max_accel) with the input hold
-    REALITY_INPUT_HOLD (a first-order hold's ramp commanded actuation_delay() ahead) and
+    at real_base.accel_factor times the base's (MpcConfig.max_accel) with the input hold
+    real_base.input_hold (a first-order hold's ramp commanded actuation_delay() ahead) and
     keeps a collision margin for the base's lag (REALITY_MARGIN); see docs/real_robot.md for
     how these were chosen.
     """
     accel = reality.acceleration_limits if reality is not None else None
-    hold = REALITY_INPUT_HOLD if accel is not None and name == 'proposed' else 'zero'
+    hold = real_base.input_hold if accel is not None and name == 'proposed' else 'zero'
     delay = actuation_delay(reality) if hold == 'first_order' and reality is not None else 0.0
     key = (name, robot.name, robot.v_max, robot.omega_max, robot.reverses, prepare, budget,
-           compile, accel, reality is not None, hold, REALITY_ACCEL_FACTOR, delay)
+           compile, accel, reality is not None, hold, real_base.accel_factor, delay)
     mpc = _MPC_CACHE.get(key)
     if mpc is None:
         model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max,
@@ -308,7 +323,7 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
         config = MpcConfig(robot_radius=robot.footprint.radius if robot.footprint.is_circle
                            else 0.0, footprint=_vertices(robot.footprint),
                            collision_margin=REALITY_MARGIN if reality is not None else None,
-                           max_accel=tuple(REALITY_ACCEL_FACTOR * a for a in accel)
+                           max_accel=tuple(real_base.accel_factor * a for a in accel)
                            if accel is not None and name == 'proposed' else None,
                            input_hold=hold,
                            solving=SolverSettings(budget=budget, compile=compile))
@@ -366,11 +381,12 @@ def _prepare(mpc: Any, budget: str = EVALUATION_BUDGET) -> None:
 
 def _local_controller(name: str, robot: Robot, world: World, *, prepare: bool = True,
                       budget: str = EVALUATION_BUDGET, compile: bool = True,
-                      reality: Reality | None = None) -> LocalController:
+                      reality: Reality | None = None,
+                      real_base: RealBaseMpc = RealBaseMpc()) -> LocalController:
     """Return the named local controller for the robot (tuned to a real base's limits)."""
     if name == 'proposed':
         return MpcLocal(_mpc(name, robot, world, prepare=prepare, budget=budget,
-                             compile=compile, reality=reality))
+                             compile=compile, reality=reality, real_base=real_base))
     if name == 'tracking':
         return TrackingLocal(_mpc(name, robot, world, prepare=prepare, budget=budget,
                                   compile=compile))
@@ -425,7 +441,8 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
                    seed: int = 0, h: float = 0.2, prepare: bool = True,
                    budget: str = EVALUATION_BUDGET, compile: bool = True,
                    reality: str | Reality = 'ideal',
-                   localized: bool | None = None) -> SensingResult:
+                   localized: bool | None = None,
+                   real_base: RealBaseMpc = RealBaseMpc()) -> SensingResult:
     """Drive robot through world with the named controller, perception and re-planning.
 
     Args:
@@ -455,6 +472,7 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
         localized: Whether a robot whose odometry is not exact has that localizer; None:
             it has. BARN's robot has none (odometry and a laser, no map, a goal relative to
             its start and reached within 1 m): suite_runs passes False for BARN.
+        real_base: How the paper's MPC is set up for a real base (not ideal).
 
     """
     if isinstance(reality, str):
@@ -464,7 +482,8 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
         _empty_map(world.bounds)
     grid, planner = _grid_planner(known, robot, world.bounds, seed)
     local = _local_controller(controller, robot, world, prepare=prepare, budget=budget,
-                              compile=compile, reality=reality if real else None)
+                              compile=compile, reality=reality if real else None,
+                              real_base=real_base)
     model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max)
     base = Base(model, reality.with_seed(seed), world.start, dt=REALITY_SUBSTEP) if real \
         else None
