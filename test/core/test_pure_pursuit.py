@@ -132,6 +132,14 @@ def test_a_collision_on_the_commanded_arc_within_the_lookahead_stops_the_robot()
     assert classic.command(x)[0] > 0.0
 
 
+def test_a_robot_already_touching_an_obstacle_gets_no_command_as_in_nav2() -> None:
+    follower = _regulated()
+    # a post 4 mm into the rectangle's back: every pose ahead clears it, the pose now does not
+    follower.set_obstacles([ConvexPolygon.from_box(-0.26, -0.02, -0.25, 0.02)])
+    assert not follower.command(np.zeros(3), velocity=np.array([2.0, 0.0])).any()
+    assert follower.collision_ahead
+
+
 def test_a_turn_in_place_that_would_sweep_into_an_obstacle_is_refused() -> None:
     behind = np.array([[0.0, 0.0], [-3.0, 0.0]])
     x = np.array([0.0, 0.0, 0.0])  # facing away from the path: it rotates to it

@@ -33,9 +33,9 @@ up for a fast robot:
   below ``min_approach_linear_velocity``);
 - it rotates to the path when the aim point is more than ``rotate_to_heading_min_angle``
   off its heading, at ``rotate_to_heading_angular_vel``;
-- collision detection (``use_collision_detection``): the command's arc is projected up to
-  ``max_allowed_time_to_collision_up_to_carrot`` seconds, and no farther than the aim point;
-  where the footprint would meet an obstacle on it, there is no valid command (Nav2's
+- collision detection (``use_collision_detection``): the footprint where the robot is, and
+  along the command's arc up to ``max_allowed_time_to_collision_up_to_carrot`` seconds and no
+  farther than the aim point; where it meets an obstacle there is no valid command (Nav2's
   controller fails and the robot stops): the follower commands zero (`collision_ahead`).
 
 Left out, as a robot's stack does them elsewhere: the cost-regulated scaling (off by default
@@ -161,6 +161,7 @@ class PurePursuit:
         self.set_path(waypoints)
         self._obstacles = ObstacleSet([])
         self._last_speed = 0.0
+        self._aim_distance = 0.0  # the last command's distance to its aim point (the carrot)
         self.collision_ahead = False  # the last command was refused by the collision check
 
     def set_path(self, waypoints: np.ndarray) -> None:
@@ -239,6 +240,7 @@ class PurePursuit:
             aim = end
         delta = aim - p
         distance = float(np.linalg.norm(delta))
+        self._aim_distance = distance
         if distance < 1e-9:
             return np.zeros(2)
         alpha = float(wrap_angle(math.atan2(delta[1], delta[0]) - theta))
@@ -278,23 +280,21 @@ class PurePursuit:
     def _collision_ahead(self, x: np.ndarray, u: np.ndarray) -> bool:
         """Whether the footprint meets an obstacle on the command's arc (collision_time).
 
-        Poses every collision_step metres (of the arc, or of a vertex's turn in place) up
-        to collision_time seconds ahead, and no farther than the aim point's distance, as
-        Nav2's RPP projects its command.
+        As Nav2's RPP projects its command: the pose now, then poses every collision_step
+        metres of the arc (or of the farthest vertex's turn in place) up to collision_time
+        seconds ahead, and no farther than the aim point's distance.
         """
         c = self.config
         if c.collision_time <= 0.0 or not len(self._obstacles):
             return False
         v, omega = float(u[0]), float(u[1])
         if abs(v) > 1e-9:
-            reach = min(abs(v) * c.collision_time, self.lookahead(v))
-            times = np.arange(1, int(reach / c.collision_step) + 1) * (c.collision_step / abs(v))
+            reach = min(abs(v) * c.collision_time, self._aim_distance)
+            times = np.arange(0, int(reach / c.collision_step) + 1) * (c.collision_step / abs(v))
         else:
             radius = max(c.footprint.radius, c.collision_step)
             step = c.collision_step / (radius * abs(omega))
-            times = np.arange(1, int(c.collision_time / step) + 1) * step
-        if not len(times):
-            return False
+            times = np.arange(0, int(c.collision_time / step) + 1) * step
         poses = np.array([unicycle_arc(x, v, omega, float(t)) for t in times])
         separation, _ = polygon_separation(c.footprint.at_poses(poses), self._obstacles)
         return bool(np.any(separation <= 0.0))
