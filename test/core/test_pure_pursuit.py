@@ -159,3 +159,5 @@ def test_bad_regulation_settings_are_refused(field: str, value: float) -> None:
         PurePursuitConfig(**{field: value})
     with pytest.raises(ValueError, match='min_lookahead must be <= max_lookahead'):
         PurePursuitConfig(min_lookahead=1.0, max_lookahead=0.5)
+    with pytest.raises(ValueError, match='footprint of some size'):
+        PurePursuitConfig(collision_time=1.0)  # a point robot: no outline to check

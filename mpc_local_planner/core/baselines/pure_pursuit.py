@@ -126,6 +126,9 @@ class PurePursuitConfig:
             if not (math.isfinite(value) and value >= 0):
                 msg = f'{name} must be >= 0 and finite, got {value}'
                 raise ValueError(msg)
+        if self.collision_time > 0.0 and not self.footprint.radius > 0.0:
+            msg = 'collision_time > 0 needs a footprint of some size (a polygon or a radius > 0)'
+            raise ValueError(msg)
         if self.min_lookahead > self.max_lookahead:
             msg = (f'min_lookahead must be <= max_lookahead, got {self.min_lookahead} > '
                    f'{self.max_lookahead}')
