@@ -349,7 +349,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.barn_dir / f'world_{w:03d}.json', robot)) for w in parse_worlds(args.plot)]
         print(suites.plot_navigation_runs(args.out / 'barn_sensing_runs.png', panels,
                                           controller, robot, seed=args.seed,
-                                          compile=args.compile))
+                                          setup=suites.MpcSetup(budget=args.budget,
+                                                                compile=args.compile)))
         return 0
     if args.plot:
         try:

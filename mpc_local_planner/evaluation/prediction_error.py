@@ -49,10 +49,10 @@ __all__ = ['VARIANTS', 'one_step_errors', 'relative_motion', 'run_variant']
 # name: how the MPC is set up for the base: the zero hold at twice the base's limits (the
 # Jackal before), the first-order hold at them; and the other two for comparison
 VARIANTS = {
-    'zoh-2x': suites.RealBaseMpc(input_hold='zero', accel_factor=2.0),
-    'foh-1x': suites.RealBaseMpc(input_hold='first_order', accel_factor=1.0),
-    'zoh-1x': suites.RealBaseMpc(input_hold='zero', accel_factor=1.0),
-    'foh-2x': suites.RealBaseMpc(input_hold='first_order', accel_factor=2.0),
+    'zoh-2x': suites.MpcSetup(input_hold='zero', accel_factor=2.0),
+    'foh-1x': suites.MpcSetup(input_hold='first_order', accel_factor=1.0),
+    'zoh-1x': suites.MpcSetup(input_hold='zero', accel_factor=1.0),
+    'foh-2x': suites.MpcSetup(input_hold='first_order', accel_factor=2.0),
 }
 
 
@@ -88,7 +88,7 @@ def one_step_errors(run: Rollout, h: float) -> list[tuple[float, float]]:
     return errors
 
 
-def run_variant(worlds: list[int], variant: suites.RealBaseMpc, *, reality: str = 'real',
+def run_variant(worlds: list[int], variant: suites.MpcSetup, *, reality: str = 'real',
                 v_max: float = 2.0, omega_max: float = 4.0) -> dict[str, Any]:
     """Run BARN worlds with the MPC set up as variant; return the errors and the outcomes."""
     robot = replace(suites.ROBOTS['jackal'], v_max=v_max, omega_max=omega_max)
@@ -99,8 +99,7 @@ def run_variant(worlds: list[int], variant: suites.RealBaseMpc, *, reality: str 
         path = DEFAULT_BARN_DIR / f'world_{index:03d}.json'
         world = suites.barn_sensing_world(path, robot)
         result = suites.run_navigation(world, 'proposed', robot, sensing=True, seed=0,
-                                       budget='iterations', reality=reality,
-                                       localized=False, real_base=variant)
+                                       setup=variant, reality=reality, localized=False)
         run = result.run
         errors += one_step_errors(run, h)
         length = float(json.loads(path.read_text(encoding='utf-8'))['barn_path_length'])

@@ -87,7 +87,7 @@ from mpc_local_planner.worlds.world import load_barn_world, World
 
 __all__ = [
     'MAP_RESOLUTION',
-    'RealBaseMpc',
+    'MpcSetup',
     'Robot',
     'ROBOTS',
     'SensingResult',
@@ -147,15 +147,23 @@ REALITY_INPUT_HOLD = 'first_order'
 
 
 @dataclass(frozen=True)
-class RealBaseMpc:
-    """How the paper's MPC is set up for a real base (the suites' choice by default).
+class MpcSetup:
+    """How the suites set up the MPCs: one value, passed down whole (the defaults: the suites').
 
     Attributes:
-        input_hold: How its inputs act over a step (MpcConfig.input_hold).
-        accel_factor: Its input-rate bounds as a multiple of the base's acceleration limits.
+        budget: What bounds a step's solving (SolverSettings.budget): 'iterations', the same
+            on any machine under any load, or 'wall', the robot's.
+        compile: Compile the MPC's functions (SolverSettings.compile); off, the interpreted
+            ones compute the same solutions, more slowly, without gcc.
+        input_hold: On a real base, how the paper's MPC's inputs act over a step
+            (MpcConfig.input_hold).
+        accel_factor: On a real base, the paper's MPC's input-rate bounds as a multiple of
+            the base's acceleration limits (MpcConfig.max_accel).
 
     """
 
+    budget: str = EVALUATION_BUDGET
+    compile: bool = True
     input_hold: str = REALITY_INPUT_HOLD
     accel_factor: float = REALITY_ACCEL_FACTOR
 
@@ -300,22 +308,22 @@ _MPC_CACHE: dict[tuple[str, str], Any] = {}
 
 
 def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
-         budget: str = EVALUATION_BUDGET, compile: bool = True,
-         reality: Reality | None = None, real_base: RealBaseMpc = RealBaseMpc()) -> Any:
+         setup: MpcSetup = MpcSetup(), reality: Reality | None = None) -> Any:
     """Return the cached MpcController or TrackingMPC for the robot, reset for a new run.
 
     With a real base (reality), the paper's MPC is told its deceleration limits (stops
     brake along the last verified plan, ControllerSettings.max_decel), bounds its input rates
-    at real_base.accel_factor times the base's (MpcConfig.max_accel) with the input hold
-    real_base.input_hold (a first-order hold's ramp commanded actuation_delay() ahead) and
+    at setup.accel_factor times the base's (MpcConfig.max_accel) with the input hold
+    setup.input_hold (a first-order hold's ramp commanded actuation_delay() ahead) and
     keeps a collision margin for the base's lag (REALITY_MARGIN); see docs/real_robot.md for
     how these were chosen.
     """
     accel = reality.acceleration_limits if reality is not None else None
-    hold = real_base.input_hold if accel is not None and name == 'proposed' else 'zero'
+    hold = setup.input_hold if accel is not None and name == 'proposed' else 'zero'
     delay = actuation_delay(reality) if hold == 'first_order' and reality is not None else 0.0
-    key = (name, robot.name, robot.v_max, robot.omega_max, robot.reverses, prepare, budget,
-           compile, accel, reality is not None, hold, real_base.accel_factor, delay)
+    key = (name, robot.name, robot.v_max, robot.omega_max, robot.reverses, prepare,
+           setup.budget, setup.compile, accel, reality is not None, hold, setup.accel_factor,
+           delay)
     mpc = _MPC_CACHE.get(key)
     if mpc is None:
         model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max,
@@ -323,10 +331,11 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
         config = MpcConfig(robot_radius=robot.footprint.radius if robot.footprint.is_circle
                            else 0.0, footprint=_vertices(robot.footprint),
                            collision_margin=REALITY_MARGIN if reality is not None else None,
-                           max_accel=tuple(real_base.accel_factor * a for a in accel)
+                           max_accel=tuple(setup.accel_factor * a for a in accel)
                            if accel is not None and name == 'proposed' else None,
                            input_hold=hold,
-                           solving=SolverSettings(budget=budget, compile=compile))
+                           solving=SolverSettings(budget=setup.budget,
+                                                  compile=setup.compile))
         if name == 'proposed':
             settings = ControllerSettings(xy_goal_tolerance=MPC_ARRIVAL,
                                           yaw_goal_tolerance=math.pi,
@@ -340,7 +349,7 @@ def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
             mpc = TrackingMPC(model, config, target=world.goal)
             core = mpc
         if prepare:
-            _prepare(core, budget)
+            _prepare(core, setup.budget)
         _MPC_CACHE[key] = mpc
     if name == 'proposed':
         mpc.clear_path()
@@ -380,16 +389,14 @@ def _prepare(mpc: Any, budget: str = EVALUATION_BUDGET) -> None:
 
 
 def _local_controller(name: str, robot: Robot, world: World, *, prepare: bool = True,
-                      budget: str = EVALUATION_BUDGET, compile: bool = True,
-                      reality: Reality | None = None,
-                      real_base: RealBaseMpc = RealBaseMpc()) -> LocalController:
+                      setup: MpcSetup = MpcSetup(),
+                      reality: Reality | None = None) -> LocalController:
     """Return the named local controller for the robot (tuned to a real base's limits)."""
     if name == 'proposed':
-        return MpcLocal(_mpc(name, robot, world, prepare=prepare, budget=budget,
-                             compile=compile, reality=reality, real_base=real_base))
+        return MpcLocal(_mpc(name, robot, world, prepare=prepare, setup=setup,
+                             reality=reality))
     if name == 'tracking':
-        return TrackingLocal(_mpc(name, robot, world, prepare=prepare, budget=budget,
-                                  compile=compile))
+        return TrackingLocal(_mpc(name, robot, world, prepare=prepare, setup=setup))
     tolerance = 0.5 * float(world.goal_tolerance or GOAL_TOLERANCE)
     if name == 'pure_pursuit':
         pursuit = PurePursuitConfig(v_max=robot.v_max, omega_max=robot.omega_max,
@@ -439,10 +446,8 @@ class SensingResult:
 
 def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool = True,
                    seed: int = 0, h: float = 0.2, prepare: bool = True,
-                   budget: str = EVALUATION_BUDGET, compile: bool = True,
-                   reality: str | Reality = 'ideal',
-                   localized: bool | None = None,
-                   real_base: RealBaseMpc = RealBaseMpc()) -> SensingResult:
+                   setup: MpcSetup = MpcSetup(), reality: str | Reality = 'ideal',
+                   localized: bool | None = None) -> SensingResult:
     """Drive robot through world with the named controller, perception and re-planning.
 
     Args:
@@ -457,10 +462,8 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
         prepare: Build and compile the MPC's NLPs before the run (once per process), as a
             robot does at start-up; off, they are built when first needed (mid-run: slow
             first steps), which is enough for tests that do not time steps.
-        budget: What bounds an MPC step's solving (SolverSettings.budget): 'iterations', the
-            same on any machine under any load, or 'wall', the robot's.
-        compile: Compile the MPC's functions (SolverSettings.compile); off, the interpreted
-            ones compute the same solutions, more slowly, without gcc.
+        setup: How the MPCs solve (their budget, compiled or not) and how the paper's MPC
+            acts on a real base.
         reality: How real the robot is (core/reality.py: a preset's name or a Reality).
             Ideal: the model takes each command exactly every h, odometry is the pose, the
             laser is exact (every suite before). Otherwise the robot is a `Base` with that
@@ -472,7 +475,6 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
         localized: Whether a robot whose odometry is not exact has that localizer; None:
             it has. BARN's robot has none (odometry and a laser, no map, a goal relative to
             its start and reached within 1 m): suite_runs passes False for BARN.
-        real_base: How the paper's MPC is set up for a real base (not ideal).
 
     """
     if isinstance(reality, str):
@@ -481,9 +483,8 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
     known = rasterize_world(world, MAP_RESOLUTION) if world.obstacles else \
         _empty_map(world.bounds)
     grid, planner = _grid_planner(known, robot, world.bounds, seed)
-    local = _local_controller(controller, robot, world, prepare=prepare, budget=budget,
-                              compile=compile, reality=reality if real else None,
-                              real_base=real_base)
+    local = _local_controller(controller, robot, world, prepare=prepare, setup=setup,
+                              reality=reality if real else None)
     model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max)
     base = Base(model, reality.with_seed(seed), world.start, dt=REALITY_SUBSTEP) if real \
         else None
@@ -527,7 +528,7 @@ def result_fields(result: SensingResult) -> dict[str, Any]:
 
 def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controller: str,
                          robot: Robot, *, seed: int = 0, prepare: bool = True,
-                         compile: bool = True) -> Path:
+                         setup: MpcSetup = MpcSetup()) -> Path:
     """Draw laser-only runs: the true obstacles, what was sensed, every plan, the footprint.
 
     Each world is run again (the runs are deterministic) with the navigator's log at hand:
@@ -542,7 +543,7 @@ def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controll
         robot: Its footprint and speed limits.
         seed: The planner's seed.
         prepare: Build the MPC's NLPs before the runs (see run_navigation).
-        compile: Compile the MPC's functions (see run_navigation).
+        setup: How the MPCs are set up (see run_navigation).
 
     Returns:
         target.
@@ -561,7 +562,7 @@ def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controll
     fig, axes = plt.subplots(1, len(worlds), figsize=(3.0 * len(worlds), 6.5), squeeze=False)
     for ax, (title, world) in zip(axes[0], worlds, strict=True):
         result = run_navigation(world, controller, robot, seed=seed, prepare=prepare,
-                                compile=compile)
+                                setup=setup)
         for shape in world.physical_shapes():
             if isinstance(shape, Circle):
                 ax.add_patch(CirclePatch((shape.x, shape.y), shape.radius, color='0.6'))

@@ -245,7 +245,8 @@ def run_navigation_task(task: Task) -> dict[str, Any]:
     try:
         result = suites.run_navigation(world, task.controller, robot,
                                        sensing=bool(row['sensing']), seed=task.seed,
-                                       budget=task.budget, compile=task.compile,
+                                       setup=suites.MpcSetup(budget=task.budget,
+                                                             compile=task.compile),
                                        reality=task.reality,
                                        # BARN's robot has odometry and a laser, no localizer
                                        localized=task.suite != 'barn')

@@ -57,7 +57,8 @@ def test_the_laser_reveals_what_the_map_lacks_and_the_planner_replans_around_it(
         controller: str) -> None:
     world = load_world(resolve_data_file('unknown_box.yaml'))
     # interpreted: the compiled functions' solutions, without gcc's wait on a fresh machine
-    result = suites.run_navigation(world, controller, CIRCLE, prepare=False, compile=False)
+    result = suites.run_navigation(world, controller, CIRCLE, prepare=False,
+                                   setup=suites.MpcSetup(compile=False))
     assert result.run.outcome is Outcome.REACHED, result.run.note
     assert result.contacts == 0 and result.min_clearance > 0.0
     log = result.navigator.log
@@ -120,7 +121,8 @@ def test_the_figure_draws_the_sensed_obstacles_every_plan_and_the_footprint(tmp_
     world = load_world(resolve_data_file('unknown_box.yaml'))
     # interpreted: the compiled functions' solutions, without gcc's wait on a fresh machine
     target = suites.plot_navigation_runs(tmp_path / 'runs.png', [('unknown box', world)],
-                                         'proposed', CIRCLE, prepare=False, compile=False)
+                                         'proposed', CIRCLE, prepare=False,
+                                         setup=suites.MpcSetup(compile=False))
     assert target.is_file() and target.stat().st_size > 10_000
 
 
