@@ -84,9 +84,9 @@ class PurePursuitConfig:
             the distance to the end over it (Nav2's approach_velocity_scaling_dist), in
             place of slowdown.
         min_approach_speed: the approach's scaling does not go below this, m/s.
-        collision_time: > 0: the command's arc is checked for this many seconds ahead, up to
-            the aim point, against the obstacles (Nav2's
-            max_allowed_time_to_collision_up_to_carrot); 0 = no check.
+        collision_time: > 0: the footprint where the robot is, and along the command's arc
+            for this many seconds ahead up to the aim point, is checked against the
+            obstacles (Nav2's max_allowed_time_to_collision_up_to_carrot); 0 = no check.
         collision_step: distance between two checked poses of that arc, m (Nav2 takes the
             costmap's resolution).
         footprint: the robot's outline for the collision check.
