@@ -53,6 +53,7 @@ __all__ = [
     'distinct_waypoints',
     'paper_sinusoid',
     'points_along',
+    'Polyline',
     'project_ahead',
     'remaining_polyline',
     'simplify_polyline',
@@ -408,6 +409,40 @@ def distinct_waypoints(waypoints: np.ndarray, *, tolerance: float) -> np.ndarray
         msg = 'a path needs at least two distinct waypoints'
         raise ValueError(msg)
     return pts
+
+
+class Polyline:
+    """A follower's polyline: its distinct points, segments and arc lengths, and points by arc.
+
+    What pure pursuit and the DWA both keep of a plan (`project_ahead` finds their progress).
+
+    Args:
+        waypoints: (M, 2) points; consecutive repeats (within 1e-9 m) are dropped.
+
+    Raises:
+        ValueError: as `distinct_waypoints`.
+
+    """
+
+    def __init__(self, waypoints: np.ndarray) -> None:
+        self.points = distinct_waypoints(waypoints, tolerance=1e-9)
+        self.segments = np.diff(self.points, axis=0)
+        self.segment_lengths = np.linalg.norm(self.segments, axis=1)
+        # the arc length at each point: 0 at the first, the polyline's length at the last
+        self.arc = np.concatenate([[0.0], np.cumsum(self.segment_lengths)])
+
+    @property
+    def length(self) -> float:
+        """Length of the polyline, metres."""
+        return float(self.arc[-1])
+
+    def point_at(self, s: float) -> np.ndarray:
+        """Return the point at arc length s (clipped to the polyline)."""
+        s = float(np.clip(s, 0.0, self.arc[-1]))
+        i = int(np.clip(np.searchsorted(self.arc, s, side='right') - 1, 0,
+                        len(self.segments) - 1))
+        t = (s - self.arc[i]) / self.segment_lengths[i]
+        return self.points[i] + t * self.segments[i]
 
 
 def simplify_polyline(points: np.ndarray, tolerance: float) -> np.ndarray:

@@ -4,7 +4,12 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from mpc_local_planner.core.paths import paper_sinusoid, simplify_polyline, WaypointPath
+from mpc_local_planner.core.paths import (
+    paper_sinusoid,
+    Polyline,
+    simplify_polyline,
+    WaypointPath,
+)
 
 
 def _symbolic_values(path, s_values):
@@ -127,3 +132,15 @@ def test_rounded_path_is_differentiable_at_its_knots() -> None:
 def test_bad_smoothing_is_refused(smoothing) -> None:
     with pytest.raises(ValueError, match='smoothing'):
         WaypointPath(np.array([[0, 0], [1, 0]]), smoothing=smoothing)
+
+
+def test_a_polyline_drops_repeats_and_gives_points_by_arc_length_clipped_to_its_ends() -> None:
+    line = Polyline(np.array([[0.0, 0.0], [0.0, 0.0], [3.0, 0.0], [3.0, 4.0]]))
+    assert len(line.points) == 3 and line.length == pytest.approx(7.0)
+    np.testing.assert_allclose(line.arc, [0.0, 3.0, 7.0])
+    np.testing.assert_allclose(line.point_at(1.5), [1.5, 0.0])
+    np.testing.assert_allclose(line.point_at(5.0), [3.0, 2.0])
+    np.testing.assert_allclose(line.point_at(-1.0), [0.0, 0.0])
+    np.testing.assert_allclose(line.point_at(9.0), [3.0, 4.0])
+    with pytest.raises(ValueError, match='two distinct waypoints'):
+        Polyline(np.array([[1.0, 1.0], [1.0, 1.0]]))

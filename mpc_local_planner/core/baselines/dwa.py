@@ -63,7 +63,7 @@ import numpy as np
 
 from mpc_local_planner.core.footprint import CIRCLE, Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
-from mpc_local_planner.core.paths import distinct_waypoints, project_ahead, wrap_angle
+from mpc_local_planner.core.paths import Polyline, project_ahead, wrap_angle
 
 __all__ = ['Dwa', 'DwaConfig']
 
@@ -272,11 +272,7 @@ class Dwa:
         pts = np.asarray(waypoints, dtype=float)
         if pts.ndim == 2 and pts.shape[1] > 2:
             pts = pts[:, :2]
-        pts = distinct_waypoints(pts, tolerance=1e-9)
-        self._pts = pts
-        self._seg = np.diff(pts, axis=0)
-        self._seg_len = np.linalg.norm(self._seg, axis=1)
-        self._cum = np.concatenate([[0.0], np.cumsum(self._seg_len)])
+        self._path = Polyline(pts)
         self._progress = 0.0
 
     def set_obstacles(self, obstacles: Sequence[ConvexPolygon] | ObstacleSet) -> None:
@@ -294,7 +290,7 @@ class Dwa:
     @property
     def length(self) -> float:
         """Length of the polyline, metres."""
-        return float(self._cum[-1])
+        return self._path.length
 
     @property
     def progress(self) -> float:
@@ -308,10 +304,7 @@ class Dwa:
 
     def point_at(self, s: float) -> np.ndarray:
         """Return the point at arc length s (clipped to the path)."""
-        s = float(np.clip(s, 0.0, self._cum[-1]))
-        i = int(np.clip(np.searchsorted(self._cum, s, side='right') - 1, 0, len(self._seg) - 1))
-        t = (s - self._cum[i]) / self._seg_len[i]
-        return self._pts[i] + t * self._seg[i]
+        return self._path.point_at(s)
 
     # --- the decision ---------------------------------------------------------------------
 
@@ -342,7 +335,7 @@ class Dwa:
         c = self.config
         p = pose[:2]
         self._progress = self._project(p)
-        end = self._pts[-1]
+        end = self._path.points[-1]
         if self.length - self._progress <= c.local_goal_distance \
                 and float(np.hypot(*(end - p))) <= c.xy_goal_tolerance:
             return np.zeros(2)
@@ -381,7 +374,7 @@ class Dwa:
 
         # Besides the grid: the current velocity, standing still, and near the path's end
         # the speed whose arc ends on it (the grid's steps would stop short or overshoot).
-        to_end = float(np.hypot(*(self._pts[-1] - pose[:2])))
+        to_end = float(np.hypot(*(self._path.points[-1] - pose[:2])))
         arrive = to_end / c.sim_time if self.length - self._progress <= c.local_goal_distance \
             else v_hi
         vs = axis(v_lo, v_hi, c.vx_samples, float(current[0]), arrive)
@@ -586,8 +579,9 @@ class Dwa:
         """Path segments from the robot's projection to the local goal (starts, edges)."""
         lo = self._progress
         hi = self._progress + self.config.local_goal_distance
-        keep = (self._cum[1:] >= lo) & (self._cum[:-1] <= hi)
-        return self._pts[:-1][keep], self._seg[keep]
+        path = self._path
+        keep = (path.arc[1:] >= lo) & (path.arc[:-1] <= hi)
+        return path.points[:-1][keep], path.segments[keep]
 
     def _project(self, p: np.ndarray) -> float:
         """Closest arc length to p among the points not behind the current progress.
@@ -595,4 +589,5 @@ class Dwa:
         As pure pursuit does: only within one local goal distance (plus the distance to the
         path) ahead, so that a path folding back on itself is not skipped.
         """
-        return project_ahead(self._pts, self._progress, p, self.config.local_goal_distance)
+        return project_ahead(self._path.points, self._progress, p,
+                             self.config.local_goal_distance)

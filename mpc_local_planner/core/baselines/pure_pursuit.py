@@ -54,7 +54,7 @@ import numpy as np
 from mpc_local_planner.core.footprint import CIRCLE, Footprint
 from mpc_local_planner.core.models import unicycle_arc
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
-from mpc_local_planner.core.paths import distinct_waypoints, project_ahead, wrap_angle
+from mpc_local_planner.core.paths import Polyline, project_ahead, wrap_angle
 
 __all__ = ['PurePursuit', 'PurePursuitConfig']
 
@@ -169,18 +169,13 @@ class PurePursuit:
 
     def set_path(self, waypoints: np.ndarray) -> None:
         """Follow a new polyline from its start (the progress is reset, the speed kept)."""
-        pts = distinct_waypoints(waypoints, tolerance=1e-9)
-        self._pts = pts
-        seg = np.diff(pts, axis=0)
-        self._seg = seg
-        self._seg_len = np.linalg.norm(seg, axis=1)
-        self._cum = np.concatenate([[0.0], np.cumsum(self._seg_len)])
+        self._path = Polyline(waypoints)
         self._progress = 0.0
 
     @property
     def length(self) -> float:
         """Length of the polyline, metres."""
-        return float(self._cum[-1])
+        return self._path.length
 
     @property
     def progress(self) -> float:
@@ -198,10 +193,7 @@ class PurePursuit:
 
     def point_at(self, s: float) -> np.ndarray:
         """Return the point at arc length s (clipped to the path)."""
-        s = float(np.clip(s, 0.0, self._cum[-1]))
-        i = int(np.clip(np.searchsorted(self._cum, s, side='right') - 1, 0, len(self._seg) - 1))
-        t = (s - self._cum[i]) / self._seg_len[i]
-        return self._pts[i] + t * self._seg[i]
+        return self._path.point_at(s)
 
     def lookahead(self, speed: float) -> float:
         """The lookahead at this speed (m/s): fixed, or scaled by it (lookahead_time)."""
@@ -232,8 +224,8 @@ class PurePursuit:
         c = self.config
         p = x[:2]
         theta = float(x[2])
-        self._progress = project_ahead(self._pts, self._progress, p, lookahead)
-        end = self._pts[-1]
+        self._progress = project_ahead(self._path.points, self._progress, p, lookahead)
+        end = self._path.points[-1]
         to_end = float(np.linalg.norm(end - p))
         remaining = self.length - self._progress
         if remaining <= lookahead and to_end <= c.goal_tolerance:
