@@ -164,7 +164,6 @@ class PurePursuit:
         self.set_path(waypoints)
         self._obstacles = ObstacleSet([])
         self._last_speed = 0.0
-        self._aim_distance = 0.0  # the last command's distance to its aim point (the carrot)
         self.collision_ahead = False  # the last command was refused by the collision check
 
     def set_path(self, waypoints: np.ndarray) -> None:
@@ -212,15 +211,21 @@ class PurePursuit:
 
         """
         speed = float(velocity[0]) if velocity is not None else self._last_speed
-        u = self._command(np.asarray(x, dtype=float), self.lookahead(speed))
-        self.collision_ahead = bool(u.any()) and self._collision_ahead(x, u)
+        u, aim_distance = self._command(np.asarray(x, dtype=float), self.lookahead(speed))
+        self.collision_ahead = bool(u.any()) and self._collision_ahead(x, u, aim_distance)
         if self.collision_ahead:
             u = np.zeros(2)
         self._last_speed = float(u[0])
         return u
 
-    def _command(self, x: np.ndarray, lookahead: float) -> np.ndarray:
-        """The pursuit's command with the lookahead, before the collision check."""
+    def _command(self, x: np.ndarray, lookahead: float) -> tuple[np.ndarray, float]:
+        """The pursuit's command with the lookahead, before the collision check.
+
+        Returns:
+            The command, and the distance from the robot to its aim point (0 where there is
+            none to aim at).
+
+        """
         c = self.config
         p = x[:2]
         theta = float(x[2])
@@ -229,26 +234,25 @@ class PurePursuit:
         to_end = float(np.linalg.norm(end - p))
         remaining = self.length - self._progress
         if remaining <= lookahead and to_end <= c.goal_tolerance:
-            return np.zeros(2)
+            return np.zeros(2), 0.0
         aim = self.point_at(self._progress + lookahead)
         if remaining <= lookahead:
             aim = end
         delta = aim - p
         distance = float(np.linalg.norm(delta))
-        self._aim_distance = distance
         if distance < 1e-9:
-            return np.zeros(2)
+            return np.zeros(2), distance
         alpha = float(wrap_angle(math.atan2(delta[1], delta[0]) - theta))
         if abs(alpha) > c.turn_in_place:
             rate = min(c.turn_rate, c.omega_max) if c.turn_rate > 0.0 else c.omega_max
-            return np.array([0.0, math.copysign(rate, alpha)])
+            return np.array([0.0, math.copysign(rate, alpha)]), distance
         v = self._regulated_speed(alpha, distance, remaining, to_end, lookahead)
         omega = 2.0 * v * math.sin(alpha) / max(distance, 1e-6)
         if abs(omega) > c.omega_max:
             # Keep the arc's curvature: scale both inputs down together.
             v *= c.omega_max / abs(omega)
             omega = math.copysign(c.omega_max, omega)
-        return np.array([v, omega])
+        return np.array([v, omega]), distance
 
     def _regulated_speed(self, alpha: float, distance: float, remaining: float,
                          to_end: float, lookahead: float) -> float:
@@ -272,7 +276,7 @@ class PurePursuit:
             v = min(v, c.slowdown * to_end)
         return min(v, c.v_max)
 
-    def _collision_ahead(self, x: np.ndarray, u: np.ndarray) -> bool:
+    def _collision_ahead(self, x: np.ndarray, u: np.ndarray, aim_distance: float) -> bool:
         """Whether the footprint meets an obstacle on the command's arc (collision_time).
 
         As Nav2's RPP projects its command: the pose now, then poses every collision_step
@@ -284,7 +288,7 @@ class PurePursuit:
             return False
         v, omega = float(u[0]), float(u[1])
         if abs(v) > 1e-9:
-            reach = min(abs(v) * c.collision_time, self._aim_distance)
+            reach = min(abs(v) * c.collision_time, aim_distance)
             times = np.arange(0, int(reach / c.collision_step) + 1) * (c.collision_step / abs(v))
         else:
             radius = max(c.footprint.radius, c.collision_step)
