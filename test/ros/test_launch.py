@@ -19,6 +19,11 @@
 of the few launch classes they use: the stand-ins record what the launch file asks for, and
 the tests check it against the package (console scripts, installed files, declared
 parameters). What launch itself does with a description is not checked here.
+
+The tests check the checkout's launch files and configs whatever else is installed: another
+copy of the package is put where an installed one would be found (``sys.prefix``, the user
+base, the ament index), as a colcon workspace or a ``pip install .`` puts one beside the
+checkout, with a map of its own that the checkout does not have.
 """
 
 from __future__ import annotations
@@ -27,6 +32,8 @@ import ast
 import importlib
 import importlib.util
 from pathlib import Path
+import shutil
+import site
 import sys
 import types
 from typing import Any
@@ -72,6 +79,29 @@ def _stand_in_modules() -> dict[str, types.ModuleType]:
         module.__dict__.update(attributes)
         modules[name] = module
     return modules
+
+
+@pytest.fixture(scope='module')
+def other_copy(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Return the prefix of another installed copy: the checkout's share/ and one more map."""
+    prefix = tmp_path_factory.mktemp('other_copy')
+    share = prefix / 'share' / 'mpc_local_planner'
+    shutil.copytree(ROOT / 'config', share / 'config')
+    shutil.copy(ROOT / 'package.xml', share)
+    shutil.copy(share / 'config' / 'maps' / 'paper_obstacle.yaml',
+                share / 'config' / 'maps' / 'mapless_world.yaml')
+    index = prefix / 'share' / 'ament_index' / 'resource_index' / 'packages'
+    index.mkdir(parents=True)
+    (index / 'mpc_local_planner').write_text('', encoding='utf-8')
+    return prefix
+
+
+@pytest.fixture(autouse=True)
+def _other_copy_installed(other_copy: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Install the other copy where an installed one is found."""
+    monkeypatch.setattr(sys, 'prefix', str(other_copy))
+    monkeypatch.setattr(site, 'USER_BASE', str(other_copy))
+    monkeypatch.setenv('AMENT_PREFIX_PATH', str(other_copy))
 
 
 def _describe(path: Path, monkeypatch: pytest.MonkeyPatch,
