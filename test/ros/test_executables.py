@@ -20,6 +20,8 @@ folder exits 2 with exactly one line on stderr.
 The scripts are the package's ``console_scripts`` entry points as installed
 (importlib.metadata), plus any that setup.py declares and an older editable install does not
 list yet (run as ``python -m <module>``), so a new executable is covered without a reinstall.
+They run with this checkout first on ``PYTHONPATH``: an installed script runs this
+checkout's code, whatever copy of the package is installed.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from __future__ import annotations
 import ast
 from importlib import import_module
 from importlib.metadata import entry_points
+import os
 from pathlib import Path
 import shutil
 import subprocess
@@ -39,7 +42,8 @@ from mpc_local_planner.ros.parameters import ParameterSpec
 pytestmark = pytest.mark.dds  # one process per executable
 
 DISTRIBUTION = 'mpc_local_planner'
-SETUP_PY = Path(__file__).resolve().parents[2] / 'setup.py'
+CHECKOUT = Path(__file__).resolve().parents[2]
+SETUP_PY = CHECKOUT / 'setup.py'
 # Wall seconds an executable may take to print its help (or refuse) before it counts as hung.
 HANG_GUARD = 60.0
 
@@ -76,6 +80,12 @@ def command(name: str) -> list[str]:
     return [sys.executable, '-m', SCRIPTS[name].split(':')[0]]
 
 
+def checkout_env() -> dict[str, str]:
+    """Return the environment with this checkout first on PYTHONPATH (its code, not a copy's)."""
+    paths = [str(CHECKOUT), *filter(None, os.environ.get('PYTHONPATH', '').split(os.pathsep))]
+    return {**os.environ, 'PYTHONPATH': os.pathsep.join(paths)}
+
+
 def node_parameters(name: str) -> tuple[ParameterSpec, ...] | None:
     """Return the PARAMETERS table of a node's module, None for an argparse command."""
     module_name = SCRIPTS[name].split(':')[0]
@@ -105,7 +115,7 @@ def test_the_package_has_the_executables_the_readme_names() -> None:
 def test_help_prints_usage_and_the_parameters_starts_nothing_and_writes_nothing(
         name, tmp_path) -> None:
     result = subprocess.run([*command(name), '--help'], cwd=tmp_path, capture_output=True,
-                            text=True, timeout=HANG_GUARD, check=False)
+                            text=True, timeout=HANG_GUARD, check=False, env=checkout_env())
     assert result.returncode == 0, result.stderr
     assert 'usage' in result.stdout.lower(), result.stdout
     assert 'Traceback' not in result.stderr, result.stderr
@@ -128,10 +138,9 @@ def test_bag_recorder_refuses_an_existing_output_folder_in_one_line(tmp_path) ->
     (tmp_path / 'bag').mkdir()
     result = subprocess.run([*command('bag_recorder'), '--ros-args', '-p', 'output:=bag'],
                             cwd=tmp_path, capture_output=True, text=True, timeout=HANG_GUARD,
-                            check=False)
+                            check=False, env=checkout_env())
     assert result.returncode == 2, result.stderr
     assert result.stderr.count('\n') == 1, result.stderr
     assert result.stderr.startswith('bag_recorder: refusing to start: ')
     assert 'exists' in result.stderr and 'Traceback' not in result.stderr
     assert list((tmp_path / 'bag').iterdir()) == []  # nothing written into it
-
