@@ -81,6 +81,7 @@ setup(
             'mpc_bench_dds = mpc_local_planner.ros.latency_bench:main',
             'world_to_map = mpc_local_planner.worlds.world_to_map:main',
             'map_server = mpc_local_planner.ros.map_server_node:main',
+            'mpc_local_planner_share = mpc_local_planner.worlds.data_files:main',
         ],
     },
 )

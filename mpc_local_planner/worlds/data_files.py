@@ -26,15 +26,20 @@ checkout (editable install, tests) is its own share directory (``config/``, ``la
 in the prefix it was installed into. Only where neither exists (an unusual layout) are the
 ament index, ``sys.prefix`` and the user base asked. The BARN worlds are package data, so
 they travel inside the Python package itself.
+
+``mpc_local_planner_share`` (`main`) prints the share directory: the pip route's
+``ros2 pkg prefix --share mpc_local_planner``.
 """
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 import site
 import sys
 
-__all__ = ['BARN_DIR', 'PACKAGE_NAME', 'config_roots', 'resolve_data_file', 'share_directory']
+__all__ = ['BARN_DIR', 'PACKAGE_NAME', 'config_roots', 'main', 'resolve_data_file',
+           'share_directory']
 
 PACKAGE_NAME = 'mpc_local_planner'
 # The Python package's folder, mpc_local_planner/ (this file is in its worlds/).
@@ -131,3 +136,27 @@ def resolve_data_file(name: str | Path) -> Path:
             return candidate.resolve()
     msg = f'{name}: not found; looked at ' + ', '.join(str(c) for c in bases)
     raise FileNotFoundError(msg)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Print the share directory (exit 0), or why there is none in one line (exit 2)."""
+    parser = argparse.ArgumentParser(
+        prog='mpc_local_planner_share',
+        description='Print the share directory of this copy of mpc_local_planner: config/ '
+                    '(the parameter files, worlds/ and maps/), launch/ and rviz/. It is what '
+                    '`ros2 pkg prefix --share mpc_local_planner` prints for a colcon install, '
+                    'here for any install and without ROS (for an editable install, the '
+                    'source checkout).',
+        epilog='example: mpc_controller --ros-args --params-file '
+               '"$(mpc_local_planner_share)/config/mpc_controller.yaml"')
+    parser.parse_args(argv)
+    try:
+        print(share_directory())
+    except FileNotFoundError as err:
+        print(f'mpc_local_planner_share: {err}', file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

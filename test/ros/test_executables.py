@@ -15,7 +15,9 @@
 
 ``<script> --help`` exits 0 with a usage line, names each node's parameters with their
 defaults, and writes nothing in its working directory; bag_recorder with an existing output
-folder exits 2 with exactly one line on stderr.
+folder exits 2 with exactly one line on stderr. ``mpc_local_planner_share`` prints the folder
+of the shipped parameter files, and a node started with ``--params-file`` from it takes
+their values (the pip route of docs/usage.md).
 
 The scripts are the package's ``console_scripts`` entry points as installed
 (importlib.metadata), plus any that setup.py declares and an older editable install does not
@@ -32,10 +34,16 @@ from importlib.metadata import entry_points
 import os
 from pathlib import Path
 import shutil
+import signal
 import subprocess
 import sys
+from typing import Any
 
 import pytest
+from rclpy.node import Node
+from rclpy.parameter import parameter_value_to_python
+from rclpy.parameter_client import AsyncParameterClient
+import yaml
 
 from mpc_local_planner.ros.parameters import ParameterSpec
 
@@ -144,3 +152,88 @@ def test_bag_recorder_refuses_an_existing_output_folder_in_one_line(tmp_path) ->
     assert result.stderr.startswith('bag_recorder: refusing to start: ')
     assert 'exists' in result.stderr and 'Traceback' not in result.stderr
     assert list((tmp_path / 'bag').iterdir()) == []  # nothing written into it
+
+
+
+def shipped_share_files() -> set[str]:
+    """Return the files setup.py's data_files install under share/mpc_local_planner/."""
+    tree = ast.parse(SETUP_PY.read_text(encoding='utf-8'))
+    shipped = {'package.xml'}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and getattr(node.func, 'id', '') == 'glob':
+            pattern = ast.literal_eval(node.args[0])
+            shipped |= {str(p.relative_to(CHECKOUT)) for p in CHECKOUT.glob(pattern)}
+    return shipped
+
+
+def share_command_output(cwd: Path) -> str:
+    """Return what mpc_local_planner_share prints, run as its console script runs it."""
+    module, function = SCRIPTS['mpc_local_planner_share'].split(':')
+    wrapper = f'import sys; from {module} import {function}; sys.exit({function}())'
+    result = subprocess.run([sys.executable, '-c', wrapper], cwd=cwd, capture_output=True,
+                            text=True, timeout=HANG_GUARD, check=False, env=checkout_env())
+    assert result.returncode == 0, result.stderr
+    assert result.stderr == '', result.stderr
+    return result.stdout
+
+
+def test_the_share_command_prints_the_folder_that_holds_the_shipped_files(tmp_path) -> None:
+    output = share_command_output(tmp_path)
+    assert output.count('\n') == 1, output
+    share = Path(output.strip())
+    assert share == CHECKOUT  # a source checkout's own (an editable install's)
+    shipped = shipped_share_files()
+    assert {'config/mpc_controller.yaml', 'config/global_planner.yaml',
+            'config/unicycle_simulator.yaml', 'config/jackal.yaml',
+            'config/worlds/paper_obstacle.yaml', 'launch/simulation.launch.py'} <= shipped
+    for name in sorted(shipped):
+        assert (share / name).is_file(), name
+    assert list(tmp_path.iterdir()) == []
+
+
+def flat_parameters(values: dict, prefix: str = '') -> dict[str, Any]:
+    """Return a ros__parameters mapping with groups flattened to dotted names."""
+    out = {}
+    for key, value in values.items():
+        if isinstance(value, dict):
+            out.update(flat_parameters(value, f'{prefix}{key}.'))
+        else:
+            out[prefix + key] = value
+    return out
+
+
+def test_a_node_started_with_params_files_from_the_share_command_takes_their_values(
+        ros, tmp_path) -> None:
+    # docs/usage.md's pip route, the Jackal's file over the defaults as README.md says
+    config = Path(share_command_output(tmp_path).strip()) / 'config'
+    files = [config / 'mpc_controller.yaml', config / 'jackal.yaml']
+    expected: dict[str, Any] = {}
+    for path in files:
+        expected |= flat_parameters(
+            yaml.safe_load(path.read_text(encoding='utf-8'))['mpc_controller']['ros__parameters'])
+    defaults = flat_parameters(yaml.safe_load(
+        files[0].read_text(encoding='utf-8'))['mpc_controller']['ros__parameters'])
+    assert {name for name in expected if expected[name] != defaults[name]} >= {
+        'v_max', 'footprint', 'max_accel'}  # the second file changes something
+    arguments = [argument for path in files for argument in ('--params-file', str(path))]
+    process = subprocess.Popen([*command('mpc_controller'), '--ros-args', *arguments],
+                               cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                               text=True, env=checkout_env())
+    try:
+        client = AsyncParameterClient(ros.add(Node('parameter_reader', context=ros.context)),
+                                      'mpc_controller')
+        assert ros.spin_until(lambda: client.services_are_ready() or process.poll() is not None,
+                              timeout=HANG_GUARD)
+        assert process.poll() is None, 'mpc_controller exited'
+        future = client.get_parameters(sorted(expected))
+        assert ros.spin_until(future.done, timeout=HANG_GUARD)
+        values = [parameter_value_to_python(value) for value in future.result().values]
+        assert dict(zip(sorted(expected), values, strict=True)) == expected
+        process.send_signal(signal.SIGINT)
+        output, _ = process.communicate(timeout=HANG_GUARD)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    assert process.returncode == 0, output
+    assert 'Traceback' not in output, output

@@ -101,16 +101,24 @@ def test_an_installed_copy_reads_the_share_of_its_own_prefix_whatever_other_copy
         assert found == share / 'config' / name
         assert found.read_text(encoding='utf-8') == '# this copy\n'
     assert installed.share_directory() == share
+    assert installed.main([]) == 0
+    assert capsys.readouterr().out == f'{share}\n'
 
 
-
-def test_without_a_share_directory_a_name_is_not_found_with_where_it_looked(
-        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+def test_without_a_share_directory_the_share_command_says_so_in_one_line(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
     nowhere = tmp_path / 'empty_prefix'
     monkeypatch.delenv('AMENT_PREFIX_PATH', raising=False)
     monkeypatch.setattr(sys, 'prefix', str(nowhere))
     monkeypatch.setattr(site, 'USER_BASE', str(nowhere))
     installed = _installed_module(tmp_path / 'venv' / 'lib' / 'python3.12' / 'site-packages')
+    assert installed.main([]) == 2
+    out, err = capsys.readouterr()
+    assert out == ''
+    assert err.startswith('mpc_local_planner_share: no share/mpc_local_planner (package.xml '
+                          'and config/) beside ')
+    assert err.count('\n') == 1 and str(nowhere) in err
     with pytest.raises(FileNotFoundError, match='no share/mpc_local_planner'):
         installed.share_directory()
     with pytest.raises(FileNotFoundError, match='mpc_controller.yaml: not found'):
