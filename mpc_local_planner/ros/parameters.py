@@ -32,11 +32,7 @@ from rcl_interfaces.msg import (
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-__all__ = ['DEFAULT_WORLD_FILE', 'ParameterSpec', 'declare_parameters', 'describe',
-           'format_default', 'format_help']
-
-# The world every node and closed_loop use unless told otherwise: the paper's scenario.
-DEFAULT_WORLD_FILE = 'worlds/paper_obstacle.yaml'
+__all__ = ['ParameterSpec', 'declare_parameters', 'describe', 'format_default', 'format_help']
 
 
 def describe(description: str, *, float_range: tuple[float, float] | None = None,
