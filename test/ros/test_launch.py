@@ -480,3 +480,43 @@ def test_an_invalid_footprint_argument_is_refused_at_launch_with_the_reason(
     with pytest.raises(RuntimeError, match=reason):
         _describe(ROOT / 'launch' / 'simulation.launch.py', monkeypatch,
                   {'footprint': footprint})
+
+
+@pytest.mark.dds
+@pytest.mark.parametrize(('name', 'launch_arguments'), [
+    ('simulation.launch.py', {}),
+    ('simulation.launch.py', {'sensing': 'true', 'world': 'narrow_gap', 'record': 'true',
+                              'footprint': JACKAL_TEXT, 'reality': 'real'}),
+    ('navigation.launch.py', {'map': 'maps/paper_obstacle.yaml'}),
+])
+def test_every_node_a_launch_file_starts_takes_its_files_and_parameters_without_a_refusal(
+        name: str, launch_arguments: dict[str, str], monkeypatch: pytest.MonkeyPatch,
+        ros: Any, tmp_path: Path) -> None:
+    # a node refuses a parameter it does not declare: none the launch file gives may be one
+    from rclpy.parameter import Parameter
+
+    arguments, nodes = _describe(ROOT / 'launch' / name, monkeypatch, launch_arguments)
+    given = {**arguments, **launch_arguments}
+
+    def value(item: Any) -> Any:  # what launch_ros makes of a launch argument: YAML
+        return yaml.safe_load(item.perform(given)) if isinstance(item, _LaunchConfiguration) \
+            else item
+
+    for node in nodes:
+        files, values = [], {}
+        for entry in node.kwargs['parameters']:
+            if isinstance(entry, dict):
+                values.update({k: value(v) for k, v in entry.items()})
+            else:  # a params file: an installed path, or an argument naming one
+                path = entry.perform(given) if isinstance(entry, _LaunchConfiguration) else entry
+                files += ['--params-file', path.replace(SHARE, str(ROOT))]
+        if node.kwargs['executable'] == 'bag_recorder':
+            values['output'] = str(tmp_path / 'bag')
+        module = importlib.import_module(
+            f"mpc_local_planner.ros.{node.kwargs['executable']}_node")
+        node_class = next(v for k, v in vars(module).items() if k.endswith('Node')
+                          and isinstance(v, type) and v.__module__ == module.__name__)
+        made = ros.add(node_class(context=ros.context, cli_args=['--ros-args', *files],
+                                  parameter_overrides=[Parameter(k, value=v)
+                                                       for k, v in values.items()]))
+        assert made.get_name() == node.kwargs['name']
