@@ -16,8 +16,11 @@
 """Run the planner and the MPC on a real robot (``ros2 launch ... navigation.launch.py``).
 
 The robot's driver supplies ``odom`` and takes ``cmd_vel``; goals come on ``goal_pose``
-(RViz's "2D Goal Pose"). Both nodes read the obstacles of ``world`` (a world YAML); the map
-server serves the robot's known map ``map`` (map_server format) on ``/map``.
+(RViz's "2D Goal Pose"), and nothing moves before one does. The map server serves the
+robot's map ``map:=FILE`` (map_server format; required: there is no default map) on
+``/map``; the planner plans on it (``use_map``) and the controller avoids its occupied cells
+(``obstacle_sources: [map]``). No world file and no goal are given: a real robot's
+obstacles are those of its map, not a demo's.
 
 Checked statically only: ``launch`` and ``launch_ros`` are not installable from PyPI, so the
 tests compile this file and check the executables and files it names (test/ros/test_launch.py).
@@ -37,14 +40,10 @@ PACKAGE = 'mpc_local_planner'
 def generate_launch_description() -> LaunchDescription:
     """Declare the arguments and the three nodes."""
     config = os.path.join(get_package_share_directory(PACKAGE), 'config')
-    world = LaunchConfiguration('world')
     use_sim_time = LaunchConfiguration('use_sim_time')
     return LaunchDescription([
-        DeclareLaunchArgument('world', default_value='paper_obstacle.yaml',
-                              description='world YAML with the obstacles: a path or a name'),
         DeclareLaunchArgument('map',
-                              default_value=os.path.join(config, 'maps', 'paper_obstacle.yaml'),
-                              description='the known map (map_server YAML): a path or a name'),
+                              description="the robot's map (map_server YAML): a path or a name"),
         DeclareLaunchArgument('use_sim_time', default_value='false',
                               description='true when a simulator or a bag drives /clock'),
         DeclareLaunchArgument('planner_params',
@@ -57,9 +56,9 @@ def generate_launch_description() -> LaunchDescription:
         Node(package=PACKAGE, executable='global_planner', name='global_planner',
              output='screen',
              parameters=[LaunchConfiguration('planner_params'),
-                         {'use_sim_time': use_sim_time, 'world_file': world}]),
+                         {'use_sim_time': use_sim_time, 'use_map': True}]),
         Node(package=PACKAGE, executable='mpc_controller', name='mpc_controller',
              output='screen',
              parameters=[LaunchConfiguration('controller_params'),
-                         {'use_sim_time': use_sim_time, 'world_file': world}]),
+                         {'use_sim_time': use_sim_time, 'obstacle_sources': ['map']}]),
     ])

@@ -31,7 +31,6 @@ import yaml
 
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
 from mpc_local_planner.core.reality import LOCALIZER_NOISE, LOCALIZER_RATE, reality_preset
-from mpc_local_planner.ros.parameters import DEFAULT_WORLD_FILE
 from mpc_local_planner.ros.unicycle_simulator_parameters import LOCALIZER_TOPIC
 from mpc_local_planner.worlds.world import load_world, World
 
@@ -39,7 +38,9 @@ __all__ = ['DEFAULT_DRIFT', 'DEFAULT_WORLD', 'LoopOptions', 'MODULES',
            'PAPER_GOAL_TOLERANCES', 'POLYGON_CLEARANCE', 'footprint_parameter', 'localized',
            'node_parameters', 'parse_parameter', 'run_world']
 
-DEFAULT_WORLD = DEFAULT_WORLD_FILE
+# The world closed_loop runs unless --world says otherwise: the paper's scenario (the nodes
+# themselves default to no world at all).
+DEFAULT_WORLD = 'worlds/paper_obstacle.yaml'
 # The planner's clearance (m) for a polygon robot (see the module docstring).
 POLYGON_CLEARANCE = 0.05
 # The controller's arrival on the paper's scenario (see the module docstring).

@@ -23,11 +23,14 @@ working planner; with ``autostart:=false`` it waits for a lifecycle manager (or
 ``ros2 lifecycle set /global_planner configure``, then ``activate``).
 
 The goal comes from the ``goal`` parameter ([x, y, theta]) or a PoseStamped on
-``goal_pose`` (RViz's "2D Goal Pose"). Each new goal is planned once, from the robot's
-pose in ``global_frame`` (the latest ``odom`` pose, or composed with a localizer's or taken from
-tf2: ros/robot_pose.py; without one the goal waits), around the world's obstacles inflated
-by robot_radius + clearance, and published on ``plan`` (reliable, transient_local: a late
-controller still gets it). With ``analytic_path`` set the node publishes that path,
+``goal_pose`` (RViz's "2D Goal Pose"); by default there is none, and nothing is planned until
+one comes. Each new goal is planned once, from the robot's pose in ``global_frame`` (the
+latest ``odom`` pose, or composed with a localizer's or taken from tf2: ros/robot_pose.py;
+without one the goal waits), around the world's obstacles inflated by robot_radius +
+clearance, and published on ``plan`` (reliable, transient_local: a late controller still gets
+it). Without ``world_file`` (the default) and without ``use_map`` the
+plane is empty and unbounded (but for MAX_COORDINATE, the controller's limit too): every plan
+is the straight line to the goal. With ``analytic_path`` set the node publishes that path,
 sampled, instead of planning. Nothing is published before activation: a ``goal`` parameter
 is planned once the node is active (and odometry has come); a ``goal_pose`` that arrives
 while the node is inactive is refused.
@@ -88,6 +91,7 @@ from rclpy.parameter import Parameter
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import LaserScan
 
+from mpc_local_planner.core.controller import MAX_COORDINATE
 from mpc_local_planner.core.diagnostics import (
     PLANNER_DIAGNOSTICS_TOPIC,
     PlannerDiagnostics,
@@ -157,6 +161,9 @@ ANALYTIC_SAMPLES = 101
 # A re-plan from a robot standing within the planner's clearance of an obstacle starts from
 # the nearest clear point no farther than this (m) that it can drive straight to.
 ESCAPE_DISTANCE = 1.0
+# The plane sampled without a world and without use_map: no obstacles, and no bounds but the
+# positions the controller accepts at all.
+FREE_PLANE_BOUNDS = (-MAX_COORDINATE, MAX_COORDINATE, -MAX_COORDINATE, MAX_COORDINATE)
 
 
 SUMMARY = ('OMPL RRT* from the current odometry (odom) to the goal (the goal parameter or '
@@ -254,10 +261,7 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
             if self._use_scan and not self._use_map:
                 problem = 'use_scan needs use_map (scans mark the cells of the map)'
                 raise ValueError(problem)
-            if not self._use_map and not self.get_parameter('world_file').value:
-                problem = "world_file is '': give a world, or plan on the map with use_map"
-                raise ValueError(problem)
-            if not self._use_map or self.get_parameter('world_file').value:
+            if self.get_parameter('world_file').value:
                 self._world = self._read_world()
             self._planner = self._make_planner()
         except Exception as err:  # a world that vanished since it was validated, a bad config
@@ -366,7 +370,7 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         return SetParametersResult(successful=True)
 
     def _check_modes(self, parameters: list[Parameter]) -> list[str]:
-        """Refuse use_scan without use_map, and no world without use_map (as they would be).
+        """Refuse use_scan without use_map (as the values would be after the set).
 
         A parameter not declared yet (during the declarations) is not judged; configure
         judges the combination again.
@@ -378,15 +382,11 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
                 return given[name]
             return self.get_parameter(name).value if self.has_parameter(name) else None
 
-        if not {'world_file', 'use_map', 'use_scan'} & given.keys():
+        if not {'use_map', 'use_scan'} & given.keys():
             return []
-        reasons = []
-        use_map = value('use_map')
-        if value('use_scan') and use_map is False:
-            reasons.append('use_scan needs use_map (scans mark the cells of the map)')
-        if value('world_file') == '' and use_map is False:
-            reasons.append("world_file '' needs use_map (the map then gives the bounds)")
-        return reasons
+        if value('use_scan') and value('use_map') is False:
+            return ['use_scan needs use_map (scans mark the cells of the map)']
+        return []
 
     def post_parameters_callback(self, parameters: list[Parameter]) -> None:
         """Rebuild a configured planner after a change; a new goal is planned when active.
@@ -451,7 +451,8 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         """
         config = self._planner_config()
         if not self._use_map:
-            assert self._world is not None  # configured without use_map
+            if self._world is None:
+                return RrtStarPlanner([], FREE_PLANE_BOUNDS, config=config)
             return RrtStarPlanner(self._world.obstacles, self._world.bounds, config=config)
         if self._grid is None:
             return None

@@ -15,8 +15,8 @@
 """global_planner's parameters: their table and the checks of single values.
 
 The node (ros/global_planner_node.py) declares PARAMETERS and refuses a set for which
-`parameter_problems` names a problem; combinations (use_scan without use_map, no world
-without use_map) are the node's to judge, with the values in force.
+`parameter_problems` names a problem; combinations (use_scan without use_map) are the
+node's to judge, with the values in force.
 """
 
 from __future__ import annotations
@@ -33,10 +33,7 @@ from mpc_local_planner.core.replanning import (
     PROGRESS_RADIUS,
     PROGRESS_TIMEOUT,
 )
-from mpc_local_planner.ros.parameters import (
-    DEFAULT_WORLD_FILE,
-    ParameterSpec,
-)
+from mpc_local_planner.ros.parameters import ParameterSpec
 from mpc_local_planner.ros.robot_pose import (
     POSE_PARAMETERS,
 )
@@ -51,10 +48,11 @@ _DEFAULTS = PlannerConfig()  # the single source of the planner's defaults
 
 
 PARAMETERS: tuple[ParameterSpec, ...] = (
-    ParameterSpec('world_file', DEFAULT_WORLD_FILE,
+    ParameterSpec('world_file', '',
                   "world YAML/JSON: obstacles and bounds (a path, or a name in the package's "
-                  "config/ or config/worlds/); used at the next plan; '' with use_map (only "
-                  "its robot_radius is used then)"),
+                  "config/ or config/worlds/); used at the next plan; '' = none: an empty "
+                  'plane without bounds (every plan the straight line), or with use_map the '
+                  'map alone; with use_map a world gives only its robot_radius and footprint'),
     ParameterSpec('use_map', False,
                   "plan on the occupancy grid from `map` (unknown cells free) instead of the "
                   "world's obstacles; applies at the next configure"),

@@ -21,7 +21,9 @@ still get it), deactivate stops publishing and cleanup forgets the map. With ``a
 (the default) ``ros2 run`` alone configures and activates it; with ``autostart:=false`` it
 waits for a lifecycle manager, as nav2's does.
 
-``yaml_filename`` is checked whenever it is set: a value that does not name a readable map
+``yaml_filename`` has no default (a map served by mistake is a robot planning around walls
+that are not there): without it the node refuses to start, in one line on stderr with exit
+code 2. It is checked whenever it is set: a value that does not name a readable map
 (missing file, bad YAML, bad image, resolution <= 0, ...) is refused with the reason, so
 ``map_server`` with a bad map exits with code 2 and one line on stderr. A new value is loaded
 at the next configure (``ros2 lifecycle set /map_server cleanup``, then ``configure``).
@@ -38,6 +40,7 @@ from geometry_msgs.msg import Pose
 from nav_msgs.msg import OccupancyGrid
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 
@@ -49,20 +52,16 @@ from mpc_local_planner.ros.qos import MAP_QOS
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.map_files import load_map, OccupancyMap
 
-__all__ = ['DEFAULT_MAP_FILE', 'MapServerNode', 'PARAMETERS', 'main', 'occupancy_grid_msg',
-           'read_map']
-
-# The map of the default world (DEFAULT_WORLD_FILE): the paper's scenario.
-DEFAULT_MAP_FILE = 'maps/paper_obstacle.yaml'
+__all__ = ['MapServerNode', 'PARAMETERS', 'main', 'occupancy_grid_msg', 'read_map']
 
 SUMMARY = ('Serve a map_server map (YAML + PGM/PNG) on `map` as nav_msgs/OccupancyGrid '
            '(reliable, transient_local), as nav2_map_server does.')
 
 PARAMETERS = (
-    ParameterSpec('yaml_filename', DEFAULT_MAP_FILE,
+    ParameterSpec('yaml_filename', Parameter.Type.STRING,
                   'the map YAML (map_server format): a path, or a name under the package '
-                  "config/ such as 'maps/unknown_box.yaml'; a value that names no readable "
-                  'map is refused; a new value is loaded at the next configure'),
+                  "config/ such as 'maps/unknown_box.yaml'; required; a value that names no "
+                  'readable map is refused; a new value is loaded at the next configure'),
     ParameterSpec('frame_id', 'map', 'frame of the published map; read at configure'),
     ParameterSpec('topic_name', 'map',
                   'topic the map is published on (relative names follow the namespace and '
@@ -135,14 +134,23 @@ class MapServerNode(ManagedNode):
         super().__init__('map_server', **kwargs)
         self.add_on_set_parameters_callback(self.parameters_callback)
         declare_parameters(self, PARAMETERS)
+        try:
+            self.get_parameter('yaml_filename')
+        except ParameterUninitializedException:
+            msg = ("yaml_filename is not set: name the map to serve (-p yaml_filename:=FILE, a "
+                   "path or a name such as 'maps/unknown_box.yaml')")
+            raise ValueError(msg) from None
         self._map_msg: OccupancyGrid | None = None
         self._map_pub = None
 
     # ------------------------------------------------------------------ parameters
     def parameters_callback(self, parameters: list[Parameter]) -> SetParametersResult:
-        """Refuse a yaml_filename that names no readable map, and empty names."""
+        """Refuse a yaml_filename that names no readable map, and empty names.
+
+        Unset (the declaration without a value) is not judged here: __init__ refuses it.
+        """
         for parameter in parameters:
-            if parameter.name == 'yaml_filename':
+            if parameter.name == 'yaml_filename' and parameter.value is not None:
                 try:
                     read_map(str(parameter.value))
                 except (OSError, ValueError) as err:

@@ -38,7 +38,7 @@ from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.footprint import Footprint, resolve
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
-from mpc_local_planner.ros.parameters import DEFAULT_WORLD_FILE, ParameterSpec
+from mpc_local_planner.ros.parameters import ParameterSpec
 from mpc_local_planner.ros.robot_pose import POSE_PARAMETERS
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world
@@ -149,7 +149,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "wall-time budget (s) of one control step's solving; past it the verified "
                   'shifted candidate is applied (counted in timeouts_total); -1 = step / 2',
                   float_range=(-1.0, 60.0)),
-    ParameterSpec('world_file', DEFAULT_WORLD_FILE,
+    ParameterSpec('world_file', '',
                   "world YAML/JSON with the obstacles (a path, or a name in the package's "
                   "config/ or config/worlds/); '' = none; read again at each configure"),
     ParameterSpec('analytic_path', '',

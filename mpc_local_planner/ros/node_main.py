@@ -33,26 +33,41 @@ defence.
 
 A node that cannot start with its parameters (or the files they name) says why in one line
 on stderr and exits with EXIT_INVALID_PARAMETERS instead of a traceback, so that a launch
-file, a supervisor or closed_loop --respawn can tell "misconfigured" from "crashed".
+file, a supervisor or closed_loop --respawn can tell "misconfigured" from "crashed". So does
+one given a parameter it does not declare (a typo: ros/parameters.py), and one whose command
+line rcl refuses: a params file that is missing, not YAML, or not laid out as rcl reads it.
+A params file without a section for the node (its sections match neither the node's fully
+qualified name nor ``/**``) is used by nothing; the node says so in one warning and starts.
 """
 
 from __future__ import annotations
 
+import difflib
 import functools
+import os
 import signal
 import sys
+import tempfile
 from types import FrameType
 from typing import Any, Callable, Sequence, TypeVar
 
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
-from mpc_local_planner.ros.parameters import format_help, ParameterSpec
+from mpc_local_planner.ros.parameters import (
+    format_help,
+    ParameterSpec,
+    params_file_problem,
+    params_files,
+    params_sections,
+    section_applies,
+)
 
 __all__ = ['EXIT_INVALID_PARAMETERS', 'StopRequest', 'autostart', 'destroy_on_failure',
            'run_node', 'spin_until_stopped', 'wants_help']
@@ -89,9 +104,16 @@ def destroy_on_failure(init: _Init) -> _Init:
 
 
 def wants_help(args: Sequence[str] | None) -> bool:
-    """Say whether the command line (without its --ros-args part) asks for --help."""
+    """Say whether the command line (without its --ros-args part) asks for --help.
+
+    A --ros-args part that rcl cannot parse (a params file it refuses) asks for nothing:
+    starting the node then says what is wrong with it.
+    """
     argv = list(sys.argv if args is None else args)
-    return any(arg in ('-h', '--help') for arg in remove_ros_args(argv)[1:])
+    try:
+        return any(arg in ('-h', '--help') for arg in remove_ros_args(argv)[1:])
+    except rclpy_implementation.RCLError:
+        return False
 
 
 def autostart(node: LifecycleNode) -> str | None:
@@ -158,6 +180,53 @@ def _exit_safely(node: Node) -> None:
         print(f'{node.get_name()}: on_exit failed: {err}', file=sys.stderr, flush=True)
 
 
+def _one_line_rcl_error(err: Exception) -> str:
+    """Return rcl's message without its prefix and source locations, on one line."""
+    text = ' '.join(str(err).split())
+    text = text.removeprefix('failed to initialize rcl: ')
+    return text.split(', at /')[0]
+
+
+def init_or_problem(args: Sequence[str] | None) -> str | None:
+    """Call rclpy.init on the command line; return why it failed, in one line (None: it did).
+
+    rcl logs a line of its own on stderr before rclpy raises ("Failed to parse global
+    arguments"); that line is held back when init fails, so the caller's one line says it
+    all. Whatever else init writes on stderr is passed on.
+    """
+    sys.stderr.flush()
+    saved = os.dup(2)
+    problem = None
+    with tempfile.TemporaryFile() as held:
+        os.dup2(held.fileno(), 2)
+        try:
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        except rclpy_implementation.RCLError as err:
+            problem = _one_line_rcl_error(err)
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        if problem is None:
+            held.seek(0)
+            os.write(2, held.read())
+    return problem
+
+
+def warn_of_unused_params_files(node: Node, args: Sequence[str]) -> None:
+    """Warn (one line each) of params files in args with no section that applies to node."""
+    fqn = node.get_fully_qualified_name()
+    for path in params_files(args):
+        sections = params_sections(path)
+        if any(section_applies(section, fqn) for section in sections):
+            continue
+        close = difflib.get_close_matches(node.get_name(), sections, n=1)
+        hint = f"; did you mean '{node.get_name()}'?" if close else ''
+        listed = ', '.join(sections) if sections else 'none'
+        node.get_logger().warning(
+            f'params file {path} has no section for {fqn} (its sections: {listed}{hint}): '
+            'none of its parameters is used')
+
+
 def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = None, *,
              summary: str = '', parameters: Sequence[ParameterSpec] = ()) -> int:
     """Print --help, or create the node (autostarting a lifecycle node) and spin it.
@@ -180,13 +249,20 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
     if wants_help(args):
         print(format_help(name, summary, parameters), end='')
         return 0
+    argv = list(sys.argv if args is None else args)
+    problem = next(filter(None, map(params_file_problem, params_files(argv))), None)
     # rclpy's handlers would shut the context down at once (no zero cmd_vel after that)
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    if problem is None:
+        problem = init_or_problem(args)
+    if problem is not None:
+        print(f'{name}: refusing to start: {problem}', file=sys.stderr, flush=True)
+        return EXIT_INVALID_PARAMETERS
     stop = StopRequest()
     node = None
     try:
         try:
             node = make_node()
+            warn_of_unused_params_files(node, argv)
             problem = autostart(node) if isinstance(node, LifecycleNode) else None
         except (ParameterException, ValueError, TypeError, OSError) as err:
             problem = str(err)

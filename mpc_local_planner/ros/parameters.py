@@ -17,11 +17,22 @@
 Each node lists its parameters once, as ParameterSpec rows (name, default, description,
 range): the node declares them from the table, and ``<executable> --help`` prints the same
 table without starting ROS, so the help can never disagree with what the node declares.
+
+A parameter given to a node that it does not declare is refused (`declare_parameters` raises
+UnknownParameterError, naming the closest declared name): rclpy itself ignores it without a
+word, so ``horizn: 15`` in a params file would leave ``horizon`` at its default. rclpy's own
+parameters (ROS_OWN_PARAMETERS, ``qos_overrides.*``) are always accepted. The params files of
+a command line are read here too (`params_files`, `params_file_problem`, `params_sections`,
+`section_applies`), so that a node can say in one line why a file cannot be used, or that it
+holds no section for the node, as ROS matches sections to nodes.
 """
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple, Sequence
+import difflib
+from pathlib import Path
+import re
+from typing import Any, Iterable, NamedTuple, Sequence
 
 from rcl_interfaces.msg import (
     FloatingPointRange,
@@ -31,12 +42,21 @@ from rcl_interfaces.msg import (
 )
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+import yaml
 
-__all__ = ['DEFAULT_WORLD_FILE', 'ParameterSpec', 'declare_parameters', 'describe',
-           'format_default', 'format_help']
+__all__ = ['ROS_OWN_PARAMETERS', 'ROS_OWN_PREFIXES', 'ParameterSpec', 'UnknownParameterError',
+           'declare_parameters', 'describe', 'format_default', 'format_help',
+           'params_file_problem', 'params_files', 'params_sections', 'refuse_unknown_parameters',
+           'section_applies', 'unknown_parameters']
 
-# The world every node and closed_loop use unless told otherwise: the paper's scenario.
-DEFAULT_WORLD_FILE = 'worlds/paper_obstacle.yaml'
+# Parameters rclpy declares or reads in every node by itself: never a typo of the package's.
+ROS_OWN_PARAMETERS = frozenset({'use_sim_time', 'start_type_description_service'})
+# Groups of parameters rclpy declares when it needs them (a publisher's QoS overrides).
+ROS_OWN_PREFIXES = ('qos_overrides.',)
+
+
+class UnknownParameterError(ValueError):
+    """A node was given a parameter it does not declare (most likely a misspelt one)."""
 
 
 def describe(description: str, *, float_range: tuple[float, float] | None = None,
@@ -94,9 +114,136 @@ class ParameterSpec(NamedTuple):
 
 
 def declare_parameters(node: Node, specs: Sequence[ParameterSpec]) -> None:
-    """Declare every row of specs on node (register the set-parameters callback first)."""
+    """Declare every row of specs on node, then refuse a parameter given that is none of them.
+
+    Register the set-parameters callback first. Call once, after which the node declares
+    nothing else.
+
+    Raises:
+        UnknownParameterError: a params file, ``-p`` or an override names an undeclared
+            parameter (see refuse_unknown_parameters).
+
+    """
     for spec in specs:
         node.declare_parameter(spec.name, spec.default, spec.descriptor())
+    refuse_unknown_parameters(node)
+
+
+def unknown_parameters(given: Iterable[str], declared: Iterable[str]) -> list[str]:
+    """Return one line per given name that is not declared, with the closest declared name.
+
+    rclpy's own parameters (ROS_OWN_PARAMETERS, ROS_OWN_PREFIXES) are never unknown.
+    """
+    known = sorted(set(declared) | ROS_OWN_PARAMETERS)
+    problems = []
+    for name in sorted(set(given)):
+        if name in known or name.startswith(ROS_OWN_PREFIXES):
+            continue
+        close = difflib.get_close_matches(name, known, n=1)
+        hint = f"did you mean '{close[0]}'?" if close else '--help lists the parameters'
+        problems.append(f"unknown parameter '{name}' ({hint})")
+    return problems
+
+
+def refuse_unknown_parameters(node: Node) -> None:
+    """Raise UnknownParameterError if node was given a parameter it has not declared.
+
+    What the node was given is rclpy's ``_parameter_overrides``: the values of the params
+    files' sections that apply to the node, of ``-p``, and of the constructor's
+    parameter_overrides. rclpy has no public accessor for them, and ignores those no
+    declaration takes.
+
+    Raises:
+        UnknownParameterError: one line, every unknown name with its closest declared one.
+
+    """
+    declared = node.list_parameters([], 0).names  # depth 0: every depth
+    problems = unknown_parameters(node._parameter_overrides, declared)
+    if problems:
+        raise UnknownParameterError('; '.join(problems))
+
+
+def params_files(args: Sequence[str]) -> list[str]:
+    """Return the files ``--params-file`` names in the ``--ros-args`` parts of args."""
+    files: list[str] = []
+    ros = False
+    tokens = iter(args)
+    for token in tokens:
+        if token == '--ros-args':
+            ros = True
+        elif token == '--':
+            ros = False
+        elif ros and token == '--params-file':
+            files.append(next(tokens, ''))
+    return files
+
+
+def params_file_problem(path: str) -> str | None:
+    """Return why a params file cannot be read as YAML, in one line (None: it can).
+
+    Only what rcl would refuse too: a missing or unreadable file, or one that is not YAML.
+    What rcl alone refuses (a value outside ros__parameters, a list of mixed types) is left
+    to rcl.
+    """
+    try:
+        text = Path(path).read_text(encoding='utf-8')
+    except FileNotFoundError:
+        return f'params file {path!r} not found'
+    except (OSError, UnicodeDecodeError) as err:
+        return f'params file {path!r} cannot be read: {err}'
+    try:
+        yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        return f'params file {path!r} is not valid YAML: {_yaml_error(err)}'
+    return None
+
+
+def _yaml_error(err: yaml.YAMLError) -> str:
+    """Return what PyYAML found wrong and where, on one line."""
+    mark = getattr(err, 'problem_mark', None)
+    what = '; '.join(str(part) for part in (getattr(err, 'context', None),
+                                            getattr(err, 'problem', None)) if part)
+    if mark is None or not what:
+        return ' '.join(str(err).split())
+    return f'{what} (line {mark.line + 1}, column {mark.column + 1})'
+
+
+def params_sections(path: str) -> list[str]:
+    """Return the node names a params file has sections for, as rcl reads them.
+
+    Nested names join with '/' (``ns: {node: {ros__parameters: ...}}`` is ``ns/node``); an
+    unreadable file has none.
+    """
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return []
+    sections: list[str] = []
+
+    def visit(mapping: dict, prefix: str) -> None:
+        for key, value in mapping.items():
+            if key == 'ros__parameters':
+                sections.append(prefix)
+            elif isinstance(value, dict):
+                visit(value, f'{prefix}/{key}' if prefix else str(key))
+
+    if isinstance(data, dict):
+        visit(data, '')
+    return [name for name in sections if name]
+
+
+def section_applies(section: str, fully_qualified_name: str) -> bool:
+    """Say whether a params file's section applies to a node, as rcl and rclpy match them.
+
+    A leading '/' is implied; ``/*`` stands for one name (``/**`` for any number), so ``/**``
+    applies to every node and ``/ns/*`` to every node right in ``/ns``.
+    """
+    name = section if section.startswith('/') else '/' + section
+    pattern = name.replace('/*', r'(/\w+)')
+    try:
+        return re.fullmatch(pattern, fully_qualified_name) is not None
+    except re.error:
+        return name == fully_qualified_name
 
 
 def format_default(value: Any) -> str:

@@ -80,7 +80,8 @@ class Base(SimClock):
 
 def start(ros, **params) -> tuple[MpcControllerNode, object, Base]:
     """A controller in simulated time following PLAN, driving (a solver step with v > 0.1)."""
-    overrides = [Parameter('use_sim_time', value=True)]
+    overrides = [Parameter('use_sim_time', value=True),
+                 Parameter('world_file', value='paper_obstacle.yaml')]
     overrides += [Parameter(k, value=v) for k, v in params.items()]
     node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=overrides))
     assert autostart(node) is None

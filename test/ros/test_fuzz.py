@@ -333,13 +333,15 @@ class Nodes:
 
     def __init__(self, ros) -> None:
         sim_time = [Parameter('use_sim_time', value=True)]
+        # the paper's world, named: the controller's default is no world
+        controller = [*sim_time, Parameter('world_file', value='paper_obstacle.yaml')]
         self.ros = ros
         # no node is spun: the test calls their callbacks, the executor the probe's
         self.idle = SingleThreadedExecutor(context=ros.context)
-        self.controller = MpcControllerNode(context=ros.context, parameter_overrides=sim_time)
+        self.controller = MpcControllerNode(context=ros.context, parameter_overrides=controller)
         assert autostart(self.controller) is None  # configured and active, as run_node does
         self.sensing = MpcControllerNode(
-            context=ros.context, namespace='sensing', parameter_overrides=sim_time + [
+            context=ros.context, namespace='sensing', parameter_overrides=controller + [
                 Parameter('obstacle_sources', value=['world', 'scan', 'map'])])
         assert autostart(self.sensing) is None
         self.simulator = UnicycleSimulatorNode(context=ros.context,

@@ -179,11 +179,13 @@ def _make_node(executable: str, ros: Any) -> Any:
     node_class = next(value for name, value in vars(module).items()
                       if name.endswith('Node') and isinstance(value, type)
                       and value.__module__ == module.__name__)
+    from rclpy.parameter import Parameter
+
     overrides = []
     if executable == 'bag_recorder':  # it opens its bag at construction
-        from rclpy.parameter import Parameter
-
         overrides = [Parameter('output', value=str(ros.tmp_path / 'bag'))]
+    elif executable == 'map_server':  # it has no default map
+        overrides = [Parameter('yaml_filename', value='maps/paper_obstacle.yaml')]
     return ros.add(node_class(context=ros.context, parameter_overrides=overrides))
 
 
@@ -252,10 +254,9 @@ def _parameter_values(node: _Recorded, arguments: dict[str, str]) -> dict[str, A
             for k, v in values.items()}
 
 
-@pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
-def test_launch_file_starts_a_map_server_on_an_installed_map(
-        path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    arguments, nodes = _describe(path, monkeypatch)
+def test_simulation_launch_starts_a_map_server_on_an_installed_map(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    arguments, nodes = _describe(ROOT / 'launch' / 'simulation.launch.py', monkeypatch)
     [map_server] = [n for n in nodes if n.kwargs['executable'] == 'map_server']
     yaml_filename = _parameter_values(map_server, arguments)['yaml_filename']
     assert _installed_path(yaml_filename) == f'{SHARE}/config/maps/paper_obstacle.yaml'
@@ -263,6 +264,31 @@ def test_launch_file_starts_a_map_server_on_an_installed_map(
     assert f'{SHARE}/config/maps/paper_obstacle.yaml' in installed
     image = yaml.safe_load((ROOT / 'config' / 'maps' / 'paper_obstacle.yaml').read_text())
     assert f'{SHARE}/config/maps/{image["image"]}' in installed
+
+
+def test_navigation_launch_gives_no_world_and_no_goal_and_serves_the_map_it_is_given(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # the real-robot launch: a demo's world, goal or map must not reach a real robot
+    arguments, nodes = _describe(ROOT / 'launch' / 'navigation.launch.py', monkeypatch)
+    assert 'world' not in arguments and 'map' not in arguments  # map: required, no default
+    by_name = {n.kwargs['executable']: n for n in nodes}
+    assert set(by_name) == {'map_server', 'global_planner', 'mpc_controller'}
+    values = {name: {k: v for entry in node.kwargs['parameters'] if isinstance(entry, dict)
+                     for k, v in entry.items()} for name, node in by_name.items()}
+    for name, given in values.items():
+        assert not {'world_file', 'goal', 'initial_pose'} & set(given), name
+    yaml_filename = values['map_server']['yaml_filename']
+    assert isinstance(yaml_filename, _LaunchConfiguration) and yaml_filename.args == ('map',)
+    # the planner plans on that map and the controller avoids what it shows
+    assert values['global_planner']['use_map'] is True
+    assert values['mpc_controller']['obstacle_sources'] == ['map']
+    # and the parameter files it names hold no world and no goal either
+    for name in ('global_planner', 'mpc_controller'):
+        [params] = [e for e in by_name[name].kwargs['parameters']
+                    if isinstance(e, _LaunchConfiguration)]
+        shipped = Path(arguments[params.args[0]].replace(SHARE, str(ROOT)))
+        given = yaml.safe_load(shipped.read_text())[name]['ros__parameters']
+        assert 'goal' not in given and given['world_file'] == '', name
 
 
 def test_every_shipped_world_has_an_installed_map(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -484,3 +510,43 @@ def test_an_invalid_footprint_argument_is_refused_at_launch_with_the_reason(
     with pytest.raises(RuntimeError, match=reason):
         _describe(ROOT / 'launch' / 'simulation.launch.py', monkeypatch,
                   {'footprint': footprint})
+
+
+@pytest.mark.dds
+@pytest.mark.parametrize(('name', 'launch_arguments'), [
+    ('simulation.launch.py', {}),
+    ('simulation.launch.py', {'sensing': 'true', 'world': 'narrow_gap', 'record': 'true',
+                              'footprint': JACKAL_TEXT, 'reality': 'real'}),
+    ('navigation.launch.py', {'map': 'maps/paper_obstacle.yaml'}),
+])
+def test_every_node_a_launch_file_starts_takes_its_files_and_parameters_without_a_refusal(
+        name: str, launch_arguments: dict[str, str], monkeypatch: pytest.MonkeyPatch,
+        ros: Any, tmp_path: Path) -> None:
+    # a node refuses a parameter it does not declare: none the launch file gives may be one
+    from rclpy.parameter import Parameter
+
+    arguments, nodes = _describe(ROOT / 'launch' / name, monkeypatch, launch_arguments)
+    given = {**arguments, **launch_arguments}
+
+    def value(item: Any) -> Any:  # what launch_ros makes of a launch argument: YAML
+        return yaml.safe_load(item.perform(given)) if isinstance(item, _LaunchConfiguration) \
+            else item
+
+    for node in nodes:
+        files, values = [], {}
+        for entry in node.kwargs['parameters']:
+            if isinstance(entry, dict):
+                values.update({k: value(v) for k, v in entry.items()})
+            else:  # a params file: an installed path, or an argument naming one
+                path = entry.perform(given) if isinstance(entry, _LaunchConfiguration) else entry
+                files += ['--params-file', path.replace(SHARE, str(ROOT))]
+        if node.kwargs['executable'] == 'bag_recorder':
+            values['output'] = str(tmp_path / 'bag')
+        module = importlib.import_module(
+            f"mpc_local_planner.ros.{node.kwargs['executable']}_node")
+        node_class = next(v for k, v in vars(module).items() if k.endswith('Node')
+                          and isinstance(v, type) and v.__module__ == module.__name__)
+        made = ros.add(node_class(context=ros.context, cli_args=['--ros-args', *files],
+                                  parameter_overrides=[Parameter(k, value=v)
+                                                       for k, v in values.items()]))
+        assert made.get_name() == node.kwargs['name']

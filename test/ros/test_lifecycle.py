@@ -126,6 +126,7 @@ def test_every_lifecycle_transition_over_dds_and_what_each_state_publishes(ros) 
     # are test_control_rate.py's): the counts below are per step
     node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=[
         Parameter('use_sim_time', value=True), Parameter('autostart', value=False),
+        Parameter('world_file', value='paper_obstacle.yaml'),
         Parameter('control_frequency', value=1.0 / STEP)]))
     lifecycle = ros.add(LifecycleProbe(ros.context))
     probe = ros.probe(use_sim_time=True)
@@ -237,6 +238,7 @@ def test_markers_show_the_obstacles_raw_grown_and_active_and_the_footprint_follo
     radius = 0.1
     node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=[
         Parameter('use_sim_time', value=True), Parameter('robot_radius', value=radius),
+        Parameter('world_file', value='paper_obstacle.yaml'),
         Parameter('control_frequency', value=1.0 / STEP)]))  # a tick per clock step
     assert autostart(node) is None
     lifecycle = ros.add(LifecycleProbe(ros.context))
@@ -278,7 +280,8 @@ def test_markers_show_the_obstacles_raw_grown_and_active_and_the_footprint_follo
 
 def test_enable_stamped_cmd_vel_publishes_twist_stamped_in_base_link(ros) -> None:
     node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=[
-        Parameter('enable_stamped_cmd_vel', value=True)]))
+        Parameter('enable_stamped_cmd_vel', value=True),
+        Parameter('world_file', value='paper_obstacle.yaml')]))
     assert autostart(node) is None
     listener = ros.add(Node('stamped_listener', context=ros.context))
     received: list[TwistStamped] = []

@@ -109,6 +109,7 @@ def start_localized_controller(ros, **params) -> tuple[MpcControllerNode, object
                                                            DriftingRobot]:
     """A controller in simulated time on amcl_pose's localizer, given PLAN (params override)."""
     overrides = [Parameter('use_sim_time', value=True),
+                 Parameter('world_file', value='paper_obstacle.yaml'),
                  Parameter('localization_topic', value='amcl_pose')]
     overrides += [Parameter(k, value=v) for k, v in params.items()]
     node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=overrides))

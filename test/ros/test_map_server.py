@@ -174,6 +174,17 @@ def test_map_server_exits_2_with_one_line_on_a_bad_map_file(tmp_path: Path, kind
 
 
 @pytest.mark.dds
+def test_map_server_without_a_map_refuses_to_start_in_one_line() -> None:
+    # no default map: a demo's map served on a real robot would be planned around
+    command = [sys.executable, '-m', 'mpc_local_planner.ros.map_server_node']
+    done = subprocess.run(command, capture_output=True, text=True, timeout=60)
+    assert done.returncode == EXIT_INVALID_PARAMETERS, done.stderr
+    assert done.stderr.splitlines() == [
+        "map_server: refusing to start: yaml_filename is not set: name the map to serve "
+        "(-p yaml_filename:=FILE, a path or a name such as 'maps/unknown_box.yaml')"]
+
+
+@pytest.mark.dds
 def test_map_server_executable_autostarts_and_serves_the_map_until_ctrl_c(ros: Any) -> None:
     occupancy = load_map(resolve_data_file('maps/unknown_box.yaml'))
     command = [sys.executable, '-m', 'mpc_local_planner.ros.map_server_node',

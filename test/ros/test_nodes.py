@@ -119,7 +119,9 @@ def test_simulator_saturates_the_command_at_the_bounds(ros) -> None:
 
 # ----------------------------------------------------------------------------- controller
 def make_controller(ros, **params) -> tuple[MpcControllerNode, Probe]:
-    overrides = [Parameter(k, value=v) for k, v in params.items()]
+    # the paper's world, named: the node's default is no world (params may override it)
+    overrides = [Parameter('world_file', value='paper_obstacle.yaml')]
+    overrides += [Parameter(k, value=v) for k, v in params.items()]
     controller = started(ros.add(
         MpcControllerNode(context=ros.context, parameter_overrides=overrides)))
     probe = ros.probe()
@@ -417,10 +419,74 @@ def test_shipped_params_files_load_and_hold_the_paper_values(name, node_class) -
             assert node.get_parameter('offset_weight').value == 1000.0
         elif name == 'global_planner':
             assert node.get_parameter('iterations').value == 1000
-            np.testing.assert_allclose(node.get_parameter('goal').value, WORLD.goal)
         else:
             np.testing.assert_allclose(node.get_parameter('initial_pose').value, WORLD.start)
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+# ----------------------------------------------------------------------------- safe defaults
+def test_no_node_and_no_shipped_params_file_names_a_goal_a_world_or_a_map() -> None:
+    # started as docs/nodes.md says, nothing may drive off or plan around a demo's obstacles
+    import yaml
+
+    from mpc_local_planner.ros import (
+        bag_recorder_node,
+        global_planner_parameters,
+        map_server_node,
+        mpc_controller_parameters,
+        unicycle_simulator_parameters,
+    )
+    from mpc_local_planner.worlds.data_files import resolve_data_file
+
+    tables = {module.__name__: {spec.name: spec.default for spec in module.PARAMETERS}
+              for module in (bag_recorder_node, global_planner_parameters, map_server_node,
+                             mpc_controller_parameters, unicycle_simulator_parameters)}
+    for table, defaults in tables.items():
+        assert defaults.get('world_file', '') == '', table
+    assert tables[global_planner_parameters.__name__]['goal'] is Parameter.Type.DOUBLE_ARRAY
+    assert tables[map_server_node.__name__]['yaml_filename'] is Parameter.Type.STRING
+    config = resolve_data_file('mpc_controller.yaml').parent
+    files = sorted(config.glob('*.yaml'))
+    assert {f.stem for f in files} >= {'global_planner', 'mpc_controller', 'jackal'}
+    for path in files:
+        for node, section in yaml.safe_load(path.read_text()).items():
+            values = section['ros__parameters']
+            assert 'goal' not in values, (path.name, node)
+            assert values.get('world_file', '') == '', (path.name, node)
+            assert 'yaml_filename' not in values, (path.name, node)
+
+
+def test_a_planner_started_with_the_shipped_file_plans_nothing_until_a_goal_pose_comes(
+        ros) -> None:
+    from mpc_local_planner.worlds.data_files import resolve_data_file
+
+    shipped = str(resolve_data_file('global_planner.yaml'))
+    planner = started(ros.add(GlobalPlannerNode(
+        context=ros.context, cli_args=['--ros-args', '--params-file', shipped])))
+    probe = ros.probe()
+    assert ros.spin_until(lambda: probe.odom_pub.get_subscription_count() > 0
+                          and probe.goal_pub.get_subscription_count() > 0)
+    start = np.array([0.5, -0.3, 0.4])
+    probe.publish_odom(start)
+    assert ros.spin_until(lambda: planner.robot_pose is not None)
+    # the odometry is in, and a goal in force would have been planned from it at once
+    ros.settle()
+    assert planner.plan_count == 0 and planner.last_outcome is None and not probe.plans
+    # a goal outside the paper world's bounds, behind its box: no world, no bounds, no box
+    goal = PoseStamped()
+    goal.header.frame_id = 'map'
+    goal.pose.position.x, goal.pose.position.y = 4.0, 3.0
+    goal.pose.orientation = yaw_to_quaternion(1.0)
+    probe.goal_pub.publish(goal)
+    assert ros.spin_until(lambda: probe.plans, timeout=20.0)
+    poses = path_to_poses(probe.plans[-1])
+    np.testing.assert_allclose(poses[0], start, atol=1e-9)
+    np.testing.assert_allclose(poses[-1], [4.0, 3.0, 1.0], atol=1e-9)
+    # every pose on the straight line from the start to the goal
+    direction = np.array([3.5, 3.3]) / np.hypot(3.5, 3.3)
+    offsets = poses[:, :2] - start[:2]
+    np.testing.assert_allclose(offsets[:, 0] * direction[1] - offsets[:, 1] * direction[0],
+                               0.0, atol=1e-9)

@@ -278,11 +278,10 @@ def test_a_malformed_map_is_refused_with_an_error_and_the_grid_in_force_stays(ro
     ('overrides', 'match'),
     [
         ({'use_scan': True}, 'use_scan needs use_map'),
-        ({'world_file': ''}, "world_file '' needs use_map"),
         ({'use_map': True, 'laser_pose': [0.0, float('nan'), 0.0]}, 'laser_pose must be'),
     ],
 )
-def test_planner_refuses_scans_without_the_map_and_no_world_without_the_map(
+def test_planner_refuses_scans_without_the_map_and_a_malformed_laser_pose(
         ros, overrides: dict, match: str) -> None:
     with pytest.raises(InvalidParameterValueException, match=match):
         GlobalPlannerNode(context=ros.context, parameter_overrides=[

@@ -133,7 +133,8 @@ def errors(probe, node: str, text: str) -> list[str]:
 
 def start_controller(ros, **params) -> tuple[MpcControllerNode, object, OdomClock]:
     """A controller in simulated time with a probe that owns the clock; tracking PLAN."""
-    overrides = [Parameter('use_sim_time', value=True)]
+    overrides = [Parameter('use_sim_time', value=True),
+                 Parameter('world_file', value='paper_obstacle.yaml')]
     overrides += [Parameter(k, value=v) for k, v in params.items()]
     node = started(ros.add(MpcControllerNode(context=ros.context, parameter_overrides=overrides)))
     probe = ros.probe(use_sim_time=True)
@@ -367,7 +368,8 @@ def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_th
         Parameter('initial_pose', value=[float(v) for v in WORLD.start])]))
     node = started(ros.add(MpcControllerNode(context=ros.context, parameter_overrides=[
         Parameter('use_sim_time', value=True), Parameter('analytic_path', value='paper_sinusoid'),
-        Parameter('horizon', value=horizon)])))
+        Parameter('horizon', value=horizon),
+        Parameter('world_file', value='paper_obstacle.yaml')])))
     probe = ros.probe(use_sim_time=True)
 
     def driving_on_the_solver() -> bool:
@@ -724,7 +726,8 @@ class Lockstep:
         # tick fired late by the stepped clock (at 2.78 s for 2.75 s) makes the duplicate
         # guard skip the one at 2.80 s; the drill is about a killed process, not the rate
         self.controller = spawn_node('mpc_controller',
-                                     {'use_sim_time': True, 'control_frequency': 1.0 / STEP},
+                                     {'use_sim_time': True, 'control_frequency': 1.0 / STEP,
+                                      'world_file': 'paper_obstacle.yaml'},
                                      self.logs / 'mpc_controller.log', append=again)
         published = -math.inf
 
@@ -941,7 +944,8 @@ def refuse_all(ros, client: LifecycleClient, probe, name: str, state: str) -> No
 
 MANAGED = {
     'mpc_controller': lambda ctx: MpcControllerNode(context=ctx, parameter_overrides=[
-        Parameter('autostart', value=False)]),
+        Parameter('autostart', value=False),
+        Parameter('world_file', value='paper_obstacle.yaml')]),
     'global_planner': lambda ctx: GlobalPlannerNode(context=ctx, parameter_overrides=[
         Parameter('autostart', value=False),
         Parameter('world_file', value='paper_obstacle.yaml')]),
@@ -1025,7 +1029,8 @@ class ScanningClock(OdomClock):
 def start_sensing_controller(ros, sources: list[str]):
     """A controller in simulated time with obstacle_sources, the probe, a scanning clock."""
     node = started(ros.add(MpcControllerNode(context=ros.context, parameter_overrides=[
-        Parameter('use_sim_time', value=True), Parameter('obstacle_sources', value=sources)])))
+        Parameter('use_sim_time', value=True), Parameter('obstacle_sources', value=sources),
+        Parameter('world_file', value='paper_obstacle.yaml')])))
     probe = ros.probe(use_sim_time=True)
     scan_pub = probe.create_publisher(LaserScan, 'scan', SCAN_QOS)
     probe.map_pub = probe.create_publisher(OccupancyGrid, 'map', MAP_QOS)
