@@ -85,7 +85,7 @@ class Budget:
 
         Ask only where work would otherwise run: a no means it is left out.
         """
-        if self.remaining() > seconds and self.iterations >= 1:
+        if not self.timed_out and self.remaining() > seconds and self.iterations >= 1:
             return True
         self.timed_out = True
         return False

@@ -16,9 +16,9 @@
 
 A cut solve (Unfinished) goes on at the next step from its last iterate only while the robot
 stands where it was (the state within CONTINUE_TOLERANCE: it stood still on the candidate
-meanwhile), with the same NLP holding the same obstacles, for at most MAX_CONTINUED_STEPS
-steps after its first. The next step then also starts its constraint generation with the
-round that was cut (resumed_round), not with the rounds before it.
+meanwhile), with the same NLP holding the same obstacles, until it has made
+MAX_CONTINUED_ITERATIONS iterations in all. The next step then also starts its constraint
+generation with the round that was cut (resumed_round), not with the rounds before it.
 """
 
 from __future__ import annotations
@@ -28,20 +28,21 @@ from typing import NamedTuple, Sequence
 import numpy as np
 
 from mpc_local_planner.core.mpc.backends import Nlp
-from mpc_local_planner.core.mpc.tries import Solver, Try
+from mpc_local_planner.core.mpc.tries import Solver, Start, Try
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
 
-__all__ = ['CONTINUE_TOLERANCE', 'MAX_CONTINUED_STEPS', 'SpotMemory', 'Unfinished',
+__all__ = ['CONTINUE_TOLERANCE', 'MAX_CONTINUED_ITERATIONS', 'SpotMemory', 'Unfinished',
            'resumed_round', 'same_polygons', 'stood_still']
 
 # A solve the budget cut goes on at the next step from where it stopped if the state moved
 # less than this (each component): the robot stood still on the candidate meanwhile.
 CONTINUE_TOLERANCE = 1e-3
-# A cut solve goes on for at most this many steps after its first before it counts as failed
-# here: enough for a solve of up to about three steps' budget to finish, few enough that a
-# hopeless try does not hold back the others (see docs/design/mpc.md, section
-# MAX_CONTINUED_STEPS).
-MAX_CONTINUED_STEPS = 2
+# A cut solve goes on until it has made this many iterations in all (its first step's and each
+# continuation's), then counts as failed here: enough for the slowest converging solve seen
+# (about 245), few enough that a hopeless try does not hold back the others (see
+# docs/design/mpc.md, section MAX_CONTINUED_ITERATIONS). Counted in iterations, not steps, so
+# that a try begun with a sliver of a step's budget gets as far as one begun with all of it.
+MAX_CONTINUED_ITERATIONS = 300
 
 
 class Unfinished(NamedTuple):
@@ -53,7 +54,7 @@ class Unfinished(NamedTuple):
     solver: Solver  # the solver of the try that was cut
     held: tuple[ConvexPolygon, ...]  # the obstacles its NLP held, in their slots' order
     origin: Try  # the try that began it (a continuation's origin is the first one's)
-    steps: int = 1  # the steps it has run in (the first one's and each continuation's)
+    spent: int = 0  # the iterations it has made in all (the first step's and each continuation's)
 
 
 class SpotMemory:
@@ -94,7 +95,15 @@ class SpotMemory:
         """Return the tries that failed here in nlp."""
         return frozenset(t for n, t in self._failed if n == id(nlp))
 
-    def record(self, nlp: Nlp, x0: np.ndarray, made: Try, origin: Try, steps: int, *,
+    def reject(self, nlp: Nlp, origin: Try) -> None:
+        """Record that the try begun by origin solved here but lost to the candidate.
+
+        The robot stands on the candidate, so the same try from the same state would give the
+        same solution, lose again, and hold the robot at every step: it goes last instead.
+        """
+        self._failed.add((id(nlp), origin))
+
+    def record(self, nlp: Nlp, x0: np.ndarray, made: Try, origin: Try, spent: int, *,
                verified: bool, cut: bool, iterations: int, w: np.ndarray,
                held: Sequence[ConvexPolygon]) -> None:
         """Record a try: a failure here, or a cut solve to go on with at the next step.
@@ -104,7 +113,7 @@ class SpotMemory:
             x0: the state it ran from.
             made: the try.
             origin: the try that began it (made, or a continuation's first).
-            steps: the steps it has run in, this one included.
+            spent: the iterations it has made in all, this step's included.
             verified: it gave a verified solution.
             cut: the budget cut it.
             iterations: the iterations it made.
@@ -112,14 +121,17 @@ class SpotMemory:
             held: the obstacles its NLP held, in their slots' order.
 
         """
-        if not verified and (not cut or steps > MAX_CONTINUED_STEPS):
-            # failed outright, or cut in every step it was given: not first again while
-            # the robot stands here
-            self._failed.update({(id(nlp), made), (id(nlp), origin)})
-        if (cut and not verified and iterations > 0 and steps <= MAX_CONTINUED_STEPS
+        if not verified and (not cut or spent >= MAX_CONTINUED_ITERATIONS):
+            # failed outright, or cut before it converged in all it may make: not first again
+            # while the robot stands here. A continuation is its origin's: one that failed
+            # says nothing of the next cut solve's continuation
+            self._failed.add((id(nlp), origin))
+            if made.start is not Start.CONTINUATION:
+                self._failed.add((id(nlp), made))
+        if (cut and not verified and iterations > 0 and spent < MAX_CONTINUED_ITERATIONS
                 and np.all(np.isfinite(w))):
             self.unfinished = Unfinished(nlp, x0.copy(), w, made.solver, tuple(held), origin,
-                                         steps)
+                                         spent)
 
 
 def stood_still(before: np.ndarray | None, x0: np.ndarray) -> bool:

@@ -113,6 +113,7 @@ class SolveAttempt(NamedTuple):
     iterations: int
     seconds: float
     cut: bool = False  # the budget stopped the solver before it converged
+    origin: Try | None = None  # the try that began the verified solve (None: none verified)
 
 
 class Rounds(NamedTuple):

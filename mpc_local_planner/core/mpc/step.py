@@ -506,13 +506,13 @@ class MpcBase(ABC):
             seconds += attempt.seconds
             origin = (continuation.origin if attempt_try.start is Start.CONTINUATION
                       else attempt_try)
-            steps = (continuation.steps + 1 if attempt_try.start is Start.CONTINUATION
-                     and continuation is not None else 1)
-            self._spot.record(nlp, x0, attempt_try, origin, steps, verified=attempt.verified,
+            spent = attempt.iterations + (continuation.spent if attempt_try.start
+                                          is Start.CONTINUATION and continuation else 0)
+            self._spot.record(nlp, x0, attempt_try, origin, spent, verified=attempt.verified,
                               cut=attempt.cut, iterations=attempt.iterations, w=attempt.w,
                               held=active)
             if attempt.verified:
-                best = attempt._replace(status=attempt.status + kind.label)
+                best = attempt._replace(status=attempt.status + kind.label, origin=origin)
                 break
             if best is None or kind is Solver.BACKEND:
                 best = attempt
@@ -547,6 +547,9 @@ class MpcBase(ABC):
                                                  activation)
         iterations, seconds = 0, 0.0
         previous: Plan | None = None  # the last round's solution, a start for the next
+        # the last round whose solution clears every reachable obstacle: feasible for the full
+        # problem, so it stands if a later round (for a better optimum) is cut or fails
+        feasible: Rounds | None = None
         for round_ in range(MAX_ACTIVATION_ROUNDS + 1):
             nlp, params, held = self._prepare_nlp(active, x0,
                                                   nlp=resumed if round_ == 0 else None)
@@ -568,6 +571,8 @@ class MpcBase(ABC):
             missed = [o for o in near if not any(o is a for a in held)]
             if not missed:
                 break
+            clears_all = (self._clearance.penetration(states, inputs, reachable)
+                          <= FEASIBILITY_TOLERANCE)
             # no further round at the limit, without time for it, or without an NLP with
             # room for one of the missed obstacles (it would hold the same ones again): the
             # solution stands if it clears every reachable obstacle (feasible for the full
@@ -575,18 +580,28 @@ class MpcBase(ABC):
             if (round_ == MAX_ACTIVATION_ROUNDS or not self._shapes.holds_more(
                     active + missed, held, self._config.solving.faces_per_obstacle)
                     or not self._budget.allows()):
-                if self._clearance.penetration(states, inputs, reachable) > FEASIBILITY_TOLERANCE:
+                if not clears_all:
                     attempt = attempt._replace(
                         verified=False,
                         status=f'{attempt.status} (hits an obstacle left out of the NLP)')
                 break
+            if clears_all:
+                feasible = Rounds(nlp=nlp, params=params, candidate=candidate,
+                                  w_candidate=w_candidate, candidate_ok=candidate_ok,
+                                  candidate_value=candidate_value, attempt=attempt,
+                                  active=held, rounds=round_ + 1)
             active = active + missed
             previous = Plan(x=states, u=inputs, s=self._progress_of(attempt.w[layout.r[-1]]),
                             mu=np.zeros(0), value=math.inf)
-        return Rounds(nlp=nlp, params=params, candidate=candidate, w_candidate=w_candidate,
-                       candidate_ok=candidate_ok, candidate_value=candidate_value,
-                       attempt=attempt._replace(iterations=iterations, seconds=seconds),
-                       active=held, rounds=round_ + 1)
+        result = Rounds(nlp=nlp, params=params, candidate=candidate, w_candidate=w_candidate,
+                        candidate_ok=candidate_ok, candidate_value=candidate_value,
+                        attempt=attempt, active=held, rounds=round_ + 1)
+        if feasible is not None and not attempt.verified:
+            result = feasible._replace(attempt=feasible.attempt._replace(
+                status=f'{feasible.attempt.status} (round {feasible.rounds}: '
+                       f'round {round_ + 1} {attempt.status})'))
+        return result._replace(attempt=result.attempt._replace(iterations=iterations,
+                                                                 seconds=seconds))
 
     # ----------------------------------------------------------------- the step
     def solve(self, x: np.ndarray, previous_input: np.ndarray | None = None) -> MpcSolution:
@@ -627,6 +642,9 @@ class MpcBase(ABC):
             candidate_collision_free=self._clearance.penetration(
                 candidate.x, candidate.u, reachable) <= 0.0,
             timed_out=budget.timed_out)
+        if decision is Decision.CANDIDATE_CHEAPER and attempt.origin is not None:
+            # from where the robot stands, that try gives the same losing solution again
+            self._spot.reject(result.nlp, attempt.origin)
         if decision is Decision.SOLVER:
             self._failures = 0
         elif decision.is_failure:
