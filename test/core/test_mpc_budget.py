@@ -567,13 +567,13 @@ def test_shapes_with_stages_beyond_the_fatrop_limit_are_solved_by_ipopt() -> Non
 # ----------------------------------------------------------------------------- continuing
 def test_a_solve_the_budget_cut_goes_on_at_the_next_step_while_the_robot_stands_still(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    # from rest among three boxes the solve takes more iterations than a step's budget
-    # allows (here 10): the step applies the candidate (stand still), and the next one goes
-    # on from where the cut try stopped and finishes; started over, it never does (the
-    # continuation is primal only: with 5 neither finishes)
+    # from rest among three boxes the solve takes more iterations (9) than a step's budget
+    # allows (here 7): the step applies the candidate (stand still), and the next one goes
+    # on from where the cut try stopped and finishes (in 5); started over, it never does
+    # (the continuation is primal only: with 5 neither finishes)
     def steps_to_move(continuing: bool) -> int | None:
         config = MpcConfig(solving=SolverSettings(compile=False, activation_distance=5.0,
-                                                  budget='iterations', max_solve_iterations=10))
+                                                  budget='iterations', max_solve_iterations=7))
         mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES,
                                path=paper_sinusoid())
         if not continuing:

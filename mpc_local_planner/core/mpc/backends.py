@@ -94,6 +94,7 @@ def _ipopt_options(settings: SolverSettings, *, cold: bool = False) -> dict[str,
     }
     if cold:
         options['ipopt.mu_init'] = 1e-2
+        options['ipopt.mu_strategy'] = 'adaptive'
     else:
         options.update({'ipopt.bound_push': 1e-8, 'ipopt.bound_frac': 1e-8,
                         'ipopt.mu_init': 1e-4})
