@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from recorded_states import perturbed, SEEDS
 
 from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.control_output import ControlOutput, Reason
@@ -78,10 +79,11 @@ def steps_until_tracking(controller: MpcController, x: np.ndarray
         x = np.asarray(model(x, output.u)).reshape(-1)
     return reasons, output
 
+@pytest.mark.parametrize('seed', SEEDS)
 @pytest.mark.parametrize('world', ['world_023', 'world_044', 'world_055'])
 def test_a_new_plan_for_a_standing_robot_among_barn_cylinders_is_driven_within_2_s(
-        world: str) -> None:
-    case = STATES[world]
+        world: str, seed: int) -> None:
+    case = perturbed(STATES[world], seed)
     controller = barn_controller()
     controller.set_plan(np.array(case['plan']))
     controller.set_obstacles([ConvexPolygon.from_vertices(np.array(v))
@@ -115,7 +117,9 @@ def forward_only_controller(case: dict) -> MpcController:
     return controller
 
 
-def test_a_plan_that_puts_off_its_motion_does_not_hold_the_robot_in_open_space() -> None:
+@pytest.mark.parametrize('seed', SEEDS)
+def test_a_plan_that_puts_off_its_motion_does_not_hold_the_robot_in_open_space(
+        seed: int) -> None:
     """Laser-only BARN world 212 at 2 m/s: a re-plan for a robot standing in open space.
 
     The plan starts with a turn in place from the robot's heading, rounded into the first
@@ -125,7 +129,7 @@ def test_a_plan_that_puts_off_its_motion_does_not_hold_the_robot_in_open_space()
     stood 1.1 m from the nearest cylinder until the run stalled. A plan that neither drives
     now nor advances s counts as standing and gets the cold tries, which leave that point.
     """
-    case = FORWARD_ONLY['world_212']
+    case = perturbed(FORWARD_ONLY['world_212'], seed)
     controller = forward_only_controller(case)
     model = controller.model.discrete(H)
     x = start = np.array(case['x'])
@@ -137,16 +141,18 @@ def test_a_plan_that_puts_off_its_motion_does_not_hold_the_robot_in_open_space()
     assert float(np.hypot(*(x[:2] - start[:2]))) > 1.0, (x, output.reason)
 
 
-def test_a_solve_longer_than_two_steps_goes_on_while_the_robot_stands() -> None:
+@pytest.mark.parametrize('seed', SEEDS)
+def test_a_solve_longer_than_two_steps_goes_on_while_the_robot_stands(seed: int) -> None:
     """Laser-only BARN world 258 at 2 m/s: a re-plan for a robot standing among cylinders.
 
     IPOPT from the guided start needs about 245 iterations here, against 100 a step: cut at
     the first step, and again when it went on at the second, it counted as failed and began
     again from scratch every other step, and the robot stood until the run stalled. A cut
-    solve now goes on for MAX_CONTINUED_STEPS steps.
+    solve now goes on until it has made MAX_CONTINUED_ITERATIONS.
     """
-    controller = forward_only_controller(FORWARD_ONLY['world_258'])
-    reasons, output = steps_until_tracking(controller, np.array(FORWARD_ONLY['world_258']['x']))
+    case = perturbed(FORWARD_ONLY['world_258'], seed)
+    controller = forward_only_controller(case)
+    reasons, output = steps_until_tracking(controller, np.array(case['x']))
     assert reasons[-1] is Reason.TRACKING, reasons
     assert output.u[0] > 0.1
 
@@ -184,7 +190,8 @@ def test_a_new_plan_at_speed_starts_from_the_motion_in_hand() -> None:
 PREPARED_SLOTS = 10
 
 
-def test_a_cut_round_in_the_largest_nlp_goes_on_until_it_is_solved() -> None:
+@pytest.mark.parametrize('seed', SEEDS)
+def test_a_cut_round_in_the_largest_nlp_goes_on_until_it_is_solved(seed: int) -> None:
     """Laser-only BARN world 283 at 2 m/s: a robot standing beside a row of cylinders.
 
     From rest the first constraint-generation round (4 obstacles) solves, the second asks for
@@ -196,8 +203,8 @@ def test_a_cut_round_in_the_largest_nlp_goes_on_until_it_is_solved() -> None:
     step, until the run stalled. A resumed round now runs in the NLP its cut try ran in, and
     a round that would hold the same obstacles again is not made.
     """
-    case = json.loads((Path(__file__).parent / 'data' / 'barn_283_capped_round.json')
-                      .read_text(encoding='utf-8'))
+    case = perturbed(json.loads((Path(__file__).parent / 'data' / 'barn_283_capped_round.json')
+                                .read_text(encoding='utf-8')), seed)
     config = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
                        robot_radius=0.0,
                        solving=SolverSettings(budget='iterations', max_solve_iterations=100,

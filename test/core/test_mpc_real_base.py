@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from recorded_states import perturbed, SEEDS
 
 from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.footprint import JACKAL
@@ -54,9 +55,11 @@ STATES = json.loads((Path(__file__).parent / 'data' / 'barn_real_replan_at_speed
                     .read_text(encoding='utf-8'))
 
 
+@pytest.mark.parametrize('seed', SEEDS)
 @pytest.mark.parametrize('world', ['world_024', 'world_066'])
-def test_a_re_plan_at_speed_with_bounded_input_rates_is_solved_within_a_step(world: str) -> None:
-    case = STATES[world]
+def test_a_re_plan_at_speed_with_bounded_input_rates_is_solved_within_a_step(
+        world: str, seed: int) -> None:
+    case = perturbed(STATES[world], seed)
     config = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
                        robot_radius=0.0, collision_margin=0.03, max_accel=(4.0, 12.0),
                        # interpreted: the compiled functions' numbers, without gcc's wait
@@ -108,10 +111,11 @@ def _standing_mpc(case: dict) -> PathReferenceMPC:
                                        for v in case['obstacles']], path=path)
 
 
+@pytest.mark.parametrize('seed', SEEDS)
 @pytest.mark.parametrize('world', ['world_055', 'world_062', 'world_062_later'])
 def test_a_standing_robot_off_the_paths_heading_is_solved_from_rest_within_a_step(
-        world: str) -> None:
-    case = STANDING[world]
+        world: str, seed: int) -> None:
+    case = perturbed(STANDING[world], seed)
     mpc = _standing_mpc(case)
     solution = mpc.solve(np.array(case['x']), previous_input=np.array(case['u_before']))
     assert solution.source is PlanSource.SOLVER, solution.status
