@@ -71,7 +71,8 @@ class BagRun(NamedTuple):
             at 0 at the first control step that solved the MPC (waiting steps are dropped).
         plan: (M, 3) the last global plan, or None.
         predictions: the local plans (each (N+1, 3)) in order.
-        lyapunov_ok: per row, the controller's V_N decrease check (None when not checked).
+        lyapunov_ok: per row, the controller's V_N decrease check (None when not checked,
+            and on the rows between two solves, which repeat the held solve's check).
         solver_failures: control steps whose input did not come from a converged solve.
         goal_reached: the controller reported the goal reached.
         counts: messages per topic.
@@ -156,7 +157,10 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
                 continue
             rows.append([t, step.x, step.y, step.theta, step.v, step.omega, step.s, step.value,
                          step.solve_ms])
-            lyapunov.append(step.lyapunov_ok)
+            # a row between two solves repeats the held solve's figures: its check is that
+            # solve's, counted once (a bag without the solved key counts every row)
+            solved = step.solved or Key.SOLVED.value not in values
+            lyapunov.append(step.lyapunov_ok if solved else None)
             if step.source not in (None, PlanSource.SOLVER):
                 failures += 1
             goal_reached = goal_reached or step.goal_reached

@@ -152,3 +152,19 @@ def test_clearance_is_the_true_footprints_and_the_metrics_say_which(tmp_path: Pa
     # a round robot's record
     round_metrics = analyze(bag, tmp_path / 'round', world_file=RRT_WORLD)
     assert round_metrics['footprint'] == {'shape': 'circle', 'radius': 0.1}
+
+
+def test_a_solves_v_n_check_counts_once_not_on_every_row_that_holds_its_plan(
+        tmp_path: Path) -> None:
+    # control_frequency 20 Hz, h = 0.2 s: one solve, then three rows that apply its plan and
+    # repeat its figures (solved false); the solve broke the decrease once
+    records = steps(8, arrive=False)
+    for i, record in enumerate(records):
+        records[i] = record._replace(solved=i % 4 == 0,
+                                     lyapunov_ok=None if i < 4 else False)
+    bag = tmp_path / 'bag'
+    write_bag(bag, records, world_file=RRT_WORLD)
+    run = read_run(bag)
+    assert run.lyapunov_ok == [None] * 4 + [False, None, None, None]
+    metrics = analyze(bag, tmp_path / 'out')
+    assert metrics['lyapunov_checks'] == 1 and metrics['lyapunov_violations'] == 1
