@@ -57,7 +57,7 @@ from mpc_local_planner.core.diagnostics import (
     Key,
 )
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
-from mpc_local_planner.core.mpc import PlanSource
+from mpc_local_planner.core.mpc import LyapunovCase, PlanSource
 from mpc_local_planner.worlds.world import load_world, World
 
 __all__ = ['BagRun', 'analyze', 'describe_footprint', 'main', 'read_run', 'recorded_world']
@@ -73,6 +73,7 @@ class BagRun(NamedTuple):
         predictions: the local plans (each (N+1, 3)) in order.
         lyapunov_ok: per row, the controller's V_N decrease check (None when not checked,
             and on the rows between two solves, which repeat the held solve's check).
+        lyapunov_cases: per row as lyapunov_ok, whether the proof covers that check.
         solver_failures: control steps whose input did not come from a converged solve.
         goal_reached: the controller reported the goal reached.
         counts: messages per topic.
@@ -83,6 +84,7 @@ class BagRun(NamedTuple):
     plan: np.ndarray | None
     predictions: list[np.ndarray]
     lyapunov_ok: list[bool | None]
+    lyapunov_cases: list[LyapunovCase | None]
     solver_failures: int
     goal_reached: bool
     counts: dict[str, int]
@@ -145,6 +147,7 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
                 diags.append((_stamp(msg.header), values))
 
     lyapunov: list[bool | None] = []
+    cases: list[LyapunovCase | None] = []
     failures = 0
     goal_reached = False
     rows: list[list[float]] = []
@@ -161,6 +164,7 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
             # solve's, counted once (a bag without the solved key counts every row)
             solved = step.solved or Key.SOLVED.value not in values
             lyapunov.append(step.lyapunov_ok if solved else None)
+            cases.append(step.lyapunov_case if solved else None)
             if step.source not in (None, PlanSource.SOLVER):
                 failures += 1
             goal_reached = goal_reached or step.goal_reached
@@ -176,7 +180,8 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
     if len(array):
         array[:, 0] -= array[0, 0]
     return BagRun(rows=array, plan=plan, predictions=predictions, lyapunov_ok=lyapunov,
-                  solver_failures=failures, goal_reached=goal_reached, counts=counts)
+                  lyapunov_cases=cases, solver_failures=failures, goal_reached=goal_reached,
+                  counts=counts)
 
 
 def recorded_world(bag: str | Path) -> World | None:
@@ -268,6 +273,7 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
         run.rows, goal=np.asarray(goal, dtype=float), obstacles=list(world.physical_shapes()),
         footprint=robot, reference_length=reference_length,
         solver_failures=run.solver_failures, lyapunov_ok=run.lyapunov_ok,
+        lyapunov_cases=run.lyapunov_cases,
         position_tolerance=position_tolerance, heading_tolerance=heading_tolerance)
     metrics['controller_goal_reached'] = run.goal_reached
     metrics['messages'] = run.counts
@@ -308,11 +314,31 @@ def summary(metrics: dict[str, Any]) -> str:
         f"{fmt('path_length', ' m', 2)}   min clearance: {fmt('min_clearance', ' m')}",
         f"solve time median/p95/max: {fmt('solve_ms_median', '', 1)}/"
         f"{fmt('solve_ms_p95', '', 1)}/{fmt('solve_ms_max', ' ms', 1)}   "
-        f"V_N violations: {metrics.get('lyapunov_violations')}   "
         f"solver failures: {metrics.get('solver_failures')}   steps: {metrics.get('steps')}",
+        _lyapunov_text(metrics),
         *([f'clearance measured from the footprint: {_footprint_text(metrics["footprint"])}']
           if metrics.get('footprint') else []),
     ])
+
+
+def _lyapunov_text(metrics: dict[str, Any]) -> str:
+    """Return the V_N checks as a line: those the proof covers apart from the others."""
+    by_case = metrics.get('lyapunov_by_case')
+    if not by_case:
+        return (f"V_N violations: {metrics.get('lyapunov_violations')} of "
+                f"{metrics.get('lyapunov_checks')} checks")
+    covered = by_case.get(LyapunovCase.COVERED.value, {'checks': 0, 'violations': 0})
+    text = (f"V_N violations: {covered['violations']} of {covered['checks']} checks the proof "
+            'covers')
+    others = {case: counts for case, counts in by_case.items()
+              if case != LyapunovCase.COVERED.value}
+    if others:
+        checks = sum(counts['checks'] for counts in others.values())
+        violations = sum(counts['violations'] for counts in others.values())
+        detail = ', '.join(f"{case.replace('_', ' ')} {counts['violations']}/{counts['checks']}"
+                           for case, counts in others.items())
+        text += f'; {violations} of {checks} where the problem changed ({detail})'
+    return text
 
 
 def _footprint_text(footprint: dict[str, Any]) -> str:

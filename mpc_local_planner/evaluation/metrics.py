@@ -31,6 +31,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from mpc_local_planner.core.footprint import Footprint
+from mpc_local_planner.core.mpc import LyapunovCase
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import wrap_angle
 from mpc_local_planner.evaluation.trajectory import TRAJECTORY_INDEX as COL
@@ -111,6 +112,25 @@ def reached_mask(
     return (pos_err <= position_tolerance) & (head_err <= heading_tolerance)
 
 
+def _lyapunov_by_case(lyapunov_ok: Sequence[bool | None],
+                      cases: Sequence[LyapunovCase | None]
+                      ) -> dict[str, dict[str, int]] | None:
+    """Return {case: {'checks': n, 'violations': m}} over the checked steps (None: unknown).
+
+    Checks without a case (a recording from before cases were reported) are left out.
+    """
+    if len(cases) != len(lyapunov_ok) or not any(case is not None for case in cases):
+        return None
+    counts: dict[str, dict[str, int]] = {}
+    for flag, case in zip(lyapunov_ok, cases, strict=True):
+        if flag is None or case is None:
+            continue
+        entry = counts.setdefault(LyapunovCase(case).value, {'checks': 0, 'violations': 0})
+        entry['checks'] += 1
+        entry['violations'] += int(not flag)
+    return counts
+
+
 def _finite_stats(values: np.ndarray) -> tuple[float | None, float | None, float | None]:
     """Return median, p95 and max of the finite values (None when there are none: JSON)."""
     values = values[np.isfinite(values)]
@@ -129,6 +149,7 @@ def compute_metrics(
     reference_length: float | None = None,
     solver_failures: int = 0,
     lyapunov_ok: Sequence[bool | None] = (),
+    lyapunov_cases: Sequence[LyapunovCase | None] = (),
     position_tolerance: float = 0.05,
     heading_tolerance: float = 0.1,
 ) -> dict[str, Any]:
@@ -145,6 +166,9 @@ def compute_metrics(
         reference_length: length of the reference path, reported beside the run's own.
         solver_failures: steps without a verified solver solution.
         lyapunov_ok: per step, whether V_N decreased as the theorem says (None: no check).
+        lyapunov_cases: per step as lyapunov_ok (or empty: not known), whether the theorem
+            covers the check (LyapunovCase.COVERED: a violation there is a defect) or what
+            changed; counted by case in lyapunov_by_case.
         position_tolerance: metres, for "reached".
         heading_tolerance: radians, for "reached".
 
@@ -185,6 +209,7 @@ def compute_metrics(
     median, p95, worst = _finite_stats(rows[:, COL['solve_ms']])
     checks = [flag for flag in lyapunov_ok if flag is not None]
     violations = int(sum(1 for flag in checks if not flag))
+    by_case = _lyapunov_by_case(lyapunov_ok, lyapunov_cases)
     return {
         'steps': int(len(rows)),
         'reached': reached,
@@ -201,6 +226,10 @@ def compute_metrics(
         'lyapunov_checks': len(checks),
         'lyapunov_violations': violations,
         'lyapunov_nonincreasing': violations == 0,
+        'lyapunov_by_case': by_case,
+        'lyapunov_covered_violations': (
+            by_case.get(LyapunovCase.COVERED.value, {}).get('violations', 0)
+            if by_case is not None else None),
         'solver_failures': int(solver_failures),
         'position_tolerance': position_tolerance,
         'heading_tolerance': heading_tolerance,

@@ -28,9 +28,15 @@ from rosbags.typesys import get_typestore, Stores
 from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.diagnostics import BagKey, ControllerDiagnostics
 from mpc_local_planner.core.footprint import JACKAL
-from mpc_local_planner.core.mpc import PlanSource
+from mpc_local_planner.core.mpc import LyapunovCase, PlanSource
 from mpc_local_planner.core.obstacles import min_clearance
-from mpc_local_planner.evaluation.analyze_bag import analyze, main, read_run, recorded_world
+from mpc_local_planner.evaluation.analyze_bag import (
+    analyze,
+    main,
+    read_run,
+    recorded_world,
+    summary,
+)
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world
 
@@ -168,3 +174,19 @@ def test_a_solves_v_n_check_counts_once_not_on_every_row_that_holds_its_plan(
     assert run.lyapunov_ok == [None] * 4 + [False, None, None, None]
     metrics = analyze(bag, tmp_path / 'out')
     assert metrics['lyapunov_checks'] == 1 and metrics['lyapunov_violations'] == 1
+
+
+def test_the_summary_says_which_v_n_violations_the_proof_covers(tmp_path: Path) -> None:
+    covered, off = LyapunovCase.COVERED, LyapunovCase.STATE_OFF_PREDICTION
+    flags = [None, (True, covered), (False, off), (True, off), (True, covered)]
+    records = [record._replace(solved=True, lyapunov_ok=None if flag is None else flag[0],
+                               lyapunov_case=None if flag is None else flag[1])
+               for record, flag in zip(steps(5, arrive=True), flags, strict=True)]
+    bag = tmp_path / 'bag'
+    write_bag(bag, records, world_file=RRT_WORLD)
+    assert read_run(bag).lyapunov_cases == [None, covered, off, off, covered]
+    metrics = analyze(bag, tmp_path / 'out')
+    assert metrics['lyapunov_covered_violations'] == 0
+    assert summary(metrics).splitlines()[4] == (
+        'V_N violations: 0 of 2 checks the proof covers; 1 of 2 where the problem changed '
+        '(state off prediction 1/2)')

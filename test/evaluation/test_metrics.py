@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.footprint import Footprint, JACKAL
+from mpc_local_planner.core.mpc import LyapunovCase
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.evaluation.metrics import compute_metrics, footprint_clearance
 from mpc_local_planner.evaluation.rollout import circle_clearance, polygon_clearance
@@ -144,3 +145,22 @@ def test_compute_metrics_refuses_a_robot_radius_that_contradicts_the_footprint()
     with pytest.raises(ValueError, match='robot_radius 0.2 contradicts the footprint'):
         compute_metrics(rows, goal=np.zeros(3), obstacles=box, robot_radius=0.2,
                         footprint=JACKAL)
+
+
+def test_v_n_checks_are_counted_apart_where_the_proof_covers_them() -> None:
+    rows = rows_along(np.array([[0.1 * k, 0.0, 0.0] for k in range(6)]))
+    covered, off = LyapunovCase.COVERED, LyapunovCase.STATE_OFF_PREDICTION
+    metrics = compute_metrics(
+        rows, goal=np.array([0.5, 0.0, 0.0]), obstacles=[],
+        lyapunov_ok=[None, True, False, True, False, None],
+        lyapunov_cases=[None, covered, off, covered, covered, None])
+    assert metrics['lyapunov_checks'] == 4 and metrics['lyapunov_violations'] == 2
+    assert metrics['lyapunov_by_case'] == {'covered': {'checks': 3, 'violations': 1},
+                                           'state_off_prediction': {'checks': 1,
+                                                                    'violations': 1}}
+    assert metrics['lyapunov_covered_violations'] == 1
+    # without cases (the suites' rollouts): the totals only
+    plain = compute_metrics(rows, goal=np.array([0.5, 0.0, 0.0]), obstacles=[],
+                            lyapunov_ok=[None, True, False, True, False, None])
+    assert plain['lyapunov_violations'] == 2
+    assert plain['lyapunov_by_case'] is None and plain['lyapunov_covered_violations'] is None
