@@ -25,6 +25,9 @@ parameter; closed_loop sets it), or from ``--world``, which takes precedence. A 
 records no world, analysed without ``--world``, is refused: clearance and collisions against
 a guessed world would be wrong.
 
+Arrival is the controller's (its goal_reached; for odometry rows, its rule with the node's
+defaults: see analyze), as closed_loop reports it: the two tools judge a bag alike.
+
 Clearance and collision are measured as the simulator counts contacts: the world's exact
 shapes (known and unknown obstacles, circles as circles) against the robot's TRUE footprint
 at each pose (its polygon turned with the heading, or its circle): the world's ``footprint``
@@ -50,6 +53,7 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_typestore, Stores
 import yaml
 
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.diagnostics import (
     BagKey,
     CONTROLLER_DIAGNOSTICS_TOPIC,
@@ -77,6 +81,8 @@ class BagRun(NamedTuple):
         solver_failures: control steps whose input did not come from a converged solve.
         goal_reached: the controller reported the goal reached.
         counts: messages per topic.
+        arrived: per row, the controller's verdict (its goal_reached); None when the rows
+            come from odometry (no verdict recorded).
 
     """
 
@@ -88,6 +94,7 @@ class BagRun(NamedTuple):
     solver_failures: int
     goal_reached: bool
     counts: dict[str, int]
+    arrived: list[bool] | None = None
 
 
 def _yaw(q: Any) -> float:
@@ -151,8 +158,10 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
     failures = 0
     goal_reached = False
     rows: list[list[float]] = []
+    arrived: list[bool] | None = None
     if diags and Key.X.value in diags[0][1]:
         started = False
+        arrived = []
         for t, values in diags:
             step = ControllerDiagnostics.from_values(values)
             started = started or step.source is not None  # the first MPC step
@@ -168,6 +177,7 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
             if step.source not in (None, PlanSource.SOLVER):
                 failures += 1
             goal_reached = goal_reached or step.goal_reached
+            arrived.append(step.goal_reached)
     elif odom:
         # a bag without our diagnostics: one row per odometry message, the command from
         # the odometry's twist (what the base executes)
@@ -181,7 +191,7 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
         array[:, 0] -= array[0, 0]
     return BagRun(rows=array, plan=plan, predictions=predictions, lyapunov_ok=lyapunov,
                   lyapunov_cases=cases, solver_failures=failures, goal_reached=goal_reached,
-                  counts=counts)
+                  counts=counts, arrived=arrived)
 
 
 def recorded_world(bag: str | Path) -> World | None:
@@ -226,7 +236,6 @@ def describe_footprint(footprint: Footprint) -> dict[str, Any]:
 
 def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None = None,
             footprint: Footprint | None = None, title: str = '',
-            position_tolerance: float = 0.05, heading_tolerance: float = 0.1,
             extra: dict[str, Any] | None = None) -> dict[str, Any]:
     """Write trajectory.csv, metrics.json and trajectory.png of a bag into out.
 
@@ -234,6 +243,12 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
     world's exact shapes (known and unknown): world_file if given, else the world the bag
     records. Clearance is measured from footprint if given, else the world's footprint (its
     polygon, or its circle). extra is merged into the metrics.
+
+    Arrival is the controller's: a run has reached the target when its last control step
+    says goal_reached, and time_to_target is when it said so from then on. A recording
+    without the controller's diagnostics is judged by the controller's own rule
+    (ControllerSettings.goal_check) with the node's default tolerances. closed_loop reports
+    exactly this: one definition, whichever tool reads the bag (metrics.json's arrival).
 
     Returns:
         The metrics (also written to metrics.json).
@@ -244,7 +259,7 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
             holds nothing to analyse (no control step, no odometry).
 
     """
-    from mpc_local_planner.evaluation.metrics import compute_metrics
+    from mpc_local_planner.evaluation.metrics import arrivals, compute_metrics
     from mpc_local_planner.evaluation.plotting import plot_runs
     from mpc_local_planner.evaluation.trajectory import write_trajectory_csv
     from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -269,12 +284,22 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
         reference_length = float(np.sum(np.linalg.norm(np.diff(run.plan[:, :2], axis=0),
                                                        axis=1)))
     robot = footprint if footprint is not None else world.footprint
+    goal = np.asarray(goal, dtype=float)
+    if run.arrived is not None:
+        arrived = np.array(run.arrived, dtype=bool)
+        arrival = "the controller's goal_reached"
+    else:
+        settings = ControllerSettings()
+        arrived = arrivals(run.rows, goal, settings)
+        arrival = (f"the controller's goal check with its defaults (xy_goal_tolerance "
+                   f'{settings.xy_goal_tolerance:g} m, yaw_goal_tolerance '
+                   f'{settings.yaw_goal_tolerance:g} rad)')
     metrics = compute_metrics(
-        run.rows, goal=np.asarray(goal, dtype=float), obstacles=list(world.physical_shapes()),
+        run.rows, goal=goal, obstacles=list(world.physical_shapes()),
         footprint=robot, reference_length=reference_length,
         solver_failures=run.solver_failures, lyapunov_ok=run.lyapunov_ok,
-        lyapunov_cases=run.lyapunov_cases,
-        position_tolerance=position_tolerance, heading_tolerance=heading_tolerance)
+        lyapunov_cases=run.lyapunov_cases, arrived=arrived)
+    metrics['arrival'] = arrival
     metrics['controller_goal_reached'] = run.goal_reached
     metrics['messages'] = run.counts
     metrics['world_name'] = world.name

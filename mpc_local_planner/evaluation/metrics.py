@@ -30,6 +30,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.mpc import LyapunovCase
 from mpc_local_planner.core.obstacles import ConvexPolygon
@@ -38,7 +39,8 @@ from mpc_local_planner.evaluation.trajectory import TRAJECTORY_INDEX as COL
 from mpc_local_planner.perception.laser import footprint_distances, TrueGeometry
 from mpc_local_planner.worlds.world import Circle, Shape
 
-__all__ = ['PoseClearance', 'compute_metrics', 'footprint_clearance', 'reached_mask']
+__all__ = ['PoseClearance', 'arrivals', 'compute_metrics', 'footprint_clearance',
+           'reached_mask']
 
 #: poses (n, 3) [x, y, theta] -> clearance (n,) in metres; <= 0 is contact.
 PoseClearance = Callable[[np.ndarray], np.ndarray]
@@ -131,6 +133,33 @@ def _lyapunov_by_case(lyapunov_ok: Sequence[bool | None],
     return counts
 
 
+def arrivals(rows: np.ndarray, goal: np.ndarray, settings: ControllerSettings) -> np.ndarray:
+    """Say, per row, whether the controller would have declared arrival by then.
+
+    The controller's own rule (ControllerSettings.goal_check) over the rows' poses, for a
+    recording without the controller's verdict: with settings.stateful the position once met
+    stays met, and arrival once declared stays (until a new plan, which rows do not show).
+    """
+    rows = np.atleast_2d(rows)
+    position = np.hypot(rows[:, COL['x']] - goal[0], rows[:, COL['y']] - goal[1])
+    heading = np.abs(wrap_angle(rows[:, COL['theta']] - goal[2]))
+    arrived = np.zeros(len(rows), dtype=bool)
+    met = done = False
+    for i in range(len(rows)):
+        met, now = settings.goal_check(float(position[i]), float(heading[i]), position_met=met)
+        done = now or (settings.stateful and done)
+        arrived[i] = done
+    return arrived
+
+
+def _arrival_row(arrived: np.ndarray) -> int | None:
+    """Return the row from which the run stays arrived to its end (None: not arrived then)."""
+    if not len(arrived) or not arrived[-1]:
+        return None
+    away = np.flatnonzero(~arrived)
+    return int(away[-1]) + 1 if len(away) else 0
+
+
 def _finite_stats(values: np.ndarray) -> tuple[float | None, float | None, float | None]:
     """Return median, p95 and max of the finite values (None when there are none: JSON)."""
     values = values[np.isfinite(values)]
@@ -152,6 +181,7 @@ def compute_metrics(
     lyapunov_cases: Sequence[LyapunovCase | None] = (),
     position_tolerance: float = 0.05,
     heading_tolerance: float = 0.1,
+    arrived: Sequence[bool] | np.ndarray | None = None,
 ) -> dict[str, Any]:
     """Return the run's metrics (arrival, errors, length, clearance, V_N, timing) as a dict.
 
@@ -169,13 +199,18 @@ def compute_metrics(
         lyapunov_cases: per step as lyapunov_ok (or empty: not known), whether the theorem
             covers the check (LyapunovCase.COVERED: a violation there is a defect) or what
             changed; counted by case in lyapunov_by_case.
-        position_tolerance: metres, for "reached".
-        heading_tolerance: radians, for "reached".
+        position_tolerance: metres, for "reached" (without arrived).
+        heading_tolerance: radians, for "reached" (without arrived).
+        arrived: per row, whether the run had arrived by then (the controller's verdict,
+            or `arrivals`); None: the pose within the tolerances (reached_mask). The run has
+            reached the target if its last row has arrived; time_to_target and path_length
+            run to the row from which it stays arrived.
 
     Raises:
         ValueError: robot_radius is neither 0 nor the footprint's covering radius (as in
             `World`, where robot_radius is derived from a footprint): which one counts
             would be a guess.
+            Or arrived is not one flag per row.
 
     """
     if footprint is not None and robot_radius not in (0.0, footprint.radius):
@@ -191,10 +226,16 @@ def compute_metrics(
     final = rows[-1]
     final_pos_err = float(math.hypot(final[COL['x']] - goal[0], final[COL['y']] - goal[1]))
     final_head_err = float(abs(wrap_angle(final[COL['theta']] - goal[2])))
-    reached_rows = reached_mask(rows, goal, position_tolerance=position_tolerance,
-                                heading_tolerance=heading_tolerance)
-    reached = bool(reached_rows[-1])
-    first = int(np.argmax(reached_rows)) if reached_rows.any() else None
+    if arrived is None:
+        reached_rows = reached_mask(rows, goal, position_tolerance=position_tolerance,
+                                    heading_tolerance=heading_tolerance)
+    else:
+        reached_rows = np.asarray(arrived, dtype=bool).reshape(-1)
+        if len(reached_rows) != len(rows):
+            msg = f'arrived has {len(reached_rows)} entries for {len(rows)} rows'
+            raise ValueError(msg)
+    first = _arrival_row(reached_rows)
+    reached = first is not None
     time_to_target = float(rows[first, COL['t']] - rows[0, COL['t']]) if first is not None \
         else None
     end = (first + 1) if first is not None else len(rows)
@@ -231,6 +272,6 @@ def compute_metrics(
             by_case.get(LyapunovCase.COVERED.value, {}).get('violations', 0)
             if by_case is not None else None),
         'solver_failures': int(solver_failures),
-        'position_tolerance': position_tolerance,
-        'heading_tolerance': heading_tolerance,
+        'position_tolerance': position_tolerance if arrived is None else None,
+        'heading_tolerance': heading_tolerance if arrived is None else None,
     }

@@ -22,13 +22,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mpc_local_planner.core.config import MpcConfig, SolverSettings
+from mpc_local_planner.core.control_output import Reason
+from mpc_local_planner.core.controller import MpcController
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.mpc import LyapunovCase
 from mpc_local_planner.core.obstacles import ConvexPolygon
-from mpc_local_planner.evaluation.metrics import compute_metrics, footprint_clearance
+from mpc_local_planner.core.paths import analytic_path
+from mpc_local_planner.evaluation.metrics import arrivals, compute_metrics, footprint_clearance
 from mpc_local_planner.evaluation.rollout import circle_clearance, polygon_clearance
 from mpc_local_planner.evaluation.trajectory import trajectory_row
-from mpc_local_planner.worlds.world import Circle, load_world
+from mpc_local_planner.worlds.world import Circle, load_world, paper_world
 
 ROOT = Path(__file__).resolve().parents[2]
 NARROW_GAP = ROOT / 'config' / 'worlds' / 'narrow_gap.yaml'
@@ -164,3 +169,32 @@ def test_v_n_checks_are_counted_apart_where_the_proof_covers_them() -> None:
                             lyapunov_ok=[None, True, False, True, False, None])
     assert plain['lyapunov_violations'] == 2
     assert plain['lyapunov_by_case'] is None and plain['lyapunov_covered_violations'] is None
+
+
+def test_arrivals_over_rows_are_the_controllers_verdicts_step_by_step() -> None:
+    # the paper's goal; the position met at 0.08 m (off the heading: the robot turns in
+    # place), then 0.12 m out by noise but on the heading: arrived all the same, as Nav2's
+    # stateful SimpleGoalChecker says; once arrived, it stays so
+    world = paper_world()
+    goal = np.asarray(world.goal, dtype=float)
+    back = np.array([-math.cos(goal[2]), -math.sin(goal[2])])
+    poses = np.array([[*(goal[:2] + 1.0 * back), goal[2]],
+                      [*(goal[:2] + 0.08 * back), goal[2] + 0.5],
+                      [*(goal[:2] + 0.12 * back), goal[2] + 0.05],
+                      [*(goal[:2] + 1.0 * back), goal[2]]])
+    controller = MpcController(config=MpcConfig(solving=SolverSettings(budget='iterations')),
+                               obstacles=world.obstacles)
+    controller.set_path(analytic_path(world.path))
+    verdicts = [controller.compute(pose, 0.2 * k).reason is Reason.GOAL_REACHED
+                for k, pose in enumerate(poses)]
+    assert verdicts == [False, False, True, True]
+    settings = ControllerSettings()
+    assert arrivals(rows_along(poses), goal, settings).tolist() == verdicts
+    metrics = compute_metrics(rows_along(poses), goal=goal, obstacles=[],
+                              arrived=arrivals(rows_along(poses), goal, settings))
+    assert metrics['reached'] and metrics['time_to_target'] == pytest.approx(0.2)
+    assert metrics['position_tolerance'] is None  # the verdicts were given, not tolerances
+    # each row judged afresh, the last pose would not count: 1 m out
+    assert not compute_metrics(rows_along(poses), goal=goal, obstacles=[])['reached']
+    with pytest.raises(ValueError, match='arrived has 3 entries for 4 rows'):
+        compute_metrics(rows_along(poses), goal=goal, obstacles=[], arrived=[True] * 3)
