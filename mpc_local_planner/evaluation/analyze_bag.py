@@ -83,6 +83,8 @@ class BagRun(NamedTuple):
         counts: messages per topic.
         arrived: per row, the controller's verdict (its goal_reached); None when the rows
             come from odometry (no verdict recorded).
+        odometry_speed: (m, 2) the odometry's times (the rows' clock) and forward speeds
+            (its twist: what the wheels measure), one per message; (0, 2) without /odom.
 
     """
 
@@ -95,6 +97,7 @@ class BagRun(NamedTuple):
     goal_reached: bool
     counts: dict[str, int]
     arrived: list[bool] | None = None
+    odometry_speed: np.ndarray = np.zeros((0, 2))
 
 
 def _yaw(q: Any) -> float:
@@ -187,11 +190,13 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
         msg = f'{bag}: no {diagnostics_topic} with states and no {odom_topic}: nothing to analyse'
         raise ValueError(msg)
     array = np.array(rows, dtype=float).reshape(-1, 9)
+    speed = np.array([(t, v) for t, _, _, _, v, _ in odom], dtype=float).reshape(-1, 2)
     if len(array):
+        speed[:, 0] -= array[0, 0]
         array[:, 0] -= array[0, 0]
     return BagRun(rows=array, plan=plan, predictions=predictions, lyapunov_ok=lyapunov,
                   lyapunov_cases=cases, solver_failures=failures, goal_reached=goal_reached,
-                  counts=counts, arrived=arrived)
+                  counts=counts, arrived=arrived, odometry_speed=speed)
 
 
 def recorded_world(bag: str | Path) -> World | None:
@@ -250,6 +255,11 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
     (ControllerSettings.goal_check) with the node's default tolerances. closed_loop reports
     exactly this: one definition, whichever tool reads the bag (metrics.json's arrival).
 
+    The path length is the distance the odometry's speed (its twist) integrates to, up to
+    the arrival, when the bag has odometry that reports one: the poses of a localized robot
+    jump at every localizer correction, and odometry's own poses carry its noise, so the
+    polyline through them measures the noise as much as the motion.
+
     Returns:
         The metrics (also written to metrics.json).
 
@@ -298,7 +308,8 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
         run.rows, goal=goal, obstacles=list(world.physical_shapes()),
         footprint=robot, reference_length=reference_length,
         solver_failures=run.solver_failures, lyapunov_ok=run.lyapunov_ok,
-        lyapunov_cases=run.lyapunov_cases, arrived=arrived)
+        lyapunov_cases=run.lyapunov_cases, arrived=arrived,
+        odometry_speed=run.odometry_speed if np.any(run.odometry_speed[:, 1]) else None)
     metrics['arrival'] = arrival
     metrics['controller_goal_reached'] = run.goal_reached
     metrics['messages'] = run.counts

@@ -40,7 +40,7 @@ from mpc_local_planner.perception.laser import footprint_distances, TrueGeometry
 from mpc_local_planner.worlds.world import Circle, Shape
 
 __all__ = ['PoseClearance', 'arrivals', 'compute_metrics', 'footprint_clearance',
-           'reached_mask']
+           'reached_mask', 'travelled']
 
 #: poses (n, 3) [x, y, theta] -> clearance (n,) in metres; <= 0 is contact.
 PoseClearance = Callable[[np.ndarray], np.ndarray]
@@ -152,6 +152,23 @@ def arrivals(rows: np.ndarray, goal: np.ndarray, settings: ControllerSettings) -
     return arrived
 
 
+def travelled(speed: np.ndarray, start: float, end: float) -> float:
+    """Return the distance (m) that speeds held from their times cover from start to end.
+
+    Args:
+        speed: (m, 2) times (s, increasing) and forward speeds (m/s); each holds until the
+            next time, the last one until then only.
+        start: from this time.
+        end: to this time.
+
+    """
+    speed = np.asarray(speed, dtype=float).reshape(-1, 2)
+    t, v = speed[:, 0], np.abs(speed[:, 1])
+    lo = np.clip(t[:-1], start, end)
+    hi = np.clip(t[1:], start, end)
+    return float(np.sum(v[:-1] * (hi - lo)))
+
+
 def _arrival_row(arrived: np.ndarray) -> int | None:
     """Return the row from which the run stays arrived to its end (None: not arrived then)."""
     if not len(arrived) or not arrived[-1]:
@@ -182,6 +199,7 @@ def compute_metrics(
     position_tolerance: float = 0.05,
     heading_tolerance: float = 0.1,
     arrived: Sequence[bool] | np.ndarray | None = None,
+    odometry_speed: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """Return the run's metrics (arrival, errors, length, clearance, V_N, timing) as a dict.
 
@@ -205,6 +223,10 @@ def compute_metrics(
             or `arrivals`); None: the pose within the tolerances (reached_mask). The run has
             reached the target if its last row has arrived; time_to_target and path_length
             run to the row from which it stays arrived.
+        odometry_speed: (m, 2) times (the rows' clock) and forward speeds the base measured
+            (odometry's twist), each held until the next; given, path_length is their
+            integral over the rows' time (to the arrival), not the polyline through the rows'
+            positions, whose noise it would count (path_length_source says which).
 
     Raises:
         ValueError: robot_radius is neither 0 nor the footprint's covering radius (as in
@@ -239,7 +261,13 @@ def compute_metrics(
     time_to_target = float(rows[first, COL['t']] - rows[0, COL['t']]) if first is not None \
         else None
     end = (first + 1) if first is not None else len(rows)
-    path_length = float(np.sum(np.linalg.norm(np.diff(xy[:end], axis=0), axis=1)))
+    if odometry_speed is not None and len(odometry_speed) > 1:
+        path_length = travelled(odometry_speed, float(rows[0, COL['t']]),
+                                float(rows[end - 1, COL['t']]))
+        path_length_source = 'odometry speed'
+    else:
+        path_length = float(np.sum(np.linalg.norm(np.diff(xy[:end], axis=0), axis=1)))
+        path_length_source = 'positions'
     if obstacles:
         poses = rows[:, [COL['x'], COL['y'], COL['theta']]]
         min_clearance = float(np.min(footprint_clearance(obstacles, robot)(poses)))
@@ -259,6 +287,7 @@ def compute_metrics(
         'final_heading_error': final_head_err,
         'time_to_target': time_to_target,
         'path_length': path_length,
+        'path_length_source': path_length_source,
         'reference_length': reference_length,
         'min_clearance': min_clearance if math.isfinite(min_clearance) else None,
         'solve_ms_median': median,

@@ -258,3 +258,23 @@ def test_an_odometry_only_bag_is_judged_by_the_controllers_rule_and_defaults(
     metrics = analyze(bag, tmp_path / 'out')
     assert metrics['reached'] is True and metrics['time_to_target'] == pytest.approx(0.9)
     assert 'xy_goal_tolerance 0.1 m' in metrics['arrival']
+
+
+def test_the_path_length_is_the_odometrys_distance_not_the_noise_of_the_poses(
+        tmp_path: Path) -> None:
+    # 20 Hz control steps at 0.5 m/s for 1.8 s toward the goal; the controller's poses (a
+    # localizer's, corrected every few steps) jump by a centimetre or so, while the
+    # odometry's twist says what the wheels drove
+    rng = np.random.default_rng(1)
+    records = [record._replace(x=3.01 + 0.025 * i + float(rng.normal(0.0, 0.01)),
+                               y=3.0 + float(rng.normal(0.0, 0.01)), theta=0.0,
+                               state_time=0.05 * i)
+               for i, record in enumerate(steps(37, arrive=True))]
+    odometry = [(0.02 * k, 3.01 + 0.01 * k, 3.0, 0.0, 0.5) for k in range(91)]
+    bag = tmp_path / 'bag'
+    write_bag(bag, records, world_file=RRT_WORLD, odometry=odometry)
+    metrics = analyze(bag, tmp_path / 'out')
+    assert metrics['path_length'] == pytest.approx(0.9)
+    assert metrics['path_length_source'] == 'odometry speed'
+    rows = read_run(bag).rows
+    assert np.sum(np.hypot(*np.diff(rows[:, 1:3], axis=0).T)) > 1.0  # what it had counted
