@@ -91,18 +91,21 @@ def test_on_the_models_own_steps_every_check_is_covered_and_v_n_falls() -> None:
 
 
 def test_the_classification_is_no_knife_edge_around_a_step() -> None:
-    # the same step, its state perturbed: far below the tolerance it stays covered (and V_N
-    # falls), far above it is off the prediction, for every one of 20 seeded perturbations
+    # the same step, its state perturbed (20 seeded perturbations at each scale): below the
+    # tolerance covered, above it off the prediction; and V_N falls on both sides of it, so
+    # whether a violation counts as a defect does not hang on the side a step falls
     rng = np.random.default_rng(0)
     start = drive(paper_mpc(), np.asarray(WORLD.start, dtype=float), 12)
     for scale, expected in ((1e-9, LyapunovCase.COVERED),
+                            (0.3 * STATE_TOLERANCE, LyapunovCase.COVERED),
+                            (3 * STATE_TOLERANCE, LyapunovCase.STATE_OFF_PREDICTION),
                             (1e-4, LyapunovCase.STATE_OFF_PREDICTION)):
         for _ in range(20):
             mpc = paper_mpc()
             x = drive(mpc, start, 1)
             solution = mpc.solve(x + scale * rng.choice([-1.0, 1.0], size=3))
             assert solution.lyapunov_case is expected
-            if expected is LyapunovCase.COVERED:
+            if scale < 1e-4:
                 assert solution.lyapunov_ok
 
 
