@@ -608,13 +608,12 @@ class MpcController:
         The position is met within xy_goal_tolerance of the plan's last position, and the
         robot has arrived when, the position met, its heading is within yaw_goal_tolerance.
         With settings.stateful both are kept for the plan (see ControllerSettings): the
-        only place where arrival is decided.
+        only place where arrival is decided (by ControllerSettings.goal_check's rule).
         """
         position, heading = self.goal_error(state)
         settings = self.settings
-        position_met = position <= settings.xy_goal_tolerance or (
-            settings.stateful and self._xy_reached)
-        arrived = position_met and heading <= settings.yaw_goal_tolerance
+        position_met, arrived = settings.goal_check(position, heading,
+                                                    position_met=self._xy_reached)
         if settings.stateful:
             self._xy_reached, self._arrived = position_met, arrived
         return position_met, arrived

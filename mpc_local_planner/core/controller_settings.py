@@ -109,3 +109,19 @@ class ControllerSettings:
         if self.max_plan_poses < 2:
             msg = f'max_plan_poses must be >= 2, got {self.max_plan_poses}'
             raise ValueError(msg)
+
+    def goal_check(self, position_error: float, heading_error: float, *,
+                   position_met: bool = False) -> tuple[bool, bool]:
+        """Return (position met, arrived): THE definition of arrival, Nav2's SimpleGoalChecker.
+
+        The controller decides with it at every step, and analyze_bag judges a recording
+        without the controller's verdict with it: one rule, so that they cannot disagree.
+
+        Args:
+            position_error: distance to the plan's last position (m).
+            heading_error: |wrapped heading error| to the plan's last heading (rad).
+            position_met: the position was met before on this plan (kept when stateful).
+
+        """
+        met = position_error <= self.xy_goal_tolerance or (self.stateful and position_met)
+        return met, met and heading_error <= self.yaw_goal_tolerance

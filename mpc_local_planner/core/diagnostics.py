@@ -33,7 +33,7 @@ from typing import Any, Iterable, Mapping, NamedTuple
 import numpy as np
 
 from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reason
-from mpc_local_planner.core.mpc import PlanSource
+from mpc_local_planner.core.mpc import LyapunovCase, PlanSource
 
 __all__ = [
     'BagKey',
@@ -73,6 +73,8 @@ class Key(Enum):
     FAILURES_TOTAL = 'failures_total'
     TIMEOUTS_TOTAL = 'timeouts_total'  # steps whose solving ran out of its time budget
     LYAPUNOV_OK = 'lyapunov_ok'  # V_N decreased as the theorem says ('' = not checked)
+    # whether the theorem covers that check: 'covered', or what changed (a LyapunovCase)
+    LYAPUNOV_CASE = 'lyapunov_case'
     ITERATIONS = 'iterations'
     REASON = 'reason'  # a Reason's value
     DETAIL = 'detail'  # free text about the reason
@@ -146,6 +148,7 @@ class ControllerDiagnostics(NamedTuple):
     failures_total: int = 0
     timeouts_total: int = 0
     lyapunov_ok: bool | None = None
+    lyapunov_case: LyapunovCase | None = None
     iterations: int = 0
     reason: Reason | None = None
     detail: str = ''
@@ -190,6 +193,7 @@ class ControllerDiagnostics(NamedTuple):
             failures_total=int(failures_total),
             timeouts_total=int(timeouts_total),
             lyapunov_ok=None if sol is None or sol.lyapunov_ok is None else bool(sol.lyapunov_ok),
+            lyapunov_case=sol.lyapunov_case if sol is not None else None,
             iterations=int(sol.iterations) if sol else 0,
             reason=output.reason,
             detail=output.detail,
@@ -309,6 +313,11 @@ def _parse(text: str, default: Any, name: str) -> Any:
             return default
     if name == 'lyapunov_ok':
         return None if text == '' else text == 'true'
+    if name == 'lyapunov_case':
+        try:
+            return LyapunovCase(text)
+        except ValueError:
+            return None
     if isinstance(default, bool):
         return text == 'true'
     try:

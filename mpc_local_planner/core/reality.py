@@ -436,8 +436,8 @@ def true_goal_tolerance(arrival_tolerance: float) -> float:
     ONE definition for closed_loop and the suites. A localized robot (odometry corrected by
     a localizer) declares arrival when its ESTIMATE is within arrival_tolerance of the goal;
     the estimate may be off by POSE_ERROR, so the truth is held to arrival_tolerance +
-    POSE_ERROR. closed_loop judges its runs so (the controller's xy_goal_tolerance, 0.1 m on
-    a real robot, and 0.05 m with --drift alone); the suites judge the truth against the
+    POSE_ERROR. closed_loop judges its runs so (the controller's xy_goal_tolerance, the node's
+    0.1 m in a localized run, --drift or a real base); the suites judge the truth against the
     task's tolerance (the unknown suite's 0.1 m) and so give their controllers an arrival
     tolerance no larger than the task's minus POSE_ERROR: true_goal_tolerance(arrival) is at
     most the task's tolerance, and a run is judged as closed_loop would judge it.

@@ -25,6 +25,9 @@ parameter; closed_loop sets it), or from ``--world``, which takes precedence. A 
 records no world, analysed without ``--world``, is refused: clearance and collisions against
 a guessed world would be wrong.
 
+Arrival is the controller's (its goal_reached; for odometry rows, its rule with the node's
+defaults: see analyze), as closed_loop reports it: the two tools judge a bag alike.
+
 Clearance and collision are measured as the simulator counts contacts: the world's exact
 shapes (known and unknown obstacles, circles as circles) against the robot's TRUE footprint
 at each pose (its polygon turned with the heading, or its circle): the world's ``footprint``
@@ -50,6 +53,7 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_typestore, Stores
 import yaml
 
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.diagnostics import (
     BagKey,
     CONTROLLER_DIAGNOSTICS_TOPIC,
@@ -57,7 +61,7 @@ from mpc_local_planner.core.diagnostics import (
     Key,
 )
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
-from mpc_local_planner.core.mpc import PlanSource
+from mpc_local_planner.core.mpc import LyapunovCase, PlanSource
 from mpc_local_planner.worlds.world import load_world, World
 
 __all__ = ['BagRun', 'analyze', 'describe_footprint', 'main', 'read_run', 'recorded_world']
@@ -71,10 +75,16 @@ class BagRun(NamedTuple):
             at 0 at the first control step that solved the MPC (waiting steps are dropped).
         plan: (M, 3) the last global plan, or None.
         predictions: the local plans (each (N+1, 3)) in order.
-        lyapunov_ok: per row, the controller's V_N decrease check (None when not checked).
+        lyapunov_ok: per row, the controller's V_N decrease check (None when not checked,
+            and on the rows between two solves, which repeat the held solve's check).
+        lyapunov_cases: per row as lyapunov_ok, whether the proof covers that check.
         solver_failures: control steps whose input did not come from a converged solve.
         goal_reached: the controller reported the goal reached.
         counts: messages per topic.
+        arrived: per row, the controller's verdict (its goal_reached); None when the rows
+            come from odometry (no verdict recorded).
+        odometry_speed: (m, 2) the odometry's times (the rows' clock) and forward speeds
+            (its twist: what the wheels measure), one per message; (0, 2) without /odom.
 
     """
 
@@ -82,9 +92,12 @@ class BagRun(NamedTuple):
     plan: np.ndarray | None
     predictions: list[np.ndarray]
     lyapunov_ok: list[bool | None]
+    lyapunov_cases: list[LyapunovCase | None]
     solver_failures: int
     goal_reached: bool
     counts: dict[str, int]
+    arrived: list[bool] | None = None
+    odometry_speed: np.ndarray = np.zeros((0, 2))
 
 
 def _yaw(q: Any) -> float:
@@ -144,11 +157,14 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
                 diags.append((_stamp(msg.header), values))
 
     lyapunov: list[bool | None] = []
+    cases: list[LyapunovCase | None] = []
     failures = 0
     goal_reached = False
     rows: list[list[float]] = []
+    arrived: list[bool] | None = None
     if diags and Key.X.value in diags[0][1]:
         started = False
+        arrived = []
         for t, values in diags:
             step = ControllerDiagnostics.from_values(values)
             started = started or step.source is not None  # the first MPC step
@@ -156,10 +172,15 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
                 continue
             rows.append([t, step.x, step.y, step.theta, step.v, step.omega, step.s, step.value,
                          step.solve_ms])
-            lyapunov.append(step.lyapunov_ok)
+            # a row between two solves repeats the held solve's figures: its check is that
+            # solve's, counted once (a bag without the solved key counts every row)
+            solved = step.solved or Key.SOLVED.value not in values
+            lyapunov.append(step.lyapunov_ok if solved else None)
+            cases.append(step.lyapunov_case if solved else None)
             if step.source not in (None, PlanSource.SOLVER):
                 failures += 1
             goal_reached = goal_reached or step.goal_reached
+            arrived.append(step.goal_reached)
     elif odom:
         # a bag without our diagnostics: one row per odometry message, the command from
         # the odometry's twist (what the base executes)
@@ -169,10 +190,13 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
         msg = f'{bag}: no {diagnostics_topic} with states and no {odom_topic}: nothing to analyse'
         raise ValueError(msg)
     array = np.array(rows, dtype=float).reshape(-1, 9)
+    speed = np.array([(t, v) for t, _, _, _, v, _ in odom], dtype=float).reshape(-1, 2)
     if len(array):
+        speed[:, 0] -= array[0, 0]
         array[:, 0] -= array[0, 0]
     return BagRun(rows=array, plan=plan, predictions=predictions, lyapunov_ok=lyapunov,
-                  solver_failures=failures, goal_reached=goal_reached, counts=counts)
+                  lyapunov_cases=cases, solver_failures=failures, goal_reached=goal_reached,
+                  counts=counts, arrived=arrived, odometry_speed=speed)
 
 
 def recorded_world(bag: str | Path) -> World | None:
@@ -217,7 +241,6 @@ def describe_footprint(footprint: Footprint) -> dict[str, Any]:
 
 def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None = None,
             footprint: Footprint | None = None, title: str = '',
-            position_tolerance: float = 0.05, heading_tolerance: float = 0.1,
             extra: dict[str, Any] | None = None) -> dict[str, Any]:
     """Write trajectory.csv, metrics.json and trajectory.png of a bag into out.
 
@@ -225,6 +248,17 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
     world's exact shapes (known and unknown): world_file if given, else the world the bag
     records. Clearance is measured from footprint if given, else the world's footprint (its
     polygon, or its circle). extra is merged into the metrics.
+
+    Arrival is the controller's: a run has reached the target when its last control step
+    says goal_reached, and time_to_target is when it said so from then on. A recording
+    without the controller's diagnostics is judged by the controller's own rule
+    (ControllerSettings.goal_check) with the node's default tolerances. closed_loop reports
+    exactly this: one definition, whichever tool reads the bag (metrics.json's arrival).
+
+    The path length is the distance the odometry's speed (its twist) integrates to, up to
+    the arrival, when the bag has odometry that reports one: the poses of a localized robot
+    jump at every localizer correction, and odometry's own poses carry its noise, so the
+    polyline through them measures the noise as much as the motion.
 
     Returns:
         The metrics (also written to metrics.json).
@@ -235,7 +269,7 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
             holds nothing to analyse (no control step, no odometry).
 
     """
-    from mpc_local_planner.evaluation.metrics import compute_metrics
+    from mpc_local_planner.evaluation.metrics import arrivals, compute_metrics
     from mpc_local_planner.evaluation.plotting import plot_runs
     from mpc_local_planner.evaluation.trajectory import write_trajectory_csv
     from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -260,11 +294,23 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
         reference_length = float(np.sum(np.linalg.norm(np.diff(run.plan[:, :2], axis=0),
                                                        axis=1)))
     robot = footprint if footprint is not None else world.footprint
+    goal = np.asarray(goal, dtype=float)
+    if run.arrived is not None:
+        arrived = np.array(run.arrived, dtype=bool)
+        arrival = "the controller's goal_reached"
+    else:
+        settings = ControllerSettings()
+        arrived = arrivals(run.rows, goal, settings)
+        arrival = (f"the controller's goal check with its defaults (xy_goal_tolerance "
+                   f'{settings.xy_goal_tolerance:g} m, yaw_goal_tolerance '
+                   f'{settings.yaw_goal_tolerance:g} rad)')
     metrics = compute_metrics(
-        run.rows, goal=np.asarray(goal, dtype=float), obstacles=list(world.physical_shapes()),
+        run.rows, goal=goal, obstacles=list(world.physical_shapes()),
         footprint=robot, reference_length=reference_length,
         solver_failures=run.solver_failures, lyapunov_ok=run.lyapunov_ok,
-        position_tolerance=position_tolerance, heading_tolerance=heading_tolerance)
+        lyapunov_cases=run.lyapunov_cases, arrived=arrived,
+        odometry_speed=run.odometry_speed if np.any(run.odometry_speed[:, 1]) else None)
+    metrics['arrival'] = arrival
     metrics['controller_goal_reached'] = run.goal_reached
     metrics['messages'] = run.counts
     metrics['world_name'] = world.name
@@ -304,11 +350,31 @@ def summary(metrics: dict[str, Any]) -> str:
         f"{fmt('path_length', ' m', 2)}   min clearance: {fmt('min_clearance', ' m')}",
         f"solve time median/p95/max: {fmt('solve_ms_median', '', 1)}/"
         f"{fmt('solve_ms_p95', '', 1)}/{fmt('solve_ms_max', ' ms', 1)}   "
-        f"V_N violations: {metrics.get('lyapunov_violations')}   "
         f"solver failures: {metrics.get('solver_failures')}   steps: {metrics.get('steps')}",
+        _lyapunov_text(metrics),
         *([f'clearance measured from the footprint: {_footprint_text(metrics["footprint"])}']
           if metrics.get('footprint') else []),
     ])
+
+
+def _lyapunov_text(metrics: dict[str, Any]) -> str:
+    """Return the V_N checks as a line: those the proof covers apart from the others."""
+    by_case = metrics.get('lyapunov_by_case')
+    if not by_case:
+        return (f"V_N violations: {metrics.get('lyapunov_violations')} of "
+                f"{metrics.get('lyapunov_checks')} checks")
+    covered = by_case.get(LyapunovCase.COVERED.value, {'checks': 0, 'violations': 0})
+    text = (f"V_N violations: {covered['violations']} of {covered['checks']} checks the proof "
+            'covers')
+    others = {case: counts for case, counts in by_case.items()
+              if case != LyapunovCase.COVERED.value}
+    if others:
+        checks = sum(counts['checks'] for counts in others.values())
+        violations = sum(counts['violations'] for counts in others.values())
+        detail = ', '.join(f"{case.replace('_', ' ')} {counts['violations']}/{counts['checks']}"
+                           for case, counts in others.items())
+        text += f'; {violations} of {checks} where the problem changed ({detail})'
+    return text
 
 
 def _footprint_text(footprint: dict[str, Any]) -> str:

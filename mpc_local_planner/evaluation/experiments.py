@@ -124,7 +124,8 @@ def run_closed_loop(
     result.metrics = compute_metrics(
         run.rows, goal=goal, obstacles=obstacles, robot_radius=robot_radius,
         reference_length=reference_length, solver_failures=run.solver_failures,
-        lyapunov_ok=run.lyapunov_ok)
+        lyapunov_ok=run.lyapunov_ok,
+        lyapunov_cases=[getattr(step.detail, 'lyapunov_case', None) for step in run.steps])
     result.metrics['label'] = label
     result.metrics['outcome'] = run.outcome.value
     result.metrics['horizon'] = controller.config.horizon

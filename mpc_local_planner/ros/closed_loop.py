@@ -75,9 +75,9 @@ LOCALIZER_NOISE noise at LOCALIZER_RATE Hz on ``amcl_pose``, and the planner and
 controller compose it with odometry (``localization_topic``). Contacts are the true pose's;
 ``metrics.json`` has the run's ``drift`` and, in one process, the simulator's true final
 pose and its distance to the goal (``true_final_pose``, ``true_goal_error``), which must then
-be within reality.true_goal_tolerance of the arrival tolerance for the run to succeed
-(0.05 + POSE_ERROR = 0.1 m: what the drifted odometry, or the controller, believes is not
-enough).
+be within reality.true_goal_tolerance of the controller's arrival tolerance
+(xy_goal_tolerance + POSE_ERROR) for the run to succeed: what the drifted odometry, or the
+controller, believes is not enough.
 
 With ``--reality {ideal,mild,real,harsh}`` (default ideal) the simulator's robot and laser
 are that preset of core/reality.py (the simulator's ``reality`` parameter: command latency,
@@ -90,10 +90,16 @@ true_goal_tolerance of the controller's arrival tolerance for success (the node'
 ``metrics.json`` records the preset in ``reality`` (and its values in ``reality_values``);
 ``--param unicycle_simulator.NAME:=VALUE`` overrides single fields (``scan.seed`` seeds it).
 
-The controller arrives within PAPER_GOAL_TOLERANCES (the paper's scenario's 0.02 m and
-0.05 rad, which the reported metrics were measured with) instead of the node's defaults, which
-are for a real robot's noisy odometry: the simulated odometry is exact.
-``--param mpc_controller.xy_goal_tolerance:=0.1`` runs with a real robot's tolerance.
+When the simulated odometry is exact (``--reality ideal`` without ``--drift``) the controller
+arrives within PAPER_GOAL_TOLERANCES (the paper's scenario's 0.02 m and 0.05 rad, which the
+reported metrics were measured with) instead of the node's defaults, which are for a real
+robot's pose: ``--param mpc_controller.xy_goal_tolerance:=0.1`` runs with a real robot's
+tolerance. A localized run (``--drift``, or a non-ideal reality) keeps the node's defaults:
+its pose estimate jumps by a centimetre or so at each localizer pose, and a unicycle's plan
+that must end exactly on the goal pose answers each jump with a manoeuvre of several
+centimetres, so within 0.02 m the robot dithered for 40 s (see closed_loop_parameters).
+Whether the run reached the target is the controller's verdict (its goal_reached, read from
+the bag as analyze_bag reads it), not a tolerance of the analysis.
 """
 
 from __future__ import annotations
@@ -122,7 +128,7 @@ from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import resolve
 from mpc_local_planner.core.planner import RrtStarPlanner
 from mpc_local_planner.core.planner_config import PlannerConfig
-from mpc_local_planner.core.reality import reality_preset, REALITY_PRESETS, true_goal_tolerance
+from mpc_local_planner.core.reality import REALITY_PRESETS, true_goal_tolerance
 from mpc_local_planner.evaluation.analyze_bag import analyze, read_run, summary
 from mpc_local_planner.evaluation.plotting import plot_runs
 from mpc_local_planner.ros.bag_recorder_node import (
@@ -321,18 +327,18 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
     shape = '' if world.footprint.is_circle else ', polygon footprint'
     title = (f'{world.name}: {options.path} path, rtf {options.rtf:g}'
              + (', sensing' if options.sensing else '') + shape)
-    real = not reality_preset(options.reality).ideal
-    tolerances = (ControllerSettings().xy_goal_tolerance, ControllerSettings().yaw_goal_tolerance
-                  ) if real else (0.05, 0.1)
-    metrics = analyze(bag, out, extra=run_info, title=title,
-                      position_tolerance=tolerances[0], heading_tolerance=tolerances[1])
+    # arrival as analyze_bag judges the same bag: the controller's own verdict
+    metrics = analyze(bag, out, extra=run_info, title=title)
     if options.sensing or world.unknown_obstacles:
         _plot_sensing(bag, out / 'trajectory.png', world, monitor.sensed, title)
     success = (bool(metrics.get('reached')) and not metrics.get('collision')
                and not monitor.contacts)
     if localized(options) and truth:
-        # arrival is declared on the estimate: the truth within it plus its error
-        success = success and run_info['true_goal_error'] <= true_goal_tolerance(tolerances[0])
+        # arrival is declared on the estimate: the truth within the controller's tolerance
+        # plus the estimate's error
+        xy = float(params['mpc_controller'].get('xy_goal_tolerance',
+                                                ControllerSettings().xy_goal_tolerance))
+        success = success and run_info['true_goal_error'] <= true_goal_tolerance(xy)
     return LoopResult(metrics=metrics, stop_reason=stop_reason, wall_time=wall_time,
                       sim_time=sim_time, out=out, success=success)
 

@@ -100,17 +100,24 @@ def localized(options: LoopOptions) -> bool:
     return bool(options.drift) or not reality_preset(options.reality).ideal_base
 
 
-def _controller_for_reality(reality: str) -> dict[str, Any]:
+def _controller_for(options: LoopOptions) -> dict[str, Any]:
     """Return the controller's arrival and braking settings for the simulated robot.
 
-    The ideal robot arrives within the paper's tolerances (PAPER_GOAL_TOLERANCES: its
-    odometry is exact). A real one keeps the node's defaults, sized for noisy odometry and a
-    lagging base, and brakes within the base's deceleration limits, as a user configures a
-    real robot (docs/real_robot.md).
+    A robot whose odometry is its exact pose arrives within the paper's tolerances
+    (PAPER_GOAL_TOLERANCES). A localized one (--drift, or a real base) keeps the node's
+    defaults, sized for a pose estimate that jumps by a centimetre or so at every localizer
+    pose: within 0.02 m of such an estimate the MPC, whose plans must end exactly on the goal
+    pose, re-plans a parking manoeuvre from each jump, back and forth, and the robot dithered
+    40 s before an estimate came within 0.02 m (--drift). A real base also brakes within its
+    deceleration limits, as a user configures a real robot (docs/real_robot.md).
+
+    Raises:
+        ValueError: for an unknown --reality.
+
     """
-    if reality == 'ideal':
+    if not localized(options):
         return dict(PAPER_GOAL_TOLERANCES)
-    accel = reality_preset(reality).acceleration_limits
+    accel = reality_preset(options.reality).acceleration_limits
     return {'max_decel': [float(a) for a in accel]} if accel is not None else {}
 
 
@@ -123,8 +130,9 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
     (map_file, which map_server serves) and the scans. The robot (world.footprint: pass the
     run's world, see run_world) reaches all three as ``footprint`` and ``robot_radius``, in
     every mode; for a polygon the planner's clearance is POLYGON_CLEARANCE; the controller
-    arrives within PAPER_GOAL_TOLERANCES on an ideal robot, with the node's defaults and
-    braking on a real one (_controller_for_reality). options.extra_parameters come last.
+    arrives within PAPER_GOAL_TOLERANCES when its odometry is exact, with the node's defaults
+    (and braking on a real base) when localized (_controller_for). options.extra_parameters
+    come last.
 
     Raises:
         ValueError: if --path analytic names no path of the world, sensing lacks map_file,
@@ -147,7 +155,7 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
         },
         'mpc_controller': {
             'use_sim_time': True, 'world_file': str(world_file), 'analytic_path': analytic,
-            **_controller_for_reality(options.reality), **robot,
+            **_controller_for(options), **robot,
         },
         'unicycle_simulator': {
             'publish_clock': True, 'real_time_factor': float(options.rtf),

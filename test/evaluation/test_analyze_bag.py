@@ -16,9 +16,12 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from nav_msgs.msg import Odometry
 import numpy as np
 import pytest
 from rclpy.serialization import serialize_message
@@ -28,9 +31,15 @@ from rosbags.typesys import get_typestore, Stores
 from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.diagnostics import BagKey, ControllerDiagnostics
 from mpc_local_planner.core.footprint import JACKAL
-from mpc_local_planner.core.mpc import PlanSource
+from mpc_local_planner.core.mpc import LyapunovCase, PlanSource
 from mpc_local_planner.core.obstacles import min_clearance
-from mpc_local_planner.evaluation.analyze_bag import analyze, main, read_run, recorded_world
+from mpc_local_planner.evaluation.analyze_bag import (
+    analyze,
+    main,
+    read_run,
+    recorded_world,
+    summary,
+)
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world
 
@@ -54,8 +63,12 @@ def steps(count: int, *, arrive: bool, start: tuple[float, float] = (0.0, 1.65)
 
 
 def write_bag(bag: Path, records: list[ControllerDiagnostics], *,
-              world_file: Path | None = None) -> None:
-    """Write /mpc/diagnostics as bag_recorder would, with the world in the metadata if given."""
+              world_file: Path | None = None,
+              odometry: list[tuple[float, float, float, float, float]] = ()) -> None:
+    """Write /mpc/diagnostics as bag_recorder would, with the world in the metadata if given.
+
+    odometry: (t, x, y, theta, v) messages on /odom too.
+    """
     typestore = get_typestore(Stores.ROS2_JAZZY)
     with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         if world_file is not None:
@@ -66,11 +79,27 @@ def write_bag(bag: Path, records: list[ControllerDiagnostics], *,
                                            typestore=typestore)
         for record in records:
             msg = DiagnosticArray()
-            msg.header.stamp.sec = int(record.state_time)
-            msg.header.stamp.nanosec = int(round((record.state_time % 1) * 1e9))
+            msg.header.stamp = stamp(record.state_time)
             msg.status = [DiagnosticStatus(message=record.message, values=[
                 KeyValue(key=k, value=v) for k, v in record.to_values()])]
             writer.write(connection, int(record.state_time * 1e9), serialize_message(msg))
+        if odometry:
+            connection = writer.add_connection('/odom', 'nav_msgs/msg/Odometry',
+                                               typestore=typestore)
+        for t, x, y, theta, v in odometry:
+            odom = Odometry()
+            odom.header.stamp = stamp(t)
+            odom.pose.pose.position.x, odom.pose.pose.position.y = x, y
+            odom.pose.pose.orientation.z = math.sin(theta / 2)
+            odom.pose.pose.orientation.w = math.cos(theta / 2)
+            odom.twist.twist.linear.x = v
+            writer.write(connection, int(round(t * 1e9)), serialize_message(odom))
+
+
+def stamp(t: float) -> Time:
+    """Return t seconds as a builtin_interfaces Time."""
+    nanoseconds = int(round(t * 1e9))
+    return Time(sec=nanoseconds // 10**9, nanosec=nanoseconds % 10**9)
 
 
 def test_the_world_recorded_in_the_bag_gives_the_true_clearance(tmp_path: Path) -> None:
@@ -152,3 +181,100 @@ def test_clearance_is_the_true_footprints_and_the_metrics_say_which(tmp_path: Pa
     # a round robot's record
     round_metrics = analyze(bag, tmp_path / 'round', world_file=RRT_WORLD)
     assert round_metrics['footprint'] == {'shape': 'circle', 'radius': 0.1}
+
+
+def test_a_solves_v_n_check_counts_once_not_on_every_row_that_holds_its_plan(
+        tmp_path: Path) -> None:
+    # control_frequency 20 Hz, h = 0.2 s: one solve, then three rows that apply its plan and
+    # repeat its figures (solved false); the solve broke the decrease once
+    records = steps(8, arrive=False)
+    for i, record in enumerate(records):
+        records[i] = record._replace(solved=i % 4 == 0,
+                                     lyapunov_ok=None if i < 4 else False)
+    bag = tmp_path / 'bag'
+    write_bag(bag, records, world_file=RRT_WORLD)
+    run = read_run(bag)
+    assert run.lyapunov_ok == [None] * 4 + [False, None, None, None]
+    metrics = analyze(bag, tmp_path / 'out')
+    assert metrics['lyapunov_checks'] == 1 and metrics['lyapunov_violations'] == 1
+
+
+def test_the_summary_says_which_v_n_violations_the_proof_covers(tmp_path: Path) -> None:
+    covered, off = LyapunovCase.COVERED, LyapunovCase.STATE_OFF_PREDICTION
+    flags = [None, (True, covered), (False, off), (True, off), (True, covered)]
+    records = [record._replace(solved=True, lyapunov_ok=None if flag is None else flag[0],
+                               lyapunov_case=None if flag is None else flag[1])
+               for record, flag in zip(steps(5, arrive=True), flags, strict=True)]
+    bag = tmp_path / 'bag'
+    write_bag(bag, records, world_file=RRT_WORLD)
+    assert read_run(bag).lyapunov_cases == [None, covered, off, off, covered]
+    metrics = analyze(bag, tmp_path / 'out')
+    assert metrics['lyapunov_covered_violations'] == 0
+    assert summary(metrics).splitlines()[4] == (
+        'V_N violations: 0 of 2 checks the proof covers; 1 of 2 where the problem changed '
+        '(state off prediction 1/2)')
+
+
+def approach(count: int, *, last_off: float) -> list[ControllerDiagnostics]:
+    """Control steps toward rrt_cluttered's goal (4, 3, 0) along -x, the last last_off short.
+
+    Only the last says goal_reached: the controller's verdict at that step.
+    """
+    records = steps(count, arrive=True)
+    xs = np.linspace(4.0 - last_off - 0.1 * (count - 1), 4.0 - last_off, count)
+    return [record._replace(x=float(x), y=3.0, theta=0.0) for record, x in zip(
+        records, xs, strict=True)]
+
+
+def test_arrival_is_the_controllers_verdict_within_its_own_tolerance(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # a real robot's controller (xy_goal_tolerance 0.1 m) arrives 0.09 m from the goal: the
+    # bag says reached, when it says so, whatever a fixed tolerance of the analysis would say
+    bag = tmp_path / 'bag'
+    write_bag(bag, approach(10, last_off=0.09), world_file=RRT_WORLD)
+    assert main([str(bag), '--out', str(tmp_path / 'out')]) == 0
+    metrics = json.loads((tmp_path / 'out' / 'metrics.json').read_text())
+    assert metrics['reached'] is True and metrics['time_to_target'] == pytest.approx(1.8)
+    assert metrics['final_position_error'] == pytest.approx(0.09)
+    assert metrics['arrival'] == "the controller's goal_reached"
+    assert 'reached: True' in capsys.readouterr().out
+    # the controller not (yet) arrived at 0.01 m: not reached
+    unfinished = tmp_path / 'unfinished'
+    records = approach(10, last_off=0.01)
+    records[-1] = steps(10, arrive=False)[-1]._replace(x=3.99, y=3.0)
+    write_bag(unfinished, records, world_file=RRT_WORLD)
+    metrics = analyze(unfinished, tmp_path / 'unfinished_out')
+    assert metrics['reached'] is False and metrics['time_to_target'] is None
+
+
+def test_an_odometry_only_bag_is_judged_by_the_controllers_rule_and_defaults(
+        tmp_path: Path) -> None:
+    # no diagnostics (ros2 bag record of /odom alone): the controller's goal check with the
+    # node's defaults (0.1 m, 0.15 rad), stateful as the node runs it
+    bag = tmp_path / 'bag'
+    odometry = [(0.1 * k, 3.0 + 0.1 * k, 3.0, 0.0, 1.0) for k in range(10)]  # to 3.9 m
+    odometry[-1] = (0.9, 3.91, 3.0, 0.0, 0.0)  # 0.09 m short, stopped
+    write_bag(bag, [], world_file=RRT_WORLD, odometry=odometry)
+    metrics = analyze(bag, tmp_path / 'out')
+    assert metrics['reached'] is True and metrics['time_to_target'] == pytest.approx(0.9)
+    assert 'xy_goal_tolerance 0.1 m' in metrics['arrival']
+
+
+def test_the_path_length_is_the_odometrys_distance_not_the_noise_of_the_poses(
+        tmp_path: Path) -> None:
+    # 20 Hz control steps at 0.5 m/s for 1.8 s toward the goal; the controller's poses (a
+    # localizer's, corrected every few steps) jump by a centimetre or so, while the
+    # odometry's twist says what the wheels drove
+    rng = np.random.default_rng(1)
+    records = [record._replace(x=3.01 + 0.025 * i + float(rng.normal(0.0, 0.01)),
+                               y=3.0 + float(rng.normal(0.0, 0.01)), theta=0.0,
+                               state_time=0.05 * i)
+               for i, record in enumerate(steps(37, arrive=True))]
+    odometry = [(0.02 * k, 3.01 + 0.01 * k, 3.0, 0.0, 0.5) for k in range(91)]
+    bag = tmp_path / 'bag'
+    write_bag(bag, records, world_file=RRT_WORLD, odometry=odometry)
+    metrics = analyze(bag, tmp_path / 'out')
+    assert metrics['path_length'] == pytest.approx(0.9)
+    assert metrics['path_length_source'] == 'odometry speed'
+    rows = read_run(bag).rows
+    assert np.sum(np.hypot(*np.diff(rows[:, 1:3], axis=0).T)) > 1.0  # what it had counted

@@ -22,12 +22,23 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mpc_local_planner.core.config import MpcConfig, SolverSettings
+from mpc_local_planner.core.control_output import Reason
+from mpc_local_planner.core.controller import MpcController
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.footprint import Footprint, JACKAL
+from mpc_local_planner.core.mpc import LyapunovCase
 from mpc_local_planner.core.obstacles import ConvexPolygon
-from mpc_local_planner.evaluation.metrics import compute_metrics, footprint_clearance
+from mpc_local_planner.core.paths import analytic_path
+from mpc_local_planner.evaluation.metrics import (
+    arrivals,
+    compute_metrics,
+    footprint_clearance,
+    travelled,
+)
 from mpc_local_planner.evaluation.rollout import circle_clearance, polygon_clearance
 from mpc_local_planner.evaluation.trajectory import trajectory_row
-from mpc_local_planner.worlds.world import Circle, load_world
+from mpc_local_planner.worlds.world import Circle, load_world, paper_world
 
 ROOT = Path(__file__).resolve().parents[2]
 NARROW_GAP = ROOT / 'config' / 'worlds' / 'narrow_gap.yaml'
@@ -144,3 +155,80 @@ def test_compute_metrics_refuses_a_robot_radius_that_contradicts_the_footprint()
     with pytest.raises(ValueError, match='robot_radius 0.2 contradicts the footprint'):
         compute_metrics(rows, goal=np.zeros(3), obstacles=box, robot_radius=0.2,
                         footprint=JACKAL)
+
+
+def test_v_n_checks_are_counted_apart_where_the_proof_covers_them() -> None:
+    rows = rows_along(np.array([[0.1 * k, 0.0, 0.0] for k in range(6)]))
+    covered, off = LyapunovCase.COVERED, LyapunovCase.STATE_OFF_PREDICTION
+    metrics = compute_metrics(
+        rows, goal=np.array([0.5, 0.0, 0.0]), obstacles=[],
+        lyapunov_ok=[None, True, False, True, False, None],
+        lyapunov_cases=[None, covered, off, covered, covered, None])
+    assert metrics['lyapunov_checks'] == 4 and metrics['lyapunov_violations'] == 2
+    assert metrics['lyapunov_by_case'] == {'covered': {'checks': 3, 'violations': 1},
+                                           'state_off_prediction': {'checks': 1,
+                                                                    'violations': 1}}
+    assert metrics['lyapunov_covered_violations'] == 1
+    # without cases (the suites' rollouts): the totals only
+    plain = compute_metrics(rows, goal=np.array([0.5, 0.0, 0.0]), obstacles=[],
+                            lyapunov_ok=[None, True, False, True, False, None])
+    assert plain['lyapunov_violations'] == 2
+    assert plain['lyapunov_by_case'] is None and plain['lyapunov_covered_violations'] is None
+
+
+def test_arrivals_over_rows_are_the_controllers_verdicts_step_by_step() -> None:
+    # the paper's goal; the position met at 0.08 m (off the heading: the robot turns in
+    # place), then 0.12 m out by noise but on the heading: arrived all the same, as Nav2's
+    # stateful SimpleGoalChecker says; once arrived, it stays so
+    world = paper_world()
+    goal = np.asarray(world.goal, dtype=float)
+    back = np.array([-math.cos(goal[2]), -math.sin(goal[2])])
+    poses = np.array([[*(goal[:2] + 1.0 * back), goal[2]],
+                      [*(goal[:2] + 0.08 * back), goal[2] + 0.5],
+                      [*(goal[:2] + 0.12 * back), goal[2] + 0.05],
+                      [*(goal[:2] + 1.0 * back), goal[2]]])
+    controller = MpcController(config=MpcConfig(solving=SolverSettings(budget='iterations')),
+                               obstacles=world.obstacles)
+    controller.set_path(analytic_path(world.path))
+    verdicts = [controller.compute(pose, 0.2 * k).reason is Reason.GOAL_REACHED
+                for k, pose in enumerate(poses)]
+    assert verdicts == [False, False, True, True]
+    settings = ControllerSettings()
+    assert arrivals(rows_along(poses), goal, settings).tolist() == verdicts
+    metrics = compute_metrics(rows_along(poses), goal=goal, obstacles=[],
+                              arrived=arrivals(rows_along(poses), goal, settings))
+    assert metrics['reached'] and metrics['time_to_target'] == pytest.approx(0.2)
+    assert metrics['position_tolerance'] is None  # the verdicts were given, not tolerances
+    # each row judged afresh, the last pose would not count: 1 m out
+    assert not compute_metrics(rows_along(poses), goal=goal, obstacles=[])['reached']
+    with pytest.raises(ValueError, match='arrived has 3 entries for 4 rows'):
+        compute_metrics(rows_along(poses), goal=goal, obstacles=[], arrived=[True] * 3)
+
+
+def test_with_the_odometrys_speed_the_path_length_counts_motion_not_pose_noise() -> None:
+    # 2 m at 0.5 m/s along x, measured at 20 Hz with 1 cm of noise on every pose (a
+    # localizer's corrections): the polyline through the poses is a sixth longer
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 4.0 + 1e-9, 0.05)
+    poses = np.column_stack([0.5 * t, np.zeros_like(t), np.zeros_like(t)])
+    rows = np.array([trajectory_row(ti, pose + rng.normal(0.0, 0.01, 3) * [1, 1, 0])
+                     for ti, pose in zip(t, poses, strict=True)])
+    goal = np.array([5.0, 0.0, 0.0])  # not reached: the whole run counts
+    noisy = compute_metrics(rows, goal=goal, obstacles=[])
+    assert noisy['path_length'] > 2.3 and noisy['path_length_source'] == 'positions'
+    odometry = np.column_stack([t, np.full_like(t, 0.5)])  # the wheels' speed, 50 Hz would do
+    metrics = compute_metrics(rows, goal=goal, obstacles=[], odometry_speed=odometry)
+    assert metrics['path_length'] == pytest.approx(2.0)
+    assert metrics['path_length_source'] == 'odometry speed'
+    # up to the arrival only: arrived from 2 s on, 1 m
+    arrived = t >= 2.0 - 1e-9
+    assert compute_metrics(rows, goal=goal, obstacles=[], odometry_speed=odometry,
+                           arrived=arrived)['path_length'] == pytest.approx(1.0)
+
+
+def test_travelled_holds_each_speed_until_the_next_and_clips_to_the_span() -> None:
+    speed = np.array([[0.0, 1.0], [1.0, -2.0], [2.0, 0.0], [3.0, 5.0]])
+    assert travelled(speed, 0.0, 3.0) == pytest.approx(3.0)  # reversing counts
+    assert travelled(speed, 0.5, 1.5) == pytest.approx(0.5 + 1.0)
+    assert travelled(speed, -1.0, 10.0) == pytest.approx(3.0)  # nothing past the last
+    assert travelled(speed[:1], 0.0, 1.0) == 0.0

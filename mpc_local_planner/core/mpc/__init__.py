@@ -27,7 +27,7 @@ of its NLP solves (which start with which solver, in which order), decision.py i
 """
 
 from mpc_local_planner.core.mpc.compilation import compile_cache_dir
-from mpc_local_planner.core.mpc.decision import decide, Decision, PlanSource
+from mpc_local_planner.core.mpc.decision import decide, Decision, LyapunovCase, PlanSource
 from mpc_local_planner.core.mpc.path_mpc import PathReferenceMPC
 from mpc_local_planner.core.mpc.solution import MpcSolution
 from mpc_local_planner.core.mpc.step import MpcBase
@@ -35,6 +35,7 @@ from mpc_local_planner.core.mpc.tries import Situation, Solver, solver_tries, St
 
 __all__ = [
     'Decision',
+    'LyapunovCase',
     'MpcBase',
     'MpcSolution',
     'PathReferenceMPC',

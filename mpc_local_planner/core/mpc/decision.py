@@ -17,6 +17,11 @@
 The proof's argument (Theorem 1 of the paper) holds if the applied plan is never costlier than
 the shifted candidate of the previous one: decide() takes the solver's verified solution only
 then, else the candidate, and stops the robot when neither is verified.
+
+The argument covers a step only if the problem is the one the last plan was solved for: the
+same obstacles and settings (a new path starts the record over), and the robot where that
+plan's first input took it. LyapunovRecord says which steps it covers (LyapunovCase): a V_N
+increase on such a step is a defect; on the others the decrease is not promised.
 """
 
 from __future__ import annotations
@@ -24,10 +29,23 @@ from __future__ import annotations
 from enum import Enum
 import math
 
-__all__ = ['Decision', 'LYAPUNOV_TOLERANCE', 'LyapunovRecord', 'PlanSource', 'decide']
+import numpy as np
+
+__all__ = ['Decision', 'LYAPUNOV_TOLERANCE', 'LyapunovCase', 'LyapunovRecord', 'PlanSource',
+           'STATE_TOLERANCE', 'decide']
 
 # Slack on the closed-loop decrease check, relative to V_N plus an absolute floor.
 LYAPUNOV_TOLERANCE = 1e-6
+# How far (m, rad: the largest component) the measured state may be from the state the
+# applied plan's first input leads to (the model's own step from the state it was solved
+# for) for the proof to cover the step. Arithmetic alone leaves the two within 1e-15 to
+# 1e-10 (the ideal simulator integrates the same model); anything physical moves the state
+# further (localizer or odometry noise by centimetres, a command taking effect a 0.02 s tick
+# late by its change times 0.02 s: 2e-6 to 1e-2 in closed_loop's ideal run). An offset below
+# it keeps the shifted candidate within FEASIBILITY_TOLERANCE (1e-5) of its terminal
+# equality, so the proof's decrease must hold there; and the decrease does not hang on the
+# side of it a step falls (on the paper's route it held at states moved by up to 1e-5).
+STATE_TOLERANCE = 1e-6
 
 
 class PlanSource(str, Enum):
@@ -106,16 +124,58 @@ def decide(*, solver_verified: bool, solver_value: float, candidate_ok: bool,
     return Decision.STOP
 
 
+class LyapunovCase(str, Enum):
+    """Whether Theorem 1 covers a step's V_N check, and if not, what changed since the last.
+
+    A str, so diagnostics and metrics read the value. The first that applies, in this order.
+    """
+
+    SETTINGS_CHANGED = 'settings_changed'  # the MPC's settings (weights, bounds...) changed
+    OBSTACLES_CHANGED = 'obstacles_changed'  # other obstacles (new scans, a new map)
+    STATE_OFF_PREDICTION = 'state_off_prediction'  # the state is off by > STATE_TOLERANCE
+    COVERED = 'covered'  # the same problem, the state where the plan took it: V_N must fall
+
+    def __str__(self) -> str:
+        return self.value
+
+
 class LyapunovRecord:
     """The last applied plan's value V_N and first stage cost: what the next value must keep.
 
     The proof's decrease (the paper's Theorem 1): V_N(k+1) <= V_N(k) - l(x_0, u_0), checked
     within LYAPUNOV_TOLERANCE relative to the bound. A reset of the MPC starts a new record.
+    The record also keeps what the proof assumes of the next step (the state the plan's first
+    input leads to, and the problem it was solved for: the versions of the obstacles and
+    settings), so that case() says whether the proof covers it.
     """
 
     def __init__(self) -> None:
         self.value: float | None = None
         self.stage = 0.0
+        self.predicted: np.ndarray | None = None
+        self.problem: tuple[int, int] = (0, 0)
+
+    def case(self, state: np.ndarray, problem: tuple[int, int], angle_index: int
+             ) -> LyapunovCase | None:
+        """Say whether the proof covers a step from state (None: no plan applied before).
+
+        Args:
+            state: the measured state, its heading unwrapped near the prediction's.
+            problem: the versions (obstacles, settings) of the problem the step solves.
+            angle_index: the heading's index in the state (compared modulo 2 pi).
+
+        """
+        if self.value is None or self.predicted is None:
+            return None
+        if problem[1] != self.problem[1]:
+            return LyapunovCase.SETTINGS_CHANGED
+        if problem[0] != self.problem[0]:
+            return LyapunovCase.OBSTACLES_CHANGED
+        off = np.abs(np.asarray(state, dtype=float) - self.predicted)
+        off[angle_index] = abs(math.remainder(float(off[angle_index]), 2.0 * math.pi))
+        if not float(np.max(off)) <= STATE_TOLERANCE:  # NaN counts as off
+            return LyapunovCase.STATE_OFF_PREDICTION
+        return LyapunovCase.COVERED
 
     def check(self, value: float) -> bool | None:
         """Say whether value keeps the decrease (None: no plan applied before)."""
@@ -124,6 +184,17 @@ class LyapunovRecord:
         bound = self.value - self.stage
         return value <= bound + LYAPUNOV_TOLERANCE * (1 + abs(bound))
 
-    def keep(self, value: float, stage: float) -> None:
-        """Record the plan applied now: its value and its first stage cost."""
+    def keep(self, value: float, stage: float, *, predicted: np.ndarray | None = None,
+             problem: tuple[int, int] = (0, 0)) -> None:
+        """Record the plan applied now: its value, its first stage cost, what it assumes.
+
+        Args:
+            value: its cost V_N.
+            stage: its first stage cost l(x_0, u_0).
+            predicted: the state its first input leads to (None: no step is covered).
+            problem: the versions (obstacles, settings) of the problem it was solved for.
+
+        """
         self.value, self.stage = float(value), float(stage)
+        self.predicted = None if predicted is None else np.array(predicted, dtype=float)
+        self.problem = problem

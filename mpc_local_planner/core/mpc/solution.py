@@ -27,7 +27,7 @@ import numpy as np
 from mpc_local_planner.core.models import held_input
 from mpc_local_planner.core.mpc.backends import Nlp
 from mpc_local_planner.core.mpc.candidate import Plan
-from mpc_local_planner.core.mpc.decision import PlanSource
+from mpc_local_planner.core.mpc.decision import LyapunovCase, PlanSource
 from mpc_local_planner.core.mpc.tries import Try
 from mpc_local_planner.core.obstacles import ConvexPolygon
 
@@ -51,6 +51,9 @@ class MpcSolution(NamedTuple):
         source: the solver's plan, the proof's shifted candidate, or a stop.
         lyapunov_ok: V_N(x_k) <= V_N(x_{k-1}) - l(x_{k-1}, u_{k-1}) + tolerance, or None at
             the first step after a reset.
+        lyapunov_case: whether the proof covers that check (LyapunovCase.COVERED: the same
+            obstacles and settings, the state where the last plan took it), or what changed;
+            None with lyapunov_ok None.
         failures: consecutive steps on which the solver gave no verified solution (a verified
             one that the candidate beat is not a failure: see solver_verified).
         obstacles_in_reach: obstacles the horizon can reach (all checked geometrically).
@@ -88,6 +91,7 @@ class MpcSolution(NamedTuple):
     timed_out: bool = False
     tries: tuple[Try, ...] = ()
     u_before: np.ndarray | None = None
+    lyapunov_case: LyapunovCase | None = None
 
     def velocity_at(self, t: float, step: float) -> np.ndarray:
         """Return the plan's input t seconds after its start (steps of length step).

@@ -131,6 +131,8 @@ class MpcBase(ABC):
         self._last_active: tuple[ConvexPolygon, ...] = ()
         self._rollout = Rollout(model)
         self._stage_fn = stage_cost(model, self._config.cost_exponent)
+        # the versions of the problem's obstacles and settings (LyapunovRecord.case)
+        self._problem_version = (0, 0)
         self.set_obstacles(obstacles)
         self.reset()
 
@@ -175,6 +177,8 @@ class MpcBase(ABC):
         """Apply new settings at the next solve; shape changes rebuild the NLP there."""
         old = self._config
         self._config = config
+        if old != config:
+            self._problem_version = (self._problem_version[0], self._problem_version[1] + 1)
         if old.structure_key() != config.structure_key():
             self._use_footprint()
             self._shapes.clear()  # the new shapes are built as steps need them
@@ -198,7 +202,10 @@ class MpcBase(ABC):
                 raise ValueError(msg)
         self._raw_obstacles = list(obstacles)
         inflation = self._config.inflation(float(self._model.u_max[0]))
-        self._inflated = [o.inflate(inflation) for o in self._raw_obstacles]
+        inflated = [o.inflate(inflation) for o in self._raw_obstacles]
+        if not _same_polygons(self._inflated, inflated):
+            self._problem_version = (self._problem_version[0] + 1, self._problem_version[1])
+        self._inflated = inflated
         self._obstacle_set = ObstacleSet(self._inflated)
         self._last_active = ()
 
@@ -664,9 +671,17 @@ class MpcBase(ABC):
                 result.candidate_value if result.candidate_ok else float(
                     result.nlp.formulation.cost_fn(result.w_candidate, result.params))))
 
+        lyapunov_case = self._lyapunov.case(x0, self._problem_version, self._model.angle_index)
         lyapunov_ok = self._lyapunov.check(plan.value)
         weights = np.array(self._config.cost_weights().as_vector())
-        self._lyapunov.keep(plan.value, self._stage_fn(plan.x[0], plan.u[0], plan.x[-1], weights))
+        # where the input commanded takes the robot: the model's step (its ramp from
+        # u_before with a first-order hold) of u0 as clipped, not the plan's x_1, which
+        # meets the dynamics and the bounds only within the solver's tolerance
+        u0 = np.clip(plan.u[:1], self._model.u_min, self._model.u_max)
+        predicted = self._rollout(x0, u0, self._config.step,
+                                  self._input_before if self._first_order else None)[1]
+        self._lyapunov.keep(plan.value, self._stage_fn(plan.x[0], plan.u[0], plan.x[-1], weights),
+                            predicted=predicted, problem=self._problem_version)
         self._progress_gain = (plan.s - self._plan.s) if self._plan is not None else math.nan
         self._plan = plan
         return MpcSolution(
@@ -680,6 +695,7 @@ class MpcBase(ABC):
             timed_out=budget.timed_out, tries=tuple(self._tries),
             u_before=(None if not self._first_order or self._input_before is None
                       else self._input_before.copy()),
+            lyapunov_case=lyapunov_case if lyapunov_ok is not None else None,
         )
 
     def _before(self, previous_input: np.ndarray | None) -> np.ndarray | None:
@@ -716,3 +732,10 @@ class MpcBase(ABC):
             obstacles_in_reach=in_reach, obstacles_active=active, timed_out=timed_out,
             tries=tuple(self._tries),
         )
+
+
+def _same_polygons(a: Sequence[ConvexPolygon], b: Sequence[ConvexPolygon]) -> bool:
+    """Say whether two obstacle lists describe the same polygons, in the same order."""
+    return len(a) == len(b) and all(
+        p is q or (np.array_equal(p.A, q.A) and np.array_equal(p.b, q.b))
+        for p, q in zip(a, b, strict=True))
