@@ -44,9 +44,10 @@ continuation a solve longer than one step's budget would start over at every ste
 finish.
 
 A try that failed at an earlier step from the same state (the robot stood still since) goes
-last: it failed outright, or it was cut and went on for step.MAX_CONTINUED_STEPS more steps,
-cut in each. The same first try at every step of a standing robot is the same failure at
-every step, and the robot would never move again.
+last: it failed outright, it was cut before it converged in
+continuation.MAX_CONTINUED_ITERATIONS, or its verified solution lost to the candidate. The
+same first try at every step of a standing robot is the same failure at every step, and the
+robot would never move again.
 
 An NLP whose backend is IPOPT has no fallback: its fallback tries are left out.
 """
