@@ -25,6 +25,7 @@ import math
 
 from rclpy.parameter import Parameter
 
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.footprint import parse_footprint
 from mpc_local_planner.core.paths import analytic_path
 from mpc_local_planner.core.planner_config import PlannerConfig
@@ -48,6 +49,7 @@ __all__ = ['PARAMETERS', 'PLANNER_FIELDS', 'parameter_problems']
 PLANNER_FIELDS = ('iterations', 'time_limit', 'seed', 'range', 'robot_radius', 'clearance',
                    'simplify', 'start_clearance', 'drive_on_heading_distance')
 _DEFAULTS = PlannerConfig()  # the single source of the planner's defaults
+_CONTROLLER = ControllerSettings()  # odom_timeout: the controller's, one rule for both
 
 
 PARAMETERS: tuple[ParameterSpec, ...] = (
@@ -128,6 +130,11 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "radians of turn that count as progress (Nav2's PoseProgressChecker "
                   'required_movement_angle): a robot that turned in place and then stood is '
                   'stuck; 0 = only the position counts', float_range=(0.0, 6.3)),
+    ParameterSpec('odom_timeout', _CONTROLLER.odom_timeout,
+                  "odometry older than this (s of ROS time) is stale, by the controller's rule "
+                  'and default: re-planning (blocked, periodic, no_progress) stops with one '
+                  'warning until odometry comes again; a new goal is still planned from the '
+                  'latest pose', float_range=(0.001, 3600.0)),
     *POSE_PARAMETERS,
     ParameterSpec('autostart', True,
                   'configure and activate at start; false = wait for a lifecycle manager (or '

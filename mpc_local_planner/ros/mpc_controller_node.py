@@ -111,6 +111,7 @@ from mpc_local_planner.perception.scan_obstacles import (
 )
 from mpc_local_planner.ros.conversions import (
     frame_problem,
+    measured_time,
     odometry_to_state,
     odometry_twist,
     path_pose_count,
@@ -528,7 +529,7 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
         stamp = stamp_to_seconds(msg.header.stamp)
         twist = odometry_twist(msg)
         self._odom_state = state
-        self._odom_time = min(stamp, receipt) if stamp > 0 else receipt
+        self._odom_time = measured_time(stamp, receipt)
         self._odom_twist = twist if np.all(np.isfinite(twist)) else None
         self._odom_problem = None
         self._pose_source.add_odometry(stamp if stamp > 0 else receipt, state,
