@@ -132,6 +132,7 @@ from mpc_local_planner.ros.mpc_controller_sensing import ControllerSensing
 from mpc_local_planner.ros.node_main import destroy_on_failure, EXIT_INVALID_PARAMETERS, run_node
 from mpc_local_planner.ros.parameters import (
     declare_parameters,
+    range_problems,
 )
 from mpc_local_planner.ros.qos import (
     CMD_VEL_QOS,
@@ -446,6 +447,9 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
         except Exception as err:  # whatever the cause, refuse with a reason
             reason = str(err) or type(err).__name__
             return SetParametersResult(successful=False, reason=reason)
+        problems = range_problems(PARAMETERS, parameters)  # the arrays' ranges, among others
+        if problems:
+            return SetParametersResult(successful=False, reason='; '.join(problems))
         return SetParametersResult(successful=True)
 
     def post_parameters_callback(self, parameters: list[Parameter]) -> None:

@@ -67,6 +67,8 @@ _SETTINGS_FIELDS = ('xy_goal_tolerance', 'yaw_goal_tolerance', 'odom_timeout',
 _AUTO_MARGIN = -1.0
 # max_accel / max_decel of [0.0, 0.0]: no limit (a double array cannot be None).
 RATE_LIMIT_OFF = (0.0, 0.0)
+# Each limit of max_accel / max_decel (m/s^2, rad/s^2), or 0 (both: no limit).
+_RATE_LIMIT = (0.01, 1000.0)
 # The defaults come from the dataclasses (the paper's values), the single source.
 _CONFIG, _MODEL, _SETTINGS = MpcConfig(), Unicycle(), ControllerSettings()
 _SHAPE = 'changes the NLP shape: rebuilt before the next solve'
@@ -91,7 +93,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "velocity_smoother's name): the NLP bounds each input change by "
                   "max_accel step, so the plan is one the base can follow; [0.0, 0.0] = "
                   "none (inputs may jump, the paper's model; config/jackal.yaml turns "
-                  f"it on for a Jackal); {_SHAPE}"),
+                  f"it on for a Jackal); {_SHAPE}", float_range=_RATE_LIMIT, special=0.0),
     ParameterSpec('input_hold', str(_CONFIG.input_hold),
                   f"how an input acts over a step, one of {INPUT_HOLDS}: 'zero' holds it "
                   "(the paper's model: the velocity jumps at each sample); 'first_order' "
@@ -109,7 +111,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "Nav2 velocity_smoother's name): a stop of a moving robot (stale or "
                   'invalid input, a failure) brakes along the last verified plan within '
                   'them instead of commanding zero at once, which a real base cannot '
-                  'follow; [0.0, 0.0] = none (zero at once); next control tick'),
+                  'follow; [0.0, 0.0] = none (zero at once); next control tick',
+                  float_range=_RATE_LIMIT, special=0.0),
     ParameterSpec('v_max', float(_MODEL.v_max),
                   'speed bound |v| (m/s); rebuilds the NLP before the next solve',
                   float_range=(0.001, 10.0)),

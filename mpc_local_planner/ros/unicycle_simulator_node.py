@@ -32,12 +32,11 @@ always did. Otherwise:
   and -inf (``scan.neg_inf_fraction``), and a ``scan.loss_fraction`` of them is never
   published.
 
-Each override replaces one field of the preset: the new ones take the preset's value when
-negative (their default, -1), so 0 turns a preset's imperfection off; the older
-``odom_drift.position``, ``odom_drift.heading`` and ``scan.noise_std`` keep their default 0,
-which takes the preset's value (0 for ideal: what they always meant), and any other value
-overrides it. ``scan.seed`` seeds every draw (laser and odometry noise): runs are
-reproducible. An unknown preset or an invalid value is refused with the reason.
+Each override replaces one field of the preset, with one marker: -1 (every override's
+default; in a pair, per component) takes the preset's value, and 0 means zero (no noise, no
+lag, exact odometry), whatever the preset. ``scan.seed`` seeds every draw (laser and
+odometry noise): runs are reproducible. An unknown preset or an invalid value is refused
+with the reason.
 
 With ``publish_clock`` the node is the clock: each tick of a steady wall timer, fired at
 ``rate * real_time_factor`` Hz, advances simulated time by exactly ``1 / rate`` s, publishes

@@ -192,6 +192,8 @@ def test_controller_applies_a_new_horizon_at_the_next_solve(ros) -> None:
     ('max_decel', [-2.0, -3.0], 'magnitudes'),  # Nav2's velocity_smoother writes them < 0
     ('max_decel', [math.inf, 3.0], 'max_decel must be [v, omega]'),
     ('max_decel', [2.0, 3.0, 0.0], 'max_decel must be [v, omega]'),
+    ('max_accel', [2000.0, 6.0], 'max_accel must be 0, or 0.01 .. 1000 each'),  # its range
+    ('max_decel', [2.0, 0.001], 'max_decel must be 0, or 0.01 .. 1000 each'),
     ('input_hold', 'linear', 'input_hold must be one of'),
     ('input_hold', 'first_order', 'needs max_accel'),  # max_accel is off by default
     ('actuation_delay', -0.1, 'out of range'),
