@@ -88,7 +88,7 @@ lost scans), the same model the ROS-free rollout uses. A preset whose odometry i
 true_goal_tolerance of the controller's arrival tolerance for success (the node's default
 0.1 m: 0.15 m) (``--drift RATE`` then overrides the preset's drift).
 ``metrics.json`` records the preset in ``reality`` (and its values in ``reality_values``);
-``--param unicycle_simulator.NAME:=VALUE`` overrides single fields (``scan.seed`` seeds it).
+``--param unicycle_simulator.NAME:=VALUE`` overrides single fields (``seed`` seeds it).
 
 The controller arrives within PAPER_GOAL_TOLERANCES (the paper's scenario's 0.02 m and
 0.05 rad, which the reported metrics were measured with) instead of the node's defaults, which

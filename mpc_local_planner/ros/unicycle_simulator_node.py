@@ -34,9 +34,9 @@ always did. Otherwise:
 
 Each override replaces one field of the preset, with one marker: -1 (every override's
 default; in a pair, per component) takes the preset's value, and 0 means zero (no noise, no
-lag, exact odometry), whatever the preset. ``scan.seed`` seeds every draw (laser and
-odometry noise): runs are reproducible. An unknown preset or an invalid value is refused
-with the reason.
+lag, exact odometry), whatever the preset. ``seed`` seeds every draw (the odometry noise
+and, on a stream of their own, the laser's): runs are reproducible. An unknown preset or an
+invalid value is refused with the reason.
 
 With ``publish_clock`` the node is the clock: each tick of a steady wall timer, fired at
 ``rate * real_time_factor`` Hz, advances simulated time by exactly ``1 / rate`` s, publishes

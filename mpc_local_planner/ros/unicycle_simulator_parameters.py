@@ -62,7 +62,7 @@ _SCALAR_OVERRIDES = {'command_latency': 'latency', 'scan.noise_std': 'scan_noise
                      'scan.loss_fraction': 'scan_loss'}
 _DRIFT = ('odom_drift.position', 'odom_drift.heading')
 # Every parameter that shapes the Reality (a change rebuilds it: see post_parameters_callback).
-REALITY_PARAMETERS = frozenset({'reality', 'scan.seed', *_PAIR_OVERRIDES, *_SCALAR_OVERRIDES,
+REALITY_PARAMETERS = frozenset({'reality', 'seed', *_PAIR_OVERRIDES, *_SCALAR_OVERRIDES,
                                 *_DRIFT})
 # A fraction of beams or scans, < 1 (Reality's rule) with a range's inclusive end.
 _FRACTION = (0.0, 0.99)
@@ -121,10 +121,6 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('scan.noise_std', FROM_PRESET,
                   f'standard deviation of the Gaussian range noise (m); {_PRESET} (ideal: '
                   'none)', float_range=(0.0, 10.0), special=FROM_PRESET),
-    ParameterSpec('scan.seed', 0,
-                  'seed of every random draw of the simulated reality: range noise, NaN and '
-                  '-inf beams, lost scans, odometry noise (runs are reproducible); the '
-                  'odometry reads it once at start', int_range=(0, 2**31 - 1)),
     ParameterSpec('odom_drift.position', FROM_PRESET,
                   "odometry's distance error as a fraction of the distance travelled (0.05 = "
                   f'5 %: the odometry says 1.05 m per true metre; 0 = exact); {_PRESET} '
@@ -138,6 +134,12 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'odometry is the pose, the laser is exact); the parameters below and '
                   "scan.noise_std, odom_drift.* and scan.*_fraction override single fields, "
                   "each -1 (its default) for the preset's, 0 for none"),
+    ParameterSpec('seed', 0,
+                  "seed of the simulated reality's random draws, the base's (odometry noise) "
+                  "and, on a stream of their own, the laser's (range noise, NaN and -inf "
+                  'beams, lost scans): runs are reproducible; the base reads it once at start, '
+                  "the laser at each change (the localizer has localizer.seed)",
+                  int_range=(0, 2**31 - 1)),
     ParameterSpec('actuator_lag', [FROM_PRESET, FROM_PRESET],
                   'first-order time constants [v, omega] (s) of the wheels following the '
                   f'command (0 = at once); {_PRESET}', float_range=(0.0, 10.0),
@@ -192,11 +194,11 @@ def validate_simulator_parameters(values: dict[str, Any]) -> str | None:
         value = values.get(name)
         if value is not None and not _is_number(value):
             return f'{name} must be a number, got {value!r}'
-    for name in ('scan.beams', 'scan.seed'):
+    for name in ('scan.beams', 'seed'):
         value = values.get(name)
         if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
             return f'{name} must be an integer, got {value!r}'
-    for name in ('scan.fov', 'scan.beams', 'scan.range_max', 'scan.seed'):
+    for name in ('scan.fov', 'scan.beams', 'scan.range_max', 'seed'):
         reason = range_problem(_SPECS[name], values[name]) if name in values else None
         if reason is not None:
             return reason
@@ -254,7 +256,7 @@ def reality_from_parameters(values: dict[str, Any]) -> Reality:
 
     The preset named by ``reality`` (default 'ideal'), with each override that is set taking
     the place of the preset's field; FROM_PRESET (-1, the overrides' default; in a pair, per
-    component) means "the preset's", and 0 means zero. ``scan.seed`` is the seed. Missing
+    component) means "the preset's", and 0 means zero. ``seed`` is the seed. Missing
     names are the preset's.
 
     Raises:
@@ -282,7 +284,7 @@ def reality_from_parameters(values: dict[str, Any]) -> Reality:
         if value is not None and float(value) != FROM_PRESET:
             drift[i] = float(value)
     changes['odom_drift'] = tuple(drift)
-    changes['seed'] = int(values.get('scan.seed', 0))
+    changes['seed'] = int(values.get('seed', 0))
     try:
         return replace(preset, **changes)  # Reality.__post_init__ checks the whole
     except ValueError as err:

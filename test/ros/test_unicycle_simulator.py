@@ -240,7 +240,7 @@ def test_scans_have_nan_beams_and_some_are_lost_counted_in_simulated_time(ros) -
     rate = 50.0  # one scan per tick: every tick is a scan's slot
     sim = real_simulator(ros, **{'scan.rate': rate, 'scan.beams': 200,
                                  'scan.nan_fraction': 0.2, 'scan.neg_inf_fraction': 0.05,
-                                 'scan.loss_fraction': 0.3, 'scan.seed': 7})
+                                 'scan.loss_fraction': 0.3, 'seed': 7})
     probe = ros.probe()
     scans: list[LaserScan] = []
     reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
@@ -298,6 +298,16 @@ def test_zero_switches_an_imperfection_off_and_only_minus_one_takes_the_presets(
         assert not result.successful and name in result.reason
 
 
+def test_one_seed_named_for_what_it_seeds_the_odometry_noise_and_the_laser(ros) -> None:
+    sim = ros.add(UnicycleSimulatorNode(context=ros.context, parameter_overrides=[
+        Parameter('reality', value='real'), Parameter('seed', value=5)]))
+    # it seeds the odometry's noise too, so it is not the laser's (scan.*) alone
+    assert not sim.has_parameter('scan.seed')
+    assert sim.reality.seed == 5 and sim.reality.odom_noise == REALITY_PRESETS['real'].odom_noise
+    assert sim.set_parameters([Parameter('seed', value=6)])[0].successful
+    assert sim.reality.seed == 6
+
+
 def test_reality_parameters_override_the_preset_field_by_field() -> None:
     real = REALITY_PRESETS['real']
     assert reality_from_parameters({}) == REALITY_PRESETS['ideal']
@@ -306,13 +316,13 @@ def test_reality_parameters_override_the_preset_field_by_field() -> None:
                 'command_latency': -1.0, 'odom_noise_std': [-1.0, -1.0],
                 'scan.nan_fraction': -1.0, 'scan.neg_inf_fraction': -1.0,
                 'scan.loss_fraction': -1.0, 'scan.noise_std': -1.0,
-                'odom_drift.position': -1.0, 'odom_drift.heading': -1.0, 'scan.seed': 0}
+                'odom_drift.position': -1.0, 'odom_drift.heading': -1.0, 'seed': 0}
     assert defaults == {spec.name: spec.default for spec in PARAMETERS
                         if spec.name in defaults}
     assert reality_from_parameters({'reality': 'real', **defaults}) == real
     mixed = reality_from_parameters({'reality': 'real', **defaults, 'actuator_lag': [0.0, -1.0],
                                      'command_latency': 0.0, 'odom_drift.position': 0.05,
-                                     'scan.noise_std': 0.05, 'scan.seed': 3})
+                                     'scan.noise_std': 0.05, 'seed': 3})
     assert mixed.lag == (0.0, real.lag[1]) and mixed.latency == 0.0
     assert mixed.odom_drift == (0.05, real.odom_drift[1]) and mixed.scan_noise == 0.05
     assert mixed.seed == 3 and mixed.acceleration == real.acceleration
