@@ -38,9 +38,7 @@ from mpc_local_planner.ros.parameters import (
     DEFAULT_WORLD_FILE,
     ParameterSpec,
 )
-from mpc_local_planner.ros.robot_pose import (
-    POSE_PARAMETERS,
-)
+from mpc_local_planner.ros.robot_pose import pose_parameters
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world
 
@@ -135,7 +133,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'and default: re-planning (blocked, periodic, no_progress) stops with one '
                   'warning until odometry comes again; a new goal is still planned from the '
                   'latest pose', float_range=(0.001, 3600.0)),
-    *POSE_PARAMETERS,
+    *pose_parameters('the planner plans nothing (a goal waits, nothing is re-planned)'),
     ParameterSpec('autostart', True,
                   'configure and activate at start; false = wait for a lifecycle manager (or '
                   '`ros2 lifecycle set`)', read_only=True),

@@ -39,7 +39,7 @@ from mpc_local_planner.core.footprint import Footprint, resolve
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.ros.parameters import DEFAULT_WORLD_FILE, ParameterSpec
-from mpc_local_planner.ros.robot_pose import POSE_PARAMETERS
+from mpc_local_planner.ros.robot_pose import pose_parameters
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world
 
@@ -204,7 +204,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('enable_stamped_cmd_vel', False,
                   'publish cmd_vel as geometry_msgs/TwistStamped (frame base_link) instead of '
                   "Twist (Nav2's name); read at configure"),
-    *POSE_PARAMETERS,
+    *pose_parameters('the controller stops (no_localization)'),
     ParameterSpec('autostart', True,
                   'configure and activate at start; false = wait for a lifecycle manager '
                   '(or ros2 lifecycle set)', read_only=True),

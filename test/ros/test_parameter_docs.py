@@ -69,3 +69,15 @@ def test_the_range_column_is_filled_where_a_range_exists():
     assert cells[('unicycle_simulator', 'actuator_lag')] == 'each -1, or 0 .. 10'
     assert cells[('mpc_controller', 'max_accel')] == 'each 0, or 0.01 .. 1000'
     assert cells[('unicycle_simulator', 'scan.beams')] == '2 .. 10000'
+
+
+def test_each_node_says_what_it_does_without_a_pose_in_the_plans_frame():
+    def description(node: str, name: str) -> str:
+        table = next(n for n in NODES if n.executable == node).parameters
+        return next(spec.description for spec in table if spec.name == name)
+
+    for name in ('localization_max_travel', 'transform_tolerance'):
+        assert 'the controller stops (no_localization)' in description('mpc_controller', name)
+        planner = description('global_planner', name)
+        assert 'controller' not in planner
+        assert 'a goal waits, nothing is re-planned' in planner
