@@ -98,7 +98,7 @@ from mpc_local_planner.core.diagnostics import (
     PlanTrigger,
 )
 from mpc_local_planner.core.errors import PlanningError
-from mpc_local_planner.core.footprint import resolve
+from mpc_local_planner.core.footprint import radius_in_force, resolve
 from mpc_local_planner.core.paths import analytic_path, waypoints_to_poses
 from mpc_local_planner.core.planner import path_length, RrtStarPlanner
 from mpc_local_planner.core.planner_config import PlannerConfig
@@ -131,6 +131,7 @@ from mpc_local_planner.ros.lifecycle import ManagedNode
 from mpc_local_planner.ros.node_main import destroy_on_failure, run_node
 from mpc_local_planner.ros.parameters import (
     declare_parameters,
+    range_problems,
 )
 from mpc_local_planner.ros.qos import (
     GOAL_QOS,
@@ -370,6 +371,7 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         """Refuse a malformed goal, an unknown world or analytic path, bad planner settings."""
         reasons = parameter_problems(parameters)
         reasons += self._check_modes(parameters)
+        reasons += range_problems(PARAMETERS, parameters)  # robot_radius's -1 beside its range
         if reasons:
             return SetParametersResult(successful=False, reason='; '.join(reasons))
         return SetParametersResult(successful=True)
@@ -439,7 +441,7 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
     def _planner_config(self) -> PlannerConfig:
         values = {name: self.get_parameter(name).value for name in PLANNER_FIELDS}
         world_radius = self._world.robot_radius if self._world is not None else 0.0
-        values['robot_radius'] = max(float(values['robot_radius']), world_radius)
+        values['robot_radius'] = radius_in_force(float(values['robot_radius']), world_radius)
         values['iterations'] = int(values['iterations'])
         values['seed'] = int(values['seed'])
         values['simplify'] = bool(values['simplify'])

@@ -26,7 +26,7 @@ import math
 from rclpy.parameter import Parameter
 
 from mpc_local_planner.core.controller_settings import ControllerSettings
-from mpc_local_planner.core.footprint import parse_footprint
+from mpc_local_planner.core.footprint import FROM_WORLD, parse_footprint
 from mpc_local_planner.core.paths import analytic_path
 from mpc_local_planner.core.planner_config import PlannerConfig
 from mpc_local_planner.core.replanning import (
@@ -77,9 +77,10 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   int_range=(0, 2**31 - 1)),
     ParameterSpec('range', _DEFAULTS.range, 'RRT* extension length (m); 0 = OMPL chooses',
                   float_range=(0.0, 1e3)),
-    ParameterSpec('robot_radius', _DEFAULTS.robot_radius,
-                  "robot radius (m); the larger of this and the world's is used",
-                  float_range=(0.0, 10.0)),
+    ParameterSpec('robot_radius', FROM_WORLD,
+                  "the round robot's radius (m), when no polygon footprint applies; -1 = the "
+                  "world file's robot_radius (0 without one); a radius >= 0 is the robot's, "
+                  "smaller than the world's too", float_range=(0.0, 10.0), special=FROM_WORLD),
     ParameterSpec('footprint', '',
                   "the robot's convex polygon in base_link, Nav2's form \"[[x, y], ...]\"; '' = "
                   "the world file's footprint, or a circle of robot_radius"),

@@ -59,8 +59,8 @@ MPC stops in front of it or goes around, and the diagnostics say ``path_blocked`
 
 The robot's shape, Nav2's precedence (as the simulator and the planner apply it): the
 ``footprint`` parameter's convex polygon (``"[[x, y], ...]"``, base_link), else the world
-file's footprint if it is a polygon, else a circle of ``robot_radius`` (the larger of the
-parameter and the world's). A circle grows the obstacles by its radius; a polygon is kept
+file's footprint if it is a polygon, else a circle of ``robot_radius`` (-1, its default:
+the world's robot_radius). A circle grows the obstacles by its radius; a polygon is kept
 apart from each obstacle exactly by the NLP. ``mpc/footprint`` shows that shape at the
 robot's pose in ``global_frame``, and sensed obstacles are handed over within
 ``MpcConfig.reach`` (which counts a polygon's circumscribed radius) plus SENSING_MARGIN.

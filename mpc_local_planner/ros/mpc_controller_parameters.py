@@ -35,7 +35,7 @@ from typing import Any
 
 from mpc_local_planner.core.config import INPUT_HOLDS, MpcConfig, SOLVERS, SolverSettings
 from mpc_local_planner.core.controller_settings import ControllerSettings
-from mpc_local_planner.core.footprint import Footprint, resolve
+from mpc_local_planner.core.footprint import Footprint, FROM_WORLD, radius_in_force, resolve
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.ros.parameters import DEFAULT_WORLD_FILE, ParameterSpec
@@ -133,11 +133,12 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'stage weight of omega^4; next solve', float_range=_WEIGHT),
     ParameterSpec('offset_weight', float(_CONFIG.offset_weight),
                   'offset cost weight of (1 - s)^2; next solve', float_range=(1e-6, 1e9)),
-    ParameterSpec('robot_radius', float(_CONFIG.robot_radius),
+    ParameterSpec('robot_radius', FROM_WORLD,
                   "the round robot's radius (m), obstacles are inflated by it and scan "
-                  "returns within it are the robot itself (ignored); the larger of this and "
-                  "the world's is used; ignored when a polygon footprint applies",
-                  float_range=(0.0, 10.0)),
+                  "returns within it are the robot itself (ignored); -1 = the world file's "
+                  "robot_radius (0 without one); a radius >= 0 is the robot's, smaller than "
+                  "the world's too; ignored when a polygon footprint applies",
+                  float_range=(0.0, 10.0), special=FROM_WORLD),
     ParameterSpec('footprint', '',
                   "the robot's convex polygon in base_link (x forward), Nav2's form "
                   "\"[[x, y], [x, y], ...]\"; the MPC separates it from each obstacle exactly; "
@@ -277,9 +278,9 @@ def build_settings(values: dict[str, Any], *, world_radius: float = 0.0,
                    ) -> tuple[MpcConfig, Unicycle, ControllerSettings]:
     """Turn parameter values into the controller's settings.
 
-    The robot radius in force is the larger of the parameter and the world's; the footprint
-    is the parameter's polygon, else the world's polygon, else that circle (see
-    robot_footprint).
+    The robot radius in force is the parameter's, or the world's for -1 (radius_in_force);
+    the footprint is the parameter's polygon, else the world's polygon, else that circle
+    (see robot_footprint).
 
     Raises:
         ValueError: with every reason the values are invalid (validate_solver_settings' and
@@ -298,7 +299,7 @@ def build_settings(values: dict[str, Any], *, world_radius: float = 0.0,
     mpc_kwargs['collision_margin'] = None if margin < 0 else margin
     budget = float(values['max_solve_time'])
     solver_kwargs['max_solve_time'] = None if budget <= 0 else budget
-    mpc_kwargs['robot_radius'] = max(float(values['robot_radius']), world_radius)
+    mpc_kwargs['robot_radius'] = radius_in_force(float(values['robot_radius']), world_radius)
     mpc_kwargs['footprint'] = robot_footprint(values['footprint'], world_footprint)
     mpc_kwargs['max_accel'] = rate_limit('max_accel', values['max_accel'])
     decel = rate_limit('max_decel', values['max_decel'])

@@ -66,7 +66,7 @@ The footprint, first that applies (Nav2's names; a polygon wins over a radius, a
 
 1. the ``footprint`` parameter, a convex polygon ``"[[x, y], ...]"`` (robot frame, x forward);
 2. the world file's ``footprint``, when it has a polygon;
-3. a circle of the larger of ``robot_radius`` and the world's ``robot_radius``.
+3. a circle of ``robot_radius``; -1 (its default) takes the world's ``robot_radius``.
 
 So a world that describes its robot is simulated with that robot unless the parameter says
 otherwise, and ``robot_radius`` (which closed_loop sets from the world's covering radius) never

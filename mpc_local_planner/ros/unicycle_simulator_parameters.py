@@ -25,7 +25,7 @@ from dataclasses import replace
 import math
 from typing import Any
 
-from mpc_local_planner.core.footprint import parse_footprint
+from mpc_local_planner.core.footprint import FROM_WORLD, parse_footprint
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.reality import (
     LOCALIZER_NOISE,
@@ -99,10 +99,11 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'the TRUE world (known and unknown obstacles) the laser sees and the robot '
                   "can touch: a path, or a name in the package's config/ or config/worlds/; "
                   "'' = an empty world; read once at start", read_only=True),
-    ParameterSpec('robot_radius', 0.0,
+    ParameterSpec('robot_radius', FROM_WORLD,
                   "radius of the robot's disk for contacts (m) when no polygon footprint "
-                  "applies; the larger of this and the world's robot_radius counts",
-                  float_range=(0.0, 10.0)),
+                  "applies; -1 = the world file's robot_radius (0 without one); a radius >= 0 "
+                  "is the robot's, smaller than the world's too",
+                  float_range=(0.0, 10.0), special=FROM_WORLD),
     ParameterSpec('footprint', '',
                   'the robot\'s convex polygon for contacts, Nav2\'s form "[[x, y], ...]" in '
                   "the robot frame (x forward); '' or '[]' = the world file's footprint if it "
@@ -198,7 +199,7 @@ def validate_simulator_parameters(values: dict[str, Any]) -> str | None:
         value = values.get(name)
         if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
             return f'{name} must be an integer, got {value!r}'
-    for name in ('scan.fov', 'scan.beams', 'scan.range_max', 'seed'):
+    for name in ('robot_radius', 'scan.fov', 'scan.beams', 'scan.range_max', 'seed'):
         reason = range_problem(_SPECS[name], values[name]) if name in values else None
         if reason is not None:
             return reason
