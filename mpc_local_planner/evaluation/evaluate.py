@@ -289,7 +289,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         'map), with the re-planning planner (unknown: always)')
     parser.add_argument('--robot', choices=('circle', 'jackal'), default='circle',
                         help='with sensing: a 0.2 m circle at 0.31 m/s, or the BARN Jackal '
-                        '(its rectangle and the challenge speed limits)')
+                        '(its rectangle and its own limits, 2.0 m/s and 4.0 rad/s, as '
+                        'config/jackal.yaml)')
     parser.add_argument('--world-dir', type=Path, default=None,
                         help='worlds: the folder of world YAML files')
     parser.add_argument('--seed', type=int, default=0)

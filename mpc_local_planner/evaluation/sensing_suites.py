@@ -195,9 +195,9 @@ class Robot:
 
 ROBOTS = {
     'circle': Robot('circle', Footprint.circle(0.2), v_max=0.31, omega_max=1.9),
-    # The BARN challenge's Jackal: its rectangle; speed limits of the challenge's baseline
-    # configuration (see docs/results.md for where they come from).
-    'jackal': Robot('jackal', JACKAL, v_max=0.5, omega_max=1.57, reverses=False),
+    # The BARN challenge's Jackal: its rectangle and its own limits, 2.0 m/s and 4.0 rad/s
+    # (jackal_control's control.yaml; config/jackal.yaml), which every headline uses.
+    'jackal': Robot('jackal', JACKAL, v_max=2.0, omega_max=4.0, reverses=False),
 }
 
 
