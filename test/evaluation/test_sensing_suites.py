@@ -240,3 +240,21 @@ def test_the_jackal_runs_at_its_own_limits_unless_told_otherwise(monkeypatch, tm
     assert given == [(2.0, 4.0), (0.5, 1.57)]
     assert suites.ROBOTS['jackal'].v_max == 2.0 and suites.ROBOTS['jackal'].omega_max == 4.0
     assert '2 m/s' in (tmp_path / 'own' / 'summary.md').read_text()
+
+
+@pytest.mark.parametrize('suite', ['unknown', 'worlds'])
+def test_plot_draws_the_navigation_suites_too_not_only_barn(suite, tmp_path) -> None:
+    command = ['--suite', suite, '--plot', '0', '--controllers', 'pure_pursuit',
+               '--out', str(tmp_path / 'out')]
+    if suite == 'worlds':
+        folder = tmp_path / 'worlds'
+        folder.mkdir()
+        (folder / 'unknown_box.yaml').write_text(
+            resolve_data_file('unknown_box.yaml').read_text(encoding='utf-8'))
+        command += ['--world-dir', str(folder), '--sensing']
+    assert evaluate.main(command) == 0
+    figure = tmp_path / 'out' / f'{suite}_sensing_runs.png'
+    assert figure.is_file() and figure.stat().st_size > 10_000
+    # a world the suite does not have is refused with the reason, not a traceback
+    with pytest.raises(SystemExit):
+        evaluate.main([*command[:2], '--plot', '500', *command[4:]])
