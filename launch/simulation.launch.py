@@ -78,15 +78,16 @@ def _map_file(name: str, world_name: str) -> str | None:
 
 
 def _radius(params_file: str, node: str, world_radius: float) -> float:
-    """Return the larger of the world's robot_radius and the one node's params file sets."""
+    """Return the radius the node's params file sets (>= 0), else the world's robot_radius."""
     import yaml
 
     try:
         with open(params_file, encoding='utf-8') as stream:
             values = yaml.safe_load(stream)[node]['ros__parameters']
-        return max(world_radius, float(values.get('robot_radius', 0.0)))
+        radius = float(values.get('robot_radius', -1.0))
     except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError):
-        return world_radius  # no such file or entry: the node's default (0) is smaller
+        return world_radius  # no such file or entry: the node's default (-1), the world's
+    return world_radius if radius < 0.0 else radius
 
 
 def _file_footprint(params_file: str, node: str) -> str:

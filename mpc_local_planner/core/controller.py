@@ -51,7 +51,7 @@ import numpy as np
 from mpc_local_planner.core.braking import Brake
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reason
-from mpc_local_planner.core.controller_settings import ControllerSettings
+from mpc_local_planner.core.controller_settings import ControllerSettings, is_stale
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import MpcSolution, PathReferenceMPC, PlanSource
 from mpc_local_planner.core.obstacles import (
@@ -443,16 +443,12 @@ class MpcController:
         if state is None:
             return self._idle(Reason.NO_ODOM, now=now)
         if state_time is not None:
-            age = now - state_time
-            # "not within" so that a NaN age (NaN compares false) counts as stale; a state
-            # from the future by more than the timeout means the clock jumped back
-            if not -self.settings.odom_timeout <= age <= self.settings.odom_timeout:
+            if is_stale(now - state_time, self.settings.odom_timeout):
                 return self._idle(Reason.STALE_ODOM, now=now)
         if scan_required:
             if scan_time is None:
                 return self._idle(Reason.NO_SCAN, now=now)
-            age = now - scan_time
-            if not -self.settings.scan_timeout <= age <= self.settings.scan_timeout:
+            if is_stale(now - scan_time, self.settings.scan_timeout):
                 return self._idle(Reason.STALE_SCAN, now=now)
         if map_missing:
             return self._idle(Reason.NO_MAP, now=now)

@@ -19,7 +19,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 
-__all__ = ['ControllerSettings']
+__all__ = ['ControllerSettings', 'is_stale']
+
+
+def is_stale(age: float, timeout: float) -> bool:
+    """Say whether data measured age seconds ago is stale, by the nodes' one rule.
+
+    Stale: older than timeout, or from the future by more than timeout (the clock jumped
+    back); a NaN age (NaN compares false) is stale too. The controller stops on it, and the
+    planner stops re-planning on it.
+    """
+    return not -timeout <= age <= timeout
 
 
 @dataclass(frozen=True)

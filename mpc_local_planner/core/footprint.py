@@ -33,8 +33,12 @@ import yaml
 
 from mpc_local_planner.core.obstacles import ConvexPolygon
 
-__all__ = ['CIRCLE', 'Footprint', 'JACKAL', 'parse_footprint', 'resolve']
+__all__ = ['CIRCLE', 'FROM_WORLD', 'Footprint', 'JACKAL', 'parse_footprint', 'radius_in_force',
+           'resolve']
 
+# The nodes' robot_radius default: the world file's robot_radius (0 without a world). Any
+# radius >= 0 is the robot's, smaller than the world's too.
+FROM_WORLD = -1.0
 # Smallest turn (cross product, m^2) between consecutive edges that counts as a corner.
 _COLLINEAR_TOLERANCE = 1e-12
 
@@ -212,15 +216,26 @@ def parse_footprint(footprint: str | Sequence[Sequence[float]] | None,
     return Footprint.polygon(vertices)
 
 
-def resolve(parameter: str | Sequence[Sequence[float]] | None, robot_radius: float = 0.0,
-            world_footprint: Footprint | None = None, world_radius: float = 0.0) -> Footprint:
+def radius_in_force(robot_radius: float, world_radius: float) -> float:
+    """Return a round robot's radius: robot_radius, or the world's when it is FROM_WORLD.
+
+    A radius the user gives (>= 0) is the robot's, whatever the world file says; FROM_WORLD
+    (any negative value) takes the world file's robot_radius.
+    """
+    return float(world_radius) if robot_radius < 0.0 else float(robot_radius)
+
+
+def resolve(parameter: str | Sequence[Sequence[float]] | None,
+            robot_radius: float = FROM_WORLD, world_footprint: Footprint | None = None,
+            world_radius: float = 0.0) -> Footprint:
     """Return the robot's shape by Nav2's precedence, as every node and closed_loop apply it.
 
     1. the ``footprint`` parameter's convex polygon;
     2. the world file's footprint, when it is a polygon;
-    3. a circle of the larger of ``robot_radius`` and the world's radius.
+    3. a circle of ``robot_radius``, or of the world's radius when it is FROM_WORLD
+       (radius_in_force).
 
-    So a world that describes its robot is run with that robot unless the parameter says
+    So a world that describes its robot is run with that robot unless a parameter says
     otherwise, and a radius (closed_loop sets it from the world's covering radius) never
     turns a polygon back into its circumscribed circle.
 
@@ -238,4 +253,4 @@ def resolve(parameter: str | Sequence[Sequence[float]] | None, robot_radius: flo
         return shape
     if world_footprint is not None and not world_footprint.is_circle:
         return world_footprint
-    return Footprint.circle(max(float(robot_radius), float(world_radius)))
+    return Footprint.circle(radius_in_force(float(robot_radius), float(world_radius)))

@@ -254,6 +254,15 @@ class Replanner:
         self._goal = None
         self._plan_time = -math.inf
 
+    def restart_progress(self, now: float) -> None:
+        """Count the no-progress rule's time from now (the pose it measures from stays).
+
+        For a caller that could not judge the robot's progress for a while (the planner node
+        while its odometry was stale): that time is not time the robot stood.
+        """
+        if self._anchor is not None:
+            self._anchor_time = now
+
     def plan_goal(self, planner: ReplanningPlanner, start: np.ndarray, goal: np.ndarray, *,
                   now: float) -> ReplanDecision:
         """Plan a new goal from start; on success the plan and goal are in force.

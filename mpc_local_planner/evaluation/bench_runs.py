@@ -417,7 +417,8 @@ def bench_scan_control(steps: int) -> dict[str, Any]:
     controller.clear_path()
     result = _control_run(world, poses, steps, controller)
     return {'world': BARN_WORLD, 'horizon': config.horizon, 'solver': config.solving.solver,
-            'reference': kind, 'target_ms': TARGET_CONTROL_STEP_MS, **result}
+            'reference': kind, 'target_ms': TARGET_CONTROL_STEP_MS, 'max_steps': steps,
+            **result}
 
 
 def _footprint_world(scenario: str, footprint: Footprint) -> World:

@@ -54,7 +54,9 @@ runs of BARN with sensing at 2 m/s gave 95 to 98 successes).
 Writes ``runs.csv`` (one row per world x controller, appended as runs finish, sorted by world
 and controller at the end), ``summary.md`` (one table row per controller) and
 ``settings.json`` (what decides the rows). With ``--save-trajectories``, the runs go to
-``OUT/trajectories`` and ``--plot 0,1,2`` later draws those worlds in ``OUT/<suite>_runs.png``.
+``OUT/trajectories`` and ``--plot 0,1,2`` later draws those worlds in ``OUT/<suite>_runs.png``;
+for the navigation suites ``--plot`` runs the worlds again (the runs are deterministic) and
+draws them in ``OUT/<suite>_sensing_runs.png`` (`plot_navigation_suite`).
 
 Where the runs run (`sweep`): ``--jobs K`` local processes, or ``--executor dask`` on a Dask
 cluster (``--scheduler tcp://HOST:8786``; without it a LocalCluster of K processes); the rows
@@ -91,6 +93,7 @@ from mpc_local_planner.evaluation.suite_runs import (
     DEFAULT_BARN_DIR,
     empty_row,
     KNOWN_MAP_CONTROLLERS,
+    navigation_world,
     parse_worlds,
     run_task,
     saved_world_path,
@@ -109,6 +112,7 @@ from mpc_local_planner.evaluation.trajectory import read_trajectory_csv
 
 __all__ = [
     'main',
+    'plot_navigation_suite',
     'plot_suite_runs',
     'summarize',
     'sweep_settings',
@@ -273,6 +277,38 @@ def plot_suite_runs(out: Path, suite: str, worlds: Sequence[int], *,
     return target
 
 
+def plot_navigation_suite(out: Path, template: Task, worlds: Sequence[int],
+                          world_files: Sequence[str] = ()) -> Path:
+    """Run some worlds of a navigation suite again and draw them (sensing_suites' figure).
+
+    The runs are deterministic: the same world, robot, controller (template.controller),
+    seed, budget and reality as the sweep's give the same run. Writes
+    OUT/<suite>_sensing_runs.png.
+
+    Args:
+        out: The output folder.
+        template: The sweep's settings (world and world_file are set per world).
+        worlds: The worlds to draw (for the worlds suite: indices into world_files).
+        world_files: The worlds suite's files, sorted as the sweep numbers them.
+
+    """
+    from mpc_local_planner.evaluation import sensing_suites as suites
+
+    panels = []
+    robot = None
+    for w in worlds:
+        task = replace(template, world=w, world_file=world_files[w] if world_files else '')
+        robot, world, _ = navigation_world(task)
+        title = f'BARN world {w}' if template.suite == 'barn' else f'{world.name} ({w})'
+        panels.append((title, world))
+    assert robot is not None, 'no world to draw'
+    return suites.plot_navigation_runs(
+        out / f'{template.suite}_sensing_runs.png', panels, template.controller, robot,
+        seed=template.seed, setup=suites.MpcSetup(budget=template.budget,
+                                                  compile=template.compile),
+        reality=template.reality, localized=template.suite != 'barn')
+
+
 def _read_rows(path: Path) -> list[dict[str, Any]]:
     with open(path, newline='') as stream:
         return list(csv.DictReader(stream))
@@ -289,7 +325,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         'map), with the re-planning planner (unknown: always)')
     parser.add_argument('--robot', choices=('circle', 'jackal'), default='circle',
                         help='with sensing: a 0.2 m circle at 0.31 m/s, or the BARN Jackal '
-                        '(its rectangle and the challenge speed limits)')
+                        '(its rectangle and its own limits, 2.0 m/s and 4.0 rad/s, as '
+                        'config/jackal.yaml)')
     parser.add_argument('--world-dir', type=Path, default=None,
                         help='worlds: the folder of world YAML files')
     parser.add_argument('--seed', type=int, default=0)
@@ -333,26 +370,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--merge', action='store_true',
                         help='BARN: merge rows of touching cylinders into rectangles')
     parser.add_argument('--plot', default='',
-                        help='only draw these worlds (e.g. 0,10,50) of an earlier run of the '
-                        'suite with --save-trajectories in OUT, then exit')
+                        help='only draw these worlds (e.g. 0,10,50), then exit: of an earlier '
+                        'run of a known-map suite with --save-trajectories in OUT; with '
+                        'sensing (unknown, worlds, barn --sensing) the first of --controllers '
+                        'runs them again (the runs are deterministic) into '
+                        'OUT/<suite>_sensing_runs.png')
     args = parser.parse_args(argv)
-    if args.plot and (args.sensing or args.suite in ('unknown', 'worlds')):
-        from mpc_local_planner.evaluation import sensing_suites as suites
-
-        if args.suite != 'barn':
-            parser.error('--plot with sensing draws BARN worlds (--suite barn --sensing)')
-        robot = suites.ROBOTS[args.robot]
-        robot = replace(robot, v_max=args.v_max or robot.v_max,
-                        omega_max=args.omega_max or robot.omega_max)
-        controller = (args.controllers or 'proposed').split(',')[0]
-        panels = [(f'BARN world {w}', suites.barn_sensing_world(
-            args.barn_dir / f'world_{w:03d}.json', robot)) for w in parse_worlds(args.plot)]
-        print(suites.plot_navigation_runs(args.out / 'barn_sensing_runs.png', panels,
-                                          controller, robot, seed=args.seed,
-                                          setup=suites.MpcSetup(budget=args.budget,
-                                                                compile=args.compile)))
-        return 0
-    if args.plot:
+    navigation = args.sensing or args.suite in ('unknown', 'worlds')
+    if args.plot and not navigation:
         try:
             target = plot_suite_runs(args.out, args.suite, parse_worlds(args.plot),
                                      barn_dir=args.barn_dir)
@@ -363,7 +388,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     if args.scheduler and args.executor != 'dask':
         parser.error('--scheduler needs --executor dask')
-    navigation = args.sensing or args.suite in ('unknown', 'worlds')
     if navigation:
         from mpc_local_planner.evaluation.sensing_suites import ROBOTS
 
@@ -404,6 +428,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         missing = [w for w in worlds if not (args.barn_dir / f'world_{w:03d}.json').is_file()]
         if missing:
             parser.error(f'BARN worlds not found in {args.barn_dir}: {missing[:10]}')
+    if args.plot:  # with sensing: run the worlds again and draw them
+        drawn = parse_worlds(args.plot)
+        if args.suite == 'barn':
+            absent = [w for w in drawn if not (args.barn_dir / f'world_{w:03d}.json').is_file()]
+        else:
+            count = len(world_files) if args.suite == 'worlds' else args.count
+            absent = [w for w in drawn if not 0 <= w < count]
+        if absent:
+            parser.error(f'--plot: no world {absent[:10]} in the {args.suite} suite')
+        template = Task(args.suite, 0, controllers[0], args.seed, args.v_max, args.omega_max,
+                        str(args.barn_dir.resolve()), '', args.merge, sensing=args.sensing,
+                        robot=args.robot, budget=args.budget, compile=args.compile,
+                        reality=args.reality)
+        print(plot_navigation_suite(args.out, template, drawn, world_files))
+        return 0
     args.out.mkdir(parents=True, exist_ok=True)
     trajectories = str((args.out / 'trajectories').resolve()) if args.save_trajectories else ''
     if barn_dir and Path(barn_dir).resolve() == Path(DEFAULT_BARN_DIR).resolve():

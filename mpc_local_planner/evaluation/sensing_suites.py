@@ -195,9 +195,9 @@ class Robot:
 
 ROBOTS = {
     'circle': Robot('circle', Footprint.circle(0.2), v_max=0.31, omega_max=1.9),
-    # The BARN challenge's Jackal: its rectangle; speed limits of the challenge's baseline
-    # configuration (see docs/results.md for where they come from).
-    'jackal': Robot('jackal', JACKAL, v_max=0.5, omega_max=1.57, reverses=False),
+    # The BARN challenge's Jackal: its rectangle and its own limits, 2.0 m/s and 4.0 rad/s
+    # (jackal_control's control.yaml; config/jackal.yaml), which every headline uses.
+    'jackal': Robot('jackal', JACKAL, v_max=2.0, omega_max=4.0, reverses=False),
 }
 
 
@@ -528,7 +528,8 @@ def result_fields(result: SensingResult) -> dict[str, Any]:
 
 def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controller: str,
                          robot: Robot, *, seed: int = 0, prepare: bool = True,
-                         setup: MpcSetup = MpcSetup()) -> Path:
+                         setup: MpcSetup = MpcSetup(), reality: str = 'ideal',
+                         localized: bool | None = None) -> Path:
     """Draw laser-only runs: the true obstacles, what was sensed, every plan, the footprint.
 
     Each world is run again (the runs are deterministic) with the navigator's log at hand:
@@ -544,6 +545,8 @@ def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controll
         seed: The planner's seed.
         prepare: Build the MPC's NLPs before the runs (see run_navigation).
         setup: How the MPCs are set up (see run_navigation).
+        reality: How real the robot is (see run_navigation), as the suite ran it.
+        localized: Whether a real robot has a localizer (see run_navigation).
 
     Returns:
         target.
@@ -559,10 +562,14 @@ def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controll
     from mpc_local_planner.evaluation.plotting import draw_footprints, draw_sensed
     from mpc_local_planner.worlds.world import Circle
 
-    fig, axes = plt.subplots(1, len(worlds), figsize=(3.0 * len(worlds), 6.5), squeeze=False)
+    # panels 3 inches wide, as tall as the worlds' shape asks (BARN's: tall, capped)
+    ratio = max((b[3] - b[2]) / (b[1] - b[0]) for b in (w.bounds for _, w in worlds))
+    height = min(max(3.0 * ratio + 1.2, 2.8), 6.5)
+    fig, axes = plt.subplots(1, len(worlds), figsize=(3.0 * len(worlds), height),
+                             squeeze=False)
     for ax, (title, world) in zip(axes[0], worlds, strict=True):
         result = run_navigation(world, controller, robot, seed=seed, prepare=prepare,
-                                setup=setup)
+                                setup=setup, reality=reality, localized=localized)
         for shape in world.physical_shapes():
             if isinstance(shape, Circle):
                 ax.add_patch(CirclePatch((shape.x, shape.y), shape.radius, color='0.6'))

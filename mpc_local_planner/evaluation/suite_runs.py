@@ -28,7 +28,7 @@ from dataclasses import dataclass, replace
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, TYPE_CHECKING
 
 import numpy as np
 
@@ -62,6 +62,10 @@ from mpc_local_planner.evaluation.rollout import (
 from mpc_local_planner.evaluation.trajectory import write_trajectory_csv
 from mpc_local_planner.worlds.data_files import BARN_DIR
 
+if TYPE_CHECKING:  # the navigation suites' module is imported where it is used
+    from mpc_local_planner.evaluation.sensing_suites import Robot
+    from mpc_local_planner.worlds.world import World
+
 __all__ = [
     'barn_score',
     'parse_worlds',
@@ -70,6 +74,7 @@ __all__ = [
     'DEFAULT_BARN_DIR',
     'empty_row',
     'KNOWN_MAP_CONTROLLERS',
+    'navigation_world',
     'run_navigation_task',
     'run_task',
     'save_world',
@@ -222,22 +227,32 @@ def empty_row(task: Task, scenario: Scenario | None, reason: str) -> dict[str, A
     return row
 
 
-def run_navigation_task(task: Task) -> dict[str, Any]:
-    """Run one world x controller through the navigation stack; return its runs.csv row."""
+def navigation_world(task: Task) -> tuple[Robot, World, float | None]:
+    """Return the robot, the world and the BARN path length (else None) of a navigation task.
+
+    The robot is the task's (its footprint, its speed limits); the world is the suite's:
+    the unknown suite's generated one, a world file with the robot's footprint, or a BARN
+    world with its obstacles unknown.
+    """
     from mpc_local_planner.evaluation import sensing_suites as suites
     from mpc_local_planner.worlds.world import load_world
 
     robot = replace(suites.ROBOTS[task.robot], v_max=task.v_max, omega_max=task.omega_max)
-    barn_length = None
     if task.suite == 'unknown':
-        world = suites.unknown_world(task.world, task.seed, robot=robot)
-    elif task.suite == 'worlds':
+        return robot, suites.unknown_world(task.world, task.seed, robot=robot), None
+    if task.suite == 'worlds':
         world = load_world(task.world_file)
-        world = replace(world, footprint=robot.footprint, robot_radius=0.0)
-    else:
-        path = _barn_file(task)
-        world = suites.barn_sensing_world(path, robot)
-        barn_length = float(json.loads(path.read_text(encoding='utf-8'))['barn_path_length'])
+        return robot, replace(world, footprint=robot.footprint, robot_radius=0.0), None
+    path = _barn_file(task)
+    barn_length = float(json.loads(path.read_text(encoding='utf-8'))['barn_path_length'])
+    return robot, suites.barn_sensing_world(path, robot), barn_length
+
+
+def run_navigation_task(task: Task) -> dict[str, Any]:
+    """Run one world x controller through the navigation stack; return its runs.csv row."""
+    from mpc_local_planner.evaluation import sensing_suites as suites
+
+    robot, world, barn_length = navigation_world(task)
     row = dict.fromkeys(CSV_COLUMNS, '')
     row.update(controller=task.controller, world=task.world, name=world.name,
                robot=task.robot, sensing=task.sensing or task.suite == 'unknown',

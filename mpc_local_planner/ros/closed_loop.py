@@ -88,7 +88,7 @@ lost scans), the same model the ROS-free rollout uses. A preset whose odometry i
 true_goal_tolerance of the controller's arrival tolerance for success (the node's default
 0.1 m: 0.15 m) (``--drift RATE`` then overrides the preset's drift).
 ``metrics.json`` records the preset in ``reality`` (and its values in ``reality_values``);
-``--param unicycle_simulator.NAME:=VALUE`` overrides single fields (``scan.seed`` seeds it).
+``--param unicycle_simulator.NAME:=VALUE`` overrides single fields (``seed`` seeds it).
 
 When the simulated odometry is exact (``--reality ideal`` without ``--drift``) the controller
 arrives within PAPER_GOAL_TOLERANCES (the paper's scenario's 0.02 m and 0.05 rad, which the
@@ -125,7 +125,7 @@ from rclpy.parameter import Parameter
 
 from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.errors import PlanningError
-from mpc_local_planner.core.footprint import resolve
+from mpc_local_planner.core.footprint import FROM_WORLD, radius_in_force, resolve
 from mpc_local_planner.core.planner import RrtStarPlanner
 from mpc_local_planner.core.planner_config import PlannerConfig
 from mpc_local_planner.core.reality import REALITY_PRESETS, true_goal_tolerance
@@ -186,18 +186,18 @@ def write_known_map(world: World, folder: Path) -> Path:
 def check_plannable(world: World, planner_parameters: dict[str, Any]) -> None:
     """Refuse a start or goal that no plan can reach: inside an obstacle as the planner grows it.
 
-    For a round robot the planner grows every obstacle by robot_radius (the larger of its
-    parameter and the world's) plus clearance; for a polygon (the footprint parameter's,
-    else the world's) it checks the polygon at the pose's heading grown by the clearance, as
-    the global_planner node will with these parameters.
+    For a round robot the planner grows every obstacle by robot_radius (its parameter, or
+    the world's when that is -1: radius_in_force) plus clearance; for a polygon (the
+    footprint parameter's, else the world's) it checks the polygon at the pose's heading
+    grown by the clearance, as the global_planner node will with these parameters.
 
     Raises:
         PlanningError: saying which pose is in which inflated obstacle (or out of bounds).
 
     """
     defaults = PlannerConfig()
-    radius = max(float(planner_parameters.get('robot_radius', defaults.robot_radius)),
-                 world.robot_radius)
+    radius = radius_in_force(float(planner_parameters.get('robot_radius', FROM_WORLD)),
+                             world.robot_radius)
     clearance = float(planner_parameters.get('clearance', defaults.clearance))
     footprint = resolve(str(planner_parameters.get('footprint', '')),
                         world_footprint=world.footprint)

@@ -52,6 +52,7 @@ __all__ = [
     'frame_problem',
     'SCANS',
     'grid_from_message',
+    'measured_time',
     'scan_beam_count',
     'scan_from_message',
     'odometry_to_state',
@@ -146,6 +147,16 @@ def pose_to_array(pose: Pose) -> np.ndarray:
 def stamp_to_seconds(stamp: Time) -> float:
     """Return a builtin_interfaces/Time in seconds."""
     return float(stamp.sec) + 1e-9 * float(stamp.nanosec)
+
+
+def measured_time(stamp: float, receipt: float) -> float:
+    """Return when a message was measured: its stamp, but never later than its arrival.
+
+    A stamp from the future must not keep the data fresh after it stops coming; an unset
+    stamp (0) is taken as the arrival. The controller and the planner judge odometry's age
+    from this (core.controller_settings.is_stale).
+    """
+    return min(stamp, receipt) if stamp > 0 else receipt
 
 
 def seconds_to_stamp(seconds: float) -> Time:

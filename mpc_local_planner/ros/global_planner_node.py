@@ -61,8 +61,10 @@ violates its clearance, the goal is planned again from the current odometry, and
 ``replan_period`` > 0 also periodically. A new plan replaces the old on ``plan``; the
 controller follows it from the robot's projection. ``planner/diagnostics`` says what
 triggered each plan and counts the re-plans; a failed re-plan is a warning and the plan in
-force stays. The policy (when to check, consecutive failures moving the seed on) is
-core/replanning.py's `Replanner`, which the evaluation's Navigator runs too.
+force stays. While the odometry is stale (older than ``odom_timeout``, the controller's rule)
+nothing is checked or re-planned: one warning says so, one line when odometry comes again.
+The policy (when to check, consecutive failures moving the seed on) is core/replanning.py's
+`Replanner`, which the evaluation's Navigator runs too.
 
 A goal it cannot plan to (inside an inflated obstacle, walled off, out of bounds, not
 finite, in another frame), or a start in collision, is logged as an error and nothing is
@@ -76,6 +78,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import replace
+import math
 import sys
 from typing import Any
 
@@ -92,13 +95,14 @@ from rclpy.subscription import Subscription
 from sensor_msgs.msg import LaserScan
 
 from mpc_local_planner.core.controller import MAX_COORDINATE
+from mpc_local_planner.core.controller_settings import is_stale
 from mpc_local_planner.core.diagnostics import (
     PLANNER_DIAGNOSTICS_TOPIC,
     PlannerDiagnostics,
     PlanTrigger,
 )
 from mpc_local_planner.core.errors import PlanningError
-from mpc_local_planner.core.footprint import resolve
+from mpc_local_planner.core.footprint import radius_in_force, resolve
 from mpc_local_planner.core.paths import analytic_path, waypoints_to_poses
 from mpc_local_planner.core.planner import path_length, RrtStarPlanner
 from mpc_local_planner.core.planner_config import PlannerConfig
@@ -114,6 +118,7 @@ from mpc_local_planner.ros.conversions import (
     diagnostic_array,
     frame_problem,
     grid_from_message,
+    measured_time,
     odometry_to_state,
     odometry_twist,
     pose_to_array,
@@ -130,6 +135,7 @@ from mpc_local_planner.ros.lifecycle import ManagedNode
 from mpc_local_planner.ros.node_main import destroy_on_failure, run_node
 from mpc_local_planner.ros.parameters import (
     declare_parameters,
+    range_problems,
 )
 from mpc_local_planner.ros.qos import (
     GOAL_QOS,
@@ -201,6 +207,8 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         self._tf_listener: Any = None
         self._active = False
         self._state: np.ndarray | None = None  # the latest odometry (odom frame)
+        self._odom_time: float | None = None  # when it was measured (node clock, s)
+        self._odom_stale = False  # said once when it goes stale, once when it comes back
         # the pose in the plan's frame (ros/robot_pose.py): configure chooses the mode
         self._pose_source = RobotPose(PoseMode.ODOMETRY, span=ODOM_HISTORY_S, global_frame='map')
         self._pending_goal: np.ndarray | None = None
@@ -356,6 +364,8 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         self._memory = None
         self._world = None
         self._state = None
+        self._odom_time = None
+        self._odom_stale = False
         self._pose_source.clear()
         self._pending_goal = None
         self._pending_scans.clear()
@@ -365,6 +375,7 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         """Refuse a malformed goal, an unknown world or analytic path, bad planner settings."""
         reasons = parameter_problems(parameters)
         reasons += self._check_modes(parameters)
+        reasons += range_problems(PARAMETERS, parameters)  # robot_radius's -1 beside its range
         if reasons:
             return SetParametersResult(successful=False, reason='; '.join(reasons))
         return SetParametersResult(successful=True)
@@ -430,7 +441,7 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
     def _planner_config(self) -> PlannerConfig:
         values = {name: self.get_parameter(name).value for name in PLANNER_FIELDS}
         world_radius = self._world.robot_radius if self._world is not None else 0.0
-        values['robot_radius'] = max(float(values['robot_radius']), world_radius)
+        values['robot_radius'] = radius_in_force(float(values['robot_radius']), world_radius)
         values['iterations'] = int(values['iterations'])
         values['seed'] = int(values['seed'])
         values['simplify'] = bool(values['simplify'])
@@ -525,6 +536,7 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         except ValueError as err:
             self.get_logger().warning(f'ignoring odometry: {err}', throttle_duration_sec=1.0)
             return
+        self._odom_time = measured_time(stamp_to_seconds(msg.header.stamp), self._now())
         self._pose_source.add_odometry(stamp_to_seconds(msg.header.stamp), self._state,
                                        msg.header.frame_id, odometry_twist(msg))
         self._place_pending()
@@ -611,10 +623,13 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         made with: an obstacle the map did not have, marked by the laser, now violates the
         clearance. The world file's obstacles do not change, so without use_map only
         replan_period re-plans. The decision is the re-planner's (core/replanning.py).
+        Nothing is checked while the odometry is stale (_odometry_stale).
         """
         if (not self._active or self._state is None or self._planner is None
-                or self._pending_goal is not None
+                or self._pending_goal is not None or self.replanner.plan is None
                 or self.get_parameter('analytic_path').value):
+            return
+        if self._odometry_stale():
             return
         start = self._start()
         if start is None:
@@ -627,6 +642,30 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
+
+    def _odometry_stale(self) -> bool:
+        """Say whether the odometry is stale (odom_timeout, the controller's rule); log once.
+
+        A re-plan from a pose the robot may have left long ago (the odometry's driver or the
+        simulator died) is a re-plan blind: re-planning stops, with one warning, and resumes
+        with one line when odometry comes again. The no-progress rule's clock then restarts:
+        the time without odometry is not time the robot stood.
+        """
+        timeout = float(self.get_parameter('odom_timeout').value)
+        now = self._now()
+        age = now - self._odom_time if self._odom_time is not None else math.inf
+        if is_stale(age, timeout):
+            if not self._odom_stale:
+                self._odom_stale = True
+                self.get_logger().warning(
+                    f'odometry is stale (the latest was measured {age:.2f} s ago; '
+                    f'odom_timeout {timeout:g} s): not re-planning until it comes again')
+            return True
+        if self._odom_stale:
+            self._odom_stale = False
+            self.replanner.restart_progress(now)
+            self.get_logger().info('odometry is fresh again: re-planning resumes')
+        return False
 
     def _adopt(self, decision: ReplanDecision) -> None:
         """Publish the re-planner's new plan, or log and report why there is none."""

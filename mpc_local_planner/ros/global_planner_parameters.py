@@ -25,7 +25,8 @@ import math
 
 from rclpy.parameter import Parameter
 
-from mpc_local_planner.core.footprint import parse_footprint
+from mpc_local_planner.core.controller_settings import ControllerSettings
+from mpc_local_planner.core.footprint import FROM_WORLD, parse_footprint
 from mpc_local_planner.core.paths import analytic_path
 from mpc_local_planner.core.planner_config import PlannerConfig
 from mpc_local_planner.core.replanning import (
@@ -34,9 +35,7 @@ from mpc_local_planner.core.replanning import (
     PROGRESS_TIMEOUT,
 )
 from mpc_local_planner.ros.parameters import ParameterSpec
-from mpc_local_planner.ros.robot_pose import (
-    POSE_PARAMETERS,
-)
+from mpc_local_planner.ros.robot_pose import pose_parameters
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world
 
@@ -45,6 +44,7 @@ __all__ = ['PARAMETERS', 'PLANNER_FIELDS', 'parameter_problems']
 PLANNER_FIELDS = ('iterations', 'time_limit', 'seed', 'range', 'robot_radius', 'clearance',
                    'simplify', 'start_clearance', 'drive_on_heading_distance')
 _DEFAULTS = PlannerConfig()  # the single source of the planner's defaults
+_CONTROLLER = ControllerSettings()  # odom_timeout: the controller's, one rule for both
 
 
 PARAMETERS: tuple[ParameterSpec, ...] = (
@@ -75,9 +75,10 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   int_range=(0, 2**31 - 1)),
     ParameterSpec('range', _DEFAULTS.range, 'RRT* extension length (m); 0 = OMPL chooses',
                   float_range=(0.0, 1e3)),
-    ParameterSpec('robot_radius', _DEFAULTS.robot_radius,
-                  "robot radius (m); the larger of this and the world's is used",
-                  float_range=(0.0, 10.0)),
+    ParameterSpec('robot_radius', FROM_WORLD,
+                  "the round robot's radius (m), when no polygon footprint applies; -1 = the "
+                  "world file's robot_radius (0 without one); a radius >= 0 is the robot's, "
+                  "smaller than the world's too", float_range=(0.0, 10.0), special=FROM_WORLD),
     ParameterSpec('footprint', '',
                   "the robot's convex polygon in base_link, Nav2's form \"[[x, y], ...]\"; '' = "
                   "the world file's footprint, or a circle of robot_radius"),
@@ -126,7 +127,12 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "radians of turn that count as progress (Nav2's PoseProgressChecker "
                   'required_movement_angle): a robot that turned in place and then stood is '
                   'stuck; 0 = only the position counts', float_range=(0.0, 6.3)),
-    *POSE_PARAMETERS,
+    ParameterSpec('odom_timeout', _CONTROLLER.odom_timeout,
+                  "odometry older than this (s of ROS time) is stale, by the controller's rule "
+                  'and default: re-planning (blocked, periodic, no_progress) stops with one '
+                  'warning until odometry comes again; a new goal is still planned from the '
+                  'latest pose', float_range=(0.001, 3600.0)),
+    *pose_parameters('the planner plans nothing (a goal waits, nothing is re-planned)'),
     ParameterSpec('autostart', True,
                   'configure and activate at start; false = wait for a lifecycle manager (or '
                   '`ros2 lifecycle set`)', read_only=True),

@@ -59,8 +59,8 @@ MPC stops in front of it or goes around, and the diagnostics say ``path_blocked`
 
 The robot's shape, Nav2's precedence (as the simulator and the planner apply it): the
 ``footprint`` parameter's convex polygon (``"[[x, y], ...]"``, base_link), else the world
-file's footprint if it is a polygon, else a circle of ``robot_radius`` (the larger of the
-parameter and the world's). A circle grows the obstacles by its radius; a polygon is kept
+file's footprint if it is a polygon, else a circle of ``robot_radius`` (-1, its default:
+the world's robot_radius). A circle grows the obstacles by its radius; a polygon is kept
 apart from each obstacle exactly by the NLP. ``mpc/footprint`` shows that shape at the
 robot's pose in ``global_frame``, and sensed obstacles are handed over within
 ``MpcConfig.reach`` (which counts a polygon's circumscribed radius) plus SENSING_MARGIN.
@@ -111,6 +111,7 @@ from mpc_local_planner.perception.scan_obstacles import (
 )
 from mpc_local_planner.ros.conversions import (
     frame_problem,
+    measured_time,
     odometry_to_state,
     odometry_twist,
     path_pose_count,
@@ -131,6 +132,7 @@ from mpc_local_planner.ros.mpc_controller_sensing import ControllerSensing
 from mpc_local_planner.ros.node_main import destroy_on_failure, EXIT_INVALID_PARAMETERS, run_node
 from mpc_local_planner.ros.parameters import (
     declare_parameters,
+    range_problems,
 )
 from mpc_local_planner.ros.qos import (
     CMD_VEL_QOS,
@@ -445,6 +447,9 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
         except Exception as err:  # whatever the cause, refuse with a reason
             reason = str(err) or type(err).__name__
             return SetParametersResult(successful=False, reason=reason)
+        problems = range_problems(PARAMETERS, parameters)  # the arrays' ranges, among others
+        if problems:
+            return SetParametersResult(successful=False, reason='; '.join(problems))
         return SetParametersResult(successful=True)
 
     def post_parameters_callback(self, parameters: list[Parameter]) -> None:
@@ -528,7 +533,7 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
         stamp = stamp_to_seconds(msg.header.stamp)
         twist = odometry_twist(msg)
         self._odom_state = state
-        self._odom_time = min(stamp, receipt) if stamp > 0 else receipt
+        self._odom_time = measured_time(stamp, receipt)
         self._odom_twist = twist if np.all(np.isfinite(twist)) else None
         self._odom_problem = None
         self._pose_source.add_odometry(stamp if stamp > 0 else receipt, state,

@@ -35,11 +35,11 @@ from typing import Any
 
 from mpc_local_planner.core.config import INPUT_HOLDS, MpcConfig, SOLVERS, SolverSettings
 from mpc_local_planner.core.controller_settings import ControllerSettings
-from mpc_local_planner.core.footprint import Footprint, resolve
+from mpc_local_planner.core.footprint import Footprint, FROM_WORLD, radius_in_force, resolve
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.ros.parameters import ParameterSpec
-from mpc_local_planner.ros.robot_pose import POSE_PARAMETERS
+from mpc_local_planner.ros.robot_pose import pose_parameters
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world
 
@@ -67,6 +67,8 @@ _SETTINGS_FIELDS = ('xy_goal_tolerance', 'yaw_goal_tolerance', 'odom_timeout',
 _AUTO_MARGIN = -1.0
 # max_accel / max_decel of [0.0, 0.0]: no limit (a double array cannot be None).
 RATE_LIMIT_OFF = (0.0, 0.0)
+# Each limit of max_accel / max_decel (m/s^2, rad/s^2), or 0 (both: no limit).
+_RATE_LIMIT = (0.01, 1000.0)
 # The defaults come from the dataclasses (the paper's values), the single source.
 _CONFIG, _MODEL, _SETTINGS = MpcConfig(), Unicycle(), ControllerSettings()
 _SHAPE = 'changes the NLP shape: rebuilt before the next solve'
@@ -91,7 +93,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "velocity_smoother's name): the NLP bounds each input change by "
                   "max_accel step, so the plan is one the base can follow; [0.0, 0.0] = "
                   "none (inputs may jump, the paper's model; config/jackal.yaml turns "
-                  f"it on for a Jackal); {_SHAPE}"),
+                  f"it on for a Jackal); {_SHAPE}", float_range=_RATE_LIMIT, special=0.0),
     ParameterSpec('input_hold', str(_CONFIG.input_hold),
                   f"how an input acts over a step, one of {INPUT_HOLDS}: 'zero' holds it "
                   "(the paper's model: the velocity jumps at each sample); 'first_order' "
@@ -109,7 +111,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "Nav2 velocity_smoother's name): a stop of a moving robot (stale or "
                   'invalid input, a failure) brakes along the last verified plan within '
                   'them instead of commanding zero at once, which a real base cannot '
-                  'follow; [0.0, 0.0] = none (zero at once); next control tick'),
+                  'follow; [0.0, 0.0] = none (zero at once); next control tick',
+                  float_range=_RATE_LIMIT, special=0.0),
     ParameterSpec('v_max', float(_MODEL.v_max),
                   'speed bound |v| (m/s); rebuilds the NLP before the next solve',
                   float_range=(0.001, 10.0)),
@@ -130,11 +133,12 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'stage weight of omega^4; next solve', float_range=_WEIGHT),
     ParameterSpec('offset_weight', float(_CONFIG.offset_weight),
                   'offset cost weight of (1 - s)^2; next solve', float_range=(1e-6, 1e9)),
-    ParameterSpec('robot_radius', float(_CONFIG.robot_radius),
+    ParameterSpec('robot_radius', FROM_WORLD,
                   "the round robot's radius (m), obstacles are inflated by it and scan "
-                  "returns within it are the robot itself (ignored); the larger of this and "
-                  "the world's is used; ignored when a polygon footprint applies",
-                  float_range=(0.0, 10.0)),
+                  "returns within it are the robot itself (ignored); -1 = the world file's "
+                  "robot_radius (0 without one); a radius >= 0 is the robot's, smaller than "
+                  "the world's too; ignored when a polygon footprint applies",
+                  float_range=(0.0, 10.0), special=FROM_WORLD),
     ParameterSpec('footprint', '',
                   "the robot's convex polygon in base_link (x forward), Nav2's form "
                   "\"[[x, y], [x, y], ...]\"; the MPC separates it from each obstacle exactly; "
@@ -201,7 +205,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('enable_stamped_cmd_vel', False,
                   'publish cmd_vel as geometry_msgs/TwistStamped (frame base_link) instead of '
                   "Twist (Nav2's name); read at configure"),
-    *POSE_PARAMETERS,
+    *pose_parameters('the controller stops (no_localization)'),
     ParameterSpec('autostart', True,
                   'configure and activate at start; false = wait for a lifecycle manager '
                   '(or ros2 lifecycle set)', read_only=True),
@@ -274,9 +278,9 @@ def build_settings(values: dict[str, Any], *, world_radius: float = 0.0,
                    ) -> tuple[MpcConfig, Unicycle, ControllerSettings]:
     """Turn parameter values into the controller's settings.
 
-    The robot radius in force is the larger of the parameter and the world's; the footprint
-    is the parameter's polygon, else the world's polygon, else that circle (see
-    robot_footprint).
+    The robot radius in force is the parameter's, or the world's for -1 (radius_in_force);
+    the footprint is the parameter's polygon, else the world's polygon, else that circle
+    (see robot_footprint).
 
     Raises:
         ValueError: with every reason the values are invalid (validate_solver_settings' and
@@ -295,7 +299,7 @@ def build_settings(values: dict[str, Any], *, world_radius: float = 0.0,
     mpc_kwargs['collision_margin'] = None if margin < 0 else margin
     budget = float(values['max_solve_time'])
     solver_kwargs['max_solve_time'] = None if budget <= 0 else budget
-    mpc_kwargs['robot_radius'] = max(float(values['robot_radius']), world_radius)
+    mpc_kwargs['robot_radius'] = radius_in_force(float(values['robot_radius']), world_radius)
     mpc_kwargs['footprint'] = robot_footprint(values['footprint'], world_footprint)
     mpc_kwargs['max_accel'] = rate_limit('max_accel', values['max_accel'])
     decel = rate_limit('max_decel', values['max_decel'])

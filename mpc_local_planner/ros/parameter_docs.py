@@ -38,7 +38,7 @@ from mpc_local_planner.ros import (
     unicycle_simulator_node,
     unicycle_simulator_parameters,
 )
-from mpc_local_planner.ros.parameters import format_default, ParameterSpec
+from mpc_local_planner.ros.parameters import format_default, format_range, ParameterSpec
 
 __all__ = ['NODES', 'NodeTable', 'render', 'main']
 
@@ -85,10 +85,8 @@ def render(nodes: Sequence[NodeTable] = NODES) -> str:
         parts.append(f'\n## `{node.executable}`\n\n{_cell(node.summary)}\n')
         parts.append('| parameter | default | range | description |\n|---|---|---|---|')
         for spec in node.parameters:
-            limits = spec.float_range or spec.int_range
-            bounds = f'{limits[0]:g} .. {limits[1]:g}' if limits else ''
             parts.append(f'| `{spec.name}` | `{_cell(format_default(spec.default))}` | '
-                         f'{bounds} | {_cell(spec.description)} |')
+                         f'{format_range(spec)} | {_cell(spec.description)} |')
     return '\n'.join(parts) + '\n'
 
 

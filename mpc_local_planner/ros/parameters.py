@@ -25,11 +25,17 @@ parameters (ROS_OWN_PARAMETERS, ``qos_overrides.*``) are always accepted. The pa
 a command line are read here too (`params_files`, `params_file_problem`, `params_sections`,
 `section_applies`), so that a node can say in one line why a file cannot be used, or that it
 holds no section for the node, as ROS matches sections to nodes.
+
+A range is enforced on every set: by rclpy for a number (its descriptor's range), and by
+the node's own set-parameters callback, through `range_problems`, for what rclpy does not
+check: each element of an array, and the values between a range and its ``special`` value
+(e.g. -1, "the preset's", beside 0 .. 10).
 """
 
 from __future__ import annotations
 
 import difflib
+import math
 from pathlib import Path
 import re
 from typing import Any, Iterable, NamedTuple, Sequence
@@ -45,9 +51,10 @@ from rclpy.parameter import Parameter
 import yaml
 
 __all__ = ['ROS_OWN_PARAMETERS', 'ROS_OWN_PREFIXES', 'ParameterSpec', 'UnknownParameterError',
-           'declare_parameters', 'describe', 'format_default', 'format_help',
-           'params_file_problem', 'params_files', 'params_sections', 'refuse_unknown_parameters',
-           'section_applies', 'unknown_parameters']
+           'declare_parameters', 'describe', 'format_default', 'format_help', 'format_range',
+           'params_file_problem', 'params_files', 'params_sections', 'range_problem',
+           'range_problems', 'refuse_unknown_parameters', 'section_applies',
+           'unknown_parameters']
 
 # Parameters rclpy declares or reads in every node by itself: never a typo of the package's.
 ROS_OWN_PARAMETERS = frozenset({'use_sim_time', 'start_type_description_service'})
@@ -59,9 +66,13 @@ class UnknownParameterError(ValueError):
     """A node was given a parameter it does not declare (most likely a misspelt one)."""
 
 
+# math.isclose's tolerance at a range's ends, as rclpy's (Node.PARAM_REL_TOL).
+_REL_TOL = 1e-6
+
+
 def describe(description: str, *, float_range: tuple[float, float] | None = None,
              int_range: tuple[int, int] | None = None, read_only: bool = False,
-             dynamic_typing: bool = False) -> ParameterDescriptor:
+             dynamic_typing: bool = False, array: bool = False) -> ParameterDescriptor:
     """Return a ParameterDescriptor with an optional range (rclpy enforces it on set).
 
     Args:
@@ -70,17 +81,21 @@ def describe(description: str, *, float_range: tuple[float, float] | None = None
         int_range: inclusive (from, to) for an integer parameter.
         read_only: refuse every change after the declaration.
         dynamic_typing: allow the type to change (e.g. an optional array given as []).
+        array: the range is each element's (shown by ``ros2 param describe``; rclpy does not
+            check arrays: `range_problem` does).
 
     """
     descriptor = ParameterDescriptor(description=description, read_only=read_only,
                                      dynamic_typing=dynamic_typing)
     if float_range is not None:
-        descriptor.type = ParameterType.PARAMETER_DOUBLE
+        descriptor.type = (ParameterType.PARAMETER_DOUBLE_ARRAY if array
+                           else ParameterType.PARAMETER_DOUBLE)
         descriptor.floating_point_range = [
             FloatingPointRange(from_value=float(float_range[0]), to_value=float(float_range[1]),
                                step=0.0)]
     if int_range is not None:
-        descriptor.type = ParameterType.PARAMETER_INTEGER
+        descriptor.type = (ParameterType.PARAMETER_INTEGER_ARRAY if array
+                           else ParameterType.PARAMETER_INTEGER)
         descriptor.integer_range = [
             IntegerRange(from_value=int(int_range[0]), to_value=int(int_range[1]), step=0)]
     return descriptor
@@ -94,9 +109,13 @@ class ParameterSpec(NamedTuple):
         default: its default value; a ``Parameter.Type`` for a parameter without one (it is
             then unset unless given, e.g. an optional goal).
         description: what it does, its unit, and when a change takes effect.
-        float_range: inclusive (from, to) for a double, enforced by rclpy on every set.
-        int_range: inclusive (from, to) for an integer.
+        float_range: inclusive (from, to) for a double, enforced on every set; for an array
+            of doubles, each element's.
+        int_range: inclusive (from, to) for an integer (for an array: each element's).
         read_only: refuse changes after start (e.g. what only matters at configure).
+        special: a value outside the range that is accepted too (for an array: as an
+            element), with the meaning the description gives it: -1 = "the preset's" for
+            the simulator's reality overrides, 0 = "none" for the controller's rate limits.
 
     """
 
@@ -106,11 +125,81 @@ class ParameterSpec(NamedTuple):
     float_range: tuple[float, float] | None = None
     int_range: tuple[int, int] | None = None
     read_only: bool = False
+    special: float | None = None
+
+    @property
+    def is_array(self) -> bool:
+        """Whether the parameter is an array (its range is each element's)."""
+        return isinstance(self.default, (list, tuple))
 
     def descriptor(self) -> ParameterDescriptor:
-        """Return the ParameterDescriptor rclpy declares it with."""
-        return describe(self.description, float_range=self.float_range,
-                        int_range=self.int_range, read_only=self.read_only)
+        """Return the ParameterDescriptor rclpy declares it with.
+
+        Its range spans the special value too (rclpy checks that hull; `range_problem` the
+        values between).
+        """
+        float_range, int_range = self.float_range, self.int_range
+        if self.special is not None and float_range is not None:
+            float_range = (min(float_range[0], self.special), max(float_range[1], self.special))
+        if self.special is not None and int_range is not None:
+            int_range = (min(int_range[0], int(self.special)),
+                         max(int_range[1], int(self.special)))
+        return describe(self.description, float_range=float_range, int_range=int_range,
+                        read_only=self.read_only, array=self.is_array)
+
+
+def format_range(spec: ParameterSpec, *, each: str = 'each ') -> str:
+    """Return the range as --help and docs/parameters.md show it ('' without one).
+
+    An array's range is each element's: each prefixes it.
+    """
+    if spec.int_range is not None:
+        text = f'{spec.int_range[0]} .. {spec.int_range[1]}'
+    elif spec.float_range is not None:
+        text = f'{spec.float_range[0]:g} .. {spec.float_range[1]:g}'
+    else:
+        return ''
+    if spec.special is not None:
+        text = f'{spec.special:g}, or {text}'
+    return f'{each}{text}' if spec.is_array else text
+
+
+def _within(value: float, limits: tuple[float, float]) -> bool:
+    low, high = limits
+    return (low <= value <= high or math.isclose(value, low, rel_tol=_REL_TOL)
+            or math.isclose(value, high, rel_tol=_REL_TOL))
+
+
+def range_problem(spec: ParameterSpec, value: Any) -> str | None:
+    """Say why value is outside spec's range (each element, for an array), or None.
+
+    A value of another type is not judged here (rclpy refuses a wrong type, the nodes'
+    checks the rest); NaN is outside every range.
+    """
+    limits = spec.float_range or spec.int_range
+    if limits is None or isinstance(value, (str, bytes, bool)):
+        return None
+    try:
+        values = [float(v) for v in value] if spec.is_array else [float(value)]
+    except (TypeError, ValueError):
+        return None
+    if all(v == spec.special or _within(v, limits) for v in values):
+        return None
+    if spec.is_array:
+        return f'{spec.name} must be {format_range(spec, each="")} each, got {list(value)}'
+    return f'{spec.name} must be {format_range(spec)}, got {value}'
+
+
+def range_problems(specs: Sequence[ParameterSpec], parameters: Sequence[Parameter]
+                   ) -> list[str]:
+    """Return why each parameter is outside its spec's range (`range_problem`); [] if none.
+
+    For a node's set-parameters callback: it checks what rclpy does not (arrays, a special
+    value beside a range), after the node's own, more specific checks.
+    """
+    by_name = {spec.name: spec for spec in specs}
+    return [reason for p in parameters if p.name in by_name
+            and (reason := range_problem(by_name[p.name], p.value)) is not None]
 
 
 def declare_parameters(node: Node, specs: Sequence[ParameterSpec]) -> None:
@@ -266,8 +355,7 @@ def format_help(executable: str, summary: str, specs: Sequence[ParameterSpec]) -
              'parameters (name, default, range: description):']
     width = max((len(spec.name) for spec in specs), default=0)
     for spec in specs:
-        limits = spec.float_range or spec.int_range
-        bounds = f' [{limits[0]:g}, {limits[1]:g}]' if limits else ''
+        bounds = f' [{format_range(spec)}]' if spec.float_range or spec.int_range else ''
         lines.append(f'  {spec.name:<{width}}  {format_default(spec.default)}{bounds}: '
                      f'{spec.description}')
     return '\n'.join(lines) + '\n'

@@ -67,7 +67,7 @@ try:  # a sourced ROS install; PyPI has no tf2_ros
 except ImportError:  # pragma: no cover - depends on the installation
     tf2_ros = None
 
-__all__ = ['LocalizationError', 'ODOM_HISTORY_S', 'PENDING_SCANS', 'PoseMode', 'POSE_PARAMETERS',
+__all__ = ['LocalizationError', 'ODOM_HISTORY_S', 'PENDING_SCANS', 'PoseMode', 'pose_parameters',
            'RobotPose', 'TF_AVAILABLE', 'TfPose', 'choose_mode', 'make_buffer',
            'transform_to_pose']
 
@@ -80,27 +80,36 @@ ODOM_HISTORY_S = 2.0
 # late, and a waiting scan too old is discarded anyway.
 PENDING_SCANS = 3
 
-# The parameters both nodes declare for it (besides global_frame and robot_base_frame).
-POSE_PARAMETERS: tuple[ParameterSpec, ...] = (
-    ParameterSpec('localization_topic', '',
-                  "a localizer's pose topic (geometry_msgs/PoseWithCovarianceStamped in "
-                  "global_frame, as AMCL's amcl_pose), composed with odometry as the pose in "
-                  "global_frame; '' = none: tf2's global_frame -> robot_base_frame if tf2_ros "
-                  'is importable, else the odometry is that pose; read at configure'),
-    ParameterSpec('localization_max_travel', 1.0,
-                  "with localization_topic, how far (m) the odometry may move from its pose at "
-                  "the last localizer pose's stamp (net, as AMCL measures) before the "
-                  "localizer is taken as silent or lost: the "
-                  "controller stops (no_localization) until its next pose; 4 x AMCL's "
-                  'update_min_d; 0 = no limit; read at configure', float_range=(0.0, 1000.0)),
-    ParameterSpec('localization_max_rotation', 0.8,
-                  'with localization_topic, the same for the odometry rotation (rad); 4 x '
-                  "AMCL's update_min_a; 0 = no limit; read at configure",
-                  float_range=(0.0, 1000.0)),
-    ParameterSpec('transform_tolerance', 0.1,
-                  "with tf2, how long (s) to wait for global_frame -> robot_base_frame (Nav2's "
-                  'name); none by then: the controller stops', float_range=(0.0, 10.0)),
-)
+def pose_parameters(without_pose: str) -> tuple[ParameterSpec, ...]:
+    """Return the parameters both nodes declare for the pose (besides the frames).
+
+    Args:
+        without_pose: what the node does while it has no pose in global_frame (the
+            localizer silent or lost, no transform), as its descriptions say it.
+
+    """
+    return (
+        ParameterSpec('localization_topic', '',
+                      "a localizer's pose topic (geometry_msgs/PoseWithCovarianceStamped in "
+                      "global_frame, as AMCL's amcl_pose), composed with odometry as the pose "
+                      "in global_frame; '' = none: tf2's global_frame -> robot_base_frame if "
+                      'tf2_ros is importable, else the odometry is that pose; read at '
+                      'configure'),
+        ParameterSpec('localization_max_travel', 1.0,
+                      'with localization_topic, how far (m) the odometry may move from its '
+                      "pose at the last localizer pose's stamp (net, as AMCL measures) before "
+                      f'the localizer is taken as silent or lost: {without_pose} until its '
+                      "next pose; 4 x AMCL's update_min_d; 0 = no limit; read at configure",
+                      float_range=(0.0, 1000.0)),
+        ParameterSpec('localization_max_rotation', 0.8,
+                      'with localization_topic, the same for the odometry rotation (rad); 4 x '
+                      "AMCL's update_min_a; 0 = no limit; read at configure",
+                      float_range=(0.0, 1000.0)),
+        ParameterSpec('transform_tolerance', 0.1,
+                      'with tf2, how long (s) to wait for global_frame -> robot_base_frame '
+                      f"(Nav2's name); none by then: {without_pose} until one comes",
+                      float_range=(0.0, 10.0)),
+    )
 
 
 class PoseMode(Enum):

@@ -32,12 +32,11 @@ always did. Otherwise:
   and -inf (``scan.neg_inf_fraction``), and a ``scan.loss_fraction`` of them is never
   published.
 
-Each override replaces one field of the preset: the new ones take the preset's value when
-negative (their default, -1), so 0 turns a preset's imperfection off; the older
-``odom_drift.position``, ``odom_drift.heading`` and ``scan.noise_std`` keep their default 0,
-which takes the preset's value (0 for ideal: what they always meant), and any other value
-overrides it. ``scan.seed`` seeds every draw (laser and odometry noise): runs are
-reproducible. An unknown preset or an invalid value is refused with the reason.
+Each override replaces one field of the preset, with one marker: -1 (every override's
+default; in a pair, per component) takes the preset's value, and 0 means zero (no noise, no
+lag, exact odometry), whatever the preset. ``seed`` seeds every draw (the odometry noise
+and, on a stream of their own, the laser's): runs are reproducible. An unknown preset or an
+invalid value is refused with the reason.
 
 With ``publish_clock`` the node is the clock: each tick of a steady wall timer, fired at
 ``rate * real_time_factor`` Hz, advances simulated time by exactly ``1 / rate`` s, publishes
@@ -67,7 +66,7 @@ The footprint, first that applies (Nav2's names; a polygon wins over a radius, a
 
 1. the ``footprint`` parameter, a convex polygon ``"[[x, y], ...]"`` (robot frame, x forward);
 2. the world file's ``footprint``, when it has a polygon;
-3. a circle of the larger of ``robot_radius`` and the world's ``robot_radius``.
+3. a circle of ``robot_radius``; -1 (its default) takes the world's ``robot_radius``.
 
 So a world that describes its robot is simulated with that robot unless the parameter says
 otherwise, and ``robot_radius`` (which closed_loop sets from the world's covering radius) never

@@ -25,7 +25,7 @@ from dataclasses import replace
 import math
 from typing import Any
 
-from mpc_local_planner.core.footprint import parse_footprint
+from mpc_local_planner.core.footprint import FROM_WORLD, parse_footprint
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.reality import (
     LOCALIZER_NOISE,
@@ -33,7 +33,7 @@ from mpc_local_planner.core.reality import (
     reality_preset,
     REALITY_PRESETS,
 )
-from mpc_local_planner.ros.parameters import ParameterSpec
+from mpc_local_planner.ros.parameters import ParameterSpec, range_problem
 
 __all__ = ['CONTACTS_TOPIC', 'FROM_PRESET', 'LOCALIZER_TOPIC', 'MAX_SCAN_BEAMS', 'PARAMETERS',
            'REALITY_PARAMETERS', 'SCAN_RANGE_MIN', 'SCAN_TOPIC', 'reality_from_parameters',
@@ -50,20 +50,23 @@ LOCALIZER_TOPIC = 'amcl_pose'
 SCAN_RANGE_MIN = 0.05
 # At most this many beams (a bigger scan is a typo, and would stall every tick).
 MAX_SCAN_BEAMS = 10_000
-# "From the preset" for the reality overrides that cannot be negative (see REALITY_PARAMETERS).
+# The one marker of every reality override: -1 = the preset's value (in a pair: per
+# component). It is outside every override's range, so 0 always means zero (no noise, no
+# lag, exact odometry), and the drift, which may be negative, can say it too.
 FROM_PRESET = -1.0
-# Overrides of the preset's fields, each: parameter -> Reality field. A negative value (in
-# a pair: per component) takes the preset's; odom_drift.* and scan.noise_std are older
-# parameters whose default 0 stays: 0 takes the preset's, any other value overrides it.
+# Overrides of the preset's fields, each: parameter -> Reality field.
 _PAIR_OVERRIDES = {'actuator_lag': 'lag', 'acceleration_limits': 'acceleration',
                    'odom_noise_std': 'odom_noise'}
-_SCALAR_OVERRIDES = {'command_latency': 'latency', 'scan.nan_fraction': 'scan_nan',
-                     'scan.neg_inf_fraction': 'scan_neg_inf', 'scan.loss_fraction': 'scan_loss'}
-_ZERO_IS_PRESET = {'scan.noise_std': 'scan_noise'}
+_SCALAR_OVERRIDES = {'command_latency': 'latency', 'scan.noise_std': 'scan_noise',
+                     'scan.nan_fraction': 'scan_nan', 'scan.neg_inf_fraction': 'scan_neg_inf',
+                     'scan.loss_fraction': 'scan_loss'}
 _DRIFT = ('odom_drift.position', 'odom_drift.heading')
 # Every parameter that shapes the Reality (a change rebuilds it: see post_parameters_callback).
-REALITY_PARAMETERS = frozenset({'reality', 'scan.seed', *_PAIR_OVERRIDES, *_SCALAR_OVERRIDES,
-                                *_ZERO_IS_PRESET, *_DRIFT})
+REALITY_PARAMETERS = frozenset({'reality', 'seed', *_PAIR_OVERRIDES, *_SCALAR_OVERRIDES,
+                                *_DRIFT})
+# A fraction of beams or scans, < 1 (Reality's rule) with a range's inclusive end.
+_FRACTION = (0.0, 0.99)
+_PRESET = "-1 = the reality preset's"
 
 
 PARAMETERS: tuple[ParameterSpec, ...] = (
@@ -96,10 +99,11 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'the TRUE world (known and unknown obstacles) the laser sees and the robot '
                   "can touch: a path, or a name in the package's config/ or config/worlds/; "
                   "'' = an empty world; read once at start", read_only=True),
-    ParameterSpec('robot_radius', 0.0,
+    ParameterSpec('robot_radius', FROM_WORLD,
                   "radius of the robot's disk for contacts (m) when no polygon footprint "
-                  "applies; the larger of this and the world's robot_radius counts",
-                  float_range=(0.0, 10.0)),
+                  "applies; -1 = the world file's robot_radius (0 without one); a radius >= 0 "
+                  "is the robot's, smaller than the world's too",
+                  float_range=(0.0, 10.0), special=FROM_WORLD),
     ParameterSpec('footprint', '',
                   'the robot\'s convex polygon for contacts, Nav2\'s form "[[x, y], ...]" in '
                   "the robot frame (x forward); '' or '[]' = the world file's footprint if it "
@@ -109,51 +113,56 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'laser scans per second of simulated time (at most one per tick, so at '
                   'most rate)', float_range=(0.01, 1000.0)),
     ParameterSpec('scan.fov', 4.71,
-                  'field of view (rad), in (0, 2 pi]: angle_min = -fov / 2, '
-                  'angle_increment = fov / (beams - 1)'),
-    ParameterSpec('scan.beams', 720, f'beams per scan, 2 to {MAX_SCAN_BEAMS}'),
+                  'field of view (rad), at most 2 pi: angle_min = -fov / 2, '
+                  'angle_increment = fov / (beams - 1)', float_range=(0.001, 2.0 * math.pi)),
+    ParameterSpec('scan.beams', 720, 'beams per scan', int_range=(2, MAX_SCAN_BEAMS)),
     ParameterSpec('scan.range_max', 10.0,
-                  f'farthest reading (m), > range_min = {SCAN_RANGE_MIN}; beyond it a beam '
-                  'reads inf'),
-    ParameterSpec('scan.noise_std', 0.0,
-                  'standard deviation of the Gaussian range noise (m), >= 0; 0 = the '
-                  "reality preset's (ideal: none)"),
-    ParameterSpec('scan.seed', 0,
-                  'seed of every random draw of the simulated reality: range noise, NaN and '
-                  '-inf beams, lost scans, odometry noise (runs are reproducible); the '
-                  'odometry reads it once at start'),
-    ParameterSpec('odom_drift.position', 0.0,
+                  f'farthest reading (m; range_min is {SCAN_RANGE_MIN}); beyond it a beam '
+                  'reads inf', float_range=(0.1, 1000.0)),
+    ParameterSpec('scan.noise_std', FROM_PRESET,
+                  f'standard deviation of the Gaussian range noise (m); {_PRESET} (ideal: '
+                  'none)', float_range=(0.0, 10.0), special=FROM_PRESET),
+    ParameterSpec('odom_drift.position', FROM_PRESET,
                   "odometry's distance error as a fraction of the distance travelled (0.05 = "
-                  "5 %: the odometry says 1.05 m per true metre); 0 = the reality preset's "
-                  '(ideal: exact)', float_range=(-0.5, 0.5)),
-    ParameterSpec('odom_drift.heading', 0.0,
-                  "odometry's heading error per metre travelled (rad/m); 0 = the reality "
-                  "preset's (ideal: exact)", float_range=(-1.0, 1.0)),
+                  f'5 %: the odometry says 1.05 m per true metre; 0 = exact); {_PRESET} '
+                  '(ideal: exact)', float_range=(-0.5, 0.5), special=FROM_PRESET),
+    ParameterSpec('odom_drift.heading', FROM_PRESET,
+                  "odometry's heading error per metre travelled (rad/m; 0 = exact); "
+                  f'{_PRESET} (ideal: exact)', float_range=(-0.5, 0.5), special=FROM_PRESET),
     ParameterSpec('reality', 'ideal',
                   'how real the robot and its laser are, a preset of core/reality.py: '
                   f'{"|".join(REALITY_PRESETS)} (ideal: commands act at once and exactly, '
-                  'odometry is the pose, the laser is exact); the parameters below override '
-                  'single fields'),
+                  'odometry is the pose, the laser is exact); the parameters below and '
+                  "scan.noise_std, odom_drift.* and scan.*_fraction override single fields, "
+                  "each -1 (its default) for the preset's, 0 for none"),
+    ParameterSpec('seed', 0,
+                  "seed of the simulated reality's random draws, the base's (odometry noise) "
+                  "and, on a stream of their own, the laser's (range noise, NaN and -inf "
+                  'beams, lost scans): runs are reproducible; the base reads it once at start, '
+                  "the laser at each change (the localizer has localizer.seed)",
+                  int_range=(0, 2**31 - 1)),
     ParameterSpec('actuator_lag', [FROM_PRESET, FROM_PRESET],
                   'first-order time constants [v, omega] (s) of the wheels following the '
-                  "command, >= 0; negative = the preset's"),
+                  f'command (0 = at once); {_PRESET}', float_range=(0.0, 10.0),
+                  special=FROM_PRESET),
     ParameterSpec('acceleration_limits', [FROM_PRESET, FROM_PRESET],
-                  'limits of |dv/dt| (m/s^2) and |domega/dt| (rad/s^2), > 0 (.inf = none); '
-                  "negative = the preset's"),
+                  'limits of |dv/dt| (m/s^2) and |domega/dt| (rad/s^2) (.inf = none); '
+                  f'{_PRESET}', float_range=(0.01, math.inf), special=FROM_PRESET),
     ParameterSpec('command_latency', FROM_PRESET,
-                  'seconds from a cmd_vel to its reaching the motors (simulated time), >= 0; '
-                  "negative = the preset's"),
+                  'seconds from a cmd_vel to its reaching the motors (simulated time); '
+                  f'{_PRESET}', float_range=(0.0, 10.0), special=FROM_PRESET),
     ParameterSpec('odom_noise_std', [FROM_PRESET, FROM_PRESET],
                   'standard deviations [m, rad] of the white noise on each published odometry '
-                  "pose, >= 0; negative = the preset's"),
+                  f'pose; {_PRESET}', float_range=(0.0, 10.0), special=FROM_PRESET),
     ParameterSpec('scan.nan_fraction', FROM_PRESET,
-                  "fraction of beams that read NaN, in [0, 1); negative = the preset's"),
+                  f'fraction of beams that read NaN; {_PRESET}', float_range=_FRACTION,
+                  special=FROM_PRESET),
     ParameterSpec('scan.neg_inf_fraction', FROM_PRESET,
-                  "fraction of beams that read -inf (too close), in [0, 1); negative = the "
-                  "preset's"),
+                  f'fraction of beams that read -inf (too close); {_PRESET}',
+                  float_range=_FRACTION, special=FROM_PRESET),
     ParameterSpec('scan.loss_fraction', FROM_PRESET,
-                  "fraction of scans that are never published, in [0, 1); negative = the "
-                  "preset's"),
+                  f'fraction of scans that are never published; {_PRESET}',
+                  float_range=_FRACTION, special=FROM_PRESET),
     ParameterSpec('localizer.rate', 0.0,
                   f'publish the true pose with noise on {LOCALIZER_TOPIC} this often (Hz of '
                   'simulated time, at most one per tick), a stand-in for AMCL; 0 = off',
@@ -168,30 +177,32 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
 )
 
 
+_SPECS = {spec.name: spec for spec in PARAMETERS}
+
+
 def validate_simulator_parameters(values: dict[str, Any]) -> str | None:
-    """Return why the simulator's parameter values are invalid, or None."""
+    """Return why the simulator's parameter values are invalid, or None.
+
+    Each value is held to its range (the table's, as the node enforces it on every set),
+    so that values given without a node (closed_loop's) are judged alike.
+    """
     pose = values.get('initial_pose')
     if pose is not None:
         pose = list(pose)
         if len(pose) != 3 or not all(math.isfinite(float(v)) for v in pose):
             return f'initial_pose must be [x, y, theta] (3 finite numbers), got {pose}'
-    checks = {
-        'scan.fov': (lambda v: 0.0 < v <= 2.0 * math.pi, 'in (0, 2 pi]'),
-        'scan.range_max': (lambda v: SCAN_RANGE_MIN < v < math.inf,
-                           f'finite and > range_min = {SCAN_RANGE_MIN}'),
-        'scan.noise_std': (lambda v: 0.0 <= v < math.inf, 'finite and >= 0'),
-    }
-    for name, (valid, what) in checks.items():
+    for name in ('scan.fov', 'scan.range_max'):
         value = values.get(name)
-        if value is None:
-            continue
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not valid(
-                float(value)):
-            return f'{name} must be a number {what}, got {value!r}'
-    beams = values.get('scan.beams')
-    if beams is not None and (isinstance(beams, bool) or not isinstance(beams, int)
-                              or not 2 <= beams <= MAX_SCAN_BEAMS):
-        return f'scan.beams must be an integer from 2 to {MAX_SCAN_BEAMS}, got {beams!r}'
+        if value is not None and not _is_number(value):
+            return f'{name} must be a number, got {value!r}'
+    for name in ('scan.beams', 'seed'):
+        value = values.get(name)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
+            return f'{name} must be an integer, got {value!r}'
+    for name in ('robot_radius', 'scan.fov', 'scan.beams', 'scan.range_max', 'seed'):
+        reason = range_problem(_SPECS[name], values[name]) if name in values else None
+        if reason is not None:
+            return reason
     footprint = values.get('footprint')
     if footprint is not None:
         if not isinstance(footprint, str):
@@ -200,9 +211,6 @@ def validate_simulator_parameters(values: dict[str, Any]) -> str | None:
             parse_footprint(footprint)
         except ValueError as err:
             return f'footprint: {err}'
-    seed = values.get('scan.seed')
-    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
-        return f'scan.seed must be an integer >= 0, got {seed!r}'
     return _validate_reality_parameters(values)
 
 
@@ -214,6 +222,7 @@ def _is_number(value: Any) -> bool:
 def _validate_reality_parameters(values: dict[str, Any]) -> str | None:
     """Return why a reality parameter is invalid on its own, or None (see PARAMETERS).
 
+    Each override is a number (a pair: two), -1 for the preset's or within its range.
     Combinations (scan.nan_fraction + scan.neg_inf_fraction < 1 with the preset's values
     filled in) are Reality's to check: reality_from_parameters.
     """
@@ -221,36 +230,25 @@ def _validate_reality_parameters(values: dict[str, Any]) -> str | None:
     if name is not None and (not isinstance(name, str) or name not in REALITY_PRESETS):
         return (f'reality must be one of {"|".join(REALITY_PRESETS)} (core/reality.py), '
                 f'got {name!r}')
-    pairs = {
-        'actuator_lag': (lambda v: v < math.inf, 'finite and >= 0'),
-        'acceleration_limits': (lambda v: v > 0.0, '> 0 (.inf = no limit)'),
-        'odom_noise_std': (lambda v: v < math.inf, 'finite and >= 0'),
-    }
-    for key, (valid, what) in pairs.items():
+    for key in _PAIR_OVERRIDES:
         value = values.get(key)
         if value is None:
             continue
         pair = list(value) if isinstance(value, (list, tuple)) else None
-        if pair is None or len(pair) != 2 or not all(_is_number(v) for v in pair) or not all(
-                float(v) < 0.0 or valid(float(v)) for v in pair):
-            return (f'{key} must be two numbers, each {what} or negative for the '
-                    f"preset's, got {value!r}")
-    scalars = {
-        'command_latency': (lambda v: v < math.inf, 'finite and >= 0'),
-        'scan.nan_fraction': (lambda v: v < 1.0, 'in [0, 1)'),
-        'scan.neg_inf_fraction': (lambda v: v < 1.0, 'in [0, 1)'),
-        'scan.loss_fraction': (lambda v: v < 1.0, 'in [0, 1)'),
-    }
-    for key, (valid, what) in scalars.items():
+        if pair is None or len(pair) != 2 or not all(_is_number(v) for v in pair):
+            return f'{key} must be two numbers, got {value!r}'
+        reason = range_problem(_SPECS[key], pair)
+        if reason is not None:
+            return reason
+    for key in (*_SCALAR_OVERRIDES, *_DRIFT):
         value = values.get(key)
         if value is None:
             continue
-        if not _is_number(value) or not (float(value) < 0.0 or valid(float(value))):
-            return f"{key} must be a number, {what}, or negative for the preset's, got {value!r}"
-    for key in _DRIFT:
-        value = values.get(key)
-        if value is not None and (not _is_number(value) or not math.isfinite(float(value))):
-            return f'{key} must be a finite number, got {value!r}'
+        if not _is_number(value):
+            return f'{key} must be a number, got {value!r}'
+        reason = range_problem(_SPECS[key], value)
+        if reason is not None:
+            return reason
     return None
 
 
@@ -258,12 +256,9 @@ def reality_from_parameters(values: dict[str, Any]) -> Reality:
     """Return the Reality the simulator's parameter values describe.
 
     The preset named by ``reality`` (default 'ideal'), with each override that is set taking
-    the place of the preset's field: a negative ``actuator_lag``, ``acceleration_limits``,
-    ``odom_noise_std`` (per component), ``command_latency`` or ``scan.*_fraction`` means "the
-    preset's"; for the older ``odom_drift.position``, ``odom_drift.heading`` and
-    ``scan.noise_std``, whose default 0 always meant "exact", 0 means the preset's (so the
-    ideal preset and the old defaults agree). ``scan.seed`` is the seed. Missing names are
-    the preset's.
+    the place of the preset's field; FROM_PRESET (-1, the overrides' default; in a pair, per
+    component) means "the preset's", and 0 means zero. ``seed`` is the seed. Missing
+    names are the preset's.
 
     Raises:
         ValueError: for an unknown preset, or values Reality refuses (the reason says which).
@@ -278,23 +273,19 @@ def reality_from_parameters(values: dict[str, Any]) -> Reality:
         value = values.get(key)
         if value is not None:
             changes[attribute] = tuple(
-                float(v) if float(v) >= 0.0 else old
+                old if float(v) == FROM_PRESET else float(v)
                 for v, old in zip(value, getattr(preset, attribute), strict=True))
     for key, attribute in _SCALAR_OVERRIDES.items():
         value = values.get(key)
-        if value is not None and float(value) >= 0.0:
-            changes[attribute] = float(value)
-    for key, attribute in _ZERO_IS_PRESET.items():
-        value = values.get(key)
-        if value is not None and float(value) != 0.0:
+        if value is not None and float(value) != FROM_PRESET:
             changes[attribute] = float(value)
     drift = list(preset.odom_drift)
     for i, key in enumerate(_DRIFT):
         value = values.get(key)
-        if value is not None and float(value) != 0.0:
+        if value is not None and float(value) != FROM_PRESET:
             drift[i] = float(value)
     changes['odom_drift'] = tuple(drift)
-    changes['seed'] = int(values.get('scan.seed', 0))
+    changes['seed'] = int(values.get('seed', 0))
     try:
         return replace(preset, **changes)  # Reality.__post_init__ checks the whole
     except ValueError as err:

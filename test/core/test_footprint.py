@@ -3,7 +3,13 @@ import math
 import numpy as np
 import pytest
 
-from mpc_local_planner.core.footprint import Footprint, JACKAL, parse_footprint, resolve
+from mpc_local_planner.core.footprint import (
+    Footprint,
+    FROM_WORLD,
+    JACKAL,
+    parse_footprint,
+    resolve,
+)
 
 
 def test_nav2_string_form_gives_a_counter_clockwise_polygon_and_its_circumscribed_radius() -> None:
@@ -98,8 +104,11 @@ def test_the_footprint_in_force_follows_nav2s_precedence():
                        parse_footprint(square).vertices)
     # 2. else the world's polygon, whatever the radii
     assert resolve('', 1.0, world, 2.0) is world
-    # 3. else a circle of the larger radius
+    # 3. else a circle of robot_radius, smaller than the world's too; -1: the world's
     assert resolve('', 0.3, Footprint.circle(0.1), 0.2).radius == pytest.approx(0.3)
-    assert resolve('', 0.1, None, 0.25).radius == pytest.approx(0.25)
+    assert resolve('', 0.1, None, 0.25).radius == pytest.approx(0.1)
+    assert resolve('', 0.0, None, 0.25).radius == 0.0
+    assert resolve('', FROM_WORLD, None, 0.25).radius == pytest.approx(0.25)
+    assert resolve('', world_radius=0.25).radius == pytest.approx(0.25)  # the default
     with pytest.raises(ValueError, match='footprint'):
         resolve('[[0, 0], [1, 0]]')

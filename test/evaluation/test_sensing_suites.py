@@ -219,3 +219,42 @@ def test_the_barn_suite_runs_on_odometry_and_the_unknown_suite_with_the_localize
             reality='real'))
         assert row['stop_reason'] == 'no plan: stop here'
     assert asked == [False, True]
+
+
+def test_the_jackal_runs_at_its_own_limits_unless_told_otherwise(monkeypatch, tmp_path) -> None:
+    from mpc_local_planner.evaluation import suite_runs
+
+    given = []
+
+    def fake(task):
+        given.append((task.v_max, task.omega_max))
+        return suite_runs.empty_row(task, None, 'not run')
+
+    monkeypatch.setattr(evaluate, 'run_task', fake)
+    command = ['--suite', 'barn', '--sensing', '--robot', 'jackal', '--worlds', '0',
+               '--controllers', 'dwa']
+    assert evaluate.main([*command, '--out', str(tmp_path / 'own')]) == 0
+    assert evaluate.main([*command, '--v-max', '0.5', '--omega-max', '1.57',
+                          '--out', str(tmp_path / 'told')]) == 0
+    # config/jackal.yaml's and every headline's limits, as the ROBOTS entry says
+    assert given == [(2.0, 4.0), (0.5, 1.57)]
+    assert suites.ROBOTS['jackal'].v_max == 2.0 and suites.ROBOTS['jackal'].omega_max == 4.0
+    assert '2 m/s' in (tmp_path / 'own' / 'summary.md').read_text()
+
+
+@pytest.mark.parametrize('suite', ['unknown', 'worlds'])
+def test_plot_draws_the_navigation_suites_too_not_only_barn(suite, tmp_path) -> None:
+    command = ['--suite', suite, '--plot', '0', '--controllers', 'pure_pursuit',
+               '--out', str(tmp_path / 'out')]
+    if suite == 'worlds':
+        folder = tmp_path / 'worlds'
+        folder.mkdir()
+        (folder / 'unknown_box.yaml').write_text(
+            resolve_data_file('unknown_box.yaml').read_text(encoding='utf-8'))
+        command += ['--world-dir', str(folder), '--sensing']
+    assert evaluate.main(command) == 0
+    figure = tmp_path / 'out' / f'{suite}_sensing_runs.png'
+    assert figure.is_file() and figure.stat().st_size > 10_000
+    # a world the suite does not have is refused with the reason, not a traceback
+    with pytest.raises(SystemExit):
+        evaluate.main([*command[:2], '--plot', '500', *command[4:]])

@@ -31,6 +31,7 @@ from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.diagnostics import (
     Level,
 )
+from mpc_local_planner.core.footprint import FROM_WORLD
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import segment_collides
 from mpc_local_planner.ros.conversions import (
@@ -194,6 +195,8 @@ def test_controller_applies_a_new_horizon_at_the_next_solve(ros) -> None:
     ('max_decel', [-2.0, -3.0], 'magnitudes'),  # Nav2's velocity_smoother writes them < 0
     ('max_decel', [math.inf, 3.0], 'max_decel must be [v, omega]'),
     ('max_decel', [2.0, 3.0, 0.0], 'max_decel must be [v, omega]'),
+    ('max_accel', [2000.0, 6.0], 'max_accel must be 0, or 0.01 .. 1000 each'),  # its range
+    ('max_decel', [2.0, 0.001], 'max_decel must be 0, or 0.01 .. 1000 each'),
     ('input_hold', 'linear', 'input_hold must be one of'),
     ('input_hold', 'first_order', 'needs max_accel'),  # max_accel is off by default
     ('actuation_delay', -0.1, 'out of range'),
@@ -371,9 +374,31 @@ def test_shipped_params_files_mirror_the_defaults_the_nodes_take_from_the_datacl
     assert MpcConfig().horizon == DEFAULTS['horizon'] and Unicycle().v_max == DEFAULTS['v_max']
     planner = shipped_params('global_planner')
     defaults = PlannerConfig()
-    for field in ('iterations', 'time_limit', 'seed', 'range', 'robot_radius', 'clearance',
-                  'simplify'):
+    for field in ('iterations', 'time_limit', 'seed', 'range', 'clearance', 'simplify'):
         assert planner[field] == getattr(defaults, field), field
+    assert planner['robot_radius'] == FROM_WORLD  # the world file's, as every node's default
+
+
+def test_robot_radius_is_the_robots_even_smaller_than_the_worlds_and_minus_one_the_worlds(
+        ros) -> None:
+    world = 'unknown_box'  # robot_radius 0.2
+    nodes = {}
+    for radius in (0.1, FROM_WORLD):
+        given = [Parameter('world_file', value=world), Parameter('robot_radius', value=radius)]
+        nodes[radius] = (
+            started(ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=given))),
+            started(ros.add(MpcControllerNode(context=ros.context, parameter_overrides=given))),
+            ros.add(UnicycleSimulatorNode(context=ros.context, parameter_overrides=given)))
+    for radius, expected in ((0.1, 0.1), (FROM_WORLD, 0.2)):
+        planner, controller, simulator = nodes[radius]
+        assert planner.planner.config.robot_radius == pytest.approx(expected)
+        assert controller.controller.config.robot_radius == pytest.approx(expected)
+        assert simulator.robot_radius == pytest.approx(expected)
+    # between -1 and 0 is no radius and not the marker: refused
+    planner, controller, simulator = nodes[0.1]
+    for node in (planner, controller, simulator):
+        [result] = node.set_parameters([Parameter('robot_radius', value=-0.5)])
+        assert not result.successful and 'robot_radius must be -1, or 0 .. 10' in result.reason
 
 
 @pytest.mark.parametrize(('name', 'module'), [

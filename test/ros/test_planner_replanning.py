@@ -24,7 +24,9 @@ from __future__ import annotations
 
 from typing import Any, Sequence
 
+from conftest import SimClock
 import numpy as np
+from rcl_interfaces.msg import Log
 from rclpy.parameter import Parameter
 
 from mpc_local_planner.core.diagnostics import PlanTrigger
@@ -150,12 +152,14 @@ def run_node(ros) -> tuple[GlobalPlannerNode, ScriptedPlanner, list]:
     node._planner = planner  # the test's clock and planner; the timer is never spun
     node._now = lambda: planner.now
     node._state = POSE.copy()
+    node._odom_time = 0.0
     decisions: list = []
     record(node.replanner, decisions)
     node._set_goal(GOAL)
     node._try_plan()
     for t in TIMES:
         planner.now = t
+        node._odom_time = t  # odometry as fresh as the navigator's
         node.check_plan()
     return node, planner, decisions
 
@@ -200,3 +204,58 @@ def test_the_navigators_settings_map_onto_the_nodes_defaults(ros) -> None:
     assert navigation.progress_angle == node.replanner.settings.progress_angle == PROGRESS_ANGLE
     # without sensing the grid never changes: the navigator never checks (a rate of 0)
     assert NavigationSettings(sense=False).replan_settings().check_period == 0.0
+
+
+class Odometry(SimClock):
+    """The test's clock and robot: each tick publishes odometry at pose, unless it is None.
+
+    None is the simulator (or the odometry's driver) gone while the clock runs on, as the
+    wall clock does for nodes started by hand.
+    """
+
+    def __init__(self, ros, probe, pose: np.ndarray) -> None:
+        super().__init__(ros, probe, dt=0.1)
+        self.pose: np.ndarray | None = pose
+
+    def publish(self) -> None:
+        if self.pose is not None:
+            self.probe.publish_odom(self.pose, stamp=self.t)
+
+
+def test_stale_odometry_stops_replanning_with_one_warning_until_it_comes_again(ros) -> None:
+    timeout = 2.0  # progress_timeout: no_progress re-plans every 2 s of a standing robot
+    node = ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
+        Parameter('use_sim_time', value=True), Parameter('world_file', value='paper_obstacle'),
+        Parameter('goal', value=[2.5, 0.0, 0.0]), Parameter('progress_timeout', value=timeout)]))
+    assert autostart(node) is None
+    probe = ros.probe(use_sim_time=True)
+    start, stands = np.array([0.0, 0.0, 0.9]), np.array([0.3, 0.4, 0.9])  # 0.5 m apart
+    clock = Odometry(ros, probe, start)
+
+    def triggers() -> list[PlanTrigger | None]:
+        return [o.trigger for o in probe.planner_outcomes if o.planned]
+
+    assert clock.run_until(lambda: triggers() == [PlanTrigger.GOAL])
+    # the robot moves off its start, then stands: no_progress re-plans, one per timeout
+    clock.pose = stands
+    assert clock.run_until(lambda: triggers().count(PlanTrigger.NO_PROGRESS) == 2)
+    assert node.get_parameter('odom_timeout').value == 0.5  # the controller's default
+
+    clock.pose = None  # the simulator is gone; time runs on
+    planned = node.plan_count
+    clock.run_for(4 * timeout)
+    assert node.plan_count == planned
+    stale = [line for line in probe.log_lines('global_planner', Log.WARN) if 'stale' in line]
+    assert len(stale) == 1 and 'not re-planning' in stale[0]
+
+    # odometry again, the robot where it stood: re-planning resumes, and the time without
+    # odometry was not time it stood (no no_progress re-plan at once)
+    clock.pose = stands
+    back = clock.t
+    assert clock.run_until(lambda: node.plan_count > planned)
+    assert triggers()[-1] is PlanTrigger.NO_PROGRESS
+    assert clock.t - back >= timeout - 1e-6
+    assert any('re-planning resumes' in line
+               for line in probe.log_lines('global_planner', Log.INFO))
+    assert len([line for line in probe.log_lines('global_planner', Log.WARN)
+                if 'stale' in line]) == 1

@@ -133,11 +133,12 @@ def test_driving_into_a_box_counts_one_contact_episode_and_logs_one_error(
     assert 'contact' in error and 'radius 0.2 m' in error
 
 
-def test_the_world_robot_radius_counts_when_it_is_larger(ros, tmp_path) -> None:
+def test_robot_radius_replaces_the_worlds_even_smaller_and_minus_one_takes_it(
+        ros, tmp_path) -> None:
     world = tmp_path / 'radius.yaml'
     world.write_text(box_world(tmp_path).read_text() + 'robot_radius: 0.3\n')
-    sim = simulator(ros, world, robot_radius=0.1)
-    assert sim.robot_radius == 0.3
+    assert simulator(ros, world, robot_radius=0.1).robot_radius == 0.1
+    assert simulator(ros, world).robot_radius == 0.3  # the default, -1: the world's
 
 
 # 0.64 m wide: wider than the gap, where the Jackal (0.43 m) fits
@@ -246,4 +247,5 @@ def test_a_bad_scan_parameter_on_the_command_line_exits_2_with_one_line() -> Non
     assert result.returncode == 2, result.stderr
     assert result.stderr.count('\n') == 1, result.stderr
     assert result.stderr.startswith('unicycle_simulator: refusing to start: ')
-    assert 'scan.beams must be an integer from 2' in result.stderr
+    # the range is the descriptor's, which rclpy enforces (docs/parameters.md shows it)
+    assert 'scan.beams out of range. Min: 2, Max: 10000' in result.stderr

@@ -40,6 +40,7 @@ from mpc_local_planner.ros.qos import CMD_VEL_QOS, LOCALIZER_QOS
 from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
 from mpc_local_planner.ros.unicycle_simulator_parameters import (
     LOCALIZER_TOPIC,
+    PARAMETERS,
     reality_from_parameters,
     SCAN_TOPIC,
     validate_simulator_parameters,
@@ -239,7 +240,7 @@ def test_scans_have_nan_beams_and_some_are_lost_counted_in_simulated_time(ros) -
     rate = 50.0  # one scan per tick: every tick is a scan's slot
     sim = real_simulator(ros, **{'scan.rate': rate, 'scan.beams': 200,
                                  'scan.nan_fraction': 0.2, 'scan.neg_inf_fraction': 0.05,
-                                 'scan.loss_fraction': 0.3, 'scan.seed': 7})
+                                 'scan.loss_fraction': 0.3, 'seed': 7})
     probe = ros.probe()
     scans: list[LaserScan] = []
     reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
@@ -273,19 +274,55 @@ def test_validate_simulator_parameters_gives_a_reason_for_each_bad_reality_value
         assert reason is not None and reason.startswith(name), (name, reason)
 
 
+def test_zero_switches_an_imperfection_off_and_only_minus_one_takes_the_presets(ros) -> None:
+    real = REALITY_PRESETS['real']
+    zeros = {'scan.noise_std': 0.0, 'odom_drift.position': 0.0, 'odom_drift.heading': 0.0,
+             'command_latency': 0.0, 'actuator_lag': [0.0, 0.0], 'odom_noise_std': [0.0, 0.0],
+             'scan.nan_fraction': 0.0, 'scan.neg_inf_fraction': 0.0, 'scan.loss_fraction': 0.0}
+    off = reality_from_parameters({'reality': 'real', **zeros})
+    assert off.scan_noise == 0.0 and off.odom_drift == (0.0, 0.0) and off.latency == 0.0
+    assert off.ideal_laser and off.odom_noise == (0.0, 0.0) and off.lag == (0.0, 0.0)
+    assert off.acceleration == real.acceleration  # not overridden: the preset's
+    # the node alike: a real base with an exact laser
+    sim = ros.add(UnicycleSimulatorNode(context=ros.context, parameter_overrides=[
+        Parameter('reality', value='real'), Parameter('scan.noise_std', value=0.0)]))
+    assert sim.reality.scan_noise == 0.0 and sim.reality.odom_drift == real.odom_drift
+    # one marker: any other negative value is refused, not taken for "the preset's"
+    # and every override is held to the range docs/parameters.md shows, arrays too
+    for name, value in [('scan.noise_std', -0.5), ('command_latency', -2.0),
+                        ('odom_drift.heading', -0.7), ('actuator_lag', [-0.5, 0.0]),
+                        ('actuator_lag', [20.0, 0.0]), ('odom_noise_std', [0.0, 11.0])]:
+        reason = validate_simulator_parameters({name: value})
+        assert reason is not None and reason.startswith(name) and '-1, or' in reason, reason
+        [result] = sim.set_parameters([Parameter(name, value=value)])
+        assert not result.successful and name in result.reason
+
+
+def test_one_seed_named_for_what_it_seeds_the_odometry_noise_and_the_laser(ros) -> None:
+    sim = ros.add(UnicycleSimulatorNode(context=ros.context, parameter_overrides=[
+        Parameter('reality', value='real'), Parameter('seed', value=5)]))
+    # it seeds the odometry's noise too, so it is not the laser's (scan.*) alone
+    assert not sim.has_parameter('scan.seed')
+    assert sim.reality.seed == 5 and sim.reality.odom_noise == REALITY_PRESETS['real'].odom_noise
+    assert sim.set_parameters([Parameter('seed', value=6)])[0].successful
+    assert sim.reality.seed == 6
+
+
 def test_reality_parameters_override_the_preset_field_by_field() -> None:
     real = REALITY_PRESETS['real']
     assert reality_from_parameters({}) == REALITY_PRESETS['ideal']
-    # the defaults (negative, or 0 for the older names) are the preset's
+    # the defaults, -1 each, are the preset's
     defaults = {'actuator_lag': [-1.0, -1.0], 'acceleration_limits': [-1.0, -1.0],
                 'command_latency': -1.0, 'odom_noise_std': [-1.0, -1.0],
                 'scan.nan_fraction': -1.0, 'scan.neg_inf_fraction': -1.0,
-                'scan.loss_fraction': -1.0, 'scan.noise_std': 0.0,
-                'odom_drift.position': 0.0, 'odom_drift.heading': 0.0, 'scan.seed': 0}
+                'scan.loss_fraction': -1.0, 'scan.noise_std': -1.0,
+                'odom_drift.position': -1.0, 'odom_drift.heading': -1.0, 'seed': 0}
+    assert defaults == {spec.name: spec.default for spec in PARAMETERS
+                        if spec.name in defaults}
     assert reality_from_parameters({'reality': 'real', **defaults}) == real
     mixed = reality_from_parameters({'reality': 'real', **defaults, 'actuator_lag': [0.0, -1.0],
                                      'command_latency': 0.0, 'odom_drift.position': 0.05,
-                                     'scan.noise_std': 0.05, 'scan.seed': 3})
+                                     'scan.noise_std': 0.05, 'seed': 3})
     assert mixed.lag == (0.0, real.lag[1]) and mixed.latency == 0.0
     assert mixed.odom_drift == (0.05, real.odom_drift[1]) and mixed.scan_noise == 0.05
     assert mixed.seed == 3 and mixed.acceleration == real.acceleration
