@@ -111,3 +111,18 @@ def test_plan_sources_read_as_their_names_in_logs_and_comparisons() -> None:
     assert PlanSource.STOP == 'stop'
     assert f'{PlanSource.CANDIDATE}' == 'candidate'
     assert str(PlanSource.SOLVER) == 'solver'
+
+
+def test_before_a_plan_of_the_solvers_a_costlier_verified_solution_beats_standing_still() -> None:
+    # after a reset (a new path, a stop) the candidate stands the robot still: the proof's
+    # decrease starts with the first solver plan, so a costlier verified one is applied, and
+    # from then on the candidate's value bounds the next
+    unbound = decide(solver_verified=True, solver_value=1005.0, candidate_ok=True,
+                     candidate_value=1000.0, has_previous_plan=True,
+                     candidate_collision_free=True, candidate_binds=False)
+    assert unbound is Decision.SOLVER
+    assert choose(value=1005.0, candidate_value=1000.0) is Decision.CANDIDATE_CHEAPER
+    assert decide(solver_verified=False, solver_value=math.inf, candidate_ok=True,
+                  candidate_value=1000.0, has_previous_plan=True,
+                  candidate_collision_free=True,
+                  candidate_binds=False) is Decision.CANDIDATE_SOLVER_FAILED

@@ -86,7 +86,8 @@ class Decision(Enum):
 
 def decide(*, solver_verified: bool, solver_value: float, candidate_ok: bool,
            candidate_value: float, has_previous_plan: bool,
-           candidate_collision_free: bool, timed_out: bool = False) -> Decision:
+           candidate_collision_free: bool, timed_out: bool = False,
+           candidate_binds: bool = True) -> Decision:
     """Choose what is applied: the solver's plan, the shifted candidate, or a stop.
 
     Args:
@@ -99,6 +100,11 @@ def decide(*, solver_verified: bool, solver_value: float, candidate_ok: bool,
         candidate_collision_free: the candidate's rollout from the measured state clears
             every reachable obstacle.
         timed_out: the step's solve time budget ran out before its solving was done.
+        candidate_binds: the candidate's value bounds the solver's: a plan of the solver's
+            has been applied since the MPC was reset (a new path, a stop). Before that the
+            candidate stands the robot still where it is, a safe stop rather than a plan of
+            the MPC's; the proof's decrease starts with the first plan the solver gives, as
+            the paper's closed loop starts with the optimum at k = 0.
 
     Returns:
         SOLVER when the solver's plan is verified and not costlier than a verified candidate
@@ -112,7 +118,7 @@ def decide(*, solver_verified: bool, solver_value: float, candidate_ok: bool,
         all u_s, which stops the robot); else STOP.
 
     """
-    bound = candidate_value if candidate_ok else math.inf
+    bound = candidate_value if candidate_ok and candidate_binds else math.inf
     if solver_verified and solver_value <= bound + LYAPUNOV_TOLERANCE * (1 + abs(bound)):
         return Decision.SOLVER
     if candidate_ok:
