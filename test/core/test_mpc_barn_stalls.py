@@ -221,3 +221,26 @@ def test_a_cut_round_in_the_largest_nlp_goes_on_until_it_is_solved(seed: int) ->
     reasons, output = steps_until_tracking(controller, np.array(case['x']))
     assert reasons[-1] is Reason.TRACKING, reasons
     assert output.u[0] > 0.1
+
+
+@pytest.mark.parametrize('seed', SEEDS)
+def test_a_round_beyond_the_largest_nlp_holds_what_its_solution_would_hit(seed: int) -> None:
+    """Laser-only BARN world 212 at 2 m/s: a re-plan among cylinders, the robot at a stand.
+
+    The second constraint-generation round asks for more obstacles than the largest
+    prepared NLP holds (10). It held the nearest to the candidate and left out those the
+    first round's solution came near, and every try solved it to the same plan, which hit
+    one of those: the robot stood until the run stalled. A round now holds first what the
+    last solution comes nearest, and a try whose solution hits an obstacle left out goes
+    last while the robot stands.
+    """
+    case = perturbed(json.loads((Path(__file__).parent / 'data' / 'barn_212_full_nlp.json')
+                                .read_text(encoding='utf-8')), seed)
+    controller = forward_only_controller({'poses': case['poses'], 'obstacles': []})
+    controller.mpc.prepare(PREPARED_SLOTS)
+    controller.set_obstacles([ConvexPolygon(A=np.array(o['A']), b=np.array(o['b']),
+                                            vertices=np.array(o['vertices']))
+                              for o in case['obstacles']])
+    reasons, output = steps_until_tracking(controller, np.array(case['x']))
+    assert reasons[-1] is Reason.TRACKING, reasons
+    assert np.max(np.abs(output.u)) > 0.1

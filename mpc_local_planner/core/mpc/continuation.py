@@ -96,10 +96,11 @@ class SpotMemory:
         return frozenset(t for n, t in self._failed if n == id(nlp))
 
     def reject(self, nlp: Nlp, origin: Try) -> None:
-        """Record that the try begun by origin solved here but lost to the candidate.
+        """Record that the try begun by origin solved here, but its solution is not applied.
 
-        The robot stands on the candidate, so the same try from the same state would give the
-        same solution, lose again, and hold the robot at every step: it goes last instead.
+        It lost to the candidate, or it hits an obstacle its NLP had no room for. The robot
+        stands, so the same try from the same state would give the same solution again and
+        hold the robot at every step: it goes last instead.
         """
         self._failed.add((id(nlp), origin))
 

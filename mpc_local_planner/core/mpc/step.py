@@ -223,6 +223,9 @@ class MpcBase(ABC):
         self._plan: Plan | None = None
         self._progress_gain = math.nan  # the gain in s of the plan in force over the one before
         self._lyapunov = LyapunovRecord()
+        # a plan of the solver's has been applied since this reset: the candidate's value
+        # bounds the next (decision.decide's candidate_binds)
+        self._bound_started = False
         self._failures = 0
         self._spot = SpotMemory()  # a cut solve to go on with, the tries failed here
         # the inputs of the last plan on the previous path (set_path keeps them): the guided
@@ -580,14 +583,22 @@ class MpcBase(ABC):
                 break
             clears_all = (self._clearance.penetration(states, inputs, reachable)
                           <= FEASIBILITY_TOLERANCE)
+            # the next round holds first what this solution comes nearest: where the largest
+            # NLP holds fewer than asked for, the obstacles it would hit stay in, and those it
+            # passes far from are left out (checked against every one all the same)
+            ranked = near + [o for o in active if not any(o is n for n in near)]
             # no further round at the limit, without time for it, or without an NLP with
             # room for one of the missed obstacles (it would hold the same ones again): the
             # solution stands if it clears every reachable obstacle (feasible for the full
             # problem, then)
             if (round_ == MAX_ACTIVATION_ROUNDS or not self._shapes.holds_more(
-                    active + missed, held, self._config.solving.faces_per_obstacle)
+                    ranked, held, self._config.solving.faces_per_obstacle)
                     or not self._budget.allows()):
                 if not clears_all:
+                    if attempt.origin is not None:
+                        # from where the robot stands that try gives the same solution
+                        # again, which hits the same obstacle: the others go first
+                        self._spot.reject(nlp, attempt.origin)
                     attempt = attempt._replace(
                         verified=False,
                         status=f'{attempt.status} (hits an obstacle left out of the NLP)')
@@ -597,7 +608,7 @@ class MpcBase(ABC):
                                   w_candidate=w_candidate, candidate_ok=candidate_ok,
                                   candidate_value=candidate_value, attempt=attempt,
                                   active=held, rounds=round_ + 1)
-            active = active + missed
+            active = ranked
             previous = Plan(x=states, u=inputs, s=self._progress_of(attempt.w[layout.r[-1]]),
                             mu=np.zeros(0), value=math.inf)
         result = Rounds(nlp=nlp, params=params, candidate=candidate, w_candidate=w_candidate,
@@ -648,7 +659,11 @@ class MpcBase(ABC):
             has_previous_plan=self._plan is not None,
             candidate_collision_free=self._clearance.penetration(
                 candidate.x, candidate.u, reachable) <= 0.0,
-            timed_out=budget.timed_out)
+            timed_out=budget.timed_out, candidate_binds=self._bound_started)
+        if decision is Decision.SOLVER and not self._bound_started:
+            # the first plan of the solver's since the reset: the proof's record starts here
+            self._lyapunov = LyapunovRecord()
+            self._bound_started = True
         if decision is Decision.CANDIDATE_CHEAPER and attempt.origin is not None:
             # from where the robot stands, that try gives the same losing solution again
             self._spot.reject(result.nlp, attempt.origin)

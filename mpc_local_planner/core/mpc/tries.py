@@ -134,8 +134,8 @@ def solver_tries(situation: Situation) -> tuple[Try, ...]:
         tries = [Try(candidate, Solver.BACKEND), Try(candidate, Solver.IPOPT_FALLBACK)]
     elif situation.obstacles_active:
         start = Start.PREVIOUS_ROUND if situation.previous_round else Start.GUIDED
-        tries = [Try(start, Solver.IPOPT_COLD), Try(candidate, Solver.BACKEND),
-                 Try(candidate, Solver.IPOPT_FALLBACK)]
+        tries = [Try(start, Solver.IPOPT_COLD), Try(candidate, Solver.IPOPT_COLD),
+                 Try(candidate, Solver.BACKEND), Try(candidate, Solver.IPOPT_FALLBACK)]
     else:
         guided = Start.GUIDED
         tries = [Try(candidate, Solver.IPOPT_COLD), Try(candidate, Solver.BACKEND),
