@@ -55,7 +55,7 @@ from mpc_local_planner.core.mpc.backends import (
     stage_size,
 )
 from mpc_local_planner.core.obstacles import ConvexPolygon
-from mpc_local_planner.core.paths import paper_sinusoid
+from mpc_local_planner.core.paths import paper_sinusoid, WaypointPath
 from mpc_local_planner.evaluation.experiments import run_closed_loop
 from mpc_local_planner.evaluation.trajectory import TRAJECTORY_COLUMNS, TRAJECTORY_INDEX
 
@@ -590,6 +590,30 @@ def test_a_solve_the_budget_cut_goes_on_at_the_next_step_while_the_robot_stands_
 
     assert steps_to_move(continuing=True) == 1  # cut at first, then finished
     assert steps_to_move(continuing=False) is None  # starting over never finishes
+
+
+# a route past the three boxes, as a planner's plan
+WAYPOINTS = [[0.0, 0.0], [1.25, 0.9], [2.5, 0.0]]
+
+
+def test_the_same_path_again_keeps_the_cut_solve_and_a_new_one_starts_over() -> None:
+    # a re-plan that finds the same path again (the planner's no-progress re-plans do, at a
+    # standing robot) poses the same problem: the cut solve goes on (BARN 273 stood 20 s,
+    # its cut solves dropped at every re-plan); a different path is a new problem
+    def tries_after(new_path: bool) -> Try:
+        config = MpcConfig(solving=SolverSettings(compile=False, activation_distance=5.0,
+                                                  budget='iterations', max_solve_iterations=7))
+        mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES,
+                               path=WaypointPath(np.array(WAYPOINTS)))
+        x = mpc.path.start.copy()
+        assert mpc.solve(x).timed_out  # cut: the robot stands on the candidate
+        waypoints = np.array(WAYPOINTS) + ([[0.0, 0.0], [0.0, 0.0], [0.0, 0.1]] if new_path
+                                           else 0.0)
+        mpc.set_path(WaypointPath(waypoints))
+        return mpc.solve(x).tries[0]
+
+    assert tries_after(new_path=False).start is Start.CONTINUATION
+    assert tries_after(new_path=True).start is not Start.CONTINUATION
 
 
 def test_after_a_stand_still_plan_the_next_step_starts_as_from_rest(

@@ -68,8 +68,15 @@ class PathReferenceMPC(MpcBase):
 
         """
         previous = self._plan
+        same_path = (self._path is not None and self._path.family == path.family
+                     and np.array_equal(self._path.parameters(), path.parameters()))
+        spot = self._spot
         self._path = path
         self.reset()
+        if same_path:
+            # the same path again (a re-plan that found it anew): what the solver tried where
+            # the robot stands was tried on this very problem, and a cut solve goes on
+            self._spot = spot
         if carried_inputs is not None:
             self._carried_inputs = np.array(carried_inputs, dtype=float)
         elif previous is not None and plan_moves(previous, math.inf):

@@ -26,7 +26,8 @@ The order, and why (the runs behind each rule: docs/design/mpc.md, section "Solv
 - without one, or after a plan that stands still (a step from rest that did not solve applied
   it), with obstacles in the NLP: IPOPT with cold-start options from the previous
   constraint-generation round's solution (else from the start rolled out along the path),
-  then the backend and the fallback from the candidate. From such states fatrop tends to fail
+  then from the candidate (the one feasible start), then the backend and the fallback from
+  the candidate. From such states fatrop tends to fail
   from every start while IPOPT converges, and a failing first try would spend each step's
   budget and keep the robot standing;
 - without one and without obstacles: IPOPT with cold-start options from the candidate, then
