@@ -69,7 +69,7 @@ from mpc_local_planner.core.mpc.candidate import (
     STANDING_INPUT,
 )
 from mpc_local_planner.core.mpc.clearance import Clearance
-from mpc_local_planner.core.mpc.continuation import resumed_round, SpotMemory
+from mpc_local_planner.core.mpc.continuation import resumed_round, same_polygons, SpotMemory
 from mpc_local_planner.core.mpc.decision import (
     decide,
     Decision,
@@ -203,7 +203,7 @@ class MpcBase(ABC):
         self._raw_obstacles = list(obstacles)
         inflation = self._config.inflation(float(self._model.u_max[0]))
         inflated = [o.inflate(inflation) for o in self._raw_obstacles]
-        if not _same_polygons(self._inflated, inflated):
+        if not same_polygons(self._inflated, inflated):
             self._problem_version = (self._problem_version[0] + 1, self._problem_version[1])
         self._inflated = inflated
         self._obstacle_set = ObstacleSet(self._inflated)
@@ -748,9 +748,3 @@ class MpcBase(ABC):
             tries=tuple(self._tries),
         )
 
-
-def _same_polygons(a: Sequence[ConvexPolygon], b: Sequence[ConvexPolygon]) -> bool:
-    """Say whether two obstacle lists describe the same polygons, in the same order."""
-    return len(a) == len(b) and all(
-        p is q or (np.array_equal(p.A, q.A) and np.array_equal(p.b, q.b))
-        for p, q in zip(a, b, strict=True))
