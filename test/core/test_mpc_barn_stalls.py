@@ -190,6 +190,19 @@ def test_a_new_plan_at_speed_starts_from_the_motion_in_hand() -> None:
 PREPARED_SLOTS = 10
 
 
+def prepared_controller(case: dict) -> MpcController:
+    """Return the forward-only MPC with the evaluation's NLPs built, on case's plan.
+
+    case's obstacles are polygons as A p <= b with their vertices (as the run held them).
+    """
+    controller = forward_only_controller({'poses': case['poses'], 'obstacles': []})
+    controller.mpc.prepare(PREPARED_SLOTS)
+    controller.set_obstacles([ConvexPolygon(A=np.array(o['A']), b=np.array(o['b']),
+                                            vertices=np.array(o['vertices']))
+                              for o in case['obstacles']])
+    return controller
+
+
 @pytest.mark.parametrize('seed', SEEDS)
 def test_a_cut_round_in_the_largest_nlp_goes_on_until_it_is_solved(seed: int) -> None:
     """Laser-only BARN world 283 at 2 m/s: a robot standing beside a row of cylinders.
@@ -205,20 +218,7 @@ def test_a_cut_round_in_the_largest_nlp_goes_on_until_it_is_solved(seed: int) ->
     """
     case = perturbed(json.loads((Path(__file__).parent / 'data' / 'barn_283_capped_round.json')
                                 .read_text(encoding='utf-8')), seed)
-    config = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
-                       robot_radius=0.0,
-                       solving=SolverSettings(budget='iterations', max_solve_iterations=100,
-                                              compile=False))
-    settings = ControllerSettings(xy_goal_tolerance=0.05, yaw_goal_tolerance=math.pi,
-                                  capacity=128)
-    controller = MpcController(Unicycle(v_max=2.0, omega_max=4.0, v_min=0.0), config,
-                               settings=settings)
-    controller.set_plan(np.array(case['poses']))
-    controller.mpc.prepare(PREPARED_SLOTS)
-    controller.set_obstacles([ConvexPolygon(A=np.array(o['A']), b=np.array(o['b']),
-                                            vertices=np.array(o['vertices']))
-                              for o in case['obstacles']])
-    reasons, output = steps_until_tracking(controller, np.array(case['x']))
+    reasons, output = steps_until_tracking(prepared_controller(case), np.array(case['x']))
     assert reasons[-1] is Reason.TRACKING, reasons
     assert output.u[0] > 0.1
 
@@ -236,11 +236,6 @@ def test_a_round_beyond_the_largest_nlp_holds_what_its_solution_would_hit(seed: 
     """
     case = perturbed(json.loads((Path(__file__).parent / 'data' / 'barn_212_full_nlp.json')
                                 .read_text(encoding='utf-8')), seed)
-    controller = forward_only_controller({'poses': case['poses'], 'obstacles': []})
-    controller.mpc.prepare(PREPARED_SLOTS)
-    controller.set_obstacles([ConvexPolygon(A=np.array(o['A']), b=np.array(o['b']),
-                                            vertices=np.array(o['vertices']))
-                              for o in case['obstacles']])
-    reasons, output = steps_until_tracking(controller, np.array(case['x']))
+    reasons, output = steps_until_tracking(prepared_controller(case), np.array(case['x']))
     assert reasons[-1] is Reason.TRACKING, reasons
     assert np.max(np.abs(output.u)) > 0.1
