@@ -37,7 +37,7 @@ os.environ['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 100)
 # ----------------------------------------------------------------------------- rclpy fixtures
 # Imported after the environment is set (above): DDS reads it at the first rclpy.init.
 import time
-from typing import Callable, Iterator, NamedTuple
+from typing import Any, Callable, Iterator, NamedTuple
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Twist
@@ -178,6 +178,17 @@ def throttle_clock(monkeypatch: pytest.MonkeyPatch) -> ThrottleClock:
     clock = ThrottleClock()
     monkeypatch.setattr(throttle, 'steady_clock', clock)
     return clock
+
+
+def flat_parameters(values: dict, prefix: str = '') -> dict[str, Any]:
+    """Return a ros__parameters mapping with groups flattened to dotted names (as rclpy)."""
+    out: dict[str, Any] = {}
+    for key, value in values.items():
+        if isinstance(value, dict):
+            out.update(flat_parameters(value, f'{prefix}{key}.'))
+        else:
+            out[prefix + key] = value
+    return out
 
 
 class SimClock:

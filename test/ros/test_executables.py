@@ -39,6 +39,7 @@ import subprocess
 import sys
 from typing import Any
 
+from conftest import flat_parameters
 import pytest
 from rclpy.node import Node
 from rclpy.parameter import parameter_value_to_python
@@ -189,17 +190,6 @@ def test_the_share_command_prints_the_folder_that_holds_the_shipped_files(tmp_pa
     for name in sorted(shipped):
         assert (share / name).is_file(), name
     assert list(tmp_path.iterdir()) == []
-
-
-def flat_parameters(values: dict, prefix: str = '') -> dict[str, Any]:
-    """Return a ros__parameters mapping with groups flattened to dotted names."""
-    out = {}
-    for key, value in values.items():
-        if isinstance(value, dict):
-            out.update(flat_parameters(value, f'{prefix}{key}.'))
-        else:
-            out[prefix + key] = value
-    return out
 
 
 def test_a_node_started_with_params_files_from_the_share_command_takes_their_values(

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 
-from conftest import Probe
+from conftest import flat_parameters, Probe
 from geometry_msgs.msg import PoseStamped, Twist
 from nav_msgs.msg import Odometry
 import numpy as np
@@ -352,17 +352,8 @@ def shipped_params(name: str) -> dict:
 
     from mpc_local_planner.worlds.data_files import resolve_data_file
 
-    def flat(values: dict, prefix: str = '') -> dict:
-        out = {}
-        for key, value in values.items():
-            if isinstance(value, dict):
-                out.update(flat(value, f'{prefix}{key}.'))
-            else:
-                out[prefix + key] = value
-        return out
-
     text = resolve_data_file(f'{name}.yaml').read_text()
-    return flat(yaml.safe_load(text)[name]['ros__parameters'])
+    return flat_parameters(yaml.safe_load(text)[name]['ros__parameters'])
 
 
 def test_shipped_params_files_mirror_the_defaults_the_nodes_take_from_the_dataclasses() -> None:
