@@ -83,7 +83,9 @@ class Budget:
             seconds: what the work takes before it can be cut (a build), if known; it does
                 not count against iterations.
 
-        Ask only where work would otherwise run: a no means it is left out.
+        Ask only where work would otherwise run: a no means it is left out. Once the step
+        timed out (a try was cut) the answer is no: a try begun on what is left would be cut
+        too and replace the cut one as the solve to go on with at the next step.
         """
         if not self.timed_out and self.remaining() > seconds and self.iterations >= 1:
             return True
