@@ -182,11 +182,18 @@ class GlobalPlannerNode(ManagedNode):
 
     It wires its components: the planner, the re-planning policy (Replanner) and the scan
     intake (PlannerScans), each owning its state.
+
+    Args:
+        planner: plan with this instead of the RRT* configure (or a map) builds from the
+            parameters (a test's scripted planner); None: the RRT*.
+        **kwargs: rclpy Node's (context, parameter_overrides, ...).
+
     """
 
     @destroy_on_failure
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, *, planner: RrtStarPlanner | None = None, **kwargs: Any) -> None:
         super().__init__('global_planner', **kwargs)
+        self._given_planner = planner
         self.add_on_set_parameters_callback(self.parameters_callback)
         declare_parameters(self, PARAMETERS)
         self.add_post_set_parameters_callback(self.post_parameters_callback)
@@ -214,7 +221,8 @@ class GlobalPlannerNode(ManagedNode):
         self._pending_goal: np.ndarray | None = None
         # the scans: waiting for a pose, marking the grid, remembered (with use_scan)
         self._scans = PlannerScans(logger=self.get_logger(), now=self._now,
-                                   parameter=lambda name: self.get_parameter(name).value)
+                                   parameter=lambda name: self.get_parameter(name).value,
+                                   body=self._scan_body)
         self._waiting_reported = False
         self._problems = ProblemThrottle()
         self.last_plan: np.ndarray | None = None
@@ -480,6 +488,8 @@ class GlobalPlannerNode(ManagedNode):
         marks are dropped with the old grid.
         """
         config = self._planner_config()
+        if self._given_planner is not None:
+            return self._given_planner
         if not self._use_map:
             if self._world is None:
                 return RrtStarPlanner([], FREE_PLANE_BOUNDS, config=config)
@@ -558,7 +568,7 @@ class GlobalPlannerNode(ManagedNode):
         self._odom_time = measured_time(stamp_to_seconds(msg.header.stamp), self._now())
         self._pose_source.add_odometry(stamp_to_seconds(msg.header.stamp), self._state,
                                        msg.header.frame_id, odometry_twist(msg))
-        self._scans.place_pending(self._grid, self._pose_source, self._scan_body())
+        self._scans.place_pending(self._grid, self._pose_source)
         if self._pending_goal is not None:
             self._try_plan()
 
@@ -568,7 +578,7 @@ class GlobalPlannerNode(ManagedNode):
         PlannerScans.take: a malformed scan is dropped with one throttled error; one newer
         than the odometry covers waits for it.
         """
-        self._scans.take(msg, self._grid, self._pose_source, self._scan_body())
+        self._scans.take(msg, self._grid, self._pose_source)
 
     def _scan_body(self) -> Footprint | None:
         """Return the planner's footprint: returns inside it are the robot."""
@@ -584,7 +594,8 @@ class GlobalPlannerNode(ManagedNode):
             occupancy = grid_from_message(msg, frame_id=frame)
             config = self._planner_config()
             grid = PlanningGrid(occupancy, inflation=config.inflation)
-            planner = RrtStarPlanner.on_grid(grid, config=config)
+            planner = (self._given_planner if self._given_planner is not None
+                       else RrtStarPlanner.on_grid(grid, config=config))
         except Exception as err:  # GridError (a ValueError); nothing may escape a callback
             if self._problems.report('map'):
                 kept = 'the grid in force stays' if self._grid is not None else 'no map yet'

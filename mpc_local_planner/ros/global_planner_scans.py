@@ -69,6 +69,7 @@ class PlannerScans:
         logger: the node's logger.
         now: the node's clock, seconds.
         parameter: the current value of a node parameter (robot_base_frame, laser_pose).
+        body: the planner's footprint in force (returns inside it are the robot), if any.
 
     Attributes:
         count: scans added to the grid.
@@ -76,8 +77,10 @@ class PlannerScans:
     """
 
     def __init__(self, *, logger: RcutilsLogger, now: Callable[[], float],
-                 parameter: Callable[[str], Any]) -> None:
+                 parameter: Callable[[str], Any],
+                 body: Callable[[], Footprint | None]) -> None:
         self._logger = logger
+        self._body = body
         self._now = now
         self._parameter = parameter
         self._problems = ProblemThrottle()
@@ -101,8 +104,7 @@ class PlannerScans:
         self._intake = ScanIntake(capacity=PENDING_SCANS, span=ODOM_HISTORY_S)
         self._memory = ObstacleMemory(memory_ttl) if memory_ttl is not None else None
 
-    def take(self, msg: LaserScan, grid: PlanningGrid | None, pose_source: RobotPose,
-             body: Footprint | None) -> None:
+    def take(self, msg: LaserScan, grid: PlanningGrid | None, pose_source: RobotPose) -> None:
         """Mark and clear the grid with a scan, placed with the pose at its stamp.
 
         A malformed scan, or one without odometry near its stamp, is dropped with one
@@ -114,7 +116,6 @@ class PlannerScans:
             msg: the scan.
             grid: the grid it marks (None: no map yet, the scan is ignored).
             pose_source: the robot's pose in the plan's frame.
-            body: the planner's footprint (returns inside it are the robot), if any.
 
         """
         if grid is None:
@@ -130,10 +131,9 @@ class PlannerScans:
         except Exception as err:  # ScanError (a ValueError); nothing may escape a callback
             self._refuse_scan(err)
             return
-        self.place_pending(grid, pose_source, body)
+        self.place_pending(grid, pose_source)
 
-    def place_pending(self, grid: PlanningGrid | None, pose_source: RobotPose,
-                      body: Footprint | None) -> None:
+    def place_pending(self, grid: PlanningGrid | None, pose_source: RobotPose) -> None:
         """Add to the grid the waiting scans whose stamps the pose now covers, in order.
 
         Called on each scan and each odometry message. A scan still without a pose once
@@ -159,11 +159,12 @@ class PlannerScans:
                 else:
                     self._refuse_scan(event.error)
             elif isinstance(event, Placed):
-                self._add(event, grid, body)
+                self._add(event, grid)
 
-    def _add(self, placed: Placed, grid: PlanningGrid, body: Footprint | None) -> None:
+    def _add(self, placed: Placed, grid: PlanningGrid) -> None:
         """Add a placed scan to the grid and the obstacle memory; count it."""
         try:
+            body = self._body()
             laser_pose = list(self._parameter('laser_pose'))
             grid.add_scan(placed.scan, placed.pose, laser_pose=laser_pose, body=body)
             if self._memory is not None:  # the controller's convex pieces, for re-plans
