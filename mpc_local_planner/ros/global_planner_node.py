@@ -76,7 +76,6 @@ supervisor such as closed_loop learns that no plan will come.
 
 from __future__ import annotations
 
-from collections import deque
 from dataclasses import replace
 import math
 import sys
@@ -102,7 +101,8 @@ from mpc_local_planner.core.diagnostics import (
     PlanTrigger,
 )
 from mpc_local_planner.core.errors import PlanningError
-from mpc_local_planner.core.footprint import radius_in_force, resolve
+from mpc_local_planner.core.footprint import Footprint, radius_in_force, resolve
+from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path, waypoints_to_poses
 from mpc_local_planner.core.planner import path_length, RrtStarPlanner
 from mpc_local_planner.core.planner_config import PlannerConfig
@@ -113,7 +113,6 @@ from mpc_local_planner.core.replanning import (
     ReplanSettings,
 )
 from mpc_local_planner.perception.grids import PlanningGrid
-from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
 from mpc_local_planner.ros.conversions import (
     diagnostic_array,
     frame_problem,
@@ -151,7 +150,6 @@ from mpc_local_planner.ros.robot_pose import (
     LocalizationError,
     make_buffer,
     ODOM_HISTORY_S,
-    PENDING_SCANS,
     PoseMode,
     RobotPose,
 )
@@ -179,12 +177,23 @@ SUMMARY = ('OMPL RRT* from the current odometry (odom) to the goal (the goal par
            'planning.')
 
 
-class GlobalPlannerNode(PlannerScans, ManagedNode):
-    """Plan with RRT* from odom to the goal and publish the plan (a lifecycle node)."""
+class GlobalPlannerNode(ManagedNode):
+    """Plan with RRT* from odom to the goal and publish the plan (a lifecycle node).
+
+    It wires its components: the planner, the re-planning policy (Replanner) and the scan
+    intake (PlannerScans), each owning its state.
+
+    Args:
+        planner: plan with this instead of the RRT* configure (or a map) builds from the
+            parameters (a test's scripted planner); None: the RRT*.
+        **kwargs: rclpy Node's (context, parameter_overrides, ...).
+
+    """
 
     @destroy_on_failure
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, *, planner: RrtStarPlanner | None = None, **kwargs: Any) -> None:
         super().__init__('global_planner', **kwargs)
+        self._given_planner = planner
         self.add_on_set_parameters_callback(self.parameters_callback)
         declare_parameters(self, PARAMETERS)
         self.add_post_set_parameters_callback(self.post_parameters_callback)
@@ -194,8 +203,6 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         self._use_scan = False
         self._world: World | None = None
         self._grid: PlanningGrid | None = None
-        # with use_scan: the convex pieces the scans make, as the controller remembers them
-        self._memory: ObstacleMemory | None = None
         self._planner: RrtStarPlanner | None = None
         self._plan_pub: LifecyclePublisher | None = None
         self._diag_pub: LifecyclePublisher | None = None
@@ -212,8 +219,10 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         # the pose in the plan's frame (ros/robot_pose.py): configure chooses the mode
         self._pose_source = RobotPose(PoseMode.ODOMETRY, span=ODOM_HISTORY_S, global_frame='map')
         self._pending_goal: np.ndarray | None = None
-        # valid scans waiting for odometry that covers their stamps, in arrival order
-        self._pending_scans: deque[Any] = deque(maxlen=PENDING_SCANS)
+        # the scans: waiting for a pose, marking the grid, remembered (with use_scan)
+        self._scans = PlannerScans(logger=self.get_logger(), now=self._now,
+                                   parameter=lambda name: self.get_parameter(name).value,
+                                   body=self._scan_body)
         self._waiting_reported = False
         self._problems = ProblemThrottle()
         self.last_plan: np.ndarray | None = None
@@ -222,7 +231,6 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         self.replanner = Replanner(self._replan_settings())
         self._check_timer: Any = None
         self.map_count = 0
-        self.scan_count = 0
         self.last_outcome: PlannerDiagnostics | None = None
 
     # ------------------------------------------------------------------ lifecycle
@@ -235,6 +243,26 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
     def grid(self) -> PlanningGrid | None:
         """With use_map, the grid plans are checked on (map plus scans), once a map came."""
         return self._grid
+
+    @property
+    def held_obstacles(self) -> tuple[ConvexPolygon, ...]:
+        """The convex pieces the scans made (obstacle_memory): re-plans keep clear of them."""
+        return self._scans.held_obstacles
+
+    @property
+    def pending_scan_count(self) -> int:
+        """Valid scans waiting for odometry that covers their stamps."""
+        return self._scans.pending
+
+    @property
+    def scan_count(self) -> int:
+        """Scans added to the grid."""
+        return self._scans.count
+
+    @property
+    def odom_state(self) -> np.ndarray | None:
+        """A copy of the latest valid odometry's state (odom frame); None without one."""
+        return None if self._state is None else self._state.copy()
 
     @property
     def is_active(self) -> bool:
@@ -263,8 +291,8 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         """
         self._use_map = bool(self.get_parameter('use_map').value)
         self._use_scan = bool(self.get_parameter('use_scan').value)
-        self._memory = (ObstacleMemory(float(self.get_parameter('obstacle_memory').value))
-                        if self._use_scan else None)
+        self._scans.reset(float(self.get_parameter('obstacle_memory').value)
+                          if self._use_scan else None)
         try:
             if self._use_scan and not self._use_map:
                 problem = 'use_scan needs use_map (scans mark the cells of the map)'
@@ -361,14 +389,13 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
             self._tf_listener = None
         self._planner = None
         self._grid = None
-        self._memory = None
         self._world = None
         self._state = None
         self._odom_time = None
         self._odom_stale = False
         self._pose_source.clear()
         self._pending_goal = None
-        self._pending_scans.clear()
+        self._scans.reset()
 
     # ------------------------------------------------------------------ parameters
     def parameters_callback(self, parameters: list[Parameter]) -> SetParametersResult:
@@ -461,6 +488,8 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         marks are dropped with the old grid.
         """
         config = self._planner_config()
+        if self._given_planner is not None:
+            return self._given_planner
         if not self._use_map:
             if self._world is None:
                 return RrtStarPlanner([], FREE_PLANE_BOUNDS, config=config)
@@ -539,9 +568,21 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
         self._odom_time = measured_time(stamp_to_seconds(msg.header.stamp), self._now())
         self._pose_source.add_odometry(stamp_to_seconds(msg.header.stamp), self._state,
                                        msg.header.frame_id, odometry_twist(msg))
-        self._place_pending()
+        self._scans.place_pending(self._grid, self._pose_source)
         if self._pending_goal is not None:
             self._try_plan()
+
+    def scan_callback(self, msg: LaserScan) -> None:
+        """Mark and clear the grid with a scan, placed with the pose at its stamp.
+
+        PlannerScans.take: a malformed scan is dropped with one throttled error; one newer
+        than the odometry covers waits for it.
+        """
+        self._scans.take(msg, self._grid, self._pose_source)
+
+    def _scan_body(self) -> Footprint | None:
+        """Return the planner's footprint: returns inside it are the robot."""
+        return self._planner.footprint if self._planner is not None else None
 
     def map_callback(self, msg: OccupancyGrid) -> None:
         """Plan on a new map from now on (its grid replaces the old one, scan marks too).
@@ -553,7 +594,8 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
             occupancy = grid_from_message(msg, frame_id=frame)
             config = self._planner_config()
             grid = PlanningGrid(occupancy, inflation=config.inflation)
-            planner = RrtStarPlanner.on_grid(grid, config=config)
+            planner = (self._given_planner if self._given_planner is not None
+                       else RrtStarPlanner.on_grid(grid, config=config))
         except Exception as err:  # GridError (a ValueError); nothing may escape a callback
             if self._problems.report('map'):
                 kept = 'the grid in force stays' if self._grid is not None else 'no map yet'
@@ -636,7 +678,7 @@ class GlobalPlannerNode(PlannerScans, ManagedNode):
             return
         # a re-plan's first turn is one the controller's obstacles allow (its pieces, as
         # this node's scans make them)
-        held = self._memory.obstacles() if self._memory is not None else ()
+        held = self._scans.held_obstacles
         self._adopt(self.replanner.check(self._planner, start, now=self._now(),
                                          grid=self._grid, local_obstacles=held))
 

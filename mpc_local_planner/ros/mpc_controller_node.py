@@ -81,34 +81,23 @@ reason on stderr (so does a configure that fails, with autostart).
 
 from __future__ import annotations
 
-from collections import deque
 import sys
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PolygonStamped, PoseWithCovarianceStamped, Twist, TwistStamped
+from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.duration import Duration
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import LaserScan
-from visualization_msgs.msg import MarkerArray
 
 from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reason
 from mpc_local_planner.core.controller import MpcController
-from mpc_local_planner.core.diagnostics import (
-    CONTROLLER_DIAGNOSTICS_TOPIC,
-)
 from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path
-from mpc_local_planner.perception.local_obstacles import LocalObstacles
-from mpc_local_planner.perception.scan_obstacles import (
-    ObstacleMemory,
-)
 from mpc_local_planner.ros.conversions import (
     frame_problem,
     measured_time,
@@ -119,7 +108,7 @@ from mpc_local_planner.ros.conversions import (
     stamp_to_seconds,
 )
 from mpc_local_planner.ros.lifecycle import ManagedNode
-from mpc_local_planner.ros.mpc_controller_outputs import ControllerOutputs, OBSTACLES_TOPIC
+from mpc_local_planner.ros.mpc_controller_outputs import ControllerOutputs, FOOTPRINT_TOPIC
 from mpc_local_planner.ros.mpc_controller_parameters import (
     build_settings,
     check_obstacles,
@@ -135,9 +124,6 @@ from mpc_local_planner.ros.parameters import (
     range_problems,
 )
 from mpc_local_planner.ros.qos import (
-    CMD_VEL_QOS,
-    DIAGNOSTICS_QOS,
-    LOCAL_PLAN_QOS,
     LOCALIZER_QOS,
     MAP_QOS,
     ODOM_QOS,
@@ -149,7 +135,6 @@ from mpc_local_planner.ros.robot_pose import (
     LocalizationError,
     make_buffer,
     ODOM_HISTORY_S,
-    PENDING_SCANS,
     PoseMode,
     RobotPose,
 )
@@ -160,10 +145,6 @@ __all__ = ['ERROR_THROTTLE_S', 'EXIT_INVALID_PARAMETERS', 'FOOTPRINT_TOPIC', 'Mp
 
 # Wall seconds the exiting process waits for subscribers to acknowledge its zero cmd_vel.
 EXIT_ACK_TIMEOUT_S = 1.0
-# What the controller avoids (MarkerArray) and the robot's outline (PolygonStamped).
-FOOTPRINT_TOPIC = 'mpc/footprint'
-# Streams like local_plan: reliable, volatile, depth 10.
-MARKERS_QOS = LOCAL_PLAN_QOS
 
 SUMMARY = """\
 The MPC of Lorenzen et al. (a lifecycle node): while active it solves once per `step` seconds
@@ -181,8 +162,13 @@ With autostart false it waits unconfigured for a
 lifecycle manager; deactivate publishes one zero cmd_vel."""
 
 
-class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
+class MpcControllerNode(ManagedNode):
     """Run the MPC on the latest odom and plan; publish cmd_vel, local_plan, diagnostics.
+
+    Configure wires the components, each owning its state: the MpcController (the
+    decision), ControllerSensing (scans and map into obstacles, ros/mpc_controller_sensing.py)
+    and ControllerOutputs (the publishers, ros/mpc_controller_outputs.py); this class keeps
+    the latest odometry, plan verdicts and pose, and runs the control step.
 
     Attributes:
         controller: the MpcController (and its NLPs) while configured, else None.
@@ -197,11 +183,8 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
         super().__init__('mpc_controller', **kwargs)
         self._world_cache: dict[str, tuple[list[ConvexPolygon], Footprint]] = {}
         self.controller: MpcController | None = None
-        self._cmd_pub = None
-        self._local_plan_pub = None
-        self._diag_pub = None
-        self._obstacles_pub = None
-        self._footprint_pub = None
+        self._sensing: ControllerSensing | None = None
+        self._outputs: ControllerOutputs | None = None
         self._odom_sub = None
         self._plan_sub = None
         self._scan_sub = None
@@ -209,7 +192,6 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
         self._localizer_sub = None
         self._tf_listener = None
         self._timer = None
-        self._stamped = False
         self._sources: frozenset[str] = frozenset()
         self._world_obstacles: list[ConvexPolygon] = []
         # where the pose in the plan's frame comes from (ros/robot_pose.py); configure
@@ -238,21 +220,10 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
         self._plan_problem: str | None = None
         self._pose_problem: str | None = None
         self._problems = ProblemThrottle(ERROR_THROTTLE_S)
-        self._last_message = ''
         self._last_step_time: float | None = None
-        self._markers_shown: tuple[tuple, tuple] | None = None  # (grown, active) last sent
-        self._steps_since_markers = 0
         # the last ODOM_HISTORY_S seconds of odometry, to place each scan where it was taken
         # (and the localizer's correction)
         self._pose_source.clear()
-        # the map's and the laser's obstacles (the scan memory inside), when the latest valid
-        # scan was taken (None: none yet) and its stamp, the latest valid map
-        self._local: LocalObstacles | None = None
-        self._scan_time: float | None = None
-        self._scan_stamp: float | None = None
-        # valid scans waiting for odometry that covers their stamps: (scan, stamp, receipt)
-        self._pending_scans: deque[tuple[Any, float, float]] = deque(maxlen=PENDING_SCANS)
-        self._grid = None
         self.blockage = Blockage()
         self.last_output: ControlOutput | None = None
         self.control_steps = 0
@@ -289,30 +260,22 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
         self._world_obstacles = list(obstacles)
         self._pose_source = self._make_robot_pose(values)
         self._forget_inputs()
-        self._local = LocalObstacles(
-            config.solving.faces_per_obstacle,
-            memory=ObstacleMemory(float(values['obstacle_memory'])) if 'scan' in sources
-            else None)
+        self._sensing = ControllerSensing(
+            controller, sources=sources, memory_ttl=float(values['obstacle_memory']),
+            logger=self.get_logger(), now=self._now, parameter=self._parameter,
+            pose_at=self.pose_at)
         if values['analytic_path']:
             self._prepare()
-        self._stamped = bool(values['enable_stamped_cmd_vel'])
-        self._cmd_pub = self.create_lifecycle_publisher(
-            TwistStamped if self._stamped else Twist, 'cmd_vel', CMD_VEL_QOS)
-        self._local_plan_pub = self.create_lifecycle_publisher(Path, 'local_plan',
-                                                               LOCAL_PLAN_QOS)
-        self._diag_pub = self.create_lifecycle_publisher(
-            DiagnosticArray, CONTROLLER_DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS)
-        self._obstacles_pub = self.create_lifecycle_publisher(MarkerArray, OBSTACLES_TOPIC,
-                                                              MARKERS_QOS)
-        self._footprint_pub = self.create_lifecycle_publisher(PolygonStamped, FOOTPRINT_TOPIC,
-                                                              MARKERS_QOS)
+        self._outputs = ControllerOutputs(self, controller,
+                                          stamped=bool(values['enable_stamped_cmd_vel']),
+                                          parameter=self._parameter)
         self._odom_sub = self.create_subscription(Odometry, 'odom', self.odom_callback,
                                                   ODOM_QOS)
         # raw: the size of a plan is checked before rclpy spends ~15 us per pose on it
         self._plan_sub = self.create_subscription(Path, 'plan', self.plan_callback, PLAN_QOS,
                                                   raw=True)
         if 'scan' in sources:
-            # raw: the beam count is checked before rclpy decodes the ranges
+            # raw: the beam count is checked before rclpy decodes the ranges (ScanIntake)
             self._scan_sub = self.create_subscription(LaserScan, 'scan', self.scan_callback,
                                                       SCAN_QOS, raw=True)
         if 'map' in sources:
@@ -376,7 +339,7 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
         self._stop_robot()
         # the process ends next: give reliable subscribers time to take the zero before the
         # writer goes (an acknowledgement can wait for DDS's next heartbeat)
-        acked = self._cmd_pub.wait_for_all_acked(Duration(seconds=EXIT_ACK_TIMEOUT_S))
+        acked = self._outputs.wait_for_cmd_acked(EXIT_ACK_TIMEOUT_S)
         self.get_logger().info('exiting: cmd_vel zero' + (
             '' if acked else f' (not acknowledged by every subscriber in '
                              f'{EXIT_ACK_TIMEOUT_S:g} s)'))
@@ -384,14 +347,15 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
     def destroy_node(self) -> None:
         """Drop the controller (and its NLP) with the node."""
         self.controller = None
+        self._sensing = self._outputs = None
         super().destroy_node()
 
     def _stop_robot(self) -> None:
         """Publish one zero cmd_vel (while the publisher is still enabled)."""
-        if self._cmd_pub is None:
+        if self._outputs is None:
             return
         try:
-            self._cmd_pub.publish(self._cmd_message(np.zeros(2), self._now()))
+            self._outputs.publish_stop(self._now())
         except Exception as err:  # the command must not fail a transition
             self.get_logger().warning(f'could not publish a zero cmd_vel: {err}')
 
@@ -401,18 +365,16 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
 
     def release(self) -> None:
         """Destroy the timer, subscriptions and publishers, and drop the controller (its NLPs)."""
+        publishers = self._outputs.publishers if self._outputs is not None else ()
         self.destroy_entities(self._timer, self._odom_sub, self._plan_sub, self._scan_sub,
-                              self._map_sub, self._localizer_sub, self._cmd_pub,
-                              self._local_plan_pub, self._diag_pub, self._obstacles_pub,
-                              self._footprint_pub)
+                              self._map_sub, self._localizer_sub, *publishers)
         self._timer = None
         self._odom_sub = self._plan_sub = self._scan_sub = self._map_sub = None
         self._localizer_sub = None
         if self._tf_listener is not None:
             self._tf_listener.unregister()
             self._tf_listener = None
-        self._cmd_pub = self._local_plan_pub = self._diag_pub = None
-        self._obstacles_pub = self._footprint_pub = None
+        self._outputs = self._sensing = None
         self.controller = None  # the MPC and its NLPs go with it
         self._forget_inputs()
 
@@ -478,9 +440,8 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
                 self._plan_problem = None  # the plan topic is ignored from now on
             if names & {'step', 'control_frequency'} and self._timer is not None:
                 self._make_timer()
-            if ('obstacle_memory' in names and self._local is not None
-                    and self._local.memory is not None):
-                self._local.memory.ttl = float(values['obstacle_memory'])
+            if 'obstacle_memory' in names and self._sensing is not None:
+                self._sensing.set_memory_ttl(float(values['obstacle_memory']))
         except Exception as err:  # validated above: a bug, but keep running
             self.get_logger().error(f'could not apply {sorted(names)}: {err}')
             return
@@ -500,6 +461,21 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
         """A copy of the latest valid odometry's state (odom frame); None without one."""
         return None if self._odom_state is None else self._odom_state.copy()
 
+    @property
+    def scan_stamp(self) -> float | None:
+        """The stamp of the latest scan placed and used (s of ROS time; None: none yet)."""
+        return self._sensing.scan_stamp if self._sensing is not None else None
+
+    @property
+    def scan_time(self) -> float | None:
+        """What scan_timeout is measured from: the latest usable scan's time (None: none)."""
+        return self._sensing.scan_time if self._sensing is not None else None
+
+    @property
+    def pending_scans(self) -> int:
+        """How many valid scans wait for odometry that covers their stamps."""
+        return self._sensing.pending_scans if self._sensing is not None else 0
+
     def _make_timer(self) -> None:
         """(Re)start the control timer at control_frequency (the MPC's step is apart)."""
         self._destroy_timer()
@@ -508,6 +484,30 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
     # ------------------------------------------------------------------ callbacks
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
+
+    def _parameter(self, name: str) -> Any:
+        """Return a parameter's current value (what the components read when they use it)."""
+        return self.get_parameter(name).value
+
+    def _place_pending(self) -> None:
+        """Place the scans that wait for odometry, if scans are taken (ControllerSensing)."""
+        if self._sensing is not None:
+            self._sensing.place_pending()
+
+    def scan_callback(self, msg: LaserScan | bytes) -> None:
+        """Take a scan (ControllerSensing.take_scan); nothing before configure.
+
+        Args:
+            msg: the scan, or its CDR bytes as the raw subscription delivers them.
+
+        """
+        if self._sensing is not None:
+            self._sensing.take_scan(msg)
+
+    def map_callback(self, msg: OccupancyGrid) -> None:
+        """Take a map (ControllerSensing.take_map); nothing before configure."""
+        if self._sensing is not None:
+            self._sensing.take_map(msg)
 
     def odom_callback(self, msg: Odometry) -> None:
         """Keep the latest state and when it was measured; a bad one stops the robot.
@@ -623,21 +623,18 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
         """Return the plan message after the checks that need no conversion of its poses.
 
         Raises:
-            ValueError: if it has too many poses or the wrong frame.
+            ValueError: if its serialised form counts more than max_plan_poses (refused before
+                rclpy decodes it; MpcController.set_plan refuses a decoded one), or it is
+                in another frame.
 
         """
-        limit = self.controller.settings.max_plan_poses
-
-        def too_many(count: int) -> ValueError:
-            return ValueError(f'{count} poses, more than max_plan_poses ({limit})')
-
         if isinstance(msg, (bytes, bytearray)):
             count = path_pose_count(bytes(msg))
+            limit = self.controller.settings.max_plan_poses
             if count is not None and count > limit:
-                raise too_many(count)
+                problem = f'{count} poses, more than max_plan_poses ({limit})'
+                raise ValueError(problem)
             msg = deserialize_message(bytes(msg), Path)
-        if len(msg.poses) > limit:
-            raise too_many(len(msg.poses))
         frame = str(self.get_parameter('global_frame').value)
         problem = frame_problem(msg.header.frame_id, frame, 'plans')
         if problem is not None:
@@ -673,11 +670,12 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
                 output = self.controller.stop(Reason.NO_LOCALIZATION, self._pose_problem,
                                               now=now)
             else:
-                self._update_obstacles()
+                self.controller.set_obstacles(self._world_obstacles
+                                              + self._sensing.near(self._state))
                 output = self.controller.compute(
                     self._state, now, state_time=self._state_time,
-                    scan_required='scan' in self._sources, scan_time=self._scan_time,
-                    map_missing='map' in self._sources and self._grid is None,
+                    scan_required='scan' in self._sources, scan_time=self._sensing.scan_time,
+                    map_missing='map' in self._sources and self._sensing.grid is None,
                     velocity=self._odom_twist)
         except Exception as err:  # compute never raises; belt and braces
             output = ControlOutput(np.zeros(2), None, Reason.ERROR, str(err))
@@ -686,7 +684,9 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
         except Exception:  # a report, not a decision: never let it stop the step
             self.blockage = Blockage()
         self.last_output = output
-        self._publish_outputs(output, now)
+        self.goal_reached = output.reason is Reason.GOAL_REACHED
+        self._outputs.publish(output, now, state=self._state, state_time=self._state_time,
+                              blockage=self.blockage)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -18,21 +18,27 @@ cmd_vel (Twist, or TwistStamped in ``robot_base_frame``), ``local_plan`` (the pr
 ``mpc/diagnostics`` (core/diagnostics.py's keys), ``mpc/obstacles`` (MarkerArray: the
 obstacles raw, grown and active, sent when that changes and every OBSTACLE_REFRESH_STEPS
 control steps) and ``mpc/footprint``, all in ``global_frame``; a log line when the reason
-changes (`log_line`). ControllerOutputs is a part of MpcControllerNode
-(ros/mpc_controller_node.py), which holds the publishers and the state these read.
+changes (`log_line`). ControllerOutputs is a component MpcControllerNode
+(ros/mpc_controller_node.py) builds at configure: it owns these publishers and what it last
+sent, and the node hands it each control step's output.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import Twist, TwistStamped
+from geometry_msgs.msg import PolygonStamped, Twist, TwistStamped
+from nav_msgs.msg import Path
 import numpy as np
+from rclpy.duration import Duration
+from rclpy.lifecycle import LifecycleNode
 from visualization_msgs.msg import MarkerArray
 
-from mpc_local_planner.core.control_output import ControlOutput, Reason
+from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reason
+from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.diagnostics import (
+    CONTROLLER_DIAGNOSTICS_TOPIC,
     ControllerDiagnostics,
     Level,
 )
@@ -46,12 +52,18 @@ from mpc_local_planner.ros.conversions import (
     twist_from_u,
     twist_stamped_from_u,
 )
+from mpc_local_planner.ros.qos import CMD_VEL_QOS, DIAGNOSTICS_QOS, LOCAL_PLAN_QOS
+from mpc_local_planner.ros.throttle import ERROR_THROTTLE_S, ProblemThrottle
 
-__all__ = ['ControllerOutputs', 'MARKER_STYLE', 'OBSTACLE_REFRESH_STEPS', 'OBSTACLES_TOPIC',
-           'log_line']
+__all__ = ['ControllerOutputs', 'FOOTPRINT_TOPIC', 'MARKER_STYLE', 'MARKERS_QOS',
+           'OBSTACLE_REFRESH_STEPS', 'OBSTACLES_TOPIC', 'log_line']
 
 # What the controller avoids, as markers (closed_loop's monitor reads it too).
 OBSTACLES_TOPIC = 'mpc/obstacles'
+# The robot's outline (PolygonStamped).
+FOOTPRINT_TOPIC = 'mpc/footprint'
+# Streams like local_plan: reliable, volatile, depth 10.
+MARKERS_QOS = LOCAL_PLAN_QOS
 
 # mpc/obstacles goes out when what it shows changes, and at least every this many control
 # steps (for an RViz that subscribes late: the topic is volatile).
@@ -96,34 +108,90 @@ def log_line(output: ControlOutput, *, failures: int,
 
 
 class ControllerOutputs:
-    """MpcControllerNode's publishing and logging of a control step's output."""
+    """MpcControllerNode's publishers, and the publishing and logging of a control step.
 
-    def _publish_outputs(self, output: ControlOutput, now: float) -> None:
-        """Publish cmd_vel, then local_plan, diagnostics, obstacles and footprint; log."""
+    Args:
+        node: the lifecycle node the publishers belong to (enabled with it).
+        controller: the node's MpcController (obstacles, footprint, failures).
+        stamped: cmd_vel as TwistStamped (enable_stamped_cmd_vel) rather than Twist.
+        parameter: the current value of a node parameter (the frames: read when used).
+
+    """
+
+    def __init__(self, node: LifecycleNode, controller: MpcController, *, stamped: bool,
+                 parameter: Callable[[str], Any]) -> None:
+        self._controller = controller
+        self._stamped = stamped
+        self._parameter = parameter
+        self._logger = node.get_logger()
+        self._name = f'{node.get_name()}: MPC'
+        self._hardware_id = node.get_fully_qualified_name()
+        self._problems = ProblemThrottle(ERROR_THROTTLE_S)
+        self._last_message = ''
+        self._markers_shown: tuple[tuple, tuple] | None = None  # (grown, active) last sent
+        self._steps_since_markers = 0
+        self._cmd_pub = node.create_lifecycle_publisher(
+            TwistStamped if stamped else Twist, 'cmd_vel', CMD_VEL_QOS)
+        self._local_plan_pub = node.create_lifecycle_publisher(Path, 'local_plan',
+                                                               LOCAL_PLAN_QOS)
+        self._diag_pub = node.create_lifecycle_publisher(
+            DiagnosticArray, CONTROLLER_DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS)
+        self._obstacles_pub = node.create_lifecycle_publisher(MarkerArray, OBSTACLES_TOPIC,
+                                                              MARKERS_QOS)
+        self._footprint_pub = node.create_lifecycle_publisher(PolygonStamped, FOOTPRINT_TOPIC,
+                                                              MARKERS_QOS)
+
+    @property
+    def publishers(self) -> tuple[Any, ...]:
+        """The publishers, for the node to destroy."""
+        return (self._cmd_pub, self._local_plan_pub, self._diag_pub, self._obstacles_pub,
+                self._footprint_pub)
+
+    def publish(self, output: ControlOutput, now: float, *, state: np.ndarray | None,
+                state_time: float | None, blockage: Blockage) -> None:
+        """Publish cmd_vel, then local_plan, diagnostics, obstacles and footprint; log.
+
+        Args:
+            output: the control step's output.
+            now: its time (s of ROS time).
+            state: the pose in the plan's frame it was computed for (None: none).
+            state_time: when that pose was measured.
+            blockage: where the plan is blocked (path_blockage), for the diagnostics.
+
+        """
         self._cmd_pub.publish(self._cmd_message(output.u, now))
         try:
             stamp = seconds_to_stamp(max(now, 0.0))
-            frame = str(self.get_parameter('global_frame').value)
+            frame = str(self._parameter('global_frame'))
             if output.solution is not None:
                 self._local_plan_pub.publish(poses_to_path(
                     output.solution.x_pred[:, :3], frame_id=frame, stamp=stamp))
-            self._diag_pub.publish(self._diagnostics(output, now))
+            self._diag_pub.publish(self._diagnostics(output, now, state, state_time,
+                                                     blockage))
             self._publish_obstacles(output, frame, stamp)
-            if self._state is not None:
+            if state is not None:
                 # the shape the MPC keeps clear: the polygon, or the circle as a 16-gon
                 self._footprint_pub.publish(polygon_stamped(
-                    self.controller.config.robot_footprint.at(self._state), frame_id=frame,
+                    self._controller.config.robot_footprint.at(state), frame_id=frame,
                     stamp=stamp))
         except Exception as err:  # a message that cannot be built: keep controlling
-            self.get_logger().warning(f'could not publish: {err}', throttle_duration_sec=1.0)
-        self._log(output)
+            self._logger.warning(f'could not publish: {err}', throttle_duration_sec=1.0)
+        self._log(output, state)
+
+    def publish_stop(self, now: float) -> None:
+        """Publish one zero cmd_vel (while the publisher is enabled)."""
+        self._cmd_pub.publish(self._cmd_message(np.zeros(2), now))
+
+    def wait_for_cmd_acked(self, timeout_s: float) -> bool:
+        """Wait until every cmd_vel subscriber acknowledged what was sent; say if they did."""
+        return self._cmd_pub.wait_for_all_acked(Duration(seconds=timeout_s))
 
     def _cmd_message(self, u: np.ndarray, now: float) -> Twist | TwistStamped:
         """Return cmd_vel's message for u: a Twist, or a TwistStamped in base_link."""
         if not self._stamped:
             return twist_from_u(u)
         return twist_stamped_from_u(u, stamp=seconds_to_stamp(max(now, 0.0)),
-                                    frame_id=str(self.get_parameter('robot_base_frame').value))
+                                    frame_id=str(self._parameter('robot_base_frame')))
 
     def _publish_obstacles(self, output: ControlOutput, frame: str, stamp: Any) -> None:
         """Publish the obstacles raw, grown and active when that changes (or now and then).
@@ -131,16 +199,17 @@ class ControllerOutputs:
         Each publication starts with DELETEALL, so markers of obstacles gone (or no longer
         active) disappear; ids are the obstacles' indices within their namespace.
         """
-        grown = self.controller.grown_obstacles
+        controller = self._controller
+        grown = controller.grown_obstacles
         # active only if this step solved: a stop without a solve holds nothing
-        active = self.controller.active_obstacles if output.solution is not None else ()
+        active = controller.active_obstacles if output.solution is not None else ()
         self._steps_since_markers += 1
         shown = self._markers_shown
         if (shown is not None and _same(shown[0], grown) and _same(shown[1], active)
                 and self._steps_since_markers < OBSTACLE_REFRESH_STEPS):
             return
         markers = [delete_all_marker(frame_id=frame, stamp=stamp)]
-        for ns, polygons in (('raw', self.controller.obstacles), ('grown', grown),
+        for ns, polygons in (('raw', controller.obstacles), ('grown', grown),
                              ('active', active)):
             rgba, width = MARKER_STYLE[ns]
             markers += [polygon_marker(p.vertices, ns=ns, marker_id=i, frame_id=frame,
@@ -150,35 +219,34 @@ class ControllerOutputs:
         self._markers_shown = (grown, active)
         self._steps_since_markers = 0
 
-    def _log(self, output: ControlOutput) -> None:
+    def _log(self, output: ControlOutput, state: np.ndarray | None) -> None:
         """Log a change of reason (refused input is logged, throttled, where refused)."""
         message = output.message
         if message == self._last_message:
             return
         self._last_message = message
-        self.goal_reached = output.reason is Reason.GOAL_REACHED
         if output.reason in (Reason.INVALID_ODOM, Reason.INVALID_PLAN, Reason.NO_LOCALIZATION):
             return
         if output.reason is Reason.ERROR and not self._problems.report('error'):
             return
-        state = self._state if self._state is not None else np.full(3, np.nan)
-        level, line = log_line(output, failures=self.controller.solver_failures,
-                               goal_error=self.controller.goal_error(state))
+        state = state if state is not None else np.full(3, np.nan)
+        level, line = log_line(output, failures=self._controller.solver_failures,
+                               goal_error=self._controller.goal_error(state))
         # one call site per severity: rclpy refuses a call site that changes severity
         if level is Level.ERROR:
-            self.get_logger().error(line)
+            self._logger.error(line)
         elif level is Level.WARN:
-            self.get_logger().warning(line)
+            self._logger.warning(line)
         else:
-            self.get_logger().info(line)
+            self._logger.info(line)
 
-    def _diagnostics(self, output: ControlOutput, now: float) -> DiagnosticArray:
+    def _diagnostics(self, output: ControlOutput, now: float, state: np.ndarray | None,
+                     state_time: float | None, blockage: Blockage) -> DiagnosticArray:
         record = ControllerDiagnostics.from_output(
-            output, state=self._state, state_time=self._state_time,
-            failures_total=self.controller.solver_failures, blockage=self.blockage,
-            timeouts_total=self.controller.timeouts)
-        return diagnostic_array(name=f'{self.get_name()}: MPC',
-                                hardware_id=self.get_fully_qualified_name(),
+            output, state=state, state_time=state_time,
+            failures_total=self._controller.solver_failures, blockage=blockage,
+            timeouts_total=self._controller.timeouts)
+        return diagnostic_array(name=self._name, hardware_id=self._hardware_id,
                                 level=record.level, message=record.message,
                                 values=record.to_values(),
                                 stamp=seconds_to_stamp(max(now, 0.0)))

@@ -14,9 +14,10 @@
 
 """What mpc_controller senses: scans and the map, turned into the obstacles it avoids.
 
-ControllerSensing is a part of MpcControllerNode (ros/mpc_controller_node.py), which holds
-the subscriptions and the state these callbacks fill; each control step hands the obstacles
-within reach to the controller.
+ControllerSensing is a component MpcControllerNode (ros/mpc_controller_node.py) builds at
+configure: it owns the scan intake (perception/scan_intake.py), the obstacle memory and the
+map; the node's scan and map callbacks hand it the messages, and each control step hands the
+obstacles within reach to the controller.
 
 What the controller avoids, each control step: the world file's obstacles (source 'world'),
 the map's occupied cells near the robot merged into rectangles (source 'map'; recomputed
@@ -51,21 +52,27 @@ silent one does (with a throttled warning).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 from nav_msgs.msg import OccupancyGrid
 import numpy as np
+from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import LaserScan
 
+from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.perception.local_obstacles import LocalObstacles
 from mpc_local_planner.perception.pose_history import MAX_EXTRAPOLATION_S
-from mpc_local_planner.perception.scans import (
-    check_scan_stamp,
-    classify_beams,
-    MAX_BEAMS,
-    validate_scan,
+from mpc_local_planner.perception.scan_intake import (
+    Discarded,
+    Dropped,
+    Placed,
+    ScanIntake,
+    ScanOrder,
 )
+from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
+from mpc_local_planner.perception.scans import classify_beams, MAX_BEAMS, Scan
 from mpc_local_planner.ros.conversions import (
     frame_problem,
     grid_from_message,
@@ -73,8 +80,9 @@ from mpc_local_planner.ros.conversions import (
     scan_from_message,
     SCANS,
 )
-from mpc_local_planner.ros.robot_pose import ODOM_HISTORY_S
-from mpc_local_planner.ros.throttle import ERROR_THROTTLE_S
+from mpc_local_planner.ros.robot_pose import ODOM_HISTORY_S, PENDING_SCANS
+from mpc_local_planner.ros.throttle import ERROR_THROTTLE_S, ProblemThrottle
+from mpc_local_planner.worlds.map_files import OccupancyMap
 
 __all__ = ['ControllerSensing', 'MAX_SCAN_BYTES', 'SENSING_MARGIN']
 
@@ -88,191 +96,198 @@ MAX_SCAN_BYTES = 2 * 4 * MAX_BEAMS + 4096
 
 
 class ControllerSensing:
-    """MpcControllerNode's intake of scan and map, and the obstacles it hands over."""
+    """MpcControllerNode's intake of scan and map, and the obstacles it hands over.
+
+    Args:
+        controller: the node's MpcController (its footprint, reach and faces).
+        sources: the obstacle sources ('scan' and 'map' are taken in here).
+        memory_ttl: obstacle_memory, seconds.
+        logger: the node's logger.
+        now: the node's clock, seconds.
+        parameter: the current value of a node parameter (frames, laser_pose,
+            scan_timeout: read when used, so a change applies at once).
+        pose_at: the robot's pose in the plan's frame at a stamp (None: not yet).
+
+    """
+
+    def __init__(self, controller: MpcController, *, sources: frozenset[str],
+                 memory_ttl: float, logger: RcutilsLogger, now: Callable[[], float],
+                 parameter: Callable[[str], Any],
+                 pose_at: Callable[[float], np.ndarray | None]) -> None:
+        self._controller = controller
+        self._logger = logger
+        self._now = now
+        self._parameter = parameter
+        self._pose_at = pose_at
+        self._problems = ProblemThrottle(ERROR_THROTTLE_S)
+        self._take_map = 'map' in sources
+        # the map's and the laser's obstacles (the scan memory inside), the latest valid map
+        self.local = LocalObstacles(
+            controller.config.solving.faces_per_obstacle,
+            memory=ObstacleMemory(memory_ttl) if 'scan' in sources else None)
+        self.grid: OccupancyMap | None = None
+        self._intake = (ScanIntake(capacity=PENDING_SCANS, span=ODOM_HISTORY_S)
+                        if 'scan' in sources else None)
 
     @property
     def scan_stamp(self) -> float | None:
         """The stamp of the latest scan placed and used (s of ROS time; None: none yet)."""
-        return self._scan_stamp
+        return self._intake.latest_stamp if self._intake is not None else None
 
     @property
     def scan_time(self) -> float | None:
         """What scan_timeout is measured from (None: no usable scan yet).
 
-        The latest usable scan's stamp, never later than its arrival (see _use_scan).
+        The latest usable scan's stamp, never later than its arrival (ScanIntake.fresh_time).
         """
-        return self._scan_time
+        return self._intake.fresh_time if self._intake is not None else None
 
     @property
     def pending_scans(self) -> int:
         """How many valid scans wait for odometry that covers their stamps."""
-        return len(self._pending_scans)
+        return self._intake.pending if self._intake is not None else 0
 
-    def scan_callback(self, msg: LaserScan | bytes) -> None:
+    def set_memory_ttl(self, ttl: float) -> None:
+        """Apply a new obstacle_memory (seconds) to the scan memory, if there is one."""
+        if self.local.memory is not None:
+            self.local.memory.ttl = ttl
+
+    def take_scan(self, msg: LaserScan | bytes) -> None:
         """Take a scan: placed now if the odometry covers its stamp, else it waits.
 
-        The robot's pose is its pose in the plan's frame at the scan's stamp (see pose_at;
-        the one the controller steers with, so scan and plan agree). A scan stamped more
-        than MAX_EXTRAPOLATION_S after the latest odometry waits (with at most
-        PENDING_SCANS - 1 others, the oldest falling out) until odometry covering its stamp
-        has come (_place_pending), renewing nothing meanwhile; the older pose would displace
-        what it saw by the motion since. A malformed scan is dropped with one throttled
-        error, so the scan goes stale if only bad ones come.
+        The robot's pose is its pose in the plan's frame at the scan's stamp (the one the
+        controller steers with, so scan and plan agree). A scan stamped more than
+        MAX_EXTRAPOLATION_S after the latest odometry waits (with at most PENDING_SCANS - 1
+        others, the oldest falling out) until odometry covering its stamp has come
+        (place_pending), renewing nothing meanwhile; the older pose would displace what it
+        saw by the motion since. A malformed scan is dropped with one throttled error, so the
+        scan goes stale if only bad ones come.
 
         Args:
             msg: the scan, or its CDR bytes as the raw subscription delivers them.
 
         """
-        memory = self._local.memory if self._local is not None else None
-        if memory is None or self.controller is None:
-            return  # 'scan' is not a source (or not configured)
+        if self._intake is None:
+            return  # 'scan' is not a source
         receipt = self._now()
         try:
-            scan, stamp = self._read_scan(msg, receipt)
+            self._intake.add(self._read_scan(msg, receipt), receipt)
         except Exception as err:  # ScanError mostly; never leave a callback
             self._refuse_scan(err)
             return
-        self._pending_scans.append((scan, stamp, receipt))
-        self._place_pending()
+        self.place_pending()
 
-    def _place_pending(self) -> None:
+    def place_pending(self) -> None:
         """Place the waiting scans whose stamps the pose now covers, in arrival order.
 
-        Called on each scan, each odometry message and each control step. What is covered
-        is every stamp up to a threshold (MAX_EXTRAPOLATION_S past the latest odometry, or
-        the latest transform), so a scan placed here is never newer than one left waiting:
-        the memory sees them in order. A scan still without a pose once older than
-        scan_timeout is discarded (it would be stale when placed); one whose pose cannot be
-        had (no localizer correction, no transform) is dropped, as before.
+        Called on each scan, each odometry message and each control step. A scan still
+        without a pose once older than scan_timeout is discarded (it would be stale when
+        placed); one whose pose cannot be had (no localizer correction, no transform) is
+        dropped.
         """
-        if self._local is None or self._local.memory is None or self.controller is None:
-            self._pending_scans.clear()
+        if self._intake is None:
             return
-        waiting: list[tuple[Any, float, float]] = []
-        while self._pending_scans:
-            scan, stamp, receipt = self._pending_scans.popleft()
-            try:
-                pose = self.pose_at(stamp)
-            except Exception as err:  # LocalizationError mostly; never leave a callback
-                self.get_logger().info(f"scan dropped: no pose in the plan's frame to place "
-                                       f'it ({err})', throttle_duration_sec=ERROR_THROTTLE_S)
-                continue
-            if pose is not None:
-                self._use_scan(scan, stamp, receipt, pose)
-                continue
-            timeout = float(self.get_parameter('scan_timeout').value)
-            if self._now() - stamp <= timeout:
-                waiting.append((scan, stamp, receipt))  # until odometry covers its stamp
-                continue
-            self.get_logger().info(
-                f'scan discarded: no odometry covered its stamp {stamp:.3f} s (more than '
-                f'{MAX_EXTRAPOLATION_S:g} s past the latest) within scan_timeout '
-                f'({timeout:g} s)', throttle_duration_sec=ERROR_THROTTLE_S)
-        self._pending_scans.extend(waiting)
+        timeout = float(self._parameter('scan_timeout'))
+        for event in self._intake.place(self._pose_at, self._now(), timeout):
+            if isinstance(event, Placed):
+                self._use_scan(event)
+            elif isinstance(event, Dropped):
+                self._logger.info(f"scan dropped: no pose in the plan's frame to place it "
+                                  f'({event.error})', throttle_duration_sec=ERROR_THROTTLE_S)
+            elif isinstance(event, Discarded):
+                self._logger.info(
+                    f'scan discarded: no odometry covered its stamp {event.scan.stamp:.3f} s '
+                    f'(more than {MAX_EXTRAPOLATION_S:g} s past the latest) within '
+                    f'scan_timeout ({timeout:g} s)', throttle_duration_sec=ERROR_THROTTLE_S)
 
-    def _use_scan(self, scan: Any, stamp: float, receipt: float, pose: np.ndarray) -> None:
+    def _use_scan(self, placed: Placed) -> None:
         """Remember a placed scan's obstacles; renew scan_timeout if it has a usable reading.
 
-        The scan's time (its stamp, but never later than its arrival) is what scan_timeout
-        is measured against, set only here, once the scan is placed and used: a waiting
-        scan renews nothing. A blind scan (no beam that is not ignored, see
-        classify_beams) is used but does not renew it, so only blind scans go stale as no
-        scans do.
+        A blind scan (no beam that is not ignored, see classify_beams) is used but does not
+        renew it, so only blind scans go stale as no scans do.
         """
-        memory = self._local.memory
+        memory, scan = self.local.memory, placed.scan
         try:
-            if self._scan_stamp is not None and stamp < self._scan_stamp:
-                if self._scan_stamp - stamp <= ODOM_HISTORY_S:
-                    return  # out of order: the memory holds a newer view already
-                memory.clear()  # the clock jumped back
-            laser = [float(v) for v in self.get_parameter('laser_pose').value]
-            body = self.controller.config.robot_footprint  # returns inside are the robot
-            memory.update(scan, pose, laser_pose=laser, body=body)
+            order = self._intake.order(scan.stamp)
+            if order is ScanOrder.LATE:
+                return  # out of order: the memory holds a newer view already
+            if order is ScanOrder.CLOCK_JUMP:
+                memory.clear()
+            laser = [float(v) for v in self._parameter('laser_pose')]
+            body = self._controller.config.robot_footprint  # returns inside are the robot
+            memory.update(scan, placed.pose, laser_pose=laser, body=body)
         except Exception as err:  # never leave a callback
             self._refuse_scan(err)
             return
-        self._local.scan_updated()
-        self._scan_stamp = stamp
+        self.local.scan_updated()
         if self._problems.resolve('scan'):
-            self.get_logger().info('scans are valid again')
-        if not classify_beams(scan, body=body, laser_pose=laser).usable.any():
-            self.get_logger().warning(
+            self._logger.info('scans are valid again')
+        usable = bool(classify_beams(scan, body=body, laser_pose=laser).usable.any())
+        self._intake.taken(scan.stamp, placed.receipt, usable=usable)
+        if not usable:
+            self._logger.warning(
                 'scan without a usable reading (every beam NaN, outside [range_min, '
                 "range_max] or inside the robot's footprint): it does not renew scan_timeout",
                 throttle_duration_sec=ERROR_THROTTLE_S)
-            return
-        self._scan_time = min(stamp, receipt)
 
     def _refuse_scan(self, err: Exception) -> None:
         """Say (throttled) that a scan was dropped as invalid."""
         problem = str(err) or type(err).__name__
         if self._problems.report('scan'):
-            self.get_logger().error(f'invalid scan: {problem}; scan dropped (cmd_vel is '
-                                    'zero once the scan is stale)')
+            self._logger.error(f'invalid scan: {problem}; scan dropped (cmd_vel is '
+                               'zero once the scan is stale)')
 
-    def _read_scan(self, msg: LaserScan | bytes, receipt: float) -> tuple[Any, float]:
-        """Return the scan (validated, stamped) and its stamp in seconds.
+    def _read_scan(self, msg: LaserScan | bytes, receipt: float) -> Scan:
+        """Return the scan, stamped (its stamp, or its arrival when it has none).
+
+        Its beams are counted before it is decoded; the intake validates the rest.
 
         Raises:
-            ValueError: if it is too large, in another frame, or malformed.
+            ValueError: if it is too large or in another frame.
 
         """
         if isinstance(msg, (bytes, bytearray)):
             count = scan_beam_count(bytes(msg))
-            if count is not None and count > MAX_BEAMS:
-                problem = f'{count} beams, more than the {MAX_BEAMS} accepted'
-                raise ValueError(problem)
+            if count is not None:
+                self._intake.check_beam_count(count)
             if len(msg) > MAX_SCAN_BYTES:
                 problem = f'{len(msg)} bytes, more than {MAX_SCAN_BYTES} (too many values)'
                 raise ValueError(problem)
             msg = deserialize_message(bytes(msg), LaserScan)
-        if len(msg.ranges) > MAX_BEAMS:
-            problem = f'{len(msg.ranges)} beams, more than the {MAX_BEAMS} accepted'
-            raise ValueError(problem)
-        frame = str(self.get_parameter('robot_base_frame').value)
+        frame = str(self._parameter('robot_base_frame'))
         problem = frame_problem(msg.header.frame_id, frame, SCANS)
         if problem is not None:
             raise ValueError(problem)
         scan = scan_from_message(msg)
-        stamp = scan.stamp if scan.stamp > 0 else receipt
-        scan = scan._replace(stamp=stamp)
-        validate_scan(scan)
-        check_scan_stamp(stamp, receipt)
-        return scan, stamp
+        return scan._replace(stamp=scan.stamp if scan.stamp > 0 else receipt)
 
-    def map_callback(self, msg: OccupancyGrid) -> None:
+    def take_map(self, msg: OccupancyGrid) -> None:
         """Keep a valid map (its rectangles near the robot are recomputed); drop a bad one."""
-        if 'map' not in self._sources or self.controller is None:
+        if not self._take_map:
             return
         try:
-            frame = str(self.get_parameter('global_frame').value)
+            frame = str(self._parameter('global_frame'))
             grid = grid_from_message(msg, frame_id=frame)
         except Exception as err:  # GridError mostly; never leave a callback
             problem = str(err) or type(err).__name__
             if self._problems.report('map'):
-                self.get_logger().error(f'invalid map: {problem}; map dropped (the previous '
-                                        'one, if any, stays in force)')
+                self._logger.error(f'invalid map: {problem}; map dropped (the previous '
+                                   'one, if any, stays in force)')
             return
-        self._grid = grid
-        if self._local is not None:
-            self._local.occupancy = grid
+        self.grid = grid
+        self.local.occupancy = grid
         self._problems.resolve('map')
-        self.get_logger().info(f'new map: {grid.width} x {grid.height} cells of '
-                               f'{grid.resolution:g} m')
+        self._logger.info(f'new map: {grid.width} x {grid.height} cells of '
+                          f'{grid.resolution:g} m')
 
-    def _sensing_radius(self) -> float:
-        """Return how far from the robot sensed obstacles matter (reach plus a margin).
+    def near(self, state: np.ndarray | None) -> list[ConvexPolygon]:
+        """Return the sensed obstacles within reach of the robot at state (none without one).
 
-        MpcConfig.reach: the horizon's travel, the inflation and, for a polygon, the
-        circumscribed radius (a polygon's obstacles are not grown by the body, so the
-        inflation alone would leave out those its corners can hit).
+        Reach: MpcConfig.reach (the horizon's travel, the inflation and, for a polygon, the
+        circumscribed radius: a polygon's obstacles are not grown by the body, so the
+        inflation alone would leave out those its corners can hit) plus SENSING_MARGIN.
         """
-        config, model = self.controller.config, self.controller.model
-        return config.reach(float(model.u_max[0])) + SENSING_MARGIN
-
-    def _update_obstacles(self) -> None:
-        """Hand the obstacles in force to the controller: world + map + scan memory."""
-        sensed: list[ConvexPolygon] = []
-        if self._local is not None and self._state is not None:
-            sensed = self._local.near(self._state[:2], self._sensing_radius())
-        self.controller.set_obstacles(self._world_obstacles + sensed)
+        if state is None:
+            return []
+        config, model = self._controller.config, self._controller.model
+        return self.local.near(state[:2], config.reach(float(model.u_max[0])) + SENSING_MARGIN)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 
-from conftest import flat_parameters, Probe
+from conftest import flat_parameters, Probe, SimClock
 from geometry_msgs.msg import PoseStamped, Twist
 from nav_msgs.msg import Odometry
 import numpy as np
@@ -258,6 +258,33 @@ def test_controller_takes_its_rate_and_the_bases_limits_at_run_time(ros) -> None
     result = controller.set_parameters([Parameter('max_accel', value=[0.0, 0.0])])[0]
     assert result.successful, result.reason
     assert controller.controller.config.max_accel is None
+
+
+class StandingClock(SimClock):
+    """Simulated time in which the robot stands at a pose: odometry at each tick."""
+
+    pose = PLAN[-1]
+
+    def publish(self) -> None:
+        self.probe.publish_odom(self.pose, stamp=self.t)
+
+
+def test_goal_reached_is_each_control_steps_verdict_also_after_a_new_plan_to_the_same_goal(
+        ros) -> None:
+    controller, _ = make_controller(ros, use_sim_time=True)
+    probe = ros.probe(use_sim_time=True)
+    clock = StandingClock(ros, probe)
+    assert ros.spin_until(lambda: probe.plan_pub.get_subscription_count() > 0
+                          and probe.odom_pub.get_subscription_count() > 0)
+    probe.plan_pub.publish(poses_to_path(PLAN))  # the robot stands at its end
+    assert clock.run_until(lambda: controller.goal_reached)
+    assert controller.last_output.reason is Reason.GOAL_REACHED
+    controller.plan_callback(poses_to_path(PLAN))  # a new plan, to the same goal
+    assert not controller.goal_reached  # not until a control step says so
+    steps = controller.control_steps
+    assert clock.run_until(lambda: controller.control_steps > steps)
+    assert controller.last_output.reason is Reason.GOAL_REACHED
+    assert controller.goal_reached  # the step's verdict, though its log line is unchanged
 
 
 def test_planner_path_starts_at_odometry_ends_at_goal_and_is_collision_free(ros) -> None:

@@ -25,9 +25,11 @@ from __future__ import annotations
 from typing import Any, Sequence
 
 from conftest import SimClock
+from geometry_msgs.msg import PoseStamped
 import numpy as np
 from rcl_interfaces.msg import Log
 from rclpy.parameter import Parameter
+from rclpy.time import Time
 
 from mpc_local_planner.core.diagnostics import PlanTrigger
 from mpc_local_planner.core.errors import PlanningError
@@ -42,6 +44,11 @@ from mpc_local_planner.core.replanning import (
 from mpc_local_planner.evaluation.navigation import NavigationSettings, Navigator
 from mpc_local_planner.evaluation.rollout import ControlStep
 from mpc_local_planner.perception.raycast import TrueGeometry
+from mpc_local_planner.ros.conversions import (
+    seconds_to_stamp,
+    state_to_odometry,
+    yaw_to_quaternion,
+)
 from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
 from mpc_local_planner.ros.node_main import autostart
 
@@ -143,23 +150,38 @@ def run_navigator() -> tuple[Navigator, ScriptedPlanner, list]:
     return navigator, planner, decisions
 
 
+def goal_pose(goal: np.ndarray) -> PoseStamped:
+    """The goal as RViz's 2D Goal Pose sends it (in map)."""
+    msg = PoseStamped()
+    msg.header.frame_id = 'map'
+    msg.pose.position.x, msg.pose.position.y = float(goal[0]), float(goal[1])
+    msg.pose.orientation = yaw_to_quaternion(float(goal[2]))
+    return msg
+
+
+def at(node: GlobalPlannerNode, planner: ScriptedPlanner, t: float) -> None:
+    """Set the test's time t on the planner and the node's clock, with odometry at POSE."""
+    planner.now = t
+    node.get_clock().set_ros_time_override(Time(nanoseconds=round(t * 1e9)))
+    node.odom_callback(state_to_odometry(POSE, np.zeros(2), stamp=seconds_to_stamp(t),
+                                       frame_id='map'))
+
+
 def run_node(ros) -> tuple[GlobalPlannerNode, ScriptedPlanner, list]:
-    node = ros.add(GlobalPlannerNode(context=ros.context, parameter_overrides=[
+    planner = ScriptedPlanner()
+    # the test's clock (simulated time, no /clock: the timer is never spun) and planner
+    node = ros.add(GlobalPlannerNode(planner=planner, context=ros.context, parameter_overrides=[
+        Parameter('use_sim_time', value=True),
         Parameter('replan_check_rate', value=1.0 / CHECK_PERIOD),
         Parameter('replan_period', value=REPLAN_PERIOD)]))
     assert autostart(node) is None
-    planner = ScriptedPlanner()
-    node._planner = planner  # the test's clock and planner; the timer is never spun
-    node._now = lambda: planner.now
-    node._state = POSE.copy()
-    node._odom_time = 0.0
+    assert node.planner is planner
     decisions: list = []
     record(node.replanner, decisions)
-    node._set_goal(GOAL)
-    node._try_plan()
+    at(node, planner, 0.0)
+    node.goal_callback(goal_pose(GOAL))
     for t in TIMES:
-        planner.now = t
-        node._odom_time = t  # odometry as fresh as the navigator's
+        at(node, planner, t)  # odometry as fresh as the navigator's
         node.check_plan()
     return node, planner, decisions
 
