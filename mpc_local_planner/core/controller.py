@@ -14,13 +14,13 @@
 
 """The controller behind the mpc_controller node, without ROS.
 
-`MpcController` owns a `PathReferenceMPC`, the world's obstacles and the plan, and decides
-what to command at each control step: the MPC's first input, an in-place turn to the goal
-heading once at the goal position, or zero, with a `Reason` (no plan, no, stale or invalid
-odometry, no or stale scan, invalid plan, goal reached, solver stop, error). Arrival is
-Nav2's SimpleGoalChecker's (xy_goal_tolerance, yaw_goal_tolerance, stateful: see
-`ControllerSettings`). The node only converts messages and publishes, so everything that can
-go wrong is testable here without a DDS participant.
+`MpcController` implements `LocalController`: it owns a `PathReferenceMPC`, the world's
+obstacles and the plan, and decides what to command at each control step: the MPC's first
+input, an in-place turn to the goal heading once at the goal position, or zero, with a
+`Reason` (no plan, no, stale or invalid odometry, no or stale scan, invalid plan, goal
+reached, solver stop, error). Arrival is Nav2's SimpleGoalChecker's (xy_goal_tolerance,
+yaw_goal_tolerance, stateful: see `ControllerSettings`). The node only converts messages and
+publishes, so everything that can go wrong is testable here without a DDS participant.
 
 Safety rules kept here (see the README's "Safety behaviours"):
 - a plan is refused unless it is finite, within MAX_COORDINATE, has two distinct positions and
@@ -28,9 +28,9 @@ Safety rules kept here (see the README's "Safety behaviours"):
   of the obstacle or goes around it: its terminal state x_N = g_p(s) must be clear too), and
   `path_blockage` says where the remaining plan is first blocked;
 - a state is refused unless it is finite and within MAX_COORDINATE;
-- odometry older than odom_timeout, or from the future by more than that (the clock jumped
-  back), is stale; so is a scan older than scan_timeout when the scan is a source of
-  obstacles (and before the first one, there is no scan: the robot does not drive blind);
+- stale or missing inputs (`InputFreshness`, the caller's check) are answered with a stop
+  (refuse_inputs);
+- a speed limit (set_speed_limit) caps the MPC's v bounds, so every plan keeps within it;
 - the proof's shifted candidate is applied for at most N consecutive solver failures: its
   inputs run out after N shifts, and then the robot stops;
 - a step's solving is bounded by the MPC's budget (SolverSettings.max_solve_time): past it the
@@ -43,6 +43,7 @@ Safety rules kept here (see the README's "Safety behaviours"):
 
 from __future__ import annotations
 
+from dataclasses import replace
 import math
 from typing import Sequence
 
@@ -51,7 +52,7 @@ import numpy as np
 from mpc_local_planner.core.braking import Brake
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reason
-from mpc_local_planner.core.controller_settings import ControllerSettings, is_stale
+from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import MpcSolution, PathReferenceMPC, PlanSource
 from mpc_local_planner.core.obstacles import (
@@ -94,7 +95,10 @@ class MpcController:
     def __init__(self, model: Unicycle | None = None, config: MpcConfig | None = None, *,
                  obstacles: Sequence[ConvexPolygon] = (),
                  settings: ControllerSettings | None = None) -> None:
-        self._model = model or Unicycle()
+        # the model as set, and the one in force: its v bounds capped by the speed limit
+        self._given_model = model or Unicycle()
+        self._speed_limit: float | None = None
+        self._model = self._given_model
         self._config = config or MpcConfig()
         self._obstacles = list(obstacles)
         settings = settings or ControllerSettings()
@@ -139,8 +143,13 @@ class MpcController:
 
     @property
     def model(self) -> Unicycle:
-        """The robot model in force."""
-        return self._model
+        """The robot model as set (set_model); its v bounds are capped by speed_limit."""
+        return self._given_model
+
+    @property
+    def speed_limit(self) -> float | None:
+        """The cap on |v| in force (m/s, set_speed_limit), or None."""
+        return self._speed_limit
 
     @property
     def config(self) -> MpcConfig:
@@ -203,10 +212,36 @@ class MpcController:
         self._stopped = None
 
     def set_model(self, model: Unicycle) -> None:
-        """Use new input bounds: the NLP is rebuilt at the next solve."""
+        """Use new input bounds (capped by speed_limit): the NLP is rebuilt at the next solve."""
+        self._given_model = model
+        self._use_model(_capped(model, self._speed_limit))
+
+    def set_speed_limit(self, v_max: float | None) -> None:
+        """Cap |v| at v_max (m/s, > 0) from the next compute; None lifts the cap.
+
+        The cap enters the MPC as its v bounds (the NLP is rebuilt for them, as for any new
+        bounds, when they change), so every verified plan and every command keeps within it;
+        obstacles are grown by the margin of the capped speed (v_max h / 2 by default).
+
+        Raises:
+            ValueError: if v_max is not None and not a finite number > 0.
+
+        """
+        if v_max is not None:
+            v_max = float(v_max)
+            if not (math.isfinite(v_max) and v_max > 0):
+                msg = f'a speed limit must be > 0 and finite (None lifts it), got {v_max}'
+                raise ValueError(msg)
+        self._speed_limit = v_max
+        model = _capped(self._given_model, v_max)
+        if model != self._model:
+            self._use_model(model)
+
+    def _use_model(self, model: Unicycle) -> None:
         self._model = model
         self._mpc = PathReferenceMPC(model, self._config, obstacles=self._obstacles,
                                      path=self._path)
+        self._solved_last_step = False
         self._held = None
         self._stopped = None
 
@@ -345,6 +380,19 @@ class MpcController:
         self._brake.stop()
         self._mpc.reset()
 
+    def reset(self) -> None:
+        """Forget the run: the plan, arrival, held inputs and the MPC's candidate and history.
+
+        What a new controller would know, but the obstacles, settings, speed limit and the
+        counters since construction (solver_failures, timeouts) stay.
+        """
+        self.clear_path()
+        self._projection_segment = 0
+        self._solved_last_step = False
+        self._last_call = None
+        self._last_u = np.zeros(2)
+        self._velocity = None
+
     def path_blockage(self, state: np.ndarray | None) -> Blockage:
         """Say where the remaining plan first meets an obstacle grown as the MPC grows it.
 
@@ -394,47 +442,51 @@ class MpcController:
         heading = abs(float(wrap_angle(state[2] - goal[2])))
         return position, heading
 
-    def compute(self, state: np.ndarray | None, now: float, *,
-                state_time: float | None = None, scan_required: bool = False,
-                scan_time: float | None = None, map_missing: bool = False,
-                velocity: np.ndarray | None = None) -> ControlOutput:
-        """Return the command for the measured state at time now.
+    def compute(self, pose: np.ndarray | None, twist: np.ndarray | None,
+                now: float) -> ControlOutput:
+        """Return the command for the measured pose at time now.
 
         Never raises: anything unexpected becomes a zero command with Reason.ERROR. At the
         goal position (xy_goal_tolerance) and off its heading the robot turns in place
         (Reason.ROTATE_TO_HEADING); arrived, the command is zero (Reason.GOAL_REACHED), and
-        with settings.stateful it stays so, whatever the state, until a new plan. The MPC
+        with settings.stateful it stays so, whatever the pose, until a new plan. The MPC
         solves once per step h; a call sooner than that after a solve that gave an input
         (settings.control_frequency) returns that input again, after the same checks
         (ControlOutput.fresh False). A stop of a moving robot brakes along the last verified
-        plan within settings.max_decel (`Brake`).
+        plan within settings.max_decel (`Brake`). The inputs' ages are the caller's to check
+        (`InputFreshness`, then refuse_inputs).
 
         Args:
-            state: (3,) measured (x, y, yaw), or None when no odometry has come.
-            now: the current time (seconds, the clock of state_time).
-            state_time: when state was measured; older than settings.odom_timeout is stale.
-            scan_required: the laser is a source of obstacles: without a scan (scan_time
-                None) or with one older than settings.scan_timeout the robot stops, as the
-                obstacles it knows may be out of date.
-            scan_time: the stamp of the latest valid scan with a usable reading (seconds),
-                or None.
-            map_missing: the map is a source of obstacles and no valid map has come: the
-                robot stops until one does.
-            velocity: the measured twist (v, omega), if known: with MpcConfig.max_accel the
+            pose: (3,) measured (x, y, yaw), or None when no odometry has come.
+            twist: the measured twist (v, omega), if known: with MpcConfig.max_accel the
                 MPC's first input starts from it after a step without a plan's input (the
                 base may still be moving); while plans are applied, from the input commanded.
+            now: the current time (seconds).
 
         """
-        self._velocity = velocity
-        output = self._compute(state, now, state_time=state_time, scan_required=scan_required,
-                               scan_time=scan_time, map_missing=map_missing)
+        self._velocity = twist
+        output = self._compute(pose, now)
         self._last_call = now
         self._last_u = np.asarray(output.u, dtype=float)
         return output
 
-    def _compute(self, state: np.ndarray | None, now: float, *, state_time: float | None,
-                 scan_required: bool, scan_time: float | None,
-                 map_missing: bool) -> ControlOutput:
+    def refuse_inputs(self, reason: Reason, now: float) -> ControlOutput:
+        """Return the stop for inputs the caller found stale or missing (`InputFreshness`).
+
+        The control call compute would be for a pose it cannot trust: no plan and arrival
+        answer first (as in compute), else a moving robot brakes within settings.max_decel.
+        """
+        if self._path is None:
+            output = self._idle(Reason.NO_PLAN)
+        elif self.settings.stateful and self._arrived:
+            output = self._idle(Reason.GOAL_REACHED)
+        else:
+            output = self._idle(reason, now=now)
+        self._last_call = now
+        self._last_u = np.asarray(output.u, dtype=float)
+        return output
+
+    def _compute(self, state: np.ndarray | None, now: float) -> ControlOutput:
         if self._path is None:
             return self._idle(Reason.NO_PLAN)
         if self.settings.stateful and self._arrived:
@@ -442,16 +494,6 @@ class MpcController:
             return self._idle(Reason.GOAL_REACHED)
         if state is None:
             return self._idle(Reason.NO_ODOM, now=now)
-        if state_time is not None:
-            if is_stale(now - state_time, self.settings.odom_timeout):
-                return self._idle(Reason.STALE_ODOM, now=now)
-        if scan_required:
-            if scan_time is None:
-                return self._idle(Reason.NO_SCAN, now=now)
-            if is_stale(now - scan_time, self.settings.scan_timeout):
-                return self._idle(Reason.STALE_SCAN, now=now)
-        if map_missing:
-            return self._idle(Reason.NO_MAP, now=now)
         try:
             x = self.check_state(state)
         except ValueError as err:
@@ -638,6 +680,19 @@ class MpcController:
         error = float(wrap_angle(self._path.goal[2] - state[2]))
         omega = error / (ROTATE_STEPS * self._config.step)
         return np.clip(np.array([0.0, omega]), self._model.u_min, self._model.u_max)
+
+
+def _capped(model: Unicycle, v_max: float | None) -> Unicycle:
+    """Return model with |v| capped at v_max (None, or a cap above its bounds: model)."""
+    if v_max is None:
+        return model
+    v_min = float(model.u_min[0])
+    new_max, new_min = min(model.v_max, v_max), max(v_min, -v_max)
+    if new_max == model.v_max and new_min == v_min:
+        return model
+    if model.v_min is None and new_min == -new_max:
+        return replace(model, v_max=new_max)
+    return replace(model, v_max=new_max, v_min=new_min)
 
 
 def _entry(a: np.ndarray, b: np.ndarray, obstacles: list[ConvexPolygon]) -> float:

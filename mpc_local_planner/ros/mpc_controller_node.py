@@ -103,6 +103,7 @@ from mpc_local_planner.core.diagnostics import (
     CONTROLLER_DIAGNOSTICS_TOPIC,
 )
 from mpc_local_planner.core.footprint import Footprint
+from mpc_local_planner.core.input_freshness import InputFreshness
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path
 from mpc_local_planner.perception.local_obstacles import LocalObstacles
@@ -674,11 +675,15 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
                                               now=now)
             else:
                 self._update_obstacles()
-                output = self.controller.compute(
-                    self._state, now, state_time=self._state_time,
-                    scan_required='scan' in self._sources, scan_time=self._scan_time,
-                    map_missing='map' in self._sources and self._grid is None,
-                    velocity=self._odom_twist)
+                refused = None if self._state is None else InputFreshness.of(
+                    self.controller.settings).check(
+                    now, pose_time=self._state_time, scan_required='scan' in self._sources,
+                    scan_time=self._scan_time,
+                    map_missing='map' in self._sources and self._grid is None)
+                if refused is None:
+                    output = self.controller.compute(self._state, self._odom_twist, now)
+                else:
+                    output = self.controller.refuse_inputs(refused, now)
         except Exception as err:  # compute never raises; belt and braces
             output = ControlOutput(np.zeros(2), None, Reason.ERROR, str(err))
         try:

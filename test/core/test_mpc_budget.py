@@ -393,12 +393,12 @@ def test_the_controller_counts_timeouts_and_the_diagnostics_publish_the_count() 
                                obstacles=[BOX])
     controller.set_path(paper_sinusoid())
     x = paper_sinusoid().start
-    output = controller.compute(x, 0.0)
+    output = controller.compute(x, None, 0.0)
     assert output.reason is Reason.TRACKING and controller.timeouts == 0
     controller.update_config(controller.config.with_solving(max_solve_time=TINY))
     for k in range(1, 3):
         x = controller.model.step(x, output.u, H)
-        output = controller.compute(x, k * H)
+        output = controller.compute(x, None, k * H)
         assert output.reason is Reason.CANDIDATE and output.solution.timed_out
         assert controller.timeouts == k and controller.solver_failures == k
     record = ControllerDiagnostics.from_output(
