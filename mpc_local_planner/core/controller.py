@@ -52,7 +52,9 @@ import numpy as np
 from mpc_local_planner.core.braking import Brake
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reason
+from mpc_local_planner.core.control_state import ControlState, Event, Mode
 from mpc_local_planner.core.controller_settings import ControllerSettings
+from mpc_local_planner.core.goal_checker import GoalChecker
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import MpcSolution, PathReferenceMPC, PlanSource
 from mpc_local_planner.core.obstacles import (
@@ -61,7 +63,13 @@ from mpc_local_planner.core.obstacles import (
     min_clearance,
     ObstacleSet,
 )
-from mpc_local_planner.core.paths import ReferencePath, simplify_polyline, WaypointPath, wrap_angle
+from mpc_local_planner.core.paths import (
+    ReferencePath,
+    remaining_polyline,
+    simplify_polyline,
+    WaypointPath,
+    wrap_angle,
+)
 
 __all__ = [
     'MAX_COORDINATE',
@@ -103,6 +111,7 @@ class MpcController:
         self._obstacles = list(obstacles)
         settings = settings or ControllerSettings()
         self._brake = Brake(settings.max_decel)
+        self._goal_checker = GoalChecker(settings)
         self.settings = settings
         self._mpc = PathReferenceMPC(self._model, self._config, obstacles=self._obstacles)
         self._path: ReferencePath | None = None
@@ -113,16 +122,9 @@ class MpcController:
         # latest projection onto it (projections only move forward along a plan)
         self._polyline: np.ndarray | None = None
         self._projection_segment = 0
-        # the plan's arrival so far (kept only with settings.stateful; a new plan clears it)
-        self._xy_reached = False
-        self._arrived = False
-        # the last solve's output while it is in force (control_frequency: the calls between
-        # solves apply it), when it was solved, and the time of the latest call
-        self._held: ControlOutput | None = None
-        self._held_time = -math.inf
-        # the last solve's stop (no verified input) and when: the calls until the next
-        # step's instant keep it instead of solving again
-        self._stopped: tuple[float, ControlOutput] | None = None
+        # what the last step left in force: a plan's input or the solver's stop, held until
+        # the next step's instant (control_frequency), or a turn to the goal heading
+        self._state = ControlState()
         self._last_call: float | None = None
         # the latest command and measured twist (the MPC's rate bounds start from them)
         self._last_u = np.zeros(2)
@@ -140,11 +142,17 @@ class MpcController:
         # node's max_decel parameter) must reach it, or stops would brake with the old ones
         self._settings = settings
         self._brake.max_decel = np.asarray(settings.max_decel, dtype=float)
+        self._goal_checker.settings = settings
 
     @property
     def model(self) -> Unicycle:
         """The robot model as set (set_model); its v bounds are capped by speed_limit."""
         return self._given_model
+
+    @property
+    def mode(self) -> Mode:
+        """What the last step left in force: a plan's input, the solver's stop, a turn."""
+        return self._state.mode
 
     @property
     def speed_limit(self) -> float | None:
@@ -208,8 +216,7 @@ class MpcController:
         """Use new MPC settings from the next solve on (a shape change rebuilds there)."""
         self._config = config
         self._mpc.update_config(config)
-        self._held = None
-        self._stopped = None
+        self._state.on(Event.DROP)
 
     def set_model(self, model: Unicycle) -> None:
         """Use new input bounds (capped by speed_limit): the NLP is rebuilt at the next solve."""
@@ -241,9 +248,7 @@ class MpcController:
         self._model = model
         self._mpc = PathReferenceMPC(model, self._config, obstacles=self._obstacles,
                                      path=self._path)
-        self._solved_last_step = False
-        self._held = None
-        self._stopped = None
+        self._state.on(Event.DROP)
 
     def set_obstacles(self, obstacles: Sequence[ConvexPolygon]) -> None:
         """Replace the obstacles (as described, not inflated); cheap enough for every step.
@@ -277,9 +282,8 @@ class MpcController:
             polyline = path.sample()[1][:, :2]
         self._polyline = np.asarray(polyline, dtype=float)
         self._projection_segment = 0
-        self._xy_reached = self._arrived = False
-        self._held = None
-        self._stopped = None
+        self._goal_checker.reset()
+        self._state.on(Event.NEW_PLAN)
 
     def set_plan(self, poses: np.ndarray) -> WaypointPath:
         """Follow a global plan of (M, 3) poses (x, y, yaw), as a nav_msgs/Path carries.
@@ -374,9 +378,8 @@ class MpcController:
         """Forget the plan: the controller commands zero until a new one comes."""
         self._path = None
         self._polyline = None
-        self._xy_reached = self._arrived = False
-        self._held = None
-        self._stopped = None
+        self._goal_checker.reset()
+        self._state.on(Event.NEW_PLAN)
         self._brake.stop()
         self._mpc.reset()
 
@@ -410,15 +413,8 @@ class MpcController:
             position = self.check_state(state)[:2]
         except ValueError:
             return Blockage()
-        start = min(self._projection_segment, len(polyline) - 2)
-        a, b = polyline[start:-1], polyline[start + 1:]
-        d = b - a
-        length2 = np.einsum('ij,ij->i', d, d)
-        t = np.clip(np.einsum('ij,ij->i', position - a, d) / np.maximum(length2, 1e-18), 0, 1)
-        nearest = a + t[:, None] * d
-        k = int(np.argmin(np.hypot(*(nearest - position).T)))
-        self._projection_segment = start + k
-        remaining = np.vstack([nearest[k], polyline[start + k + 1:]])
+        remaining, self._projection_segment = remaining_polyline(
+            polyline, position, forward_from=self._projection_segment)
         grown = self.grown_obstacles
         if not grown or len(remaining) < 2:
             return Blockage()
@@ -437,10 +433,7 @@ class MpcController:
         """Return (position, |heading|) error of state to the end of the path."""
         if self._path is None:
             return math.inf, math.inf
-        goal = self._path.goal
-        position = float(np.hypot(state[0] - goal[0], state[1] - goal[1]))
-        heading = abs(float(wrap_angle(state[2] - goal[2])))
-        return position, heading
+        return GoalChecker.errors(state, self._path.goal)
 
     def compute(self, pose: np.ndarray | None, twist: np.ndarray | None,
                 now: float) -> ControlOutput:
@@ -478,7 +471,7 @@ class MpcController:
         """
         if self._path is None:
             output = self._idle(Reason.NO_PLAN)
-        elif self.settings.stateful and self._arrived:
+        elif self.settings.stateful and self._goal_checker.arrived:
             output = self._idle(Reason.GOAL_REACHED)
         else:
             output = self._idle(reason, now=now)
@@ -486,40 +479,42 @@ class MpcController:
         self._last_u = np.asarray(output.u, dtype=float)
         return output
 
-    def _compute(self, state: np.ndarray | None, now: float) -> ControlOutput:
+    def _compute(self, pose: np.ndarray | None, now: float) -> ControlOutput:
         if self._path is None:
             return self._idle(Reason.NO_PLAN)
-        if self.settings.stateful and self._arrived:
+        if self.settings.stateful and self._goal_checker.arrived:
             # arrived once: the plan is done, whatever the measured pose does now
             return self._idle(Reason.GOAL_REACHED)
-        if state is None:
+        if pose is None:
             return self._idle(Reason.NO_ODOM, now=now)
         try:
-            x = self.check_state(state)
+            x = self.check_state(pose)
         except ValueError as err:
             return self._idle(Reason.INVALID_ODOM, str(err), now=now)
         try:
-            position_met, arrived = self._check_goal(x)
+            position_met, arrived = self._goal_checker.check(x, self._path.goal)
             if arrived:
                 return self._idle(Reason.GOAL_REACHED)
             if position_met:
                 turn = self._rotate_to_heading(x)
                 if turn is not None:
                     self._drop_warm_start()
+                    self._state.on(Event.ROTATE)
                     self._brake.stop()
                     return ControlOutput(turn, None, Reason.ROTATE_TO_HEADING)
-            held = self._held
+            in_force = self._state
             # (a clock that jumped back solves at once: the held plan's time is not now's)
-            if held is not None and 0.0 <= now - self._held_time < self._hold_period():
+            held = in_force.holding(Mode.PLAN, now, self._hold_period())
+            if held is not None:
                 return held._replace(u=self._planned_input(held.solution,
-                                                           now - self._held_time),
+                                                           now - in_force.since),
                                      fresh=False)
-            stopped = self._stopped
-            if stopped is not None and 0.0 <= now - stopped[0] < self._hold_period():
+            stopped = in_force.holding(Mode.STOP, now, self._hold_period())
+            if stopped is not None:
                 # the solver found no verified input at this step: keep braking (or
                 # standing) until the next step's instant, as a plan is kept for its step
-                return self._idle(Reason.STOP, stopped[1].detail, now=now,
-                                  solution=stopped[1].solution,
+                return self._idle(Reason.STOP, stopped.detail, now=now,
+                                  solution=stopped.solution,
                                   keep_warm_start=True)._replace(fresh=False)
             if self._config.max_accel is None:
                 solution = self._mpc.solve(x)
@@ -538,7 +533,7 @@ class MpcController:
             # no verified input: the MPC keeps its own state (failure count, the plan it
             # carries) for the next step, as it decides what to try from there
             output = self._idle(Reason.STOP, now=now, solution=solution, keep_warm_start=True)
-            self._stopped = (now, output)
+            self._state.on(Event.SOLVER_STOP, now=now, output=output)
             return output
         if source is PlanSource.CANDIDATE and solution.failures > self._config.horizon:
             # the shifted candidate has run out (N shifts leave only steady-state inputs):
@@ -552,8 +547,7 @@ class MpcController:
         u = np.clip(u, self._model.u_min, self._model.u_max)
         reason = Reason.TRACKING if solution.success else Reason.CANDIDATE
         output = ControlOutput(u, solution, reason)
-        self._held, self._held_time = output, now
-        self._stopped = None
+        self._state.on(Event.SOLVED, now=now, output=output)
         self._brake.stop()
         return output
 
@@ -577,8 +571,9 @@ class MpcController:
         candidate follows it); after a stop or a turn, the measured twist if there is one
         (the base may still be moving), else what was commanded.
         """
-        if self._held is not None:
-            return self._held.u
+        held = self._state.plan()
+        if held is not None:
+            return held.u
         if self._velocity is not None:
             return np.asarray(self._velocity, dtype=float)
         return self._last_u
@@ -617,16 +612,16 @@ class MpcController:
         if now is None or reason in (Reason.NO_PLAN, Reason.GOAL_REACHED):
             self._brake.stop()
         else:
-            if not self._brake.active and self._held is not None \
-                    and self._held.solution is not None:
-                plan = self._held.solution
+            held = self._state.plan()
+            if not self._brake.active and held is not None and held.solution is not None:
+                plan = held.solution
                 lead = 0.0 if plan.u_before is None else self.settings.actuation_delay
                 self._brake.start(plan.u_pred, self._config.step,
-                                  now - self._held_time + lead, plan.u_before)
+                                  now - self._state.since + lead, plan.u_before)
             last = self._last_call if self._last_call is not None else now
             u = np.clip(self._brake.command(now - last), self._model.u_min, self._model.u_max)
         if keep_warm_start:
-            self._held = None
+            self._state.on(Event.END_PLAN)
         else:
             self._drop_warm_start()
         return ControlOutput(u, solution, reason, detail)
@@ -634,27 +629,10 @@ class MpcController:
     def _drop_warm_start(self) -> None:
         # The shifted warm start assumes its first input was applied: after a step without
         # one, start the MPC over (s restarts at the projection).
-        self._held = None
-        self._stopped = None
+        self._state.on(Event.DROP)
         if self._solved_last_step:
             self._mpc.reset()
             self._solved_last_step = False
-
-    def _check_goal(self, state: np.ndarray) -> tuple[bool, bool]:
-        """Return (position met, arrived) for state, as Nav2's SimpleGoalChecker judges.
-
-        The position is met within xy_goal_tolerance of the plan's last position, and the
-        robot has arrived when, the position met, its heading is within yaw_goal_tolerance.
-        With settings.stateful both are kept for the plan (see ControllerSettings): the
-        only place where arrival is decided (by ControllerSettings.goal_check's rule).
-        """
-        position, heading = self.goal_error(state)
-        settings = self.settings
-        position_met, arrived = settings.goal_check(position, heading,
-                                                    position_met=self._xy_reached)
-        if settings.stateful:
-            self._xy_reached, self._arrived = position_met, arrived
-        return position_met, arrived
 
     def _rotate_to_heading(self, state: np.ndarray) -> np.ndarray | None:
         """Return the input that turns the robot in place towards the plan's last heading.
