@@ -57,6 +57,7 @@ from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.goal_checker import GoalChecker
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import MpcSolution, PathReferenceMPC, PlanSource
+from mpc_local_planner.core.mpc.backends import run_solver, SolverRunner
 from mpc_local_planner.core.obstacles import (
     ConvexPolygon,
     first_blocked_segment,
@@ -97,12 +98,14 @@ class MpcController:
         config: MPC settings.
         obstacles: the world's obstacles as described (the MPC inflates them).
         settings: goal tolerances, odometry timeout and plan handling.
+        runner: what runs the MPC's NLP solvers (backends.run_solver; see `runner`).
 
     """
 
     def __init__(self, model: Unicycle | None = None, config: MpcConfig | None = None, *,
                  obstacles: Sequence[ConvexPolygon] = (),
-                 settings: ControllerSettings | None = None) -> None:
+                 settings: ControllerSettings | None = None,
+                 runner: SolverRunner = run_solver) -> None:
         # the model as set, and the one in force: its v bounds capped by the speed limit
         self._given_model = model or Unicycle()
         self._speed_limit: float | None = None
@@ -113,7 +116,8 @@ class MpcController:
         self._brake = Brake(settings.max_decel)
         self._goal_checker = GoalChecker(settings)
         self.settings = settings
-        self._mpc = PathReferenceMPC(self._model, self._config, obstacles=self._obstacles)
+        self._mpc = PathReferenceMPC(self._model, self._config, obstacles=self._obstacles,
+                                     runner=runner)
         self._path: ReferencePath | None = None
         self._solved_last_step = False
         self._solver_failures = 0
@@ -148,6 +152,19 @@ class MpcController:
     def model(self) -> Unicycle:
         """The robot model as set (set_model); its v bounds are capped by speed_limit."""
         return self._given_model
+
+    @property
+    def runner(self) -> SolverRunner:
+        """What runs the MPC's NLP solvers; a new one solves from the next step.
+
+        A test's failing solver, or a benchmark's instrumented one; it stays through
+        rebuilds (set_model, set_speed_limit).
+        """
+        return self._mpc.runner
+
+    @runner.setter
+    def runner(self, runner: SolverRunner) -> None:
+        self._mpc.runner = runner
 
     @property
     def mode(self) -> Mode:
@@ -247,7 +264,7 @@ class MpcController:
     def _use_model(self, model: Unicycle) -> None:
         self._model = model
         self._mpc = PathReferenceMPC(model, self._config, obstacles=self._obstacles,
-                                     path=self._path)
+                                     path=self._path, runner=self._mpc.runner)
         self._state.on(Event.DROP)
 
     def set_obstacles(self, obstacles: Sequence[ConvexPolygon]) -> None:

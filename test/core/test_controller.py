@@ -27,6 +27,7 @@ from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.input_freshness import InputFreshness
 from mpc_local_planner.core.local_controller import LocalController
 from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.mpc.backends import run_solver, SolverRun
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path, WaypointPath
 from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -412,3 +413,18 @@ def test_a_speed_limit_caps_every_command_until_it_is_lifted() -> None:
     for bad in (0.0, -1.0, math.nan, math.inf):
         with pytest.raises(ValueError, match='speed limit'):
             controller.set_speed_limit(bad)
+
+
+def test_the_solver_runner_is_injected_and_kept_through_a_rebuild() -> None:
+    calls: list[int] = []
+
+    def counting(*args: object, **kwargs: object) -> SolverRun:
+        calls.append(1)
+        return run_solver(*args, **kwargs)
+
+    controller = MpcController(config=CONFIG, obstacles=WORLD.obstacles, runner=counting)
+    assert controller.runner is counting and controller.mpc.runner is counting
+    controller.set_plan(PLAN)
+    controller.set_speed_limit(0.2)  # a rebuild of the MPC
+    assert controller.runner is counting
+    assert controller.compute(WORLD.start, None, 0.0).reason is Reason.TRACKING and calls

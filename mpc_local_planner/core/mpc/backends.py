@@ -45,7 +45,7 @@ import os
 from pathlib import Path
 import threading
 import time
-from typing import Any, Callable, NamedTuple
+from typing import Any, Callable, NamedTuple, Protocol
 
 import casadi as ca
 import numpy as np
@@ -54,7 +54,7 @@ from mpc_local_planner.core.config import SolverSettings
 from mpc_local_planner.core.mpc import compilation
 from mpc_local_planner.core.mpc.formulation import Formulation
 
-__all__ = ['Nlp', 'SolverRun', 'backend_options', 'build_nlp', 'compile_flags',
+__all__ = ['Nlp', 'SolverRun', 'SolverRunner', 'backend_options', 'build_nlp', 'compile_flags',
            'iteration_levels', 'run_solver', 'stage_size']
 
 _LOG = logging.getLogger(__name__)
@@ -453,6 +453,15 @@ class SolverRun(NamedTuple):
     iterations: int
     seconds: float  # wall time of the call (and of building a limited copy for it)
     cut: bool = False  # the time limit stopped it (or left no time to start) before success
+
+
+class SolverRunner(Protocol):
+    """What runs an NLP's solver for a step (run_solver; a test's or benchmark's stand-in)."""
+
+    def __call__(self, nlp: Nlp, w0: np.ndarray, params: np.ndarray,
+                 solver: ca.Function | None = None, *, time_limit: float = math.inf,
+                 iteration_limit: float = math.inf) -> SolverRun:
+        """Solve nlp from w0 within the limits (see run_solver)."""
 
 
 def run_solver(nlp: Nlp, w0: np.ndarray, params: np.ndarray,
