@@ -17,13 +17,23 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 
+import casadi as ca
 import numpy as np
 import pytest
 
+from mpc_local_planner.core.baselines.tracking_mpc import target_terminal
 from mpc_local_planner.core.config import CostWeights, MpcConfig
+from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.mpc.formulation import formulate, path_terminal, stage_cost
+from mpc_local_planner.core.mpc.formulation import (
+    formulate,
+    Formulation,
+    path_terminal,
+    stage_cost,
+    TerminalCondition,
+)
 from mpc_local_planner.core.mpc.nlp_values import (
     feasible_multipliers,
     obstacle_parameters,
@@ -127,3 +137,61 @@ def test_a_waypoint_path_is_evaluated_once_its_steady_state_carried_along_the_ho
         copied.g_fn.n_instructions() + copied.cost_fn.n_instructions()) / 2
     with pytest.raises(ValueError, match='steady state'):
         form.pack(x, np.array([s]), np.zeros((config.horizon, model.nu)), mu)
+
+
+# ----------------------------------------------------------------------------- fingerprint
+JACKAL_VERTICES = tuple((float(x), float(y)) for x, y in JACKAL.vertices)
+FINGERPRINT_WAYPOINTS = WaypointPath(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]),
+                                     capacity=5)
+# The symbolic problem of each variant as written when these were recorded: the C code of
+# (w, p) -> (J_N, g) (every expression, the constraints in their order), the bounds of w and
+# g, the stage structure and the layout of w. A restructuring of formulate keeps all of it.
+FINGERPRINTS = {
+    'circle': '9234f294f1c696c8',
+    'polygon_waypoints': '197d217082793513',
+    'circle_rates': '28cb313050c6229b',
+    'circle_first_order': '6ced69ef7796e55a',
+    'polygon_first_order': '1e2a7547dd96cf21',
+    'tracking': '072abfdde1c4555c',
+    'one_step': '5d8f05404d943918',
+}
+
+
+def _fingerprint_case(name: str) -> tuple[MpcConfig, TerminalCondition, int, int]:
+    model, rates = Unicycle(), (0.5, 2.0)
+    sinusoid = path_terminal(model, paper_sinusoid())
+    waypoints = path_terminal(model, FINGERPRINT_WAYPOINTS)
+    return {
+        'circle': (MpcConfig(horizon=4), sinusoid, 2, 4),
+        'polygon_waypoints': (MpcConfig(horizon=4, footprint=JACKAL_VERTICES), waypoints, 2, 4),
+        'circle_rates': (MpcConfig(horizon=4, max_accel=rates), waypoints, 1, 4),
+        'circle_first_order': (MpcConfig(horizon=4, max_accel=rates, input_hold='first_order'),
+                               sinusoid, 1, 4),
+        'polygon_first_order': (MpcConfig(horizon=3, footprint=JACKAL_VERTICES,
+                                          max_accel=rates, input_hold='first_order'),
+                                waypoints, 2, 4),
+        'tracking': (MpcConfig(horizon=4), target_terminal(model), 1, 4),
+        'one_step': (MpcConfig(horizon=1), sinusoid, 1, 4),
+    }[name]
+
+
+def fingerprint(form: Formulation) -> str:
+    """Return a digest of the symbolic problem, its bounds, structure and layout."""
+    problem = form.problem
+    generator = ca.CodeGenerator('fingerprint.c', {'with_header': False})
+    generator.add(ca.Function('nlp', [problem['x'], problem['p']],
+                              [problem['f'], problem['g']]))
+    digest = hashlib.sha256(generator.dump().encode())
+    for array in (form.lbw, form.ubw, form.lbg, form.ubg):
+        digest.update(np.ascontiguousarray(array, dtype=float).tobytes())
+    digest.update(repr(form.structure).encode())
+    for part in form.layout:
+        digest.update(np.ascontiguousarray(part, dtype=np.int64).tobytes())
+    return digest.hexdigest()[:16]
+
+
+@pytest.mark.parametrize('name', sorted(FINGERPRINTS))
+def test_the_formulation_fingerprint_holds(name: str) -> None:
+    config, terminal, slots, faces = _fingerprint_case(name)
+    assert fingerprint(formulate(Unicycle(), config, terminal, slots, faces)) == \
+        FINGERPRINTS[name]
