@@ -97,6 +97,7 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import MarkerArray
 
+from mpc_local_planner.core.config import ObstacleSource
 from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reason
 from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.diagnostics import (
@@ -211,7 +212,7 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
         self._tf_listener = None
         self._timer = None
         self._stamped = False
-        self._sources: frozenset[str] = frozenset()
+        self._sources: frozenset[ObstacleSource] = frozenset()
         self._world_obstacles: list[ConvexPolygon] = []
         # where the pose in the plan's frame comes from (ros/robot_pose.py); configure
         # chooses the mode, odometry until then
@@ -273,9 +274,9 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
             world_file = str(values['world_file'])
             self._world_cache.pop(world_file, None)  # read it again: it may have changed
             check_sensing(values)
-            sources = frozenset(values['obstacle_sources'])
+            sources = frozenset(ObstacleSource(s) for s in values['obstacle_sources'])
             world_obstacles, world_footprint = self._load_world(world_file)
-            obstacles = world_obstacles if 'world' in sources else []
+            obstacles = world_obstacles if ObstacleSource.WORLD in sources else []
             config, model, settings = build_settings(
                 values, world_radius=world_footprint.radius, world_footprint=world_footprint)
             check_obstacles(obstacles, config)
@@ -441,7 +442,7 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
             obstacles, footprint = self._load_world(str(values['world_file']))
             config, _, _ = build_settings(values, world_radius=footprint.radius,
                                           world_footprint=footprint)
-            if 'world' in values['obstacle_sources']:
+            if ObstacleSource.WORLD in values['obstacle_sources']:
                 check_obstacles(obstacles, config)
             if values['analytic_path']:
                 analytic_path(str(values['analytic_path']))
@@ -469,7 +470,8 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
             # one thread runs every callback: never between two halves of a solve; the
             # obstacles in force are handed over at the next control step
             if 'world_file' in names:
-                self._world_obstacles = list(obstacles) if 'world' in self._sources else []
+                self._world_obstacles = (list(obstacles) if ObstacleSource.WORLD in self._sources
+                                         else [])
             self.controller.update_config(config)
             if model != self.controller.model:
                 self.controller.set_model(model)
@@ -677,9 +679,9 @@ class MpcControllerNode(ControllerSensing, ControllerOutputs, ManagedNode):
                 self._update_obstacles()
                 refused = None if self._state is None else InputFreshness.of(
                     self.controller.settings).check(
-                    now, pose_time=self._state_time, scan_required='scan' in self._sources,
-                    scan_time=self._scan_time,
-                    map_missing='map' in self._sources and self._grid is None)
+                    now, pose_time=self._state_time,
+                    scan_required=ObstacleSource.SCAN in self._sources, scan_time=self._scan_time,
+                    map_missing=ObstacleSource.MAP in self._sources and self._grid is None)
                 if refused is None:
                     output = self.controller.compute(self._state, self._odom_twist, now)
                 else:

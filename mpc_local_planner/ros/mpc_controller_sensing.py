@@ -58,6 +58,7 @@ import numpy as np
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import LaserScan
 
+from mpc_local_planner.core.config import ObstacleSource
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.perception.pose_history import MAX_EXTRAPOLATION_S
 from mpc_local_planner.perception.scans import (
@@ -242,7 +243,7 @@ class ControllerSensing:
 
     def map_callback(self, msg: OccupancyGrid) -> None:
         """Keep a valid map (its rectangles near the robot are recomputed); drop a bad one."""
-        if 'map' not in self._sources or self.controller is None:
+        if ObstacleSource.MAP not in self._sources or self.controller is None:
             return
         try:
             frame = str(self.get_parameter('global_frame').value)

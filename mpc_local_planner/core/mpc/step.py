@@ -54,7 +54,7 @@ from typing import Callable, Mapping, NamedTuple, Sequence
 import casadi as ca
 import numpy as np
 
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import BudgetKind, MpcConfig
 from mpc_local_planner.core.models import RobotModel
 from mpc_local_planner.core.mpc.backends import Nlp, run_solver, SolverRunner
 from mpc_local_planner.core.mpc.budget import Budget, build_time, solver_of
@@ -345,7 +345,7 @@ class MpcBase(ABC):
         else:
             held = active
         # with an iteration budget, which functions run must not depend on timing either
-        self._shapes.ready(nlp, wait=self._config.solving.budget == 'iterations')
+        self._shapes.ready(nlp, wait=self._config.solving.budget is BudgetKind.ITERATIONS)
         self._last_nlp = nlp
         form = nlp.formulation
         params = parameter_vector(x0, self._config.cost_weights(),
