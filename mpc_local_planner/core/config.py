@@ -25,26 +25,83 @@ validate_solver_settings) as in a script.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
+from enum import StrEnum
 from functools import cached_property
 import math
 from typing import Any, NamedTuple, Sequence
 
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
 
-__all__ = ['BUDGETS', 'CostWeights', 'INPUT_HOLDS', 'MpcConfig', 'STRUCTURAL_FIELDS',
+__all__ = ['BUDGETS', 'BudgetKind', 'CostWeights', 'INPUT_HOLDS', 'InputHold', 'MpcConfig',
+           'NlpSolver', 'OBSTACLE_SOURCES', 'ObstacleSource', 'SOLVERS', 'STRUCTURAL_FIELDS',
            'STRUCTURAL_SOLVER_FIELDS', 'SolverSettings', 'validate_mpc_config',
            'validate_solver_settings']
 
-# 'fatrop' (structure-exploiting interior point) is the fastest that gives IPOPT's closed loop;
-# 'ipopt' is the reference. SQP is not offered: from rest, where every derivative of the
-# quartic cost vanishes, it stops or stalls (see docs/design/mpc.md, section SOLVERS).
-SOLVERS = ('fatrop', 'ipopt')
-# What bounds a control step's solving (SolverSettings.budget): wall time, the robot's, or solver
-# iterations, the same on any machine and under any load (the evaluation's).
-BUDGETS = ('wall', 'iterations')
-# How an input acts over a step (MpcConfig.input_hold): held constant (the paper's), or a
-# linear ramp from the input before it (a velocity a rate-limited base can follow).
-INPUT_HOLDS = ('zero', 'first_order')
+
+class _Choice(StrEnum):
+    """A closed choice written as its string (YAML, CLI, ROS parameters): it is that string.
+
+    str() and format() give the value, == compares with it, and the hash is the string's, so
+    a member and the string a user wrote are the same key of a dict or set.
+    """
+
+    __hash__ = str.__hash__
+
+    @classmethod
+    def parse(cls, value: object) -> object:
+        """Return the member value names, or value as it is (refused by the validation)."""
+        if isinstance(value, str) and value in cls._value2member_map_:
+            return cls(value)
+        return value
+
+
+class NlpSolver(_Choice):
+    """The NLP backend (SolverSettings.solver).
+
+    fatrop (structure-exploiting interior point) is the fastest that gives IPOPT's closed
+    loop; IPOPT is the reference. SQP is not offered: from rest, where every derivative of
+    the quartic cost vanishes, it stops or stalls (see docs/design/mpc.md, section SOLVERS).
+    """
+
+    FATROP = 'fatrop'
+    IPOPT = 'ipopt'
+
+
+class BudgetKind(_Choice):
+    """What bounds a control step's solving (SolverSettings.budget).
+
+    Wall time, the robot's, or solver iterations, the same on any machine and under any load
+    (the evaluation's).
+    """
+
+    WALL = 'wall'
+    ITERATIONS = 'iterations'
+
+
+class InputHold(_Choice):
+    """How an input acts over a step (MpcConfig.input_hold).
+
+    Held constant (the paper's), or a linear ramp from the input before it (a velocity a
+    rate-limited base can follow).
+    """
+
+    ZERO = 'zero'
+    FIRST_ORDER = 'first_order'
+
+
+class ObstacleSource(_Choice):
+    """Where the controller's obstacles come from (the node's obstacle_sources)."""
+
+    WORLD = 'world'  # the world file's obstacles
+    SCAN = 'scan'  # the laser's, with a memory
+    MAP = 'map'  # the occupancy grid's, as rectangles
+
+
+# The values a user writes, in the members' order (CLI choices, messages).
+SOLVERS = tuple(member.value for member in NlpSolver)
+BUDGETS = tuple(member.value for member in BudgetKind)
+INPUT_HOLDS = tuple(member.value for member in InputHold)
+OBSTACLE_SOURCES = tuple(member.value for member in ObstacleSource)
 # Seconds one solver iteration typically takes, to turn the wall budget into an iteration
 # allowance (MpcConfig.solve_iterations()): the typical time of an iteration in the steps the
 # wall budget binds (large NLPs), so the default 0.1 s is 100 iterations (see
@@ -138,17 +195,20 @@ class SolverSettings:
     obstacle_slots: int = 4
     faces_per_obstacle: int = 8
     activation_distance: float | None = None
-    solver: str = 'fatrop'
+    solver: NlpSolver = NlpSolver.FATROP
     fatrop_stage_limit: int = 50
     max_iterations: int = 200
     tolerance: float = 1e-8
     compile: bool = True
     max_solve_time: float | None = None
-    budget: str = 'wall'
+    budget: BudgetKind = BudgetKind.WALL
     max_solve_iterations: int | None = None
     solver_options: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
 
     def __post_init__(self) -> None:
+        # frozen: the strings of YAML, the CLI or a ROS parameter become their members
+        object.__setattr__(self, 'solver', NlpSolver.parse(self.solver))
+        object.__setattr__(self, 'budget', BudgetKind.parse(self.budget))
         problems = validate_solver_settings(self)
         if problems:
             msg = 'invalid MPC solver settings: ' + '; '.join(problems)
@@ -225,13 +285,14 @@ class MpcConfig:
     collision_margin: float | None = None
     farkas_margin: float = 1e-4
     max_accel: tuple[float, float] | None = None
-    input_hold: str = 'zero'
+    input_hold: InputHold = InputHold.ZERO
     solving: SolverSettings = field(default_factory=SolverSettings)
 
     def __post_init__(self) -> None:
         # frozen: normalise with object.__setattr__, so that a list (from YAML, a ROS
         # parameter) or an array still gives a hashable, comparable tuple of floats
         object.__setattr__(self, 'footprint', _as_vertex_tuple(self.footprint))
+        object.__setattr__(self, 'input_hold', InputHold.parse(self.input_hold))
         if self.max_accel is not None:
             try:
                 object.__setattr__(self, 'max_accel', tuple(float(a) for a in self.max_accel))
@@ -301,7 +362,7 @@ class MpcConfig:
     @property
     def first_order_hold(self) -> bool:
         """The inputs are first-order-hold knots (input_hold 'first_order', with max_accel)."""
-        return self.input_hold == 'first_order' and self.max_accel is not None
+        return self.input_hold is InputHold.FIRST_ORDER and self.max_accel is not None
 
     def cost_weights(self) -> CostWeights:
         """Return the cost weights by name (the solver reads them as a parameter)."""
@@ -406,7 +467,7 @@ def validate_mpc_config(config: MpcConfig) -> list[str]:
                         f'rad/s^2), got {accel!r}')
     if config.input_hold not in INPUT_HOLDS:
         problems.append(f'input_hold must be one of {INPUT_HOLDS}, got {config.input_hold!r}')
-    elif config.input_hold == 'first_order' and accel is None:
+    elif config.input_hold is InputHold.FIRST_ORDER and accel is None:
         problems.append("input_hold 'first_order' needs max_accel (the ramps' rate bounds)")
     if not isinstance(config.solving, SolverSettings):
         problems.append(f'solving must be a SolverSettings, got {config.solving!r}')

@@ -14,13 +14,13 @@
 
 """The controller behind the mpc_controller node, without ROS.
 
-`MpcController` owns a `PathReferenceMPC`, the world's obstacles and the plan, and decides
-what to command at each control step: the MPC's first input, an in-place turn to the goal
-heading once at the goal position, or zero, with a `Reason` (no plan, no, stale or invalid
-odometry, no or stale scan, invalid plan, goal reached, solver stop, error). Arrival is
-Nav2's SimpleGoalChecker's (xy_goal_tolerance, yaw_goal_tolerance, stateful: see
-`ControllerSettings`). The node only converts messages and publishes, so everything that can
-go wrong is testable here without a DDS participant.
+`MpcController` implements `LocalController`: it owns a `PathReferenceMPC`, the world's
+obstacles and the plan, and decides what to command at each control step: the MPC's first
+input, an in-place turn to the goal heading once at the goal position, or zero, with a
+`Reason` (no plan, no, stale or invalid odometry, no or stale scan, invalid plan, goal
+reached, solver stop, error). Arrival is Nav2's SimpleGoalChecker's (xy_goal_tolerance,
+yaw_goal_tolerance, stateful: see `ControllerSettings`). The node only converts messages and
+publishes, so everything that can go wrong is testable here without a DDS participant.
 
 Safety rules kept here (see the README's "Safety behaviours"):
 - a plan is refused unless it is finite, within MAX_COORDINATE, has two distinct positions and
@@ -28,9 +28,9 @@ Safety rules kept here (see the README's "Safety behaviours"):
   of the obstacle or goes around it: its terminal state x_N = g_p(s) must be clear too), and
   `path_blockage` says where the remaining plan is first blocked;
 - a state is refused unless it is finite and within MAX_COORDINATE;
-- odometry older than odom_timeout, or from the future by more than that (the clock jumped
-  back), is stale; so is a scan older than scan_timeout when the scan is a source of
-  obstacles (and before the first one, there is no scan: the robot does not drive blind);
+- stale or missing inputs (`InputFreshness`, the caller's check) are answered with a stop
+  (refuse_inputs);
+- a speed limit (set_speed_limit) caps the MPC's v bounds, so every plan keeps within it;
 - the proof's shifted candidate is applied for at most N consecutive solver failures: its
   inputs run out after N shifts, and then the robot stops;
 - a step's solving is bounded by the MPC's budget (SolverSettings.max_solve_time): past it the
@@ -43,6 +43,7 @@ Safety rules kept here (see the README's "Safety behaviours"):
 
 from __future__ import annotations
 
+from dataclasses import replace
 import math
 from typing import Sequence
 
@@ -51,16 +52,25 @@ import numpy as np
 from mpc_local_planner.core.braking import Brake
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reason
-from mpc_local_planner.core.controller_settings import ControllerSettings, is_stale
+from mpc_local_planner.core.control_state import ControlState, Event, Mode
+from mpc_local_planner.core.controller_settings import ControllerSettings
+from mpc_local_planner.core.goal_checker import GoalChecker
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import MpcSolution, PathReferenceMPC, PlanSource
+from mpc_local_planner.core.mpc.backends import run_solver, SolverRunner
 from mpc_local_planner.core.obstacles import (
     ConvexPolygon,
     first_blocked_segment,
     min_clearance,
     ObstacleSet,
 )
-from mpc_local_planner.core.paths import ReferencePath, simplify_polyline, WaypointPath, wrap_angle
+from mpc_local_planner.core.paths import (
+    ReferencePath,
+    remaining_polyline,
+    simplify_polyline,
+    WaypointPath,
+    wrap_angle,
+)
 
 __all__ = [
     'MAX_COORDINATE',
@@ -88,19 +98,26 @@ class MpcController:
         config: MPC settings.
         obstacles: the world's obstacles as described (the MPC inflates them).
         settings: goal tolerances, odometry timeout and plan handling.
+        runner: what runs the MPC's NLP solvers (backends.run_solver; see `runner`).
 
     """
 
     def __init__(self, model: Unicycle | None = None, config: MpcConfig | None = None, *,
                  obstacles: Sequence[ConvexPolygon] = (),
-                 settings: ControllerSettings | None = None) -> None:
-        self._model = model or Unicycle()
+                 settings: ControllerSettings | None = None,
+                 runner: SolverRunner = run_solver) -> None:
+        # the model as set, and the one in force: its v bounds capped by the speed limit
+        self._given_model = model or Unicycle()
+        self._speed_limit: float | None = None
+        self._model = self._given_model
         self._config = config or MpcConfig()
         self._obstacles = list(obstacles)
         settings = settings or ControllerSettings()
         self._brake = Brake(settings.max_decel)
+        self._goal_checker = GoalChecker(settings)
         self.settings = settings
-        self._mpc = PathReferenceMPC(self._model, self._config, obstacles=self._obstacles)
+        self._mpc = PathReferenceMPC(self._model, self._config, obstacles=self._obstacles,
+                                     runner=runner)
         self._path: ReferencePath | None = None
         self._solved_last_step = False
         self._solver_failures = 0
@@ -109,16 +126,9 @@ class MpcController:
         # latest projection onto it (projections only move forward along a plan)
         self._polyline: np.ndarray | None = None
         self._projection_segment = 0
-        # the plan's arrival so far (kept only with settings.stateful; a new plan clears it)
-        self._xy_reached = False
-        self._arrived = False
-        # the last solve's output while it is in force (control_frequency: the calls between
-        # solves apply it), when it was solved, and the time of the latest call
-        self._held: ControlOutput | None = None
-        self._held_time = -math.inf
-        # the last solve's stop (no verified input) and when: the calls until the next
-        # step's instant keep it instead of solving again
-        self._stopped: tuple[float, ControlOutput] | None = None
+        # what the last step left in force: a plan's input or the solver's stop, held until
+        # the next step's instant (control_frequency), or a turn to the goal heading
+        self._state = ControlState()
         self._last_call: float | None = None
         # the latest command and measured twist (the MPC's rate bounds start from them)
         self._last_u = np.zeros(2)
@@ -136,11 +146,35 @@ class MpcController:
         # node's max_decel parameter) must reach it, or stops would brake with the old ones
         self._settings = settings
         self._brake.max_decel = np.asarray(settings.max_decel, dtype=float)
+        self._goal_checker.settings = settings
 
     @property
     def model(self) -> Unicycle:
-        """The robot model in force."""
-        return self._model
+        """The robot model as set (set_model); its v bounds are capped by speed_limit."""
+        return self._given_model
+
+    @property
+    def runner(self) -> SolverRunner:
+        """What runs the MPC's NLP solvers; a new one solves from the next step.
+
+        A test's failing solver, or a benchmark's instrumented one; it stays through
+        rebuilds (set_model, set_speed_limit).
+        """
+        return self._mpc.runner
+
+    @runner.setter
+    def runner(self, runner: SolverRunner) -> None:
+        self._mpc.runner = runner
+
+    @property
+    def mode(self) -> Mode:
+        """What the last step left in force: a plan's input, the solver's stop, a turn."""
+        return self._state.mode
+
+    @property
+    def speed_limit(self) -> float | None:
+        """The cap on |v| in force (m/s, set_speed_limit), or None."""
+        return self._speed_limit
 
     @property
     def config(self) -> MpcConfig:
@@ -199,16 +233,39 @@ class MpcController:
         """Use new MPC settings from the next solve on (a shape change rebuilds there)."""
         self._config = config
         self._mpc.update_config(config)
-        self._held = None
-        self._stopped = None
+        self._state.on(Event.DROP)
 
     def set_model(self, model: Unicycle) -> None:
-        """Use new input bounds: the NLP is rebuilt at the next solve."""
+        """Use new input bounds (capped by speed_limit): the NLP is rebuilt at the next solve."""
+        self._given_model = model
+        self._use_model(_capped(model, self._speed_limit))
+
+    def set_speed_limit(self, v_max: float | None) -> None:
+        """Cap |v| at v_max (m/s, > 0) from the next compute; None lifts the cap.
+
+        The cap enters the MPC as its v bounds (the NLP is rebuilt for them, as for any new
+        bounds, when they change), so every verified plan and every command keeps within it;
+        obstacles are grown by the margin of the capped speed (v_max h / 2 by default).
+
+        Raises:
+            ValueError: if v_max is not None and not a finite number > 0.
+
+        """
+        if v_max is not None:
+            v_max = float(v_max)
+            if not (math.isfinite(v_max) and v_max > 0):
+                msg = f'a speed limit must be > 0 and finite (None lifts it), got {v_max}'
+                raise ValueError(msg)
+        self._speed_limit = v_max
+        model = _capped(self._given_model, v_max)
+        if model != self._model:
+            self._use_model(model)
+
+    def _use_model(self, model: Unicycle) -> None:
         self._model = model
         self._mpc = PathReferenceMPC(model, self._config, obstacles=self._obstacles,
-                                     path=self._path)
-        self._held = None
-        self._stopped = None
+                                     path=self._path, runner=self._mpc.runner)
+        self._state.on(Event.DROP)
 
     def set_obstacles(self, obstacles: Sequence[ConvexPolygon]) -> None:
         """Replace the obstacles (as described, not inflated); cheap enough for every step.
@@ -242,9 +299,8 @@ class MpcController:
             polyline = path.sample()[1][:, :2]
         self._polyline = np.asarray(polyline, dtype=float)
         self._projection_segment = 0
-        self._xy_reached = self._arrived = False
-        self._held = None
-        self._stopped = None
+        self._goal_checker.reset()
+        self._state.on(Event.NEW_PLAN)
 
     def set_plan(self, poses: np.ndarray) -> WaypointPath:
         """Follow a global plan of (M, 3) poses (x, y, yaw), as a nav_msgs/Path carries.
@@ -339,11 +395,23 @@ class MpcController:
         """Forget the plan: the controller commands zero until a new one comes."""
         self._path = None
         self._polyline = None
-        self._xy_reached = self._arrived = False
-        self._held = None
-        self._stopped = None
+        self._goal_checker.reset()
+        self._state.on(Event.NEW_PLAN)
         self._brake.stop()
         self._mpc.reset()
+
+    def reset(self) -> None:
+        """Forget the run: the plan, arrival, held inputs and the MPC's candidate and history.
+
+        What a new controller would know, but the obstacles, settings, speed limit and the
+        counters since construction (solver_failures, timeouts) stay.
+        """
+        self.clear_path()
+        self._projection_segment = 0
+        self._solved_last_step = False
+        self._last_call = None
+        self._last_u = np.zeros(2)
+        self._velocity = None
 
     def path_blockage(self, state: np.ndarray | None) -> Blockage:
         """Say where the remaining plan first meets an obstacle grown as the MPC grows it.
@@ -362,15 +430,8 @@ class MpcController:
             position = self.check_state(state)[:2]
         except ValueError:
             return Blockage()
-        start = min(self._projection_segment, len(polyline) - 2)
-        a, b = polyline[start:-1], polyline[start + 1:]
-        d = b - a
-        length2 = np.einsum('ij,ij->i', d, d)
-        t = np.clip(np.einsum('ij,ij->i', position - a, d) / np.maximum(length2, 1e-18), 0, 1)
-        nearest = a + t[:, None] * d
-        k = int(np.argmin(np.hypot(*(nearest - position).T)))
-        self._projection_segment = start + k
-        remaining = np.vstack([nearest[k], polyline[start + k + 1:]])
+        remaining, self._projection_segment = remaining_polyline(
+            polyline, position, forward_from=self._projection_segment)
         grown = self.grown_obstacles
         if not grown or len(remaining) < 2:
             return Blockage()
@@ -389,95 +450,88 @@ class MpcController:
         """Return (position, |heading|) error of state to the end of the path."""
         if self._path is None:
             return math.inf, math.inf
-        goal = self._path.goal
-        position = float(np.hypot(state[0] - goal[0], state[1] - goal[1]))
-        heading = abs(float(wrap_angle(state[2] - goal[2])))
-        return position, heading
+        return GoalChecker.errors(state, self._path.goal)
 
-    def compute(self, state: np.ndarray | None, now: float, *,
-                state_time: float | None = None, scan_required: bool = False,
-                scan_time: float | None = None, map_missing: bool = False,
-                velocity: np.ndarray | None = None) -> ControlOutput:
-        """Return the command for the measured state at time now.
+    def compute(self, pose: np.ndarray | None, twist: np.ndarray | None,
+                now: float) -> ControlOutput:
+        """Return the command for the measured pose at time now.
 
         Never raises: anything unexpected becomes a zero command with Reason.ERROR. At the
         goal position (xy_goal_tolerance) and off its heading the robot turns in place
         (Reason.ROTATE_TO_HEADING); arrived, the command is zero (Reason.GOAL_REACHED), and
-        with settings.stateful it stays so, whatever the state, until a new plan. The MPC
+        with settings.stateful it stays so, whatever the pose, until a new plan. The MPC
         solves once per step h; a call sooner than that after a solve that gave an input
         (settings.control_frequency) returns that input again, after the same checks
         (ControlOutput.fresh False). A stop of a moving robot brakes along the last verified
-        plan within settings.max_decel (`Brake`).
+        plan within settings.max_decel (`Brake`). The inputs' ages are the caller's to check
+        (`InputFreshness`, then refuse_inputs).
 
         Args:
-            state: (3,) measured (x, y, yaw), or None when no odometry has come.
-            now: the current time (seconds, the clock of state_time).
-            state_time: when state was measured; older than settings.odom_timeout is stale.
-            scan_required: the laser is a source of obstacles: without a scan (scan_time
-                None) or with one older than settings.scan_timeout the robot stops, as the
-                obstacles it knows may be out of date.
-            scan_time: the stamp of the latest valid scan with a usable reading (seconds),
-                or None.
-            map_missing: the map is a source of obstacles and no valid map has come: the
-                robot stops until one does.
-            velocity: the measured twist (v, omega), if known: with MpcConfig.max_accel the
+            pose: (3,) measured (x, y, yaw), or None when no odometry has come.
+            twist: the measured twist (v, omega), if known: with MpcConfig.max_accel the
                 MPC's first input starts from it after a step without a plan's input (the
                 base may still be moving); while plans are applied, from the input commanded.
+            now: the current time (seconds).
 
         """
-        self._velocity = velocity
-        output = self._compute(state, now, state_time=state_time, scan_required=scan_required,
-                               scan_time=scan_time, map_missing=map_missing)
+        self._velocity = twist
+        output = self._compute(pose, now)
         self._last_call = now
         self._last_u = np.asarray(output.u, dtype=float)
         return output
 
-    def _compute(self, state: np.ndarray | None, now: float, *, state_time: float | None,
-                 scan_required: bool, scan_time: float | None,
-                 map_missing: bool) -> ControlOutput:
+    def refuse_inputs(self, reason: Reason, now: float) -> ControlOutput:
+        """Return the stop for inputs the caller found stale or missing (`InputFreshness`).
+
+        The control call compute would be for a pose it cannot trust: no plan and arrival
+        answer first (as in compute), else a moving robot brakes within settings.max_decel.
+        """
+        if self._path is None:
+            output = self._idle(Reason.NO_PLAN)
+        elif self.settings.stateful and self._goal_checker.arrived:
+            output = self._idle(Reason.GOAL_REACHED)
+        else:
+            output = self._idle(reason, now=now)
+        self._last_call = now
+        self._last_u = np.asarray(output.u, dtype=float)
+        return output
+
+    def _compute(self, pose: np.ndarray | None, now: float) -> ControlOutput:
         if self._path is None:
             return self._idle(Reason.NO_PLAN)
-        if self.settings.stateful and self._arrived:
+        if self.settings.stateful and self._goal_checker.arrived:
             # arrived once: the plan is done, whatever the measured pose does now
             return self._idle(Reason.GOAL_REACHED)
-        if state is None:
+        if pose is None:
             return self._idle(Reason.NO_ODOM, now=now)
-        if state_time is not None:
-            if is_stale(now - state_time, self.settings.odom_timeout):
-                return self._idle(Reason.STALE_ODOM, now=now)
-        if scan_required:
-            if scan_time is None:
-                return self._idle(Reason.NO_SCAN, now=now)
-            if is_stale(now - scan_time, self.settings.scan_timeout):
-                return self._idle(Reason.STALE_SCAN, now=now)
-        if map_missing:
-            return self._idle(Reason.NO_MAP, now=now)
         try:
-            x = self.check_state(state)
+            x = self.check_state(pose)
         except ValueError as err:
             return self._idle(Reason.INVALID_ODOM, str(err), now=now)
         try:
-            position_met, arrived = self._check_goal(x)
+            position_met, arrived = self._goal_checker.check(x, self._path.goal)
             if arrived:
                 return self._idle(Reason.GOAL_REACHED)
             if position_met:
                 turn = self._rotate_to_heading(x)
                 if turn is not None:
                     self._drop_warm_start()
+                    self._state.on(Event.ROTATE)
                     self._brake.stop()
                     return ControlOutput(turn, None, Reason.ROTATE_TO_HEADING)
-            held = self._held
+            in_force = self._state
             # (a clock that jumped back solves at once: the held plan's time is not now's)
-            if held is not None and 0.0 <= now - self._held_time < self._hold_period():
+            held = in_force.holding(Mode.PLAN, now, self._hold_period())
+            if held is not None:
                 return held._replace(u=self._planned_input(held.solution,
-                                                           now - self._held_time),
+                                                           now - in_force.since),
                                      fresh=False)
-            stopped = self._stopped
-            if stopped is not None and 0.0 <= now - stopped[0] < self._hold_period():
+            stopped = in_force.holding(Mode.STOP, now, self._hold_period())
+            if stopped is not None:
                 # the solver found no verified input at this step: keep braking (or
                 # standing) until the next step's instant, as a plan is kept for its step
-                return self._idle(Reason.STOP, stopped[1].detail, now=now,
-                                  solution=stopped[1].solution,
+                return self._idle(Reason.STOP, stopped.detail, now=now,
+                                  solution=stopped.solution,
                                   keep_warm_start=True)._replace(fresh=False)
             if self._config.max_accel is None:
                 solution = self._mpc.solve(x)
@@ -496,7 +550,7 @@ class MpcController:
             # no verified input: the MPC keeps its own state (failure count, the plan it
             # carries) for the next step, as it decides what to try from there
             output = self._idle(Reason.STOP, now=now, solution=solution, keep_warm_start=True)
-            self._stopped = (now, output)
+            self._state.on(Event.SOLVER_STOP, now=now, output=output)
             return output
         if source is PlanSource.CANDIDATE and solution.failures > self._config.horizon:
             # the shifted candidate has run out (N shifts leave only steady-state inputs):
@@ -510,8 +564,7 @@ class MpcController:
         u = np.clip(u, self._model.u_min, self._model.u_max)
         reason = Reason.TRACKING if solution.success else Reason.CANDIDATE
         output = ControlOutput(u, solution, reason)
-        self._held, self._held_time = output, now
-        self._stopped = None
+        self._state.on(Event.SOLVED, now=now, output=output)
         self._brake.stop()
         return output
 
@@ -535,8 +588,9 @@ class MpcController:
         candidate follows it); after a stop or a turn, the measured twist if there is one
         (the base may still be moving), else what was commanded.
         """
-        if self._held is not None:
-            return self._held.u
+        held = self._state.plan()
+        if held is not None:
+            return held.u
         if self._velocity is not None:
             return np.asarray(self._velocity, dtype=float)
         return self._last_u
@@ -575,16 +629,16 @@ class MpcController:
         if now is None or reason in (Reason.NO_PLAN, Reason.GOAL_REACHED):
             self._brake.stop()
         else:
-            if not self._brake.active and self._held is not None \
-                    and self._held.solution is not None:
-                plan = self._held.solution
+            held = self._state.plan()
+            if not self._brake.active and held is not None and held.solution is not None:
+                plan = held.solution
                 lead = 0.0 if plan.u_before is None else self.settings.actuation_delay
                 self._brake.start(plan.u_pred, self._config.step,
-                                  now - self._held_time + lead, plan.u_before)
+                                  now - self._state.since + lead, plan.u_before)
             last = self._last_call if self._last_call is not None else now
             u = np.clip(self._brake.command(now - last), self._model.u_min, self._model.u_max)
         if keep_warm_start:
-            self._held = None
+            self._state.on(Event.END_PLAN)
         else:
             self._drop_warm_start()
         return ControlOutput(u, solution, reason, detail)
@@ -592,27 +646,10 @@ class MpcController:
     def _drop_warm_start(self) -> None:
         # The shifted warm start assumes its first input was applied: after a step without
         # one, start the MPC over (s restarts at the projection).
-        self._held = None
-        self._stopped = None
+        self._state.on(Event.DROP)
         if self._solved_last_step:
             self._mpc.reset()
             self._solved_last_step = False
-
-    def _check_goal(self, state: np.ndarray) -> tuple[bool, bool]:
-        """Return (position met, arrived) for state, as Nav2's SimpleGoalChecker judges.
-
-        The position is met within xy_goal_tolerance of the plan's last position, and the
-        robot has arrived when, the position met, its heading is within yaw_goal_tolerance.
-        With settings.stateful both are kept for the plan (see ControllerSettings): the
-        only place where arrival is decided (by ControllerSettings.goal_check's rule).
-        """
-        position, heading = self.goal_error(state)
-        settings = self.settings
-        position_met, arrived = settings.goal_check(position, heading,
-                                                    position_met=self._xy_reached)
-        if settings.stateful:
-            self._xy_reached, self._arrived = position_met, arrived
-        return position_met, arrived
 
     def _rotate_to_heading(self, state: np.ndarray) -> np.ndarray | None:
         """Return the input that turns the robot in place towards the plan's last heading.
@@ -638,6 +675,19 @@ class MpcController:
         error = float(wrap_angle(self._path.goal[2] - state[2]))
         omega = error / (ROTATE_STEPS * self._config.step)
         return np.clip(np.array([0.0, omega]), self._model.u_min, self._model.u_max)
+
+
+def _capped(model: Unicycle, v_max: float | None) -> Unicycle:
+    """Return model with |v| capped at v_max (None, or a cap above its bounds: model)."""
+    if v_max is None:
+        return model
+    v_min = float(model.u_min[0])
+    new_max, new_min = min(model.v_max, v_max), max(v_min, -v_max)
+    if new_max == model.v_max and new_min == v_min:
+        return model
+    if model.v_min is None and new_min == -new_max:
+        return replace(model, v_max=new_max)
+    return replace(model, v_max=new_max, v_min=new_min)
 
 
 def _entry(a: np.ndarray, b: np.ndarray, obstacles: list[ConvexPolygon]) -> float:

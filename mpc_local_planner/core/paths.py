@@ -39,7 +39,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 import hashlib
 import math
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -56,6 +56,7 @@ __all__ = [
     'Polyline',
     'project_ahead',
     'remaining_polyline',
+    'RemainingPlan',
     'simplify_polyline',
     'smooth_ramp',
     'waypoints_to_poses',
@@ -478,31 +479,44 @@ def simplify_polyline(points: np.ndarray, tolerance: float) -> np.ndarray:
     return pts[keep]
 
 
-def remaining_polyline(waypoints: np.ndarray, point: np.ndarray) -> np.ndarray:
+class RemainingPlan(NamedTuple):
+    """What is left of a plan: its points from the projection, and the projection's segment."""
+
+    points: np.ndarray
+    segment: int
+
+
+def remaining_polyline(waypoints: np.ndarray, point: np.ndarray, *,
+                       forward_from: int = 0) -> RemainingPlan:
     """Return the part of a polyline after the point's projection onto it.
 
-    What is left of a plan for a robot at point: the nearest point of the polyline (the
-    first segment wins a tie), then the later vertices. A re-planner checks this part only:
-    what the robot has passed cannot block it.
+    What is left of a plan for a robot at point: the nearest point of the polyline on
+    segment forward_from or a later one (the first segment wins a tie), then the later
+    vertices. A re-planner checks this part only: what the robot has passed cannot block it.
+    The controller passes the segment of its previous projection (projections only move
+    forward along a plan, so a plan that comes back near itself is not cut short); the
+    planner, which keeps no projection, 0 (the nearest point of the whole plan).
 
     Args:
         waypoints: (M, 2+) vertices, M >= 1 (further columns are ignored).
         point: (2+,) the robot's position (further entries are ignored).
+        forward_from: the first segment the projection may lie on (clipped to the last).
 
     Returns:
-        (K, 2) vertices, K >= 1, starting at the projection.
+        (K, 2) vertices, K >= 1, starting at the projection, and the projection's segment.
 
     """
     pts = np.atleast_2d(np.asarray(waypoints, dtype=float))[:, :2]
     p = np.asarray(point, dtype=float).reshape(-1)[:2]
     if len(pts) < 2:
-        return pts.copy()
-    a, d = pts[:-1], np.diff(pts, axis=0)
+        return RemainingPlan(pts.copy(), 0)
+    start = min(max(int(forward_from), 0), len(pts) - 2)
+    a, d = pts[start:-1], np.diff(pts[start:], axis=0)
     length2 = np.einsum('ij,ij->i', d, d)
     t = np.clip(np.einsum('ij,ij->i', p - a, d) / np.maximum(length2, 1e-18), 0.0, 1.0)
     nearest = a + t[:, None] * d
     k = int(np.argmin(np.hypot(*(nearest - p).T)))
-    return np.vstack([nearest[k], pts[k + 1:]])
+    return RemainingPlan(np.vstack([nearest[k], pts[start + k + 1:]]), start + k)
 
 
 def points_along(waypoints: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:

@@ -574,7 +574,7 @@ class RrtStarPlanner:
             None if the rest is clear, else what is in collision, and where.
 
         """
-        rest = remaining_polyline(plan, position)
+        rest = remaining_polyline(plan, position).points
         if len(rest) < 2:
             return None
         lengths = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(rest, axis=0).T))])

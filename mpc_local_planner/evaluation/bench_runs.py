@@ -358,7 +358,7 @@ def _control_run(world: World, poses: np.ndarray, steps: int, controller: MpcCon
         middle = time.perf_counter()
         if scan is not None:
             controller.set_obstacles(nearby)
-        output = controller.compute(x, t)
+        output = controller.compute(x, None, t)
         end = time.perf_counter()
         update_ms.append(1e3 * (middle - start))
         set_solve_ms.append(1e3 * (end - middle))
@@ -498,7 +498,7 @@ def _rate_run(controller: MpcController, calls: int) -> dict[str, Any]:
     solves, holds, reached = [], [], False
     for k in range(calls):
         start = time.perf_counter()
-        output = controller.compute(x, k * dt)
+        output = controller.compute(x, None, k * dt)
         elapsed = 1e3 * (time.perf_counter() - start)
         # a solve: fresh with a solution; a hold: not fresh (stops and turns are neither)
         if output.fresh and output.solution is not None:

@@ -178,7 +178,7 @@ class MpcLocal:
     def command(self, x: np.ndarray, t: float, velocity: np.ndarray | None = None
                 ) -> ControlStep:
         """Compute the command as the node does (stop reasons give a zero input)."""
-        output = self.controller.compute(x, t, velocity=velocity)
+        output = self.controller.compute(x, velocity, t)
         solution = output.solution
         if not output.fresh and solution is not None:
             # between solves (control_frequency): the verified plan's input, nothing solved

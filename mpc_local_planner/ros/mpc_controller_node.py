@@ -93,9 +93,11 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import LaserScan
 
+from mpc_local_planner.core.config import ObstacleSource
 from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reason
 from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.footprint import Footprint
+from mpc_local_planner.core.input_freshness import InputFreshness
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path
 from mpc_local_planner.ros.conversions import (
@@ -192,7 +194,7 @@ class MpcControllerNode(ManagedNode):
         self._localizer_sub = None
         self._tf_listener = None
         self._timer = None
-        self._sources: frozenset[str] = frozenset()
+        self._sources: frozenset[ObstacleSource] = frozenset()
         self._world_obstacles: list[ConvexPolygon] = []
         # where the pose in the plan's frame comes from (ros/robot_pose.py); configure
         # chooses the mode, odometry until then
@@ -243,9 +245,9 @@ class MpcControllerNode(ManagedNode):
             world_file = str(values['world_file'])
             self._world_cache.pop(world_file, None)  # read it again: it may have changed
             check_sensing(values)
-            sources = frozenset(values['obstacle_sources'])
+            sources = frozenset(ObstacleSource(s) for s in values['obstacle_sources'])
             world_obstacles, world_footprint = self._load_world(world_file)
-            obstacles = world_obstacles if 'world' in sources else []
+            obstacles = world_obstacles if ObstacleSource.WORLD in sources else []
             config, model, settings = build_settings(
                 values, world_radius=world_footprint.radius, world_footprint=world_footprint)
             check_obstacles(obstacles, config)
@@ -274,11 +276,11 @@ class MpcControllerNode(ManagedNode):
         # raw: the size of a plan is checked before rclpy spends ~15 us per pose on it
         self._plan_sub = self.create_subscription(Path, 'plan', self.plan_callback, PLAN_QOS,
                                                   raw=True)
-        if 'scan' in sources:
+        if ObstacleSource.SCAN in sources:
             # raw: the beam count is checked before rclpy decodes the ranges (ScanIntake)
             self._scan_sub = self.create_subscription(LaserScan, 'scan', self.scan_callback,
                                                       SCAN_QOS, raw=True)
-        if 'map' in sources:
+        if ObstacleSource.MAP in sources:
             self._map_sub = self.create_subscription(OccupancyGrid, 'map', self.map_callback,
                                                      MAP_QOS)
         if self._pose_source.mode is PoseMode.LOCALIZER:
@@ -402,7 +404,7 @@ class MpcControllerNode(ManagedNode):
             obstacles, footprint = self._load_world(str(values['world_file']))
             config, _, _ = build_settings(values, world_radius=footprint.radius,
                                           world_footprint=footprint)
-            if 'world' in values['obstacle_sources']:
+            if ObstacleSource.WORLD in values['obstacle_sources']:
                 check_obstacles(obstacles, config)
             if values['analytic_path']:
                 analytic_path(str(values['analytic_path']))
@@ -430,7 +432,8 @@ class MpcControllerNode(ManagedNode):
             # one thread runs every callback: never between two halves of a solve; the
             # obstacles in force are handed over at the next control step
             if 'world_file' in names:
-                self._world_obstacles = list(obstacles) if 'world' in self._sources else []
+                self._world_obstacles = (list(obstacles) if ObstacleSource.WORLD in self._sources
+                                         else [])
             self.controller.update_config(config)
             if model != self.controller.model:
                 self.controller.set_model(model)
@@ -672,11 +675,16 @@ class MpcControllerNode(ManagedNode):
             else:
                 self.controller.set_obstacles(self._world_obstacles
                                               + self._sensing.near(self._state))
-                output = self.controller.compute(
-                    self._state, now, state_time=self._state_time,
-                    scan_required='scan' in self._sources, scan_time=self._sensing.scan_time,
-                    map_missing='map' in self._sources and self._sensing.grid is None,
-                    velocity=self._odom_twist)
+                refused = None if self._state is None else InputFreshness.of(
+                    self.controller.settings).check(
+                    now, pose_time=self._state_time,
+                    scan_required=ObstacleSource.SCAN in self._sources,
+                    scan_time=self._sensing.scan_time,
+                    map_missing=ObstacleSource.MAP in self._sources and self._sensing.grid is None)
+                if refused is None:
+                    output = self.controller.compute(self._state, self._odom_twist, now)
+                else:
+                    output = self.controller.refuse_inputs(refused, now)
         except Exception as err:  # compute never raises; belt and braces
             output = ControlOutput(np.zeros(2), None, Reason.ERROR, str(err))
         try:

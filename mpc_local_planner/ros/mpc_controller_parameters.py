@@ -33,7 +33,13 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from mpc_local_planner.core.config import INPUT_HOLDS, MpcConfig, SOLVERS, SolverSettings
+from mpc_local_planner.core.config import (
+    INPUT_HOLDS,
+    MpcConfig,
+    OBSTACLE_SOURCES,
+    SOLVERS,
+    SolverSettings,
+)
 from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.footprint import Footprint, FROM_WORLD, radius_in_force, resolve
 from mpc_local_planner.core.models import Unicycle
@@ -43,14 +49,12 @@ from mpc_local_planner.ros.robot_pose import pose_parameters
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world
 
-__all__ = ['BASE_FRAME', 'DEFAULTS', 'OBSTACLE_SOURCES', 'PARAMETERS', 'RATE_LIMIT_OFF',
+__all__ = ['BASE_FRAME', 'DEFAULTS', 'PARAMETERS', 'RATE_LIMIT_OFF',
            'build_settings', 'check_obstacles', 'check_sensing', 'load_obstacles',
            'load_robot', 'rate_limit', 'robot_footprint']
 
 # The frame of a TwistStamped cmd_vel.
 BASE_FRAME = 'base_link'
-# What obstacle_sources may list.
-OBSTACLE_SOURCES = ('world', 'scan', 'map')
 # Parameter -> field of MpcConfig, its SolverSettings, Unicycle and ControllerSettings (the
 # parameters are flat: one namespace, whichever dataclass a field lives in).
 _MPC_FIELDS = {

@@ -60,6 +60,7 @@ from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import LaserScan
 
+from mpc_local_planner.core.config import ObstacleSource
 from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.perception.local_obstacles import LocalObstacles
@@ -110,7 +111,7 @@ class ControllerSensing:
 
     """
 
-    def __init__(self, controller: MpcController, *, sources: frozenset[str],
+    def __init__(self, controller: MpcController, *, sources: frozenset[ObstacleSource],
                  memory_ttl: float, logger: RcutilsLogger, now: Callable[[], float],
                  parameter: Callable[[str], Any],
                  pose_at: Callable[[float], np.ndarray | None]) -> None:
@@ -120,14 +121,14 @@ class ControllerSensing:
         self._parameter = parameter
         self._pose_at = pose_at
         self._problems = ProblemThrottle(ERROR_THROTTLE_S)
-        self._take_map = 'map' in sources
+        self._take_map = ObstacleSource.MAP in sources
         # the map's and the laser's obstacles (the scan memory inside), the latest valid map
         self.local = LocalObstacles(
             controller.config.solving.faces_per_obstacle,
-            memory=ObstacleMemory(memory_ttl) if 'scan' in sources else None)
+            memory=ObstacleMemory(memory_ttl) if ObstacleSource.SCAN in sources else None)
         self.grid: OccupancyMap | None = None
         self._intake = (ScanIntake(capacity=PENDING_SCANS, span=ODOM_HISTORY_S)
-                        if 'scan' in sources else None)
+                        if ObstacleSource.SCAN in sources else None)
 
     @property
     def scan_stamp(self) -> float | None:

@@ -21,7 +21,19 @@ import math
 import numpy as np
 import pytest
 
-from mpc_local_planner.core.config import MpcConfig, SolverSettings, STRUCTURAL_FIELDS
+from mpc_local_planner.core.config import (
+    BudgetKind,
+    BUDGETS,
+    INPUT_HOLDS,
+    InputHold,
+    MpcConfig,
+    NlpSolver,
+    OBSTACLE_SOURCES,
+    ObstacleSource,
+    SOLVERS,
+    SolverSettings,
+    STRUCTURAL_FIELDS,
+)
 
 JACKAL_VERTICES = ((0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215), (0.254, -0.215))
 
@@ -107,3 +119,26 @@ def test_the_solver_settings_are_validated_apart_and_their_structure_is_in_the_k
         config.with_solving(solver='sqp')
     with pytest.raises(ValueError, match='solving must be a SolverSettings'):
         MpcConfig(solving={'solver': 'ipopt'})
+
+
+def test_the_closed_choices_are_str_enums_that_parse_and_compare_as_the_strings_written() -> None:
+    settings = SolverSettings(solver='ipopt', budget='iterations')
+    assert settings.solver is NlpSolver.IPOPT and settings.budget is BudgetKind.ITERATIONS
+    config = MpcConfig(max_accel=(0.5, 2.0), input_hold='first_order')
+    assert config.input_hold is InputHold.FIRST_ORDER and config.first_order_hold
+    assert MpcConfig().input_hold is InputHold.ZERO and MpcConfig().solving.solver == 'fatrop'
+    for member in (*NlpSolver, *BudgetKind, *InputHold, *ObstacleSource):
+        # what a user writes and what a log or a CSV shows: the string itself
+        assert member == member.value and str(member) == f'{member}' == member.value
+        assert {member.value: True}[member] and member in {member.value}
+    assert settings == SolverSettings(solver=NlpSolver.IPOPT, budget=BudgetKind.ITERATIONS)
+    assert hash(settings) == hash(SolverSettings(solver='ipopt', budget='iterations'))
+    assert (SOLVERS, BUDGETS, INPUT_HOLDS, OBSTACLE_SOURCES) == (
+        ('fatrop', 'ipopt'), ('wall', 'iterations'), ('zero', 'first_order'),
+        ('world', 'scan', 'map'))
+    with pytest.raises(ValueError, match=r"^invalid MPC solver settings: solver must be one of "
+                                         r"\('fatrop', 'ipopt'\), got 'sqp'$"):
+        SolverSettings(solver='sqp')
+    with pytest.raises(ValueError, match=r"input_hold must be one of \('zero', 'first_order'\), "
+                                         r"got 'ramp'$"):
+        MpcConfig(input_hold='ramp')

@@ -24,7 +24,10 @@ from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.controller import MpcController, ROTATE_STEPS
 from mpc_local_planner.core.controller_settings import ControllerSettings
+from mpc_local_planner.core.input_freshness import InputFreshness
+from mpc_local_planner.core.local_controller import LocalController
 from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.mpc.backends import run_solver, SolverRun
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path, WaypointPath
 from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -39,6 +42,15 @@ PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
                  [2.5, 0.0, WORLD.goal[2]]])
 
 
+def _control(controller: MpcController, pose: np.ndarray, now: float,
+             **inputs: object) -> ControlOutput:
+    """Step as the controller node does: the inputs' ages are checked before compute."""
+    refused = InputFreshness.of(controller.settings).check(now, **inputs)
+    if refused is None:
+        return controller.compute(pose, None, now)
+    return controller.refuse_inputs(refused, now)
+
+
 @pytest.fixture(scope='module')
 def controller() -> MpcController:
     return MpcController(Unicycle(), CONFIG, obstacles=WORLD.obstacles)
@@ -46,7 +58,7 @@ def controller() -> MpcController:
 
 def test_without_a_plan_the_command_is_zero_with_a_reason(controller: MpcController) -> None:
     fresh = MpcController(config=CONFIG, obstacles=WORLD.obstacles)
-    out = fresh.compute(WORLD.start, 0.0)
+    out = fresh.compute(WORLD.start, None, 0.0)
     assert out.reason is Reason.NO_PLAN
     assert out.solution is None
     np.testing.assert_array_equal(out.u, [0.0, 0.0])
@@ -54,7 +66,7 @@ def test_without_a_plan_the_command_is_zero_with_a_reason(controller: MpcControl
 
 def test_without_odometry_the_command_is_zero(controller: MpcController) -> None:
     controller.set_plan(PLAN)
-    out = controller.compute(None, 10.0)
+    out = controller.compute(None, None, 10.0)
     assert out.reason is Reason.NO_ODOM
     np.testing.assert_array_equal(out.u, [0.0, 0.0])
 
@@ -62,14 +74,14 @@ def test_without_odometry_the_command_is_zero(controller: MpcController) -> None
 def test_stale_odometry_gives_zero(controller: MpcController) -> None:
     controller.set_plan(PLAN)
     timeout = controller.settings.odom_timeout
-    out = controller.compute(WORLD.start, 10.0, state_time=10.0 - 2 * timeout)
+    out = _control(controller, WORLD.start, 10.0, pose_time=10.0 - 2 * timeout)
     assert out.reason is Reason.STALE_ODOM
     np.testing.assert_array_equal(out.u, [0.0, 0.0])
 
 
 def test_a_plan_gives_a_bounded_command_and_a_prediction(controller: MpcController) -> None:
     controller.set_plan(PLAN)
-    out = controller.compute(WORLD.start, 1.0, state_time=0.9)
+    out = _control(controller, WORLD.start, 1.0, pose_time=0.9)
     assert out.reason is Reason.TRACKING
     assert out.solution is not None
     model = controller.model
@@ -81,7 +93,7 @@ def test_a_plan_gives_a_bounded_command_and_a_prediction(controller: MpcControll
 def test_the_goal_reached_gives_zero(controller: MpcController) -> None:
     controller.set_plan(PLAN)
     near_goal = WORLD.goal + np.array([0.005, 0.0, 0.01])
-    out = controller.compute(near_goal, 0.0)
+    out = controller.compute(near_goal, None, 0.0)
     assert out.reason is Reason.GOAL_REACHED
     np.testing.assert_array_equal(out.u, [0.0, 0.0])
     position, heading = controller.goal_error(near_goal)
@@ -91,7 +103,7 @@ def test_the_goal_reached_gives_zero(controller: MpcController) -> None:
 def test_a_non_finite_state_gives_zero_as_invalid_odometry_with_the_problem_as_detail(
         controller: MpcController) -> None:
     controller.set_plan(PLAN)
-    out = controller.compute(np.array([0.0, np.nan, 0.0]), 0.0)
+    out = controller.compute(np.array([0.0, np.nan, 0.0]), None, 0.0)
     assert out.reason is Reason.INVALID_ODOM
     assert 'three finite numbers' in out.detail
     assert out.message == f'invalid odometry: {out.detail}'
@@ -106,7 +118,7 @@ def test_an_exception_in_the_solve_gives_zero_with_the_error_reason_and_its_mess
         raise RuntimeError('boom')
 
     controller.mpc.solve = broken  # type: ignore[method-assign]
-    out = controller.compute(WORLD.start, 0.0)
+    out = controller.compute(WORLD.start, None, 0.0)
     assert out.reason is Reason.ERROR and out.detail == 'RuntimeError: boom'
     assert controller.solver_failures == 1
     np.testing.assert_array_equal(out.u, [0.0, 0.0])
@@ -154,7 +166,7 @@ def test_a_dense_plan_is_simplified_to_fit_the_capacity() -> None:
 def test_a_new_horizon_takes_effect_at_the_next_solve(controller: MpcController) -> None:
     controller.set_path(analytic_path('paper_sinusoid'))
     controller.update_config(controller.config.with_changes(horizon=6))
-    out = controller.compute(WORLD.start, 0.0)
+    out = controller.compute(WORLD.start, None, 0.0)
     assert out.reason is Reason.TRACKING
     assert out.solution.x_pred.shape == (7, 3)
     controller.update_config(controller.config.with_changes(horizon=10))
@@ -164,7 +176,7 @@ def test_new_velocity_bounds_bound_the_command() -> None:
     controller = MpcController(config=CONFIG, obstacles=WORLD.obstacles)
     controller.set_path(analytic_path('paper_sinusoid'))
     controller.set_model(Unicycle(v_max=0.1, omega_max=0.5))
-    out = controller.compute(WORLD.start, 0.0)
+    out = controller.compute(WORLD.start, None, 0.0)
     assert out.reason is Reason.TRACKING
     assert abs(out.u[0]) <= 0.1 + 1e-12 and abs(out.u[1]) <= 0.5 + 1e-12
     assert out.u[0] > 0.05
@@ -210,7 +222,7 @@ def test_at_the_goal_position_off_its_heading_the_robot_turns_in_place_then_arri
     x = TURNED.copy()
     reasons = []
     for _ in range(20):
-        out = controller.compute(x, 0.0)
+        out = controller.compute(x, None, 0.0)
         reasons.append(out.reason)
         if out.reason is Reason.GOAL_REACHED:
             break
@@ -238,45 +250,45 @@ def test_a_polygon_robot_beside_an_obstacle_lets_the_mpc_steer_to_the_heading() 
         raise RuntimeError('the MPC was asked')
 
     controller.mpc.solve = steered  # type: ignore[method-assign]
-    out = controller.compute(TURNED, 0.0)
+    out = controller.compute(TURNED, None, 0.0)
     assert out.reason is Reason.ERROR and 'the MPC was asked' in out.detail
     controller.set_obstacles([ConvexPolygon.from_box(3.5, -0.5, 4.0, 0.5)])  # 0.95 m away
-    out = controller.compute(TURNED, 0.0)
+    out = controller.compute(TURNED, None, 0.0)
     assert out.reason is Reason.ROTATE_TO_HEADING and out.u[0] == 0.0
 
 
 def test_stateful_arrival_stays_through_drift_until_a_new_plan() -> None:
     controller = arrival_controller()
-    assert controller.compute(GOAL + [0.08, 0.0, 0.1], 0.0).reason is Reason.GOAL_REACHED
+    assert controller.compute(GOAL + [0.08, 0.0, 0.1], None, 0.0).reason is Reason.GOAL_REACHED
     # odometry noise carries the measured pose out of both tolerances: still arrived
     for drifted in (GOAL + [0.3, 0.0, 0.0], GOAL + [0.0, 0.12, 1.0], WORLD.start):
-        out = controller.compute(drifted, 0.0)
+        out = controller.compute(drifted, None, 0.0)
         assert out.reason is Reason.GOAL_REACHED and out.solution is None
         np.testing.assert_array_equal(out.u, [0.0, 0.0])
-    assert controller.compute(None, 0.0).reason is Reason.GOAL_REACHED
+    assert controller.compute(None, None, 0.0).reason is Reason.GOAL_REACHED
     # a new plan (the same poses again: a new goal) is driven to from the drifted pose
     controller.set_plan(PLAN)
-    out = controller.compute(GOAL + [0.3, 0.0, 0.0], 0.0)
+    out = controller.compute(GOAL + [0.3, 0.0, 0.0], None, 0.0)
     assert out.reason in (Reason.TRACKING, Reason.CANDIDATE) and out.solution is not None
 
 
 def test_stateful_the_goal_position_once_met_stays_met_while_turning() -> None:
     controller = arrival_controller()
-    assert controller.compute(TURNED, 0.0).reason is Reason.ROTATE_TO_HEADING
+    assert controller.compute(TURNED, None, 0.0).reason is Reason.ROTATE_TO_HEADING
     # noise moves the position 0.12 m off (outside 0.1 m): the robot still only turns
-    out = controller.compute(GOAL + [0.12, 0.0, 0.5], 0.0)
+    out = controller.compute(GOAL + [0.12, 0.0, 0.5], None, 0.0)
     assert out.reason is Reason.ROTATE_TO_HEADING and out.u[0] == 0.0
-    assert controller.compute(GOAL + [0.12, 0.0, 0.1], 0.0).reason is Reason.GOAL_REACHED
+    assert controller.compute(GOAL + [0.12, 0.0, 0.1], None, 0.0).reason is Reason.GOAL_REACHED
 
 
 def test_not_stateful_a_pose_that_drifts_out_is_driven_back() -> None:
     controller = arrival_controller(stateful=False)
-    assert controller.compute(GOAL + [0.08, 0.0, 0.1], 0.0).reason is Reason.GOAL_REACHED
-    out = controller.compute(GOAL + [0.3, 0.0, 0.0], 0.0)
+    assert controller.compute(GOAL + [0.08, 0.0, 0.1], None, 0.0).reason is Reason.GOAL_REACHED
+    out = controller.compute(GOAL + [0.3, 0.0, 0.0], None, 0.0)
     assert out.reason in (Reason.TRACKING, Reason.CANDIDATE) and out.solution is not None
     controller.set_plan(PLAN)
-    assert controller.compute(TURNED, 0.0).reason is Reason.ROTATE_TO_HEADING
-    out = controller.compute(GOAL + [0.12, 0.0, 0.5], 0.0)  # out of xy: the MPC again
+    assert controller.compute(TURNED, None, 0.0).reason is Reason.ROTATE_TO_HEADING
+    out = controller.compute(GOAL + [0.12, 0.0, 0.5], None, 0.0)  # out of xy: the MPC again
     assert out.reason in (Reason.TRACKING, Reason.CANDIDATE) and out.solution is not None
 
 
@@ -293,7 +305,7 @@ def test_a_plan_through_an_obstacle_is_followed_and_reported_blocked_where_it_en
     straight = np.array([WORLD.start, WORLD.goal])
     path = controller.set_plan(straight)  # no longer refused
     assert controller.path is path
-    out = controller.compute(WORLD.start, 0.0)
+    out = controller.compute(WORLD.start, None, 0.0)
     assert out.reason in (Reason.TRACKING, Reason.CANDIDATE, Reason.STOP)
     blockage = controller.path_blockage(WORLD.start)
     assert blockage.blocked
@@ -325,14 +337,14 @@ def test_with_the_scan_a_source_no_scan_or_a_stale_one_gives_zero() -> None:
     controller = MpcController(config=CONFIG, obstacles=WORLD.obstacles,
                                settings=ControllerSettings(scan_timeout=0.5))
     controller.set_plan(PLAN)
-    out = controller.compute(WORLD.start, 10.0, state_time=10.0, scan_required=True)
+    out = _control(controller, WORLD.start, 10.0, pose_time=10.0, scan_required=True)
     assert out.reason is Reason.NO_SCAN and not out.u.any()
-    out = controller.compute(WORLD.start, 10.0, state_time=10.0, scan_required=True,
-                             scan_time=9.4)
+    out = _control(controller, WORLD.start, 10.0, pose_time=10.0, scan_required=True,
+                   scan_time=9.4)
     assert out.reason is Reason.STALE_SCAN and out.message == 'scan is stale'
     assert not out.u.any()
-    out = controller.compute(WORLD.start, 10.0, state_time=10.0, scan_required=True,
-                             scan_time=9.6)
+    out = _control(controller, WORLD.start, 10.0, pose_time=10.0, scan_required=True,
+                   scan_time=9.6)
     assert out.reason is Reason.TRACKING
     with pytest.raises(ValueError, match='scan_timeout'):
         ControllerSettings(scan_timeout=0.0)
@@ -341,14 +353,78 @@ def test_with_the_scan_a_source_no_scan_or_a_stale_one_gives_zero() -> None:
 def test_new_obstacles_keep_the_warm_start_and_the_lyapunov_history() -> None:
     controller = MpcController(config=CONFIG, obstacles=WORLD.obstacles)
     controller.set_path(analytic_path('paper_sinusoid'))
-    first = controller.compute(WORLD.start, 0.0)
+    first = controller.compute(WORLD.start, None, 0.0)
     state = first.solution.x_pred[1]
     far = ConvexPolygon.from_box(10.0, 10.0, 11.0, 11.0)
     controller.set_obstacles([*WORLD.obstacles, far])
     assert len(controller.obstacles) == 2
-    second = controller.compute(state, 0.2)
+    second = controller.compute(state, None, 0.2)
     assert second.reason is Reason.TRACKING
     assert second.solution.lyapunov_ok is not None  # the history was kept, and checked
     same = controller.grown_obstacles
     controller.set_obstacles(list(controller.obstacles))  # the same objects: nothing to do
     assert controller.grown_obstacles == same
+
+
+def test_the_mpc_controller_implements_the_local_controller_interface() -> None:
+    assert isinstance(MpcController(config=CONFIG), LocalController)
+
+
+def test_reset_forgets_the_run_as_a_new_controller_would_start_it() -> None:
+    used = MpcController(config=CONFIG, obstacles=WORLD.obstacles)
+    used.set_path(analytic_path('paper_sinusoid'))
+    x = np.asarray(WORLD.start, dtype=float)
+    for k in range(3):
+        x = used.compute(x, None, 0.2 * k).solution.x_pred[1]
+    used.reset()
+    assert used.path is None
+    out = used.compute(x, None, 0.6)
+    assert out.reason is Reason.NO_PLAN and not out.u.any()  # nothing held, nothing braked
+    new = MpcController(config=CONFIG, obstacles=WORLD.obstacles)
+    for controller in (used, new):
+        controller.set_path(analytic_path('paper_sinusoid'))
+    # the same step as a new controller's first: no held input, no candidate, no history
+    a, b = used.compute(x, None, 0.65), new.compute(x, None, 0.65)
+    assert a.fresh and a.reason is b.reason is Reason.TRACKING
+    assert a.solution.lyapunov_ok is None and b.solution.lyapunov_ok is None
+    np.testing.assert_array_equal(a.u, b.u)
+    np.testing.assert_array_equal(a.solution.x_pred, b.solution.x_pred)
+
+
+def test_a_speed_limit_caps_every_command_until_it_is_lifted() -> None:
+    controller = MpcController(config=CONFIG, obstacles=WORLD.obstacles)
+    controller.set_plan(PLAN)
+    cap = 0.12  # the paper's Turtlebot drives at up to 0.31 m/s here
+    controller.set_speed_limit(cap)
+    assert controller.speed_limit == cap and controller.model.v_max == Unicycle().v_max
+    model = controller.model.discrete(0.2)
+    x = np.asarray(WORLD.start, dtype=float)
+    speeds = []
+    for k in range(15):
+        out = controller.compute(x, None, 0.2 * k)
+        # the plans within the solver's tolerance, the command exactly
+        assert out.solution is None or np.all(np.abs(out.solution.u_pred[:, 0]) <= cap + 1e-6)
+        speeds.append(abs(out.u[0]))
+        x = np.asarray(model(x, out.u)).reshape(-1)
+    assert max(speeds) <= cap and max(speeds) > 0.9 * cap
+    controller.set_speed_limit(None)
+    out = controller.compute(x, None, 3.0)
+    assert out.reason is Reason.TRACKING and abs(out.u[0]) > cap
+    for bad in (0.0, -1.0, math.nan, math.inf):
+        with pytest.raises(ValueError, match='speed limit'):
+            controller.set_speed_limit(bad)
+
+
+def test_the_solver_runner_is_injected_and_kept_through_a_rebuild() -> None:
+    calls: list[int] = []
+
+    def counting(*args: object, **kwargs: object) -> SolverRun:
+        calls.append(1)
+        return run_solver(*args, **kwargs)
+
+    controller = MpcController(config=CONFIG, obstacles=WORLD.obstacles, runner=counting)
+    assert controller.runner is counting and controller.mpc.runner is counting
+    controller.set_plan(PLAN)
+    controller.set_speed_limit(0.2)  # a rebuild of the MPC
+    assert controller.runner is counting
+    assert controller.compute(WORLD.start, None, 0.0).reason is Reason.TRACKING and calls

@@ -25,9 +25,10 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.config import MpcConfig, SolverSettings
-from mpc_local_planner.core.control_output import Reason
+from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.controller_settings import ControllerSettings
+from mpc_local_planner.core.input_freshness import InputFreshness
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.reality import Base, Reality
 from mpc_local_planner.evaluation.rollout import rollout, StopRule
@@ -39,6 +40,15 @@ CONFIG = MpcConfig(solving=SolverSettings(max_solve_time=3600.0))
 PLAN = np.array([[0.0, 0.0, WORLD.start[2]], [0.8, 1.3, 0.0], [1.7, 1.3, -0.96],
                  [2.5, 0.0, WORLD.goal[2]]])
 PERIOD = 0.05  # 20 Hz
+
+
+def _control(controller: MpcController, pose: np.ndarray, now: float,
+             **inputs: object) -> ControlOutput:
+    """Step as the controller node does: the inputs' ages are checked before compute."""
+    refused = InputFreshness.of(controller.settings).check(now, **inputs)
+    if refused is None:
+        return controller.compute(pose, None, now)
+    return controller.refuse_inputs(refused, now)
 
 
 def _controller(config: MpcConfig = CONFIG, **settings) -> MpcController:
@@ -53,7 +63,7 @@ def test_at_20_hz_the_mpc_solves_once_a_step_and_the_calls_between_apply_its_pla
     x = np.array(WORLD.start, dtype=float)
     outputs = []
     for k in range(40):  # 2 s
-        out = controller.compute(x, k * PERIOD)
+        out = controller.compute(x, None, k * PERIOD)
         outputs.append(out)
         x = MODEL.step(x, out.u, PERIOD)
     fresh = [k for k, out in enumerate(outputs) if out.fresh]
@@ -68,7 +78,7 @@ def test_a_timer_that_fires_early_still_solves_at_the_step():
     controller = _controller(control_frequency=20.0)
     x = np.array(WORLD.start, dtype=float)
     times = [0.0, 0.049, 0.101, 0.148, 0.199, 0.251]
-    fresh = [controller.compute(x, t).fresh for t in times]
+    fresh = [controller.compute(x, None, t).fresh for t in times]
     assert fresh == [True, False, False, False, True, False]
 
 
@@ -79,13 +89,13 @@ def test_a_stop_of_a_moving_robot_brakes_along_the_plan_within_max_decel():
     t = 0.0
     for k in range(40):  # get going
         t = k * PERIOD
-        out = controller.compute(x, t, state_time=t)
+        out = _control(controller, x, t, pose_time=t)
         x = MODEL.step(x, out.u, PERIOD)
     assert out.reason is Reason.TRACKING and out.u[0] > 0.2
     last = out.u
     braking = []
     for k in range(1, 40):  # odometry stops coming at t
-        out = controller.compute(x, t + k * PERIOD, state_time=t)
+        out = _control(controller, x, t + k * PERIOD, pose_time=t)
         if out.reason is Reason.STALE_ODOM:
             braking.append(out.u)
     braking = np.array(braking)
@@ -99,9 +109,9 @@ def test_without_max_decel_a_stop_is_zero_at_once():
     controller = _controller(control_frequency=20.0, odom_timeout=0.3)
     x = np.array(WORLD.start, dtype=float)
     for k in range(20):
-        out = controller.compute(x, k * PERIOD, state_time=k * PERIOD)
+        out = _control(controller, x, k * PERIOD, pose_time=k * PERIOD)
         x = MODEL.step(x, out.u, PERIOD)
-    out = controller.compute(x, 2.0, state_time=0.95)
+    out = _control(controller, x, 2.0, pose_time=0.95)
     assert out.reason is Reason.STALE_ODOM
     np.testing.assert_array_equal(out.u, [0.0, 0.0])
 
@@ -112,7 +122,7 @@ def test_with_max_accel_the_commands_change_within_the_bounds_and_the_robot_arri
     x = np.array(WORLD.start, dtype=float)
     commands = []
     for k in range(150):
-        out = controller.compute(x, k * 0.2)
+        out = controller.compute(x, None, k * 0.2)
         commands.append(out.u)
         if out.reason is Reason.GOAL_REACHED:
             break
@@ -130,7 +140,7 @@ def test_with_max_accel_the_commands_change_within_the_bounds_and_the_robot_arri
     x = np.array(WORLD.start, dtype=float)
     jumps = []
     for k in range(30):
-        out = free.compute(x, k * 0.2)
+        out = free.compute(x, None, k * 0.2)
         jumps.append(out.u)
         x = MODEL.step(x, out.u, 0.2)
     assert np.max(np.abs(np.diff(np.vstack([np.zeros(2), jumps]), axis=0))[:, 1]) > bound[1]
@@ -149,7 +159,7 @@ def test_a_closed_loop_with_lag_and_delay_reaches_the_goal_and_settles(reality):
     class Stepper:
         def step(self, x):
             from mpc_local_planner.evaluation.rollout import ControlStep
-            out = controller.compute(x, round(base.time, 9), velocity=base.twist())
+            out = controller.compute(x, base.twist(), round(base.time, 9))
             return ControlStep(u=out.u, detail=out)
 
     rule = StopRule(time_limit=40.0, position_tolerance=-1.0)  # run on past arrival
@@ -179,7 +189,7 @@ def test_after_a_stop_the_mpc_tries_again_at_the_next_step_not_at_every_call():
         return solve(x, *args, **kwargs)
 
     controller.mpc.solve = counted
-    outputs = [controller.compute(np.zeros(3), k * PERIOD) for k in range(20)]
+    outputs = [controller.compute(np.zeros(3), None, k * PERIOD) for k in range(20)]
     assert all(out.reason is Reason.STOP for out in outputs)
     assert len(solves) == 5
     assert [out.fresh for out in outputs[:5]] == [True, False, False, False, True]
@@ -188,6 +198,6 @@ def test_after_a_stop_the_mpc_tries_again_at_the_next_step_not_at_every_call():
 def test_a_clock_that_jumps_back_solves_at_once():
     controller = _controller(control_frequency=20.0)
     x = np.array(WORLD.start, dtype=float)
-    assert controller.compute(x, 5.0).fresh
-    assert not controller.compute(x, 5.05).fresh
-    assert controller.compute(x, 1.0).fresh  # e.g. a simulation restarted its /clock
+    assert controller.compute(x, None, 5.0).fresh
+    assert not controller.compute(x, None, 5.05).fresh
+    assert controller.compute(x, None, 1.0).fresh  # e.g. a simulation restarted its /clock

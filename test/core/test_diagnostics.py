@@ -54,7 +54,7 @@ def test_a_solved_step_survives_the_round_trip_through_strings() -> None:
     controller = MpcController(config=MpcConfig(solving=SolverSettings(max_solve_time=3600.0)),
                                obstacles=WORLD.obstacles)
     controller.set_path(analytic_path('paper_sinusoid'))
-    output = controller.compute(WORLD.start, 0.0)
+    output = controller.compute(WORLD.start, None, 0.0)
     assert output.reason is Reason.TRACKING
     record = ControllerDiagnostics.from_output(output, state=WORLD.start, state_time=1.5,
                                                failures_total=0)

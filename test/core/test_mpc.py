@@ -7,7 +7,6 @@ from mpc_local_planner.core.baselines import TrackingMPC
 from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC, PlanSource
-from mpc_local_planner.core.mpc import step as step_module
 from mpc_local_planner.core.mpc.backends import SolverRun
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import paper_sinusoid, WaypointPath
@@ -154,8 +153,7 @@ def test_lazy_obstacles_give_the_closed_loop_of_all_obstacles_in_the_nlp(propose
         proposed_run.metrics['path_length'], rel=1e-3)
 
 
-def test_without_a_solver_the_shifted_candidate_is_applied_until_it_runs_out(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+def test_without_a_solver_the_shifted_candidate_is_applied_until_it_runs_out() -> None:
     path, model, horizon = paper_sinusoid(), Unicycle(), 6
     controller = PathReferenceMPC(model, CONFIG.with_changes(horizon=horizon), obstacles=[BOX],
                                   path=path)
@@ -169,7 +167,7 @@ def test_without_a_solver_the_shifted_candidate_is_applied_until_it_runs_out(
         return SolverRun(w=np.asarray(w0, dtype=float), value=np.inf, success=False,
                          status='injected failure', iterations=0, seconds=0.0)
 
-    monkeypatch.setattr(step_module, 'run_solver', failing_solver)
+    controller.runner = failing_solver
     for k in range(1, horizon + 2):
         solution = controller.solve(x)
         assert solution.source == PlanSource.CANDIDATE and not solution.solver_verified

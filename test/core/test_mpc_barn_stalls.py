@@ -72,7 +72,7 @@ def steps_until_tracking(controller: MpcController, x: np.ndarray
     model = controller.model.discrete(H)
     reasons = []
     for k in range(WITHIN_STEPS):
-        output = controller.compute(x, k * H)
+        output = controller.compute(x, None, k * H)
         reasons.append(output.reason)
         if output.reason is Reason.TRACKING:
             break
@@ -134,7 +134,7 @@ def test_a_plan_that_puts_off_its_motion_does_not_hold_the_robot_in_open_space(
     model = controller.model.discrete(H)
     x = start = np.array(case['x'])
     for k in range(LEAVES_WITHIN_STEPS):
-        output = controller.compute(x, k * H)
+        output = controller.compute(x, None, k * H)
         x = np.asarray(model(x, output.u)).reshape(-1)
         if float(np.hypot(*(x[:2] - start[:2]))) > 1.0:
             break
@@ -177,7 +177,7 @@ def test_a_new_plan_at_speed_starts_from_the_motion_in_hand() -> None:
             controller.set_plan(np.array(poses))  # the re-plan, at the last recorded step
         controller.set_obstacles([ConvexPolygon.from_vertices(np.array(v))
                                   for v in step['obstacles']])
-        output = controller.compute(np.array(step['x']), step['t'])
+        output = controller.compute(np.array(step['x']), None, step['t'])
     assert poses != sequence[0]['poses']  # the sequence ends with the re-plan
     model = controller.model.discrete(H)
     x = np.asarray(model(np.array(sequence[-1]['x']), output.u)).reshape(-1)

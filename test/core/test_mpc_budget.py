@@ -18,9 +18,9 @@ Two kinds: wall time (max_solve_time, the robot's) and solver iterations
 (max_solve_iterations, the evaluation's: the same on any machine). Where a test needs the
 wall budget spent at a given point, the MPC gets a fake clock that the test moves (the public
 MpcBase.clock); a 1 us budget is spent before any solver is reached. Where it needs the
-solver to fail, backends' run_solver is replaced by a fake one (FakeSolver), and the step
-says which tries it made (MpcSolution.tries). Which tries a situation calls for is the table
-of test_mpc_tries.py. Nothing here asserts how fast anything is.
+solver to fail, the MPC is given a fake solver runner (FakeSolver, the public
+MpcBase.runner), and the step says which tries it made (MpcSolution.tries). Which tries a
+situation calls for is the table of test_mpc_tries.py. Nothing here asserts how fast anything is.
 """
 
 from __future__ import annotations
@@ -46,7 +46,6 @@ from mpc_local_planner.core.mpc import (
     Start,
     Try,
 )
-from mpc_local_planner.core.mpc import step as step_module
 from mpc_local_planner.core.mpc.backends import (
     iteration_levels,
     Nlp,
@@ -86,7 +85,7 @@ def no_clock() -> float:
 
 
 class FakeSolver:
-    """Stands in for backends.run_solver: fails, records its calls, spends a budget.
+    """Stands in for backends.run_solver (an MPC's runner): fails, records, spends a budget.
 
     Args:
         clock: a fake clock it moves by `seconds` a call (none: no time passes).
@@ -209,34 +208,32 @@ def test_a_spent_budget_stops_the_robot_when_there_is_no_verified_candidate() ->
     assert f'({Decision.STOP.value})' in solution.status
 
 
-def test_the_retry_chain_is_left_out_once_the_budget_is_spent(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_retry_chain_is_left_out_once_the_budget_is_spent() -> None:
     mpc = paper_mpc()
     x, _ = drive(mpc, 3)
     clock = FakeClock()
     mpc.clock = clock
     mpc.update_config(mpc.config.with_solving(max_solve_time=100.0))
     # with time to spare a failed solve is retried with the IPOPT fallback
-    monkeypatch.setattr(step_module, 'run_solver', FakeSolver())
+    mpc.runner = FakeSolver()
     spare = mpc.solve(x)
     assert spare.tries == (CANDIDATE_BACKEND, CANDIDATE_FALLBACK)
     assert not spare.timed_out and spare.status.endswith(
         f'({Decision.CANDIDATE_SOLVER_FAILED.value})')
     # a failed solve that spends the budget is the step's only try
-    monkeypatch.setattr(step_module, 'run_solver', FakeSolver(clock, seconds=200.0))
+    mpc.runner = FakeSolver(clock, seconds=200.0)
     spent = mpc.solve(mpc.model.step(x, spare.u0, H))
     assert spent.tries == (CANDIDATE_BACKEND,)
     assert spent.timed_out and spent.source is PlanSource.CANDIDATE
     assert spent.status.endswith(f'({Decision.CANDIDATE_TIMEOUT.value})')
 
 
-def test_without_a_plan_the_second_start_is_left_out_once_the_budget_is_spent(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+def test_without_a_plan_the_second_start_is_left_out_once_the_budget_is_spent() -> None:
     clock = FakeClock()
     mpc = paper_mpc(max_solve_time=100.0)
     mpc.clock = clock
     solver = FakeSolver()
-    monkeypatch.setattr(step_module, 'run_solver', solver)
+    mpc.runner = solver
     solution = mpc.solve(mpc.path.start)
     # the candidate (stay put) with IPOPT cold and the backend, then the start along the
     # path with IPOPT and the backend: solver_tries()'s order, each start packed once
@@ -247,21 +244,20 @@ def test_without_a_plan_the_second_start_is_left_out_once_the_budget_is_spent(
     assert not np.array_equal(starts[2], starts[0])
     np.testing.assert_array_equal(starts[3], starts[2])
     mpc.reset()
-    monkeypatch.setattr(step_module, 'run_solver', FakeSolver(clock, seconds=200.0))
+    mpc.runner = FakeSolver(clock, seconds=200.0)
     solution = mpc.solve(mpc.path.start)
     assert solution.tries == (Try(Start.CANDIDATE, Solver.IPOPT_COLD),)
     assert solution.timed_out
 
 
-def test_a_fallback_is_built_mid_step_only_if_its_build_fits_in_what_is_left(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_fallback_is_built_mid_step_only_if_its_build_fits_in_what_is_left() -> None:
     mpc = paper_mpc()
     x, _ = drive(mpc, 3)
     clock = FakeClock()
     mpc.clock = clock
     mpc.update_config(mpc.config.with_solving(max_solve_time=0.1))
     solver = FakeSolver()
-    monkeypatch.setattr(step_module, 'run_solver', solver)
+    mpc.runner = solver
     mpc.solve(x)  # finds the NLP of this state (and builds its fallback: time was left)
     nlp = solver.nlps[0]
     nlp.fallback = None  # as if never built
@@ -283,8 +279,7 @@ def test_prepare_builds_the_fallbacks_ahead() -> None:
     assert all(nlp.fallback_build_time == 0.0 for nlp in mpc.nlps.values())
 
 
-def test_a_constraint_generation_round_is_left_out_once_the_budget_is_spent(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_constraint_generation_round_is_left_out_once_the_budget_is_spent() -> None:
     # nothing active up front: at step 15 the solution comes onto the box, which a second
     # round adds (found by running this scenario; the interpreted solver is deterministic)
     rounds_at = 15
@@ -304,7 +299,7 @@ def test_a_constraint_generation_round_is_left_out_once_the_budget_is_spent(
         clock.now += 200.0  # it took longer than the budget
         return run
 
-    monkeypatch.setattr(step_module, 'run_solver', slow_solver)
+    hurried.runner = slow_solver
     solution = hurried.solve(x)
     assert solution.rounds == 1 and solution.timed_out
     # the one round's solution ran onto the box left out of its NLP: not applied
@@ -313,21 +308,20 @@ def test_a_constraint_generation_round_is_left_out_once_the_budget_is_spent(
 
 
 # ----------------------------------------------------------------------------- iterations
-def test_an_iteration_budget_is_spent_by_the_iterations_made_and_never_reads_a_clock(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+def test_an_iteration_budget_is_spent_by_the_iterations_made_and_never_reads_a_clock() -> None:
     mpc = paper_mpc()
     x, _ = drive(mpc, 3)
     mpc.clock = no_clock
     mpc.update_config(mpc.config.with_solving(budget='iterations', max_solve_iterations=10))
     # a failed try of 4 iterations leaves 6 for the fallback
     solver = FakeSolver(iterations=4)
-    monkeypatch.setattr(step_module, 'run_solver', solver)
+    mpc.runner = solver
     solution = mpc.solve(x)
     assert solution.tries == (CANDIDATE_BACKEND, CANDIDATE_FALLBACK)
     assert solver.limits == [10, 6] and solution.iterations == 8 and not solution.timed_out
     # one of 10 leaves nothing: the step's only try
     solver = FakeSolver(iterations=10)
-    monkeypatch.setattr(step_module, 'run_solver', solver)
+    mpc.runner = solver
     solution = mpc.solve(mpc.model.step(x, solution.u0, H))
     assert solution.tries == (CANDIDATE_BACKEND,) and solution.timed_out
     assert solution.source is PlanSource.CANDIDATE
@@ -393,12 +387,12 @@ def test_the_controller_counts_timeouts_and_the_diagnostics_publish_the_count() 
                                obstacles=[BOX])
     controller.set_path(paper_sinusoid())
     x = paper_sinusoid().start
-    output = controller.compute(x, 0.0)
+    output = controller.compute(x, None, 0.0)
     assert output.reason is Reason.TRACKING and controller.timeouts == 0
     controller.update_config(controller.config.with_solving(max_solve_time=TINY))
     for k in range(1, 3):
         x = controller.model.step(x, output.u, H)
-        output = controller.compute(x, k * H)
+        output = controller.compute(x, None, k * H)
         assert output.reason is Reason.CANDIDATE and output.solution.timed_out
         assert controller.timeouts == k and controller.solver_failures == k
     record = ControllerDiagnostics.from_output(
@@ -616,15 +610,14 @@ def test_the_same_path_again_keeps_the_cut_solve_and_a_new_one_starts_over() -> 
     assert tries_after(new_path=True).start is not Start.CONTINUATION
 
 
-def test_after_a_stand_still_plan_the_next_step_starts_as_from_rest(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+def test_after_a_stand_still_plan_the_next_step_starts_as_from_rest() -> None:
     # a step from rest that does not solve applies the stand-still candidate; the step after
     # it must try IPOPT's cold start first, as from rest, not the warm tries from that
     # candidate (fatrop failed from it at every step after a re-plan at 2 m/s on BARN)
     config = MpcConfig(solving=SolverSettings(compile=False, max_solve_time=NO_TIME_LIMIT,
                                               activation_distance=5.0))
-    mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid())
-    monkeypatch.setattr(step_module, 'run_solver', FakeSolver(iterations=1))
+    mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES, path=paper_sinusoid(),
+                           runner=FakeSolver(iterations=1))
     x = mpc.path.start.copy()
     first = mpc.solve(x)
     assert not first.success and not np.any(first.u_pred)  # the stand-still candidate

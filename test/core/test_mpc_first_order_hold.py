@@ -147,7 +147,7 @@ def _prediction_errors(hold: str, factor: float, delay: float) -> np.ndarray:
                 actual = _relative(pose, base.pose)
                 errors.append((float(np.hypot(*(actual[:2] - predicted[:2]))),
                                abs(actual[2] - predicted[2])))
-        output = controller.compute(base.pose.copy(), t, velocity=base.twist())
+        output = controller.compute(base.pose.copy(), base.twist(), t)
         if output.fresh and output.reason.applies_input and output.solution is not None:
             pending.append((t, base.pose.copy(),
                             _relative(output.solution.x_pred[0], output.solution.x_pred[1])))

@@ -30,7 +30,6 @@ from mpc_local_planner.core.config import MpcConfig, SolverSettings
 from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import Decision, PathReferenceMPC, PlanSource
-from mpc_local_planner.core.mpc import step as step_module
 from mpc_local_planner.core.mpc.backends import SolverRun
 from mpc_local_planner.core.mpc.formulation import (
     formulate,
@@ -324,8 +323,7 @@ def test_the_jackal_drives_through_a_gap_of_0_60_m(solver: str,
     assert np.all(run.inputs[in_gap, 0] > 0.3)
 
 
-def test_the_shifted_candidate_of_a_polygon_plan_is_verified_and_applied(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_shifted_candidate_of_a_polygon_plan_is_verified_and_applied() -> None:
     mpc = PathReferenceMPC(Unicycle(), jackal_config(), obstacles=GAP_BOXES, path=gap_path(0.3))
     x = np.array([0.0, 0.3, 0.0])
     run = drive(mpc, x, 14, GAP_BOXES)  # to the mouth of the gap, both boxes in the NLP
@@ -335,7 +333,7 @@ def test_the_shifted_candidate_of_a_polygon_plan_is_verified_and_applied(
         return SolverRun(w=np.asarray(w0, dtype=float), value=np.inf, success=False,
                          status='injected failure', iterations=0, seconds=0.0)
 
-    monkeypatch.setattr(step_module, 'run_solver', failing_solver)
+    mpc.runner = failing_solver
     failed = drive(mpc, run.x, 6, GAP_BOXES)
     # the proof's candidate meets the NLP's smooth clearance rows with the exact multipliers
     assert all(status.endswith(f'({Decision.CANDIDATE_SOLVER_FAILED.value})')

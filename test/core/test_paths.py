@@ -7,6 +7,7 @@ import pytest
 from mpc_local_planner.core.paths import (
     paper_sinusoid,
     Polyline,
+    remaining_polyline,
     simplify_polyline,
     WaypointPath,
 )
@@ -144,3 +145,26 @@ def test_a_polyline_drops_repeats_and_gives_points_by_arc_length_clipped_to_its_
     np.testing.assert_allclose(line.point_at(9.0), [3.0, 4.0])
     with pytest.raises(ValueError, match='two distinct waypoints'):
         Polyline(np.array([[1.0, 1.0], [1.0, 1.0]]))
+
+
+def test_the_remaining_plan_starts_at_the_projection_on_or_after_forward_from() -> None:
+    # a plan out and back beside itself: at (1, 0.1) the nearest point is on the way back
+    plan = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 0.2], [0.0, 0.2]])
+    point = np.array([1.0, 0.11])
+    nearest = remaining_polyline(plan, point)
+    assert nearest.segment == 2
+    np.testing.assert_allclose(nearest.points, [[1.0, 0.2], [0.0, 0.2]])
+    # a controller still on the way out (its last projection on segment 0) keeps going
+    # forward: forward_from limits the search to segments from there on, not before
+    behind = remaining_polyline(plan, np.array([1.0, 0.09]), forward_from=0)
+    assert behind.segment == 0
+    np.testing.assert_allclose(behind.points, [[1.0, 0.0], *plan[1:]])
+    ahead = remaining_polyline(plan, np.array([1.0, 0.09]), forward_from=2)
+    assert ahead.segment == 2
+    np.testing.assert_allclose(ahead.points, [[1.0, 0.2], [0.0, 0.2]])
+    clipped = remaining_polyline(plan, np.array([-1.0, 0.0]), forward_from=99)
+    assert clipped.segment == 2
+    np.testing.assert_allclose(clipped.points, [[0.0, 0.2]] * 2)
+    single = remaining_polyline(plan[:1], point)
+    assert single.segment == 0
+    np.testing.assert_array_equal(single.points, plan[:1])

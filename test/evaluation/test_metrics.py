@@ -190,7 +190,7 @@ def test_arrivals_over_rows_are_the_controllers_verdicts_step_by_step() -> None:
     controller = MpcController(config=MpcConfig(solving=SolverSettings(budget='iterations')),
                                obstacles=world.obstacles)
     controller.set_path(analytic_path(world.path))
-    verdicts = [controller.compute(pose, 0.2 * k).reason is Reason.GOAL_REACHED
+    verdicts = [controller.compute(pose, None, 0.2 * k).reason is Reason.GOAL_REACHED
                 for k, pose in enumerate(poses)]
     assert verdicts == [False, False, True, True]
     settings = ControllerSettings()

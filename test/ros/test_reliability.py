@@ -46,7 +46,6 @@ from mpc_local_planner.core.control_output import Reason
 from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PlanSource
-from mpc_local_planner.core.mpc import step as step_module
 from mpc_local_planner.core.mpc.backends import SolverRun
 from mpc_local_planner.core.obstacles import first_blocked_segment
 from mpc_local_planner.ros.closed_loop_parameters import MODULES
@@ -361,7 +360,7 @@ def failing_solver(nlp, w0, params, solver=None, **limits):
 
 
 def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_then_stop(
-        ros, monkeypatch) -> None:
+        ros) -> None:
     horizon = 10
     ros.add(UnicycleSimulatorNode(context=ros.context, parameter_overrides=[
         Parameter('publish_clock', value=True), Parameter('real_time_factor', value=2.0),
@@ -382,7 +381,8 @@ def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_th
     verified = node.last_output.solution  # the last plan the solver gave
     patched_at = node.get_clock().now().nanoseconds * 1e-9
     failures_before = node.controller.solver_failures
-    monkeypatch.setattr(step_module, 'run_solver', failing_solver)
+    solver = node.controller.runner
+    node.controller.runner = failing_solver
 
     def after_patch() -> list[dict]:
         return [d for d in probe.diagnostics if d.stamp > patched_at]
@@ -414,7 +414,7 @@ def test_injected_solver_failures_apply_the_shifted_candidate_at_most_n_steps_th
     check_commands(probe)
 
     # the solver is back: the robot drives on
-    monkeypatch.undo()
+    node.controller.runner = solver
     resumed = len(probe.diagnostics)
     assert ros.spin_until(lambda: tracking(probe, resumed), timeout=30.0)
     check_commands(probe)

@@ -30,6 +30,7 @@ import numpy as np
 
 from mpc_local_planner.core.config import CostWeights, MpcConfig
 from mpc_local_planner.core.models import RobotModel
+from mpc_local_planner.core.mpc.backends import run_solver, SolverRunner
 from mpc_local_planner.core.mpc.candidate import Plan
 from mpc_local_planner.core.mpc.formulation import TerminalCondition
 from mpc_local_planner.core.mpc.step import MpcBase
@@ -70,14 +71,16 @@ class TrackingMPC(MpcBase):
         config: settings (MpcConfig()); offset_weight weighs the distance to the target.
         obstacles: convex obstacles as described; inflated here by config.inflation().
         target: the target pose [x, y, theta].
+        runner: what runs an NLP's solver (see MpcBase).
 
     """
 
     def __init__(self, model: RobotModel, config: MpcConfig | None = None, *,
                  obstacles: Sequence[ConvexPolygon] = (),
-                 target: np.ndarray | None = None) -> None:
+                 target: np.ndarray | None = None,
+                 runner: SolverRunner = run_solver) -> None:
         self._target = None if target is None else np.asarray(target, dtype=float)
-        super().__init__(model, config, obstacles=obstacles)
+        super().__init__(model, config, obstacles=obstacles, runner=runner)
 
     def set_target(self, target: np.ndarray) -> None:
         """Set the target pose [x, y, theta]."""

@@ -45,16 +45,16 @@ import os
 from pathlib import Path
 import threading
 import time
-from typing import Any, Callable, NamedTuple
+from typing import Any, Callable, NamedTuple, Protocol
 
 import casadi as ca
 import numpy as np
 
-from mpc_local_planner.core.config import SolverSettings
+from mpc_local_planner.core.config import NlpSolver, SolverSettings
 from mpc_local_planner.core.mpc import compilation
 from mpc_local_planner.core.mpc.formulation import Formulation
 
-__all__ = ['Nlp', 'SolverRun', 'backend_options', 'build_nlp', 'compile_flags',
+__all__ = ['Nlp', 'SolverRun', 'SolverRunner', 'backend_options', 'build_nlp', 'compile_flags',
            'iteration_levels', 'run_solver', 'stage_size']
 
 _LOG = logging.getLogger(__name__)
@@ -133,9 +133,9 @@ def backend_options(settings: SolverSettings, structure: dict) -> tuple[str, dic
     """
     common = {'print_time': False, 'error_on_fail': False}
     name = settings.solver
-    if name == 'ipopt':
+    if name is NlpSolver.IPOPT:
         plugin, options = 'ipopt', _ipopt_options(settings)
-    elif name == 'fatrop':
+    elif name is NlpSolver.FATROP:
         plugin, options = 'fatrop', _fatrop_options(settings, structure)
     else:
         msg = f'unknown solver {name!r}'
@@ -417,8 +417,9 @@ def build_nlp(formulation: Formulation, settings: SolverSettings) -> Nlp:
     """
     start = time.perf_counter()
     problem, structure = formulation.problem, formulation.structure
-    if settings.solver == 'fatrop' and stage_size(structure) > settings.fatrop_stage_limit:
-        settings = settings.with_changes(solver='ipopt')
+    if settings.solver is NlpSolver.FATROP and \
+            stage_size(structure) > settings.fatrop_stage_limit:
+        settings = settings.with_changes(solver=NlpSolver.IPOPT)
     plugin, options = backend_options(settings, structure)
     deadline = _Deadline(problem)
     if plugin == 'ipopt':
@@ -426,12 +427,13 @@ def build_nlp(formulation: Formulation, settings: SolverSettings) -> Nlp:
     nlp = Nlp(formulation=formulation, solver=ca.nlpsol('mpc', plugin, problem, options),
               backend=settings.solver, plugin=plugin, options=options, deadline=deadline,
               max_iterations=_iteration_limit(plugin, options, settings.max_iterations))
-    if settings.solver != 'ipopt':
+    if settings.solver is not NlpSolver.IPOPT:
         # a structure-exploiting backend is fast but less robust far from its warm start
         # (seen: fatrop failing near the box's corner under timing jitter); IPOPT, the
         # reference, gets the same problem before the controller gives up. Built on first
         # use: building it with every NLP doubled the start-up time.
-        fb_plugin, fb_options = backend_options(settings.with_changes(solver='ipopt'), structure)
+        fallback = settings.with_changes(solver=NlpSolver.IPOPT)
+        fb_plugin, fb_options = backend_options(fallback, structure)
         fb_options.setdefault('iteration_callback', deadline)
         nlp.fallback_factory = lambda: ca.nlpsol('mpc_fallback', fb_plugin, problem, fb_options)
     cold_options = {**_ipopt_options(settings, cold=True), 'print_time': False,
@@ -453,6 +455,15 @@ class SolverRun(NamedTuple):
     iterations: int
     seconds: float  # wall time of the call (and of building a limited copy for it)
     cut: bool = False  # the time limit stopped it (or left no time to start) before success
+
+
+class SolverRunner(Protocol):
+    """What runs an NLP's solver for a step (run_solver; a test's or benchmark's stand-in)."""
+
+    def __call__(self, nlp: Nlp, w0: np.ndarray, params: np.ndarray,
+                 solver: ca.Function | None = None, *, time_limit: float = math.inf,
+                 iteration_limit: float = math.inf) -> SolverRun:
+        """Solve nlp from w0 within the limits (see run_solver)."""
 
 
 def run_solver(nlp: Nlp, w0: np.ndarray, params: np.ndarray,

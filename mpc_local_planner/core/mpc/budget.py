@@ -35,7 +35,7 @@ from typing import Callable
 
 import casadi as ca
 
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import BudgetKind, MpcConfig
 from mpc_local_planner.core.mpc.backends import Nlp
 from mpc_local_planner.core.mpc.tries import Solver
 
@@ -62,7 +62,7 @@ class Budget:
     @classmethod
     def of(cls, config: MpcConfig, clock: Callable[[], float]) -> Budget:
         """Return the budget of one step under config."""
-        if config.solving.budget == 'iterations':
+        if config.solving.budget is BudgetKind.ITERATIONS:
             return cls(clock, iterations=config.solve_iterations())
         return cls(clock, seconds=config.solve_budget())
 

@@ -68,8 +68,11 @@ from mpc_local_planner.core.models import RobotModel
 from mpc_local_planner.core.paths import ReferencePath
 
 __all__ = [
-    'Formulation', 'Layout', 'SWEEP_SMOOTHING', 'TerminalCondition', 'formulate',
-    'path_terminal', 'ramp_sweep_rate', 'stage_cost', 'sweep_rate', 'symbolic_weights',
+    'Formulation', 'Layout', 'Row', 'SWEEP_SMOOTHING', 'TerminalCondition',
+    'disc_collision_rows', 'formulate', 'gap_closing_rows', 'initial_state_rows',
+    'obstacle_halfplanes', 'path_terminal', 'polygon_collision_rows', 'ramp_sweep_rate',
+    'rate_rows', 'stage_cost', 'sweep_rate', 'symbolic_weights', 'terminal_rows',
+    'variable_bounds',
 ]
 
 # eps of the smooth |z| ~ sqrt(z^2 + eps^2) in the NLP's motion-dependent clearance (m/s and
@@ -331,7 +334,9 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
     z_l = (x_l, r_l): the reference r is copied along the horizon (r_{l+1} = r_l) so that each
     stage cost l(x_l - x_s(r_l), ...) only touches its own stage. Constraints, per stage l:
     the gap-closing z_{l+1} = (f(x_l, u_l), r_l), then the stage's own constraints (x_0 = x(k)
-    at l = 0, the collision rows of x_l at l >= 1, the terminal condition at l = N).
+    at l = 0, the collision rows of x_l at l >= 1, the terminal condition at l = N). Each
+    family of rows has its builder below (gap_closing_rows, rate_rows, initial_state_rows,
+    disc_collision_rows, polygon_collision_rows, terminal_rows; variable_bounds for w).
 
     With a polygonal footprint (config.footprint), z_l = (x_l, r_l, c_l) for l >= 1 carries
     c_l = sweep_rate(x_{l-1}, u_{l-1}) too: the clearance at x_l must cover the step before
@@ -396,11 +401,7 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
     obs = ca.SX.sym('obs', 3 * faces * slots)
     p_path = ca.SX.sym('path', terminal.num_params)
     u_prev = ca.SX.sym('u_prev', npv)
-    A_list, b_list = [], []  # obstacle j is {p : A_j p <= b_j}
-    for j in range(slots):
-        base = 3 * faces * j
-        A_list.append(ca.reshape(obs[base:base + 2 * faces], faces, 2))
-        b_list.append(obs[base + 2 * faces:base + 3 * faces])
+    A_list, b_list = obstacle_halfplanes(obs, slots, faces)
 
     # ---- decision variables, stage by stage, in the order _blocks writes once
     blocks = _blocks(n, nx, nr, nz, nu, nm, nc, npv)
@@ -416,12 +417,15 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
     g, lbg, ubg = [], [], []
     ng_stage = []
 
-    def add(expr: ca.SX, lower: float, upper: float) -> int:
-        size = expr.numel()
-        g.append(ca.vec(expr))
-        lbg.append(np.full(size, lower, dtype=float))
-        ubg.append(np.full(size, upper, dtype=float))
-        return size
+    def add(rows: list[Row]) -> int:
+        count = 0
+        for expr, lower, upper in rows:
+            size = expr.numel()
+            g.append(ca.vec(expr))
+            lbg.append(np.full(size, lower, dtype=float))
+            ubg.append(np.full(size, upper, dtype=float))
+            count += size
+        return count
 
     cost = 0
     for k in range(n + 1):
@@ -432,66 +436,35 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
         if k < n:
             # (6a), cost (5): + l(x_l - x_s, u_l - u_s)
             cost = cost + stage(x_l, U[k], x_s, w_weights)
-            # (6c): x_{l+1} = f(x_l, u_l); and r_{l+1} = r_l (one reference, and its steady
-            # state when carried); a polygon also carries this step's sweep rate
+            # the steady state (when carried), this step's sweep rate (a polygon) and input
+            # (max_accel) go on to the next stage
             carried = ([x_s] if ns else []) + ([sweep(x_l, *step_inputs)] if polygon
                                                else []) + ([U[k]] if npv else [])
-            add(Z[k + 1] - ca.vertcat(f(x_l, *step_inputs), r_l, *carried), 0.0, 0.0)
+            add(gap_closing_rows(Z[k + 1], f(x_l, *step_inputs), r_l, carried))
         rows = 0
         if npv:
-            # (6g) for a real base: each input within max_accel h of the one before it
-            # (the commanded u_prev at l = 0), and u_N = 0 within it of u_{N-1}
-            if k == 0:
-                rows += add(Q[0] - u_prev, 0.0, 0.0)
-            change = U[k] - Q[k] if k < n else Q[k]
-            # a first-order hold reaches x_N at the velocity q_N = u_{N-1}: it must be 0
-            bound = np.zeros(nu) if first_order and k == n else rate
-            for i in range(nu):
-                rows += add(change[i], -bound[i], bound[i])
+            rows += add(rate_rows(k, n, Q[k], U[k] if k < n else None, u_prev, rate,
+                                  first_order))
         if k == 0:
-            # (6b): x_0 = x(k)
-            rows += add(x_l - x_k, 0.0, 0.0)
+            rows += add(initial_state_rows(x_l, x_k))
         elif polygon:
-            rows += _polygon_rows(add, x_l, model.angle_index, MU[k], A_list, b_list, faces,
-                                  G, g_body, config.farkas_margin,
-                                  # the step before x_l, and the one after it (u_N = 0: none)
-                                  [half_step * Z[k][nz]]
-                                  + ([half_step * sweep(x_l, *step_inputs)] if k < n
-                                     else []))
+            rows += add(polygon_collision_rows(
+                x_l, model.angle_index, MU[k], A_list, b_list, faces, G, g_body,
+                config.farkas_margin,
+                # the step before x_l, and the one after it (u_N = 0: none)
+                [half_step * Z[k][nz]]
+                + ([half_step * sweep(x_l, *step_inputs)] if k < n else [])))
         else:
-            # (6h) via Farkas (8), l = 1..N: p_l is outside {A p <= b} iff some mu >= 0 with
-            # sum(mu) = 1 has (A p_l - b)^T mu > 0 (without sum(mu) = 1, mu = 0 would do)
-            for j in range(slots):
-                mu = MU[k][j * faces:(j + 1) * faces]
-                p = x_l[0:2]
-                rows += add(ca.dot(ca.mtimes(A_list[j], p) - b_list[j], mu),
-                            config.farkas_margin, ca.inf)
-                rows += add(ca.sum1(mu), 1.0, 1.0)
+            rows += add(disc_collision_rows(x_l[0:2], MU[k], A_list, b_list, faces,
+                                            config.farkas_margin))
         if k == n:
-            if ns:
-                # the carried copies are x_s(r): evaluated here only
-                rows += add(x_s - terminal.steady_state(r_l, p_path), 0.0, 0.0)
-            # (6d)-(6f): the terminal condition, and (6a): + weights.offset V_o
-            residual, offset_cost = terminal.condition(x_l, x_s, r_l, p_path, weights)
-            # drop entries that are identically zero (a free steady state): an empty
-            # Jacobian row makes the KKT system singular and the solver wanders off
-            kept = [residual[i] for i in range(residual.numel()) if not residual[i].is_zero()]
-            if kept:
-                rows += add(ca.vertcat(*kept), 0.0, 0.0)
+            end_rows, offset_cost = terminal_rows(terminal, x_l, x_s, r_l, p_path,
+                                                  weights, carried=bool(ns))
+            rows += add(end_rows)
             cost = cost + weights.offset * offset_cost
         ng_stage.append(rows)
 
-    # (6g): (x_l, u_l) in Z; r in its range (s in [0, 1]); multipliers >= 0 (8); the carried
-    # sweep rates are free (their gap-closing rows fix them)
-    lbw, ubw = np.full(w.numel(), -np.inf), np.full(w.numel(), np.inf)
-    for k in range(n + 1):
-        lbw[layout.x[k]], ubw[layout.x[k]] = model.x_min, model.x_max
-        lbw[layout.r[k]], ubw[layout.r[k]] = terminal.lower, terminal.upper
-        if k < n:
-            lbw[layout.u[k]], ubw[layout.u[k]] = model.u_min, model.u_max
-        if k >= 1:
-            lbw[layout.mu[k - 1]], ubw[layout.mu[k - 1]] = 0.0, np.inf
-
+    lbw, ubw = variable_bounds(model, terminal, layout, n, w.numel())
     g_all = ca.vertcat(*g)
     params = ca.vertcat(x_k, w_weights, obs, p_path, u_prev)
     structure = {
@@ -511,10 +484,79 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
     )
 
 
-def _polygon_rows(add: Callable[[ca.SX, float, float], int], x_l: ca.SX, angle: int,
-                  multipliers: ca.SX, A_list: list[ca.SX], b_list: list[ca.SX], faces: int,
-                  G: ca.DM, g_body: ca.DM, margin: float, sweeps: list[ca.SX]) -> int:
-    """Add (6h) for a polygonal footprint at x_l against every slot; return the row count.
+def obstacle_halfplanes(obs: ca.SX, slots: int, faces: int
+                        ) -> tuple[list[ca.SX], list[ca.SX]]:
+    """Return (A_j, b_j) of each slot of the obstacle parameter (obstacle j: A_j p <= b_j).
+
+    Slot j holds its A column by column (2 faces values), then its b (faces values), as
+    nlp_values.obstacle_parameters packs them.
+    """
+    A_list, b_list = [], []
+    for j in range(slots):
+        base = 3 * faces * j
+        A_list.append(ca.reshape(obs[base:base + 2 * faces], faces, 2))
+        b_list.append(obs[base + 2 * faces:base + 3 * faces])
+    return A_list, b_list
+
+
+class Row(NamedTuple):
+    """Constraint rows lower <= expr <= upper (every entry of expr, the same bounds)."""
+
+    expr: ca.SX
+    lower: float
+    upper: float
+
+
+def gap_closing_rows(z_next: ca.SX, x_next: ca.SX, r_l: ca.SX, carried: list[ca.SX]
+                     ) -> list[Row]:
+    """(6c): x_{l+1} = f(x_l, u_l), and the reference and carried values copied on.
+
+    z_{l+1} = (f(x_l, u_l), r_l, carried...): one reference along the horizon, and whatever
+    a later stage reads of this one (the steady state, a sweep rate, the input).
+    """
+    return [Row(z_next - ca.vertcat(x_next, r_l, *carried), 0.0, 0.0)]
+
+
+def rate_rows(k: int, n: int, q_k: ca.SX, u_k: ca.SX | None, u_prev: ca.SX,
+              rate: np.ndarray, first_order: bool) -> list[Row]:
+    """(6g) for a real base: stage k's input within max_accel h of the one before it.
+
+    q_k is the input before stage k (q_0 = u_prev, fixed here at k = 0); at k = N, where
+    u_N = 0, the bound is on q_N itself, and a first-order hold reaches x_N at the velocity
+    q_N = u_{N-1}, which must then be 0.
+    """
+    rows = [Row(q_k - u_prev, 0.0, 0.0)] if k == 0 else []
+    change = u_k - q_k if k < n else q_k
+    bound = np.zeros(len(rate)) if first_order and k == n else rate
+    rows.extend(Row(change[i], -bound[i], bound[i]) for i in range(len(rate)))
+    return rows
+
+
+def initial_state_rows(x_0: ca.SX, x_k: ca.SX) -> list[Row]:
+    """(6b): x_0 = x(k), the measured state."""
+    return [Row(x_0 - x_k, 0.0, 0.0)]
+
+
+def disc_collision_rows(p: ca.SX, multipliers: ca.SX, A_list: list[ca.SX],
+                        b_list: list[ca.SX], faces: int, margin: float) -> list[Row]:
+    """(6h) via Farkas (8) for a disc (obstacles grown by its radius), every slot.
+
+    p is outside {A p <= b} iff some mu >= 0 with sum(mu) = 1 has (A p - b)^T mu > 0
+    (without sum(mu) = 1, mu = 0 would do): (A p - b)^T mu >= margin and sum(mu) = 1.
+    """
+    rows = []
+    for j in range(len(A_list)):
+        mu = multipliers[j * faces:(j + 1) * faces]
+        rows.append(Row(ca.dot(ca.mtimes(A_list[j], p) - b_list[j], mu), margin, ca.inf))
+        rows.append(Row(ca.sum1(mu), 1.0, 1.0))
+    return rows
+
+
+def polygon_collision_rows(x_l: ca.SX, angle: int, multipliers: ca.SX,
+                           A_list: list[ca.SX], b_list: list[ca.SX], faces: int,
+                           G: ca.DM, g_body: ca.DM, margin: float,
+                           sweeps: list[ca.SX]) -> list[Row]:
+    """(6h) for a polygonal footprint at x_l against every slot.
 
     Per slot, with w = A^T lambda (the separating direction, from obstacle to robot):
     (A p - b)^T lambda - g^T mu - sweep >= margin for each sweep (the clearance covers the
@@ -524,21 +566,54 @@ def _polygon_rows(add: Callable[[ca.SX, float, float], int], x_l: ca.SX, angle: 
     p, theta = x_l[0:2], x_l[angle]
     cos, sin = ca.cos(theta), ca.sin(theta)
     robot_faces = G.shape[0]
-    rows = 0
+    rows = []
     for j in range(len(A_list)):
         base = j * (faces + robot_faces)
         lam = multipliers[base:base + faces]
         mu = multipliers[base + faces:base + faces + robot_faces]
         direction = ca.mtimes(A_list[j].T, lam)  # A^T lambda, in the world frame
         value = ca.dot(p, direction) - ca.dot(b_list[j], lam) - ca.dot(g_body, mu)
-        for sweep in sweeps:
-            rows += add(value - sweep, margin, ca.inf)
+        rows.extend(Row(value - sweep, margin, ca.inf) for sweep in sweeps)
         # R(theta)^T A^T lambda: the direction in the robot frame
         local = ca.vertcat(cos * direction[0] + sin * direction[1],
                            -sin * direction[0] + cos * direction[1])
-        rows += add(ca.mtimes(G.T, mu) + local, 0.0, 0.0)
-        rows += add(ca.sumsqr(direction), -ca.inf, 1.0)
+        rows.append(Row(ca.mtimes(G.T, mu) + local, 0.0, 0.0))
+        rows.append(Row(ca.sumsqr(direction), -ca.inf, 1.0))
     return rows
+
+
+def terminal_rows(terminal: TerminalCondition, x_n: ca.SX, x_s: ca.SX, r_n: ca.SX,
+                  p_path: ca.SX, weights: CostWeights, *, carried: bool
+                  ) -> tuple[list[Row], ca.SX]:
+    """(6d)-(6f): the terminal set's rows at stage N, and the offset cost V_o (unweighted).
+
+    A carried steady state is x_s(r) here, where it is evaluated once. Residual entries that
+    are identically zero (a free steady state) are dropped: an empty Jacobian row makes the
+    KKT system singular and the solver wanders off.
+    """
+    rows = [Row(x_s - terminal.steady_state(r_n, p_path), 0.0, 0.0)] if carried else []
+    residual, offset_cost = terminal.condition(x_n, x_s, r_n, p_path, weights)
+    kept = [residual[i] for i in range(residual.numel()) if not residual[i].is_zero()]
+    if kept:
+        rows.append(Row(ca.vertcat(*kept), 0.0, 0.0))
+    return rows, offset_cost
+
+
+def variable_bounds(model: RobotModel, terminal: TerminalCondition, layout: Layout, n: int,
+                    size: int) -> tuple[np.ndarray, np.ndarray]:
+    """(6g): (x_l, u_l) in Z; r in its range (s in [0, 1]); multipliers >= 0 (8).
+
+    Everything else (the carried copies) is free: its gap-closing rows fix it.
+    """
+    lbw, ubw = np.full(size, -np.inf), np.full(size, np.inf)
+    for k in range(n + 1):
+        lbw[layout.x[k]], ubw[layout.x[k]] = model.x_min, model.x_max
+        lbw[layout.r[k]], ubw[layout.r[k]] = terminal.lower, terminal.upper
+        if k < n:
+            lbw[layout.u[k]], ubw[layout.u[k]] = model.u_min, model.u_max
+        if k >= 1:
+            lbw[layout.mu[k - 1]], ubw[layout.mu[k - 1]] = 0.0, np.inf
+    return lbw, ubw
 
 
 def _blocks(n: int, nx: int, nr: int, nz: int, nu: int, nm: int, nc: int,

@@ -23,6 +23,7 @@ import numpy as np
 
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import RobotModel
+from mpc_local_planner.core.mpc.backends import run_solver, SolverRunner
 from mpc_local_planner.core.mpc.candidate import Plan, plan_moves
 from mpc_local_planner.core.mpc.formulation import path_terminal, TerminalCondition
 from mpc_local_planner.core.mpc.step import MpcBase
@@ -40,14 +41,16 @@ class PathReferenceMPC(MpcBase):
         config: settings (MpcConfig()).
         obstacles: convex obstacles as described; inflated here by config.inflation().
         path: the reference path p(s); p(0) should be the robot's start pose.
+        runner: what runs an NLP's solver (see MpcBase).
 
     """
 
     def __init__(self, model: RobotModel, config: MpcConfig | None = None, *,
                  obstacles: Sequence[ConvexPolygon] = (),
-                 path: ReferencePath | None = None) -> None:
+                 path: ReferencePath | None = None,
+                 runner: SolverRunner = run_solver) -> None:
         self._path = path
-        super().__init__(model, config, obstacles=obstacles)
+        super().__init__(model, config, obstacles=obstacles, runner=runner)
 
     @property
     def path(self) -> ReferencePath | None:

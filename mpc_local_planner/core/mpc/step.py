@@ -54,9 +54,9 @@ from typing import Callable, Mapping, NamedTuple, Sequence
 import casadi as ca
 import numpy as np
 
-from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.config import BudgetKind, MpcConfig
 from mpc_local_planner.core.models import RobotModel
-from mpc_local_planner.core.mpc.backends import Nlp, run_solver
+from mpc_local_planner.core.mpc.backends import Nlp, run_solver, SolverRunner
 from mpc_local_planner.core.mpc.budget import Budget, build_time, solver_of
 from mpc_local_planner.core.mpc.built_nlps import shared_nlp
 from mpc_local_planner.core.mpc.candidate import (
@@ -111,6 +111,8 @@ class MpcBase(ABC):
         model: the robot model.
         config: settings (MpcConfig()).
         obstacles: convex obstacles as described; inflated here by config.inflation().
+        runner: what runs an NLP's solver (backends.run_solver); a test gives a failing or
+            slow stand-in here, or sets the `runner` attribute of an instance.
 
     """
 
@@ -118,7 +120,9 @@ class MpcBase(ABC):
     clock: Callable[[], float] = staticmethod(time.perf_counter)
 
     def __init__(self, model: RobotModel, config: MpcConfig | None = None, *,
-                 obstacles: Sequence[ConvexPolygon] = ()) -> None:
+                 obstacles: Sequence[ConvexPolygon] = (),
+                 runner: SolverRunner = run_solver) -> None:
+        self.runner = runner
         self._model = model
         self._budget = Budget(self.clock)  # solve() starts one per step
         self._tries: list[Try] = []  # the tries of the step in progress
@@ -341,7 +345,7 @@ class MpcBase(ABC):
         else:
             held = active
         # with an iteration budget, which functions run must not depend on timing either
-        self._shapes.ready(nlp, wait=self._config.solving.budget == 'iterations')
+        self._shapes.ready(nlp, wait=self._config.solving.budget is BudgetKind.ITERATIONS)
         self._last_nlp = nlp
         form = nlp.formulation
         params = parameter_vector(x0, self._config.cost_weights(),
@@ -454,8 +458,8 @@ class MpcBase(ABC):
         marks the step as timed out.
         """
         budget = self._budget
-        run = run_solver(nlp, w0, params, solver, time_limit=budget.remaining(),
-                         iteration_limit=budget.iterations)
+        run = self.runner(nlp, w0, params, solver, time_limit=budget.remaining(),
+                          iteration_limit=budget.iterations)
         budget.spend(run.iterations)
         if run.cut:
             budget.timed_out = True
