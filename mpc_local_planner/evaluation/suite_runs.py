@@ -32,12 +32,17 @@ from typing import Any, TYPE_CHECKING
 
 import numpy as np
 
-from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit, PurePursuitConfig
-from mpc_local_planner.core.baselines.tracking_mpc import TrackingMPC
 from mpc_local_planner.core.config import MpcConfig, SolverSettings
+from mpc_local_planner.core.controllers import (
+    build_controller,
+    controller_name,
+    ControllerName,
+    ControllerSetup,
+)
+from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC
-from mpc_local_planner.core.paths import WaypointPath
+from mpc_local_planner.core.paths import WaypointPath, waypoints_to_poses
 from mpc_local_planner.core.planner import PlanningError
 from mpc_local_planner.evaluation.known_map_worlds import (
     barn_world,
@@ -47,16 +52,14 @@ from mpc_local_planner.evaluation.known_map_worlds import (
     Scenario,
 )
 from mpc_local_planner.evaluation.metrics import compute_metrics
+from mpc_local_planner.evaluation.mpc_cache import MPC_CACHE, MpcKey
 from mpc_local_planner.evaluation.rollout import (
     circle_clearance,
     Clearance,
     EVALUATION_BUDGET,
-    MpcAdapter,
     Outcome,
     polygon_clearance,
-    PurePursuitAdapter,
     rollout,
-    RolloutController,
     StopRule,
 )
 from mpc_local_planner.evaluation.trajectory import write_trajectory_csv
@@ -170,47 +173,50 @@ def _clearance_fn(scenario: Scenario) -> Clearance:
     return polygon_clearance(scenario.obstacles, ROBOT_RADIUS)
 
 
-# Per worker process: one MPC per (controller, bounds), reused across worlds so the NLPs it
-# builds (one per obstacle count in reach) are built once, not once per run.
-_MPC_CACHE: dict[tuple, PathReferenceMPC | TrackingMPC] = {}
-_PREPARED: set[tuple] = set()
 PREPARED_SLOTS = 4
 
 
-def _controller(task: Task, scenario: Scenario, model: Unicycle,
-                config: MpcConfig) -> RolloutController:
-    """Return the task's controller with the rollout's step interface."""
-    if task.controller == 'pure_pursuit':
-        return PurePursuitAdapter(PurePursuit(scenario.waypoints, PurePursuitConfig(
-            v_max=model.v_max, omega_max=model.omega_max,
-            goal_tolerance=min(0.03, scenario.goal_tolerance / 2))))
-    if task.controller not in ('proposed', 'tracking'):
+def _controller(task: Task, scenario: Scenario, model: Unicycle, config: MpcConfig) -> Any:
+    """Return the task's controller for the rollout, set up for the scenario.
+
+    Pure pursuit and the tracking MPC are local controllers (core/controllers.py); the
+    paper's MPC runs as it is (PathReferenceMPC.solve), without the controller's arrival and
+    braking around it. The MPCs come from the process's MPC_CACHE (their NLPs built once).
+
+    Raises:
+        ValueError: for a controller the known-map suites do not run.
+
+    """
+    name = controller_name(task.controller)
+    if name not in KNOWN_MAP_CONTROLLERS:
         msg = f'unknown controller {task.controller!r}'
         raise ValueError(msg)
-    key = (task.controller, model.v_max, model.omega_max, config.solving.budget,
-           config.solving.compile)
-    mpc = _MPC_CACHE.get(key)
-    if task.controller == 'tracking':
-        if mpc is None:
-            mpc = _MPC_CACHE[key] = TrackingMPC(model, config, target=scenario.goal)
-        mpc.set_target(scenario.goal)
+    setup = ControllerSetup(model=model, footprint=Footprint.circle(ROBOT_RADIUS),
+                            config=config, goal_tolerance=scenario.goal_tolerance)
+    if name is ControllerName.PURE_PURSUIT:
+        follower = build_controller(name, setup).controller
+        follower.set_plan(waypoints_to_poses(scenario.waypoints, float(scenario.start[2]),
+                                             float(scenario.goal[2])))
+        return follower
+    key = MpcKey(name, model, config)
+    mpc: Any
+    if name is ControllerName.TRACKING:
+        mpc = MPC_CACHE.get(key, lambda: build_controller(name, setup).controller)
+        mpc.set_plan(np.asarray(scenario.goal, dtype=float)[None, :3])
     else:
         path = WaypointPath(scenario.waypoints, start_heading=float(scenario.start[2]),
                             goal_heading=float(scenario.goal[2]), capacity=PATH_CAPACITY)
-        if mpc is None:
-            mpc = _MPC_CACHE[key] = PathReferenceMPC(model, config, path=path)
+        mpc = MPC_CACHE.get(key, lambda: PathReferenceMPC(model, config, path=path))
         mpc.set_path(path)
     # every obstacle: the MPC checks those within reach and gives multipliers to those near
     # its candidate trajectory (constraint generation, see mpc.py)
     mpc.set_obstacles(scenario.obstacles)
-    if key not in _PREPARED:
-        # build the NLPs before the first run, as a robot does at start-up: built mid-step
-        # they would cost that step its time budget (their compilation goes on in the
-        # background, as in the node: waiting for it takes minutes on a fresh machine)
-        mpc.prepare(PREPARED_SLOTS)
-        _PREPARED.add(key)
+    # build the NLPs before the first run, as a robot does at start-up: built mid-step they
+    # would cost that step its time budget (their compilation goes on in the background, as
+    # in the node: waiting for it takes minutes on a fresh machine)
+    MPC_CACHE.prepare_once(key, lambda: mpc.prepare(PREPARED_SLOTS))
     mpc.reset()
-    return MpcAdapter(mpc)
+    return mpc
 
 
 def empty_row(task: Task, scenario: Scenario | None, reason: str) -> dict[str, Any]:
