@@ -175,7 +175,8 @@ class ControlStep(NamedTuple):
         success: the input is a fresh solver solution (counts solver failures).
         lyapunov_ok: whether V_N decreased as the theorem says (None: no check).
         prediction: (N+1, nx) predicted states, or None.
-        detail: the controller's own record of the step (the MpcSolution for the MPCs).
+        detail: the controller's own record of the step: a local controller's
+            ControlOutput, the paper's MPC's MpcSolution (`solution` reads either).
 
     """
 
@@ -187,6 +188,13 @@ class ControlStep(NamedTuple):
     lyapunov_ok: bool | None = None
     prediction: np.ndarray | None = None
     detail: Any = None
+
+    @property
+    def solution(self) -> Any:
+        """The MPC's solution of the step (a local controller's or the MPC's own), or None."""
+        if isinstance(self.detail, ControlOutput):
+            return self.detail.solution
+        return self.detail
 
 
 class RolloutController(Protocol):
