@@ -59,9 +59,11 @@ from mpc_local_planner.evaluation.rollout import (
     EVALUATION_BUDGET,
     Outcome,
     polygon_clearance,
+    Rollout,
     rollout,
     StopRule,
 )
+from mpc_local_planner.evaluation.run_row import RUN_COLUMNS, RunRow
 from mpc_local_planner.evaluation.trajectory import write_trajectory_csv
 from mpc_local_planner.worlds.data_files import BARN_DIR
 
@@ -76,6 +78,7 @@ __all__ = [
     'CSV_COLUMNS',
     'DEFAULT_BARN_DIR',
     'empty_row',
+    'finish_row',
     'KNOWN_MAP_CONTROLLERS',
     'navigation_world',
     'run_navigation_task',
@@ -86,18 +89,12 @@ __all__ = [
     'Task',
 ]
 
-CONTROLLERS = ('proposed', 'tracking', 'pure_pursuit', 'dwa', 'regulated_pure_pursuit')
+CONTROLLERS = tuple(ControllerName)
 # The known-map suites run the first three (DWA and Nav2's regulated pure pursuit run with
 # sensing, on re-planned paths: they take the sensed obstacles).
-KNOWN_MAP_CONTROLLERS = ('proposed', 'tracking', 'pure_pursuit')
+KNOWN_MAP_CONTROLLERS = CONTROLLERS[:3]
 SUITES = ('random', 'barn', 'unknown', 'worlds')
-CSV_COLUMNS = (
-    'controller', 'world', 'success', 'collision', 'time', 'path_length', 'min_clearance',
-    'solve_ms_median', 'solve_ms_max', 'barn_score', 'assumption_1', 'reference_length',
-    'final_distance', 'steps', 'stop_reason', 'planner_clearance', 'solver_failures', 'v_max',
-    'robot', 'sensing', 'contacts', 'replans', 'replan_failures', 'step_ms_median',
-    'step_ms_max', 'plan_s_max', 'name', 'reality',
-)
+CSV_COLUMNS = RUN_COLUMNS
 DEFAULT_BARN_DIR = BARN_DIR
 PATH_CAPACITY = 128
 
@@ -219,17 +216,44 @@ def _controller(task: Task, scenario: Scenario, model: Unicycle, config: MpcConf
     return mpc
 
 
-def empty_row(task: Task, scenario: Scenario | None, reason: str) -> dict[str, Any]:
+def empty_row(task: Task, scenario: Scenario | None, reason: str) -> RunRow:
     """Return the row of a run that did not run (or failed): its identity and the reason."""
-    row = dict.fromkeys(CSV_COLUMNS, '')
-    row.update(controller=task.controller, world=task.world, success=False, collision=False,
-               stop_reason=reason, v_max=task.v_max, robot=task.robot, sensing=task.sensing)
+    row = RunRow(controller=controller_name(task.controller), world=task.world,
+                 success=False, collision=False, stop_reason=reason, v_max=task.v_max,
+                 robot=task.robot, sensing=task.sensing)
     if scenario is not None:
-        row['name'] = scenario.name
-        row.update(assumption_1=scenario.assumption_1,
-                   planner_clearance=scenario.planner_clearance)
+        row.name = scenario.name
+        row.assumption_1 = scenario.assumption_1
+        row.planner_clearance = scenario.planner_clearance
         if scenario.barn_path_length is not None:
-            row['barn_score'] = 0.0
+            row.barn_score = 0.0
+    return row
+
+
+def finish_row(row: RunRow, run: Rollout, goal: np.ndarray, *, min_clearance: float,
+               barn_length: float | None) -> RunRow:
+    """Fill in the row's outcome from the run, by one rule for every suite; return the row.
+
+    A run touched an obstacle when it ended in a collision or its true footprint's least
+    clearance is <= 0; the BARN score counts only with a BARN path length.
+    """
+    data = run.rows
+    metrics = compute_metrics(data, goal=goal, obstacles=(),
+                              solver_failures=run.solver_failures)
+    collision = run.outcome is Outcome.COLLISION or min_clearance <= 0.0
+    row.success, row.collision, row.contacts = run.reached, collision, int(collision)
+    row.time = run.end_time
+    row.path_length = metrics['path_length']
+    row.min_clearance = min_clearance
+    row.solve_ms_median = metrics['solve_ms_median']
+    row.solve_ms_max = metrics['solve_ms_max']
+    row.final_distance = math.hypot(data[-1, 1] - goal[0], data[-1, 2] - goal[1])
+    row.steps = len(data)
+    row.solver_failures = run.solver_failures
+    row.stop_reason = run.outcome.value + (f': {run.note}' if run.note else '')
+    if barn_length is not None:
+        row.barn_score = barn_score(run.reached, run.end_time if run.reached else None,
+                                    barn_length)
     return row
 
 
@@ -254,55 +278,42 @@ def navigation_world(task: Task) -> tuple[Robot, World, float | None]:
     return robot, suites.barn_sensing_world(path, robot), barn_length
 
 
-def run_navigation_task(task: Task) -> dict[str, Any]:
+def run_navigation_task(task: Task) -> RunRow:
     """Run one world x controller through the navigation stack; return its runs.csv row."""
     from mpc_local_planner.evaluation import sensing_suites as suites
 
     robot, world, barn_length = navigation_world(task)
-    row = dict.fromkeys(CSV_COLUMNS, '')
-    row.update(controller=task.controller, world=task.world, name=world.name,
-               robot=task.robot, sensing=task.sensing or task.suite == 'unknown',
-               v_max=robot.v_max, reality=task.reality)
+    row = RunRow(controller=controller_name(task.controller), world=task.world,
+                 name=world.name, robot=task.robot,
+                 sensing=task.sensing or task.suite == 'unknown', v_max=robot.v_max,
+                 reality=task.reality)
     try:
         result = suites.run_navigation(world, task.controller, robot,
-                                       sensing=bool(row['sensing']), seed=task.seed,
+                                       sensing=bool(row.sensing), seed=task.seed,
                                        setup=suites.MpcSetup(budget=task.budget,
                                                              compile=task.compile),
                                        reality=task.reality,
                                        # BARN's robot has odometry and a laser, no localizer
                                        localized=task.suite != 'barn')
     except PlanningError as err:
-        row.update(success=False, collision=False, stop_reason=f'no plan: {err}',
-                   barn_score=0.0 if barn_length is not None else '')
+        row.success, row.collision, row.stop_reason = False, False, f'no plan: {err}'
+        row.barn_score = 0.0 if barn_length is not None else None
         return row
     run = result.run
-    data = run.rows
-    goal = np.asarray(world.goal, dtype=float)
-    metrics = compute_metrics(data, goal=goal, obstacles=(),
-                              solver_failures=run.solver_failures)
     if task.trajectory_dir:
         folder = Path(task.trajectory_dir)
         folder.mkdir(parents=True, exist_ok=True)
-        write_trajectory_csv(folder / f'{task.controller}_{task.world:03d}.csv', data)
+        write_trajectory_csv(folder / f'{task.controller}_{task.world:03d}.csv', run.rows)
         plans = result.navigator.log.plans if result.navigator is not None else []
         for number, (_, waypoints, _) in enumerate(plans):
             np.savetxt(folder / f'plan_{task.controller}_{task.world:03d}_{number}.csv',
                        waypoints, delimiter=',', header='x,y', comments='')
-    row.update(
-        success=run.reached, collision=result.contacts > 0, time=run.end_time,
-        path_length=metrics['path_length'], min_clearance=result.min_clearance,
-        solve_ms_median=metrics['solve_ms_median'], solve_ms_max=metrics['solve_ms_max'],
-        final_distance=math.hypot(data[-1, 1] - goal[0], data[-1, 2] - goal[1]),
-        steps=len(data), solver_failures=run.solver_failures,
-        stop_reason=run.outcome.value + (f': {run.note}' if run.note else ''),
-        **suites.result_fields(result))
-    if barn_length is not None:
-        row['barn_score'] = barn_score(run.reached, run.end_time if run.reached else None,
-                                       barn_length)
-    return row
+    row = replace(row, **suites.result_fields(result))
+    return finish_row(row, run, np.asarray(world.goal, dtype=float),
+                      min_clearance=result.min_clearance, barn_length=barn_length)
 
 
-def run_task(task: Task) -> dict[str, Any]:
+def run_task(task: Task) -> RunRow:
     """Run one world x controller in closed loop and return its runs.csv row."""
     if task.navigation:
         return run_navigation_task(task)
@@ -322,12 +333,6 @@ def run_task(task: Task) -> dict[str, Any]:
     run = rollout(controller, model, scenario.start, goal, h=config.step, rule=rule,
                   clearance=clearance)
     data = run.rows
-    metrics = compute_metrics(data, goal=goal, obstacles=(),
-                              solver_failures=run.solver_failures)
-    min_clear = float(np.min(clearance(data[:, 1:3])))
-    success = run.reached
-    success_time = run.end_time if success else None
-    ref_len = polyline_length(scenario.waypoints) if scenario.waypoints is not None else None
     if task.trajectory_dir:
         folder = Path(task.trajectory_dir)
         folder.mkdir(parents=True, exist_ok=True)
@@ -337,21 +342,15 @@ def run_task(task: Task) -> dict[str, Any]:
                        delimiter=',', header='x,y', comments='')
         if task.suite == 'random':
             save_world(folder, scenario, task.world)
-    row = empty_row(task, scenario, run.outcome.value + (f': {run.note}' if run.note else ''))
-    row.update(
-        success=success, collision=run.outcome is Outcome.COLLISION or min_clear <= 0.0,
-        time=run.end_time,
-        path_length=metrics['path_length'], min_clearance=min_clear,
-        solve_ms_median=metrics['solve_ms_median'], solve_ms_max=metrics['solve_ms_max'],
-        reference_length=ref_len,
-        final_distance=math.hypot(data[-1, 1] - goal[0], data[-1, 2] - goal[1]),
-        steps=len(data), solver_failures=run.solver_failures,
-        contacts=int(run.outcome is Outcome.COLLISION or min_clear <= 0.0), replans=0,
-        step_ms_median=float(np.median(run.step_times)) * 1e3 if len(run.step_times) else '',
-        step_ms_max=float(np.max(run.step_times)) * 1e3 if len(run.step_times) else '')
-    if scenario.barn_path_length is not None:
-        row['barn_score'] = barn_score(success, success_time, scenario.barn_path_length)
-    return row
+    row = empty_row(task, scenario, '')
+    row.reference_length = (polyline_length(scenario.waypoints)
+                            if scenario.waypoints is not None else None)
+    row.replans = 0
+    if len(run.step_times):
+        row.step_ms_median = float(np.median(run.step_times)) * 1e3
+        row.step_ms_max = float(np.max(run.step_times)) * 1e3
+    return finish_row(row, run, goal, min_clearance=float(np.min(clearance(data[:, 1:3]))),
+                      barn_length=scenario.barn_path_length)
 
 
 def saved_world_path(folder: Path, world: int) -> Path:

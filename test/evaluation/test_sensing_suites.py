@@ -217,7 +217,7 @@ def test_the_barn_suite_runs_on_odometry_and_the_unknown_suite_with_the_localize
         row = suite_runs.run_navigation_task(suite_runs.Task(
             suite=suite, world=0, controller='dwa', sensing=True, robot='jackal',
             reality='real'))
-        assert row['stop_reason'] == 'no plan: stop here'
+        assert row.stop_reason == 'no plan: stop here'
     assert asked == [False, True]
 
 
