@@ -322,7 +322,8 @@ def run_task(task: Task) -> RunRow:
                        solving=SolverSettings(budget=task.budget, compile=task.compile))
     margin = config.inflation(model.v_max) - ROBOT_RADIUS
     scenario = _scenario(task, margin)
-    if task.controller != 'tracking' and scenario.waypoints is None:
+    if controller_name(task.controller) is not ControllerName.TRACKING \
+            and scenario.waypoints is None:
         return empty_row(task, scenario, 'no reference path: ' + scenario.note)
     controller = _controller(task, scenario, model, config)
     clearance = _clearance_fn(scenario)
