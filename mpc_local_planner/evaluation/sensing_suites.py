@@ -41,13 +41,11 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 import math
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
 from mpc_local_planner.core.config import MpcConfig, SolverSettings
-from mpc_local_planner.core.control_output import ControlOutput
-from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.controllers import (
     build_controller,
@@ -361,35 +359,11 @@ def _mpc(name: ControllerName, built: ControllerSetup, world: World, *,
         controller.clear_path()
         controller.set_obstacles([])
         controller.mpc.reset()
-        # TEMPORARY (until MpcController.compute(pose, twist, now) of branch h32-core)
-        return made._replace(controller=_MpcShim(controller))
+        return made
     controller.set_plan(np.asarray(world.goal, dtype=float)[None, :3])
     controller.set_obstacles([])
     controller.reset()
     return made
-
-
-class _MpcShim:
-    """TEMPORARY: MpcController's compute(state, now, velocity=) as the interface's."""
-
-    def __init__(self, controller: MpcController) -> None:
-        self.controller = controller
-
-    def set_plan(self, poses: np.ndarray) -> None:
-        self.controller.set_plan(poses)
-
-    def set_obstacles(self, obstacles: Sequence[ConvexPolygon]) -> None:
-        self.controller.set_obstacles(obstacles)
-
-    def compute(self, pose: np.ndarray | None, twist: np.ndarray | None,
-                now: float) -> ControlOutput:
-        return self.controller.compute(pose, now, velocity=twist)
-
-    def reset(self) -> None:
-        self.controller.mpc.reset()
-
-    def set_speed_limit(self, v_max: float | None) -> None:
-        raise NotImplementedError
 
 
 def actuation_delay(reality: Reality) -> float:

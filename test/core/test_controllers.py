@@ -56,6 +56,13 @@ def test_every_baseline_is_a_local_controller_that_follows_a_plan(name: Controll
         controller.set_plan(np.zeros(3))
 
 
+def test_the_papers_controller_is_a_local_controller_too() -> None:
+    controller, reach = build_controller(ControllerName.PROPOSED, SETUP)
+    assert isinstance(controller, LocalController)
+    assert reach == SETUP.config.reach(2.0)
+    assert controller.compute(np.zeros(3), None, 0.0).reason is Reason.NO_PLAN
+
+
 def test_the_path_followers_answer_with_their_progress_and_time() -> None:
     for name in (ControllerName.PURE_PURSUIT, ControllerName.DWA):
         controller = build_controller(name, SETUP).controller

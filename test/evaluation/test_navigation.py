@@ -45,7 +45,7 @@ def test_calls_that_hold_the_plan_solve_nothing_and_leave_the_solve_statistics_a
     x = np.array(WORLD.start, dtype=float)
     rows = []
     for k in range(12):
-        step = control_step(controller.compute(x, k * PERIOD))
+        step = control_step(controller.compute(x, None, k * PERIOD))
         rows.append(trajectory_row(k * PERIOD, x, step.u, s=step.s, value=step.value,
                                    solve_ms=1e3 * step.solve_time_s))
         x = MODEL.step(x, step.u, PERIOD)
