@@ -14,9 +14,10 @@
 
 """What the controller answers at each step: the command, and why (`Reason`, an Enum).
 
-`ControlOutput` is `MpcController.compute`'s answer; `Reason` says why the command is what it
-is (its value is the diagnostics' word, its `text` the words for logs); `Blockage` is
-`MpcController.path_blockage`'s answer, where the remaining plan first meets an obstacle.
+`ControlOutput` is every local controller's answer (`LocalController.compute`); `Reason`
+says why the command is what it is (its value is the diagnostics' word, its `text` the
+words for logs); `Blockage` is `MpcController.path_blockage`'s answer, where the remaining
+plan first meets an obstacle.
 """
 
 from __future__ import annotations
@@ -125,6 +126,12 @@ class ControlOutput(NamedTuple):
         fresh: the MPC solved at this call; False between solves (control_frequency above
             1 / step), where u is the input the last verified plan gives for now, or where a
             stop brakes along it (u then need not be zero: see `Brake`).
+        progress: how far along its plan the controller is, in [0, 1], for a controller
+            without an MPC solution (a path follower: its projection's arc length over the
+            plan's length); NaN where it does not say (the MPCs' is solution.s).
+        compute_time_s: the controller's own time for this answer, seconds, for a
+            controller without an MPC solution (the MPCs' is solution.solve_time_s); NaN
+            where it does not say.
 
     """
 
@@ -133,6 +140,8 @@ class ControlOutput(NamedTuple):
     reason: Reason
     detail: str = ''
     fresh: bool = True
+    progress: float = math.nan
+    compute_time_s: float = math.nan
 
     @property
     def message(self) -> str:

@@ -49,6 +49,7 @@ from mpc_local_planner.core.planner import RrtStarPlanner
 from mpc_local_planner.core.planner_config import PlannerConfig
 from mpc_local_planner.evaluation.opti_peer import OptiMpc
 from mpc_local_planner.evaluation.rollout import rollout, StopRule
+from mpc_local_planner.evaluation.run_row import RunRow
 from mpc_local_planner.perception.laser import contact, SimulatedLaser
 from mpc_local_planner.perception.raycast import TrueGeometry
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory, scan_to_obstacles
@@ -560,11 +561,11 @@ def _evaluate_once(controllers: str, cache: Path, out: Path) -> dict[str, Any]:
     if done.returncode != 0:
         msg = f'{" ".join(command)} failed: {done.stderr.strip()[-500:]}'
         raise RuntimeError(msg)
-    with open(out / 'runs.csv', encoding='utf-8') as f:
-        row = next(csv.DictReader(f))
-    solve = row.get('solve_ms_median', '')
-    return {'seconds': seconds, 'solve_ms_median': float(solve) if solve else math.nan,
-            'success': row.get('success') == 'True'}
+    with open(out / 'runs.csv', encoding='utf-8', newline='') as f:
+        row = RunRow.from_csv(next(csv.DictReader(f)))
+    solve = row.solve_ms_median
+    return {'seconds': seconds, 'solve_ms_median': solve if solve is not None else math.nan,
+            'success': bool(row.success)}
 
 
 def bench_cold_start(repeats: int, *, controllers: str = 'proposed') -> dict[str, Any]:

@@ -84,9 +84,11 @@ from typing import Any, Sequence
 import numpy as np
 
 from mpc_local_planner.core.config import BUDGETS
+from mpc_local_planner.core.controllers import ControllerName
 from mpc_local_planner.core.reality import REALITY_PRESETS
 from mpc_local_planner.evaluation.plotting import plot_world_panels, WorldPanel
 from mpc_local_planner.evaluation.rollout import EVALUATION_BUDGET
+from mpc_local_planner.evaluation.run_row import RunRow
 from mpc_local_planner.evaluation.suite_runs import (
     CONTROLLERS,
     CSV_COLUMNS,
@@ -127,26 +129,21 @@ def _fmt(value: Any, digits: int = 2) -> str:
     return str(value)
 
 
-def _floats(rows: list[dict[str, Any]], key: str) -> np.ndarray:
+def _floats(rows: list[RunRow], key: str) -> np.ndarray:
     values = []
     for r in rows:
-        try:
-            values.append(float(r[key]))
-        except (TypeError, ValueError):
-            continue
+        value = getattr(r, key)
+        if value is not None:
+            values.append(float(value))
     values = np.array(values, dtype=float)
     return values[np.isfinite(values)]
 
 
-def _true(value: Any) -> bool:
-    return str(value) in ('True', 'true', '1')
-
-
-def summarize(rows: list[dict[str, Any]], *, suite: str, title: str = '') -> str:
+def summarize(rows: list[RunRow], *, suite: str, title: str = '') -> str:
     """Return the Markdown summary: one table row per controller."""
     lines = [f'# {title or suite} suite', '']
-    worlds = sorted({int(r['world']) for r in rows})
-    a1 = {int(r['world']) for r in rows if _true(r['assumption_1'])}
+    worlds = sorted({r.world for r in rows})
+    a1 = {r.world for r in rows if r.assumption_1}
     if a1:
         lines.append(f'Worlds: {len(worlds)}; reference path satisfies Assumption 1 in '
                      f'{len(a1 & set(worlds))} of them.')
@@ -160,12 +157,12 @@ def summarize(rows: list[dict[str, Any]], *, suite: str, title: str = '') -> str
     if suite == 'barn':
         head.append('mean BARN score')
     lines += ['| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)]
-    order = [c for c in CONTROLLERS if any(r['controller'] == c for r in rows)]
+    order = [c for c in CONTROLLERS if any(r.controller is c for r in rows)]
     for name in order:
-        mine = [r for r in rows if r['controller'] == name]
-        ok = [r for r in mine if _true(r['success'])]
-        mine_a1 = [r for r in mine if _true(r['assumption_1'])]
-        ok_a1 = [r for r in mine_a1 if _true(r['success'])]
+        mine = [r for r in rows if r.controller is name]
+        ok = [r for r in mine if r.success]
+        mine_a1 = [r for r in mine if r.assumption_1]
+        ok_a1 = [r for r in mine_a1 if r.success]
         times = _floats(ok, 'time')
         paths = _floats(ok, 'path_length')
         med = _floats(mine, 'solve_ms_median')
@@ -174,8 +171,8 @@ def summarize(rows: list[dict[str, Any]], *, suite: str, title: str = '') -> str
         step_max = _floats(mine, 'step_ms_max')
         replans = _floats(mine, 'replans')
         cells = [
-            name, str(len(mine)), str(len(ok)), f'{len(ok) / max(1, len(mine)):.1%}',
-            str(sum(_true(r['collision']) for r in mine)), f'{len(ok_a1)}/{len(mine_a1)}',
+            str(name), str(len(mine)), str(len(ok)), f'{len(ok) / max(1, len(mine)):.1%}',
+            str(sum(bool(r.collision) for r in mine)), f'{len(ok_a1)}/{len(mine_a1)}',
             str(int(np.sum(replans))) if len(replans) else '-',
             _fmt(float(np.median(times)) if len(times) else None, 1),
             _fmt(float(np.median(paths)) if len(paths) else None, 2),
@@ -190,16 +187,16 @@ def summarize(rows: list[dict[str, Any]], *, suite: str, title: str = '') -> str
             cells.append(_fmt(float(np.mean(scores)) if len(scores) else None, 4))
         lines.append('| ' + ' | '.join(cells) + ' |')
     lines.append('')
-    reasons: dict[str, dict[str, int]] = {}
+    reasons: dict[ControllerName, dict[str, int]] = {}
     for r in rows:
-        key = str(r['stop_reason']).split(':')[0]
-        reasons.setdefault(r['controller'], {}).setdefault(key, 0)
-        reasons[r['controller']][key] += 1
+        key = r.stop_reason.split(':')[0]
+        reasons.setdefault(r.controller, {}).setdefault(key, 0)
+        reasons[r.controller][key] += 1
     lines.append('Stop reasons: ' + '; '.join(
         f'{c}: ' + ', '.join(f'{k} {v}' for k, v in sorted(reasons[c].items()))
         for c in order))
-    failed = sorted(int(r['world']) for r in rows
-                    if r['controller'] == 'proposed' and not _true(r['success']))
+    failed = sorted(r.world for r in rows
+                    if r.controller is ControllerName.PROPOSED and not r.success)
     if failed:
         lines.append('')
         lines.append('Proposed MPC failed in worlds: ' + ', '.join(map(str, failed)))
@@ -207,7 +204,7 @@ def summarize(rows: list[dict[str, Any]], *, suite: str, title: str = '') -> str
 
 
 def _panel(out: Path, suite: str, world: int, barn_dir: Path,
-           rows: dict[tuple[int, str], dict[str, Any]]) -> WorldPanel:
+           rows: dict[tuple[int, ControllerName], RunRow]) -> WorldPanel:
     """Return the figure panel of one world of an earlier run with --save-trajectories."""
     folder = out / 'trajectories'
     if suite == 'barn':
@@ -231,10 +228,11 @@ def _panel(out: Path, suite: str, world: int, barn_dir: Path,
         run = folder / f'{controller}_{world:03d}.csv'
         if not run.is_file():
             continue
-        row = rows.get((world, controller), {})
-        reached = _true(row.get('success'))
-        runs.append((controller, read_trajectory_csv(run), reached))
-        outcomes.append(f"{controller}: {str(row.get('stop_reason', '?')).split(':')[0]}")
+        row = rows.get((world, controller))
+        reached = bool(row is not None and row.success)
+        reason = row.stop_reason if row is not None else '?'
+        runs.append((str(controller), read_trajectory_csv(run), reached))
+        outcomes.append(f"{controller}: {reason.split(':')[0]}")
     return WorldPanel(
         title='\n'.join([name, *outcomes]), polygons=polygons, circles=circles,
         circle_radius=radius, start=np.asarray(data['start'], dtype=float),
@@ -263,7 +261,7 @@ def plot_suite_runs(out: Path, suite: str, worlds: Sequence[int], *,
         msg = (f'{", ".join(missing[:3])} not found: run the {suite} suite with '
                f'--save-trajectories and --out {out} first')
         raise FileNotFoundError(msg)
-    rows = {(int(r['world']), r['controller']): r for r in _read_rows(runs_csv)}
+    rows = {r.key: r for r in _read_rows(runs_csv)}
     panels = [_panel(out, suite, w, barn_dir, rows) for w in worlds]
     if suite == 'barn':
         title = 'BARN worlds: RRT* reference and closed loops (circle robot, known map)'
@@ -309,9 +307,9 @@ def plot_navigation_suite(out: Path, template: Task, worlds: Sequence[int],
         reality=template.reality, localized=template.suite != 'barn')
 
 
-def _read_rows(path: Path) -> list[dict[str, Any]]:
+def _read_rows(path: Path) -> list[RunRow]:
     with open(path, newline='') as stream:
-        return list(csv.DictReader(stream))
+        return [RunRow.from_csv(cells) for cells in csv.DictReader(stream)]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -471,17 +469,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     with ExitStack() as stack:
         # what can refuse the sweep, before the table is touched
         try:
-            done = table.earlier_rows(settings, keep=_finished_row) if args.resume else []
+            done = [RunRow.from_csv(cells) for cells in
+                    table.earlier_rows(settings, keep=_finished_row)] if args.resume else []
             run = stack.enter_context(open_executor(args.executor, jobs=args.jobs,
                                                     scheduler=args.scheduler))
         except (ExecutorUnavailable, SettingsMismatch) as err:
             parser.exit(2, f'{parser.prog}: error: {err}\n')
-        table.start(settings, done)
+        table.start(settings, [row.to_csv() for row in done])
         try:
             rows = _sweep(run, tasks, done, table, suite=args.suite, title=title)
         finally:
             table.close()
-    table.finish(rows)
+    table.finish([row.to_csv() for row in rows])
     summary = summarize(rows, suite=args.suite, title=title)
     (args.out / 'summary.md').write_text(summary)
     print(summary)
@@ -506,28 +505,23 @@ def sweep_settings(template: Task, worlds: Sequence[int], controllers: Sequence[
 _PER_RUN_FIELDS = ('world', 'controller', 'world_file', 'trajectory_dir')
 
 
-def _row_key(row: dict[str, Any]) -> tuple[int, str]:
-    """Return the run a row is of: (world, controller)."""
-    return int(row['world']), str(row['controller'])
-
-
-def _finished_row(row: dict[str, Any]) -> bool:
+def _finished_row(row: dict[str, str]) -> bool:
     """Tell whether a row of an earlier sweep is a finished run (an error is tried again)."""
     return not str(row['stop_reason']).startswith('error:')
 
 
-def _canonical_order(row: dict[str, Any]) -> tuple[int, int]:
-    return int(row['world']), CONTROLLERS.index(row['controller'])
+def _canonical_order(row: RunRow) -> tuple[int, int]:
+    return row.world, CONTROLLERS.index(row.controller)
 
 
-def _sweep(run: Runner, tasks: Sequence[Task], done: list[dict[str, Any]], table: RunTable, *,
-           suite: str, title: str) -> list[dict[str, Any]]:
+def _sweep(run: Runner, tasks: Sequence[Task], done: list[RunRow], table: RunTable, *,
+           suite: str, title: str) -> list[RunRow]:
     """Run the tasks without a row in ``done``, append each row as it comes; return all rows.
 
     The rows come back in the canonical order (world, then controller), whichever executor
     ran them and in whatever order they finished.
     """
-    finished = {_row_key(row) for row in done}
+    finished = {row.key for row in done}
     todo = [t for t in tasks if (t.world, t.controller) not in finished]
     rows = list(done)
     summary_path = table.folder / 'summary.md'
@@ -540,7 +534,7 @@ def _sweep(run: Runner, tasks: Sequence[Task], done: list[dict[str, Any]], table
             result = empty_row(todo[index], None,
                                 f'error: {type(result).__name__}: {result}')
         rows.append(result)
-        table.append(result)
+        table.append(result.to_csv())
         _progress(result, len(rows), len(tasks), time.monotonic() - started)
         if len(rows) % 10 == 0:
             summary_path.write_text(summarize(rows, suite=suite, title=title))
@@ -548,12 +542,12 @@ def _sweep(run: Runner, tasks: Sequence[Task], done: list[dict[str, Any]], table
     return rows
 
 
-def _progress(row: dict[str, Any], done: int, total: int, elapsed: float) -> None:
+def _progress(row: RunRow, done: int, total: int, elapsed: float) -> None:
     """Draw the progress bar line of a finished run on stderr."""
     filled = int(30 * done / max(total, 1))
     print(f"[{'#' * filled}{'.' * (30 - filled)}] {done}/{total} "
-          f"{elapsed:6.0f} s  {row['controller']:12s} world {int(row['world']):3d}: "
-          f"{'ok' if _true(row['success']) else 'FAIL'} ({row['stop_reason']})",
+          f"{elapsed:6.0f} s  {row.controller!s:12s} world {row.world:3d}: "
+          f"{'ok' if row.success else 'FAIL'} ({row.stop_reason})",
           file=sys.stderr, flush=True)
 
 

@@ -125,7 +125,7 @@ def run_closed_loop(
         run.rows, goal=goal, obstacles=obstacles, robot_radius=robot_radius,
         reference_length=reference_length, solver_failures=run.solver_failures,
         lyapunov_ok=run.lyapunov_ok,
-        lyapunov_cases=[getattr(step.detail, 'lyapunov_case', None) for step in run.steps])
+        lyapunov_cases=[getattr(step.solution, 'lyapunov_case', None) for step in run.steps])
     result.metrics['label'] = label
     result.metrics['outcome'] = run.outcome.value
     result.metrics['horizon'] = controller.config.horizon

@@ -37,25 +37,25 @@ rollout's controller):
    the node plans a goal that comes before the laser has shown anything;
 5. the local controller gets those obstacles and answers.
 
-The local controllers are adapters (`LocalController`): the paper's MPC through the same
-`MpcController` the node runs, the tracking MPC (it tracks the goal, not the plan), pure
-pursuit (it follows the plan and ignores obstacles) and the DWA. All see the same scans and
-follow the same re-planned paths.
+The local controller is any `LocalController` (core/local_controller.py), built by name
+(core/controllers.py): the paper's MPC (the `MpcController` the node runs), the tracking MPC
+(it tracks the plan's end), pure pursuit (it follows the plan and ignores obstacles), Nav2's
+regulated pure pursuit and the DWA. All see the same scans and follow the same re-planned
+paths; each gets the obstacles within its reach at every step, and the measured twist when a
+real base reports one.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 import time
-from typing import Any, Protocol, Sequence
 
 import numpy as np
 
-from mpc_local_planner.core.control_output import Reason
-from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.diagnostics import PlanTrigger
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import Footprint
+from mpc_local_planner.core.local_controller import LocalController
 from mpc_local_planner.core.mpc.compilation import compile_wait_seconds
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import waypoints_to_poses
@@ -70,7 +70,7 @@ from mpc_local_planner.core.replanning import (
     ReplanOutcome,
     ReplanSettings,
 )
-from mpc_local_planner.evaluation.rollout import ControlStep
+from mpc_local_planner.evaluation.rollout import control_step, ControlStep
 from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.perception.laser import JACKAL_FOV, SimulatedLaser
 from mpc_local_planner.perception.local_obstacles import LocalObstacles
@@ -80,12 +80,9 @@ from mpc_local_planner.perception.scans import Scan
 from mpc_local_planner.worlds.map_files import OccupancyMap
 
 __all__ = [
-    'LocalController',
-    'MpcLocal',
+    'NavigationLog',
     'NavigationSettings',
     'Navigator',
-    'PathFollowerLocal',
-    'TrackingLocal',
 ]
 
 
@@ -144,135 +141,6 @@ class NavigationSettings:
             progress_angle=self.progress_angle)
 
 
-class LocalController(Protocol):
-    """What the navigator needs of a local controller."""
-
-    reach: float  # metres: obstacles farther from the robot cannot matter to the next step
-
-    def follow(self, poses: np.ndarray) -> None:
-        """Follow a new plan of (M, 3) poses from the robot's projection onto it."""
-
-    def avoid(self, obstacles: Sequence[ConvexPolygon]) -> None:
-        """Take the obstacles in force (as sensed, not inflated)."""
-
-    def command(self, x: np.ndarray, t: float, velocity: np.ndarray | None = None
-                ) -> ControlStep:
-        """Return the input for state x at time t (velocity: the measured twist, if known)."""
-
-
-class MpcLocal:
-    """The paper's MPC through `MpcController`, as the controller node runs it."""
-
-    def __init__(self, controller: MpcController) -> None:
-        self.controller = controller
-        self.reach = controller.config.reach(float(controller.model.u_max[0]))
-
-    def follow(self, poses: np.ndarray) -> None:
-        """Set the plan (s restarts at the projection)."""
-        self.controller.set_plan(poses)
-
-    def avoid(self, obstacles: Sequence[ConvexPolygon]) -> None:
-        """Set the obstacles (the MPC grows them itself)."""
-        self.controller.set_obstacles(obstacles)
-
-    def command(self, x: np.ndarray, t: float, velocity: np.ndarray | None = None
-                ) -> ControlStep:
-        """Compute the command as the node does (stop reasons give a zero input)."""
-        output = self.controller.compute(x, velocity, t)
-        solution = output.solution
-        if not output.fresh and solution is not None:
-            # between solves (control_frequency): the verified plan's input, nothing solved
-            # (solve_time_s NaN: the solve statistics are over solves only)
-            return ControlStep(u=output.u, s=float(solution.s), value=float(solution.value),
-                               success=True, detail=output)
-        if solution is None:
-            # no solve: a failure unless at the goal or turning in place to its heading
-            done = output.reason in (Reason.GOAL_REACHED, Reason.ROTATE_TO_HEADING)
-            return ControlStep(u=output.u, success=done, detail=output)
-        return ControlStep(
-            u=output.u, s=float(solution.s), value=float(solution.value),
-            solve_time_s=float(solution.solve_time_s),
-            success=output.reason is Reason.TRACKING, lyapunov_ok=solution.lyapunov_ok,
-            prediction=solution.x_pred, detail=output)
-
-
-class TrackingLocal:
-    """The tracking MPC baseline: it tracks the goal (a target), so plans do not reach it."""
-
-    def __init__(self, mpc: Any) -> None:
-        self.mpc = mpc
-        self.reach = mpc.config.reach(float(mpc.model.u_max[0]))
-
-    def follow(self, poses: np.ndarray) -> None:
-        """Ignore the plan: the baseline knows only its target."""
-
-    def avoid(self, obstacles: Sequence[ConvexPolygon]) -> None:
-        """Set the obstacles."""
-        self.mpc.set_obstacles(obstacles)
-
-    def command(self, x: np.ndarray, t: float, velocity: np.ndarray | None = None
-                ) -> ControlStep:
-        """Solve and apply what the MPC applies."""
-        solution = self.mpc.solve(x)
-        return ControlStep(
-            u=np.asarray(solution.u0, dtype=float), value=float(solution.value),
-            solve_time_s=float(solution.solve_time_s), success=bool(solution.success),
-            lyapunov_ok=solution.lyapunov_ok, prediction=solution.x_pred, detail=solution)
-
-
-class PathFollowerLocal:
-    """A path follower with ``command(x) -> u`` (pure pursuit, DWA).
-
-    Made for the first plan; later plans go to its ``set_path`` when it has one (the DWA
-    keeps its current velocity across plans, pure pursuit its speed), else a new one is made.
-
-    Args:
-        make: waypoints (M, 2) -> the controller for that plan.
-        reach: How far obstacles matter to it, metres (0: it ignores obstacles).
-        uses_obstacles: Hand it the obstacles (its ``set_obstacles``) at every step.
-        takes_velocity: Its ``command`` takes the measured twist (``velocity=``), as DWB
-            reads odometry's; given only when a real base reports one.
-
-    """
-
-    def __init__(self, make: Any, *, reach: float = 0.0, uses_obstacles: bool = False,
-                 takes_velocity: bool = False) -> None:
-        self._make = make
-        self._takes_velocity = takes_velocity
-        self.reach = float(reach)
-        self._uses_obstacles = uses_obstacles
-        self.follower: Any = None
-        self._obstacles: list[ConvexPolygon] = []
-
-    def follow(self, poses: np.ndarray) -> None:
-        """Hand the new plan over, or make the controller for it."""
-        waypoints = np.asarray(poses, dtype=float)[:, :2]
-        if self.follower is not None and callable(getattr(self.follower, 'set_path', None)):
-            self.follower.set_path(waypoints)
-            return
-        self.follower = self._make(waypoints)
-        if self._uses_obstacles:
-            self.follower.set_obstacles(self._obstacles)
-
-    def avoid(self, obstacles: Sequence[ConvexPolygon]) -> None:
-        """Hand the obstacles on, if it uses them."""
-        self._obstacles = list(obstacles)
-        if self._uses_obstacles and self.follower is not None:
-            self.follower.set_obstacles(self._obstacles)
-
-    def command(self, x: np.ndarray, t: float, velocity: np.ndarray | None = None
-                ) -> ControlStep:
-        """Return its command (zero without a plan), timed; the DWA takes the measured twist."""
-        if self.follower is None:
-            return ControlStep(u=np.zeros(2), solve_time_s=0.0)
-        start = time.perf_counter()
-        if velocity is not None and self._takes_velocity:
-            u = np.asarray(self.follower.command(x, velocity=velocity), dtype=float)
-        else:
-            u = np.asarray(self.follower.command(x), dtype=float)
-        return ControlStep(u=u, solve_time_s=time.perf_counter() - start)
-
-
 @dataclass
 class NavigationLog:
     """What the navigator did, for metrics and figures.
@@ -305,6 +173,9 @@ class Navigator:
 
     Args:
         local: The local controller.
+        reach: How far from the robot obstacles can matter to its next command, metres
+            (core/controllers.py `Built.reach`): the obstacles it and the re-planner get
+            are those within reach plus settings.sensing_margin.
         geometry: The true world (known and unknown obstacles) the laser scans.
         grid: The planner's grid (the map the robot is given, empty for no prior map),
             inflated by the planner's robot_radius + clearance.
@@ -325,13 +196,15 @@ class Navigator:
     """
 
     def __init__(self, local: LocalController, geometry: TrueGeometry, grid: PlanningGrid,
-                 planner: RrtStarPlanner, goal: np.ndarray, *, h: float, faces: int = 8,
+                 planner: RrtStarPlanner, goal: np.ndarray, *, reach: float, h: float,
+                 faces: int = 8,
                  known_map: OccupancyMap | None = None,
                  settings: NavigationSettings | None = None,
                  snapshot_period: float = 2.0,
                  footprint: Footprint | None = None,
                  base: Base | None = None) -> None:
         self.local = local
+        self.reach = float(reach)
         self.base = base
         self._channel = ScanChannel(base.reality) if base is not None else None
         self._next_scan = 0.0
@@ -373,18 +246,17 @@ class Navigator:
         if scan is not None:
             self.memory.update(scan, x, body=self.footprint)
             self.obstacles.scan_updated()
-        nearby = self.obstacles.near(x[:2], self.local.reach + self.settings.sensing_margin)
+        nearby = self.obstacles.near(x[:2], self.reach + self.settings.sensing_margin)
         perceived = time.perf_counter() - started
         # a re-plan's first turn is one the controller's obstacles allow (Replanner.check)
         self._adopt(self.replanner.check(self.planner, x, now=t, grid=self.grid,
                                          local_obstacles=nearby), x, t)
         started = time.perf_counter() - perceived
         waited = compile_wait_seconds()  # a first use of an NLP on a fresh machine
-        self.local.avoid(nearby)
-        if self.base is None:
-            answer = self.local.command(np.asarray(x, dtype=float), t)
-        else:  # a real base reports its twist: the controllers that use it get it
-            answer = self.local.command(np.asarray(x, dtype=float), t, self.base.twist())
+        self.local.set_obstacles(nearby)
+        # a real base reports its twist (an ideal robot's odometry has none)
+        twist = self.base.twist() if self.base is not None else None
+        answer = control_step(self.local.compute(np.asarray(x, dtype=float), twist, t))
         self.log.control_seconds.append(time.perf_counter() - started
                                         - (compile_wait_seconds() - waited))
         if not self.log.sensed or t >= self.log.sensed[-1][0] + self._snapshot_period:
@@ -429,5 +301,5 @@ class Navigator:
             return
         assert decision.waypoints is not None and decision.trigger is not None
         self.log.plans.append((t, decision.waypoints, decision.trigger.value))
-        self.local.follow(waypoints_to_poses(decision.waypoints, float(x[2]),
-                                             float(self.goal[2])))
+        self.local.set_plan(waypoints_to_poses(decision.waypoints, float(x[2]),
+                                               float(self.goal[2])))

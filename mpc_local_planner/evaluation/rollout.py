@@ -17,10 +17,11 @@
 The experiments, the evaluation suites and the benchmark all run their closed loops here, so
 they stop for the same reasons and write the same rows (the trajectory.csv format).
 
-A controller is anything with ``step(x) -> ControlStep`` (the `RolloutController` protocol);
-`as_controller` adapts the package's controllers: anything with ``solve(x) -> MpcSolution``
-(the paper's PathReferenceMPC, the TrackingMPC baseline) and anything with
-``command(x) -> u`` (pure pursuit). The plant is the model's ``step(x, u, h)``.
+The controller is a local controller (core/local_controller.py: ``compute(pose, twist, t)``,
+its `ControlOutput` recorded as a `ControlStep` by `control_step`), the paper's MPC as it
+is (``solve(x) -> MpcSolution``, recorded by `solution_step`), or anything with
+``step(x) -> ControlStep`` (the `RolloutController` protocol: the navigator). The plant is
+the model's ``step(x, u, h)``.
 
 Each step k, at t = k h: the controller answers for the state x_k, the row (t, x_k, its answer)
 is recorded, then the stop rule is applied to x_k in this order:
@@ -66,30 +67,31 @@ from typing import Any, Callable, NamedTuple, Protocol, Sequence, TYPE_CHECKING
 
 import numpy as np
 
+from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.errors import PlanningError
+from mpc_local_planner.core.local_controller import LocalController
 from mpc_local_planner.core.mpc.compilation import compile_wait_seconds
 from mpc_local_planner.core.paths import wrap_angle
 from mpc_local_planner.evaluation.trajectory import trajectory_row
 from mpc_local_planner.perception.localization import LocalizedPose
 
 if TYPE_CHECKING:
-    from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit
+    from mpc_local_planner.core.mpc import MpcSolution
     from mpc_local_planner.core.obstacles import ConvexPolygon
     from mpc_local_planner.core.reality import Base, Localizer
 
 __all__ = [
-    'as_controller',
     'circle_clearance',
     'Clearance',
+    'control_step',
     'ControlStep',
     'EVALUATION_BUDGET',
-    'MpcAdapter',
     'Outcome',
     'polygon_clearance',
-    'PurePursuitAdapter',
     'rollout',
     'Rollout',
     'RolloutController',
+    'solution_step',
     'STALL_INPUT',
     'STALL_STEPS',
     'StopRule',
@@ -173,7 +175,8 @@ class ControlStep(NamedTuple):
         success: the input is a fresh solver solution (counts solver failures).
         lyapunov_ok: whether V_N decreased as the theorem says (None: no check).
         prediction: (N+1, nx) predicted states, or None.
-        detail: the controller's own record of the step (the MpcSolution for the MPCs).
+        detail: the controller's own record of the step: a local controller's
+            ControlOutput, the paper's MPC's MpcSolution (`solution` reads either).
 
     """
 
@@ -186,6 +189,13 @@ class ControlStep(NamedTuple):
     prediction: np.ndarray | None = None
     detail: Any = None
 
+    @property
+    def solution(self) -> Any:
+        """The MPC's solution of the step (a local controller's or the MPC's own), or None."""
+        if isinstance(self.detail, ControlOutput):
+            return self.detail.solution
+        return self.detail
+
 
 class RolloutController(Protocol):
     """What the rollout needs of a controller."""
@@ -194,51 +204,58 @@ class RolloutController(Protocol):
         """Return the controller's answer for the state x."""
 
 
-class MpcAdapter:
-    """Step interface of anything with ``solve(x) -> MpcSolution`` (the paper's MPC, tracking)."""
-
-    def __init__(self, mpc: Any) -> None:
-        self.mpc = mpc
-
-    def step(self, x: np.ndarray) -> ControlStep:
-        """Solve for x and return the applied input with the solution's bookkeeping."""
-        solution = self.mpc.solve(x)
-        return ControlStep(
-            u=np.asarray(solution.u0, dtype=float), s=float(solution.s),
-            value=float(solution.value), solve_time_s=float(solution.solve_time_s),
-            success=bool(solution.success), lyapunov_ok=solution.lyapunov_ok,
-            prediction=solution.x_pred, detail=solution)
+def solution_step(solution: MpcSolution) -> ControlStep:
+    """Return the record of a solve of the paper's MPC as it is (``solve(x)``)."""
+    return ControlStep(
+        u=np.asarray(solution.u0, dtype=float), s=float(solution.s),
+        value=float(solution.value), solve_time_s=float(solution.solve_time_s),
+        success=bool(solution.success), lyapunov_ok=solution.lyapunov_ok,
+        prediction=solution.x_pred, detail=solution)
 
 
-class PurePursuitAdapter:
-    """Step interface of a pure-pursuit follower: s is its progress over the path's length."""
+def control_step(output: ControlOutput) -> ControlStep:
+    """Return the record of a local controller's answer (the output is its detail).
 
-    def __init__(self, follower: PurePursuit) -> None:
-        self.follower = follower
+    Between solves (not fresh) the MPC applies its verified plan and solves nothing: a
+    success without a solve time (the solve statistics are over solves only). Without a
+    solution, a command that is an input (a path follower's, the turn to the goal heading)
+    or the goal reached is a success, any other stop a failure; s and the solve time are
+    the controller's own (ControlOutput.progress, compute_time_s). A fresh solve succeeds
+    when the solver's plan is applied (TRACKING).
+    """
+    solution = output.solution
+    if not output.fresh and solution is not None:
+        return ControlStep(u=output.u, s=float(solution.s), value=float(solution.value),
+                           success=True, detail=output)
+    if solution is None:
+        done = output.reason.applies_input or output.reason is Reason.GOAL_REACHED
+        return ControlStep(u=output.u, s=output.progress, solve_time_s=output.compute_time_s,
+                           success=done, detail=output)
+    return ControlStep(
+        u=output.u, s=float(solution.s), value=float(solution.value),
+        solve_time_s=float(solution.solve_time_s),
+        success=output.reason is Reason.TRACKING, lyapunov_ok=solution.lyapunov_ok,
+        prediction=solution.x_pred, detail=output)
 
-    def step(self, x: np.ndarray) -> ControlStep:
-        """Return the follower's command for x, timed."""
-        start = time.perf_counter()
-        u = np.asarray(self.follower.command(x), dtype=float)
-        seconds = time.perf_counter() - start
-        return ControlStep(u=u, s=self.follower.progress / max(self.follower.length, 1e-9),
-                           solve_time_s=seconds)
+
+Stepper = Callable[[np.ndarray, np.ndarray | None, float], ControlStep]
 
 
-def as_controller(controller: Any) -> RolloutController:
-    """Return controller with the step interface: itself, or the adapter that fits it.
+def _stepper(controller: Any) -> Stepper:
+    """Return (x, twist, t) -> the controller's answer, for each kind the rollout drives.
 
     Raises:
-        TypeError: if it has neither ``step``, ``solve`` nor ``command``.
+        TypeError: if it has neither ``step``, ``compute`` (with the rest of the local
+            controller's interface) nor ``solve``.
 
     """
     if callable(getattr(controller, 'step', None)):
-        return controller
+        return lambda x, twist, t: controller.step(x)
+    if isinstance(controller, LocalController):
+        return lambda x, twist, t: control_step(controller.compute(x, twist, t))
     if callable(getattr(controller, 'solve', None)):
-        return MpcAdapter(controller)
-    if callable(getattr(controller, 'command', None)):
-        return PurePursuitAdapter(controller)
-    msg = f'{type(controller).__name__} has no step(x), solve(x) or command(x)'
+        return lambda x, twist, t: solution_step(controller.solve(x))
+    msg = f'{type(controller).__name__} has no step(x), compute(pose, twist, t) or solve(x)'
     raise TypeError(msg)
 
 
@@ -249,7 +266,7 @@ class Rollout(NamedTuple):
         outcome: why the run ended.
         rows: (n, 9) trajectory rows (trajectory.TRAJECTORY_COLUMNS), one per step.
         steps: the controller's answers, one per row (STOPPED: one fewer).
-        step_times: wall time of each controller call, seconds (adapter included; without
+        step_times: wall time of each controller call, seconds (its record included; without
             a wait for an NLP's compilation, compilation.compile_wait_seconds).
         h: the step length, seconds.
         note: why the controller stopped (STOPPED), else ''.
@@ -303,7 +320,8 @@ def rollout(
     """Run controller and model in closed loop until the stop rule ends the run.
 
     Args:
-        controller: a RolloutController, or anything as_controller adapts.
+        controller: a local controller, the paper's MPC (``solve(x)``) or a
+            RolloutController (see the module docstring).
         model: the plant: ``model.step(x, u, h) -> x_next``, or a real robot's `Base`
             (core/reality.py; it holds the start pose: start is not used).
         start: the initial state.
@@ -328,7 +346,7 @@ def rollout(
     if localizer is not None and base is None:
         msg = 'a localizer corrects odometry: it needs a real base as the plant'
         raise ValueError(msg)
-    stepper = as_controller(controller)
+    stepper = _stepper(controller)
     goal = np.asarray(goal, dtype=float)
     x = np.asarray(start, dtype=float).copy() if base is None else base.pose.copy()
     located = LocalizedPose(ODOM_HISTORY, localized=True, source='localizer') \
@@ -346,7 +364,7 @@ def rollout(
         started = time.perf_counter()
         waited = compile_wait_seconds()  # a first use of an NLP on a fresh machine
         try:
-            answer = stepper.step(measured)
+            answer = stepper(measured, None if base is None else base.twist(), t)
         except PlanningError as err:
             outcome, note = Outcome.STOPPED, f'{type(err).__name__}: {err}'
             rows.append(trajectory_row(t, x))

@@ -45,11 +45,15 @@ from typing import Any
 
 import numpy as np
 
-from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit, PurePursuitConfig
-from mpc_local_planner.core.baselines.tracking_mpc import TrackingMPC
 from mpc_local_planner.core.config import MpcConfig, SolverSettings
-from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.controller_settings import ControllerSettings
+from mpc_local_planner.core.controllers import (
+    build_controller,
+    Built,
+    controller_name,
+    ControllerName,
+    ControllerSetup,
+)
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.models import Unicycle
@@ -65,14 +69,8 @@ from mpc_local_planner.core.reality import (
 )
 from mpc_local_planner.evaluation.known_map_worlds import RANDOM_BOUNDS, RANDOM_GOAL, RANDOM_START
 from mpc_local_planner.evaluation.metrics import footprint_clearance
-from mpc_local_planner.evaluation.navigation import (
-    LocalController,
-    MpcLocal,
-    NavigationSettings,
-    Navigator,
-    PathFollowerLocal,
-    TrackingLocal,
-)
+from mpc_local_planner.evaluation.mpc_cache import MPC_CACHE, MpcKey
+from mpc_local_planner.evaluation.navigation import NavigationSettings, Navigator
 from mpc_local_planner.evaluation.rollout import (
     EVALUATION_BUDGET,
     Outcome,
@@ -301,65 +299,71 @@ def _empty_map(bounds: tuple[float, float, float, float]) -> OccupancyMap:
                         (xmin, ymin, 0.0))
 
 
-# Per process: one MPC per (controller, robot), reused across runs so that its NLPs are built
-# once, before the first run (a robot builds them at start-up, not mid-run), and compiled
-# once (see _prepare).
-_MPC_CACHE: dict[tuple[str, str], Any] = {}
-
-
-def _mpc(name: str, robot: Robot, world: World, *, prepare: bool = True,
-         setup: MpcSetup = MpcSetup(), reality: Reality | None = None) -> Any:
-    """Return the cached MpcController or TrackingMPC for the robot, reset for a new run.
+def controller_setup(name: ControllerName, robot: Robot, world: World, *,
+                     setup: MpcSetup = MpcSetup(),
+                     reality: Reality | None = None) -> ControllerSetup:
+    """Return what the named controller is built from for the robot in world.
 
     With a real base (reality), the paper's MPC is told its deceleration limits (stops
     brake along the last verified plan, ControllerSettings.max_decel), bounds its input rates
     at setup.accel_factor times the base's (MpcConfig.max_accel) with the input hold
     setup.input_hold (a first-order hold's ramp commanded actuation_delay() ahead) and
     keeps a collision margin for the base's lag (REALITY_MARGIN); see docs/real_robot.md for
-    how these were chosen.
+    how these were chosen. The tracking MPC is set up as for an ideal robot; the DWA takes
+    the base's control period and acceleration limits.
     """
-    accel = reality.acceleration_limits if reality is not None else None
-    hold = setup.input_hold if accel is not None and name == 'proposed' else 'zero'
-    delay = actuation_delay(reality) if hold == 'first_order' and reality is not None else 0.0
-    key = (name, robot.name, robot.v_max, robot.omega_max, robot.reverses, prepare,
-           setup.budget, setup.compile, accel, reality is not None, hold, setup.accel_factor,
-           delay)
-    mpc = _MPC_CACHE.get(key)
-    if mpc is None:
-        model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max,
-                         v_min=None if robot.reverses else 0.0)
-        config = MpcConfig(robot_radius=robot.footprint.radius if robot.footprint.is_circle
-                           else 0.0, footprint=_vertices(robot.footprint),
-                           collision_margin=REALITY_MARGIN if reality is not None else None,
-                           max_accel=tuple(setup.accel_factor * a for a in accel)
-                           if accel is not None and name == 'proposed' else None,
-                           input_hold=hold,
-                           solving=SolverSettings(budget=setup.budget,
-                                                  compile=setup.compile))
-        if name == 'proposed':
-            settings = ControllerSettings(xy_goal_tolerance=MPC_ARRIVAL,
-                                          yaw_goal_tolerance=math.pi,
-                                          capacity=PATH_CAPACITY,
-                                          max_decel=accel or (math.inf, math.inf),
-                                          actuation_delay=delay)
-            mpc = MpcController(model, config, settings=settings)
-            mpc.set_plan(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))  # the NLPs' path family
-            core = mpc.mpc
-        else:
-            mpc = TrackingMPC(model, config, target=world.goal)
-            core = mpc
-        if prepare:
-            _prepare(core, setup.budget)
-        _MPC_CACHE[key] = mpc
-    if name == 'proposed':
-        mpc.clear_path()
-        mpc.set_obstacles([])
-        mpc.mpc.reset()
-    else:
-        mpc.set_target(world.goal)
-        mpc.set_obstacles([])
-        mpc.reset()
-    return mpc
+    proposed = name is ControllerName.PROPOSED
+    mpc_reality = reality if proposed else None
+    accel = mpc_reality.acceleration_limits if mpc_reality is not None else None
+    hold = setup.input_hold if accel is not None else 'zero'
+    delay = actuation_delay(mpc_reality) if hold == 'first_order' and mpc_reality is not None \
+        else 0.0
+    model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max,
+                     v_min=None if robot.reverses else 0.0)
+    config = MpcConfig(robot_radius=robot.footprint.radius if robot.footprint.is_circle
+                       else 0.0, footprint=_vertices(robot.footprint),
+                       collision_margin=REALITY_MARGIN if mpc_reality is not None else None,
+                       max_accel=tuple(setup.accel_factor * a for a in accel)
+                       if accel is not None else None,
+                       input_hold=hold,
+                       solving=SolverSettings(budget=setup.budget, compile=setup.compile))
+    settings = ControllerSettings(xy_goal_tolerance=MPC_ARRIVAL, yaw_goal_tolerance=math.pi,
+                                  capacity=PATH_CAPACITY,
+                                  max_decel=accel or (math.inf, math.inf),
+                                  actuation_delay=delay)
+    return ControllerSetup(
+        model=model, footprint=robot.footprint, config=config, settings=settings,
+        goal_tolerance=float(world.goal_tolerance or GOAL_TOLERANCE),
+        control_period=1.0 / CONTROL_FREQUENCY if reality is not None else None,
+        acceleration=reality.acceleration if reality is not None else None)
+
+
+def _mpc(name: ControllerName, built: ControllerSetup, world: World, *,
+         prepare: bool = True, budget: str = EVALUATION_BUDGET) -> Built:
+    """Return the cached MPC of the setup (MPC_CACHE), reset for a new run in world."""
+    key = MpcKey(name, built.model, built.config,
+                 built.settings if name is ControllerName.PROPOSED else None)
+
+    def build() -> Built:
+        made = build_controller(name, built)
+        if name is ControllerName.PROPOSED:
+            made.controller.set_plan(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))  # the NLPs
+        return made
+
+    made = MPC_CACHE.get(key, build)
+    controller: Any = made.controller
+    if prepare:
+        core = controller.mpc if name is ControllerName.PROPOSED else controller
+        MPC_CACHE.prepare_once(key, lambda: _prepare(core, budget))
+    if name is ControllerName.PROPOSED:
+        controller.clear_path()
+        controller.set_obstacles([])
+        controller.mpc.reset()
+        return made
+    controller.set_plan(np.asarray(world.goal, dtype=float)[None, :3])
+    controller.set_obstacles([])
+    controller.reset()
+    return made
 
 
 def actuation_delay(reality: Reality) -> float:
@@ -388,49 +392,23 @@ def _prepare(mpc: Any, budget: str = EVALUATION_BUDGET) -> None:
         mpc.wait_compiled()
 
 
-def _local_controller(name: str, robot: Robot, world: World, *, prepare: bool = True,
-                      setup: MpcSetup = MpcSetup(),
-                      reality: Reality | None = None) -> LocalController:
-    """Return the named local controller for the robot (tuned to a real base's limits)."""
-    if name == 'proposed':
-        return MpcLocal(_mpc(name, robot, world, prepare=prepare, setup=setup,
-                             reality=reality))
-    if name == 'tracking':
-        return TrackingLocal(_mpc(name, robot, world, prepare=prepare, setup=setup))
-    tolerance = 0.5 * float(world.goal_tolerance or GOAL_TOLERANCE)
-    if name == 'pure_pursuit':
-        pursuit = PurePursuitConfig(v_max=robot.v_max, omega_max=robot.omega_max,
-                                    goal_tolerance=min(0.03, tolerance))
-        return PathFollowerLocal(lambda waypoints: PurePursuit(waypoints, pursuit))
-    if name == 'regulated_pure_pursuit':
-        pursuit = PurePursuitConfig.regulated(robot.v_max, robot.omega_max,
-                                              footprint=robot.footprint,
-                                              goal_tolerance=min(0.03, tolerance))
-        # as a user configures RPP: its collision check sees the local costmap's obstacles
-        # (the sensed ones, as the DWA and the MPC get them), its lookahead the measured speed
-        reach = (min(robot.v_max * pursuit.collision_time, pursuit.max_lookahead)
-                 + robot.footprint.radius)
-        return PathFollowerLocal(lambda waypoints: PurePursuit(waypoints, pursuit),
-                                 reach=reach, uses_obstacles=True,
-                                 takes_velocity=reality is not None)
-    if name == 'dwa':
-        from mpc_local_planner.core.baselines.dwa import Dwa, DwaConfig
+def _local_controller(name: ControllerName | str, robot: Robot, world: World, *,
+                      prepare: bool = True, setup: MpcSetup = MpcSetup(),
+                      reality: Reality | None = None) -> Built:
+    """Return the named local controller for the robot (tuned to a real base's limits).
 
-        dwa = DwaConfig(max_vel_x=robot.v_max, max_vel_theta=robot.omega_max,
-                        footprint=robot.footprint, xy_goal_tolerance=min(0.03, tolerance))
-        if reality is not None:
-            # as a user configures DWB for the robot: its control rate and its limits
-            dwa = replace(dwa, control_period=1.0 / CONTROL_FREQUENCY)
-            linear, angular = reality.acceleration
-            if math.isfinite(linear):
-                dwa = replace(dwa, acc_lim_x=linear, decel_lim_x=linear)
-            if math.isfinite(angular):
-                dwa = replace(dwa, acc_lim_theta=angular)
-        reach = robot.v_max * dwa.sim_time + robot.footprint.radius + dwa.inflation_radius
-        return PathFollowerLocal(lambda waypoints: Dwa(waypoints, dwa), reach=reach,
-                                 uses_obstacles=True, takes_velocity=reality is not None)
-    msg = f'unknown controller {name!r}'
-    raise ValueError(msg)
+    The MPCs come from the process's MPC_CACHE (their NLPs built once), reset for the run;
+    the path followers are built new.
+
+    Raises:
+        ValueError: for a name that is not a ControllerName.
+
+    """
+    key = controller_name(name)
+    built = controller_setup(key, robot, world, setup=setup, reality=reality)
+    if key in (ControllerName.PROPOSED, ControllerName.TRACKING):
+        return _mpc(key, built, world, prepare=prepare, budget=setup.budget)
+    return build_controller(key, built)
 
 
 @dataclass
@@ -490,8 +468,9 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
         else None
     period = 1.0 / CONTROL_FREQUENCY if real else h
     settings = NavigationSettings(sense=sensing, scan_period=SCAN_PERIOD if real else None)
-    navigator = Navigator(local, TrueGeometry(world.physical_shapes()), grid, planner,
-                          world.goal, h=period, known_map=known if world.obstacles else None,
+    navigator = Navigator(local.controller, TrueGeometry(world.physical_shapes()), grid,
+                          planner, world.goal, reach=local.reach, h=period,
+                          known_map=known if world.obstacles else None,
                           settings=settings, footprint=robot.footprint, base=base)
     clearance = footprint_clearance(world.physical_shapes(), robot.footprint)
     # a robot may wait in front of an obstacle for a re-plan: standing still ends a run after

@@ -32,12 +32,17 @@ from typing import Any, TYPE_CHECKING
 
 import numpy as np
 
-from mpc_local_planner.core.baselines.pure_pursuit import PurePursuit, PurePursuitConfig
-from mpc_local_planner.core.baselines.tracking_mpc import TrackingMPC
 from mpc_local_planner.core.config import MpcConfig, SolverSettings
+from mpc_local_planner.core.controllers import (
+    build_controller,
+    controller_name,
+    ControllerName,
+    ControllerSetup,
+)
+from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import PathReferenceMPC
-from mpc_local_planner.core.paths import WaypointPath
+from mpc_local_planner.core.paths import WaypointPath, waypoints_to_poses
 from mpc_local_planner.core.planner import PlanningError
 from mpc_local_planner.evaluation.known_map_worlds import (
     barn_world,
@@ -47,18 +52,18 @@ from mpc_local_planner.evaluation.known_map_worlds import (
     Scenario,
 )
 from mpc_local_planner.evaluation.metrics import compute_metrics
+from mpc_local_planner.evaluation.mpc_cache import MPC_CACHE, MpcKey
 from mpc_local_planner.evaluation.rollout import (
     circle_clearance,
     Clearance,
     EVALUATION_BUDGET,
-    MpcAdapter,
     Outcome,
     polygon_clearance,
-    PurePursuitAdapter,
+    Rollout,
     rollout,
-    RolloutController,
     StopRule,
 )
+from mpc_local_planner.evaluation.run_row import RUN_COLUMNS, RunRow
 from mpc_local_planner.evaluation.trajectory import write_trajectory_csv
 from mpc_local_planner.worlds.data_files import BARN_DIR
 
@@ -73,6 +78,7 @@ __all__ = [
     'CSV_COLUMNS',
     'DEFAULT_BARN_DIR',
     'empty_row',
+    'finish_row',
     'KNOWN_MAP_CONTROLLERS',
     'navigation_world',
     'run_navigation_task',
@@ -83,18 +89,12 @@ __all__ = [
     'Task',
 ]
 
-CONTROLLERS = ('proposed', 'tracking', 'pure_pursuit', 'dwa', 'regulated_pure_pursuit')
+CONTROLLERS = tuple(ControllerName)
 # The known-map suites run the first three (DWA and Nav2's regulated pure pursuit run with
 # sensing, on re-planned paths: they take the sensed obstacles).
-KNOWN_MAP_CONTROLLERS = ('proposed', 'tracking', 'pure_pursuit')
+KNOWN_MAP_CONTROLLERS = CONTROLLERS[:3]
 SUITES = ('random', 'barn', 'unknown', 'worlds')
-CSV_COLUMNS = (
-    'controller', 'world', 'success', 'collision', 'time', 'path_length', 'min_clearance',
-    'solve_ms_median', 'solve_ms_max', 'barn_score', 'assumption_1', 'reference_length',
-    'final_distance', 'steps', 'stop_reason', 'planner_clearance', 'solver_failures', 'v_max',
-    'robot', 'sensing', 'contacts', 'replans', 'replan_failures', 'step_ms_median',
-    'step_ms_max', 'plan_s_max', 'name', 'reality',
-)
+CSV_COLUMNS = RUN_COLUMNS
 DEFAULT_BARN_DIR = BARN_DIR
 PATH_CAPACITY = 128
 
@@ -170,60 +170,90 @@ def _clearance_fn(scenario: Scenario) -> Clearance:
     return polygon_clearance(scenario.obstacles, ROBOT_RADIUS)
 
 
-# Per worker process: one MPC per (controller, bounds), reused across worlds so the NLPs it
-# builds (one per obstacle count in reach) are built once, not once per run.
-_MPC_CACHE: dict[tuple, PathReferenceMPC | TrackingMPC] = {}
-_PREPARED: set[tuple] = set()
 PREPARED_SLOTS = 4
 
 
-def _controller(task: Task, scenario: Scenario, model: Unicycle,
-                config: MpcConfig) -> RolloutController:
-    """Return the task's controller with the rollout's step interface."""
-    if task.controller == 'pure_pursuit':
-        return PurePursuitAdapter(PurePursuit(scenario.waypoints, PurePursuitConfig(
-            v_max=model.v_max, omega_max=model.omega_max,
-            goal_tolerance=min(0.03, scenario.goal_tolerance / 2))))
-    if task.controller not in ('proposed', 'tracking'):
+def _controller(task: Task, scenario: Scenario, model: Unicycle, config: MpcConfig) -> Any:
+    """Return the task's controller for the rollout, set up for the scenario.
+
+    Pure pursuit and the tracking MPC are local controllers (core/controllers.py); the
+    paper's MPC runs as it is (PathReferenceMPC.solve), without the controller's arrival and
+    braking around it. The MPCs come from the process's MPC_CACHE (their NLPs built once).
+
+    Raises:
+        ValueError: for a controller the known-map suites do not run.
+
+    """
+    name = controller_name(task.controller)
+    if name not in KNOWN_MAP_CONTROLLERS:
         msg = f'unknown controller {task.controller!r}'
         raise ValueError(msg)
-    key = (task.controller, model.v_max, model.omega_max, config.solving.budget,
-           config.solving.compile)
-    mpc = _MPC_CACHE.get(key)
-    if task.controller == 'tracking':
-        if mpc is None:
-            mpc = _MPC_CACHE[key] = TrackingMPC(model, config, target=scenario.goal)
-        mpc.set_target(scenario.goal)
+    setup = ControllerSetup(model=model, footprint=Footprint.circle(ROBOT_RADIUS),
+                            config=config, goal_tolerance=scenario.goal_tolerance)
+    if name is ControllerName.PURE_PURSUIT:
+        follower = build_controller(name, setup).controller
+        follower.set_plan(waypoints_to_poses(scenario.waypoints, float(scenario.start[2]),
+                                             float(scenario.goal[2])))
+        return follower
+    key = MpcKey(name, model, config)
+    mpc: Any
+    if name is ControllerName.TRACKING:
+        mpc = MPC_CACHE.get(key, lambda: build_controller(name, setup).controller)
+        mpc.set_plan(np.asarray(scenario.goal, dtype=float)[None, :3])
     else:
         path = WaypointPath(scenario.waypoints, start_heading=float(scenario.start[2]),
                             goal_heading=float(scenario.goal[2]), capacity=PATH_CAPACITY)
-        if mpc is None:
-            mpc = _MPC_CACHE[key] = PathReferenceMPC(model, config, path=path)
+        mpc = MPC_CACHE.get(key, lambda: PathReferenceMPC(model, config, path=path))
         mpc.set_path(path)
     # every obstacle: the MPC checks those within reach and gives multipliers to those near
     # its candidate trajectory (constraint generation, see mpc.py)
     mpc.set_obstacles(scenario.obstacles)
-    if key not in _PREPARED:
-        # build the NLPs before the first run, as a robot does at start-up: built mid-step
-        # they would cost that step its time budget (their compilation goes on in the
-        # background, as in the node: waiting for it takes minutes on a fresh machine)
-        mpc.prepare(PREPARED_SLOTS)
-        _PREPARED.add(key)
+    # build the NLPs before the first run, as a robot does at start-up: built mid-step they
+    # would cost that step its time budget (their compilation goes on in the background, as
+    # in the node: waiting for it takes minutes on a fresh machine)
+    MPC_CACHE.prepare_once(key, lambda: mpc.prepare(PREPARED_SLOTS))
     mpc.reset()
-    return MpcAdapter(mpc)
+    return mpc
 
 
-def empty_row(task: Task, scenario: Scenario | None, reason: str) -> dict[str, Any]:
+def empty_row(task: Task, scenario: Scenario | None, reason: str) -> RunRow:
     """Return the row of a run that did not run (or failed): its identity and the reason."""
-    row = dict.fromkeys(CSV_COLUMNS, '')
-    row.update(controller=task.controller, world=task.world, success=False, collision=False,
-               stop_reason=reason, v_max=task.v_max, robot=task.robot, sensing=task.sensing)
+    row = RunRow(controller=controller_name(task.controller), world=task.world,
+                 success=False, collision=False, stop_reason=reason, v_max=task.v_max,
+                 robot=task.robot, sensing=task.sensing)
     if scenario is not None:
-        row['name'] = scenario.name
-        row.update(assumption_1=scenario.assumption_1,
-                   planner_clearance=scenario.planner_clearance)
+        row.name = scenario.name
+        row.assumption_1 = scenario.assumption_1
+        row.planner_clearance = scenario.planner_clearance
         if scenario.barn_path_length is not None:
-            row['barn_score'] = 0.0
+            row.barn_score = 0.0
+    return row
+
+
+def finish_row(row: RunRow, run: Rollout, goal: np.ndarray, *, min_clearance: float,
+               barn_length: float | None) -> RunRow:
+    """Fill in the row's outcome from the run, by one rule for every suite; return the row.
+
+    A run touched an obstacle when it ended in a collision or its true footprint's least
+    clearance is <= 0; the BARN score counts only with a BARN path length.
+    """
+    data = run.rows
+    metrics = compute_metrics(data, goal=goal, obstacles=(),
+                              solver_failures=run.solver_failures)
+    collision = run.outcome is Outcome.COLLISION or min_clearance <= 0.0
+    row.success, row.collision, row.contacts = run.reached, collision, int(collision)
+    row.time = run.end_time
+    row.path_length = metrics['path_length']
+    row.min_clearance = min_clearance
+    row.solve_ms_median = metrics['solve_ms_median']
+    row.solve_ms_max = metrics['solve_ms_max']
+    row.final_distance = math.hypot(data[-1, 1] - goal[0], data[-1, 2] - goal[1])
+    row.steps = len(data)
+    row.solver_failures = run.solver_failures
+    row.stop_reason = run.outcome.value + (f': {run.note}' if run.note else '')
+    if barn_length is not None:
+        row.barn_score = barn_score(run.reached, run.end_time if run.reached else None,
+                                    barn_length)
     return row
 
 
@@ -248,55 +278,42 @@ def navigation_world(task: Task) -> tuple[Robot, World, float | None]:
     return robot, suites.barn_sensing_world(path, robot), barn_length
 
 
-def run_navigation_task(task: Task) -> dict[str, Any]:
+def run_navigation_task(task: Task) -> RunRow:
     """Run one world x controller through the navigation stack; return its runs.csv row."""
     from mpc_local_planner.evaluation import sensing_suites as suites
 
     robot, world, barn_length = navigation_world(task)
-    row = dict.fromkeys(CSV_COLUMNS, '')
-    row.update(controller=task.controller, world=task.world, name=world.name,
-               robot=task.robot, sensing=task.sensing or task.suite == 'unknown',
-               v_max=robot.v_max, reality=task.reality)
+    row = RunRow(controller=controller_name(task.controller), world=task.world,
+                 name=world.name, robot=task.robot,
+                 sensing=task.sensing or task.suite == 'unknown', v_max=robot.v_max,
+                 reality=task.reality)
     try:
         result = suites.run_navigation(world, task.controller, robot,
-                                       sensing=bool(row['sensing']), seed=task.seed,
+                                       sensing=bool(row.sensing), seed=task.seed,
                                        setup=suites.MpcSetup(budget=task.budget,
                                                              compile=task.compile),
                                        reality=task.reality,
                                        # BARN's robot has odometry and a laser, no localizer
                                        localized=task.suite != 'barn')
     except PlanningError as err:
-        row.update(success=False, collision=False, stop_reason=f'no plan: {err}',
-                   barn_score=0.0 if barn_length is not None else '')
+        row.success, row.collision, row.stop_reason = False, False, f'no plan: {err}'
+        row.barn_score = 0.0 if barn_length is not None else None
         return row
     run = result.run
-    data = run.rows
-    goal = np.asarray(world.goal, dtype=float)
-    metrics = compute_metrics(data, goal=goal, obstacles=(),
-                              solver_failures=run.solver_failures)
     if task.trajectory_dir:
         folder = Path(task.trajectory_dir)
         folder.mkdir(parents=True, exist_ok=True)
-        write_trajectory_csv(folder / f'{task.controller}_{task.world:03d}.csv', data)
+        write_trajectory_csv(folder / f'{task.controller}_{task.world:03d}.csv', run.rows)
         plans = result.navigator.log.plans if result.navigator is not None else []
         for number, (_, waypoints, _) in enumerate(plans):
             np.savetxt(folder / f'plan_{task.controller}_{task.world:03d}_{number}.csv',
                        waypoints, delimiter=',', header='x,y', comments='')
-    row.update(
-        success=run.reached, collision=result.contacts > 0, time=run.end_time,
-        path_length=metrics['path_length'], min_clearance=result.min_clearance,
-        solve_ms_median=metrics['solve_ms_median'], solve_ms_max=metrics['solve_ms_max'],
-        final_distance=math.hypot(data[-1, 1] - goal[0], data[-1, 2] - goal[1]),
-        steps=len(data), solver_failures=run.solver_failures,
-        stop_reason=run.outcome.value + (f': {run.note}' if run.note else ''),
-        **suites.result_fields(result))
-    if barn_length is not None:
-        row['barn_score'] = barn_score(run.reached, run.end_time if run.reached else None,
-                                       barn_length)
-    return row
+    row = replace(row, **suites.result_fields(result))
+    return finish_row(row, run, np.asarray(world.goal, dtype=float),
+                      min_clearance=result.min_clearance, barn_length=barn_length)
 
 
-def run_task(task: Task) -> dict[str, Any]:
+def run_task(task: Task) -> RunRow:
     """Run one world x controller in closed loop and return its runs.csv row."""
     if task.navigation:
         return run_navigation_task(task)
@@ -305,7 +322,8 @@ def run_task(task: Task) -> dict[str, Any]:
                        solving=SolverSettings(budget=task.budget, compile=task.compile))
     margin = config.inflation(model.v_max) - ROBOT_RADIUS
     scenario = _scenario(task, margin)
-    if task.controller != 'tracking' and scenario.waypoints is None:
+    if controller_name(task.controller) is not ControllerName.TRACKING \
+            and scenario.waypoints is None:
         return empty_row(task, scenario, 'no reference path: ' + scenario.note)
     controller = _controller(task, scenario, model, config)
     clearance = _clearance_fn(scenario)
@@ -316,12 +334,6 @@ def run_task(task: Task) -> dict[str, Any]:
     run = rollout(controller, model, scenario.start, goal, h=config.step, rule=rule,
                   clearance=clearance)
     data = run.rows
-    metrics = compute_metrics(data, goal=goal, obstacles=(),
-                              solver_failures=run.solver_failures)
-    min_clear = float(np.min(clearance(data[:, 1:3])))
-    success = run.reached
-    success_time = run.end_time if success else None
-    ref_len = polyline_length(scenario.waypoints) if scenario.waypoints is not None else None
     if task.trajectory_dir:
         folder = Path(task.trajectory_dir)
         folder.mkdir(parents=True, exist_ok=True)
@@ -331,21 +343,15 @@ def run_task(task: Task) -> dict[str, Any]:
                        delimiter=',', header='x,y', comments='')
         if task.suite == 'random':
             save_world(folder, scenario, task.world)
-    row = empty_row(task, scenario, run.outcome.value + (f': {run.note}' if run.note else ''))
-    row.update(
-        success=success, collision=run.outcome is Outcome.COLLISION or min_clear <= 0.0,
-        time=run.end_time,
-        path_length=metrics['path_length'], min_clearance=min_clear,
-        solve_ms_median=metrics['solve_ms_median'], solve_ms_max=metrics['solve_ms_max'],
-        reference_length=ref_len,
-        final_distance=math.hypot(data[-1, 1] - goal[0], data[-1, 2] - goal[1]),
-        steps=len(data), solver_failures=run.solver_failures,
-        contacts=int(run.outcome is Outcome.COLLISION or min_clear <= 0.0), replans=0,
-        step_ms_median=float(np.median(run.step_times)) * 1e3 if len(run.step_times) else '',
-        step_ms_max=float(np.max(run.step_times)) * 1e3 if len(run.step_times) else '')
-    if scenario.barn_path_length is not None:
-        row['barn_score'] = barn_score(success, success_time, scenario.barn_path_length)
-    return row
+    row = empty_row(task, scenario, '')
+    row.reference_length = (polyline_length(scenario.waypoints)
+                            if scenario.waypoints is not None else None)
+    row.replans = 0
+    if len(run.step_times):
+        row.step_ms_median = float(np.median(run.step_times)) * 1e3
+        row.step_ms_max = float(np.max(run.step_times)) * 1e3
+    return finish_row(row, run, goal, min_clearance=float(np.min(clearance(data[:, 1:3]))),
+                      barn_length=scenario.barn_path_length)
 
 
 def saved_world_path(folder: Path, world: int) -> Path:

@@ -20,11 +20,12 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.baselines.dwa import Dwa, DwaConfig
+from mpc_local_planner.core.control_output import Reason
 from mpc_local_planner.core.footprint import Footprint, JACKAL
+from mpc_local_planner.core.local_controller import LocalController
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
 from mpc_local_planner.evaluation.rollout import (
-    as_controller,
     Outcome,
     polygon_clearance,
     rollout,
@@ -257,11 +258,18 @@ def test_goes_around_a_box_beside_a_straight_path() -> None:
     assert states[-1, 0] > 3.9
 
 
-def test_as_controller_adapts_it_like_pure_pursuit() -> None:
-    dwa = Dwa(np.array([[0.0, 0.0], [2.0, 0.0]]), _config())
-    step = as_controller(dwa).step(np.array([0.5, 0.0, 0.0]))
-    assert step.u[0] > 0.0
-    assert step.s == pytest.approx(0.25)
+def test_it_is_a_local_controller_like_pure_pursuit() -> None:
+    dwa = Dwa(config=_config())
+    assert isinstance(dwa, LocalController)
+    assert dwa.compute(np.array([0.5, 0.0, 0.0]), None, 0.0).reason is Reason.NO_PLAN
+    dwa.set_plan(np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]]))
+    output = dwa.compute(np.array([0.5, 0.0, 0.0]), None, 0.0)
+    assert output.u[0] > 0.0 and output.reason is Reason.TRACKING
+    assert output.progress == pytest.approx(0.25) and output.compute_time_s >= 0.0
+    dwa.set_speed_limit(0.01)
+    assert dwa.compute(np.array([0.5, 0.0, 0.0]), None, 0.2).u[0] <= 0.01
+    dwa.reset()
+    assert dwa.compute(np.array([0.5, 0.0, 0.0]), None, 0.4).reason is Reason.NO_PLAN
 
 
 # --- invalid input --------------------------------------------------------------------------

@@ -31,6 +31,10 @@ def test_obstacle_experiment_writes_both_runs_and_one_figure(experiments_out) ->
     assert proposed['reached'] and not proposed['collision']
     assert proposed['lyapunov_nonincreasing']
     assert not baseline['reached'] and baseline['max_x'] < 1.0
+    # the tracking baseline's checks are told by case, as the proposed MPC's
+    assert baseline['lyapunov_by_case'] is not None
+    assert sum(c['checks'] for c in baseline['lyapunov_by_case'].values()) \
+        == baseline['lyapunov_checks'] > 0
     with open(folder / 'proposed' / 'trajectory.csv') as stream:
         assert stream.readline().strip() == ','.join(TRAJECTORY_COLUMNS)
     rows = read_trajectory_csv(folder / 'proposed' / 'trajectory.csv')

@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The suites' adapter of the paper's controller (evaluation.navigation.MpcLocal)."""
+"""How the suites record the paper's controller's answers (evaluation.rollout.control_step)."""
 
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.evaluation.metrics import compute_metrics
-from mpc_local_planner.evaluation.navigation import MpcLocal
+from mpc_local_planner.evaluation.rollout import control_step
 from mpc_local_planner.evaluation.trajectory import trajectory_row
 from mpc_local_planner.worlds.world import paper_world
 
@@ -41,12 +41,11 @@ def test_calls_that_hold_the_plan_solve_nothing_and_leave_the_solve_statistics_a
     config = MpcConfig(solving=SolverSettings(budget='iterations', compile=False))
     controller = MpcController(MODEL, config, obstacles=WORLD.obstacles,
                                settings=ControllerSettings(control_frequency=20.0))
-    local = MpcLocal(controller)
-    local.follow(PLAN)
+    controller.set_plan(PLAN)
     x = np.array(WORLD.start, dtype=float)
     rows = []
     for k in range(12):
-        step = local.command(x, k * PERIOD)
+        step = control_step(controller.compute(x, None, k * PERIOD))
         rows.append(trajectory_row(k * PERIOD, x, step.u, s=step.s, value=step.value,
                                    solve_ms=1e3 * step.solve_time_s))
         x = MODEL.step(x, step.u, PERIOD)

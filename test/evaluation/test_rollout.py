@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The closed loop without ROS: its stop rule, its rows and its controller adapters."""
+"""The closed loop without ROS: its stop rule, its rows and the controllers it drives."""
 
 import math
 
@@ -27,15 +27,13 @@ from mpc_local_planner.core.mpc import PathReferenceMPC
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import paper_sinusoid
 from mpc_local_planner.evaluation.rollout import (
-    as_controller,
     circle_clearance,
     ControlStep,
     EVALUATION_BUDGET,
-    MpcAdapter,
     Outcome,
     polygon_clearance,
-    PurePursuitAdapter,
     rollout,
+    solution_step,
     StopRule,
 )
 from mpc_local_planner.evaluation.trajectory import (
@@ -157,7 +155,7 @@ def test_the_row_builder_puts_each_value_in_its_named_column(tmp_path) -> None:
     assert back[0] == pytest.approx(row)
 
 
-def test_the_package_controllers_plug_in_through_adapters() -> None:
+def test_the_package_controllers_plug_in_through_their_interfaces() -> None:
     class FakeMpc:
         def solve(self, x):
             from types import SimpleNamespace
@@ -165,20 +163,23 @@ def test_the_package_controllers_plug_in_through_adapters() -> None:
                                    solve_time_s=0.004, success=False, lyapunov_ok=True,
                                    x_pred=np.zeros((3, 3)))
 
-    mpc = as_controller(FakeMpc())
-    assert isinstance(mpc, MpcAdapter)
-    step = mpc.step(np.zeros(3))
+    step = solution_step(FakeMpc().solve(np.zeros(3)))
     assert step.value == 3.0 and not step.success and step.prediction.shape == (3, 3)
-    follower = as_controller(PurePursuit(np.array([[0.0, 0.0], [2.0, 0.0]])))
-    assert isinstance(follower, PurePursuitAdapter)
     rule = StopRule(time_limit=30.0, position_tolerance=0.05)
+    mpc = rollout(FakeMpc(), Unicycle(), np.zeros(3), np.array([2.0, 0.0, 0.0]), h=H,
+                  rule=StopRule(time_limit=0.4, position_tolerance=0.05))
+    assert [step.value for step in mpc.steps] == [3.0, 3.0, 3.0] and mpc.solver_failures == 3
+    # a local controller: its compute(pose, twist, t), its progress as s
+    follower = PurePursuit(np.array([[0.0, 0.0], [2.0, 0.0]]))
     run = rollout(follower, Unicycle(), np.zeros(3), np.array([2.0, 0.0, 0.0]), h=H, rule=rule)
     assert run.outcome is Outcome.REACHED
     assert np.all(np.diff(run.rows[:, TRAJECTORY_INDEX['s']]) >= 0)
+    assert run.rows[-2, TRAJECTORY_INDEX['s']] > 0.9
     constant = Constant([0.0, 0.0])
-    assert as_controller(constant) is constant
+    rollout(constant, Unicycle(), np.zeros(3), np.ones(3), h=H, rule=rule)
+    assert constant.calls > 0
     with pytest.raises(TypeError, match='no step'):
-        as_controller(object())
+        rollout(object(), Unicycle(), np.zeros(3), np.ones(3), h=H, rule=rule)
 
 
 def test_the_same_rollout_twice_is_the_same_with_the_iteration_budget() -> None:

@@ -23,6 +23,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from mpc_local_planner.core.controllers import ControllerName
 from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.evaluation import evaluate, suite_runs
 from mpc_local_planner.evaluation import sensing_suites as suites
@@ -132,12 +133,11 @@ def test_every_controller_arrives_where_a_localized_truth_still_succeeds() -> No
     world = suites.unknown_world(0, 0)
     robot = suites.ROBOTS['jackal']
     tolerance = float(world.goal_tolerance or suites.GOAL_TOLERANCE)
-    mpc = suites._local_controller('proposed', robot, world, prepare=False)
-    arrivals = [mpc.controller.settings.xy_goal_tolerance]
+    mpc = suites.controller_setup(ControllerName.PROPOSED, robot, world)
+    arrivals = [mpc.settings.xy_goal_tolerance]
     for name in ('pure_pursuit', 'dwa', 'regulated_pure_pursuit'):
-        local = suites._local_controller(name, robot, world, prepare=False)
-        local.follow(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))
-        config = getattr(local.follower, 'config', None)
+        local = suites._local_controller(name, robot, world, prepare=False).controller
+        config = getattr(local, 'config', None)
         arrivals.append(getattr(config, 'goal_tolerance', None) or config.xy_goal_tolerance)
     assert all(true_goal_tolerance(a) <= tolerance + 1e-12 for a in arrivals)
 
@@ -148,23 +148,23 @@ def test_regulated_pure_pursuit_checks_its_arc_against_the_sensed_obstacles() ->
 
     world = suites.unknown_world(0, 0)
     robot = dataclasses.replace(suites.ROBOTS['jackal'], v_max=2.0, omega_max=4.0)
-    local = suites._local_controller('regulated_pure_pursuit', robot, world, prepare=False,
-                                     reality=reality_preset('real'))
-    local.follow(np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0]]))
+    local, reach = suites._local_controller('regulated_pure_pursuit', robot, world,
+                                            prepare=False, reality=reality_preset('real'))
+    local.set_plan(np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0]]))
     x, moving = np.zeros(3), np.array([2.0, 0.0])
-    assert local.command(x, 0.0, velocity=moving).u[0] == pytest.approx(2.0)
+    assert local.compute(x, moving, 0.0).u[0] == pytest.approx(2.0)
     # the navigator hands it the obstacles within its reach, as it does the DWA's
     post = ConvexPolygon.from_box(1.0, -0.1, 1.2, 0.1)
-    assert local.reach >= 1.2
-    local.avoid([post])
-    assert not local.command(x, 0.0, velocity=moving).u.any()
-    assert local.follower.collision_ahead
+    assert reach >= 1.2
+    local.set_obstacles([post])
+    assert not local.compute(x, moving, 0.0).u.any()
+    assert local.collision_ahead
     # the measured speed scales its lookahead: 0.2 m off the path, at rest it aims 0.3 m
     # ahead (a tighter arc), at 2 m/s 0.9 m ahead
-    local.avoid([])
+    local.set_obstacles([])
     off = np.array([0.0, -0.2, 0.0])
-    at_speed = local.command(off, 0.0, velocity=moving).u
-    at_rest = local.command(off, 0.0, velocity=np.zeros(2)).u
+    at_speed = local.compute(off, moving, 0.0).u
+    at_rest = local.compute(off, np.zeros(2), 0.0).u
     assert at_rest[1] / at_rest[0] == pytest.approx(2.0 * 0.2 / (0.3**2 + 0.2**2))
     assert at_speed[1] / at_speed[0] == pytest.approx(2.0 * 0.2 / (0.9**2 + 0.2**2), rel=0.01)
 
@@ -217,7 +217,7 @@ def test_the_barn_suite_runs_on_odometry_and_the_unknown_suite_with_the_localize
         row = suite_runs.run_navigation_task(suite_runs.Task(
             suite=suite, world=0, controller='dwa', sensing=True, robot='jackal',
             reality='real'))
-        assert row['stop_reason'] == 'no plan: stop here'
+        assert row.stop_reason == 'no plan: stop here'
     assert asked == [False, True]
 
 

@@ -31,6 +31,7 @@ from rcl_interfaces.msg import Log
 from rclpy.parameter import Parameter
 from rclpy.time import Time
 
+from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.diagnostics import PlanTrigger
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.replanning import (
@@ -42,7 +43,6 @@ from mpc_local_planner.core.replanning import (
     ReplanSettings,
 )
 from mpc_local_planner.evaluation.navigation import NavigationSettings, Navigator
-from mpc_local_planner.evaluation.rollout import ControlStep
 from mpc_local_planner.perception.raycast import TrueGeometry
 from mpc_local_planner.ros.conversions import (
     seconds_to_stamp,
@@ -114,19 +114,24 @@ def record(replanner: Replanner, decisions: list) -> None:
 class StillLocal:
     """A local controller that stands still and keeps the plans it is given."""
 
-    reach = 1.0
-
     def __init__(self) -> None:
         self.plans: list[np.ndarray] = []
 
-    def follow(self, poses: np.ndarray) -> None:
+    def set_plan(self, poses: np.ndarray) -> None:
         self.plans.append(poses)
 
-    def avoid(self, obstacles: Sequence[Any]) -> None:
+    def set_obstacles(self, obstacles: Sequence[Any]) -> None:
         pass
 
-    def command(self, x: np.ndarray, t: float) -> ControlStep:
-        return ControlStep(u=np.zeros(2), solve_time_s=0.0)
+    def compute(self, pose: np.ndarray | None, twist: np.ndarray | None,
+                now: float) -> ControlOutput:
+        return ControlOutput(np.zeros(2), None, Reason.TRACKING, compute_time_s=0.0)
+
+    def reset(self) -> None:
+        self.plans.clear()
+
+    def set_speed_limit(self, v_max: float | None) -> None:
+        pass
 
 
 class NoGrid:
@@ -141,7 +146,7 @@ def run_navigator() -> tuple[Navigator, ScriptedPlanner, list]:
     settings = NavigationSettings(beams=16, replan_check_period=CHECK_PERIOD,
                                   replan_period=REPLAN_PERIOD)
     navigator = Navigator(StillLocal(), TrueGeometry([]), NoGrid(), planner, GOAL,
-                          h=CHECK_PERIOD, settings=settings)
+                          reach=1.0, h=CHECK_PERIOD, settings=settings)
     decisions: list = []
     record(navigator.replanner, decisions)
     for t in [0.0, *TIMES]:

@@ -57,10 +57,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+import time
 from typing import Sequence
 
 import numpy as np
 
+from mpc_local_planner.core.baselines.common import limited, plan_points, speed_limit
+from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.footprint import CIRCLE, Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
 from mpc_local_planner.core.paths import Polyline, project_ahead, wrap_angle
@@ -240,12 +243,15 @@ class Dwa:
 
     """
 
-    def __init__(self, waypoints: np.ndarray, config: DwaConfig | None = None,
+    def __init__(self, waypoints: np.ndarray | None = None, config: DwaConfig | None = None,
                  obstacles: Sequence[ConvexPolygon] | ObstacleSet = ()) -> None:
         self.config = config or DwaConfig()
         self._velocity = np.zeros(2)
         self._progress = 0.0
-        self.set_path(waypoints)
+        self._path: Polyline | None = None
+        self._speed_limit: float | None = None
+        if waypoints is not None:
+            self.set_path(waypoints)
         self.set_obstacles(obstacles)
         footprint = self.config.footprint
         self._radius = float(footprint.radius)
@@ -281,16 +287,55 @@ class Dwa:
         self._obstacles = _Obstacles(list(polygons))
 
     def reset(self) -> None:
-        """Start again from the path's beginning, at rest (the kept velocity is cleared)."""
+        """Forget the plan and start at rest (the kept velocity is cleared)."""
+        self._path = None
         self._progress = 0.0
         self._velocity = np.zeros(2)
+
+    # --- the local-controller interface (core/local_controller.py) -------------------------
+
+    def set_plan(self, poses: np.ndarray) -> None:
+        """Follow the plan's (M, 3) poses as a polyline (headings unused), as set_path does.
+
+        Raises:
+            ValueError: if the plan is not (M, >= 2) or its points are not a polyline.
+
+        """
+        self.set_path(plan_points(poses))
+
+    def compute(self, pose: np.ndarray | None, twist: np.ndarray | None,
+                now: float) -> ControlOutput:
+        """Return the command for pose, timed, with the progress along the plan.
+
+        The measured twist, when the base reports one, centres the window (`command`'s
+        velocity, as DWB reads odometry's); without a plan or a pose the answer is a zero
+        command with its reason.
+        """
+        if self._path is None:
+            return ControlOutput(np.zeros(2), None, Reason.NO_PLAN, compute_time_s=0.0)
+        if pose is None:
+            self._velocity = np.zeros(2)
+            return ControlOutput(np.zeros(2), None, Reason.NO_ODOM, compute_time_s=0.0)
+        start = time.perf_counter()
+        u = self.command(pose, velocity=twist)
+        if self._speed_limit is not None:
+            u = limited(u, self._speed_limit)
+            self._velocity = u.copy()
+        seconds = time.perf_counter() - start
+        return ControlOutput(u, None, Reason.TRACKING,
+                             progress=self._progress / max(self.length, 1e-9),
+                             compute_time_s=seconds)
+
+    def set_speed_limit(self, v_max: float | None) -> None:
+        """Cap |v| at v_max from the next compute (the arc kept: omega scales with v)."""
+        self._speed_limit = speed_limit(v_max)
 
     # --- what the rollout reads -----------------------------------------------------------
 
     @property
     def length(self) -> float:
-        """Length of the polyline, metres."""
-        return self._path.length
+        """Length of the polyline, metres (0 without one)."""
+        return self._path.length if self._path is not None else 0.0
 
     @property
     def progress(self) -> float:
@@ -304,6 +349,7 @@ class Dwa:
 
     def point_at(self, s: float) -> np.ndarray:
         """Return the point at arc length s (clipped to the path)."""
+        assert self._path is not None, 'no path: call set_plan first'
         return self._path.point_at(s)
 
     # --- the decision ---------------------------------------------------------------------
@@ -332,6 +378,7 @@ class Dwa:
         return u.copy()
 
     def _decide(self, pose: np.ndarray, current: np.ndarray) -> np.ndarray:
+        assert self._path is not None, 'no path: call set_plan first'
         c = self.config
         p = pose[:2]
         self._progress = self._project(p)

@@ -47,10 +47,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+import time
 from typing import Sequence
 
 import numpy as np
 
+from mpc_local_planner.core.baselines.common import limited, plan_points, speed_limit
+from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.footprint import CIRCLE, Footprint
 from mpc_local_planner.core.models import unicycle_arc
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
@@ -159,11 +162,16 @@ class PurePursuit:
 
     """
 
-    def __init__(self, waypoints: np.ndarray, config: PurePursuitConfig | None = None) -> None:
+    def __init__(self, waypoints: np.ndarray | None = None,
+                 config: PurePursuitConfig | None = None) -> None:
         self.config = config or PurePursuitConfig()
-        self.set_path(waypoints)
+        self._path: Polyline | None = None
+        self._progress = 0.0
+        if waypoints is not None:
+            self.set_path(waypoints)
         self._obstacles = ObstacleSet([])
         self._last_speed = 0.0
+        self._speed_limit: float | None = None
         self.collision_ahead = False  # the last command was refused by the collision check
 
     def set_path(self, waypoints: np.ndarray) -> None:
@@ -171,10 +179,44 @@ class PurePursuit:
         self._path = Polyline(waypoints)
         self._progress = 0.0
 
+    # --- the local-controller interface (core/local_controller.py) -------------------------
+
+    def set_plan(self, poses: np.ndarray) -> None:
+        """Follow the plan's (M, 3) poses as a polyline (headings unused), as set_path does.
+
+        Raises:
+            ValueError: if the plan is not (M, >= 2) or its points are not a polyline.
+
+        """
+        self.set_path(plan_points(poses))
+
+    def compute(self, pose: np.ndarray | None, twist: np.ndarray | None,
+                now: float) -> ControlOutput:
+        """Return the command for pose, timed, with the progress along the plan.
+
+        The measured twist scales the regulated follower's lookahead (`command`'s
+        velocity); without a plan or a pose the answer is a zero command with its reason.
+        """
+        if self._path is None:
+            return ControlOutput(np.zeros(2), None, Reason.NO_PLAN, compute_time_s=0.0)
+        if pose is None:
+            return ControlOutput(np.zeros(2), None, Reason.NO_ODOM, compute_time_s=0.0)
+        start = time.perf_counter()
+        u = limited(np.asarray(self.command(pose, velocity=twist), dtype=float),
+                     self._speed_limit)
+        seconds = time.perf_counter() - start
+        return ControlOutput(u, None, Reason.TRACKING,
+                             progress=self._progress / max(self.length, 1e-9),
+                             compute_time_s=seconds)
+
+    def set_speed_limit(self, v_max: float | None) -> None:
+        """Cap |v| at v_max from the next compute (the arc kept: omega scales with v)."""
+        self._speed_limit = speed_limit(v_max)
+
     @property
     def length(self) -> float:
-        """Length of the polyline, metres."""
-        return self._path.length
+        """Length of the polyline, metres (0 without one)."""
+        return self._path.length if self._path is not None else 0.0
 
     @property
     def progress(self) -> float:
@@ -182,7 +224,8 @@ class PurePursuit:
         return self._progress
 
     def reset(self) -> None:
-        """Start again from the beginning of the path."""
+        """Forget the plan (a new run starts with set_plan); the speed limit stays."""
+        self._path = None
         self._progress = 0.0
 
     def set_obstacles(self, obstacles: Sequence[ConvexPolygon] | ObstacleSet) -> None:
@@ -192,6 +235,7 @@ class PurePursuit:
 
     def point_at(self, s: float) -> np.ndarray:
         """Return the point at arc length s (clipped to the path)."""
+        assert self._path is not None, 'no path: call set_plan first'
         return self._path.point_at(s)
 
     def lookahead(self, speed: float) -> float:
@@ -227,6 +271,7 @@ class PurePursuit:
 
         """
         c = self.config
+        assert self._path is not None, 'no path: call set_plan first'
         p = x[:2]
         theta = float(x[2])
         self._progress = project_ahead(self._path.points, self._progress, p, lookahead)

@@ -28,7 +28,9 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
+from mpc_local_planner.core.baselines.common import limited, speed_limit
 from mpc_local_planner.core.config import CostWeights, MpcConfig
+from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.models import RobotModel
 from mpc_local_planner.core.mpc.backends import run_solver, SolverRunner
 from mpc_local_planner.core.mpc.candidate import Plan
@@ -80,12 +82,56 @@ class TrackingMPC(MpcBase):
                  target: np.ndarray | None = None,
                  runner: SolverRunner = run_solver) -> None:
         self._target = None if target is None else np.asarray(target, dtype=float)
+        self._speed_limit: float | None = None
         super().__init__(model, config, obstacles=obstacles, runner=runner)
 
     def set_target(self, target: np.ndarray) -> None:
         """Set the target pose [x, y, theta]."""
         self._target = np.asarray(target, dtype=float)
         self.reset()
+
+    # --- the local-controller interface (core/local_controller.py) -------------------------
+
+    def set_plan(self, poses: np.ndarray) -> None:
+        """Track the plan's last pose: the baseline knows its target, not the way there.
+
+        A plan ending where the target already is changes nothing (a re-plan to the same
+        goal keeps the warm start); a new target starts the MPC over (set_target).
+
+        Raises:
+            ValueError: if poses is not (M >= 1, 3) or its last pose is not finite.
+
+        """
+        points = np.asarray(poses, dtype=float)
+        if points.ndim != 2 or points.shape[1] < 3 or len(points) < 1:
+            msg = f'a plan is (M, 3) poses, got shape {points.shape}'
+            raise ValueError(msg)
+        target = points[-1, :3]
+        if not np.all(np.isfinite(target)):
+            msg = f'the plan ends at a non-finite pose {target.tolist()}'
+            raise ValueError(msg)
+        if self._target is None or not np.array_equal(target, self._target[:3]):
+            self.set_target(target)
+
+    def compute(self, pose: np.ndarray | None, twist: np.ndarray | None,
+                now: float) -> ControlOutput:
+        """Solve for pose and return what the MPC applies (the twist is not used).
+
+        TRACKING when the applied plan is the solver's, else CANDIDATE (the shifted
+        candidate, or the stop when nothing verified: solution.source says which).
+        """
+        if pose is None:
+            return ControlOutput(np.zeros(2), None, Reason.NO_ODOM)
+        if self._target is None:
+            return ControlOutput(np.zeros(2), None, Reason.NO_PLAN)
+        solution = self.solve(np.asarray(pose, dtype=float))
+        u = limited(np.asarray(solution.u0, dtype=float), self._speed_limit)
+        return ControlOutput(u, solution,
+                             Reason.TRACKING if solution.success else Reason.CANDIDATE)
+
+    def set_speed_limit(self, v_max: float | None) -> None:
+        """Cap the applied |v| at v_max from the next compute (the prediction knows no cap)."""
+        self._speed_limit = speed_limit(v_max)
 
     def _require_target(self) -> np.ndarray:
         if self._target is None:

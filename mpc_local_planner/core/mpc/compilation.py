@@ -144,8 +144,24 @@ class _CompileJob(Future):
 _QUEUE: deque[_CompileJob] = deque()
 _QUEUE_READY = threading.Condition()
 _WORKER: list[threading.Thread] = []
-# seconds spent waiting for compilations, in any thread (see compile_wait_seconds)
-_WAITED = [0.0]
+class _WaitTotal:
+    """Seconds spent waiting for compilations in this process, added from any thread."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._seconds = 0.0
+
+    def add(self, seconds: float) -> None:
+        with self._lock:
+            self._seconds += seconds
+
+    @property
+    def seconds(self) -> float:
+        with self._lock:
+            return self._seconds
+
+
+_WAITED = _WaitTotal()
 
 
 def compile_wait_seconds() -> float:
@@ -154,7 +170,7 @@ def compile_wait_seconds() -> float:
     A rollout subtracts what a control step waited for its NLP's compilation from the
     step's time: the wait happens once per NLP on a fresh machine, not in a robot's loop.
     """
-    return _WAITED[0]
+    return _WAITED.seconds
 
 
 def wait_for(job: Future) -> None:
@@ -165,7 +181,7 @@ def wait_for(job: Future) -> None:
     try:
         job.exception()  # blocks until done
     finally:
-        _WAITED[0] += time.perf_counter() - start
+        _WAITED.add(time.perf_counter() - start)
 
 
 def _queue_worker() -> None:
