@@ -132,14 +132,10 @@ REALITY_SUBSTEP = 0.01
 # the model exactly, not the robot's departures from it).
 REALITY_MARGIN = 0.03
 # The paper's MPC's input-rate bounds on a real base, as a multiple of the base's
-# acceleration limits, and how its inputs act over a step (MpcConfig.input_hold). With a
-# zero hold at the base's own limits a standing robot's NLP often found no verified plan
-# (7 of 8 hard BARN worlds stalled); without bounds its commands jumped and the lagging base
-# left the verified motion (3 contacts in BARN 0-99); at twice them 97 of 0-99, no contact,
-# but the base could not follow the jumps. With a first-order hold the velocity ramps between
-# the knots, commanded actuation_delay() ahead: at the base's own limits it follows the plan,
-# and with a solve from rest that follows the path, all of 0-99 were reached, no contact
-# (docs/real_robot.md).
+# acceleration limits, and how its inputs act over a step (MpcConfig.input_hold): with a
+# first-order hold the velocity ramps between the knots, commanded actuation_delay() ahead,
+# so at the base's own limits the lagging base follows the verified motion (the
+# measurements behind the choice: docs/real_robot.md).
 REALITY_ACCEL_FACTOR = 1.0
 REALITY_INPUT_HOLD = 'first_order'
 
@@ -383,9 +379,8 @@ def _prepare(mpc: Any, budget: str = EVALUATION_BUDGET) -> None:
     'iterations' budget the runs start at once: a step that needs an NLP waits for its
     compilation (SolverSettings.budget; the queued one is compiled first), so every solve runs the
     compiled functions whatever the timing, and the rest compile in the background in the
-    order they were built. On a fresh machine the first BARN run no longer waits for the 21
-    shapes (minutes), only for the few it uses; the wait is not counted in the step times
-    (compilation.compile_wait_seconds).
+    order they were built: a first run waits for the few shapes it uses, not for all 21
+    (minutes); the wait is not counted in the step times (compilation.compile_wait_seconds).
     """
     mpc.prepare(PREPARED_SLOTS)
     if budget != 'iterations':
