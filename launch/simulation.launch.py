@@ -39,7 +39,7 @@ world's polygon itself (unless their parameter file sets one). An invalid footpr
 refused at launch, with the reason.
 
 How real the simulated robot and laser are: ``reality:=ideal|mild|real|harsh`` (a preset of
-core/reality.py: command latency, actuator lag, acceleration limits, odometry noise and
+sim/reality.py: command latency, actuator lag, acceleration limits, odometry noise and
 drift, laser noise, NaN/-inf beams, lost scans) sets the simulator's ``reality`` over its
 parameter file; empty (the default), the parameter file's (ideal in the shipped one). An
 unknown name is refused at launch. The odometry of a non-ideal preset is not the pose in
@@ -141,7 +141,7 @@ def _check_reality(text: str) -> dict[str, str]:
         RuntimeError: for an unknown preset (the message lists the known ones).
 
     """
-    from mpc_local_planner.core.reality import REALITY_PRESETS
+    from mpc_local_planner.sim.reality import REALITY_PRESETS
 
     if not text:
         return {}
@@ -236,7 +236,7 @@ def generate_launch_description() -> LaunchDescription:
                                           "parameter file, else the world's footprint"),
         DeclareLaunchArgument('reality', default_value='',
                               description="how real the simulator's robot and laser are: "
-                                          'ideal|mild|real|harsh (core/reality.py); empty: '
+                                          'ideal|mild|real|harsh (sim/reality.py); empty: '
                                           "the simulator's parameter file"),
         DeclareLaunchArgument('use_sim_time', default_value='true',
                               description='the simulator drives /clock; every node follows it'),

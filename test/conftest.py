@@ -37,7 +37,7 @@ os.environ['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 100)
 # ----------------------------------------------------------------------------- rclpy fixtures
 # Imported after the environment is set (above): DDS reads it at the first rclpy.init.
 import time
-from typing import Any, Callable, Iterator, NamedTuple
+from typing import Any, Callable, Iterator, NamedTuple, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Twist
@@ -178,6 +178,17 @@ def throttle_clock(monkeypatch: pytest.MonkeyPatch) -> ThrottleClock:
     clock = ThrottleClock()
     monkeypatch.setattr(throttle, 'steady_clock', clock)
     return clock
+
+
+def point_in_any(
+    obstacles: Sequence[Any], points: np.ndarray, *, margin: float = 0.0
+) -> np.ndarray:
+    """Say, per point, whether it lies in any obstacle grown by margin (a test oracle)."""
+    pts = np.atleast_2d(np.asarray(points, dtype=float))
+    inside = np.zeros(len(pts), dtype=bool)
+    for obstacle in obstacles:
+        inside |= obstacle.contains(pts, margin=margin)
+    return inside
 
 
 def flat_parameters(values: dict, prefix: str = '') -> dict[str, Any]:

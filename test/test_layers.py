@@ -33,8 +33,9 @@ ALLOWED_LAYERS = {
     'core': {'core'},
     'worlds': {'core', 'worlds'},
     'perception': {'core', 'worlds', 'perception'},
-    'evaluation': {'core', 'perception', 'worlds', 'evaluation'},
-    'ros': {'core', 'perception', 'worlds', 'evaluation', 'ros'},
+    'sim': {'core', 'worlds', 'perception', 'sim'},
+    'evaluation': {'core', 'perception', 'worlds', 'sim', 'evaluation'},
+    'ros': {'core', 'perception', 'worlds', 'sim', 'evaluation', 'ros'},
 }
 # ament_index_python is a plain lookup of installed files (worlds/data_files.py), not ROS I/O
 ROS_PREFIXES = ('rclpy', 'rcl_interfaces', 'rosidl', 'launch')

@@ -31,7 +31,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-__all__ = ['KinematicBicycle', 'RobotModel', 'STRAIGHT_OMEGA', 'Unicycle', 'held_input',
+__all__ = ['RobotModel', 'STRAIGHT_OMEGA', 'Unicycle', 'held_input',
            'ramp_rk4', 'rk4', 'unicycle_arc']
 
 Symbolic = Any  # a CasADi SX/MX expression or a NumPy array
@@ -230,56 +230,6 @@ class Unicycle(RobotModel):
         """Stand still at the pose."""
         return pose, ca.DM.zeros(2)
 
-
-@dataclass(frozen=True)
-class KinematicBicycle(RobotModel):
-    """Kinematic bicycle with the steering angle as a state: x = [p_x, p_y, theta, delta].
-
-    Inputs are speed and steering rate, u = [v, delta_dot]. Steady states stand still with
-    any steering angle; g_p picks delta = 0, which makes the map unique (Assumption 1.3).
-    It is here to show that the MPC takes another model without change.
-    """
-
-    wheelbase: float = 0.3
-    v_max: float = 0.5
-    steer_max: float = 0.6
-    steer_rate_max: float = 1.0
-
-    state_names = ('x', 'y', 'theta', 'delta')
-    input_names = ('v', 'delta_dot')
-
-    @property
-    def u_min(self) -> np.ndarray:
-        """Lower input bounds."""
-        return np.array([-self.v_max, -self.steer_rate_max])
-
-    @property
-    def u_max(self) -> np.ndarray:
-        """Upper input bounds."""
-        return np.array([self.v_max, self.steer_rate_max])
-
-    @property
-    def x_min(self) -> np.ndarray:
-        """Lower state bounds (only the steering angle is bounded)."""
-        return np.array([-np.inf, -np.inf, -np.inf, -self.steer_max])
-
-    @property
-    def x_max(self) -> np.ndarray:
-        """Upper state bounds."""
-        return np.array([np.inf, np.inf, np.inf, self.steer_max])
-
-    def rhs(self, x: Symbolic, u: Symbolic) -> Symbolic:
-        """Rear-axle kinematic bicycle."""
-        return ca.vertcat(
-            u[0] * ca.cos(x[2]),
-            u[0] * ca.sin(x[2]),
-            u[0] * ca.tan(x[3]) / self.wheelbase,
-            u[1],
-        )
-
-    def steady_state(self, pose: Symbolic) -> tuple[Symbolic, Symbolic]:
-        """Stand still at the pose with straight wheels."""
-        return ca.vertcat(pose, 0), ca.DM.zeros(2)
 
 # Below this yaw rate (rad/s) the arc is taken as the straight line (no division by omega).
 STRAIGHT_OMEGA = 1e-9

@@ -50,7 +50,6 @@ __all__ = [
     'first_blocked_segment',
     'GRAZE_TOLERANCE',
     'min_clearance',
-    'point_in_any',
     'polygon_separation',
     'segment_collides',
     'SHARP_CORNER',
@@ -332,17 +331,6 @@ def first_blocked_segment(obstacles: Sequence[ConvexPolygon], points: np.ndarray
         return None
     k = int(blocked[0])
     return k, int(np.flatnonzero(hits[:, k])[0])
-
-
-def point_in_any(
-    obstacles: Sequence[ConvexPolygon], points: np.ndarray, *, margin: float = 0.0
-) -> np.ndarray:
-    """Say, per point, whether it lies in any obstacle grown by margin."""
-    pts = np.atleast_2d(np.asarray(points, dtype=float))
-    inside = np.zeros(len(pts), dtype=bool)
-    for obstacle in obstacles:
-        inside |= obstacle.contains(pts, margin=margin)
-    return inside
 
 
 def min_clearance(obstacles: Sequence[ConvexPolygon], points: np.ndarray) -> float:

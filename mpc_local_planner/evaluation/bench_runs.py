@@ -50,9 +50,10 @@ from mpc_local_planner.core.planner_config import PlannerConfig
 from mpc_local_planner.evaluation.opti_peer import OptiMpc
 from mpc_local_planner.evaluation.rollout import rollout, StopRule
 from mpc_local_planner.evaluation.run_row import RunRow
-from mpc_local_planner.perception.laser import contact, SimulatedLaser
 from mpc_local_planner.perception.raycast import TrueGeometry
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory, scan_to_obstacles
+from mpc_local_planner.sim.contact import contact
+from mpc_local_planner.sim.laser import SimulatedLaser
 from mpc_local_planner.worlds.data_files import BARN_DIR
 from mpc_local_planner.worlds.world import load_barn_world, paper_world, World
 

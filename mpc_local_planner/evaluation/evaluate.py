@@ -85,7 +85,6 @@ import numpy as np
 
 from mpc_local_planner.core.config import BUDGETS
 from mpc_local_planner.core.controllers import ControllerName
-from mpc_local_planner.core.reality import REALITY_PRESETS
 from mpc_local_planner.evaluation.plotting import plot_world_panels, WorldPanel
 from mpc_local_planner.evaluation.rollout import EVALUATION_BUDGET
 from mpc_local_planner.evaluation.run_row import RunRow
@@ -111,6 +110,7 @@ from mpc_local_planner.evaluation.sweep import (
     SettingsMismatch,
 )
 from mpc_local_planner.evaluation.trajectory import read_trajectory_csv
+from mpc_local_planner.sim.reality import REALITY_PRESETS
 
 __all__ = [
     'main',
@@ -360,7 +360,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         "default); --no-compile runs CasADi's interpreted functions: the "
                         "same solutions, slower solves, no C compiler and no wait for it")
     parser.add_argument('--reality', choices=tuple(REALITY_PRESETS), default='ideal',
-                        help='how real the robot is (core/reality.py presets): lag, latency, '
+                        help='how real the robot is (sim/reality.py presets): lag, latency, '
                              'acceleration limits, odometry noise and drift, laser noise and '
                              'dropouts; navigation suites only')
     parser.add_argument('--save-trajectories', action='store_true',

@@ -36,7 +36,8 @@ from mpc_local_planner.core.mpc import LyapunovCase
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import wrap_angle
 from mpc_local_planner.evaluation.trajectory import TRAJECTORY_INDEX as COL
-from mpc_local_planner.perception.laser import footprint_distances, TrueGeometry
+from mpc_local_planner.perception.raycast import TrueGeometry
+from mpc_local_planner.sim.contact import footprint_distances
 from mpc_local_planner.worlds.world import Circle, Shape
 
 __all__ = ['PoseClearance', 'arrivals', 'compute_metrics', 'footprint_clearance',

@@ -60,7 +60,6 @@ from mpc_local_planner.core.mpc.compilation import compile_wait_seconds
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import waypoints_to_poses
 from mpc_local_planner.core.planner import RrtStarPlanner
-from mpc_local_planner.core.reality import Base, ScanChannel
 from mpc_local_planner.core.replanning import (
     PROGRESS_ANGLE,
     PROGRESS_RADIUS,
@@ -72,11 +71,13 @@ from mpc_local_planner.core.replanning import (
 )
 from mpc_local_planner.evaluation.rollout import control_step, ControlStep
 from mpc_local_planner.perception.grids import PlanningGrid
-from mpc_local_planner.perception.laser import JACKAL_FOV, SimulatedLaser
 from mpc_local_planner.perception.local_obstacles import LocalObstacles
 from mpc_local_planner.perception.raycast import TrueGeometry
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
 from mpc_local_planner.perception.scans import Scan
+from mpc_local_planner.sim.base import Base
+from mpc_local_planner.sim.laser import JACKAL_FOV, SimulatedLaser
+from mpc_local_planner.sim.scan_channel import ScanChannel
 from mpc_local_planner.worlds.map_files import OccupancyMap
 
 __all__ = [
@@ -188,7 +189,7 @@ class Navigator:
         snapshot_period: Seconds between two records of the sensed obstacles (figures).
         footprint: The robot's footprint: scan returns inside it are the robot itself, not
             obstacles (`classify_beams`), as the nodes read them; None: every return counts.
-        base: The real robot's base the rollout drives (core/reality.py), or None: the
+        base: The real robot's base the rollout drives (sim/base.py), or None: the
             laser scans from the pose step() is given (an ideal robot, whose odometry is
             its pose). With a base it scans from the base's true pose through the
             reality's ScanChannel, and step() gets what odometry says.

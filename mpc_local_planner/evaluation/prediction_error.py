@@ -15,7 +15,7 @@
 """Do the MPC's predictions match what a lagging base does? One step ahead, on BARN runs.
 
 Runs the paper's MPC on BARN worlds (laser sensing, the suites' set-up) with a `real` base
-(core/reality.py: latency, first-order lag, acceleration limits) and compares, at every
+(sim/base.py: latency, first-order lag, acceleration limits) and compares, at every
 solve, the motion the plan predicts over its first step h with the motion the base made
 in the h that followed: the relative pose x_0^{-1} x_1 of the prediction against
 p(t)^{-1} p(t + h) of the TRUE pose. Relative motions, so that odometry's drift and noise

@@ -36,7 +36,7 @@ Otherwise u_k is applied: x_{k+1} = model.step(x_k, u_k, h). A controller that r
 PlanningError (it has no way to the goal) or commands a non-finite input ends the run as
 STOPPED; its last row has a zero input.
 
-The plant may instead be a real robot's base (core/reality.py `Base`, the model the
+The plant may instead be a real robot's base (sim/base.py `Base`, the model the
 unicycle_simulator node runs): then the controller is called every h with what odometry
 reports (noise and drift included), its command is sent to the base at that instant and acts
 after the base's latency, lag and acceleration limits, and the rows hold the TRUE pose (the
@@ -46,7 +46,7 @@ period (1 / control_frequency), and stall_steps counts periods of stall_period s
 
 Odometry that drifts is not the pose in ``map``, where the plan and the obstacles are: the
 nodes then compose it with a localizer's poses (perception/localization.py), and so does the
-rollout given a `Localizer` (core/reality.py, the simulator's stand-in for AMCL): at each
+rollout given a `Localizer` (sim/localizer.py, the simulator's stand-in for AMCL): at each
 control instant the odometry (and its twist) goes into a `LocalizedPose`, a localizer pose
 due then (the TRUE pose with noise) updates its correction map <- odom at that instant, and
 the controller gets the latest odometry through the correction: the pose in ``map``, as the
@@ -78,7 +78,8 @@ from mpc_local_planner.perception.localization import LocalizedPose
 if TYPE_CHECKING:
     from mpc_local_planner.core.mpc import MpcSolution
     from mpc_local_planner.core.obstacles import ConvexPolygon
-    from mpc_local_planner.core.reality import Base, Localizer
+    from mpc_local_planner.sim.base import Base
+    from mpc_local_planner.sim.localizer import Localizer
 
 __all__ = [
     'circle_clearance',
@@ -323,7 +324,7 @@ def rollout(
         controller: a local controller, the paper's MPC (``solve(x)``) or a
             RolloutController (see the module docstring).
         model: the plant: ``model.step(x, u, h) -> x_next``, or a real robot's `Base`
-            (core/reality.py; it holds the start pose: start is not used).
+            (sim/base.py; it holds the start pose: start is not used).
         start: the initial state.
         goal: the goal pose (x, y, theta).
         h: the step length, seconds.

@@ -50,7 +50,7 @@ class RunRow:
         step_ms_max: Largest of them, ms.
         plan_s_max: Longest planning, seconds.
         name: The world's name.
-        reality: How real the robot was (core/reality.py preset; navigation runs).
+        reality: How real the robot was (sim/reality.py preset; navigation runs).
 
     """
 

@@ -60,13 +60,6 @@ from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.planner import RrtStarPlanner
 from mpc_local_planner.core.planner_config import PlannerConfig
-from mpc_local_planner.core.reality import (
-    Base,
-    Localizer,
-    POSE_ERROR,
-    Reality,
-    reality_preset,
-)
 from mpc_local_planner.evaluation.known_map_worlds import RANDOM_BOUNDS, RANDOM_GOAL, RANDOM_START
 from mpc_local_planner.evaluation.metrics import footprint_clearance
 from mpc_local_planner.evaluation.mpc_cache import MPC_CACHE, MpcKey
@@ -80,6 +73,9 @@ from mpc_local_planner.evaluation.rollout import (
 )
 from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.perception.raycast import TrueGeometry
+from mpc_local_planner.sim.base import Base
+from mpc_local_planner.sim.localizer import Localizer
+from mpc_local_planner.sim.reality import POSE_ERROR, Reality, reality_preset
 from mpc_local_planner.worlds.map_files import OccupancyMap, rasterize_world
 from mpc_local_planner.worlds.world import load_barn_world, World
 
@@ -437,7 +433,7 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
             first steps), which is enough for tests that do not time steps.
         setup: How the MPCs solve (their budget, compiled or not) and how the paper's MPC
             acts on a real base.
-        reality: How real the robot is (core/reality.py: a preset's name or a Reality).
+        reality: How real the robot is (sim/reality.py: a preset's name or a Reality).
             Ideal: the model takes each command exactly every h, odometry is the pose, the
             laser is exact (every suite before). Otherwise the robot is a `Base` with that
             reality (seeded with seed), commanded at CONTROL_FREQUENCY (the MPC still

@@ -117,7 +117,7 @@ class Task:
     world_file: str = ''
     budget: str = EVALUATION_BUDGET  # SolverSettings.budget of the MPCs
     compile: bool = True  # SolverSettings.compile of the MPCs
-    reality: str = 'ideal'  # core/reality.py preset: how real the robot is (navigation runs)
+    reality: str = 'ideal'  # sim/reality.py preset: how real the robot is (navigation runs)
 
     @property
     def navigation(self) -> bool:

@@ -80,7 +80,7 @@ be within reality.true_goal_tolerance of the controller's arrival tolerance
 controller, believes is not enough.
 
 With ``--reality {ideal,mild,real,harsh}`` (default ideal) the simulator's robot and laser
-are that preset of core/reality.py (the simulator's ``reality`` parameter: command latency,
+are that preset of sim/reality.py (the simulator's ``reality`` parameter: command latency,
 actuator lag, acceleration limits, odometry noise and drift, laser noise, NaN/-inf beams,
 lost scans), the same model the ROS-free rollout uses. A preset whose odometry is not exact
 (all but ideal) is run as ``--drift`` is: odometry in ``odom``, the localizer stand-in on
@@ -128,7 +128,6 @@ from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.footprint import FROM_WORLD, radius_in_force, resolve
 from mpc_local_planner.core.planner import RrtStarPlanner
 from mpc_local_planner.core.planner_config import PlannerConfig
-from mpc_local_planner.core.reality import REALITY_PRESETS, true_goal_tolerance
 from mpc_local_planner.evaluation.analyze_bag import analyze, read_run, summary
 from mpc_local_planner.evaluation.plotting import plot_runs
 from mpc_local_planner.ros.bag_recorder_node import (
@@ -151,6 +150,7 @@ from mpc_local_planner.ros.closed_loop_parameters import (
 )
 from mpc_local_planner.ros.closed_loop_processes import respawn, spawn_all, stop_children
 from mpc_local_planner.ros.node_main import autostart
+from mpc_local_planner.sim.reality import REALITY_PRESETS, true_goal_tolerance
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.map_files import rasterize_world, save_map
 from mpc_local_planner.worlds.world import load_world, World
@@ -444,7 +444,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                              'RATE rad/m in heading; default 5 %%), and the nodes follow a '
                              'localizer stand-in on amcl_pose')
     parser.add_argument('--reality', choices=tuple(REALITY_PRESETS), default=defaults.reality,
-                        help="how real the simulator's robot and laser are (core/reality.py): "
+                        help="how real the simulator's robot and laser are (sim/reality.py): "
                              'ideal (exact), mild, real or harsh (latency, lag, acceleration '
                              'limits, odometry noise and drift, laser noise, NaN/-inf beams, '
                              'lost scans); a non-ideal one runs with the localizer, as --drift')

@@ -30,8 +30,9 @@ from typing import Any
 import yaml
 
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
-from mpc_local_planner.core.reality import LOCALIZER_NOISE, LOCALIZER_RATE, reality_preset
 from mpc_local_planner.ros.unicycle_simulator_parameters import LOCALIZER_TOPIC
+from mpc_local_planner.sim.localizer import LOCALIZER_NOISE, LOCALIZER_RATE
+from mpc_local_planner.sim.reality import reality_preset
 from mpc_local_planner.worlds.world import load_world, World
 
 __all__ = ['DEFAULT_DRIFT', 'DEFAULT_WORLD', 'LoopOptions', 'MODULES',
@@ -46,7 +47,7 @@ POLYGON_CLEARANCE = 0.05
 # The controller's arrival on the paper's scenario (see the module docstring).
 PAPER_GOAL_TOLERANCES = {'xy_goal_tolerance': 0.02, 'yaw_goal_tolerance': 0.05}
 # --drift: the odometry's drift when the option comes without a rate. The localizer
-# stand-in's rate and noise are core/reality.py's LOCALIZER_RATE and LOCALIZER_NOISE, which
+# stand-in's rate and noise are sim/localizer.py's LOCALIZER_RATE and LOCALIZER_NOISE, which
 # the suites' rollout uses too.
 DEFAULT_DRIFT = 0.05
 
@@ -74,7 +75,7 @@ class LoopOptions:
     sensing: bool = False
     # odometry drift (fraction of the distance, and rad/m), with the localizer; 0 = exact
     drift: float = 0.0
-    # the simulator's reality preset (core/reality.py): how real the robot and laser are
+    # the simulator's reality preset (sim/reality.py): how real the robot and laser are
     reality: str = 'ideal'
     # the robot, instead of the world's: a polygon (Nav2's "[[x, y], ...]") or a circle
     footprint: str | None = None

@@ -50,7 +50,7 @@ from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world
 
 __all__ = ['BASE_FRAME', 'DEFAULTS', 'PARAMETERS', 'RATE_LIMIT_OFF',
-           'build_settings', 'check_obstacles', 'check_sensing', 'load_obstacles',
+           'build_settings', 'check_obstacles', 'check_sensing',
            'load_robot', 'rate_limit', 'robot_footprint']
 
 # The frame of a TwistStamped cmd_vel.
@@ -248,15 +248,6 @@ def load_robot(world_file: str) -> tuple[list[ConvexPolygon], Footprint]:
         return [], Footprint.circle(0.0)
     world = load_world(resolve_data_file(world_file))
     return list(world.obstacles), world.footprint
-
-
-def load_obstacles(world_file: str) -> tuple[list[ConvexPolygon], float]:
-    """Return the obstacles and robot radius of a world file ('' = no obstacles).
-
-    For a polygon footprint the radius is its circumscribed one (see `World.robot_radius`).
-    """
-    obstacles, footprint = load_robot(world_file)
-    return obstacles, float(footprint.radius)
 
 
 def robot_footprint(parameter: str, world_footprint: Footprint | None = None

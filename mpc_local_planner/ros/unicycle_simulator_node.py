@@ -15,11 +15,11 @@
 """unicycle_simulator: a robot base and its laser, as ideal or as real as ``reality`` says.
 
 The node simulates what a real robot does with a velocity command and what its sensors give
-back, with ONE model shared with the ROS-free rollout of the evaluation suites
-(core/reality.py: `Base` for the base and its odometry, `ScanChannel` for the laser), so the
-suites measure what the nodes see. ``reality`` names a preset (ideal|mild|real|harsh, their
-values and sources in core/reality.py); with ``ideal`` (the default) a command acts at once
-and exactly (saturated), the odometry is the true pose and the laser is exact, as this node
+back, with ONE model shared with the ROS-free rollout of the evaluation suites (sim/:
+`Base` for the base and its odometry, `ScanChannel` for the laser), so the suites measure
+what the nodes see. ``reality`` names a preset (ideal|mild|real|harsh, their
+values and sources in sim/reality.py); with ``ideal`` (the default) a command acts at once
+and exactly (saturated), the odometry is the true pose and the laser is exact.
 always did. Otherwise:
 
 - a cmd_vel reaches the motors ``command_latency`` s (simulated) after its arrival;
@@ -106,12 +106,7 @@ from std_msgs.msg import UInt32
 
 from mpc_local_planner.core.footprint import Footprint, parse_footprint, resolve
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.reality import (
-    Base,
-    Reality,
-    ScanChannel,
-)
-from mpc_local_planner.perception.laser import contact, SimulatedLaser, TrueGeometry
+from mpc_local_planner.perception.raycast import TrueGeometry
 from mpc_local_planner.perception.scans import Scan
 from mpc_local_planner.ros.conversions import (
     seconds_to_stamp,
@@ -139,6 +134,11 @@ from mpc_local_planner.ros.unicycle_simulator_parameters import (
     SCAN_TOPIC,
     validate_simulator_parameters,
 )
+from mpc_local_planner.sim.base import Base
+from mpc_local_planner.sim.contact import contact
+from mpc_local_planner.sim.laser import SimulatedLaser
+from mpc_local_planner.sim.reality import Reality
+from mpc_local_planner.sim.scan_channel import ScanChannel
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world, World
 

@@ -27,13 +27,9 @@ from typing import Any
 
 from mpc_local_planner.core.footprint import FROM_WORLD, parse_footprint
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.reality import (
-    LOCALIZER_NOISE,
-    Reality,
-    reality_preset,
-    REALITY_PRESETS,
-)
 from mpc_local_planner.ros.parameters import ParameterSpec, range_problem
+from mpc_local_planner.sim.localizer import LOCALIZER_NOISE
+from mpc_local_planner.sim.reality import Reality, reality_preset, REALITY_PRESETS
 
 __all__ = ['CONTACTS_TOPIC', 'FROM_PRESET', 'LOCALIZER_TOPIC', 'MAX_SCAN_BEAMS', 'PARAMETERS',
            'REALITY_PARAMETERS', 'SCAN_RANGE_MIN', 'SCAN_TOPIC', 'reality_from_parameters',
@@ -130,7 +126,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "odometry's heading error per metre travelled (rad/m; 0 = exact); "
                   f'{_PRESET} (ideal: exact)', float_range=(-0.5, 0.5), special=FROM_PRESET),
     ParameterSpec('reality', 'ideal',
-                  'how real the robot and its laser are, a preset of core/reality.py: '
+                  'how real the robot and its laser are, a preset of sim/reality.py: '
                   f'{"|".join(REALITY_PRESETS)} (ideal: commands act at once and exactly, '
                   'odometry is the pose, the laser is exact); the parameters below and '
                   "scan.noise_std, odom_drift.* and scan.*_fraction override single fields, "
@@ -228,7 +224,7 @@ def _validate_reality_parameters(values: dict[str, Any]) -> str | None:
     """
     name = values.get('reality')
     if name is not None and (not isinstance(name, str) or name not in REALITY_PRESETS):
-        return (f'reality must be one of {"|".join(REALITY_PRESETS)} (core/reality.py), '
+        return (f'reality must be one of {"|".join(REALITY_PRESETS)} (sim/reality.py), '
                 f'got {name!r}')
     for key in _PAIR_OVERRIDES:
         value = values.get(key)

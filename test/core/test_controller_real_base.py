@@ -13,7 +13,7 @@
 # limitations under the License.
 """MpcController on a real base: the control rate, braking stops, bounded input rates.
 
-The closed loops run on core/reality.py's Base (lag, latency, acceleration limits, odometry
+The closed loops run on sim/base.py's Base (lag, latency, acceleration limits, odometry
 noise), the model the simulator node and the suites' rollout share.
 """
 
@@ -30,8 +30,9 @@ from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.input_freshness import InputFreshness
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.reality import Base, Reality
 from mpc_local_planner.evaluation.rollout import rollout, StopRule
+from mpc_local_planner.sim.base import Base
+from mpc_local_planner.sim.reality import Reality
 from mpc_local_planner.worlds.world import paper_world
 
 WORLD = paper_world()

@@ -1,10 +1,9 @@
 """Unit tests of the robot models (no ROS)."""
 
-import casadi as ca
 import numpy as np
 import pytest
 
-from mpc_local_planner.core.models import KinematicBicycle, Unicycle
+from mpc_local_planner.core.models import Unicycle
 
 
 def test_unicycle_has_the_papers_turtlebot_bounds_by_default() -> None:
@@ -39,11 +38,3 @@ def test_every_pose_is_a_steady_state_with_zero_input() -> None:
 def test_unicycle_refuses_non_positive_bounds() -> None:
     with pytest.raises(ValueError, match='must be > 0'):
         Unicycle(v_max=0.0)
-
-
-def test_bicycle_model_steady_state_has_straight_wheels() -> None:
-    model = KinematicBicycle()
-    x_s, u_s = model.steady_state(ca.DM([1.0, 2.0, 0.3]))
-    np.testing.assert_allclose(np.asarray(x_s).ravel(), [1.0, 2.0, 0.3, 0.0])
-    np.testing.assert_allclose(np.asarray(model.discrete(0.1)(x_s, u_s)).ravel(),
-                               [1.0, 2.0, 0.3, 0.0])

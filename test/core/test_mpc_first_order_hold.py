@@ -37,7 +37,8 @@ from mpc_local_planner.core.mpc.formulation import formulate, path_terminal
 from mpc_local_planner.core.mpc.tries import Start
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
 from mpc_local_planner.core.paths import paper_sinusoid, WaypointPath
-from mpc_local_planner.core.reality import Base, Reality
+from mpc_local_planner.sim.base import Base
+from mpc_local_planner.sim.reality import Reality
 
 JACKAL_VERTICES = tuple((float(x), float(y)) for x, y in JACKAL.vertices)
 MODEL = Unicycle(v_max=2.0, omega_max=4.0, v_min=0.0)

@@ -1,5 +1,6 @@
 """Unit tests of convex obstacles in H-representation."""
 
+from conftest import point_in_any
 from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
@@ -11,7 +12,6 @@ from mpc_local_planner.core.obstacles import (
     first_blocked_segment,
     min_clearance,
     ObstacleSet,
-    point_in_any,
     polygon_separation,
     segment_collides,
     within_faces,

@@ -18,16 +18,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from conftest import point_in_any
 import numpy as np
 import pytest
 
 from mpc_local_planner.core.errors import PlanningError
 from mpc_local_planner.core.free_space import grid_bounds
-from mpc_local_planner.core.obstacles import ConvexPolygon, point_in_any, segment_collides
+from mpc_local_planner.core.obstacles import ConvexPolygon, segment_collides
 from mpc_local_planner.core.planner import path_length, RrtStarPlanner
 from mpc_local_planner.core.planner_config import PlannerConfig
 from mpc_local_planner.perception.grids import PlanningGrid
-from mpc_local_planner.perception.laser import SimulatedLaser
+from mpc_local_planner.sim.laser import SimulatedLaser
 from mpc_local_planner.worlds.data_files import BARN_DIR
 from mpc_local_planner.worlds.map_files import OccupancyMap
 from mpc_local_planner.worlds.world import load_world, paper_world, World

@@ -215,7 +215,8 @@ def test_the_same_rollout_twice_is_the_same_with_the_iteration_budget() -> None:
 
 
 def test_on_a_real_base_the_controller_sees_odometry_and_the_rows_hold_the_truth():
-    from mpc_local_planner.core.reality import Base, Reality
+    from mpc_local_planner.sim.base import Base
+    from mpc_local_planner.sim.reality import Reality
 
     seen = []
 
@@ -249,7 +250,8 @@ def test_a_stall_lasts_as_long_in_seconds_at_any_control_period():
 
 def _drifting_run(localizer, monkeypatch=None):
     """Drive a drifting base straight on for 10 s; return the run and what the controller saw."""
-    from mpc_local_planner.core.reality import Base, Reality
+    from mpc_local_planner.sim.base import Base
+    from mpc_local_planner.sim.reality import Reality
 
     seen = []
 
@@ -267,7 +269,7 @@ def _drifting_run(localizer, monkeypatch=None):
 
 
 def test_with_a_localizer_the_controller_sees_the_pose_in_map_not_the_drifted_odometry():
-    from mpc_local_planner.core.reality import Localizer
+    from mpc_local_planner.sim.localizer import Localizer
 
     truth_error = []
     for localizer in (None, Localizer()):
@@ -280,9 +282,9 @@ def test_with_a_localizer_the_controller_sees_the_pose_in_map_not_the_drifted_od
 
 
 def test_the_rollout_composes_odometry_and_the_localizer_through_localized_pose(monkeypatch):
-    from mpc_local_planner.core.reality import Localizer
     from mpc_local_planner.evaluation import rollout as rollout_module
     from mpc_local_planner.perception.localization import compose, LocalizedPose
+    from mpc_local_planner.sim.localizer import Localizer
 
     made = []
 
@@ -309,7 +311,7 @@ def test_the_rollout_composes_odometry_and_the_localizer_through_localized_pose(
 
 
 def test_a_localizer_needs_a_real_base():
-    from mpc_local_planner.core.reality import Localizer
+    from mpc_local_planner.sim.localizer import Localizer
 
     with pytest.raises(ValueError, match='real base'):
         rollout(lambda x: None, Unicycle(), np.zeros(3), np.ones(3), h=0.1,

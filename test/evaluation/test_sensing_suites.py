@@ -128,7 +128,7 @@ def test_the_figure_draws_the_sensed_obstacles_every_plan_and_the_footprint(tmp_
 
 
 def test_every_controller_arrives_where_a_localized_truth_still_succeeds() -> None:
-    from mpc_local_planner.core.reality import true_goal_tolerance
+    from mpc_local_planner.sim.reality import true_goal_tolerance
 
     world = suites.unknown_world(0, 0)
     robot = suites.ROBOTS['jackal']
@@ -144,7 +144,7 @@ def test_every_controller_arrives_where_a_localized_truth_still_succeeds() -> No
 
 def test_regulated_pure_pursuit_checks_its_arc_against_the_sensed_obstacles() -> None:
     from mpc_local_planner.core.obstacles import ConvexPolygon
-    from mpc_local_planner.core.reality import reality_preset
+    from mpc_local_planner.sim.reality import reality_preset
 
     world = suites.unknown_world(0, 0)
     robot = dataclasses.replace(suites.ROBOTS['jackal'], v_max=2.0, omega_max=4.0)
@@ -170,7 +170,7 @@ def test_regulated_pure_pursuit_checks_its_arc_against_the_sensed_obstacles() ->
 
 
 def test_a_real_robot_navigates_on_odometry_corrected_by_the_localizer(monkeypatch) -> None:
-    from mpc_local_planner.core.reality import Localizer
+    from mpc_local_planner.sim.localizer import Localizer
 
     given = {}
     real_rollout = suites.rollout

@@ -18,19 +18,20 @@ from __future__ import annotations
 
 import math
 
+from conftest import point_in_any
 import numpy as np
 import pytest
 
 from mpc_local_planner.core.footprint import Footprint, JACKAL
-from mpc_local_planner.core.obstacles import ConvexPolygon, point_in_any
+from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.perception.grids import (
     grid_from_fields,
     grid_rectangles,
     GridError,
     PlanningGrid,
 )
-from mpc_local_planner.perception.laser import SimulatedLaser
 from mpc_local_planner.perception.scans import Scan
+from mpc_local_planner.sim.laser import SimulatedLaser
 from mpc_local_planner.worlds.map_files import OccupancyMap
 
 L_SHAPE = np.array([  # row 0 at the bottom

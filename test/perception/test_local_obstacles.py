@@ -17,12 +17,13 @@
 
 from __future__ import annotations
 
+from conftest import point_in_any
 import numpy as np
 
-from mpc_local_planner.core.obstacles import ConvexPolygon, point_in_any
-from mpc_local_planner.perception.laser import SimulatedLaser
+from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.perception.local_obstacles import LocalObstacles
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
+from mpc_local_planner.sim.laser import SimulatedLaser
 from mpc_local_planner.worlds.map_files import OccupancyMap
 
 

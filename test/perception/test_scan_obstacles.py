@@ -18,12 +18,12 @@ from __future__ import annotations
 
 import math
 
+from conftest import point_in_any
 import numpy as np
 import pytest
 
 from mpc_local_planner.core.footprint import Footprint, JACKAL
-from mpc_local_planner.core.obstacles import ConvexPolygon, min_clearance, point_in_any
-from mpc_local_planner.perception.laser import SimulatedLaser
+from mpc_local_planner.core.obstacles import ConvexPolygon, min_clearance
 from mpc_local_planner.perception.scan_obstacles import (
     cluster_bounds,
     ObstacleMemory,
@@ -36,6 +36,7 @@ from mpc_local_planner.perception.scans import (
     ScanError,
     validate_scan,
 )
+from mpc_local_planner.sim.laser import SimulatedLaser
 
 BOX = ConvexPolygon.from_box(2.0, -0.5, 2.6, 0.5)
 

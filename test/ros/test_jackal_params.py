@@ -21,9 +21,9 @@ import pytest
 import yaml
 
 from mpc_local_planner.core.footprint import JACKAL
-from mpc_local_planner.core.reality import reality_preset
 from mpc_local_planner.evaluation import sensing_suites
 from mpc_local_planner.ros.mpc_controller_parameters import build_settings, DEFAULTS, PARAMETERS
+from mpc_local_planner.sim.reality import reality_preset
 from mpc_local_planner.worlds.data_files import resolve_data_file
 
 

@@ -45,7 +45,7 @@ from mpc_local_planner.ros.conversions import (
 from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
 from mpc_local_planner.ros.mpc_controller_node import MpcControllerNode
 from mpc_local_planner.ros.mpc_controller_outputs import log_line
-from mpc_local_planner.ros.mpc_controller_parameters import load_obstacles
+from mpc_local_planner.ros.mpc_controller_parameters import load_robot
 from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
 from mpc_local_planner.worlds.world import paper_world
@@ -349,8 +349,8 @@ def test_nodes_find_world_files_named_without_a_suffix(ros) -> None:
     for node in (controller, planner):
         result = node.set_parameters([Parameter('world_file', value='rrt_cluttered')])[0]
         assert result.successful, result.reason
-    obstacles, radius = load_obstacles('rrt_cluttered')
-    assert len(obstacles) == 7 and radius == 0.1
+    obstacles, footprint = load_robot('rrt_cluttered')
+    assert len(obstacles) == 7 and footprint.radius == 0.1
 
 
 def test_the_candidate_log_line_says_its_input_is_applied() -> None:

@@ -37,7 +37,6 @@ from mpc_local_planner.core.diagnostics import (
     PlanTrigger,
 )
 from mpc_local_planner.core.obstacles import ConvexPolygon
-from mpc_local_planner.perception.laser import SimulatedLaser
 from mpc_local_planner.ros.conversions import (
     path_to_poses,
     seconds_to_stamp,
@@ -48,6 +47,7 @@ from mpc_local_planner.ros.global_planner_node import GlobalPlannerNode
 from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.qos import MAP_QOS, PLANNER_DIAGNOSTICS_QOS, SCAN_QOS
 from mpc_local_planner.ros.throttle import ProblemThrottle
+from mpc_local_planner.sim.laser import SimulatedLaser
 
 pytestmark = pytest.mark.dds  # topics over DDS
 

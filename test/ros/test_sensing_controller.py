@@ -38,7 +38,6 @@ from visualization_msgs.msg import Marker, MarkerArray
 from mpc_local_planner.core.control_output import Reason
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
-from mpc_local_planner.perception.laser import SimulatedLaser
 from mpc_local_planner.ros.conversions import (
     poses_to_path,
     seconds_to_stamp,
@@ -50,6 +49,7 @@ from mpc_local_planner.ros.mpc_controller_node import MpcControllerNode
 from mpc_local_planner.ros.mpc_controller_outputs import OBSTACLES_TOPIC
 from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.qos import LOCAL_PLAN_QOS, MAP_QOS
+from mpc_local_planner.sim.laser import SimulatedLaser
 
 pytestmark = pytest.mark.dds  # DDS
 

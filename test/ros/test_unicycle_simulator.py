@@ -15,7 +15,7 @@
 
 Both are handled alike: a valid command moves the robot, a non-finite one stops it with an
 error, and silence longer than cmd_timeout (simulated time) stops it too. With ``reality``
-the robot is a real one (core/reality.py): its wheels lag the command, a command arrives late,
+the robot is a real one (sim/reality.py): its wheels lag the command, a command arrives late,
 its scans have NaN beams and some never come; every check counts in simulated time.
 """
 
@@ -34,7 +34,6 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 
-from mpc_local_planner.core.reality import REALITY_PRESETS
 from mpc_local_planner.ros.conversions import stamp_to_seconds, twist_from_u, twist_stamped_from_u
 from mpc_local_planner.ros.qos import CMD_VEL_QOS, LOCALIZER_QOS
 from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
@@ -45,6 +44,7 @@ from mpc_local_planner.ros.unicycle_simulator_parameters import (
     SCAN_TOPIC,
     validate_simulator_parameters,
 )
+from mpc_local_planner.sim.reality import REALITY_PRESETS
 
 pytestmark = pytest.mark.dds  # topics over DDS
 

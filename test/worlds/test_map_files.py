@@ -19,11 +19,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from conftest import point_in_any
 import numpy as np
 import pytest
 import yaml
 
-from mpc_local_planner.core.obstacles import point_in_any
 from mpc_local_planner.worlds.map_files import (
     load_map,
     MapError,

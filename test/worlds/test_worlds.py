@@ -28,7 +28,8 @@ import yaml
 from mpc_local_planner.core.errors import WorldError
 from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.obstacles import ConvexPolygon, min_clearance
-from mpc_local_planner.perception.laser import contact, TrueGeometry
+from mpc_local_planner.perception.raycast import TrueGeometry
+from mpc_local_planner.sim.contact import contact
 from mpc_local_planner.worlds.data_files import BARN_DIR
 from mpc_local_planner.worlds.world import (
     BARN_ROBOT_RADIUS,

@@ -40,7 +40,7 @@ up for a fast robot:
 
 Left out, as a robot's stack does them elsewhere: the cost-regulated scaling (off by default
 in Nav2), the angular acceleration limit of the turn in place and the velocity smoother (the
-base's own limits apply them here, `core/reality.py`).
+base's own limits apply them here, `sim/reality.py`).
 """
 
 from __future__ import annotations

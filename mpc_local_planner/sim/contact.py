@@ -1,22 +1,9 @@
-# Copyright 2026 mpc_local_planner developers
-#
-# Licensed under the Apache License, Version 2.0 (the "License");
-# you may not use this file except in compliance with the License.
-# You may obtain a copy of the License at
-#
-#     http://www.apache.org/licenses/LICENSE-2.0
-#
-# Unless required by applicable law or agreed to in writing, software
-# distributed under the License is distributed on an "AS IS" BASIS,
-# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
-# See the License for the specific language governing permissions and
-# limitations under the License.
+# SPDX-License-Identifier: Apache-2.0
+"""Contacts and clearances of the robot's TRUE footprint with the world's exact obstacles.
 
-"""A simulated 2-D laser and contact checks against the world's exact geometry.
-
-Both answer questions about the *true* world (known and unknown obstacles, disks as disks),
-not about what the robot believes: the laser is how unknown obstacles become known, and a
-contact is what the evaluation counts against the controller.
+Like the simulated laser (sim/laser.py), these answer questions about the *true* world
+(known and unknown obstacles, disks as disks), not about what the robot believes: a contact
+is what the evaluation counts against the controller.
 
 Contacts and clearances use the robot's TRUE footprint (`Footprint`): a disk, or a convex
 polygon at the pose (x, y, theta). A Jackal's rectangle passes gaps its circumscribed circle
@@ -26,40 +13,20 @@ when the score is "no contact". Polygon against convex polygon is exact by separ
 disk's centre to the polygon; both are one NumPy expression over the (pose, obstacle) pairs
 whose bounding disks can meet, so the simulator's check every tick stays cheap in a BARN
 world with hundreds of cylinders.
-
-Speed matters because the simulator scans at 10-40 Hz in a BARN world with hundreds of
-cylinders. Every obstacle is bounded by a disk; a disk beyond range_max is dropped, and each
-remaining disk is paired only with the beams whose angles fall inside the cone it subtends
-from the laser. The exact intersection (analytic for disks, Cyrus-Beck style for polygon
-edges) is then one NumPy expression over those (beam, obstacle) pairs, and each beam keeps its
-nearest hit. Beams that hit nothing are ``inf`` (REP 117), not range_max.
 """
 
 from __future__ import annotations
 
 import math
-from typing import NamedTuple, Sequence, TYPE_CHECKING
+from typing import NamedTuple
 import weakref
 
 import numpy as np
 
 from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.perception.raycast import TrueGeometry
-from mpc_local_planner.perception.scans import Scan
 
-if TYPE_CHECKING:
-    from mpc_local_planner.worlds.world import Shape
-
-__all__ = [
-    'JACKAL_FOV',
-    'SimulatedLaser',
-    'TrueGeometry',
-    'contact',
-    'footprint_distances',
-]
-
-#: The Jackal's laser field of view (270 degrees), the BARN challenge's sensor.
-JACKAL_FOV = 4.71
+__all__ = ['contact', 'footprint_distances']
 
 # Slack (m) on the bounding-disk tests that pick the (pose, obstacle) pairs to examine, so
 # that rounding never drops a pair that exactly touches.
@@ -368,82 +335,3 @@ def _circle_polygon_signed_distance(packed: _Packed, points: np.ndarray,
     outside = _segment_distances(points[:, None, :], packed.starts[polygon],
                                  packed.edges[polygon])
     return np.where(residual <= 0.0, residual, outside)
-
-
-class SimulatedLaser:
-    """A planar laser scanner that sees the true world, with the LaserScan conventions.
-
-    Beam angles are relative to the laser's forward axis: angle_min = -fov / 2,
-    angle_increment = fov / (beams - 1), so the middle beam looks straight ahead. Readings are
-    the exact distance (a real laser's noise and dropouts are core/reality.py's ScanChannel,
-    applied to the scan by whoever simulates a real one); a beam that hits nothing within
-    range_max is inf. Readings below range_min are reported as measured (consumers discard
-    them, as they must for a real sensor).
-
-    Args:
-        geometry: The world's exact obstacles, or the shapes to build them from.
-        fov: Field of view, radians (default the Jackal's 270 degrees).
-        beams: Number of beams (>= 2).
-        range_min: Closest valid reading, metres.
-        range_max: Farthest valid reading, metres.
-
-    Raises:
-        ValueError: If an option is out of range.
-
-    """
-
-    def __init__(self, geometry: TrueGeometry | Sequence[Shape], *, fov: float = JACKAL_FOV,
-                 beams: int = 720, range_min: float = 0.05, range_max: float = 10.0) -> None:
-        if not (0.0 < fov <= 2.0 * math.pi):
-            msg = f'fov must be in (0, 2 pi], got {fov}'
-            raise ValueError(msg)
-        if isinstance(beams, bool) or not isinstance(beams, int) or beams < 2:
-            msg = f'beams must be an integer >= 2, got {beams!r}'
-            raise ValueError(msg)
-        if not (0.0 <= range_min < range_max < math.inf):
-            msg = f'need 0 <= range_min < range_max < inf, got {range_min}, {range_max}'
-            raise ValueError(msg)
-        self.geometry = geometry if isinstance(geometry, TrueGeometry) else TrueGeometry(
-            geometry)
-        self.fov = float(fov)
-        self.beams = beams
-        self.range_min = float(range_min)
-        self.range_max = float(range_max)
-
-    @property
-    def angle_min(self) -> float:
-        """Angle of the first beam relative to the laser's forward axis."""
-        return -0.5 * self.fov
-
-    @property
-    def angle_increment(self) -> float:
-        """Angle between consecutive beams."""
-        return self.fov / (self.beams - 1)
-
-    def angles(self) -> np.ndarray:
-        """Return the beams' angles relative to the laser's forward axis."""
-        return self.angle_min + np.arange(self.beams) * self.angle_increment
-
-    def scan(self, pose: Sequence[float], *, stamp: float = 0.0) -> Scan:
-        """Cast every beam from the laser's pose and return the scan.
-
-        Args:
-            pose: (x, y, yaw) of the laser in the world frame.
-            stamp: Time of the scan, seconds (copied into the result).
-
-        Returns:
-            The scan; ``ranges`` has one entry per beam, inf where nothing was hit.
-
-        Raises:
-            ValueError: If the pose is not finite.
-
-        """
-        x, y, yaw = (float(v) for v in pose[:3])
-        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw)):
-            msg = f'laser pose must be finite, got {tuple(pose)}'
-            raise ValueError(msg)
-        ranges = self.geometry.cast((x, y), yaw + self.angle_min, self.angle_increment,
-                                    self.beams, self.range_max)
-        return Scan(angle_min=self.angle_min, angle_increment=self.angle_increment,
-                    range_min=self.range_min, range_max=self.range_max, ranges=ranges,
-                    stamp=float(stamp))

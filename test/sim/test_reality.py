@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The real robot's base and laser (core/reality.py), the model the simulator and rollout share."""
+"""The real robot's base and laser (sim/), the model the simulator and rollout share."""
 
 from __future__ import annotations
 
@@ -22,13 +22,9 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.reality import (
-    Base,
-    Reality,
-    reality_preset,
-    REALITY_PRESETS,
-    ScanChannel,
-)
+from mpc_local_planner.sim.base import Base
+from mpc_local_planner.sim.reality import Reality, reality_preset, REALITY_PRESETS
+from mpc_local_planner.sim.scan_channel import ScanChannel
 
 MODEL = Unicycle(v_max=2.0, omega_max=4.0)
 
@@ -152,7 +148,7 @@ def test_a_reality_no_robot_has_is_refused(changes):
 
 
 def test_the_localizer_gives_the_true_pose_with_its_noise_at_its_rate():
-    from mpc_local_planner.core.reality import Localizer, LOCALIZER_NOISE, LOCALIZER_RATE
+    from mpc_local_planner.sim.localizer import Localizer, LOCALIZER_NOISE, LOCALIZER_RATE
 
     localizer = Localizer(seed=3)
     assert (localizer.rate, localizer.noise_std) == (LOCALIZER_RATE, LOCALIZER_NOISE)
@@ -169,7 +165,7 @@ def test_the_localizer_gives_the_true_pose_with_its_noise_at_its_rate():
 
 
 def test_the_truth_is_held_to_the_arrival_tolerance_plus_the_estimates_error():
-    from mpc_local_planner.core.reality import POSE_ERROR, true_goal_tolerance
+    from mpc_local_planner.sim.reality import POSE_ERROR, true_goal_tolerance
 
     assert true_goal_tolerance(0.1) == pytest.approx(0.1 + POSE_ERROR)
     # closed_loop --drift: the analysis' 0.05 m gives the 0.1 m it always asked of the truth

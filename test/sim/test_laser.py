@@ -23,13 +23,9 @@ import pytest
 
 from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.obstacles import ConvexPolygon
-from mpc_local_planner.perception.laser import (
-    contact,
-    footprint_distances,
-    JACKAL_FOV,
-    SimulatedLaser,
-)
 from mpc_local_planner.perception.raycast import TrueGeometry
+from mpc_local_planner.sim.contact import contact, footprint_distances
+from mpc_local_planner.sim.laser import JACKAL_FOV, SimulatedLaser
 from mpc_local_planner.worlds.data_files import BARN_DIR
 from mpc_local_planner.worlds.world import Circle, load_barn_world, world_from_dict
 
