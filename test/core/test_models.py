@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Unit tests of the robot models (no ROS)."""
 
 import numpy as np

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The paper's MPC and the baseline on the paper's scenario (no ROS)."""
 
 import numpy as np

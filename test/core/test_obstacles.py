@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Unit tests of convex obstacles in H-representation."""
 
 from conftest import point_in_any

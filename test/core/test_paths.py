@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Unit tests of reference paths: continuity, Lipschitz bound, symbolic form, projection."""
 
 import casadi as ca

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The paper's three experiments, run through their command line (no ROS)."""
 
 import json
