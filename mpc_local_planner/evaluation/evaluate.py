@@ -350,6 +350,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help='how real the robot is (sim/reality.py presets): lag, latency, '
                              'acceleration limits, odometry noise and drift, laser noise and '
                              'dropouts; navigation suites only')
+    parser.add_argument('--through-nodes', action='store_true',
+                        help="BARN or unknown with sensing: the paper's MPC runs through the "
+                             'real node processes over DDS (closed_loop, lockstep clock, the '
+                             "package's parameter files as shipped; runs in OUT/nodes/), the "
+                             'other controllers in process beside it')
     parser.add_argument('--save-trajectories', action='store_true',
                         help='write each run as trajectory CSV under OUT/trajectories')
     parser.add_argument('--merge', action='store_true',
@@ -382,6 +387,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         args.v_max = 0.31 if args.v_max is None else args.v_max
         args.omega_max = 1.9 if args.omega_max is None else args.omega_max
+    if args.through_nodes and not (navigation and args.suite in ('barn', 'unknown')):
+        parser.error('--through-nodes needs --suite barn --sensing or --suite unknown')
     if args.sensing and args.suite == 'random':
         parser.error('--sensing: use --suite unknown for random worlds with unknown obstacles')
     if args.robot != 'circle' and not navigation:
@@ -435,8 +442,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     template = Task(args.suite, 0, '', args.seed, args.v_max, args.omega_max, barn_dir,
                     trajectories, args.merge, sensing=args.sensing, robot=args.robot,
                     budget=args.budget, compile=args.compile, reality=args.reality)
+    nodes = str((args.out / 'nodes').resolve()) if args.through_nodes else ''
     tasks = [replace(template, world=w, controller=c,
-                     world_file=world_files[w] if world_files else '')
+                     world_file=world_files[w] if world_files else '',
+                     through_nodes=nodes if c == 'proposed' else '')
              for w in worlds for c in controllers]
     settings = sweep_settings(template, worlds, controllers, world_files)
     for var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
@@ -447,7 +456,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                  f'{args.robot} robot, v_max {args.v_max:g} m/s, omega_max '
                  f'{args.omega_max:g} rad/s'
                  + (', no prior map' if args.suite == 'barn' else '')
-                 + f', {args.budget} budget, reality {args.reality})')
+                 + f', {args.budget} budget, reality {args.reality}'
+                 + (", the paper's MPC through the nodes" if args.through_nodes else '') + ')')
     else:
         title = (f'{args.suite}, known map (seed {args.seed}, v_max {args.v_max:g} m/s, '
                  f'omega_max {args.omega_max:g} rad/s{", merged walls" if args.merge else ""}'

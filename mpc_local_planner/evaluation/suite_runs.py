@@ -105,6 +105,9 @@ class Task:
     budget: str = EVALUATION_BUDGET  # SolverSettings.budget of the MPCs
     compile: bool = True  # SolverSettings.compile of the MPCs
     reality: str = 'ideal'  # sim/reality.py preset: how real the robot is (navigation runs)
+    # a folder: the paper's MPC runs through the node processes there (through_nodes.py);
+    # '' runs it in process
+    through_nodes: str = ''
 
     @property
     def navigation(self) -> bool:
@@ -302,6 +305,10 @@ def run_navigation_task(task: Task) -> RunRow:
 
 def run_task(task: Task) -> RunRow:
     """Run one world x controller in closed loop and return its runs.csv row."""
+    if task.through_nodes:
+        from mpc_local_planner.evaluation.through_nodes import run_through_nodes
+
+        return run_through_nodes(task)
     if task.navigation:
         return run_navigation_task(task)
     model = Unicycle(v_max=task.v_max, omega_max=task.omega_max)

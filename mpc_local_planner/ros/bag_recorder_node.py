@@ -34,6 +34,7 @@ from mpc_local_planner.core.diagnostics import (
     CONTROLLER_DIAGNOSTICS_TOPIC,
     PLANNER_DIAGNOSTICS_TOPIC,
 )
+from mpc_local_planner.ros.lockstep import LOCKSTEP_PARAMETER, LockstepReporter
 from mpc_local_planner.ros.node_main import destroy_on_failure, run_node
 from mpc_local_planner.ros.parameters import declare_parameters, ParameterSpec
 from mpc_local_planner.ros.qos import recorder_qos
@@ -63,6 +64,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   read_only=True),
     ParameterSpec('transient_local_topics', DEFAULT_LATCHED,
                   'topics subscribed transient_local (latched, such as plan)', read_only=True),
+    LOCKSTEP_PARAMETER,
     ParameterSpec('world_file', '',
                   "world file to record in the bag's metadata (a path, or a name in the "
                   "package's config/ or config/worlds/); '' = none", read_only=True),
@@ -121,6 +123,10 @@ class BagRecorderNode(Node):
             self._writer = None
             raise
         self.get_logger().info(f'recording {len(topics)} topics into {self.path}')
+        # a lockstep clock then waits for every message to be recorded: no gap at the start
+        # (the recorder may match later than the nodes), none when the clock runs fast
+        if self.get_parameter('lockstep').value:
+            LockstepReporter(self).report()
 
     @staticmethod
     def _read_world(world_file: str) -> dict[BagKey, str]:

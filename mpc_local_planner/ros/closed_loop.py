@@ -219,6 +219,10 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
     if options.respawn and not options.separate_processes:
         msg = '--respawn needs --separate-processes'
         raise ValueError(msg)
+    if options.respawn and options.lockstep:
+        # a restarted node has taken none of the messages so far: the clock would wait
+        msg = '--respawn and --lockstep do not go together'
+        raise ValueError(msg)
     world_file, world, robot_source = run_world(options, source_file, world,
                                                 Path(options.out) / 'world')
     params = node_parameters(options, world_file, world,
@@ -254,8 +258,11 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
             *sim, Parameter('output', value=str(bag)),
             Parameter('world_file', value=str(world_file)),
             *(Parameter(k, value=v)
-              for k, v in recorder_topics(sensing=options.sensing).items())])
-        monitor = LoopMonitor(context=context, parameter_overrides=sim, sensing=options.sensing)
+              for k, v in recorder_topics(sensing=options.sensing).items()),
+            Parameter('lockstep', value=options.lockstep)])
+        monitor = LoopMonitor(context=context, parameter_overrides=sim, sensing=options.sensing,
+                              goal=world.goal, referee_radius=options.referee_radius,
+                              stall_seconds=options.stall_seconds)
         nodes += [recorder, monitor]
         if options.separate_processes:
             children = spawn_all(params, out / 'logs')
@@ -269,6 +276,12 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
             sim_time = monitor.sim_time()
             if monitor.goal_reached:
                 stop_reason = 'goal reached'
+                break
+            if monitor.referee_time is not None:
+                stop_reason = f'within {options.referee_radius:g} m of the goal (referee)'
+                break
+            if monitor.stalled:
+                stop_reason = f'stood still for {options.stall_seconds:g} s'
                 break
             if monitor.plan_failure is not None:
                 plan_failure = monitor.plan_failure
@@ -308,9 +321,18 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
                 'world_file': str(world_file), 'footprint_source': robot_source,
                 'drift': options.drift, 'reality': options.reality,
                 'reality_values': _run_reality(params)}
-    if truth:  # one process: the simulator's true pose, whatever odometry said
+    if not truth and monitor.true_pose is not None:  # the simulator's ground truth topic
+        truth = [monitor.true_pose]
+    if truth:  # the simulator's true pose, whatever odometry said
         run_info['true_final_pose'] = [float(v) for v in truth[0]]
         run_info['true_goal_error'] = float(np.hypot(*(truth[0][:2] - world.goal[:2])))
+    if options.referee_radius is not None:
+        run_info['referee_radius'] = options.referee_radius
+        run_info['referee_time'] = monitor.referee_time
+    run_info['stalled'] = monitor.stalled
+    run_info['lockstep'] = options.lockstep
+    if options.lockstep:
+        run_info['lockstep_stalls'] = monitor.lockstep_stalls
     shape = '' if world.footprint.is_circle else ', polygon footprint'
     title = (f'{world.name}: {options.path} path, rtf {options.rtf:g}'
              + (', sensing' if options.sensing else '') + shape)
@@ -318,9 +340,10 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
     metrics = analyze(bag, out, extra=run_info, title=title)
     if options.sensing or world.unknown_obstacles:
         _plot_sensing(bag, out / 'trajectory.png', world, monitor.sensed, title)
-    success = (bool(metrics.get('reached')) and not metrics.get('collision')
-               and not monitor.contacts)
-    if localized(options) and truth:
+    reached = (monitor.referee_time is not None if options.referee_radius is not None
+               else bool(metrics.get('reached')))
+    success = reached and not metrics.get('collision') and not monitor.contacts
+    if localized(options) and truth and options.referee_radius is None:
         # arrival is declared on the estimate: the truth within the controller's tolerance
         # plus the estimate's error
         xy = float(params['mpc_controller'].get('xy_goal_tolerance',
@@ -435,6 +458,25 @@ def main(argv: Sequence[str] | None = None) -> int:
                              'ideal (exact), mild, real or harsh (latency, lag, acceleration '
                              'limits, odometry noise and drift, laser noise, NaN/-inf beams, '
                              'lost scans); a non-ideal one runs with the localizer, as --drift')
+    parser.add_argument('--params-file', action='append', default=[], metavar='FILE',
+                        help='a ros__parameters YAML file for the nodes (repeatable, e.g. '
+                             'config/mpc_controller.yaml and config/jackal.yaml): each node '
+                             "takes its sections' values over closed_loop's own choices; "
+                             '--param still wins')
+    parser.add_argument('--lockstep', action='store_true',
+                        help='the simulated clock waits for every node: each control step '
+                             'and plan is computed at a standstill of simulated time, so a '
+                             'run is the same under any load (--rtf is then unused)')
+    parser.add_argument('--referee-radius', type=float, default=None, metavar='R',
+                        help="end the run as reached when the robot's TRUE position is "
+                             'within R m of the goal (a referee, as BARN judges); default: '
+                             "the controller's own arrival")
+    parser.add_argument('--stall-seconds', type=float, default=None, metavar='S',
+                        help='end the run when the robot has stood still S simulated seconds')
+    parser.add_argument('--no-localizer', action='store_true',
+                        help='with odometry that is not exact (--drift, a non-ideal '
+                             '--reality): no localizer stand-in; the nodes take odometry as '
+                             "the pose (BARN's robot)")
     parser.add_argument('--respawn', action='store_true',
                         help='with --separate-processes: start a node process that exits '
                              'again instead of ending the run (a restart drill)')
@@ -458,7 +500,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                               timeout=args.timeout, time_limit=args.time_limit,
                               seed=args.seed, separate_processes=args.separate_processes,
                               respawn=args.respawn, sensing=args.sensing, drift=args.drift,
-                              reality=args.reality,
+                              reality=args.reality, lockstep=args.lockstep,
+                              params_files=tuple(args.params_file),
+                              referee_radius=args.referee_radius,
+                              localizer=not args.no_localizer,
+                              stall_seconds=args.stall_seconds,
                               footprint=args.footprint, robot_radius=args.robot_radius,
                               extra_parameters=extra)
         result = run_closed_loop(options, ros_args=ros_args)

@@ -8,9 +8,11 @@ a few snapshots of what the controller avoided for the figure.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
+from nav_msgs.msg import Odometry
 import numpy as np
 from rclpy.executors import Executor
 from rclpy.node import Node
@@ -23,21 +25,29 @@ from mpc_local_planner.core.diagnostics import (
     PLANNER_DIAGNOSTICS_TOPIC,
     PlannerDiagnostics,
 )
+from mpc_local_planner.evaluation.rollout import STALL_INPUT
 from mpc_local_planner.ros.bag_recorder_node import (
     BagRecorderNode,
     DEFAULT_LATCHED,
     DEFAULT_TOPICS,
     DEFAULT_TYPES,
 )
+from mpc_local_planner.ros.conversions import odometry_to_state, odometry_twist
 from mpc_local_planner.ros.executors import spin_until
 from mpc_local_planner.ros.mpc_controller_outputs import OBSTACLES_TOPIC
 from mpc_local_planner.ros.qos import (
     CONTACTS_QOS,
     DIAGNOSTICS_QOS,
     LOCAL_PLAN_QOS,
+    ODOM_QOS,
     PLANNER_DIAGNOSTICS_QOS,
 )
-from mpc_local_planner.ros.unicycle_simulator_parameters import CONTACTS_TOPIC, SCAN_TOPIC
+from mpc_local_planner.ros.unicycle_simulator_parameters import (
+    CONTACTS_TOPIC,
+    GROUND_TRUTH_TOPIC,
+    LOCKSTEP_STALLS_TOPIC,
+    SCAN_TOPIC,
+)
 
 __all__ = ['FLUSH_TIMEOUT', 'LoopMonitor', 'SENSED_SNAPSHOTS',
            'flush_recording', 'recorder_topics']
@@ -84,8 +94,28 @@ class LoopMonitor(Node):
     avoids (its raw obstacles) at a few instants for the figure.
     """
 
-    def __init__(self, *, sensing: bool = False, **kwargs: Any) -> None:
+    def __init__(self, *, sensing: bool = False, goal: np.ndarray | None = None,
+                 referee_radius: float | None = None, stall_seconds: float | None = None,
+                 **kwargs: Any) -> None:
+        """Watch; with referee_radius, also judge arrival from the TRUE pose (the referee).
+
+        With stall_seconds, `stalled` says the robot has stood still (true speeds below
+        STALL_INPUT) that long, as the suites' stop rule ends a run.
+        """
         super().__init__('closed_loop_monitor', **kwargs)
+        self.true_pose: np.ndarray | None = None
+        self.referee_time: float | None = None  # when the true pose first came within
+        self.stalled = False
+        self._goal = None if goal is None else np.asarray(goal, dtype=float)
+        self._referee_radius = referee_radius
+        self._stall_seconds = stall_seconds
+        self._still_since: float | None = None
+        self.lockstep_stalls = 0  # how often the lockstep clock gave up waiting
+        self._stalls_sub = self.create_subscription(
+            UInt32, LOCKSTEP_STALLS_TOPIC,
+            lambda msg: setattr(self, 'lockstep_stalls', int(msg.data)), CONTACTS_QOS)
+        self._truth_sub = self.create_subscription(Odometry, GROUND_TRUTH_TOPIC,
+                                                   self.truth_callback, ODOM_QOS)
         self.goal_reached = False
         self.replans = 0  # the planner's count of re-plans, as it last reported it
         self.contacts: int | None = None  # the simulator's count, once heard
@@ -105,6 +135,20 @@ class LoopMonitor(Node):
         if sensing:
             self._obstacles_sub = self.create_subscription(
                 MarkerArray, OBSTACLES_TOPIC, self.obstacles_callback, LOCAL_PLAN_QOS)
+
+    def truth_callback(self, msg: Odometry) -> None:
+        """Keep the true pose; judge arrival (referee_radius) and standing still."""
+        self.true_pose = odometry_to_state(msg)
+        now = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        if (self._referee_radius is not None and self._goal is not None
+                and self.referee_time is None
+                and math.hypot(*(self.true_pose[:2] - self._goal[:2])) <= self._referee_radius):
+            self.referee_time = now
+        if self._stall_seconds is not None:
+            moving = float(np.max(np.abs(odometry_twist(msg)))) >= STALL_INPUT
+            if moving or self._still_since is None:
+                self._still_since = now
+            self.stalled = now - self._still_since >= self._stall_seconds
 
     def contacts_callback(self, msg: UInt32) -> None:
         """Keep the simulator's contact count (it only grows)."""

@@ -17,6 +17,7 @@ from typing import Any
 import yaml
 
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
+from mpc_local_planner.ros.parameters import params_file_problem, section_applies
 from mpc_local_planner.ros.unicycle_simulator_parameters import LOCALIZER_TOPIC
 from mpc_local_planner.sim.localizer import LOCALIZER_NOISE, LOCALIZER_RATE
 from mpc_local_planner.sim.reality import reality_preset
@@ -24,7 +25,7 @@ from mpc_local_planner.worlds.world import load_world, World
 
 __all__ = ['DEFAULT_DRIFT', 'DEFAULT_WORLD', 'LoopOptions', 'MODULES',
            'PAPER_GOAL_TOLERANCES', 'POLYGON_CLEARANCE', 'footprint_parameter', 'localized',
-           'node_parameters', 'parse_parameter', 'run_world']
+           'file_parameters', 'node_parameters', 'parse_parameter', 'run_world']
 
 # The world closed_loop runs unless --world says otherwise: the paper's scenario (the nodes
 # themselves default to no world at all).
@@ -67,6 +68,19 @@ class LoopOptions:
     # the robot, instead of the world's: a polygon (Nav2's "[[x, y], ...]") or a circle
     footprint: str | None = None
     robot_radius: float | None = None
+    # the simulator holds the clock for every node's step (ros/lockstep.py); rtf is unused
+    lockstep: bool = False
+    # a robot whose odometry is not exact is told its pose by the localizer stand-in; off,
+    # its odometry is the pose the nodes have (BARN's robot: odometry and a laser)
+    localizer: bool = True
+    # the referee (the TRUE pose, as BARN judges): arrival within this of the goal ends the
+    # run as reached, whatever the controller says; None: the controller's own verdict
+    referee_radius: float | None = None
+    # standing still (true speeds ~0) this long ends the run (the suites' stall rule)
+    stall_seconds: float | None = None
+    # the user's params files (ros__parameters YAML, sections matched to node names as rcl
+    # does), applied over closed_loop's choices and under extra_parameters
+    params_files: tuple[str, ...] = ()
     # node -> parameter -> value, applied last (over what closed_loop chooses)
     extra_parameters: dict[str, dict[str, Any]] = field(default_factory=dict)
 
@@ -143,7 +157,7 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
         },
         'mpc_controller': {
             'use_sim_time': True, 'world_file': str(world_file), 'analytic_path': analytic,
-            **_controller_for(options), **robot,
+            **robot,
         },
         'unicycle_simulator': {
             'publish_clock': True, 'real_time_factor': float(options.rtf),
@@ -167,7 +181,7 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
         params['unicycle_simulator'].update({
             'odom_drift.position': float(options.drift), 'odom_drift.heading': float(
                 options.drift)})
-    if localized(options):
+    if localized(options) and options.localizer:
         # odometry that drifts or is noisy is not the pose in map: a localizer says where
         # the robot is, as on a real robot
         params['unicycle_simulator'].update({
@@ -175,12 +189,65 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
             'localizer.noise_std': LOCALIZER_NOISE})
         for name in ('global_planner', 'mpc_controller'):
             params[name]['localization_topic'] = LOCALIZER_TOPIC
+    if options.lockstep:
+        participants = [name for name in params if name != 'unicycle_simulator']
+        for name in participants:
+            params[name]['lockstep'] = True
+        # the recorder too (closed_loop's own node): the bag misses nothing
+        params['unicycle_simulator'].update({
+            'lockstep': True, 'lockstep.participants': [*participants, 'bag_recorder']})
+    # the controller's tuning for the simulated robot yields to the user's files; the run's
+    # wiring (world, map, sources, robot, clock) does not
+    tuning: dict[str, dict[str, Any]] = {'mpc_controller': _controller_for(options)}
+    for path in options.params_files:
+        for name in params:
+            tuning.setdefault(name, {}).update(file_parameters(path, name))
+    for name in params:
+        params[name] = {**tuning.get(name, {}), **params[name]}
     for name, extra in options.extra_parameters.items():
         if name not in params:  # map_server: only with --sensing
             msg = f'parameters for {name}, which does not run here (map_server needs --sensing)'
             raise ValueError(msg)
         params[name].update(extra)
     return params
+
+
+def file_parameters(path: str, node: str) -> dict[str, Any]:
+    """Return the parameters a params file gives the node /node (its matching sections).
+
+    Sections match as rcl matches them (``/**``, ``/*``, the node's name); nested mappings
+    under ros__parameters are dotted names, as ROS reads them (``weights: {position: 1}``
+    is ``weights.position``). Later sections of the file win, as in rcl.
+
+    Raises:
+        ValueError: if the file cannot be read as YAML (the reason, in one line).
+
+    """
+    problem = params_file_problem(path)
+    if problem is not None:
+        raise ValueError(problem)
+    data = yaml.safe_load(Path(path).read_text(encoding='utf-8')) or {}
+    values: dict[str, Any] = {}
+
+    def flatten(mapping: dict[str, Any], prefix: str) -> None:
+        for key, value in mapping.items():
+            name = f'{prefix}.{key}' if prefix else str(key)
+            if isinstance(value, dict):
+                flatten(value, name)
+            else:
+                values[name] = value
+
+    def visit(mapping: dict[str, Any], section: str) -> None:
+        for key, value in mapping.items():
+            if key == 'ros__parameters' and isinstance(value, dict):
+                if section and section_applies(section, '/' + node):
+                    flatten(value, '')
+            elif isinstance(value, dict):
+                visit(value, f'{section}/{key}' if section else str(key))
+
+    if isinstance(data, dict):
+        visit(data, '')
+    return values
 
 
 def run_world(options: LoopOptions, world_file: Path, world: World,

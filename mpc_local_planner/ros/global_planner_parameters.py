@@ -21,6 +21,7 @@ from mpc_local_planner.core.replanning import (
     PROGRESS_RADIUS,
     PROGRESS_TIMEOUT,
 )
+from mpc_local_planner.ros.lockstep import LOCKSTEP_PARAMETER
 from mpc_local_planner.ros.parameters import ParameterSpec
 from mpc_local_planner.ros.robot_pose import pose_parameters
 from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -120,6 +121,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'warning until odometry comes again; a new goal is still planned from the '
                   'latest pose', float_range=(0.001, 3600.0)),
     *pose_parameters('the planner plans nothing (a goal waits, nothing is re-planned)'),
+    LOCKSTEP_PARAMETER,
     ParameterSpec('autostart', True,
                   'configure and activate at start; false = wait for a lifecycle manager (or '
                   '`ros2 lifecycle set`)', read_only=True),

@@ -15,6 +15,8 @@ from rclpy.lifecycle import (
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 
+from mpc_local_planner.ros.lockstep import LockstepReporter
+
 __all__ = ['ManagedNode']
 
 
@@ -37,7 +39,13 @@ class ManagedNode(LifecycleNode):
     says so in one warning. rclpy 7.1 instead raises RCLError out of the service callback
     (ros2/rclpy#1209), which ends the executor's spin and so the process, with no answer to
     the caller and, for the controller, no zero cmd_vel.
+
+    A node with the parameter ``lockstep`` true takes part in a lockstep simulation
+    (ros/lockstep.py): its reporter starts counting when it activates, before on_activate
+    publishes (the map server publishes its map there), and reports once it is active.
     """
+
+    _lockstep: LockstepReporter | None = None
 
     def transition_available(self, transition_id: int) -> bool:
         """Say whether the current state has a transition of this id."""
@@ -57,7 +65,17 @@ class ManagedNode(LifecycleNode):
                 f'transition {_transition_name(transition_id)} refused: the node is '
                 f'{label}, which has no such transition (it stays {label})')
             return TransitionCallbackReturn.FAILURE
-        return super()._LifecycleNodeMixin__change_state(transition_id)
+        activating = (transition_id == Transition.TRANSITION_ACTIVATE
+                      and self.has_parameter('lockstep')
+                      and bool(self.get_parameter('lockstep').value))
+        if activating:
+            if self._lockstep is None:
+                self._lockstep = LockstepReporter(self)
+            self._lockstep.attach()
+        result = super()._LifecycleNodeMixin__change_state(transition_id)
+        if activating and result == TransitionCallbackReturn.SUCCESS:
+            self._lockstep.report()
+        return result
 
     def trigger_shutdown(self) -> TransitionCallbackReturn:
         """Shut down from unconfigured, inactive or active; refuse it from anywhere else."""

@@ -33,6 +33,7 @@ from rclpy.parameter import Parameter
 
 from mpc_local_planner.ros.conversions import yaw_to_quaternion
 from mpc_local_planner.ros.lifecycle import ManagedNode
+from mpc_local_planner.ros.lockstep import LOCKSTEP_PARAMETER
 from mpc_local_planner.ros.node_main import destroy_on_failure, run_node
 from mpc_local_planner.ros.parameters import declare_parameters, ParameterSpec
 from mpc_local_planner.ros.qos import MAP_QOS
@@ -53,6 +54,7 @@ PARAMETERS = (
     ParameterSpec('topic_name', 'map',
                   'topic the map is published on (relative names follow the namespace and '
                   'remaps); read at configure'),
+    LOCKSTEP_PARAMETER,
     ParameterSpec('autostart', True,
                   'configure and activate at start (false: wait for a lifecycle manager)',
                   read_only=True),

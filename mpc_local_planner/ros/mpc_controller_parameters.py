@@ -31,6 +31,7 @@ from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.footprint import Footprint, FROM_WORLD, radius_in_force, resolve
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.ros.lockstep import LOCKSTEP_PARAMETER
 from mpc_local_planner.ros.parameters import ParameterSpec
 from mpc_local_planner.ros.robot_pose import pose_parameters
 from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -50,7 +51,7 @@ _MPC_FIELDS = {
     'offset_weight': 'offset_weight', 'robot_radius': 'robot_radius',
     'input_hold': 'input_hold',
 }
-_SOLVER_FIELDS = ('solver', 'max_iterations', 'obstacle_slots')
+_SOLVER_FIELDS = ('solver', 'max_iterations', 'obstacle_slots', 'budget')
 _MODEL_FIELDS = ('v_max', 'omega_max')
 _SETTINGS_FIELDS = ('xy_goal_tolerance', 'yaw_goal_tolerance', 'odom_timeout',
                     'scan_timeout', 'control_frequency', 'actuation_delay')
@@ -144,6 +145,10 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "wall-time budget (s) of one control step's solving; past it the verified "
                   'shifted candidate is applied (counted in timeouts_total); -1 = step / 2',
                   float_range=(-1.0, 60.0)),
+    ParameterSpec('budget', str(_CONFIG.solving.budget),
+                  "what bounds a control step's solving: 'wall' (max_solve_time, a robot's) or "
+                  "'iterations' (the iterations max_solve_time is worth at 1 ms each: the same "
+                  'commands under any load, for lockstep simulation and evaluation)'),
     ParameterSpec('world_file', '',
                   "world YAML/JSON with the obstacles (a path, or a name in the package's "
                   "config/ or config/worlds/); '' = none; read again at each configure"),
@@ -197,6 +202,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'publish cmd_vel as geometry_msgs/TwistStamped (frame base_link) instead of '
                   "Twist (Nav2's name); read at configure"),
     *pose_parameters('the controller stops (no_localization)'),
+    LOCKSTEP_PARAMETER,
     ParameterSpec('autostart', True,
                   'configure and activate at start; false = wait for a lifecycle manager '
                   '(or ros2 lifecycle set)', read_only=True),

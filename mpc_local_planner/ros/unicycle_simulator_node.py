@@ -75,10 +75,12 @@ odometry of the same instant).
 from __future__ import annotations
 
 import array
+import enum
 import math
 import sys
 from typing import Any
 
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 import numpy as np
@@ -101,6 +103,7 @@ from mpc_local_planner.ros.conversions import (
     u_from_twist,
     yaw_to_quaternion,
 )
+from mpc_local_planner.ros.lockstep import LockstepGate
 from mpc_local_planner.ros.node_main import destroy_on_failure, run_node
 from mpc_local_planner.ros.parameters import declare_parameters
 from mpc_local_planner.ros.qos import (
@@ -113,7 +116,9 @@ from mpc_local_planner.ros.qos import (
 from mpc_local_planner.ros.throttle import ProblemThrottle
 from mpc_local_planner.ros.unicycle_simulator_parameters import (
     CONTACTS_TOPIC,
+    GROUND_TRUTH_TOPIC,
     LOCALIZER_TOPIC,
+    LOCKSTEP_STALLS_TOPIC,
     PARAMETERS,
     reality_from_parameters,
     REALITY_PARAMETERS,
@@ -133,6 +138,22 @@ __all__ = ['SCAN_PUBLISHER_QOS', 'SUMMARY', 'UnicycleSimulatorNode', 'laser_scan
 
 # At most this many integration steps catch up a late tick (real-time mode).
 MAX_CATCH_UP_STEPS = 10
+# Wall seconds between the lockstep clock's own looks (the participants' reports move it
+# between them; this starts it and notices a timeout).
+LOCKSTEP_POLL = 0.005
+
+
+class _Phase(enum.Enum):
+    """Where the lockstep clock is in a tick."""
+
+    START = 'waiting for the participants'
+    SENSED = 'sensors out, waiting for them to be taken'
+    CLOCKED = 'clock out, waiting for the due steps'
+
+
+def _stamp(nanoseconds: int) -> Time:
+    """Return a stamp of whole nanoseconds (exact: timers due at that time fire)."""
+    return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
 
 # The publisher side of ``scan``: reliable, volatile, depth 10 (best-effort readers match).
 SCAN_PUBLISHER_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
@@ -223,6 +244,7 @@ class UnicycleSimulatorNode(Node):
         self._odom_pub = self.create_publisher(Odometry, 'odom', ODOM_QOS)
         self._scan_pub = self.create_publisher(LaserScan, SCAN_TOPIC, SCAN_PUBLISHER_QOS)
         self._contacts_pub = self.create_publisher(UInt32, CONTACTS_TOPIC, CONTACTS_QOS)
+        self._truth_pub = self.create_publisher(Odometry, GROUND_TRUTH_TOPIC, ODOM_QOS)
         self._localizer_pub = self.create_publisher(PoseWithCovarianceStamped, LOCALIZER_TOPIC,
                                                     LOCALIZER_QOS)
         self._contacts_pub.publish(UInt32(data=0))
@@ -231,6 +253,11 @@ class UnicycleSimulatorNode(Node):
         self._cmd_sub = self.create_subscription(cmd_type, 'cmd_vel', self.cmd_vel_callback,
                                                  CMD_VEL_QOS)
         self._steady_clock = Clock(clock_type=ClockType.STEADY_TIME)
+        self._gate: LockstepGate | None = None
+        self._lockstep_busy = False
+        self._stalls_published = 0
+        if self.get_parameter('lockstep').value:
+            self._start_lockstep()
         self._timer = None
         self._make_timer()
 
@@ -311,13 +338,40 @@ class UnicycleSimulatorNode(Node):
                               range_min=SCAN_RANGE_MIN,
                               range_max=float(self.get_parameter('scan.range_max').value))
 
+    def _start_lockstep(self) -> None:
+        """Hold the clock for the participants (ros/lockstep.py), in whole nanosecond ticks.
+
+        Raises:
+            ValueError: without publish_clock (a lockstep clock must be the clock).
+
+        """
+        if not self.get_parameter('publish_clock').value:
+            msg = 'lockstep needs publish_clock: true (the simulator must be the clock)'
+            raise ValueError(msg)
+        participants = [str(name) for name in
+                        self.get_parameter('lockstep.participants').value if str(name)]
+        self._gate = LockstepGate(self, participants,
+                                  float(self.get_parameter('lockstep.timeout').value),
+                                  on_status=self._lockstep_progress)
+        self._stalls_pub = self.create_publisher(UInt32, LOCKSTEP_STALLS_TOPIC, CONTACTS_QOS)
+        self._stalls_pub.publish(UInt32(data=0))
+        self._gate.own.attach()  # counts odom, scan, amcl_pose out and cmd_vel in
+        self._phase = _Phase.START
+        self._ticks = 0
+        self.get_logger().info(f'lockstep: the clock waits for {participants}')
+
     def _make_timer(self) -> None:
         if self._timer is not None:
             self.destroy_timer(self._timer)
         rate = float(self.get_parameter('rate').value)
         self._dt = 1.0 / rate
         self._base.dt = self._dt  # the base's sub-step is the tick
-        if self.get_parameter('publish_clock').value:
+        if self._gate is not None:
+            # the participants' reports move the clock; this poll starts it and times out
+            self._tick_ns = int(round(1e9 / rate))
+            self._timer = self.create_timer(LOCKSTEP_POLL, self._lockstep_progress,
+                                            clock=self._steady_clock)
+        elif self.get_parameter('publish_clock').value:
             rtf = float(self.get_parameter('real_time_factor').value)
             self._timer = self.create_timer(self._dt / rtf, self.timer_callback,
                                             clock=self._steady_clock)
@@ -402,35 +456,16 @@ class UnicycleSimulatorNode(Node):
                 self._last_tick = last + steps * self._dt if steps else last
                 if now - self._last_tick > MAX_CATCH_UP_STEPS * self._dt:
                     self._last_tick = now  # far behind (a clock jump): do not catch up
-            timeout = float(self.get_parameter('cmd_timeout').value)
-            if (timeout > 0 and not self._timed_out and self._last_cmd_time is not None
-                    and self._now() - self._last_cmd_time > timeout):
-                # the driver's watchdog: the stop needs no trip over the network, it acts
-                # now, not command_latency later (before any cmd_vel the base is at rest)
-                self._base.stop(self._sim_time - self._base.reality.latency)
-                self._timed_out = True
+            self._watchdog()
             for _ in range(steps):
-                until = self._sim_time + self._dt
-                self._base.advance(until)
-                self._sim_time = until
-                self._scan_phase += float(self.get_parameter('scan.rate').value) * self._dt
-                self._localizer_phase += float(
-                    self.get_parameter('localizer.rate').value) * self._dt
-                self._check_contact()
+                self._advance(self._sim_time + self._dt)
             publish_clock = self.get_parameter('publish_clock').value
             if publish_clock:
                 stamp = seconds_to_stamp(self._sim_time)
             else:
                 stamp = self.get_clock().now().to_msg()
-            # odom before clock: a controller woken by the new time already has the state;
-            # what odometry reports (noise, drift) and the wheels' measured twist
-            pose, twist = self._base.odometry()
-            self._odom_pub.publish(state_to_odometry(
-                pose, twist, stamp=stamp,
-                frame_id=str(self.get_parameter('odom_frame').value),
-                child_frame_id=str(self.get_parameter('robot_base_frame').value)))
-            self._publish_scan(stamp)
-            self._publish_localizer(stamp)
+            # odom before clock: a controller woken by the new time already has the state
+            self._publish_sensors(stamp)
             if publish_clock:
                 self._clock_pub.publish(ClockMsg(clock=stamp))
         except Exception as err:  # never let a callback kill the executor
@@ -438,6 +473,91 @@ class UnicycleSimulatorNode(Node):
                 return  # Ctrl-C shut the context down during the step: not a failure
             self.get_logger().error(f'simulation step failed: {err}',
                                     throttle_duration_sec=1.0)
+
+    def _lockstep_progress(self) -> None:
+        """Make the next lockstep move if the participants allow it (at most one tick).
+
+        A tick: the robot moves one 1 / rate and its odometry, scan and localizer pose go
+        out; once every participant has taken them, the clock moves to the new time; once
+        every step due by then is done and its messages (cmd_vel, plans) are taken, the
+        next tick. So no participant computes on stale inputs, and none sees time move
+        while it computes.
+        """
+        gate = self._gate
+        if gate is None or self._lockstep_busy:
+            return
+        self._lockstep_busy = True
+        try:
+            now_ns = self._ticks * self._tick_ns
+            if self._phase is _Phase.START:
+                if gate.passes(gate.awaited_start(), 'start the clock'):
+                    self._publish_sensors(_stamp(now_ns))
+                    self._phase = _Phase.SENSED
+            elif self._phase is _Phase.CLOCKED:
+                if gate.passes(gate.awaited_steps(now_ns), f'move past {now_ns * 1e-9:.3f} s'):
+                    self._watchdog()
+                    self._ticks += 1
+                    now_ns = self._ticks * self._tick_ns
+                    self._advance(now_ns * 1e-9)
+                    self._publish_sensors(_stamp(now_ns))
+                    self._phase = _Phase.SENSED
+            # the new time wakes only the participants due by then: they must have the new
+            # sensor messages first; a tick nobody is due at needs no wait (its messages
+            # are taken before the next tick all the same)
+            if self._phase is _Phase.SENSED and gate.passes(
+                    gate.awaited_messages() if gate.due(now_ns) else [],
+                    f'publish the clock at {now_ns * 1e-9:.3f} s'):
+                self._clock_pub.publish(ClockMsg(clock=_stamp(now_ns)))
+                self._phase = _Phase.CLOCKED
+            if gate.stalls != self._stalls_published:
+                self._stalls_published = gate.stalls
+                self._stalls_pub.publish(UInt32(data=gate.stalls))
+        except Exception as err:  # never let a callback kill the executor
+            if self.context.ok():
+                self.get_logger().error(f'lockstep step failed: {err}',
+                                        throttle_duration_sec=1.0)
+        finally:
+            self._lockstep_busy = False
+
+    @property
+    def lockstep_stalls(self) -> int:
+        """How often the lockstep clock gave up waiting (0 without lockstep)."""
+        return self._gate.stalls if self._gate is not None else 0
+
+    def _watchdog(self) -> None:
+        """Stop the base when the latest cmd_vel is older than cmd_timeout (simulated s)."""
+        timeout = float(self.get_parameter('cmd_timeout').value)
+        if (timeout > 0 and not self._timed_out and self._last_cmd_time is not None
+                and self._now() - self._last_cmd_time > timeout):
+            # the driver's watchdog: the stop needs no trip over the network, it acts
+            # now, not command_latency later (before any cmd_vel the base is at rest)
+            self._base.stop(self._sim_time - self._base.reality.latency)
+            self._timed_out = True
+
+    def _advance(self, until: float) -> None:
+        """Integrate one tick up to until; count scan and localizer periods and contacts."""
+        self._base.advance(until)
+        self._sim_time = until
+        self._scan_phase += float(self.get_parameter('scan.rate').value) * self._dt
+        self._localizer_phase += float(self.get_parameter('localizer.rate').value) * self._dt
+        self._check_contact()
+
+    def _publish_sensors(self, stamp: Any) -> None:
+        """Publish odometry, and the scan and localizer pose if due, stamped alike.
+
+        Odometry as the wheels report it (noise, drift, their measured twist).
+        """
+        pose, twist = self._base.odometry()
+        self._odom_pub.publish(state_to_odometry(
+            pose, twist, stamp=stamp,
+            frame_id=str(self.get_parameter('odom_frame').value),
+            child_frame_id=str(self.get_parameter('robot_base_frame').value)))
+        self._publish_scan(stamp)
+        self._publish_localizer(stamp)
+        self._truth_pub.publish(state_to_odometry(
+            self._base.pose, self._base.velocity, stamp=stamp,
+            frame_id=str(self.get_parameter('localizer.global_frame').value),
+            child_frame_id=str(self.get_parameter('robot_base_frame').value)))
 
     def _publish_localizer(self, stamp: Any) -> None:
         """Publish the true pose with noise if a localizer period ended during this tick."""

@@ -18,7 +18,8 @@ from mpc_local_planner.ros.parameters import ParameterSpec, range_problem
 from mpc_local_planner.sim.localizer import LOCALIZER_NOISE
 from mpc_local_planner.sim.reality import Reality, reality_preset, REALITY_PRESETS
 
-__all__ = ['CONTACTS_TOPIC', 'FROM_PRESET', 'LOCALIZER_TOPIC', 'MAX_SCAN_BEAMS', 'PARAMETERS',
+__all__ = ['CONTACTS_TOPIC', 'FROM_PRESET', 'GROUND_TRUTH_TOPIC', 'LOCALIZER_TOPIC',
+           'LOCKSTEP_STALLS_TOPIC', 'MAX_SCAN_BEAMS', 'PARAMETERS',
            'REALITY_PARAMETERS', 'SCAN_RANGE_MIN', 'SCAN_TOPIC', 'reality_from_parameters',
            'validate_simulator_parameters']
 
@@ -28,6 +29,11 @@ _MODEL = Unicycle()  # the single source of the saturation defaults
 # localizer stand-in's, as AMCL's.
 SCAN_TOPIC = 'scan'
 CONTACTS_TOPIC = 'simulator/contacts'
+# The TRUE pose and velocity (a referee's view, as Gazebo's p3d plugin gives it), in the
+# localizer's global frame: no node of the robot's may read it.
+GROUND_TRUTH_TOPIC = 'simulator/ground_truth'
+# Where the lockstep clock counts the times it gave up waiting (latched, as the contacts).
+LOCKSTEP_STALLS_TOPIC = 'simulator/lockstep_stalls'
 LOCALIZER_TOPIC = 'amcl_pose'
 # The simulated laser's closest valid reading (m), as a LaserScan's range_min.
 SCAN_RANGE_MIN = 0.05
@@ -69,8 +75,20 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'drive /clock from the simulation (other nodes then use_sim_time)',
                   read_only=True),
     ParameterSpec('real_time_factor', 1.0,
-                  'simulated seconds per wall second when publish_clock is true',
-                  float_range=(0.01, 100.0)),
+                  'simulated seconds per wall second when publish_clock is true (not with '
+                  'lockstep)', float_range=(0.01, 100.0)),
+    ParameterSpec('lockstep', False,
+                  'with publish_clock: move the clock only when every node of '
+                  'lockstep.participants has done its due steps and taken every message (as '
+                  'fast as they compute, the same run under any load); read once at start',
+                  read_only=True),
+    ParameterSpec('lockstep.participants', ['global_planner', 'mpc_controller'],
+                  'names of the nodes the lockstep clock waits for (each with its own '
+                  'lockstep parameter true)', read_only=True),
+    ParameterSpec('lockstep.timeout', 30.0,
+                  'wall seconds the lockstep clock waits for one move before it goes on '
+                  'without (a participant that died or hangs); each time is logged and '
+                  'counted on simulator/lockstep_stalls', float_range=(0.01, 3600.0)),
     ParameterSpec('v_max', _MODEL.v_max, 'saturation of |linear.x| (m/s)',
                   float_range=(0.001, 10.0)),
     ParameterSpec('omega_max', _MODEL.omega_max, 'saturation of |angular.z| (rad/s)',

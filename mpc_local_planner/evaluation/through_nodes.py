@@ -1,0 +1,186 @@
+# SPDX-License-Identifier: Apache-2.0
+"""One suite run through the real node processes: what users run is what is measured.
+
+`evaluate --through-nodes` runs each world as a user runs the package: ``closed_loop`` starts
+the map server, the planner, the controller and the simulator as separate processes that
+talk over DDS, the controller with the package's own parameter files
+(config/mpc_controller.yaml, and config/<robot>.yaml for the Jackal) as shipped. The clock
+is a lockstep one (ros/lockstep.py): simulated time waits for every control step and plan,
+so a row does not depend on the machine's load, and the controller's solve budget is its
+iteration limit (as the in-process suites', design.md section 6) unless ``--budget wall``.
+
+What is the suite's, not the nodes': the world (a BARN world with every cylinder unknown,
+written as a world file), the robot's actuator limits (the simulator's saturation), the
+referee (arrival is the TRUE position within the suite's goal tolerance, as the in-process
+rollout's stop rule) and the stall rule. BARN's robot has no localizer: a real base's
+odometry is the pose the nodes have (as the in-process suite runs BARN).
+
+Each run gets a DDS domain of its own (claimed with a lock file, so parallel jobs never
+share one) and loopback only.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import os
+from pathlib import Path
+import subprocess
+import sys
+import tempfile
+from typing import Any, Iterator
+
+import yaml
+
+from mpc_local_planner.core.controllers import controller_name, ControllerName
+from mpc_local_planner.evaluation.run_row import RunRow
+from mpc_local_planner.worlds.data_files import resolve_data_file
+from mpc_local_planner.worlds.world import Circle, World
+
+__all__ = ['DOMAIN_RANGE', 'RUN_WALL_LIMIT', 'node_command', 'run_through_nodes',
+           'world_yaml']
+
+# DDS domains the runs claim (one each at a time); ids 1-100 leave 0 (ROS's default) alone.
+DOMAIN_RANGE = range(1, 101)
+# Wall seconds one run may take before closed_loop gives up (a hung process, not a slow one).
+RUN_WALL_LIMIT = 1800.0
+
+
+@contextlib.contextmanager
+def claimed_domain() -> Iterator[int]:
+    """Hold a DDS domain id no other run of this machine holds (a lock file per id)."""
+    folder = Path(tempfile.gettempdir()) / 'mpc_local_planner_domains'
+    folder.mkdir(exist_ok=True)
+    for domain in DOMAIN_RANGE:
+        handle = open(folder / f'{domain}.lock', 'w')
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.close()
+            continue
+        try:
+            yield domain
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+            handle.close()
+        return
+    msg = f'every DDS domain of {DOMAIN_RANGE} is in use by other runs'
+    raise RuntimeError(msg)
+
+
+def world_yaml(world: World, path: Path) -> Path:
+    """Write world as a world file (its obstacles as they are: circles stay circles)."""
+    def shape(item: Any) -> dict[str, Any]:
+        if isinstance(item, Circle):
+            return {'circle': [float(item.x), float(item.y), float(item.radius)]}
+        return {'polygon': item.vertices.tolist()}
+
+    known = len(world.obstacles)
+    shapes = list(world.true_shapes) if world.true_shapes else [
+        *world.obstacles, *world.unknown_obstacles]
+    data: dict[str, Any] = {
+        'bounds': [float(v) for v in world.bounds],
+        'obstacles': [shape(item) for item in shapes[:known]],
+        'unknown_obstacles': [shape(item) for item in shapes[known:]],
+        'start': [float(v) for v in world.start],
+        'goal': [float(v) for v in world.goal],
+    }
+    if world.footprint.is_circle:
+        data['robot_radius'] = float(world.robot_radius)
+    else:
+        data['footprint'] = world.footprint.vertices.tolist()
+    if world.time_limit:
+        data['time_limit'] = float(world.time_limit)
+    if world.goal_tolerance:
+        data['goal_tolerance'] = float(world.goal_tolerance)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(f'# {world.name}, written for a run through the nodes\n'
+                    + yaml.safe_dump(data, sort_keys=False, default_flow_style=None),
+                    encoding='utf-8')
+    return path
+
+
+def node_command(world_file: Path, out: Path, *, robot: str, v_max: float, omega_max: float,
+                 time_limit: float, goal_tolerance: float, stall_seconds: float, seed: int,
+                 reality: str, budget: str) -> list[str]:
+    """Return the closed_loop command of one run (the user's parameter files as shipped)."""
+    files = [resolve_data_file('mpc_controller.yaml')]
+    if robot == 'jackal':
+        files.append(resolve_data_file('jackal.yaml'))
+    command = [sys.executable, '-m', 'mpc_local_planner.ros.closed_loop',
+               '--world', str(world_file), '--out', str(out), '--path', 'rrt', '--sensing',
+               '--separate-processes', '--lockstep', '--no-localizer',
+               '--time-limit', repr(float(time_limit)), '--referee-radius',
+               repr(float(goal_tolerance)), '--stall-seconds', repr(float(stall_seconds)),
+               '--seed', str(int(seed)), '--reality', reality, '--timeout', repr(RUN_WALL_LIMIT)]
+    for file in files:
+        command += ['--params-file', str(file)]
+    # the robot's motors (the simulator's saturation), not the controller's tuning
+    command += ['--param', f'unicycle_simulator.v_max:={float(v_max)!r}',
+                '--param', f'unicycle_simulator.omega_max:={float(omega_max)!r}']
+    if budget == 'iterations':
+        command += ['--param', 'mpc_controller.budget:=iterations']
+    return command
+
+
+def run_through_nodes(task: Any) -> RunRow:
+    """Run one navigation task through the node processes; return its runs.csv row.
+
+    Raises:
+        ValueError: for a controller other than the paper's MPC (the only one with a node).
+
+    """
+    from mpc_local_planner.evaluation import sensing_suites as suites
+    from mpc_local_planner.evaluation.suite_runs import barn_score, navigation_world
+
+    if controller_name(task.controller) is not ControllerName.PROPOSED:
+        msg = (f'--through-nodes runs the mpc_controller node: {task.controller} has none '
+               '(run it in process, beside)')
+        raise ValueError(msg)
+    robot, world, barn_length = navigation_world(task)
+    folder = Path(task.through_nodes) / f'{task.suite}_{task.world:03d}'
+    world_file = world_yaml(world, folder / 'world.yaml')
+    time_limit = float(world.time_limit or 100.0)
+    command = node_command(world_file, folder / 'run', robot=task.robot, v_max=robot.v_max,
+                           omega_max=robot.omega_max, time_limit=time_limit,
+                           goal_tolerance=float(world.goal_tolerance or suites.GOAL_TOLERANCE),
+                           stall_seconds=suites.STALL_SECONDS, seed=task.seed,
+                           reality=task.reality, budget=task.budget)
+    row = RunRow(controller=controller_name(task.controller), world=task.world,
+                 name=world.name, robot=task.robot, sensing=True, v_max=robot.v_max,
+                 reality=task.reality)
+    with claimed_domain() as domain:
+        env = {**os.environ, 'ROS_DOMAIN_ID': str(domain),
+               'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
+        with open(folder / 'closed_loop.log', 'w', encoding='utf-8') as log:
+            code = subprocess.run(command, stdout=log, stderr=subprocess.STDOUT, env=env,
+                                  check=False).returncode
+    metrics_file = folder / 'run' / 'metrics.json'
+    if not metrics_file.exists():
+        row.success, row.collision = False, False
+        row.stop_reason = f'closed_loop exited {code} without metrics (see {folder})'
+        row.barn_score = 0.0 if barn_length is not None else None
+        return row
+    metrics = json.loads(metrics_file.read_text(encoding='utf-8'))
+    reached = metrics.get('referee_time') is not None
+    contacts = int(metrics.get('contacts') or 0)
+    row.success = reached and contacts == 0 and code == 0
+    row.collision = contacts > 0
+    row.contacts = int(contacts > 0)
+    row.time = float(metrics['referee_time'] if reached else metrics['sim_time'])
+    row.path_length = metrics.get('path_length')
+    row.min_clearance = metrics.get('min_clearance')
+    row.solve_ms_median = metrics.get('solve_ms_median')
+    row.solve_ms_max = metrics.get('solve_ms_max')
+    row.final_distance = metrics.get('true_goal_error')
+    row.steps = metrics.get('steps')
+    row.solver_failures = metrics.get('solver_failures')
+    row.replans = metrics.get('replans')
+    stalls = metrics.get('lockstep_stalls') or 0
+    row.stop_reason = str(metrics.get('stop_reason')) + (
+        f' ({stalls} lockstep stalls)' if stalls else '')
+    if barn_length is not None:
+        row.barn_score = barn_score(bool(row.success), row.time if row.success else None,
+                                    barn_length)
+    return row
