@@ -83,8 +83,10 @@ _LATENCY_GRID_STEP = 0.01
 # refinement, and the grid's responses are held in memory at once).
 _GRID_STAGE_STEPS = 20_000
 # A base stops by itself when its sender goes silent (the Jackal's driver after 0.25 s);
-# the model does not, so samples that long after a non-zero command are not fitted.
+# the model does not, so samples from that long after a non-zero command until this long
+# after the next command (the model has caught up with the stopped base) are not fitted.
 COMMAND_GAP = 0.25
+RESUME_SETTLE = 1.0
 # What a record must have to be fitted.
 MIN_DURATION = 2.0  # s of fitted samples
 MIN_SAMPLES = 20
@@ -143,6 +145,7 @@ class AxisFit(NamedTuple):
             command reaching it (latency and lag shape these samples).
         saturated: seconds the fitted acceleration limit binds (they tell the limit).
         fitted: seconds of the record fitted.
+        left_out: seconds left out after the sender went silent (the base's own timeout).
 
     """
 
@@ -158,6 +161,7 @@ class AxisFit(NamedTuple):
     transient: float
     saturated: float
     fitted: float
+    left_out: float = 0.0
 
 
 class Identification(NamedTuple):
@@ -414,13 +418,17 @@ class _Axis:
         self.targets = np.where(index >= 0, self.command_u[np.maximum(index, 0)], self.initial)
         self.target_list = self.targets.tolist()
         self.range = float(np.ptp(self.command_u))
-        # a sample long after a non-zero command may be the base's own timeout stop
-        last = np.searchsorted(self.command_t, self.measured_t + 1e-9, side='right') - 1
-        known = last >= 0
-        age = np.where(known, self.measured_t - self.command_t[np.maximum(last, 0)], 0.0)
-        silent = known & (age > COMMAND_GAP) & (
-            np.abs(self.command_u[np.maximum(last, 0)]) > 1e-9)
-        self.mask = (self.measured_t >= self.command_t[0]) & ~silent
+        # the base may have stopped by its own timeout in a silent gap after a non-zero
+        # command: those samples, and the model's catching up after it, are not fitted
+        self.mask = self.measured_t >= self.command_t[0]
+        gaps = np.flatnonzero((np.diff(self.command_t, append=math.inf) > COMMAND_GAP)
+                              & (np.abs(self.command_u) > 1e-9))
+        for i in gaps:
+            end = (self.command_t[i + 1] + RESUME_SETTLE if i + 1 < len(self.command_t)
+                   else math.inf)
+            self.mask &= ~((self.measured_t > self.command_t[i] + COMMAND_GAP)
+                           & (self.measured_t < end))
+        self.left_out = int(np.sum(~self.mask & (self.measured_t >= self.command_t[0])))
 
     def shifted(self, responses: np.ndarray, latency: float) -> np.ndarray:
         """Return responses (C, K + 1) at the fitted sample times delayed by latency."""
@@ -489,7 +497,7 @@ def _fit_axis(data: _Axis, grid: _Axis, axis: str, max_latency: float) -> AxisFi
         rms=rms_limited if identified else rms_free, rms_unlimited=rms_free,
         command_range=data.range, command_changes=changes,
         transient=_sample_seconds(data) * float(np.mean(away)), saturated=saturated,
-        fitted=_sample_seconds(data))
+        fitted=_sample_seconds(data), left_out=_sample_seconds(data, data.left_out))
 
 
 def _fastest_change(t: np.ndarray, y: np.ndarray) -> float:
@@ -501,10 +509,10 @@ def _fastest_change(t: np.ndarray, y: np.ndarray) -> float:
     return float(np.max(np.abs(y[later[first]] - y[first]) / (t[later[first]] - t[first])))
 
 
-def _sample_seconds(data: _Axis) -> float:
-    """Seconds the fitted samples span (their count times the median sample period)."""
+def _sample_seconds(data: _Axis, count: int | None = None) -> float:
+    """Seconds count samples (default: the fitted ones) span at the median sample period."""
     period = float(np.median(np.diff(data.measured_t))) if len(data.measured_t) > 1 else 0.0
-    return period * int(np.sum(data.mask))
+    return period * (int(np.sum(data.mask)) if count is None else count)
 
 
 def _fitted_seconds(data: _Axis, bound: np.ndarray, latency: float) -> float:
@@ -593,7 +601,10 @@ def report(result: Identification, *, max_latency: float = MAX_LATENCY) -> str:
     for fit in result.axes:
         speed, rate = UNITS[fit.axis]
         fitted = max(fit.fitted, 1e-9)
-        text = (f'  {fit.axis}: {fit.fitted:.1f} s fitted; {fit.command_changes} command '
+        gaps = (f' ({fit.left_out:.1f} s left out: the sender was silent for more than '
+                f'{COMMAND_GAP:g} s, the base may have stopped by itself)'
+                if fit.left_out > 0 else '')
+        text = (f'  {fit.axis}: {fit.fitted:.1f} s fitted{gaps}; {fit.command_changes} command '
                 f'changes, {fit.transient:.1f} s ({100 * fit.transient / fitted:.0f} %) in '
                 'transients (latency, lag); ')
         if fit.acceleration is not None:
