@@ -28,8 +28,8 @@ from mpc_local_planner.evaluation.identify_base import (
     Record,
     simulate_axis,
 )
-from mpc_local_planner.ros.mpc_controller_parameters import build_settings, DEFAULTS
-from mpc_local_planner.ros.unicycle_simulator_parameters import reality_from_parameters
+from mpc_local_planner.ros import unicycle_simulator_parameters
+from mpc_local_planner.ros.mpc_controller_parameters import build_settings, DEFAULTS, PARAMETERS
 from mpc_local_planner.sim.base import Base
 from mpc_local_planner.sim.reality import Reality
 
@@ -243,6 +243,10 @@ def test_the_written_file_gives_the_controller_and_the_simulator_the_base(
     assert 'Residual RMS: v 0.01' in text
     written = yaml.safe_load(text)
     controller = written['mpc_controller']['ros__parameters']
+    simulator = written['unicycle_simulator']['ros__parameters']
+    # only names the nodes declare (a misspelt one would be refused at start)
+    assert set(controller) <= {spec.name for spec in PARAMETERS}
+    assert set(simulator) <= {spec.name for spec in unicycle_simulator_parameters.PARAMETERS}
     assert controller['input_hold'] == 'first_order'
     config, _, settings = build_settings({**DEFAULTS, **controller})
     assert config.max_accel == pytest.approx(BASE.acceleration, rel=0.1)
@@ -250,7 +254,7 @@ def test_the_written_file_gives_the_controller_and_the_simulator_the_base(
     assert settings.actuation_delay == pytest.approx(sensing_suites.actuation_delay(BASE),
                                                      abs=0.03)
     # on the ideal preset the overrides alone are the identified base
-    reality = reality_from_parameters(written['unicycle_simulator']['ros__parameters'])
+    reality = unicycle_simulator_parameters.reality_from_parameters(simulator)
     assert reality.latency == pytest.approx(BASE.latency, abs=ODOMETRY_PERIOD)
     assert reality.lag == pytest.approx(BASE.lag, rel=0.2)
     assert reality.acceleration == pytest.approx(BASE.acceleration, rel=0.1)
