@@ -270,6 +270,8 @@ def read_bag(bag: str | Path, *, cmd_vel_topic: str = '/cmd_vel',
     from rosbags.rosbag2 import Reader, ReaderError
     from rosbags.typesys import get_typestore, Stores
 
+    # a bag stores absolute names; 'cmd_vel' is the user's '/cmd_vel'
+    cmd_vel_topic, odom_topic = ('/' + name.lstrip('/') for name in (cmd_vel_topic, odom_topic))
     typestore = get_typestore(Stores.ROS2_JAZZY)
     cmd_types = ('geometry_msgs/msg/Twist', 'geometry_msgs/msg/TwistStamped')
     wanted = {cmd_vel_topic: cmd_types, odom_topic: ('nav_msgs/msg/Odometry',)}
@@ -331,6 +333,20 @@ def _times(stamps: np.ndarray, received: np.ndarray) -> tuple[np.ndarray, str]:
             and abs(float(np.median(received - stamps))) < _STAMP_AGREEMENT):
         return stamps, 'header stamps'
     return received, 'receive times'
+
+
+def _usable(commands: np.ndarray, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return the rows a fit can use, by time.
+
+    A non-finite command is a broken sender, which a base takes as zero (as `Base` does); a
+    non-finite twist is a measurement that did not happen.
+    """
+    commands = _by_time(commands)
+    commands = commands[np.isfinite(commands[:, 0])].copy()
+    broken = ~np.all(np.isfinite(commands[:, 1:]), axis=1)
+    commands[broken, 1:] = 0.0
+    measured = _by_time(measured)
+    return commands, measured[np.all(np.isfinite(measured), axis=1)]
 
 
 def _by_time(rows: np.ndarray) -> np.ndarray:
@@ -535,19 +551,17 @@ def identify(record: Record, *, max_latency: float = MAX_LATENCY,
     if not (math.isfinite(max_latency) and 0.0 < max_latency <= 5.0):
         msg = f'max latency must be in (0, 5] s, got {max_latency}'
         raise ValueError(msg)
-    commands, measured = record.commands, record.measured
+    commands, measured = _usable(record.commands, record.measured)
     if len(commands) < 2 or len(measured) < MIN_SAMPLES:
         msg = (f'{record.source}: too short a record ({len(commands)} commands, '
                f'{len(measured)} measured twists; at least 2 and {MIN_SAMPLES})')
-        raise ValueError(msg)
-    if not (np.all(np.isfinite(commands)) and np.all(np.isfinite(measured))):
-        msg = f'{record.source}: non-finite commands or twists in the record'
         raise ValueError(msg)
     if measured[-1, 0] <= commands[0, 0] or commands[-1, 0] <= measured[0, 0]:
         msg = (f'{record.source}: the commands ({commands[0, 0]:.2f}-{commands[-1, 0]:.2f} s) '
                f'and the measured twists ({measured[0, 0]:.2f}-{measured[-1, 0]:.2f} s) do '
                'not overlap in time (are they on one clock?)')
         raise ValueError(msg)
+    record = record._replace(commands=commands, measured=measured)
     fits = []
     for column, axis in enumerate(AXES, start=1):
         data = _Axis(record, column, step, max_latency)

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 import math
 from pathlib import Path
 from typing import Callable
@@ -273,6 +274,24 @@ def test_a_bag_of_cmd_vel_and_odom_is_identified(tmp_path: Path, stamped: bool) 
     assert '/odom (at their header stamps)' in record.description
     assert record.measured[0, 0] == pytest.approx(100.0 + measured[0, 0])
     check_recovered(identify(record), BASE)
+    # topics named as in ros2 topic, without the leading slash
+    assert len(read_record(bag, cmd_vel_topic='cmd_vel', odom_topic='odom').commands) == len(
+        commands)
+
+
+def test_a_broken_command_counts_as_a_stop_and_a_missing_twist_as_no_sample() -> None:
+    # the base stops for a non-finite command (as Base and the simulator do): the record
+    # is fitted with zero there, and a NaN twist is left out
+    reality = replace(BASE, odom_drift=(0.0, 0.0))
+    profile = steps_ramps_and_turns
+
+    def broken(t: float) -> tuple[float, float]:
+        return (math.nan, 0.5) if 6.0 <= t < 6.5 else profile(t)
+
+    commands, measured = record_run(reality, broken)
+    measured[100:110, 1] = math.nan
+    result = identify(Record(commands, measured, 'generated', 'test'))
+    check_recovered(result, reality)
 
 
 def test_odometry_stamped_on_another_clock_falls_back_to_receive_times(
