@@ -25,8 +25,8 @@ RECORD is a rosbag2 folder (``cmd_vel`` as geometry_msgs Twist or TwistStamped, 
 nav_msgs/Odometry, read with rosbags: no ROS needed) or a CSV with the columns
 ``t, v_cmd, omega_cmd, v, omega``: one row per sample, the command sent at t (empty when
 none was) and the twist measured at t (empty when none was). Times in a bag are the
-messages' header stamps when they agree with the recorder's clock, else the times the
-recorder received them (a Twist has no stamp).
+messages' header stamps when the recorder received them within 0.05 s of them (its clock
+and the sender's agree), else the times the recorder received them (a Twist has no stamp).
 
 ``--write FILE`` writes ros__parameters for ``mpc_controller`` (``max_accel``,
 ``max_decel``, ``input_hold: first_order``, ``actuation_delay`` = latency + lag, as
@@ -102,8 +102,9 @@ MIN_LIMIT_GAIN = 1.1
 _CHANGE = 0.05
 # Window (s) of the fastest change a record shows (a lower bound on an unbound limit).
 _RATE_WINDOW = 0.1
-# Header stamps are used when they are within this of the recorder's clock (s).
-_STAMP_AGREEMENT = 1.0
+# Header stamps are used when they are received within this of them (s, the median): a
+# stamp on a clock further off the recorder's would shift the latency by the offset.
+_STAMP_AGREEMENT = 0.05
 # Residual RMS above this fraction of the command range: the model does not fit.
 _POOR_FIT = 0.2
 
@@ -326,13 +327,18 @@ def _times(stamps: np.ndarray, received: np.ndarray) -> tuple[np.ndarray, str]:
     """Return the header stamps when they are on the recorder's clock, else receive times.
 
     A stamp says when the measurement was taken; a sender that leaves stamps zero, or a
-    clock other than the recorder's (sim time against wall time), cannot be compared with
-    the other topic's times.
+    clock other than the recorder's (sim time against wall time, an unsynchronised robot),
+    cannot be compared with the other topic's times. The label says which, and how far
+    apart the two clocks were.
     """
-    if (np.all(np.isfinite(stamps)) and np.all(stamps > 0.0)
-            and abs(float(np.median(received - stamps))) < _STAMP_AGREEMENT):
-        return stamps, 'header stamps'
-    return received, 'receive times'
+    if not (np.all(np.isfinite(stamps)) and np.all(stamps > 0.0)):
+        return received, 'receive times (no stamps)'
+    offset = float(np.median(received - stamps))
+    if abs(offset) < _STAMP_AGREEMENT:
+        return stamps, f'header stamps, received {1000 * offset:.0f} ms after them'
+    side = 'ahead of' if offset < 0.0 else 'behind'
+    return received, (f"receive times: the stamps were {abs(offset):.3f} s {side} the "
+                      "recorder's clock")
 
 
 def _usable(commands: np.ndarray, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

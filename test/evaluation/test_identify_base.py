@@ -117,9 +117,12 @@ def stamp(t: float) -> Time:
 
 
 def write_bag(bag: Path, commands: np.ndarray, measured: np.ndarray, *,
-              stamped: bool = False, offset: float = 100.0,
+              stamped: bool = False, offset: float = 100.0, stamp_offset: float = 0.0,
               topics: tuple[str, ...] = ('/cmd_vel', '/odom')) -> Path:
-    """Write cmd_vel (Twist, or TwistStamped with zero stamps as teleop sends) and odom."""
+    """Write cmd_vel (Twist, or TwistStamped with zero stamps as teleop sends) and odom.
+
+    The recorder's clock reads offset at t = 0; odometry's stamps are stamp_offset ahead.
+    """
     typestore = get_typestore(Stores.ROS2_JAZZY)
     cmd_type = 'geometry_msgs/msg/TwistStamped' if stamped else 'geometry_msgs/msg/Twist'
     with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
@@ -138,7 +141,7 @@ def write_bag(bag: Path, commands: np.ndarray, measured: np.ndarray, *,
             messages.append((t, '/cmd_vel', message))
         for t, v, omega in measured:
             odom = Odometry()
-            odom.header.stamp = stamp(offset + t)
+            odom.header.stamp = stamp(offset + stamp_offset + t)
             odom.pose.pose.orientation.w = 1.0
             odom.twist.twist.linear.x, odom.twist.twist.angular.z = float(v), float(omega)
             # received a few milliseconds after its stamp
@@ -270,8 +273,8 @@ def test_a_bag_of_cmd_vel_and_odom_is_identified(tmp_path: Path, stamped: bool) 
     # odometry at its stamps; a command at its receive time (a Twist has no stamp, and
     # teleop leaves a TwistStamped's zero)
     kind = 'TwistStamped' if stamped else 'Twist'
-    assert f'/cmd_vel ({kind}, at their receive times)' in record.description
-    assert '/odom (at their header stamps)' in record.description
+    assert f'/cmd_vel ({kind}, at their receive times' in record.description
+    assert '/odom (at their header stamps, received 3 ms after them)' in record.description
     assert record.measured[0, 0] == pytest.approx(100.0 + measured[0, 0])
     check_recovered(identify(record), BASE)
     # topics named as in ros2 topic, without the leading slash
@@ -294,30 +297,19 @@ def test_a_broken_command_counts_as_a_stop_and_a_missing_twist_as_no_sample() ->
     check_recovered(result, reality)
 
 
+@pytest.mark.parametrize('clock_offset', [1000.0, 0.1])
 def test_odometry_stamped_on_another_clock_falls_back_to_receive_times(
-        tmp_path: Path) -> None:
+        tmp_path: Path, clock_offset: float) -> None:
+    # stamps of a clock 1000 s away (sim time), or 0.1 s (an unsynchronised robot), would
+    # shift the latency by the offset: the times the recorder received them are used
     commands, measured = record_run(BASE)
-    bag = write_bag(tmp_path / 'bag', commands, measured, offset=0.0)
-    # stamps from t = 0.02 while the recorder's clock starts at 0 too: they agree...
-    assert 'odom (at their header stamps)' in read_record(bag).description
-    # ...and stamps of a clock 1000 s away are not compared with the commands' times
-    other = tmp_path / 'other'
-    typestore = get_typestore(Stores.ROS2_JAZZY)
-    with Writer(other, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-        cmd = writer.add_connection('/cmd_vel', 'geometry_msgs/msg/Twist', typestore=typestore)
-        odom = writer.add_connection('/odom', 'nav_msgs/msg/Odometry', typestore=typestore)
-        for t, v, omega in commands:
-            twist = Twist()
-            twist.linear.x, twist.angular.z = float(v), float(omega)
-            writer.write(cmd, int(round(t * 1e9)), serialize_message(twist))
-        for t, v, omega in measured:
-            message = Odometry()
-            message.header.stamp = stamp(1000.0 + t)
-            message.twist.twist.linear.x, message.twist.twist.angular.z = float(v), float(omega)
-            writer.write(odom, int(round(t * 1e9)), serialize_message(message))
-    record = read_record(other)
-    assert 'odom (at their receive times)' in record.description
-    assert record.measured[0, 0] == pytest.approx(measured[0, 0])
+    bag = write_bag(tmp_path / 'bag', commands, measured, stamp_offset=clock_offset)
+    record = read_record(bag)
+    assert (f'/odom (at their receive times: the stamps were {clock_offset - 0.003:.3f} s '
+            "ahead of the recorder's clock") in record.description
+    assert record.measured[0, 0] == pytest.approx(100.0 + measured[0, 0] + 0.003)
+    assert identify(record).latency == pytest.approx(BASE.latency + 0.003,
+                                                     abs=ODOMETRY_PERIOD)
 
 
 def run_main(capsys: pytest.CaptureFixture[str], *argv: str) -> str:
