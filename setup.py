@@ -64,6 +64,7 @@ setup(
             'bag_recorder = mpc_local_planner.ros.bag_recorder_node:main',
             'closed_loop = mpc_local_planner.ros.closed_loop:main',
             'analyze_bag = mpc_local_planner.evaluation.analyze_bag:main',
+            'identify_base = mpc_local_planner.evaluation.identify_base:main',
             'mpc_bench = mpc_local_planner.evaluation.bench:main',
             'mpc_bench_dds = mpc_local_planner.ros.latency_bench:main',
             'world_to_map = mpc_local_planner.worlds.world_to_map:main',
