@@ -97,6 +97,7 @@ from mpc_local_planner.evaluation.sweep import (
     SettingsMismatch,
 )
 from mpc_local_planner.evaluation.trajectory import read_trajectory_csv
+from mpc_local_planner.sim.physics import mujoco_missing, PLANTS
 from mpc_local_planner.sim.reality import REALITY_PRESETS
 
 __all__ = [
@@ -350,6 +351,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help='how real the robot is (sim/reality.py presets): lag, latency, '
                              'acceleration limits, odometry noise and drift, laser noise and '
                              'dropouts; navigation suites only')
+    parser.add_argument('--plant', choices=PLANTS, default='kinematic',
+                        help="the robot's plant: kinematic (the default) or mujoco (rigid "
+                             'body, wheels, slip: the [physics] extra); navigation suites only')
     parser.add_argument('--save-trajectories', action='store_true',
                         help='write each run as trajectory CSV under OUT/trajectories')
     parser.add_argument('--merge', action='store_true',
@@ -389,6 +393,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.reality != 'ideal' and not navigation:
         parser.error('--reality needs the navigation stack (--suite unknown, --suite worlds '
                      'or --sensing): the known-map suites follow a fixed path on the model')
+    if args.plant != 'kinematic' and not navigation:
+        parser.error('--plant needs the navigation stack (--suite unknown, --suite worlds or '
+                     '--sensing)')
+    if args.plant == 'mujoco' and mujoco_missing() is not None:
+        parser.error(f'--plant mujoco: {mujoco_missing()}')
     allowed = CONTROLLERS if navigation else KNOWN_MAP_CONTROLLERS
     controllers = ([c.strip() for c in args.controllers.split(',') if c.strip()]
                    if args.controllers else list(allowed))
@@ -425,7 +434,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         template = Task(args.suite, 0, controllers[0], args.seed, args.v_max, args.omega_max,
                         str(args.barn_dir.resolve()), '', args.merge, sensing=args.sensing,
                         robot=args.robot, budget=args.budget, compile=args.compile,
-                        reality=args.reality)
+                        reality=args.reality, plant=args.plant)
         print(plot_navigation_suite(args.out, template, drawn, world_files))
         return 0
     args.out.mkdir(parents=True, exist_ok=True)
@@ -434,7 +443,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         barn_dir = ''  # the shipped worlds: each worker finds its own copy
     template = Task(args.suite, 0, '', args.seed, args.v_max, args.omega_max, barn_dir,
                     trajectories, args.merge, sensing=args.sensing, robot=args.robot,
-                    budget=args.budget, compile=args.compile, reality=args.reality)
+                    budget=args.budget, compile=args.compile, reality=args.reality,
+                    plant=args.plant)
     tasks = [replace(template, world=w, controller=c,
                      world_file=world_files[w] if world_files else '')
              for w in worlds for c in controllers]
@@ -447,7 +457,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                  f'{args.robot} robot, v_max {args.v_max:g} m/s, omega_max '
                  f'{args.omega_max:g} rad/s'
                  + (', no prior map' if args.suite == 'barn' else '')
-                 + f', {args.budget} budget, reality {args.reality})')
+                 + f', {args.budget} budget, reality {args.reality}'
+                 + (f', {args.plant} plant' if args.plant != 'kinematic' else '') + ')')
     else:
         title = (f'{args.suite}, known map (seed {args.seed}, v_max {args.v_max:g} m/s, '
                  f'omega_max {args.omega_max:g} rad/s{", merged walls" if args.merge else ""}'

@@ -105,6 +105,7 @@ class Task:
     budget: str = EVALUATION_BUDGET  # SolverSettings.budget of the MPCs
     compile: bool = True  # SolverSettings.compile of the MPCs
     reality: str = 'ideal'  # sim/reality.py preset: how real the robot is (navigation runs)
+    plant: str = 'kinematic'  # sim/physics PLANTS: the kinematic Base or MuJoCo's robot
 
     @property
     def navigation(self) -> bool:
@@ -281,7 +282,7 @@ def run_navigation_task(task: Task) -> RunRow:
                                                              compile=task.compile),
                                        reality=task.reality,
                                        # BARN's robot has odometry and a laser, no localizer
-                                       localized=task.suite != 'barn')
+                                       localized=task.suite != 'barn', plant=task.plant)
     except PlanningError as err:
         row.success, row.collision, row.stop_reason = False, False, f'no plan: {err}'
         row.barn_score = 0.0 if barn_length is not None else None

@@ -1,5 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The MuJoCo plant behaves like a robot: limits, skid-steer, odometry, walls, its laser."""
+"""The MuJoCo plant behaves like a robot: limits, skid-steer, odometry, walls, its laser.
+
+And it is what the suites (run_navigation, evaluate --plant), the simulator node (plant:
+mujoco) and closed_loop (--plant) run when asked.
+"""
 
 from __future__ import annotations
 
@@ -7,20 +11,33 @@ import math
 
 import numpy as np
 import pytest
+from rclpy.exceptions import ParameterException
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import LaserScan
 
 from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.evaluation import evaluate
+from mpc_local_planner.evaluation import sensing_suites as suites
+from mpc_local_planner.evaluation.rollout import Outcome
 from mpc_local_planner.perception.raycast import TrueGeometry
+from mpc_local_planner.ros import unicycle_simulator_parameters
+from mpc_local_planner.ros.closed_loop_parameters import localized, LoopOptions, node_parameters
+from mpc_local_planner.ros.conversions import twist_from_u
+from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
 from mpc_local_planner.sim.contact import footprint_distances
 from mpc_local_planner.sim.laser import SimulatedLaser
 from mpc_local_planner.sim.physics.drive import DiffDrive, WheelOdometry
 from mpc_local_planner.sim.physics.robots import JACKAL_ROBOT
 from mpc_local_planner.sim.reality import Reality
-from mpc_local_planner.worlds.world import Circle
+from mpc_local_planner.worlds.data_files import resolve_data_file
+from mpc_local_planner.worlds.world import Circle, load_world
 
 mujoco = pytest.importorskip('mujoco', reason='the [physics] extra is not installed')
 
+from mpc_local_planner.sim.physics.laser import PhysicsLaser  # noqa: E402 (needs mujoco)
 from mpc_local_planner.sim.physics.plant import PhysicsBase  # noqa: E402 (needs mujoco)
 
 JACKAL_MODEL = Unicycle(v_max=2.0, omega_max=4.0)
@@ -163,3 +180,86 @@ def test_the_small_robot_drives_straight_at_its_speed() -> None:
     travelled = np.hypot(base.pose[0] - 1.0, base.pose[1] - 2.0)
     assert 0.5 < travelled < 0.62
     assert np.hypot(*(base.odom_pose[:2] - base.pose[:2])) < 0.03
+
+
+def test_run_navigation_drives_the_physics_robot_with_the_engines_laser() -> None:
+    world = load_world(resolve_data_file('unknown_box.yaml'))
+    result = suites.run_navigation(world, 'pure_pursuit', suites.ROBOTS['circle'],
+                                   prepare=False, plant='mujoco')
+    navigator = result.navigator
+    assert isinstance(navigator.base, PhysicsBase) and navigator.base.robot.name == 'small'
+    assert isinstance(navigator.laser, PhysicsLaser)
+    # the laser showed the unknown box: the planner went around it, without touching it
+    assert navigator.log.replans >= 1
+    assert result.run.outcome is Outcome.REACHED and result.contacts == 0
+
+
+def test_an_unknown_plant_is_refused_with_the_known_ones() -> None:
+    world = load_world(resolve_data_file('unknown_box.yaml'))
+    with pytest.raises(ValueError, match='kinematic, mujoco'):
+        suites.run_navigation(world, 'pure_pursuit', suites.ROBOTS['circle'],
+                              prepare=False, plant='gazebo')
+
+
+def test_evaluate_takes_the_plant_for_the_navigation_suites_only(tmp_path) -> None:
+    with pytest.raises(SystemExit):
+        evaluate.main(['--suite', 'random', '--plant', 'mujoco', '--out', str(tmp_path)])
+    with pytest.raises(SystemExit):
+        evaluate.main(['--suite', 'unknown', '--plant', 'bullet', '--out', str(tmp_path)])
+    assert evaluate.main(['--suite', 'unknown', '--count', '1', '--plant', 'mujoco',
+                          '--controllers', 'pure_pursuit', '--out', str(tmp_path)]) == 0
+    summary = (tmp_path / 'summary.md').read_text(encoding='utf-8')
+    assert 'mujoco plant' in summary
+
+
+@pytest.mark.dds
+def test_the_simulator_node_on_the_mujoco_plant_publishes_odometry_and_scans(ros) -> None:
+    world = resolve_data_file('unknown_box.yaml')
+    sim = ros.add(UnicycleSimulatorNode(context=ros.context, parameter_overrides=[
+        Parameter('plant', value='mujoco'), Parameter('physics.robot', value='jackal'),
+        Parameter('world_file', value=str(world)), Parameter('v_max', value=2.0),
+        Parameter('publish_clock', value=True), Parameter('real_time_factor', value=10.0)]))
+    assert isinstance(sim._base, PhysicsBase) and isinstance(sim._laser, PhysicsLaser)
+    probe = ros.probe()
+    scans: list[LaserScan] = []
+    probe.create_subscription(LaserScan, 'scan', scans.append, qos_profile_sensor_data)
+    assert ros.spin_until(lambda: probe.cmd_pub.get_subscription_count() > 0, timeout=20.0)
+
+    def moved() -> bool:
+        probe.cmd_pub.publish(twist_from_u([1.0, 0.0]))
+        return bool(probe.odoms) and probe.odoms[-1].pose.pose.position.x > 0.5
+
+    assert ros.spin_until(moved, timeout=20.0)
+    # the wheels' odometry and the body agree on a straight run, within the wheels' slip
+    assert sim.state[0] == pytest.approx(probe.odoms[-1].pose.pose.position.x, abs=0.15)
+    assert probe.odoms[-1].twist.twist.linear.x > 0.5
+    # the engine's laser sees the unknown box ahead (REP 117: inf where nothing is hit)
+    assert ros.spin_until(lambda: len(scans) >= 2, timeout=20.0)
+    ranges = np.array(scans[-1].ranges)
+    assert np.any(np.isfinite(ranges)) and np.any(np.isinf(ranges))
+
+
+def test_the_simulator_refuses_an_unknown_plant_and_mujoco_when_it_is_missing(
+        ros, monkeypatch) -> None:
+    reason = unicycle_simulator_parameters.validate_simulator_parameters({'plant': 'gazebo'})
+    assert reason is not None and 'kinematic|mujoco' in reason
+    reason = unicycle_simulator_parameters.validate_simulator_parameters(
+        {'physics.robot': 'husky'})
+    assert reason is not None and 'jackal|small' in reason
+    monkeypatch.setattr(unicycle_simulator_parameters, 'mujoco_missing',
+                        lambda: 'MuJoCo is not installed: pip install ...[physics]')
+    with pytest.raises(ParameterException, match='MuJoCo is not installed'):
+        UnicycleSimulatorNode(context=ros.context,
+                              parameter_overrides=[Parameter('plant', value='mujoco')])
+
+
+def test_closed_loop_passes_the_plant_to_the_simulator_and_runs_localized() -> None:
+    world_file = resolve_data_file('unknown_box.yaml')
+    world = load_world(world_file)
+    options = LoopOptions(path='rrt', plant='mujoco')
+    params = node_parameters(options, world_file, world)['unicycle_simulator']
+    assert params['plant'] == 'mujoco' and params['physics.robot'] == 'small'
+    # odometry from the wheels is not the pose in map: a localizer says where the robot is
+    assert localized(options) and params['odom_frame'] == 'odom'
+    plain = node_parameters(LoopOptions(path='rrt'), world_file, world)['unicycle_simulator']
+    assert plain['plant'] == 'kinematic' and not localized(LoopOptions())
