@@ -27,6 +27,7 @@ from mpc_local_planner.ros import unicycle_simulator_parameters
 from mpc_local_planner.ros.closed_loop_parameters import localized, LoopOptions, node_parameters
 from mpc_local_planner.ros.conversions import twist_from_u
 from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
+from mpc_local_planner.sim import step_response
 from mpc_local_planner.sim.contact import footprint_distances
 from mpc_local_planner.sim.laser import SimulatedLaser
 from mpc_local_planner.sim.physics.drive import DiffDrive, WheelOdometry
@@ -263,3 +264,19 @@ def test_closed_loop_passes_the_plant_to_the_simulator_and_runs_localized() -> N
     assert localized(options) and params['odom_frame'] == 'odom'
     plain = node_parameters(LoopOptions(path='rrt'), world_file, world)['unicycle_simulator']
     assert plain['plant'] == 'kinematic' and not localized(LoopOptions())
+
+
+def test_step_response_prints_what_its_docstring_table_says(capsys, monkeypatch) -> None:
+    assert step_response.main(['--robot', 'jackal']) == 0
+    printed = capsys.readouterr().out
+    assert '90 % of v_max after 0.375 s' in printed and '3.738 rad/s held' in printed
+    jackal_row = [line for line in step_response.__doc__.splitlines()
+                  if line.startswith('jackal ')][0]
+    result = step_response.measure('jackal')
+    assert f'{result.t90_linear:.3f} s' in jackal_row
+    assert f'{result.omega_held:.2f} of 4.0' in jackal_row
+    assert f'{math.degrees(result.turn_heading_error):.1f} d' in jackal_row
+    # without MuJoCo: the reason, no traceback
+    monkeypatch.setattr(step_response, 'mujoco_missing', lambda: 'MuJoCo is not installed')
+    assert step_response.main(['--robot', 'small']) == 2
+    assert 'MuJoCo is not installed' in capsys.readouterr().err
