@@ -440,6 +440,7 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
             this reality, whose latency and odometry noise it adds).
 
     Raises:
+        ValueError: for a plant that is not one of sim/physics PLANTS.
         RuntimeError: for the mujoco plant when MuJoCo is not installed.
 
     """

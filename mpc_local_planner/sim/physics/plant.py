@@ -146,8 +146,9 @@ class PhysicsBase:
                 self._update(now)
                 self._next_update += self._period
             # up to the next update or command, whichever comes first, in one call
-            events = [self._next_update, *(c[0] for c in list(self._commands)[:1])]
-            ahead = min(int(math.ceil((min(events) - now) / TIMESTEP - _EPS)), last - self._steps)
+            event = min(self._next_update, self._commands[0][0]) if self._commands \
+                else self._next_update
+            ahead = min(int(math.ceil((event - now) / TIMESTEP - _EPS)), last - self._steps)
             ahead = max(ahead, 1)
             mujoco.mj_step(self.engine, self.data, nstep=ahead)
             self._steps += ahead
