@@ -47,6 +47,8 @@ setup(
         ],
         # evaluate --executor dask: the runs on a Dask cluster (dask scheduler, dask worker).
         'cluster': ['dask[distributed]>=2024.1'],
+        # the MuJoCo plant (sim/physics/): plant: mujoco, --plant mujoco, step_response
+        'physics': ['mujoco>=3,<4'],
         # the tests run the Dask executor too
         'test': ['pytest', 'pytest-timeout', 'hypothesis', 'ruff', 'dask[distributed]>=2024.1'],
     },
@@ -67,6 +69,7 @@ setup(
             'identify_base = mpc_local_planner.evaluation.identify_base:main',
             'mpc_bench = mpc_local_planner.evaluation.bench:main',
             'mpc_bench_dds = mpc_local_planner.ros.latency_bench:main',
+            'step_response = mpc_local_planner.sim.step_response:main',
             'world_to_map = mpc_local_planner.worlds.world_to_map:main',
             'map_server = mpc_local_planner.ros.map_server_node:main',
             'mpc_local_planner_share = mpc_local_planner.worlds.data_files:main',

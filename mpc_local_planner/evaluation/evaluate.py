@@ -97,6 +97,7 @@ from mpc_local_planner.evaluation.sweep import (
     SettingsMismatch,
 )
 from mpc_local_planner.evaluation.trajectory import read_trajectory_csv
+from mpc_local_planner.sim.physics import mujoco_missing, PLANTS
 from mpc_local_planner.sim.reality import REALITY_PRESETS
 
 __all__ = [
@@ -355,6 +356,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                              'real node processes over DDS (closed_loop, lockstep clock, the '
                              "package's parameter files as shipped; runs in OUT/nodes/), the "
                              'other controllers in process beside it')
+    parser.add_argument('--plant', choices=PLANTS, default='kinematic',
+                        help="the robot's plant: kinematic (the default) or mujoco (rigid "
+                             'body, wheels, slip: the [physics] extra); navigation suites only')
     parser.add_argument('--save-trajectories', action='store_true',
                         help='write each run as trajectory CSV under OUT/trajectories')
     parser.add_argument('--merge', action='store_true',
@@ -396,6 +400,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.reality != 'ideal' and not navigation:
         parser.error('--reality needs the navigation stack (--suite unknown, --suite worlds '
                      'or --sensing): the known-map suites follow a fixed path on the model')
+    if args.plant != 'kinematic' and not navigation:
+        parser.error('--plant needs the navigation stack (--suite unknown, --suite worlds or '
+                     '--sensing)')
+    if args.plant == 'mujoco' and mujoco_missing() is not None:
+        parser.error(f'--plant mujoco: {mujoco_missing()}')
     allowed = CONTROLLERS if navigation else KNOWN_MAP_CONTROLLERS
     controllers = ([c.strip() for c in args.controllers.split(',') if c.strip()]
                    if args.controllers else list(allowed))
@@ -432,7 +441,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         template = Task(args.suite, 0, controllers[0], args.seed, args.v_max, args.omega_max,
                         str(args.barn_dir.resolve()), '', args.merge, sensing=args.sensing,
                         robot=args.robot, budget=args.budget, compile=args.compile,
-                        reality=args.reality)
+                        reality=args.reality, plant=args.plant)
         print(plot_navigation_suite(args.out, template, drawn, world_files))
         return 0
     args.out.mkdir(parents=True, exist_ok=True)
@@ -441,7 +450,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         barn_dir = ''  # the shipped worlds: each worker finds its own copy
     template = Task(args.suite, 0, '', args.seed, args.v_max, args.omega_max, barn_dir,
                     trajectories, args.merge, sensing=args.sensing, robot=args.robot,
-                    budget=args.budget, compile=args.compile, reality=args.reality)
+                    budget=args.budget, compile=args.compile, reality=args.reality,
+                    plant=args.plant)
     nodes = str((args.out / 'nodes').resolve()) if args.through_nodes else ''
     tasks = [replace(template, world=w, controller=c,
                      world_file=world_files[w] if world_files else '',
@@ -457,6 +467,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                  f'{args.omega_max:g} rad/s'
                  + (', no prior map' if args.suite == 'barn' else '')
                  + f', {args.budget} budget, reality {args.reality}'
+                 + (f', {args.plant} plant' if args.plant != 'kinematic' else '')
                  + (", the paper's MPC through the nodes" if args.through_nodes else '') + ')')
     else:
         title = (f'{args.suite}, known map (seed {args.seed}, v_max {args.v_max:g} m/s, '

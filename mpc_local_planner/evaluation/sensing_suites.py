@@ -61,6 +61,7 @@ from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.perception.raycast import TrueGeometry
 from mpc_local_planner.sim.base import Base
 from mpc_local_planner.sim.localizer import Localizer
+from mpc_local_planner.sim.physics import make_physics_base, PLANTS
 from mpc_local_planner.sim.reality import POSE_ERROR, Reality, reality_preset
 from mpc_local_planner.worlds.map_files import OccupancyMap, rasterize_world
 from mpc_local_planner.worlds.world import load_barn_world, World
@@ -120,6 +121,8 @@ REALITY_MARGIN = 0.03
 # measurements behind the choice: docs/real_robot.md).
 REALITY_ACCEL_FACTOR = 1.0
 REALITY_INPUT_HOLD = 'first_order'
+# The physics plant's robot for each of ROBOTS (sim/physics/robots.py).
+PHYSICS_ROBOT = {'circle': 'small', 'jackal': 'jackal'}
 
 
 @dataclass(frozen=True)
@@ -402,7 +405,7 @@ class SensingResult:
 def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool = True,
                    seed: int = 0, h: float = 0.2, prepare: bool = True,
                    setup: MpcSetup = MpcSetup(), reality: str | Reality = 'ideal',
-                   localized: bool | None = None) -> SensingResult:
+                   localized: bool | None = None, plant: str = 'kinematic') -> SensingResult:
     """Drive robot through world with the named controller, perception and re-planning.
 
     Args:
@@ -430,25 +433,48 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
         localized: Whether a robot whose odometry is not exact has that localizer; None:
             it has. BARN's robot has none (odometry and a laser, no map, a goal relative to
             its start and reached within 1 m): suite_runs passes False for BARN.
+        plant: ``kinematic`` (the `Base` above) or ``mujoco``: the rigid-body robot of
+            sim/physics/ (PHYSICS_ROBOT[robot.name]) among the world's obstacles, its
+            odometry from its wheels and its laser cast by the engine; it is run as a real
+            robot (commanded at CONTROL_FREQUENCY, controllers set up as for a real base of
+            this reality, whose latency and odometry noise it adds).
+
+    Raises:
+        ValueError: for a plant that is not one of sim/physics PLANTS.
+        RuntimeError: for the mujoco plant when MuJoCo is not installed.
 
     """
     if isinstance(reality, str):
         reality = reality_preset(reality)
-    real = not reality.ideal
+    if plant not in PLANTS:
+        msg = f'unknown plant {plant!r}; choose one of {", ".join(PLANTS)}'
+        raise ValueError(msg)
+    physics = plant == 'mujoco'
+    real = not reality.ideal or physics
     known = rasterize_world(world, MAP_RESOLUTION) if world.obstacles else \
         _empty_map(world.bounds)
     grid, planner = _grid_planner(known, robot, world.bounds, seed)
     local = _local_controller(controller, robot, world, prepare=prepare, setup=setup,
                               reality=reality if real else None)
     model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max)
-    base = Base(model, reality.with_seed(seed), world.start, dt=REALITY_SUBSTEP) if real \
-        else None
+    if physics:
+        base: Any = make_physics_base(model, reality.with_seed(seed), world.start,
+                                      robot=PHYSICS_ROBOT[robot.name],
+                                      footprint=robot.footprint,
+                                      shapes=world.physical_shapes(), dt=REALITY_SUBSTEP)
+    else:
+        base = Base(model, reality.with_seed(seed), world.start, dt=REALITY_SUBSTEP) \
+            if real else None
     period = 1.0 / CONTROL_FREQUENCY if real else h
     settings = NavigationSettings(sense=sensing, scan_period=SCAN_PERIOD if real else None)
     navigator = Navigator(local.controller, TrueGeometry(world.physical_shapes()), grid,
                           planner, world.goal, reach=local.reach, h=period,
                           known_map=known if world.obstacles else None,
                           settings=settings, footprint=robot.footprint, base=base)
+    if physics:  # the engine casts the beams, with the laser's settings
+        laser = navigator.laser
+        navigator.laser = base.laser(fov=laser.fov, beams=laser.beams,
+                                     range_min=laser.range_min, range_max=laser.range_max)
     clearance = footprint_clearance(world.physical_shapes(), robot.footprint)
     # a robot may wait in front of an obstacle for a re-plan: standing still ends a run after
     # STALL_SECONDS, not the rollout's default 5 s
@@ -485,7 +511,7 @@ def result_fields(result: SensingResult) -> dict[str, Any]:
 def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controller: str,
                          robot: Robot, *, seed: int = 0, prepare: bool = True,
                          setup: MpcSetup = MpcSetup(), reality: str = 'ideal',
-                         localized: bool | None = None) -> Path:
+                         localized: bool | None = None, plant: str = 'kinematic') -> Path:
     """Draw laser-only runs: the true obstacles, what was sensed, every plan, the footprint.
 
     Each world is run again (the runs are deterministic) with the navigator's log at hand:
@@ -503,6 +529,7 @@ def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controll
         setup: How the MPCs are set up (see run_navigation).
         reality: How real the robot is (see run_navigation), as the suite ran it.
         localized: Whether a real robot has a localizer (see run_navigation).
+        plant: The robot's plant (see run_navigation).
 
     Returns:
         target.
@@ -525,7 +552,8 @@ def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controll
                              squeeze=False)
     for ax, (title, world) in zip(axes[0], worlds, strict=True):
         result = run_navigation(world, controller, robot, seed=seed, prepare=prepare,
-                                setup=setup, reality=reality, localized=localized)
+                                setup=setup, reality=reality, localized=localized,
+                                plant=plant)
         for shape in world.physical_shapes():
             if isinstance(shape, Circle):
                 ax.add_patch(CirclePatch((shape.x, shape.y), shape.radius, color='0.6'))

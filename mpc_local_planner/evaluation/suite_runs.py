@@ -108,6 +108,7 @@ class Task:
     # a folder: the paper's MPC runs through the node processes there (through_nodes.py);
     # '' runs it in process
     through_nodes: str = ''
+    plant: str = 'kinematic'  # sim/physics PLANTS: the kinematic Base or MuJoCo's robot
 
     @property
     def navigation(self) -> bool:
@@ -284,7 +285,7 @@ def run_navigation_task(task: Task) -> RunRow:
                                                              compile=task.compile),
                                        reality=task.reality,
                                        # BARN's robot has odometry and a laser, no localizer
-                                       localized=task.suite != 'barn')
+                                       localized=task.suite != 'barn', plant=task.plant)
     except PlanningError as err:
         row.success, row.collision, row.stop_reason = False, False, f'no plan: {err}'
         row.barn_score = 0.0 if barn_length is not None else None
@@ -308,7 +309,12 @@ def run_task(task: Task) -> RunRow:
     if task.through_nodes:
         from mpc_local_planner.evaluation.through_nodes import run_through_nodes
 
-        return run_through_nodes(task)
+        robot, world, barn_length = navigation_world(task)
+        row = run_through_nodes(task, robot, world)
+        if barn_length is not None:
+            row.barn_score = barn_score(bool(row.success), row.time if row.success else None,
+                                        barn_length)
+        return row
     if task.navigation:
         return run_navigation_task(task)
     model = Unicycle(v_max=task.v_max, omega_max=task.omega_max)

@@ -124,21 +124,21 @@ def node_command(world_file: Path, out: Path, *, robot: str, v_max: float, omega
     return command
 
 
-def run_through_nodes(task: Any) -> RunRow:
-    """Run one navigation task through the node processes; return its runs.csv row.
+def run_through_nodes(task: Any, robot: Any, world: World) -> RunRow:
+    """Run one navigation task (its robot, its world) through the node processes.
+
+    Returns its runs.csv row without the BARN score (the suite's to add).
 
     Raises:
         ValueError: for a controller other than the paper's MPC (the only one with a node).
 
     """
     from mpc_local_planner.evaluation import sensing_suites as suites
-    from mpc_local_planner.evaluation.suite_runs import barn_score, navigation_world
 
     if controller_name(task.controller) is not ControllerName.PROPOSED:
         msg = (f'--through-nodes runs the mpc_controller node: {task.controller} has none '
                '(run it in process, beside)')
         raise ValueError(msg)
-    robot, world, barn_length = navigation_world(task)
     folder = Path(task.through_nodes) / f'{task.suite}_{task.world:03d}'
     world_file = world_yaml(world, folder / 'world.yaml')
     time_limit = float(world.time_limit or 100.0)
@@ -160,7 +160,6 @@ def run_through_nodes(task: Any) -> RunRow:
     if not metrics_file.exists():
         row.success, row.collision = False, False
         row.stop_reason = f'closed_loop exited {code} without metrics (see {folder})'
-        row.barn_score = 0.0 if barn_length is not None else None
         return row
     metrics = json.loads(metrics_file.read_text(encoding='utf-8'))
     reached = metrics.get('referee_time') is not None
@@ -180,7 +179,4 @@ def run_through_nodes(task: Any) -> RunRow:
     stalls = metrics.get('lockstep_stalls') or 0
     row.stop_reason = str(metrics.get('stop_reason')) + (
         f' ({stalls} lockstep stalls)' if stalls else '')
-    if barn_length is not None:
-        row.barn_score = barn_score(bool(row.success), row.time if row.success else None,
-                                    barn_length)
     return row

@@ -137,6 +137,7 @@ from mpc_local_planner.ros.closed_loop_parameters import (
 )
 from mpc_local_planner.ros.closed_loop_processes import respawn, spawn_all, stop_children
 from mpc_local_planner.ros.node_main import autostart
+from mpc_local_planner.sim.physics import mujoco_missing, PLANTS
 from mpc_local_planner.sim.reality import REALITY_PRESETS, true_goal_tolerance
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.map_files import rasterize_world, save_map
@@ -319,7 +320,7 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
                 'contacts': monitor.contacts, 'replans': monitor.replans,
                 'path_source': options.path, 'world': str(source_file),
                 'world_file': str(world_file), 'footprint_source': robot_source,
-                'drift': options.drift, 'reality': options.reality,
+                'drift': options.drift, 'reality': options.reality, 'plant': options.plant,
                 'reality_values': _run_reality(params)}
     if not truth and monitor.true_pose is not None:  # the simulator's ground truth topic
         truth = [monitor.true_pose]
@@ -477,6 +478,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help='with odometry that is not exact (--drift, a non-ideal '
                              '--reality): no localizer stand-in; the nodes take odometry as '
                              "the pose (BARN's robot)")
+    parser.add_argument('--plant', choices=PLANTS, default=defaults.plant,
+                        help="the simulator's plant: kinematic, or mujoco (a rigid body with "
+                             'wheels and slip, odometry from the wheels, the [physics] extra; '
+                             'the Jackal for a polygon footprint, else the small robot: '
+                             '--param unicycle_simulator.physics.robot:=... chooses); it runs '
+                             'with the localizer, as --drift')
     parser.add_argument('--respawn', action='store_true',
                         help='with --separate-processes: start a node process that exits '
                              'again instead of ending the run (a restart drill)')
@@ -491,6 +498,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="a node's parameter, applied last (repeatable), e.g. "
                              f'global_planner.clearance:=0.05; NODE is one of {sorted(MODULES)}')
     args = parser.parse_args(argv)
+    if args.plant == 'mujoco' and mujoco_missing() is not None:
+        parser.error(f'--plant mujoco: {mujoco_missing()}')
     try:
         extra: dict[str, dict[str, Any]] = {}
         for text in args.param:
@@ -500,7 +509,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                               timeout=args.timeout, time_limit=args.time_limit,
                               seed=args.seed, separate_processes=args.separate_processes,
                               respawn=args.respawn, sensing=args.sensing, drift=args.drift,
-                              reality=args.reality, lockstep=args.lockstep,
+                              reality=args.reality, lockstep=args.lockstep, plant=args.plant,
                               params_files=tuple(args.params_file),
                               referee_radius=args.referee_radius,
                               localizer=not args.no_localizer,

@@ -65,6 +65,8 @@ class LoopOptions:
     drift: float = 0.0
     # the simulator's reality preset (sim/reality.py): how real the robot and laser are
     reality: str = 'ideal'
+    # the simulator's plant: kinematic, or mujoco (sim/physics/: wheels, slip, wheel odometry)
+    plant: str = 'kinematic'
     # the robot, instead of the world's: a polygon (Nav2's "[[x, y], ...]") or a circle
     footprint: str | None = None
     robot_radius: float | None = None
@@ -93,13 +95,16 @@ def footprint_parameter(footprint: Footprint) -> str:
 
 
 def localized(options: LoopOptions) -> bool:
-    """Whether the run's odometry is not the true pose (--drift, or a non-ideal reality).
+    """Whether the run's odometry is not the true pose.
+
+    So with --drift, a non-ideal reality, or the mujoco plant (its odometry counts wheels).
 
     Raises:
         ValueError: for an unknown --reality (the message lists the presets).
 
     """
-    return bool(options.drift) or not reality_preset(options.reality).ideal_base
+    return (bool(options.drift) or not reality_preset(options.reality).ideal_base
+            or options.plant == 'mujoco')
 
 
 def _controller_for(options: LoopOptions) -> dict[str, Any]:
@@ -166,6 +171,9 @@ def node_parameters(options: LoopOptions, world_file: Path, world: World, *,
             # exact odometry IS the pose in map: said so, nodes with tf2 look nothing up
             'odom_frame': 'map',
             'reality': options.reality,
+            # the mujoco plant's robot: the Jackal for a polygon, else the small robot
+            'plant': options.plant,
+            'physics.robot': 'small' if world.footprint.is_circle else 'jackal',
         },
     }
     if not world.footprint.is_circle:

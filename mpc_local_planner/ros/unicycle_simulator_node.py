@@ -70,6 +70,11 @@ localizer stands in for AMCL: at that rate (in ticks, as scans) it publishes the
 with Gaussian noise of ``localizer.noise_std`` (m, and rad for the heading) on ``amcl_pose``
 (geometry_msgs/PoseWithCovarianceStamped in ``localizer.global_frame``, stamped like the
 odometry of the same instant).
+
+With ``plant: mujoco`` (the [physics] extra; refused with the reason without it) the robot
+is sim/physics/'s rigid body (``physics.robot``): the same calls, but wheels, slip and
+the base controller's limits between cmd_vel and the motion, odometry from the wheels, and
+the laser cast by the engine.
 """
 
 from __future__ import annotations
@@ -129,6 +134,7 @@ from mpc_local_planner.ros.unicycle_simulator_parameters import (
 from mpc_local_planner.sim.base import Base
 from mpc_local_planner.sim.contact import contact
 from mpc_local_planner.sim.laser import SimulatedLaser
+from mpc_local_planner.sim.physics import make_physics_base
 from mpc_local_planner.sim.reality import Reality
 from mpc_local_planner.sim.scan_channel import ScanChannel
 from mpc_local_planner.worlds.data_files import resolve_data_file
@@ -232,6 +238,11 @@ class UnicycleSimulatorNode(Node):
         self._geometry = TrueGeometry.from_world(self._world) if self._world else TrueGeometry(
             [])
         self._footprint = self._read_footprint()
+        if self.get_parameter('plant').value == 'mujoco':  # validated: MuJoCo is installed
+            self._base = make_physics_base(
+                self._model, reality, pose, robot=str(self.get_parameter('physics.robot').value),
+                footprint=self._footprint,
+                shapes=self._world.physical_shapes() if self._world else (), dt=self._base.dt)
         # scan periods elapsed since the last scan, advanced by scan.rate / rate per tick:
         # scans follow the simulation's steps, not the wall clock
         self._scan_phase = 0.0
@@ -332,7 +343,15 @@ class UnicycleSimulatorNode(Node):
         return reality_from_parameters(self._reality_values())
 
     def _make_laser(self) -> SimulatedLaser:
-        """Return the exact laser: its noise is the ScanChannel's (applied once, there)."""
+        """Return the exact laser: its noise is the ScanChannel's (applied once, there).
+
+        On the mujoco plant the engine casts it (the same Scan).
+        """
+        if hasattr(self._base, 'laser'):
+            return self._base.laser(fov=float(self.get_parameter('scan.fov').value),
+                                    beams=int(self.get_parameter('scan.beams').value),
+                                    range_min=SCAN_RANGE_MIN,
+                                    range_max=float(self.get_parameter('scan.range_max').value))
         return SimulatedLaser(self._geometry, fov=float(self.get_parameter('scan.fov').value),
                               beams=int(self.get_parameter('scan.beams').value),
                               range_min=SCAN_RANGE_MIN,

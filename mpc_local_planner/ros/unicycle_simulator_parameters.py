@@ -16,6 +16,7 @@ from mpc_local_planner.core.footprint import FROM_WORLD, parse_footprint
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.ros.parameters import ParameterSpec, range_problem
 from mpc_local_planner.sim.localizer import LOCALIZER_NOISE
+from mpc_local_planner.sim.physics import mujoco_missing, PHYSICS_ROBOTS, PLANTS
 from mpc_local_planner.sim.reality import Reality, reality_preset, REALITY_PRESETS
 
 __all__ = ['CONTACTS_TOPIC', 'FROM_PRESET', 'GROUND_TRUTH_TOPIC', 'LOCALIZER_TOPIC',
@@ -175,6 +176,18 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "frame of the localizer's poses (Nav2's name for the map frame)"),
     ParameterSpec('localizer.seed', 0, "seed of the localizer's noise",
                   int_range=(0, 2**31 - 1)),
+    ParameterSpec('plant', 'kinematic',
+                  f'the robot\'s plant: {"|".join(PLANTS)}; kinematic = the unicycle as '
+                  'real as reality says; mujoco = a rigid body with wheels (sim/physics/: '
+                  "torque-limited servos, slip, diff_drive_controller's limits, timeout and "
+                  'wheel odometry, the laser cast by the engine; of reality only the command '
+                  "latency, odometry noise and the laser's faults apply; needs the [physics] "
+                  'extra); its bumper is the footprint at start; read once at start',
+                  read_only=True),
+    ParameterSpec('physics.robot', 'jackal',
+                  f'the robot the mujoco plant simulates: {"|".join(PHYSICS_ROBOTS)} '
+                  "(the Jackal's four wheels skid-steer; small: the paper's two-wheeled robot); "
+                  'read once at start', read_only=True),
 )
 
 
@@ -204,6 +217,15 @@ def validate_simulator_parameters(values: dict[str, Any]) -> str | None:
         reason = range_problem(_SPECS[name], values[name]) if name in values else None
         if reason is not None:
             return reason
+    plant = values.get('plant')
+    if plant is not None:
+        if plant not in PLANTS:
+            return f'plant must be one of {"|".join(PLANTS)}, got {plant!r}'
+        if plant == 'mujoco' and mujoco_missing() is not None:
+            return f'plant mujoco: {mujoco_missing()}'
+    robot = values.get('physics.robot')
+    if robot is not None and robot not in PHYSICS_ROBOTS:
+        return f'physics.robot must be one of {"|".join(PHYSICS_ROBOTS)}, got {robot!r}'
     footprint = values.get('footprint')
     if footprint is not None:
         if not isinstance(footprint, str):

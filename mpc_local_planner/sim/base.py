@@ -103,14 +103,14 @@ class Base:
         steps = max(int(math.ceil(span / self.dt - 1e-9)), 1)
         dt = span / steps
         for _ in range(steps):
+            end = self.time + dt
+            # a command reaching the motors inside the sub-step acts from its instant, not
+            # from the next sub-step: the latency is the reality's whatever the tick
+            while self._commands and self.time + 1e-9 < self._commands[0][0] < end - 1e-9:
+                self._take_commands(self.time)
+                self._move(self._commands[0][0] - self.time)
             self._take_commands(self.time)
-            self._follow(dt)
-            v, omega = (float(u) for u in self.velocity)
-            self.pose = unicycle_arc(self.pose, v, omega, dt)
-            scale, bias = self.reality.odom_drift
-            self.odom_pose = unicycle_arc(self.odom_pose, (1.0 + scale) * v,
-                                            omega + bias * abs(v), dt)
-            self.time += dt
+            self._move(end - self.time)
         self.time = float(until)
 
     def odometry(self) -> tuple[np.ndarray, np.ndarray]:
@@ -131,6 +131,16 @@ class Base:
         scale, bias = self.reality.odom_drift
         v, omega = (float(u) for u in self.velocity)
         return np.array([(1.0 + scale) * v, omega + bias * abs(v)])
+
+    def _move(self, dt: float) -> None:
+        """Move the wheels and the poses over dt with the command in force."""
+        self._follow(dt)
+        v, omega = (float(u) for u in self.velocity)
+        self.pose = unicycle_arc(self.pose, v, omega, dt)
+        scale, bias = self.reality.odom_drift
+        self.odom_pose = unicycle_arc(self.odom_pose, (1.0 + scale) * v,
+                                        omega + bias * abs(v), dt)
+        self.time += dt
 
     def _take_commands(self, now: float) -> None:
         """Make the latest command that has reached the motors by now the one in force."""

@@ -195,6 +195,23 @@ def test_node_parameters_use_sim_time_and_the_world(tmp_path) -> None:
     assert loose['mpc_controller']['xy_goal_tolerance'] == 0.1
 
 
+def test_params_files_tune_the_nodes_but_not_the_runs_wiring_and_param_wins(
+        tmp_path) -> None:
+    # the user's files over closed_loop's own tuning (the paper's tolerances), the run's
+    # wiring (world, clock) over the files, --param over everything
+    user = tmp_path / 'user.yaml'
+    user.write_text('mpc_controller:\n  ros__parameters:\n    xy_goal_tolerance: 0.3\n'
+                    "    world_file: ''\n    horizon: 12\n", encoding='utf-8')
+    options = LoopOptions(world=str(WORLD_FILE), params_files=(str(user),),
+                          extra_parameters={'mpc_controller': {'horizon': 14}})
+    params = node_parameters(options, WORLD_FILE, WORLD)['mpc_controller']
+    assert params['xy_goal_tolerance'] == 0.3
+    assert params['world_file'] == str(WORLD_FILE)
+    assert params['horizon'] == 14
+    assert node_parameters(LoopOptions(world=str(WORLD_FILE)), WORLD_FILE,
+                           WORLD)['mpc_controller']['xy_goal_tolerance'] == 0.02
+
+
 def test_analytic_path_on_a_world_without_one_is_refused(tmp_path) -> None:
     code = main(['--world', 'corridor_turn.yaml', '--path', 'analytic', '--out', str(tmp_path)])
     assert code == 2

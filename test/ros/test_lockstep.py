@@ -4,8 +4,8 @@
 A participant here is a node of a second context whose executor the test spins by hand:
 while it is not spun, it takes no message and runs no step, and the simulator (spun all
 along) must hold its clock however long it is given; once the participant is spun again,
-time moves on and its steps come at their exact instants. A participant that never reports does not hang the simulation:
-the clock starts after lockstep.timeout and counts the stall.
+time moves on and its steps come at their exact instants. A participant that never reports
+does not hang the simulation: the clock starts after lockstep.timeout and counts the stall.
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ from __future__ import annotations
 from conftest import RosHarness
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from nav_msgs.msg import Odometry
+import pytest
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-import pytest
 from std_msgs.msg import UInt32
 
 from mpc_local_planner.ros.lockstep import LockstepReporter, parse_status, status_message

@@ -36,6 +36,17 @@ def test_a_command_acts_only_after_the_latency():
     assert base.pose[0] == pytest.approx(0.2, abs=0.011)
 
 
+@pytest.mark.parametrize('dt', [0.01, 0.02, 0.03])
+def test_the_latency_is_the_realitys_whatever_the_simulators_tick(dt):
+    # the node's 50 Hz tick and the suites' 100 Hz sub-step: a command due between two
+    # ticks acts from its instant, so both drive the same base (0.05 s late, exactly)
+    base = Base(Unicycle(v_max=2.0, omega_max=4.0), Reality(latency=0.05),
+                np.zeros(3), dt=dt)
+    base.command([1.0, 0.0], t=0.0)
+    base.advance(0.12)
+    assert base.pose[0] == pytest.approx(0.12 - 0.05, abs=1e-12)
+
+
 def test_the_wheels_follow_a_step_with_the_lag_and_within_the_acceleration_limits():
     lagging = Base(MODEL, Reality(lag=(0.1, 0.1)), [0.0, 0.0, 0.0], dt=0.001)
     lagging.command([1.0, 2.0], 0.0)

@@ -1,0 +1,197 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The rigid-body plant: a wheeled robot in MuJoCo, stepped as the kinematic `Base` is.
+
+`PhysicsBase` offers `Base`'s calls (command, stop, advance, odometry, twist, pose,
+odom_pose, time, velocity, target), so the rollout and the simulator node step it
+unchanged. Underneath, a command reaches the robot's base controller (`DiffDrive`, at its
+update rate: timeout, limits, wheel speeds), the wheels' servos drive the wheels with
+limited torque, the engine moves the body on the floor's friction (the Jackal's four wheels
+scrub when it turns) and against the world's obstacles, and odometry is integrated from the
+wheels' joint angles (`WheelOdometry`), so it drifts from the TRUE pose (the body's) when
+the wheels slip. A `Reality`'s command latency and odometry noise still apply on top;
+its lag, acceleration limits and odometry drift are the engine's and the base
+controller's own here, and are not added.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+import math
+from typing import Sequence, TYPE_CHECKING
+
+import mujoco
+import numpy as np
+
+from mpc_local_planner.core.footprint import Footprint
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.sim.physics.drive import DiffDrive, WheelOdometry
+from mpc_local_planner.sim.physics.laser import PhysicsLaser
+from mpc_local_planner.sim.physics.model import robot_mjcf, TIMESTEP, WHEEL_JOINTS
+from mpc_local_planner.sim.physics.robots import physics_robot, WheeledRobot
+from mpc_local_planner.sim.reality import Reality
+
+if TYPE_CHECKING:
+    from mpc_local_planner.worlds.world import Shape
+
+__all__ = ['PhysicsBase']
+
+# Rounding slack when counting engine steps and update times (s).
+_EPS = 1e-9
+
+
+class PhysicsBase:
+    """A wheeled robot simulated by MuJoCo, driven by velocity commands like `Base`.
+
+    Time is the caller's (seconds from 0). The engine steps TIMESTEP; `advance` runs it
+    to the step nearest until.
+
+    Args:
+        model: The unicycle whose bounds saturate the commands (the node's v_max, omega_max).
+        reality: Its command latency and odometry noise apply (see the module docstring).
+        pose: The start pose (x, y, theta).
+        robot: The robot (`robots.PHYSICS_ROBOTS` or its name).
+        footprint: The robot's bumper in the plane (None: a circle around its wheels).
+        shapes: The world's obstacles (the true ones: static geoms).
+        dt: Kept for `Base`'s interface (the node sets it to its tick); the engine's step
+            and the base controller's rate are the robot's.
+
+    Raises:
+        ValueError: for a non-finite pose or an unknown robot name.
+
+    """
+
+    def __init__(self, model: Unicycle, reality: Reality, pose: Sequence[float], *,
+                 robot: WheeledRobot | str = 'jackal', footprint: Footprint | None = None,
+                 shapes: Sequence[Shape] = (), dt: float = 0.01) -> None:
+        start = np.asarray(pose, dtype=float).reshape(-1)[:3]
+        if len(start) != 3 or not np.all(np.isfinite(start)):
+            msg = f'the start pose must be 3 finite numbers, got {pose!r}'
+            raise ValueError(msg)
+        self.robot = physics_robot(robot) if isinstance(robot, str) else robot
+        self.model = model
+        self.reality = reality
+        self.dt = float(dt)
+        self.time = 0.0
+        self.footprint = footprint or Footprint.circle(0.0)
+        self.engine = mujoco.MjModel.from_xml_string(
+            robot_mjcf(self.robot, self.footprint, tuple(shapes), start))
+        self.data = mujoco.MjData(self.engine)
+        mujoco.mj_forward(self.engine, self.data)
+        self.drive = DiffDrive(self.robot.drive)
+        self.wheel_odometry = WheelOdometry(self.robot.drive, start)
+        self._period = 1.0 / self.robot.drive.update_rate
+        self._steps = 0
+        self._next_update = 0.0
+        self._commands: deque[tuple[float, np.ndarray]] = deque()
+        self._applied = np.zeros(2)
+        self._yaw = float(start[2])
+        self._rng = np.random.default_rng(reality.seed)
+        sides = []
+        for side in (0, 1):
+            names = [WHEEL_JOINTS.format(side=side, index=i)
+                     for i in range(len(self.robot.wheel_x))]
+            sides.append(np.array([self.engine.joint(n).qposadr[0] for n in names]))
+        self._wheel_qpos = sides
+        self._actuators = [np.array([self.engine.actuator(
+            WHEEL_JOINTS.format(side=side, index=i)).id for i in range(len(self.robot.wheel_x))])
+            for side in (0, 1)]
+
+    # ------------------------------------------------------------------ Base's calls
+    def command(self, u: Sequence[float], t: float | None = None) -> None:
+        """Send the command u at time t (default: now); it acts from t + latency.
+
+        A non-finite command is a broken sender: it is taken as zero (stop), as `Base` does.
+        """
+        u = np.asarray(u, dtype=float).reshape(-1)[:2]
+        if len(u) != 2 or not np.all(np.isfinite(u)):
+            u = np.zeros(2)
+        sent = self.time if t is None else float(t)
+        self._commands.append((sent + self.reality.latency, self.model.saturate(u)))
+
+    def stop(self, t: float | None = None) -> None:
+        """Send a zero command (a command timeout, a dead controller)."""
+        self.command(np.zeros(2), t)
+
+    @property
+    def target(self) -> np.ndarray:
+        """The command that has reached the base controller."""
+        return self._applied.copy()
+
+    @property
+    def pose(self) -> np.ndarray:
+        """The TRUE pose (x, y, theta) of ``base_link``, theta unwrapped."""
+        return np.array([self.data.qpos[0], self.data.qpos[1], self._yaw])
+
+    @property
+    def odom_pose(self) -> np.ndarray:
+        """The pose the wheels' odometry integrates (no noise)."""
+        return self.wheel_odometry.pose.copy()
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """The body's TRUE (forward speed, yaw rate)."""
+        heading = np.array([math.cos(self._yaw), math.sin(self._yaw)])
+        return np.array([float(self.data.qvel[:2] @ heading), float(self.data.qvel[5])])
+
+    def advance(self, until: float) -> None:
+        """Run the engine from the base's time to until (to its nearest step)."""
+        until = float(until)
+        if until - self.time <= 1e-12:
+            return
+        last = int(round(until / TIMESTEP))
+        while self._steps < last:
+            now = self._steps * TIMESTEP
+            self._take_commands(now)
+            if now >= self._next_update - _EPS:
+                self._update(now)
+                self._next_update += self._period
+            # up to the next update or command, whichever comes first, in one call
+            event = min(self._next_update, self._commands[0][0]) if self._commands \
+                else self._next_update
+            ahead = min(int(math.ceil((event - now) / TIMESTEP - _EPS)), last - self._steps)
+            ahead = max(ahead, 1)
+            mujoco.mj_step(self.engine, self.data, nstep=ahead)
+            self._steps += ahead
+            self._unwrap()
+        self.time = until
+
+    def odometry(self) -> tuple[np.ndarray, np.ndarray]:
+        """Return what odometry reports now: (the wheels' pose with noise, their twist)."""
+        pose = self.odom_pose
+        std_position, std_heading = self.reality.odom_noise
+        if std_position > 0.0 or std_heading > 0.0:
+            pose += self._rng.normal(0.0, 1.0, 3) * np.array(
+                [std_position, std_position, std_heading])
+        return pose, self.twist()
+
+    def twist(self) -> np.ndarray:
+        """Return the twist odometry reports (the wheels' rolling mean)."""
+        return self.wheel_odometry.twist
+
+    def laser(self, *, fov: float, beams: int, range_min: float,
+              range_max: float) -> PhysicsLaser:
+        """Return a laser that the engine ray-casts in this plant's world."""
+        return PhysicsLaser(self.engine, self.data, fov=fov, beams=beams, range_min=range_min,
+                            range_max=range_max)
+
+    # ------------------------------------------------------------------ inside
+    def _take_commands(self, now: float) -> None:
+        """Hand the commands that have arrived by now to the base controller."""
+        while self._commands and self._commands[0][0] <= now + _EPS:
+            arrival, self._applied = self._commands.popleft()
+            self.drive.receive(self._applied, arrival)
+
+    def _update(self, now: float) -> None:
+        """One update of the base controller: odometry from the wheels, then wheel speeds."""
+        qpos = self.data.qpos
+        self.wheel_odometry.update(float(np.mean(qpos[self._wheel_qpos[0]])),
+                                   float(np.mean(qpos[self._wheel_qpos[1]])), self._period)
+        left, right = self.drive.update(now, self._period)
+        self.data.ctrl[self._actuators[0]] = left
+        self.data.ctrl[self._actuators[1]] = right
+
+    def _unwrap(self) -> None:
+        """Follow the body's yaw without wrapping (as the kinematic base's theta)."""
+        w, _, _, z = self.data.qpos[3:7]
+        yaw = 2.0 * math.atan2(z, w)  # the robot stays level: its rotation is about z
+        self._yaw += (yaw - self._yaw + math.pi) % (2.0 * math.pi) - math.pi
