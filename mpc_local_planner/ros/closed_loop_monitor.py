@@ -16,6 +16,7 @@ from nav_msgs.msg import Odometry
 import numpy as np
 from rclpy.executors import Executor
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from std_msgs.msg import UInt32
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -134,7 +135,8 @@ class LoopMonitor(Node):
         self._obstacles_sub = None
         if sensing:
             self._obstacles_sub = self.create_subscription(
-                MarkerArray, OBSTACLES_TOPIC, self.obstacles_callback, LOCAL_PLAN_QOS)
+                MarkerArray, OBSTACLES_TOPIC, self.obstacles_callback, LOCAL_PLAN_QOS,
+                raw=True)
 
     def truth_callback(self, msg: Odometry) -> None:
         """Keep the true pose; judge arrival (referee_radius) and standing still."""
@@ -154,11 +156,17 @@ class LoopMonitor(Node):
         """Keep the simulator's contact count (it only grows)."""
         self.contacts = max(int(msg.data), self.contacts or 0)
 
-    def obstacles_callback(self, msg: MarkerArray) -> None:
-        """Keep what the controller avoids, once per SNAPSHOT_PERIOD of simulated time."""
+    def obstacles_callback(self, msg: MarkerArray | bytes) -> None:
+        """Keep what the controller avoids, once per SNAPSHOT_PERIOD of simulated time.
+
+        Taken serialised: only a snapshot's message is read (a MarkerArray at every control
+        step costs this process more than all it does besides).
+        """
         now = self.sim_time()
         if self.sensed and now < self.sensed[-1][0] + SNAPSHOT_PERIOD:
             return
+        if isinstance(msg, bytes):
+            msg = deserialize_message(msg, MarkerArray)
         polygons = _raw_polygons(msg)
         if polygons:
             self.sensed.append((now, polygons))
