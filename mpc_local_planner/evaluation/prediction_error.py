@@ -10,6 +10,11 @@ p(t)^{-1} p(t + h) of the TRUE pose. Relative motions, so that odometry's drift 
 
     PYTHONPATH=. python3 -m mpc_local_planner.evaluation.prediction_error --worlds 0-9
 
+or, from recorded runs of the nodes (closed_loop's bags, which hold the simulator's ground
+truth; a bag without it is measured against its odometry, the truth of an ideal plant):
+
+    python3 -m mpc_local_planner.evaluation.prediction_error --bag OUT/nodes/*/run/bag
+
 prints, per variant (the zero hold at twice the base's limits as the Jackal ran before, the
 first-order hold at the base's own limits), the median, 95th percentile and maximum of the
 position and heading errors (docs/real_robot.md, "Predictions against the base").
@@ -20,6 +25,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 import json
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -31,7 +37,11 @@ from mpc_local_planner.evaluation.rollout import Rollout
 from mpc_local_planner.evaluation.suite_runs import barn_score, DEFAULT_BARN_DIR, parse_worlds
 from mpc_local_planner.perception.localization import compose, invert
 
-__all__ = ['VARIANTS', 'one_step_errors', 'relative_motion', 'run_variant']
+# The simulator's ground truth topic (ros/unicycle_simulator_parameters.GROUND_TRUTH_TOPIC;
+# this layer does not import ros/).
+GROUND_TRUTH = 'simulator/ground_truth'
+
+__all__ = ['VARIANTS', 'bag_one_step_errors', 'one_step_errors', 'relative_motion', 'run_variant']
 
 # name: how the MPC is set up for the base: the zero hold at twice the base's limits (the
 # Jackal before), the first-order hold at them; and the other two for comparison
@@ -99,14 +109,104 @@ def run_variant(worlds: list[int], variant: suites.MpcSetup, *, reality: str = '
     return {'errors': values, 'outcomes': outcomes}
 
 
+def bag_one_step_errors(bag: str | Path, h: float) -> list[tuple[float, float]]:
+    """Return (position, heading) errors of each solve's first step h in a closed_loop bag.
+
+    A solve is a control step whose diagnostics say ``solved`` with the paper's MPC's plan
+    applied (source solver or candidate); its prediction is the local_plan of the same
+    stamp, starting at the state measured at ``state_time``. The true motion from then to
+    h later is the simulator's ground truth (``simulator/ground_truth``; the odometry when the
+    bag has none), interpolated between its ticks.
+
+    Raises:
+        ValueError: if the bag holds no pose to compare with, or no local plan.
+
+    """
+    from rosbags.highlevel import AnyReader
+
+    truth: dict[str, list[tuple[float, float, float, float]]] = {}
+    plans: dict[int, np.ndarray] = {}
+    solves: list[tuple[int, float]] = []
+    with AnyReader([Path(bag)]) as reader:
+        wanted = ('/' + GROUND_TRUTH, '/odom', '/local_plan', '/mpc/diagnostics')
+        connections = [c for c in reader.connections if c.topic in wanted]
+        for connection, _, raw in reader.messages(connections=connections):
+            msg = reader.deserialize(raw, connection.msgtype)
+            stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec \
+                if hasattr(msg, 'header') else 0
+            if connection.topic == '/local_plan':
+                plans[stamp] = np.array([[p.pose.position.x, p.pose.position.y,
+                                          _yaw(p.pose.orientation)] for p in msg.poses])
+            elif connection.topic == '/mpc/diagnostics':
+                for status in msg.status:
+                    values = {kv.key: kv.value for kv in status.values}
+                    if (values.get('solved') == 'true'
+                            and values.get('source') in ('solver', 'candidate')):
+                        solves.append((stamp, float(values['state_time'])))
+            else:
+                pose = msg.pose.pose
+                truth.setdefault(connection.topic, []).append(
+                    (stamp * 1e-9, pose.position.x, pose.position.y, _yaw(pose.orientation)))
+    samples = truth.get('/' + GROUND_TRUTH) or truth.get('/odom')
+    if not samples:
+        msg_text = f'{bag}: no ground truth and no odometry to compare the predictions with'
+        raise ValueError(msg_text)
+    if not plans:
+        msg_text = f'{bag}: no local_plan'
+        raise ValueError(msg_text)
+    track = np.array(sorted(samples))
+    track[:, 3] = np.unwrap(track[:, 3])
+
+    def at(t: float) -> np.ndarray:
+        return np.array([np.interp(t, track[:, 0], track[:, k]) for k in (1, 2, 3)])
+
+    errors = []
+    for stamp, start in solves:
+        plan = plans.get(stamp)
+        if plan is None or len(plan) < 2 or start + h > track[-1, 0] or start < track[0, 0]:
+            continue
+        predicted = relative_motion(plan[0], plan[1])
+        actual = relative_motion(at(start), at(start + h))
+        heading = float(np.arctan2(np.sin(predicted[2] - actual[2]),
+                                   np.cos(predicted[2] - actual[2])))
+        errors.append((float(np.hypot(*(predicted[:2] - actual[:2]))), abs(heading)))
+    return errors
+
+
+def _yaw(q: Any) -> float:
+    return float(np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)))
+
+
+def _print_bag_errors(bags: list[str], h: float) -> None:
+    """Print the one-step errors over the bags' solves (median, 95th percentile, maximum)."""
+    errors = []
+    for bag in bags:
+        errors += bag_one_step_errors(bag, h)
+    e = np.array(errors).reshape(-1, 2)
+    pos, head = (np.percentile(e[:, k], [50, 95, 100]) if len(e) else [np.nan] * 3
+                 for k in (0, 1))
+    print('| bags | solves | position median / p95 / max (m) | '
+          'heading median / p95 / max (rad) |')
+    print('|---|---|---|---|')
+    print(f'| {len(bags)} | {len(e)} | {pos[0]:.3f} / {pos[1]:.3f} / {pos[2]:.3f} | '
+          f'{head[0]:.3f} / {head[1]:.3f} / {head[2]:.3f} |', flush=True)
+
+
 def main(argv: list[str] | None = None) -> None:
-    """Print the prediction errors of each variant over the given BARN worlds."""
+    """Print the prediction errors of each variant over the given BARN worlds (or bags)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--bag', nargs='+', default=None, metavar='BAG',
+                        help="closed_loop bags (e.g. evaluate --through-nodes' runs): their "
+                             'solves against the ground truth instead of running worlds')
+    parser.add_argument('--step', type=float, default=0.2, help='the MPC step h of the bags (s)')
     parser.add_argument('--worlds', default='0-9', help='BARN world indices, e.g. 0-9,50')
     parser.add_argument('--reality', default='real')
     parser.add_argument('--variants', default='zoh-2x,foh-1x',
                         help='comma-separated names of VARIANTS')
     args = parser.parse_args(argv)
+    if args.bag:
+        _print_bag_errors(args.bag, args.step)
+        return
     worlds = parse_worlds(args.worlds)
     print('| variant | solves | position median / p95 / max (m) | '
           'heading median / p95 / max (rad) | reached | contacts |')

@@ -65,9 +65,13 @@ SENSED_SNAPSHOTS = 4
 
 
 def recorder_topics(*, sensing: bool) -> dict[str, list[str]]:
-    """Return the recorder's topics, types and latched topics (scan too with sensing)."""
-    topics = [*DEFAULT_TOPICS, CONTACTS_TOPIC]
-    types = [*DEFAULT_TYPES, 'std_msgs/msg/UInt32']
+    """Return the recorder's topics, types and latched topics (scan too with sensing).
+
+    The simulator's ground truth too: the one-step prediction error is measured against it
+    (evaluation/prediction_error.py --bag).
+    """
+    topics = [*DEFAULT_TOPICS, CONTACTS_TOPIC, GROUND_TRUTH_TOPIC]
+    types = [*DEFAULT_TYPES, 'std_msgs/msg/UInt32', 'nav_msgs/msg/Odometry']
     if sensing:
         topics.append(SCAN_TOPIC)
         types.append('sensor_msgs/msg/LaserScan')

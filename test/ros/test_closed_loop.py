@@ -23,6 +23,7 @@ from mpc_local_planner.core.mpc import PlanSource
 from mpc_local_planner.core.paths import wrap_angle
 from mpc_local_planner.evaluation.analyze_bag import main as analyze_bag_main
 from mpc_local_planner.evaluation.analyze_bag import read_run, summary
+from mpc_local_planner.evaluation.prediction_error import bag_one_step_errors
 from mpc_local_planner.evaluation.trajectory import read_trajectory_csv, TRAJECTORY_COLUMNS
 from mpc_local_planner.ros.bag_recorder_node import BagRecorderNode
 from mpc_local_planner.ros.closed_loop import (
@@ -131,6 +132,11 @@ def test_with_lockstep_separate_processes_drive_exactly_as_one_process(tmp_path)
         assert metrics['lockstep'] is True and metrics['lockstep_stalls'] == 0
         check_run(out, metrics)
         runs[layout] = read_trajectory_csv(out / 'trajectory.csv')
+        # the bag holds the simulator's ground truth: on the ideal plant each solve's first
+        # step is what the robot then did, to the model's rounding
+        errors = np.array(bag_one_step_errors(out / 'bag', 0.2))
+        assert metrics['messages']['/simulator/ground_truth'] > 100 and len(errors) > 20
+        assert float(np.max(errors)) < 1e-3
     solve_ms = TRAJECTORY_COLUMNS.index('solve_ms')
     same = [i for i in range(len(TRAJECTORY_COLUMNS)) if i != solve_ms]
     assert runs['one'].shape == runs['separate'].shape
