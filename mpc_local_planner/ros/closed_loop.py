@@ -96,8 +96,10 @@ from dataclasses import dataclass
 import math
 from pathlib import Path
 import shutil
+import signal
 import subprocess
 import sys
+import threading
 import time
 from typing import Any, Sequence
 
@@ -420,8 +422,24 @@ def _create_nodes(params: dict[str, dict[str, Any]], context: Context) -> list[N
     return nodes
 
 
+def _terminate(signum: int, frame: Any) -> None:
+    raise SystemExit(128 + signum)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the closed loop from the command line; exit 0 iff the target was reached safely."""
+    # SIGTERM (a sweep that gives up on a run, a job scheduler) ends the run as Ctrl-C does:
+    # through the finally blocks, which stop the node processes (else they outlive it)
+    if threading.current_thread() is not threading.main_thread():
+        return _main(argv)
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        return _main(argv)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _main(argv: Sequence[str] | None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     ros_args: list[str] = []
     if '--ros-args' in argv:

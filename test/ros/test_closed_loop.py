@@ -3,9 +3,14 @@
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import replace
 import json
 from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
@@ -141,6 +146,44 @@ def test_with_lockstep_separate_processes_drive_exactly_as_one_process(tmp_path)
     same = [i for i in range(len(TRAJECTORY_COLUMNS)) if i != solve_ms]
     assert runs['one'].shape == runs['separate'].shape
     np.testing.assert_array_equal(runs['one'][:, same], runs['separate'][:, same])
+
+
+def _children(pid: int) -> list[int]:
+    """Return the pids of the processes whose parent is pid."""
+    found = []
+    for entry in Path('/proc').iterdir():
+        try:
+            if entry.name.isdigit() and int(
+                    (entry / 'stat').read_text().rsplit(')', 1)[1].split()[1]) == pid:
+                found.append(int(entry.name))
+        except (OSError, IndexError, ValueError):
+            continue
+    return found
+
+
+@pytest.mark.dds
+def test_sigterm_ends_the_run_and_its_node_processes(tmp_path) -> None:
+    # a sweep that gives up on a run, or a job scheduler, sends SIGTERM: the node processes
+    # must not outlive closed_loop (they would hold cores and a DDS domain)
+    out = tmp_path / 'run'
+    # a slow clock: the run is still going when the signal comes
+    run = subprocess.Popen([sys.executable, '-m', 'mpc_local_planner.ros.closed_loop', '--out',
+                            str(out), '--separate-processes', '--rtf', '0.2'],
+                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60.0
+        while time.monotonic() < deadline and run.poll() is None and len(
+                _children(run.pid)) < 3:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                run.wait(timeout=0.2)  # the node processes start; closed_loop must not end
+        nodes = _children(run.pid)
+        assert len(nodes) == 3  # planner, controller, simulator
+        run.send_signal(signal.SIGTERM)
+        assert run.wait(timeout=30.0) == 128 + signal.SIGTERM
+        assert [pid for pid in nodes if Path(f'/proc/{pid}').exists()] == []
+    finally:
+        if run.poll() is None:
+            run.kill()
 
 
 @pytest.mark.dds
