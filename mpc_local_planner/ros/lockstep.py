@@ -137,7 +137,7 @@ class LockstepReporter:
         """Wrap the node's subscriptions, sim-time timers and publishers not yet wrapped."""
         for subscription in self._node.subscriptions:
             topic = subscription.topic_name
-            if (counted(topic) and id(subscription) not in self._taken
+            if (counted(topic) and not getattr(subscription.callback, '_lockstep', False)
                     and subscription._callback_type is Subscription.CallbackType.MessageOnly):
                 self._taken[id(subscription)] = (topic, 0)
                 subscription.callback = self._counting(subscription)
@@ -163,8 +163,10 @@ class LockstepReporter:
             if left is not None:
                 due = now + int(left) if due is None else min(due, now + int(left))
         received: dict[str, int] = {}
-        for topic, count in self._taken.values():
-            received[topic] = min(received.get(topic, count), count)
+        alive = {id(subscription) for subscription in self._node.subscriptions}
+        for key, (topic, count) in self._taken.items():
+            if key in alive:  # a destroyed subscription (a cleanup) takes nothing more
+                received[topic] = min(received.get(topic, count), count)
         matched = {topic: publisher.get_subscription_count()
                    for topic, publisher in self._publishers.items()}
         return StepStatus(node=self._node.get_name(), now_ns=now, due_ns=due,
