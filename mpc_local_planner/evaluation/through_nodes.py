@@ -103,8 +103,12 @@ def world_yaml(world: World, path: Path) -> Path:
 
 def node_command(world_file: Path, out: Path, *, robot: str, v_max: float, omega_max: float,
                  time_limit: float, goal_tolerance: float, stall_seconds: float, seed: int,
-                 reality: str, budget: str) -> list[str]:
-    """Return the closed_loop command of one run (the user's parameter files as shipped)."""
+                 reality: str, budget: str, plant: str = 'kinematic') -> list[str]:
+    """Return the closed_loop command of one run (the user's parameter files as shipped).
+
+    plant is the simulator's (closed_loop --plant: kinematic, or the MuJoCo robot of the
+    world's footprint).
+    """
     files = [resolve_data_file('mpc_controller.yaml')]
     if robot == 'jackal':
         files.append(resolve_data_file('jackal.yaml'))
@@ -113,7 +117,8 @@ def node_command(world_file: Path, out: Path, *, robot: str, v_max: float, omega
                '--separate-processes', '--lockstep', '--no-localizer',
                '--time-limit', repr(float(time_limit)), '--referee-radius',
                repr(float(goal_tolerance)), '--stall-seconds', repr(float(stall_seconds)),
-               '--seed', str(int(seed)), '--reality', reality, '--timeout', repr(RUN_WALL_LIMIT)]
+               '--seed', str(int(seed)), '--reality', reality, '--plant', plant,
+               '--timeout', repr(RUN_WALL_LIMIT)]
     for file in files:
         command += ['--params-file', str(file)]
     # the robot's motors (the simulator's saturation), not the controller's tuning
@@ -146,7 +151,7 @@ def run_through_nodes(task: Any, robot: Any, world: World) -> RunRow:
                            omega_max=robot.omega_max, time_limit=time_limit,
                            goal_tolerance=float(world.goal_tolerance or suites.GOAL_TOLERANCE),
                            stall_seconds=suites.STALL_SECONDS, seed=task.seed,
-                           reality=task.reality, budget=task.budget)
+                           reality=task.reality, budget=task.budget, plant=task.plant)
     row = RunRow(controller=controller_name(task.controller), world=task.world,
                  name=world.name, robot=task.robot, sensing=True, v_max=robot.v_max,
                  reality=task.reality)

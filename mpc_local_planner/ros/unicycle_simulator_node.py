@@ -242,7 +242,8 @@ class UnicycleSimulatorNode(Node):
             self._base = make_physics_base(
                 self._model, reality, pose, robot=str(self.get_parameter('physics.robot').value),
                 footprint=self._footprint,
-                shapes=self._world.physical_shapes() if self._world else (), dt=self._base.dt)
+                shapes=self._world.physical_shapes() if self._world else (), dt=self._base.dt,
+                odometry=str(self.get_parameter('physics.odometry').value))
         # scan periods elapsed since the last scan, advanced by scan.rate / rate per tick:
         # scans follow the simulation's steps, not the wall clock
         self._scan_phase = 0.0

@@ -16,7 +16,8 @@ from mpc_local_planner.core.footprint import FROM_WORLD, parse_footprint
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.ros.parameters import ParameterSpec, range_problem
 from mpc_local_planner.sim.localizer import LOCALIZER_NOISE
-from mpc_local_planner.sim.physics import mujoco_missing, PHYSICS_ROBOTS, PLANTS
+from mpc_local_planner.sim.physics import (mujoco_missing, ODOMETRY_SOURCES, PHYSICS_ROBOTS,
+                                           PLANTS)
 from mpc_local_planner.sim.reality import Reality, reality_preset, REALITY_PRESETS
 
 __all__ = ['CONTACTS_TOPIC', 'FROM_PRESET', 'GROUND_TRUTH_TOPIC', 'LOCALIZER_TOPIC',
@@ -188,6 +189,12 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   f'the robot the mujoco plant simulates: {"|".join(PHYSICS_ROBOTS)} '
                   "(the Jackal's four wheels skid-steer; small: the paper's two-wheeled robot); "
                   'read once at start', read_only=True),
+    ParameterSpec('physics.odometry', 'fused',
+                  f'what the mujoco plant\'s odometry integrates: {"|".join(ODOMETRY_SOURCES)}; '
+                  "fused = the wheels' distance and a gyro's heading, as the robots' stacks "
+                  "fuse their IMU (the Jackal's robot_localization EKF); wheels = "
+                  "diff_drive_controller's wheel odometry alone (a skid-steer's drifts in "
+                  'heading); read once at start', read_only=True),
 )
 
 
@@ -226,6 +233,10 @@ def validate_simulator_parameters(values: dict[str, Any]) -> str | None:
     robot = values.get('physics.robot')
     if robot is not None and robot not in PHYSICS_ROBOTS:
         return f'physics.robot must be one of {"|".join(PHYSICS_ROBOTS)}, got {robot!r}'
+    odometry = values.get('physics.odometry')
+    if odometry is not None and odometry not in ODOMETRY_SOURCES:
+        return (f'physics.odometry must be one of {"|".join(ODOMETRY_SOURCES)}, '
+                f'got {odometry!r}')
     footprint = values.get('footprint')
     if footprint is not None:
         if not isinstance(footprint, str):

@@ -10,28 +10,30 @@ On flat ground, from rest, commands re-sent at 20 Hz as a controller would:
 - **yaw**: (0, omega_max), turning in place: the yaw rate held (the body's, against the
   command), its time constant (63 %) and rise time (10-90 %);
 - **odometry after a turn**: a 360 degree turn in place at omega_max and a 2 m arc of radius
-  1 m (at most v_max), each ended by odometry (the wheels say: done), then stopped: how far
-  the odometry's pose is from the true one.
+  1 m (at most v_max), each ended by odometry (it says: done), then stopped: how far the
+  odometry's pose is from the true one, for the wheels' odometry alone and for odometry
+  fused with the gyro (the robots' default, sim/physics/drive.py).
 
 What it printed (MuJoCo 3.17, the robots of sim/physics/robots.py; the plant is
 deterministic). Odometry errors are position / heading of the odometry's pose from the true
-one after the manoeuvre:
+one after the manoeuvre, the wheels' alone, then fused:
 
-======  =======  ==========  ===========  =======  =======  ==============  ==============
-robot   90 % of  mean        yaw rate     yaw tau  yaw rise 360 deg turn    2 m arc
-        v_max    accel       held         (63 %)   10-90 %  in place        (radius 1 m)
-======  =======  ==========  ===========  =======  =======  ==============  ==============
-jackal  0.375 s  4.80 m/s^2  3.74 of 4.0  0.177 s  0.274 s  0.7 cm, 28.7 d  15.9 cm, 25.8 d
-small   0.130 s  2.15 m/s^2  1.83 of 1.9  0.377 s  0.469 s  0.0 cm, 7.3 d   2.8 cm, 1.4 d
-======  =======  ==========  ===========  =======  =======  ==============  ==============
+======  =======  ==========  ===========  =======  =======  ==============  ==============  ==============  ==============
+robot   90 % of  mean        yaw rate     yaw tau  yaw rise 360 deg turn    2 m arc         360 deg turn    2 m arc
+        v_max    accel       held         (63 %)   10-90 %  (wheels)        (wheels)        (fused)         (fused)
+======  =======  ==========  ===========  =======  =======  ==============  ==============  ==============  ==============
+jackal  0.375 s  4.80 m/s^2  3.74 of 4.0  0.177 s  0.274 s  0.7 cm, 28.7 d  15.9 cm, 25.8 d 1.5 cm, 0.0 d   14.4 cm, 0.0 d
+small   0.130 s  2.15 m/s^2  1.83 of 1.9  0.377 s  0.469 s  0.0 cm, 7.3 d   2.8 cm, 1.4 d   0.1 cm, 0.1 d   1.3 cm, 0.1 d
+======  =======  ==========  ===========  =======  =======  ==============  ==============  ==============  ==============
 (d: degrees)
 
 The Jackal accelerates at the floor's friction limit (mu 0.5: 4.9 m/s^2; its wheels spin
 at first, 20 m/s^2 being its controller's cap) and turns in place at 93 % of the command;
-its odometry, which divides the wheels' difference by 1.5 times the track, counts 360
+its wheel odometry, which divides the wheels' difference by 1.5 times the track, counts 360
 degrees when the body has turned 331: skid-steer odometry is poor in heading, which is why
-the vendor fuses it with an IMU. The small robot rolls without scrub: its odometry's error
-is the wheels' slip while the turn starts and stops.
+the vendor fuses it with an IMU. Fused, the heading is the gyro's and the error left is the
+distance the scrubbing wheels overcount on an arc (7 % of it). The small robot rolls without
+scrub: its wheel odometry's error is the wheels' slip while the turn starts and stops.
 """
 
 from __future__ import annotations
@@ -81,13 +83,17 @@ class StepResponse:
     turn_heading_error: float
     arc_position_error: float
     arc_heading_error: float
+    fused_turn_position_error: float = math.nan
+    fused_turn_heading_error: float = math.nan
+    fused_arc_position_error: float = math.nan
+    fused_arc_heading_error: float = math.nan
 
 
-def _base(name: str) -> PhysicsBase:
+def _base(name: str, odometry: str = 'wheels') -> PhysicsBase:
     drive = PHYSICS_ROBOTS[name].drive
     model = Unicycle(v_max=drive.max_velocity[0], omega_max=drive.max_velocity[1])
     return make_physics_base(model, Reality(), (0.0, 0.0, 0.0), robot=name,
-                             footprint=_FOOTPRINTS[name])
+                             footprint=_FOOTPRINTS[name], odometry=odometry)
 
 
 def _hold(base: PhysicsBase, u: tuple[float, float],
@@ -148,16 +154,18 @@ def measure(name: str) -> StepResponse:
     rise = _first(times, velocity[:, 1], 0.9 * omega_held) - _first(
         times, velocity[:, 1], 0.1 * omega_held)
     tau = _first(times, velocity[:, 1], (1.0 - math.exp(-1.0)) * omega_held)
-    base = _base(name)
-    _until_odometry(base, (0.0, omega_max), lambda d: d[2] >= 2.0 * math.pi)
-    turn = _errors(base)
-    base = _base(name)
-    speed = min(v_max, omega_max * ARC_RADIUS, 1.0)
-    _until_odometry(base, (speed, speed / ARC_RADIUS),
-                    lambda d: d[2] * ARC_RADIUS >= ARC_LENGTH)
-    arc = _errors(base)
+    errors = []
+    for odometry in ('wheels', 'fused'):
+        base = _base(name, odometry)
+        _until_odometry(base, (0.0, omega_max), lambda d: d[2] >= 2.0 * math.pi)
+        errors += _errors(base)
+        base = _base(name, odometry)
+        speed = min(v_max, omega_max * ARC_RADIUS, 1.0)
+        _until_odometry(base, (speed, speed / ARC_RADIUS),
+                        lambda d: d[2] * ARC_RADIUS >= ARC_LENGTH)
+        errors += _errors(base)
     return StepResponse(name, v_max, omega_max, t90, 0.9 * v_max / t90, v_held, omega_held,
-                        tau, rise, *turn, *arc)
+                        tau, rise, *errors)
 
 
 def report(result: StepResponse) -> str:
@@ -170,11 +178,15 @@ def report(result: StepResponse) -> str:
         f'  yaw, turning in place: {r.omega_held:.3f} rad/s held ('
         f'{100.0 * r.omega_held / r.omega_max:.0f} % of the command), time constant '
         f'{r.tau_yaw:.3f} s, rise 10-90 % {r.rise_yaw:.3f} s',
-        f'  odometry after a 360 deg turn in place: {100.0 * r.turn_position_error:.1f} cm, '
-        f'{math.degrees(r.turn_heading_error):.1f} deg from the true pose',
-        f'  odometry after a {ARC_LENGTH:g} m arc of radius {ARC_RADIUS:g} m: '
+        f'  wheel odometry after a 360 deg turn in place: '
+        f'{100.0 * r.turn_position_error:.1f} cm, '
+        f'{math.degrees(r.turn_heading_error):.1f} deg from the true pose '
+        f'(fused with the gyro: {100.0 * r.fused_turn_position_error:.1f} cm, '
+        f'{math.degrees(r.fused_turn_heading_error):.1f} deg)',
+        f'  wheel odometry after a {ARC_LENGTH:g} m arc of radius {ARC_RADIUS:g} m: '
         f'{100.0 * r.arc_position_error:.1f} cm, {math.degrees(r.arc_heading_error):.1f} deg '
-        'from the true pose',
+        f'from the true pose (fused with the gyro: {100.0 * r.fused_arc_position_error:.1f} '
+        f'cm, {math.degrees(r.fused_arc_heading_error):.1f} deg)',
     ])
 
 

@@ -31,7 +31,9 @@ def test_a_barn_world_written_for_the_nodes_reads_back_as_the_suites_world(tmp_p
 def test_the_run_is_the_users_files_as_shipped_with_only_the_runs_wiring_added() -> None:
     command = node_command(Path('w.yaml'), Path('out'), robot='jackal', v_max=2.0,
                            omega_max=4.0, time_limit=100.0, goal_tolerance=1.0,
-                           stall_seconds=20.0, seed=3, reality='real', budget='iterations')
+                           stall_seconds=20.0, seed=3, reality='real', budget='iterations',
+                           plant='mujoco')
+    assert command[command.index('--plant') + 1] == 'mujoco'  # the suite's plant, not a default
     files = [command[i + 1] for i, arg in enumerate(command) if arg == '--params-file']
     assert [Path(f).name for f in files] == ['mpc_controller.yaml', 'jackal.yaml']
     params = [command[i + 1] for i, arg in enumerate(command) if arg == '--param']
@@ -44,6 +46,7 @@ def test_the_run_is_the_users_files_as_shipped_with_only_the_runs_wiring_added()
                           omega_max=1.9, time_limit=100.0, goal_tolerance=0.1,
                           stall_seconds=20.0, seed=0, reality='ideal', budget='wall')
     assert 'jackal.yaml' not in ' '.join(circle) and 'budget:=' not in ' '.join(circle)
+    assert circle[circle.index('--plant') + 1] == 'kinematic'
 
 
 def test_each_run_holds_a_dds_domain_no_other_run_holds() -> None:

@@ -46,9 +46,9 @@ PERIOD = 0.05  # a controller's 20 Hz
 
 
 def jackal(shapes: tuple = (), pose: tuple = (0.0, 0.0, 0.0),
-           reality: Reality | None = None) -> PhysicsBase:
+           reality: Reality | None = None, odometry: str = 'fused') -> PhysicsBase:
     return PhysicsBase(JACKAL_MODEL, reality or Reality(), pose, robot='jackal',
-                       footprint=JACKAL, shapes=shapes)
+                       footprint=JACKAL, shapes=shapes, odometry=odometry)
 
 
 def drive(base: PhysicsBase, u: tuple[float, float], seconds: float) -> list[np.ndarray]:
@@ -73,17 +73,28 @@ def test_the_jackal_reaches_the_commanded_speed_within_its_limits() -> None:
     assert base.pose[0] > 3.0 and abs(base.pose[1]) < 0.1
 
 
-def test_the_jackal_turns_in_place_and_its_odometry_drifts_from_the_true_pose() -> None:
-    base = jackal()
-    velocities = np.array(drive(base, (0.0, 4.0), 3.0))
+def test_the_jackal_turns_in_place_and_its_wheel_odometry_drifts_where_the_fused_does_not(
+) -> None:
+    wheels, fused = jackal(odometry='wheels'), jackal(odometry='fused')
+    velocities = np.array(drive(wheels, (0.0, 4.0), 3.0))
+    drive(fused, (0.0, 4.0), 3.0)
+    for base in (wheels, fused):  # stopped: odometry (updated at 50 Hz) has caught up
+        drive(base, (0.0, 0.0), 1.0)
     # it turns: the body's yaw rate is near the command, it stays where it was
     assert 3.0 < np.mean(velocities[-20:, 1]) < 4.2
-    assert np.hypot(*base.pose[:2]) < 0.2
+    assert np.hypot(*wheels.pose[:2]) < 0.2
     # the four wheels scrub: odometry (the wheels' angles) and the truth part
-    turned_true = base.pose[2]
-    turned_odometry = base.odom_pose[2]
+    turned_true = wheels.pose[2]
     assert turned_true > 8.0
-    assert abs(turned_odometry - turned_true) > 0.2
+    assert abs(wheels.odom_pose[2] - turned_true) > 0.2
+    # the gyro's heading is off by its bias only (at most 4 sigma over the 4 s)
+    assert fused.pose[2] == pytest.approx(turned_true)  # the same motion: odometry is apart
+    assert abs(fused.odom_pose[2] - turned_true) < 4 * JACKAL_ROBOT.gyro_bias * 4.0
+
+
+def test_an_unknown_odometry_source_is_refused_with_the_choices() -> None:
+    with pytest.raises(ValueError, match='fused, wheels'):
+        jackal(odometry='gps')
 
 
 def test_a_wall_stops_the_robot_where_its_bumper_touches() -> None:
@@ -276,6 +287,7 @@ def test_step_response_prints_what_its_docstring_table_says(capsys, monkeypatch)
     assert f'{result.t90_linear:.3f} s' in jackal_row
     assert f'{result.omega_held:.2f} of 4.0' in jackal_row
     assert f'{math.degrees(result.turn_heading_error):.1f} d' in jackal_row
+    assert f'{100 * result.fused_arc_position_error:.1f} cm' in jackal_row
     # without MuJoCo: the reason, no traceback
     monkeypatch.setattr(step_response, 'mujoco_missing', lambda: 'MuJoCo is not installed')
     assert step_response.main(['--robot', 'small']) == 2

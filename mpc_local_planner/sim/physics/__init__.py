@@ -21,10 +21,13 @@ if TYPE_CHECKING:
     from mpc_local_planner.sim.reality import Reality
     from mpc_local_planner.worlds.world import Shape
 
-__all__ = ['PHYSICS_ROBOTS', 'PLANTS', 'make_physics_base', 'mujoco_missing', 'physics_robot']
+__all__ = ['ODOMETRY_SOURCES', 'PHYSICS_ROBOTS', 'PLANTS', 'make_physics_base', 'mujoco_missing', 'physics_robot']
 
 #: The plants a simulation can run on: the kinematic `Base` (the default) or MuJoCo's.
 PLANTS = ('kinematic', 'mujoco')
+#: What the physics plant's odometry integrates (plant.py; kept here, where MuJoCo is not
+#: imported): wheels and gyro fused, as the robots ship, or the wheels alone.
+ODOMETRY_SOURCES = ('fused', 'wheels')
 
 
 def mujoco_missing() -> str | None:
@@ -37,12 +40,13 @@ def mujoco_missing() -> str | None:
 
 def make_physics_base(model: Unicycle, reality: Reality, pose: Sequence[float], *,
                       robot: str = 'jackal', footprint: Footprint | None = None,
-                      shapes: Sequence[Shape] = (), dt: float = 0.01) -> Any:
+                      shapes: Sequence[Shape] = (), dt: float = 0.01,
+                      odometry: str = 'fused') -> Any:
     """Return a `plant.PhysicsBase` (arguments as its own).
 
     Raises:
         RuntimeError: when MuJoCo is not installed (the message says how to install it).
-        ValueError: for an unknown robot or a bad pose.
+        ValueError: for an unknown robot, a bad pose or an unknown odometry source.
 
     """
     problem = mujoco_missing()
@@ -51,4 +55,4 @@ def make_physics_base(model: Unicycle, reality: Reality, pose: Sequence[float], 
     from mpc_local_planner.sim.physics.plant import PhysicsBase
 
     return PhysicsBase(model, reality, pose, robot=robot, footprint=footprint,
-                       shapes=shapes, dt=dt)
+                       shapes=shapes, dt=dt, odometry=odometry)

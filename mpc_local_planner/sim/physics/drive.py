@@ -13,6 +13,14 @@ increments into a linear (mean) and an angular ((right - left) / s) step, integr
 exactly on the arc (second-order Runge-Kutta when the turn is below 1e-6 rad); its twist
 is the rolling mean of the last ``velocity_rolling_window_size`` updates. So odometry
 believes the wheels: when they slip or scrub, it drifts from the true pose.
+
+A robot's odometry is rarely the wheels' alone: the Jackal's stack fuses them with its IMU
+(jackal/jackal ``jackal_control/config/robot_localization.yaml``: an EKF taking the wheels'
+velocities and the IMU's orientation and yaw rate), and the Create 3 under the small robot
+fuses its wheels, IMU and optical flow. `WheelOdometry.update` therefore takes an optional
+heading change from a gyro: the turn is then the gyro's, the distance still the wheels'.
+That is what such a filter converges to when it trusts the gyro for yaw (a skid-steer's
+wheels are the worst sensor of it), without the filter's transients.
 """
 
 from __future__ import annotations
@@ -86,8 +94,13 @@ class WheelOdometry:
         return np.array([sum(self._linear) / len(self._linear),
                          sum(self._angular) / len(self._angular)])
 
-    def update(self, left: float, right: float, period: float) -> None:
-        """Integrate from the mean (left, right) wheel angles (rad) over an update of period."""
+    def update(self, left: float, right: float, period: float,
+               gyro_turn: float | None = None) -> None:
+        """Integrate from the mean (left, right) wheel angles (rad) over an update of period.
+
+        gyro_turn, when given, is the heading change a gyro measured over the update (rad):
+        it replaces the wheels' (fused odometry, see the module docstring).
+        """
         left_m = left * self.limits.wheel_radius
         right_m = right * self.limits.wheel_radius
         if self._last is None:
@@ -97,6 +110,8 @@ class WheelOdometry:
         self._last = (left_m, right_m)
         linear = 0.5 * (d_right + d_left)
         angular = (d_right - d_left) / self.limits.wheel_separation
+        if gyro_turn is not None:
+            angular = float(gyro_turn)
         x, y, theta = (float(c) for c in self.pose)
         if abs(angular) < _EXACT_TURN:
             heading = theta + 0.5 * angular

@@ -8,7 +8,9 @@ update rate: timeout, limits, wheel speeds), the wheels' servos drive the wheels
 limited torque, the engine moves the body on the floor's friction (the Jackal's four wheels
 scrub when it turns) and against the world's obstacles, and odometry is integrated from the
 wheels' joint angles (`WheelOdometry`), so it drifts from the TRUE pose (the body's) when
-the wheels slip. A `Reality`'s command latency and odometry noise still apply on top;
+the wheels slip. With ``odometry='fused'`` (the default, as the robots ship: drive.py) the
+heading comes from a gyro instead: the body's yaw rate with a constant bias drawn from the
+reality's seed (the robot's ``gyro_bias``), so the distance still slips with the wheels. A `Reality`'s command latency and odometry noise still apply on top;
 its lag, acceleration limits and odometry drift are the engine's and the base
 controller's own here, and are not added.
 """
@@ -24,6 +26,7 @@ import numpy as np
 
 from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.sim.physics import ODOMETRY_SOURCES
 from mpc_local_planner.sim.physics.drive import DiffDrive, WheelOdometry
 from mpc_local_planner.sim.physics.laser import PhysicsLaser
 from mpc_local_planner.sim.physics.model import robot_mjcf, TIMESTEP, WHEEL_JOINTS
@@ -54,18 +57,23 @@ class PhysicsBase:
         shapes: The world's obstacles (the true ones: static geoms).
         dt: Kept for `Base`'s interface (the node sets it to its tick); the engine's step
             and the base controller's rate are the robot's.
+        odometry: One of ODOMETRY_SOURCES.
 
     Raises:
-        ValueError: for a non-finite pose or an unknown robot name.
+        ValueError: for a non-finite pose, an unknown robot name or odometry source.
 
     """
 
     def __init__(self, model: Unicycle, reality: Reality, pose: Sequence[float], *,
                  robot: WheeledRobot | str = 'jackal', footprint: Footprint | None = None,
-                 shapes: Sequence[Shape] = (), dt: float = 0.01) -> None:
+                 shapes: Sequence[Shape] = (), dt: float = 0.01,
+                 odometry: str = 'fused') -> None:
         start = np.asarray(pose, dtype=float).reshape(-1)[:3]
         if len(start) != 3 or not np.all(np.isfinite(start)):
             msg = f'the start pose must be 3 finite numbers, got {pose!r}'
+            raise ValueError(msg)
+        if odometry not in ODOMETRY_SOURCES:
+            msg = f'odometry must be one of {", ".join(ODOMETRY_SOURCES)}, got {odometry!r}'
             raise ValueError(msg)
         self.robot = physics_robot(robot) if isinstance(robot, str) else robot
         self.model = model
@@ -86,6 +94,10 @@ class PhysicsBase:
         self._applied = np.zeros(2)
         self._yaw = float(start[2])
         self._rng = np.random.default_rng(reality.seed)
+        # the gyro's bias: its own draw, so the odometry noise's sequence is the same either way
+        self._gyro_bias = (float(np.random.default_rng([reality.seed, 1]).normal(
+            0.0, self.robot.gyro_bias)) if odometry == 'fused' else None)
+        self._gyro_yaw = self._yaw
         sides = []
         for side in (0, 1):
             names = [WHEEL_JOINTS.format(side=side, index=i)
@@ -184,8 +196,13 @@ class PhysicsBase:
     def _update(self, now: float) -> None:
         """One update of the base controller: odometry from the wheels, then wheel speeds."""
         qpos = self.data.qpos
+        gyro_turn = None
+        if self._gyro_bias is not None:
+            gyro_turn = self._yaw - self._gyro_yaw + self._gyro_bias * self._period
+            self._gyro_yaw = self._yaw
         self.wheel_odometry.update(float(np.mean(qpos[self._wheel_qpos[0]])),
-                                   float(np.mean(qpos[self._wheel_qpos[1]])), self._period)
+                                   float(np.mean(qpos[self._wheel_qpos[1]])), self._period,
+                                   gyro_turn)
         left, right = self.drive.update(now, self._period)
         self.data.ctrl[self._actuators[0]] = left
         self.data.ctrl[self._actuators[1]] = right

@@ -102,6 +102,9 @@ class WheeledRobot:
         servo_gain: The velocity servo's gain (N m per rad/s of error).
         armature: The rotor inertia the gearbox reflects onto each wheel (kg m^2).
         drive: The base controller's settings.
+        gyro_bias: Standard deviation of the yaw gyro's constant bias (rad/s), which fused
+            odometry integrates (drive.py). Assumed for both robots: 0.002 rad/s (0.11 deg/s),
+            a MEMS gyro of their class after the bias estimate taken at rest on start-up.
 
     """
 
@@ -122,6 +125,7 @@ class WheeledRobot:
     servo_gain: float
     armature: float
     drive: DriveLimits
+    gyro_bias: float = 0.002
 
     @property
     def total_mass(self) -> float:
