@@ -16,8 +16,7 @@ from mpc_local_planner.core.footprint import FROM_WORLD, parse_footprint
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.ros.parameters import ParameterSpec, range_problem
 from mpc_local_planner.sim.localizer import LOCALIZER_NOISE
-from mpc_local_planner.sim.physics import (mujoco_missing, ODOMETRY_SOURCES, PHYSICS_ROBOTS,
-                                           PLANTS)
+from mpc_local_planner.sim.physics import mujoco_missing, ODOMETRY_SOURCES, PHYSICS_ROBOTS, PLANTS
 from mpc_local_planner.sim.reality import Reality, reality_preset, REALITY_PRESETS
 
 __all__ = ['CONTACTS_TOPIC', 'FROM_PRESET', 'GROUND_TRUTH_TOPIC', 'LOCALIZER_TOPIC',

@@ -18,13 +18,15 @@ What it printed (MuJoCo 3.17, the robots of sim/physics/robots.py; the plant is
 deterministic). Odometry errors are position / heading of the odometry's pose from the true
 one after the manoeuvre, the wheels' alone, then fused:
 
-======  =======  ==========  ===========  =======  =======  ==============  ==============  ==============  ==============
-robot   90 % of  mean        yaw rate     yaw tau  yaw rise 360 deg turn    2 m arc         360 deg turn    2 m arc
-        v_max    accel       held         (63 %)   10-90 %  (wheels)        (wheels)        (fused)         (fused)
-======  =======  ==========  ===========  =======  =======  ==============  ==============  ==============  ==============
-jackal  0.375 s  4.80 m/s^2  3.74 of 4.0  0.177 s  0.274 s  0.7 cm, 28.7 d  15.9 cm, 25.8 d 1.5 cm, 0.0 d   14.4 cm, 0.0 d
-small   0.130 s  2.15 m/s^2  1.83 of 1.9  0.377 s  0.469 s  0.0 cm, 7.3 d   2.8 cm, 1.4 d   0.1 cm, 0.1 d   1.3 cm, 0.1 d
-======  =======  ==========  ===========  =======  =======  ==============  ==============  ==============  ==============
+======  =======  ==========  ===========  =======  =======  ==============  ==============
+robot   90 % of  mean        yaw rate     yaw tau  yaw rise 360 deg turn    2 m arc
+        v_max    accel       held         (63 %)   10-90 %  in place        (radius 1 m)
+======  =======  ==========  ===========  =======  =======  ==============  ==============
+jackal  0.375 s  4.80 m/s^2  3.74 of 4.0  0.177 s  0.274 s  0.7 cm, 28.7 d  15.9 cm, 25.8 d
+(fused)                                                     1.5 cm, 0.0 d   14.4 cm, 0.0 d
+small   0.130 s  2.15 m/s^2  1.83 of 1.9  0.377 s  0.469 s  0.0 cm, 7.3 d   2.8 cm, 1.4 d
+(fused)                                                     0.1 cm, 0.1 d   1.3 cm, 0.1 d
+======  =======  ==========  ===========  =======  =======  ==============  ==============
 (d: degrees)
 
 The Jackal accelerates at the floor's friction limit (mu 0.5: 4.9 m/s^2; its wheels spin

@@ -40,3 +40,18 @@ def test_the_jackal_file_bounds_input_rates_as_the_suites_do_on_the_real_base() 
     assert config.robot_footprint.vertices.tolist() == JACKAL.vertices.tolist()
     assert model.u_min[0] == 0.0 and not jackal.reverses
     assert (model.u_max[0], model.u_max[1]) == (2.0, 4.0)  # the suites' BARN runs
+
+
+def test_the_jackal_file_plans_as_the_suites_plan_for_the_jackal() -> None:
+    from mpc_local_planner.ros.global_planner_parameters import PARAMETERS as PLANNER
+
+    text = resolve_data_file('jackal.yaml').read_text(encoding='utf-8')
+    given = yaml.safe_load(text)['global_planner']['ros__parameters']
+    declared = {spec.name for spec in PLANNER}
+    assert set(given) <= declared, f'undeclared: {sorted(set(given) - declared)}'
+    # the planner node as a user runs it with the Jackal's file is the suites' planner
+    assert given['iterations'] == sensing_suites.PLANNER_ITERATIONS
+    assert given['range'] == pytest.approx(sensing_suites.PLANNER_RANGE)
+    assert given['time_limit'] == pytest.approx(sensing_suites.PLANNER_TIME_LIMIT)
+    assert given['clearance'] == pytest.approx(sensing_suites.POLYGON_CLEARANCE)
+    assert yaml.safe_load(given['footprint']) == JACKAL.vertices.tolist()

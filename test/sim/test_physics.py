@@ -281,13 +281,15 @@ def test_step_response_prints_what_its_docstring_table_says(capsys, monkeypatch)
     assert step_response.main(['--robot', 'jackal']) == 0
     printed = capsys.readouterr().out
     assert '90 % of v_max after 0.375 s' in printed and '3.738 rad/s held' in printed
-    jackal_row = [line for line in step_response.__doc__.splitlines()
-                  if line.startswith('jackal ')][0]
+    lines = step_response.__doc__.splitlines()
+    at = [i for i, line in enumerate(lines) if line.startswith('jackal ')][0]
+    jackal_row, fused_row = lines[at], lines[at + 1]
     result = step_response.measure('jackal')
     assert f'{result.t90_linear:.3f} s' in jackal_row
     assert f'{result.omega_held:.2f} of 4.0' in jackal_row
     assert f'{math.degrees(result.turn_heading_error):.1f} d' in jackal_row
-    assert f'{100 * result.fused_arc_position_error:.1f} cm' in jackal_row
+    assert fused_row.startswith('(fused)')
+    assert f'{100 * result.fused_arc_position_error:.1f} cm' in fused_row
     # without MuJoCo: the reason, no traceback
     monkeypatch.setattr(step_response, 'mujoco_missing', lambda: 'MuJoCo is not installed')
     assert step_response.main(['--robot', 'small']) == 2

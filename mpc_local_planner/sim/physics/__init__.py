@@ -21,7 +21,8 @@ if TYPE_CHECKING:
     from mpc_local_planner.sim.reality import Reality
     from mpc_local_planner.worlds.world import Shape
 
-__all__ = ['ODOMETRY_SOURCES', 'PHYSICS_ROBOTS', 'PLANTS', 'make_physics_base', 'mujoco_missing', 'physics_robot']
+__all__ = ['ODOMETRY_SOURCES', 'PHYSICS_ROBOTS', 'PLANTS', 'make_physics_base', 'mujoco_missing',
+           'physics_robot']
 
 #: The plants a simulation can run on: the kinematic `Base` (the default) or MuJoCo's.
 PLANTS = ('kinematic', 'mujoco')

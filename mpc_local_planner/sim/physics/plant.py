@@ -10,9 +10,10 @@ scrub when it turns) and against the world's obstacles, and odometry is integrat
 wheels' joint angles (`WheelOdometry`), so it drifts from the TRUE pose (the body's) when
 the wheels slip. With ``odometry='fused'`` (the default, as the robots ship: drive.py) the
 heading comes from a gyro instead: the body's yaw rate with a constant bias drawn from the
-reality's seed (the robot's ``gyro_bias``), so the distance still slips with the wheels. A `Reality`'s command latency and odometry noise still apply on top;
-its lag, acceleration limits and odometry drift are the engine's and the base
-controller's own here, and are not added.
+reality's seed (the robot's ``gyro_bias``), so the distance still slips with the wheels.
+A `Reality`'s command latency and odometry noise still apply on top; its lag, acceleration
+limits and odometry drift are the engine's and the base controller's own here, and are not
+added.
 """
 
 from __future__ import annotations
