@@ -51,7 +51,12 @@ from mpc_local_planner.core.footprint import Footprint, parse_footprint
 from mpc_local_planner.core.mpc import LyapunovCase, PlanSource
 from mpc_local_planner.worlds.world import load_world, World
 
-__all__ = ['BagRun', 'analyze', 'describe_footprint', 'main', 'read_run', 'recorded_world']
+__all__ = ['BagRun', 'GROUND_TRUTH', 'analyze', 'describe_footprint', 'main', 'read_run',
+           'recorded_world']
+
+# The simulator's ground truth topic (ros/unicycle_simulator_parameters.GROUND_TRUTH_TOPIC;
+# this layer does not import ros/): closed_loop's bags record it.
+GROUND_TRUTH = 'simulator/ground_truth'
 
 
 class BagRun(NamedTuple):
@@ -72,6 +77,13 @@ class BagRun(NamedTuple):
             come from odometry (no verdict recorded).
         odometry_speed: (m, 2) the odometry's times (the rows' clock) and forward speeds
             (its twist: what the wheels measure), one per message; (0, 2) without /odom.
+        start: the bag's time (s) of the rows' 0; the steps' state_time is on the bag's clock.
+        steps: per row, the controller's step as it reported it; None when the rows come
+            from odometry.
+        prediction_times: per local plan, its stamp on the rows' clock.
+        odometry_poses: (m, 4) t, x, y, theta of each odometry message (the rows' clock).
+        ground_truth: (k, 4) t, x, y, theta of the simulator's ground truth (the rows'
+            clock), when read_run was asked for it; (0, 4) otherwise or without it.
 
     """
 
@@ -85,6 +97,11 @@ class BagRun(NamedTuple):
     counts: dict[str, int]
     arrived: list[bool] | None = None
     odometry_speed: np.ndarray = np.zeros((0, 2))
+    start: float = 0.0
+    steps: list[ControllerDiagnostics] | None = None
+    prediction_times: np.ndarray = np.zeros(0)
+    odometry_poses: np.ndarray = np.zeros((0, 4))
+    ground_truth: np.ndarray = np.zeros((0, 4))
 
 
 def _yaw(q: Any) -> float:
@@ -106,8 +123,12 @@ def _poses(path_msg: Any) -> np.ndarray:
 
 def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str = '/cmd_vel',
              plan_topic: str = '/plan', local_plan_topic: str = '/local_plan',
-             diagnostics_topic: str = '/' + CONTROLLER_DIAGNOSTICS_TOPIC) -> BagRun:
+             diagnostics_topic: str = '/' + CONTROLLER_DIAGNOSTICS_TOPIC,
+             ground_truth_topic: str | None = None) -> BagRun:
     """Read a closed-loop bag into arrays.
+
+    The topics are the bag's names; ground_truth_topic (nav_msgs/Odometry, e.g. '/' +
+    GROUND_TRUTH) is read only when given.
 
     Raises:
         FileNotFoundError: if the bag does not exist.
@@ -120,12 +141,15 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
         raise FileNotFoundError(msg)
     typestore = get_typestore(Stores.ROS2_JAZZY)
     odom: list[tuple[float, float, float, float, float, float]] = []
+    truth: list[tuple[float, float, float, float]] = []
     diags: list[tuple[float, dict[str, str]]] = []  # (stamp, the status's values)
     plan = None
     predictions: list[np.ndarray] = []
+    prediction_stamps: list[float] = []
     counts: dict[str, int] = {}
     with Reader(bag) as reader:
-        wanted = {odom_topic, cmd_vel_topic, plan_topic, local_plan_topic, diagnostics_topic}
+        wanted = {odom_topic, cmd_vel_topic, plan_topic, local_plan_topic, diagnostics_topic,
+                  ground_truth_topic} - {None}
         connections = [c for c in reader.connections if c.topic in wanted]
         for connection, _, data in reader.messages(connections=connections):
             counts[connection.topic] = counts.get(connection.topic, 0) + 1
@@ -135,10 +159,15 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
                 odom.append((_stamp(msg.header), p.position.x, p.position.y,
                              _yaw(p.orientation), msg.twist.twist.linear.x,
                              msg.twist.twist.angular.z))
+            elif connection.topic == ground_truth_topic:
+                p = msg.pose.pose
+                truth.append((_stamp(msg.header), p.position.x, p.position.y,
+                              _yaw(p.orientation)))
             elif connection.topic == plan_topic:
                 plan = _poses(msg)
             elif connection.topic == local_plan_topic:
                 predictions.append(_poses(msg))
+                prediction_stamps.append(_stamp(msg.header))
             elif connection.topic == diagnostics_topic and msg.status:
                 values = {kv.key: kv.value for kv in msg.status[0].values}
                 diags.append((_stamp(msg.header), values))
@@ -149,9 +178,11 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
     goal_reached = False
     rows: list[list[float]] = []
     arrived: list[bool] | None = None
+    steps: list[ControllerDiagnostics] | None = None
     if diags and Key.X.value in diags[0][1]:
         started = False
         arrived = []
+        steps = []
         for t, values in diags:
             step = ControllerDiagnostics.from_values(values)
             started = started or step.source is not None  # the first MPC step
@@ -168,6 +199,7 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
                 failures += 1
             goal_reached = goal_reached or step.goal_reached
             arrived.append(step.goal_reached)
+            steps.append(step)
     elif odom:
         # a bag without our diagnostics: one row per odometry message, the command from
         # the odometry's twist (what the base executes)
@@ -176,14 +208,21 @@ def read_run(bag: str | Path, *, odom_topic: str = '/odom', cmd_vel_topic: str =
     else:
         msg = f'{bag}: no {diagnostics_topic} with states and no {odom_topic}: nothing to analyse'
         raise ValueError(msg)
-    array = np.array(rows, dtype=float).reshape(-1, 9)
-    speed = np.array([(t, v) for t, _, _, _, v, _ in odom], dtype=float).reshape(-1, 2)
-    if len(array):
-        speed[:, 0] -= array[0, 0]
-        array[:, 0] -= array[0, 0]
-    return BagRun(rows=array, plan=plan, predictions=predictions, lyapunov_ok=lyapunov,
-                  lyapunov_cases=cases, solver_failures=failures, goal_reached=goal_reached,
-                  counts=counts, arrived=arrived, odometry_speed=speed)
+    start = float(rows[0][0]) if rows else 0.0  # the rows' clock: 0 at the first row
+
+    def on_rows_clock(samples: list, columns: int) -> np.ndarray:
+        timed = np.array(samples, dtype=float).reshape(-1, columns)
+        timed[:, 0] -= start
+        return timed
+
+    return BagRun(rows=on_rows_clock(rows, 9), plan=plan, predictions=predictions,
+                  lyapunov_ok=lyapunov, lyapunov_cases=cases, solver_failures=failures,
+                  goal_reached=goal_reached, counts=counts, arrived=arrived,
+                  odometry_speed=on_rows_clock([(t, v) for t, _, _, _, v, _ in odom], 2),
+                  start=start, steps=steps,
+                  prediction_times=on_rows_clock(prediction_stamps, 1)[:, 0],
+                  odometry_poses=on_rows_clock([o[:4] for o in odom], 4),
+                  ground_truth=on_rows_clock(truth, 4))
 
 
 def recorded_world(bag: str | Path) -> World | None:

@@ -32,14 +32,12 @@ import numpy as np
 
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.control_output import Reason
+from mpc_local_planner.core.mpc import PlanSource
 from mpc_local_planner.evaluation import sensing_suites as suites
+from mpc_local_planner.evaluation.analyze_bag import GROUND_TRUTH, read_run
 from mpc_local_planner.evaluation.rollout import Rollout
 from mpc_local_planner.evaluation.suite_runs import barn_score, DEFAULT_BARN_DIR, parse_worlds
 from mpc_local_planner.perception.localization import compose, invert
-
-# The simulator's ground truth topic (ros/unicycle_simulator_parameters.GROUND_TRUTH_TOPIC;
-# this layer does not import ros/).
-GROUND_TRUTH = 'simulator/ground_truth'
 
 __all__ = ['VARIANTS', 'bag_one_step_errors', 'one_step_errors', 'relative_motion', 'run_variant']
 
@@ -122,47 +120,27 @@ def bag_one_step_errors(bag: str | Path, h: float) -> list[tuple[float, float]]:
         ValueError: if the bag holds no pose to compare with, or no local plan.
 
     """
-    from rosbags.highlevel import AnyReader
-
-    truth: dict[str, list[tuple[float, float, float, float]]] = {}
-    plans: dict[int, np.ndarray] = {}
-    solves: list[tuple[int, float]] = []
-    with AnyReader([Path(bag)]) as reader:
-        wanted = ('/' + GROUND_TRUTH, '/odom', '/local_plan', '/mpc/diagnostics')
-        connections = [c for c in reader.connections if c.topic in wanted]
-        for connection, _, raw in reader.messages(connections=connections):
-            msg = reader.deserialize(raw, connection.msgtype)
-            stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec \
-                if hasattr(msg, 'header') else 0
-            if connection.topic == '/local_plan':
-                plans[stamp] = np.array([[p.pose.position.x, p.pose.position.y,
-                                          _yaw(p.pose.orientation)] for p in msg.poses])
-            elif connection.topic == '/mpc/diagnostics':
-                for status in msg.status:
-                    values = {kv.key: kv.value for kv in status.values}
-                    if (values.get('solved') == 'true'
-                            and values.get('source') in ('solver', 'candidate')):
-                        solves.append((stamp, float(values['state_time'])))
-            else:
-                pose = msg.pose.pose
-                truth.setdefault(connection.topic, []).append(
-                    (stamp * 1e-9, pose.position.x, pose.position.y, _yaw(pose.orientation)))
-    samples = truth.get('/' + GROUND_TRUTH) or truth.get('/odom')
-    if not samples:
+    run = read_run(bag, ground_truth_topic='/' + GROUND_TRUTH)
+    samples = run.ground_truth if len(run.ground_truth) else run.odometry_poses
+    if not len(samples):
         msg_text = f'{bag}: no ground truth and no odometry to compare the predictions with'
         raise ValueError(msg_text)
-    if not plans:
+    if not run.predictions:
         msg_text = f'{bag}: no local_plan'
         raise ValueError(msg_text)
-    track = np.array(sorted(samples))
+    plans = dict(zip(run.prediction_times.tolist(), run.predictions, strict=True))
+    track = np.array(sorted(samples.tolist()))
     track[:, 3] = np.unwrap(track[:, 3])
 
     def at(t: float) -> np.ndarray:
         return np.array([np.interp(t, track[:, 0], track[:, k]) for k in (1, 2, 3)])
 
     errors = []
-    for stamp, start in solves:
-        plan = plans.get(stamp)
+    for row, step in enumerate(run.steps or ()):  # None: no controller's steps, no solves
+        if not step.solved or step.source not in (PlanSource.SOLVER, PlanSource.CANDIDATE):
+            continue
+        plan = plans.get(float(run.rows[row, 0]))
+        start = step.state_time - run.start
         if plan is None or len(plan) < 2 or start + h > track[-1, 0] or start < track[0, 0]:
             continue
         predicted = relative_motion(plan[0], plan[1])
@@ -171,10 +149,6 @@ def bag_one_step_errors(bag: str | Path, h: float) -> list[tuple[float, float]]:
                                    np.cos(predicted[2] - actual[2])))
         errors.append((float(np.hypot(*(predicted[:2] - actual[:2]))), abs(heading)))
     return errors
-
-
-def _yaw(q: Any) -> float:
-    return float(np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)))
 
 
 def _print_bag_errors(bags: list[str], h: float) -> None:

@@ -17,7 +17,11 @@ from typing import Any
 import yaml
 
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
-from mpc_local_planner.ros.parameters import params_file_problem, section_applies
+from mpc_local_planner.ros.parameters import (
+    params_file_problem,
+    params_file_sections,
+    section_applies,
+)
 from mpc_local_planner.ros.unicycle_simulator_parameters import LOCALIZER_TOPIC
 from mpc_local_planner.sim.localizer import LOCALIZER_NOISE, LOCALIZER_RATE
 from mpc_local_planner.sim.reality import reality_preset
@@ -245,16 +249,9 @@ def file_parameters(path: str, node: str) -> dict[str, Any]:
             else:
                 values[name] = value
 
-    def visit(mapping: dict[str, Any], section: str) -> None:
-        for key, value in mapping.items():
-            if key == 'ros__parameters' and isinstance(value, dict):
-                if section and section_applies(section, '/' + node):
-                    flatten(value, '')
-            elif isinstance(value, dict):
-                visit(value, f'{section}/{key}' if section else str(key))
-
-    if isinstance(data, dict):
-        visit(data, '')
+    for section, parameters in params_file_sections(data):
+        if isinstance(parameters, dict) and section_applies(section, '/' + node):
+            flatten(parameters, '')
     return values
 
 

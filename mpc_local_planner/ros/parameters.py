@@ -39,8 +39,8 @@ import yaml
 
 __all__ = ['ROS_OWN_PARAMETERS', 'ROS_OWN_PREFIXES', 'ParameterSpec', 'UnknownParameterError',
            'declare_parameters', 'describe', 'format_default', 'format_help', 'format_range',
-           'params_file_problem', 'params_files', 'params_sections', 'range_problem',
-           'range_problems', 'refuse_unknown_parameters', 'section_applies',
+           'params_file_problem', 'params_file_sections', 'params_files', 'params_sections',
+           'range_problem', 'range_problems', 'refuse_unknown_parameters', 'section_applies',
            'unknown_parameters']
 
 # Parameters rclpy declares or reads in every node by itself: never a typo of the package's.
@@ -294,18 +294,33 @@ def params_sections(path: str) -> list[str]:
         data = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
     except (OSError, UnicodeDecodeError, yaml.YAMLError):
         return []
-    sections: list[str] = []
+    return [name for name, _ in params_file_sections(data)]
+
+
+def params_file_sections(data: Any) -> list[tuple[str, Any]]:
+    """Return a params file's sections in file order, as (node name, its ros__parameters).
+
+    The one walk of a params file's nesting, as rcl reads it: nested names join with '/'
+    (``ns: {node: {ros__parameters: ...}}`` is ``ns/node``). A ros__parameters at the top
+    names no node and is left out; the values are as YAML gave them (not always a mapping).
+
+    Args:
+        data: The file as ``yaml.safe_load`` read it (anything but a mapping has none).
+
+    """
+    sections: list[tuple[str, Any]] = []
 
     def visit(mapping: dict, prefix: str) -> None:
         for key, value in mapping.items():
             if key == 'ros__parameters':
-                sections.append(prefix)
+                if prefix:
+                    sections.append((prefix, value))
             elif isinstance(value, dict):
                 visit(value, f'{prefix}/{key}' if prefix else str(key))
 
     if isinstance(data, dict):
         visit(data, '')
-    return [name for name in sections if name]
+    return sections
 
 
 def section_applies(section: str, fully_qualified_name: str) -> bool:

@@ -7,7 +7,6 @@ measure the plant the nodes drive; a physics plant would offer the same calls.
 
 from __future__ import annotations
 
-from collections import deque
 from dataclasses import dataclass, field
 import math
 from typing import Sequence
@@ -15,6 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from mpc_local_planner.core.models import Unicycle, unicycle_arc
+from mpc_local_planner.sim.commands import CommandQueue
 from mpc_local_planner.sim.reality import Reality
 
 __all__ = ['Base']
@@ -48,8 +48,7 @@ class Base:
     time: float = 0.0
     velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
     odom_pose: np.ndarray = field(init=False)
-    _commands: deque = field(init=False, repr=False)
-    _applied: np.ndarray = field(init=False, repr=False)
+    _commands: CommandQueue = field(init=False, repr=False)
     _rng: np.random.Generator = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -59,21 +58,16 @@ class Base:
             raise ValueError(msg)
         self.pose = np.asarray(self.pose, dtype=float)[:3].copy()
         self.odom_pose = self.pose.copy()
-        self._commands = deque()
-        self._applied = np.zeros(2)
+        self._commands = CommandQueue()
         self._rng = np.random.default_rng(self.reality.seed)
 
     def command(self, u: Sequence[float], t: float | None = None) -> None:
         """Send the command u at time t (default: now); it acts from t + latency.
 
-        A non-finite command is a broken sender: it is taken as zero (stop), as the
-        simulator node does.
+        A command that is not two finite numbers is a broken sender: it is taken as zero
+        (stop), as the simulator node does (`CommandQueue`).
         """
-        u = np.asarray(u, dtype=float).reshape(-1)[:2]
-        if not np.all(np.isfinite(u)):
-            u = np.zeros(2)
-        sent = self.time if t is None else float(t)
-        self._commands.append((sent + self.reality.latency, self.model.saturate(u)))
+        self._commands.send(u, self.time if t is None else t, self.model, self.reality.latency)
 
     def stop(self, t: float | None = None) -> None:
         """Send a zero command (a command timeout, a dead controller)."""
@@ -82,7 +76,7 @@ class Base:
     @property
     def target(self) -> np.ndarray:
         """The command reaching the motors now."""
-        return self._applied.copy()
+        return self._commands.applied
 
     def advance(self, until: float) -> None:
         """Integrate from the base's time up to until (a whole number of sub-steps, at most).
@@ -94,9 +88,9 @@ class Base:
         if span <= 1e-12:
             return
         if self.reality.ideal_base:
-            self._take_commands(until)
-            self.velocity = self._applied.copy()
-            self.pose = self.model.step(self.pose, self._applied, span)
+            self._commands.take(until)
+            self.velocity = self._commands.applied
+            self.pose = self.model.step(self.pose, self.velocity, span)
             self.odom_pose = self.pose.copy()
             self.time = float(until)
             return
@@ -106,10 +100,11 @@ class Base:
             end = self.time + dt
             # a command reaching the motors inside the sub-step acts from its instant, not
             # from the next sub-step: the latency is the reality's whatever the tick
-            while self._commands and self.time + 1e-9 < self._commands[0][0] < end - 1e-9:
-                self._take_commands(self.time)
-                self._move(self._commands[0][0] - self.time)
-            self._take_commands(self.time)
+            while (arrival := self._commands.next_arrival) is not None \
+                    and self.time + 1e-9 < arrival < end - 1e-9:
+                self._commands.take(self.time)
+                self._move(arrival - self.time)
+            self._commands.take(self.time)
             self._move(end - self.time)
         self.time = float(until)
 
@@ -142,14 +137,9 @@ class Base:
                                         omega + bias * abs(v), dt)
         self.time += dt
 
-    def _take_commands(self, now: float) -> None:
-        """Make the latest command that has reached the motors by now the one in force."""
-        while self._commands and self._commands[0][0] <= now + 1e-9:
-            self._applied = self._commands.popleft()[1]
-
     def _follow(self, dt: float) -> None:
         """Move the wheels' velocity toward the command over dt: lag, then rate limits."""
-        target = self._applied
+        target = self._commands.applied
         wanted = target.copy()
         for i, tau in enumerate(self.reality.lag):
             if tau > 0.0:

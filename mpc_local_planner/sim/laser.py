@@ -14,6 +14,7 @@ nearest hit. Beams that hit nothing are ``inf`` (REP 117), not range_max.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 import math
 from typing import Sequence, TYPE_CHECKING
 
@@ -25,25 +26,25 @@ from mpc_local_planner.perception.scans import Scan
 if TYPE_CHECKING:
     from mpc_local_planner.worlds.world import Shape
 
-__all__ = ['JACKAL_FOV', 'SimulatedLaser']
+__all__ = ['BeamLayout', 'JACKAL_FOV', 'SimulatedLaser']
 
 #: The Jackal's laser field of view (270 degrees), the BARN challenge's sensor.
 JACKAL_FOV = 4.71
 
 
-class SimulatedLaser:
-    """A planar laser scanner that sees the true world, with the LaserScan conventions.
+class BeamLayout(ABC):
+    """The beams of a planar laser scanner and its scan, with the LaserScan conventions.
 
-    Beam angles are relative to the laser's forward axis: angle_min = -fov / 2,
-    angle_increment = fov / (beams - 1), so the middle beam looks straight ahead. Readings are
-    the exact distance (a real laser's noise and dropouts are sim/scan_channel.py's ScanChannel,
-    applied to the scan by whoever simulates a real one); a beam that hits nothing within
-    range_max is inf. Readings below range_min are reported as measured (consumers discard
-    them, as they must for a real sensor).
+    Every simulated laser shares this layout so that perception takes any of their scans
+    unchanged; a subclass only casts the beams. Beam angles are relative to the laser's
+    forward axis: angle_min = -fov / 2, angle_increment = fov / (beams - 1), so the middle
+    beam looks straight ahead. Readings are the exact distance (a real laser's noise and
+    dropouts are sim/scan_channel.py's ScanChannel, applied to the scan by whoever simulates a
+    real one); a beam that hits nothing within range_max is inf. Readings below range_min are
+    reported as measured (consumers discard them, as they must for a real sensor).
 
     Args:
-        geometry: The world's exact obstacles, or the shapes to build them from.
-        fov: Field of view, radians (default the Jackal's 270 degrees).
+        fov: Field of view, radians.
         beams: Number of beams (>= 2).
         range_min: Closest valid reading, metres.
         range_max: Farthest valid reading, metres.
@@ -53,8 +54,7 @@ class SimulatedLaser:
 
     """
 
-    def __init__(self, geometry: TrueGeometry | Sequence[Shape], *, fov: float = JACKAL_FOV,
-                 beams: int = 720, range_min: float = 0.05, range_max: float = 10.0) -> None:
+    def __init__(self, *, fov: float, beams: int, range_min: float, range_max: float) -> None:
         if not (0.0 < fov <= 2.0 * math.pi):
             msg = f'fov must be in (0, 2 pi], got {fov}'
             raise ValueError(msg)
@@ -64,8 +64,6 @@ class SimulatedLaser:
         if not (0.0 <= range_min < range_max < math.inf):
             msg = f'need 0 <= range_min < range_max < inf, got {range_min}, {range_max}'
             raise ValueError(msg)
-        self.geometry = geometry if isinstance(geometry, TrueGeometry) else TrueGeometry(
-            geometry)
         self.fov = float(fov)
         self.beams = beams
         self.range_min = float(range_min)
@@ -103,8 +101,37 @@ class SimulatedLaser:
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw)):
             msg = f'laser pose must be finite, got {tuple(pose)}'
             raise ValueError(msg)
-        ranges = self.geometry.cast((x, y), yaw + self.angle_min, self.angle_increment,
-                                    self.beams, self.range_max)
         return Scan(angle_min=self.angle_min, angle_increment=self.angle_increment,
-                    range_min=self.range_min, range_max=self.range_max, ranges=ranges,
-                    stamp=float(stamp))
+                    range_min=self.range_min, range_max=self.range_max,
+                    ranges=self._cast(x, y, yaw), stamp=float(stamp))
+
+    @abstractmethod
+    def _cast(self, x: float, y: float, yaw: float) -> np.ndarray:
+        """Return each beam's range from the finite pose (x, y, yaw), inf for no return."""
+
+
+class SimulatedLaser(BeamLayout):
+    """A planar laser scanner that sees the true world (`BeamLayout`'s conventions).
+
+    Args:
+        geometry: The world's exact obstacles, or the shapes to build them from.
+        fov: Field of view, radians (default the Jackal's 270 degrees).
+        beams: Number of beams (>= 2).
+        range_min: Closest valid reading, metres.
+        range_max: Farthest valid reading, metres.
+
+    Raises:
+        ValueError: If an option is out of range.
+
+    """
+
+    def __init__(self, geometry: TrueGeometry | Sequence[Shape], *, fov: float = JACKAL_FOV,
+                 beams: int = 720, range_min: float = 0.05, range_max: float = 10.0) -> None:
+        super().__init__(fov=fov, beams=beams, range_min=range_min, range_max=range_max)
+        self.geometry = geometry if isinstance(geometry, TrueGeometry) else TrueGeometry(
+            geometry)
+
+    def _cast(self, x: float, y: float, yaw: float) -> np.ndarray:
+        """Cast against the exact geometry (see the module docstring)."""
+        return self.geometry.cast((x, y), yaw + self.angle_min, self.angle_increment,
+                                  self.beams, self.range_max)

@@ -9,7 +9,9 @@ from pathlib import Path
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
+from nav_msgs.msg import Path as PathMsg
 import numpy as np
 import pytest
 from rclpy.serialization import serialize_message
@@ -23,6 +25,7 @@ from mpc_local_planner.core.mpc import LyapunovCase, PlanSource
 from mpc_local_planner.core.obstacles import min_clearance
 from mpc_local_planner.evaluation.analyze_bag import (
     analyze,
+    GROUND_TRUTH,
     main,
     read_run,
     recorded_world,
@@ -52,10 +55,13 @@ def steps(count: int, *, arrive: bool, start: tuple[float, float] = (0.0, 1.65)
 
 def write_bag(bag: Path, records: list[ControllerDiagnostics], *,
               world_file: Path | None = None,
-              odometry: list[tuple[float, float, float, float, float]] = ()) -> None:
+              odometry: list[tuple[float, float, float, float, float]] = (),
+              ground_truth: list[tuple[float, float, float, float, float]] = (),
+              local_plans: list[tuple[float, list[tuple[float, float]]]] = ()) -> None:
     """Write /mpc/diagnostics as bag_recorder would, with the world in the metadata if given.
 
-    odometry: (t, x, y, theta, v) messages on /odom too.
+    odometry: (t, x, y, theta, v) messages on /odom too; ground_truth: the same on the
+    simulator's ground truth; local_plans: (t, [(x, y), ...]) on /local_plan.
     """
     typestore = get_typestore(Stores.ROS2_JAZZY)
     with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
@@ -71,17 +77,30 @@ def write_bag(bag: Path, records: list[ControllerDiagnostics], *,
             msg.status = [DiagnosticStatus(message=record.message, values=[
                 KeyValue(key=k, value=v) for k, v in record.to_values()])]
             writer.write(connection, int(record.state_time * 1e9), serialize_message(msg))
-        if odometry:
-            connection = writer.add_connection('/odom', 'nav_msgs/msg/Odometry',
+        for topic, samples in (('/odom', odometry), ('/' + GROUND_TRUTH, ground_truth)):
+            if samples:
+                connection = writer.add_connection(topic, 'nav_msgs/msg/Odometry',
+                                                   typestore=typestore)
+            for t, x, y, theta, v in samples:
+                odom = Odometry()
+                odom.header.stamp = stamp(t)
+                odom.pose.pose.position.x, odom.pose.pose.position.y = x, y
+                odom.pose.pose.orientation.z = math.sin(theta / 2)
+                odom.pose.pose.orientation.w = math.cos(theta / 2)
+                odom.twist.twist.linear.x = v
+                writer.write(connection, int(round(t * 1e9)), serialize_message(odom))
+        if local_plans:
+            connection = writer.add_connection('/local_plan', 'nav_msgs/msg/Path',
                                                typestore=typestore)
-        for t, x, y, theta, v in odometry:
-            odom = Odometry()
-            odom.header.stamp = stamp(t)
-            odom.pose.pose.position.x, odom.pose.pose.position.y = x, y
-            odom.pose.pose.orientation.z = math.sin(theta / 2)
-            odom.pose.pose.orientation.w = math.cos(theta / 2)
-            odom.twist.twist.linear.x = v
-            writer.write(connection, int(round(t * 1e9)), serialize_message(odom))
+        for t, points in local_plans:
+            path = PathMsg()
+            path.header.stamp = stamp(t)
+            for x, y in points:
+                pose = PoseStamped()
+                pose.pose.position.x, pose.pose.position.y = x, y
+                pose.pose.orientation.w = 1.0
+                path.poses.append(pose)
+            writer.write(connection, int(round(t * 1e9)), serialize_message(path))
 
 
 def stamp(t: float) -> Time:
@@ -266,3 +285,28 @@ def test_the_path_length_is_the_odometrys_distance_not_the_noise_of_the_poses(
     assert metrics['path_length_source'] == 'odometry speed'
     rows = read_run(bag).rows
     assert np.sum(np.hypot(*np.diff(rows[:, 1:3], axis=0).T)) > 1.0  # what it had counted
+
+
+def test_read_run_gives_the_ground_truth_when_asked_and_every_stream_on_the_rows_clock(
+        tmp_path: Path) -> None:
+    # the run starts 10 s into the bag's clock; each solve's local plan has its stamp
+    records = [record._replace(state_time=10.0 + 0.2 * i)
+               for i, record in enumerate(steps(5, arrive=False))]
+    odometry = [(10.0 + 0.1 * k, 0.1 * k, 1.65, 0.0, 0.5) for k in range(10)]
+    truth = [(10.05 + 0.1 * k, 0.1 * k, 1.7, 0.1, 0.5) for k in range(10)]
+    plans = [(10.0 + 0.2 * i, [(0.1 * i, 1.65), (0.1 * i + 0.1, 1.65)]) for i in range(5)]
+    bag = tmp_path / 'bag'
+    write_bag(bag, records, odometry=odometry, ground_truth=truth, local_plans=plans)
+
+    assert read_run(bag).ground_truth.shape == (0, 4)  # read only when asked
+    run = read_run(bag, ground_truth_topic='/' + GROUND_TRUTH)
+    assert run.start == pytest.approx(10.0)
+    np.testing.assert_allclose(run.rows[:, 0], [0.0, 0.2, 0.4, 0.6, 0.8], atol=1e-9)
+    np.testing.assert_allclose(run.ground_truth, [(t - 10.0, x, y, theta)
+                                                  for t, x, y, theta, _ in truth], atol=1e-9)
+    np.testing.assert_allclose(run.odometry_poses, [(t - 10.0, x, y, theta)
+                                                    for t, x, y, theta, _ in odometry],
+                               atol=1e-9)
+    np.testing.assert_allclose(run.prediction_times, run.rows[:, 0], atol=1e-9)
+    assert [step.state_time for step in run.steps] == [r.state_time for r in records]
+    assert all(step.source is PlanSource.SOLVER for step in run.steps)

@@ -18,7 +18,6 @@ added.
 
 from __future__ import annotations
 
-from collections import deque
 import math
 from typing import Sequence, TYPE_CHECKING
 
@@ -27,6 +26,7 @@ import numpy as np
 
 from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.sim.commands import CommandQueue
 from mpc_local_planner.sim.physics import ODOMETRY_SOURCES
 from mpc_local_planner.sim.physics.drive import DiffDrive, WheelOdometry
 from mpc_local_planner.sim.physics.laser import PhysicsLaser
@@ -91,8 +91,7 @@ class PhysicsBase:
         self._period = 1.0 / self.robot.drive.update_rate
         self._steps = 0
         self._next_update = 0.0
-        self._commands: deque[tuple[float, np.ndarray]] = deque()
-        self._applied = np.zeros(2)
+        self._commands = CommandQueue()
         self._yaw = float(start[2])
         self._rng = np.random.default_rng(reality.seed)
         # the gyro's bias: its own draw, so the odometry noise's sequence is the same either way
@@ -113,13 +112,10 @@ class PhysicsBase:
     def command(self, u: Sequence[float], t: float | None = None) -> None:
         """Send the command u at time t (default: now); it acts from t + latency.
 
-        A non-finite command is a broken sender: it is taken as zero (stop), as `Base` does.
+        A command that is not two finite numbers is a broken sender: it is taken as zero
+        (stop), as `Base` does (`CommandQueue`).
         """
-        u = np.asarray(u, dtype=float).reshape(-1)[:2]
-        if len(u) != 2 or not np.all(np.isfinite(u)):
-            u = np.zeros(2)
-        sent = self.time if t is None else float(t)
-        self._commands.append((sent + self.reality.latency, self.model.saturate(u)))
+        self._commands.send(u, self.time if t is None else t, self.model, self.reality.latency)
 
     def stop(self, t: float | None = None) -> None:
         """Send a zero command (a command timeout, a dead controller)."""
@@ -128,7 +124,7 @@ class PhysicsBase:
     @property
     def target(self) -> np.ndarray:
         """The command that has reached the base controller."""
-        return self._applied.copy()
+        return self._commands.applied
 
     @property
     def pose(self) -> np.ndarray:
@@ -159,8 +155,8 @@ class PhysicsBase:
                 self._update(now)
                 self._next_update += self._period
             # up to the next update or command, whichever comes first, in one call
-            event = min(self._next_update, self._commands[0][0]) if self._commands \
-                else self._next_update
+            arrival = self._commands.next_arrival
+            event = self._next_update if arrival is None else min(self._next_update, arrival)
             ahead = min(int(math.ceil((event - now) / TIMESTEP - _EPS)), last - self._steps)
             ahead = max(ahead, 1)
             mujoco.mj_step(self.engine, self.data, nstep=ahead)
@@ -190,9 +186,8 @@ class PhysicsBase:
     # ------------------------------------------------------------------ inside
     def _take_commands(self, now: float) -> None:
         """Hand the commands that have arrived by now to the base controller."""
-        while self._commands and self._commands[0][0] <= now + _EPS:
-            arrival, self._applied = self._commands.popleft()
-            self.drive.receive(self._applied, arrival)
+        for arrival, u in self._commands.take(now):
+            self.drive.receive(u, arrival)
 
     def _update(self, now: float) -> None:
         """One update of the base controller: odometry from the wheels, then wheel speeds."""
