@@ -26,6 +26,7 @@ import argparse
 from dataclasses import replace
 import json
 from pathlib import Path
+import sys
 from typing import Any
 
 import numpy as np
@@ -166,8 +167,11 @@ def _print_bag_errors(bags: list[str], h: float) -> None:
           f'{head[0]:.3f} / {head[1]:.3f} / {head[2]:.3f} |', flush=True)
 
 
-def main(argv: list[str] | None = None) -> None:
-    """Print the prediction errors of each variant over the given BARN worlds (or bags)."""
+def main(argv: list[str] | None = None) -> int:
+    """Print the prediction errors of each variant over the given BARN worlds (or bags).
+
+    Returns 0, or 2 with the reason on stderr for a bag that is missing or cannot be used.
+    """
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--bag', nargs='+', default=None, metavar='BAG',
                         help="closed_loop bags (e.g. evaluate --through-nodes' runs): their "
@@ -179,8 +183,12 @@ def main(argv: list[str] | None = None) -> None:
                         help='comma-separated names of VARIANTS')
     args = parser.parse_args(argv)
     if args.bag:
-        _print_bag_errors(args.bag, args.step)
-        return
+        try:
+            _print_bag_errors(args.bag, args.step)
+        except (FileNotFoundError, ValueError) as err:
+            print(f'prediction_error: {err}', file=sys.stderr)
+            return 2
+        return 0
     worlds = parse_worlds(args.worlds)
     print('| variant | solves | position median / p95 / max (m) | '
           'heading median / p95 / max (rad) | reached | contacts |')
@@ -195,7 +203,8 @@ def main(argv: list[str] | None = None) -> None:
         print(f'| {name} | {len(e)} | {pos[0]:.3f} / {pos[1]:.3f} / {pos[2]:.3f} | '
               f'{head[0]:.3f} / {head[1]:.3f} / {head[2]:.3f} | {reached}/{len(worlds)} | '
               f'{contacts} |', flush=True)
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

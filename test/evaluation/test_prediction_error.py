@@ -49,3 +49,10 @@ def test_only_fresh_applied_plans_count(fresh: bool, reason: Reason) -> None:
 def test_relative_motion_is_the_pose_in_the_first_ones_frame() -> None:
     moved = relative_motion(np.array([1.0, 1.0, np.pi / 2]), np.array([1.0, 2.0, np.pi]))
     np.testing.assert_allclose(moved, [1.0, 0.0, np.pi / 2], atol=1e-12)
+
+
+def test_a_bag_that_is_not_there_is_a_clear_error_not_a_traceback(tmp_path, capsys) -> None:
+    from mpc_local_planner.evaluation.prediction_error import main
+
+    assert main(['--bag', str(tmp_path / 'absent')]) == 2
+    assert 'prediction_error:' in capsys.readouterr().err
