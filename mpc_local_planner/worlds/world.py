@@ -21,6 +21,12 @@ that perception has something to discover. ``World.true_shapes`` keeps the exact
 everything physically present (circles as `Circle`, not as their octagons) for the simulated
 laser and the contact check, which must not inherit the planner's conservative approximation.
 
+A world may also hold ``moving_obstacles``: circles and convex polygons, each in its own frame,
+carried along a trajectory (worlds/motion.py: constant velocity reflected off a box,
+waypoints with speeds, a sinusoid). Like unknown obstacles they are in no map and in no node's
+prior knowledge; the simulated laser and the contact check see them where they are at the
+time asked (`World.shapes_at`).
+
 Everything is validated on load. A malformed world fails here, with the file and the field in
 the message, instead of as a NaN deep inside a solver.
 """
@@ -39,6 +45,7 @@ import yaml
 from mpc_local_planner.core.errors import WorldError
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.worlds.motion import MovingObstacle, parse_trajectory, TRAJECTORY_KINDS
 
 __all__ = [
     'BARN_MARGIN',
@@ -71,6 +78,7 @@ _YAML_KEYS = frozenset(
         'name',
         'description',
         'unknown_obstacles',
+        'moving_obstacles',
     }
 )
 _BARN_KEYS = ('cylinder_radius', 'cylinders', 'start', 'goal')
@@ -136,6 +144,9 @@ class World:
             None when constructing means a circle of ``robot_radius``; after construction it is
             always a `Footprint`. A polygon sets ``robot_radius`` to its circumscribed radius
             (a different nonzero robot_radius is refused: the two would disagree).
+        moving_obstacles: Obstacles that move (worlds/motion.py), exact shapes in their own
+            frames; like unknown ones they are in no map. Not in ``true_shapes``: where they
+            are depends on the time (`shapes_at`).
 
     """
 
@@ -151,6 +162,7 @@ class World:
     unknown_obstacles: tuple[ConvexPolygon, ...] = ()
     true_shapes: tuple[Shape, ...] = ()
     footprint: Footprint | None = None
+    moving_obstacles: tuple[MovingObstacle, ...] = ()
 
     def __post_init__(self) -> None:
         """Make ``footprint`` and ``robot_radius`` describe the same robot.
@@ -181,6 +193,13 @@ class World:
         if self.true_shapes:
             return self.true_shapes
         return tuple(self.obstacles) + tuple(self.unknown_obstacles)
+
+    def shapes_at(self, t: float) -> tuple[Shape, ...]:
+        """Return the exact shapes of everything physically present at time t (seconds).
+
+        The static ones (`physical_shapes`), then each moving obstacle where it is at t.
+        """
+        return self.physical_shapes() + tuple(m.shape_at(t) for m in self.moving_obstacles)
 
     def inflated_obstacles(self, extra: float = 0.0) -> tuple[ConvexPolygon, ...]:
         """Return the obstacles inflated by the robot radius plus extra (metres)."""
@@ -230,7 +249,7 @@ def world_from_dict(data: Any, *, name: str, source: str | None = None) -> World
     Args:
         data: The parsed mapping with ``bounds``, ``obstacles``, ``start``, ``goal`` and the
             optional ``path``, ``robot_radius`` or ``footprint`` (not both),
-            ``goal_tolerance``, ``time_limit``, ``unknown_obstacles``.
+            ``goal_tolerance``, ``time_limit``, ``unknown_obstacles``, ``moving_obstacles``.
         name: Name of the world.
         source: Where the data came from, for error messages (defaults to the name).
 
@@ -256,6 +275,7 @@ def world_from_dict(data: Any, *, name: str, source: str | None = None) -> World
     unknown_obstacles, unknown_shapes = _obstacles(
         data.get('unknown_obstacles') or [], where, key='unknown_obstacles'
     )
+    moving = _moving_obstacles(data.get('moving_obstacles') or [], bounds, where)
     start = _vector(data['start'], 3, 'start', where)
     goal = _vector(data['goal'], 3, 'goal', where)
     robot_radius = _number(data.get('robot_radius', 0.0), 'robot_radius', where, minimum=0.0)
@@ -282,6 +302,7 @@ def world_from_dict(data: Any, *, name: str, source: str | None = None) -> World
         time_limit=time_limit,
         unknown_obstacles=unknown_obstacles,
         true_shapes=known_shapes + unknown_shapes,
+        moving_obstacles=moving,
     )
 
 
@@ -403,7 +424,19 @@ def _make_world(*, name: str, where: str, **fields: Any) -> World:
                     where,
                     f'{label} ({pose[0]:g}, {pose[1]:g}) is inside unknown obstacle {index}',
                 )
+        if label == 'start':
+            for index, moving in enumerate(world.moving_obstacles):
+                if _shape_contains(moving.shape_at(0.0), pose[:2]):
+                    _fail(where, f'start ({pose[0]:g}, {pose[1]:g}) is inside moving '
+                                 f'obstacle {index} at t = 0')
     return world
+
+
+def _shape_contains(shape: Shape, point: np.ndarray) -> bool:
+    """Say whether the point lies in the shape (boundary included)."""
+    if isinstance(shape, ConvexPolygon):
+        return bool(shape.contains(point)[0])
+    return math.hypot(point[0] - shape.x, point[1] - shape.y) <= shape.radius
 
 
 def _fail(where: str, problem: str) -> NoReturn:
@@ -509,3 +542,54 @@ def _obstacles(
             msg = f'{where}: {what}: {err}'
             raise WorldError(msg) from None
     return tuple(obstacles), tuple(shapes)
+
+
+def _moving_obstacles(value: Any, bounds: tuple[float, float, float, float],
+                      where: str) -> tuple[MovingObstacle, ...]:
+    """Parse ``moving_obstacles``: each a shape (circle or polygon) and one trajectory.
+
+    The shape is in the obstacle's own frame; the trajectory (worlds/motion.py) moves that
+    frame's origin. Problems name the entry (``moving_obstacles[i]``) and the key.
+    """
+    if not isinstance(value, list):
+        _fail(where, f'moving_obstacles must be a list, got {type(value).__name__}')
+    moving: list[MovingObstacle] = []
+    for index, item in enumerate(value):
+        what = f'moving_obstacles[{index}]'
+        if not isinstance(item, dict):
+            _fail(where, f'{what} must be a mapping with a shape (circle or polygon) and a '
+                         f'trajectory ({", ".join(TRAJECTORY_KINDS)}), got {item!r}')
+        extra = sorted(str(k) for k in set(item) - {'circle', 'polygon', *TRAJECTORY_KINDS})
+        if extra:
+            _fail(where, f'{what}: unknown key(s) {extra}; a shape (circle or polygon) and a '
+                         f'trajectory ({", ".join(TRAJECTORY_KINDS)})')
+        shapes = [k for k in ('circle', 'polygon') if k in item]
+        kinds = [k for k in TRAJECTORY_KINDS if k in item]
+        if len(shapes) != 1:
+            _fail(where, f'{what} needs exactly one shape, circle or polygon, got {shapes}')
+        if len(kinds) != 1:
+            _fail(where, f'{what} needs exactly one trajectory '
+                         f'({", ".join(TRAJECTORY_KINDS)}), got {kinds}')
+        try:
+            if shapes[0] == 'circle':
+                x, y, r = _vector(item['circle'], 3, f'{what}.circle', where)
+                ConvexPolygon.from_circle(x, y, r)  # the same checks as a static circle's
+                shape: Shape = Circle(float(x), float(y), float(r))
+            else:
+                spec = item['polygon']
+                if not isinstance(spec, list) or len(spec) < 3:
+                    _fail(where, f'{what}.polygon needs a list of >= 3 [x, y], got {spec!r}')
+                shape = ConvexPolygon.from_vertices(
+                    [_vector(v, 2, f'{what}.polygon[{i}]', where) for i, v in enumerate(spec)])
+        except ValueError as err:
+            if isinstance(err, WorldError):
+                raise
+            msg = f'{where}: {what}.{shapes[0]}: {err}'
+            raise WorldError(msg) from None
+        try:
+            trajectory = parse_trajectory(kinds[0], item[kinds[0]], shape, bounds)
+        except ValueError as err:
+            msg = f'{where}: {what}: {err}'
+            raise WorldError(msg) from None
+        moving.append(MovingObstacle(shape, trajectory))
+    return tuple(moving)

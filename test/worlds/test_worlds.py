@@ -54,7 +54,7 @@ def write_yaml(tmp_path: Path, data: Any, name: str = 'world.yaml') -> Path:
 
 
 @pytest.mark.parametrize('name', ['paper_obstacle', 'corridor_turn', 'rrt_cluttered',
-                                  'unknown_box', 'narrow_gap'])
+                                  'unknown_box', 'narrow_gap', 'moving_crossing'])
 def test_every_shipped_world_loads_with_start_and_goal_in_free_space(name: str) -> None:
     world = load_world(WORLDS / f'{name}.yaml')
 
