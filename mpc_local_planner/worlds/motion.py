@@ -21,14 +21,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
-from typing import Any, NamedTuple, TYPE_CHECKING
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
 from mpc_local_planner.core.obstacles import ConvexPolygon
-
-if TYPE_CHECKING:
-    from mpc_local_planner.worlds.world import Shape
 
 __all__ = [
     'ConstantVelocity',
@@ -45,6 +42,20 @@ __all__ = [
 TRAJECTORY_KINDS = ('constant_velocity', 'waypoints', 'sinusoid')
 #: The ways round a waypoint polyline.
 WAYPOINT_MODES = ('loop', 'back_and_forth')
+
+
+class Disk(Protocol):
+    """What a moving disk needs of worlds/world.py's `Circle` (world.py imports this module)."""
+
+    x: float
+    y: float
+    radius: float
+
+    def _replace(self, **fields: float) -> Disk: ...
+
+
+#: A shape in its own frame: a convex polygon or a `Circle`.
+Shape = ConvexPolygon | Disk
 
 
 @dataclass(frozen=True, eq=False)
