@@ -63,6 +63,7 @@ from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
 from mpc_local_planner.perception.scans import Scan
 from mpc_local_planner.sim.base import Base
 from mpc_local_planner.sim.laser import JACKAL_FOV, SimulatedLaser
+from mpc_local_planner.sim.moving import WorldClock
 from mpc_local_planner.sim.scan_channel import ScanChannel
 from mpc_local_planner.worlds.map_files import OccupancyMap
 
@@ -163,7 +164,8 @@ class Navigator:
         reach: How far from the robot obstacles can matter to its next command, metres
             (core/controllers.py `Built.reach`): the obstacles it and the re-planner get
             are those within reach plus settings.sensing_margin.
-        geometry: The true world (known and unknown obstacles) the laser scans.
+        geometry: The true world (known and unknown obstacles) the laser scans; a
+            `WorldClock` for a world whose obstacles move (scanned as they are at each t).
         grid: The planner's grid (the map the robot is given, empty for no prior map),
             inflated by the planner's robot_radius + clearance.
         planner: The planner on that grid (RrtStarPlanner.on_grid(grid, ...)).
@@ -182,7 +184,8 @@ class Navigator:
 
     """
 
-    def __init__(self, local: LocalController, geometry: TrueGeometry, grid: PlanningGrid,
+    def __init__(self, local: LocalController, geometry: TrueGeometry | WorldClock,
+                 grid: PlanningGrid,
                  planner: RrtStarPlanner, goal: np.ndarray, *, reach: float, h: float,
                  faces: int = 8,
                  known_map: OccupancyMap | None = None,

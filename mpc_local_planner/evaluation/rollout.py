@@ -31,6 +31,12 @@ stop rule and contacts judge the truth; the controller never sees it). h is then
 period (1 / control_frequency), and stall_steps counts periods of stall_period seconds
 (StopRule.stall_period), so that a stall lasts as long in seconds at any control rate.
 
+In a world with moving obstacles the clearance depends on the time too: ``clearance_at(x, t)``
+replaces ``clearance`` in rule 1, and the run's contact is told apart as the simulator tells
+it (sim/moving.py): ACTIVE when the robot was moving into it (a real base's true velocity,
+else the input applied since the last step), PASSIVE when it stood still and an obstacle ran
+into it (`Rollout.contact`).
+
 Odometry that drifts is not the pose in ``map``, where the plan and the obstacles are: the
 nodes then compose it with a localizer's poses (perception/localization.py), and so does the
 rollout given a `Localizer` (sim/localizer.py, the simulator's stand-in for AMCL): at each
@@ -61,6 +67,7 @@ from mpc_local_planner.core.mpc.compilation import compile_wait_seconds
 from mpc_local_planner.core.paths import wrap_angle
 from mpc_local_planner.evaluation.trajectory import trajectory_row
 from mpc_local_planner.perception.localization import LocalizedPose
+from mpc_local_planner.sim.moving import contact_kind, ContactKind
 
 if TYPE_CHECKING:
     from mpc_local_planner.core.mpc import MpcSolution
@@ -83,6 +90,7 @@ __all__ = [
     'STALL_INPUT',
     'STALL_STEPS',
     'StopRule',
+    'TimedClearance',
 ]
 
 # The MPC budget of the evaluation suites (SolverSettings.budget): solver iterations, the
@@ -97,6 +105,8 @@ STALL_STEPS = 25
 ODOM_HISTORY = 2.0
 
 Clearance = Callable[[np.ndarray], np.ndarray]
+# The clearance of a pose (3,) at a time t, for a world whose obstacles move.
+TimedClearance = Callable[[np.ndarray, float], float]
 
 
 class Outcome(enum.Enum):
@@ -258,6 +268,7 @@ class Rollout(NamedTuple):
             a wait for an NLP's compilation, compilation.compile_wait_seconds).
         h: the step length, seconds.
         note: why the controller stopped (STOPPED), else ''.
+        contact: who caused the contact that ended the run (COLLISION), else None.
 
     """
 
@@ -267,6 +278,7 @@ class Rollout(NamedTuple):
     step_times: np.ndarray
     h: float
     note: str = ''
+    contact: ContactKind | None = None
 
     @property
     def reached(self) -> bool:
@@ -304,6 +316,7 @@ def rollout(
     rule: StopRule,
     clearance: Clearance | None = None,
     localizer: Localizer | None = None,
+    clearance_at: TimedClearance | None = None,
 ) -> Rollout:
     """Run controller and model in closed loop until the stop rule ends the run.
 
@@ -322,6 +335,8 @@ def rollout(
         localizer: with a real base, the localizer whose poses correct odometry (the
             controller gets the pose in map, see the module docstring); None: the controller
             gets odometry as it is.
+        clearance_at: (pose (3,), t) -> clearance at time t, for a world whose obstacles
+            move; replaces clearance in the stop rule.
 
     Returns:
         The outcome, the rows and the controller's answers.
@@ -345,7 +360,8 @@ def rollout(
     steps: list[ControlStep] = []
     step_times: list[float] = []
     still = 0
-    outcome, note = Outcome.TIME_LIMIT, ''
+    outcome, note, kind = Outcome.TIME_LIMIT, '', None
+    moved = np.zeros(2)  # the input that brought the ideal plant to x (none at the start)
     for k in range(last + 1):
         t = k * h
         measured = x if base is None else _measure(base, t, localizer, located)
@@ -367,8 +383,12 @@ def rollout(
         steps.append(answer)
         rows.append(trajectory_row(t, x, u, s=answer.s, value=answer.value,
                                    solve_ms=answer.solve_time_s * 1e3))
-        if clearance is not None and clearance(x[None, :3])[0] <= 0.0:
+        touching = (clearance_at(x[:3], t) <= 0.0 if clearance_at is not None
+                    else clearance is not None and clearance(x[None, :3])[0] <= 0.0)
+        if touching:
             outcome = Outcome.COLLISION
+            v, omega = (float(c) for c in (base.velocity if base is not None else moved))
+            kind = contact_kind(v, omega)
             break
         if rule.reached(x, goal):
             outcome = Outcome.REACHED
@@ -384,12 +404,14 @@ def rollout(
             break
         if base is None:
             x = np.asarray(model.step(x, u, h), dtype=float)
+            moved = u
         else:
             base.command(u, t)
             base.advance(t + h)
             x = base.pose.copy()
     return Rollout(outcome=outcome, rows=np.array(rows, dtype=float), steps=tuple(steps),
-                   step_times=np.array(step_times, dtype=float), h=float(h), note=note)
+                   step_times=np.array(step_times, dtype=float), h=float(h), note=note,
+                   contact=kind)
 
 
 def _measure(base: Base, t: float, localizer: Localizer | None,

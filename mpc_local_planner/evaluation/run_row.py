@@ -51,6 +51,8 @@ class RunRow:
         plan_s_max: Longest planning, seconds.
         name: The world's name.
         reality: How real the robot was (sim/reality.py preset; navigation runs).
+        active_contacts: Of contacts, 1 if the robot was moving into it (navigation runs).
+        passive_contacts: Of contacts, 1 if it stood still and an obstacle ran into it.
 
     """
 
@@ -82,6 +84,8 @@ class RunRow:
     plan_s_max: float | None = None
     name: str = ''
     reality: str = ''
+    active_contacts: int | None = None
+    passive_contacts: int | None = None
 
     @property
     def key(self) -> tuple[int, ControllerName]:

@@ -14,6 +14,11 @@ follow the same kind of re-planned paths:
   time limit (100 s) with no contact of the true footprint with the true cylinders.
 - ``worlds``: every world YAML of a folder, known and unknown obstacles as the files say.
 
+A world's ``moving_obstacles`` move in the run's time (sim/moving.py `WorldClock`, as in the
+simulator node): the laser sees them where they are at each scan, the contact check where
+they are at each step, and a contact is counted as active (the robot moving) or passive (it
+stood still and an obstacle ran into it).
+
 Without ``--sensing`` (``worlds`` only) the laser is off: the controller and the planner know
 the map of the known obstacles and nothing else.
 
@@ -60,7 +65,9 @@ from mpc_local_planner.evaluation.rollout import (
 from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.perception.raycast import TrueGeometry
 from mpc_local_planner.sim.base import Base
+from mpc_local_planner.sim.contact import footprint_distances
 from mpc_local_planner.sim.localizer import Localizer
+from mpc_local_planner.sim.moving import ContactKind, WorldClock
 from mpc_local_planner.sim.physics import make_physics_base, PLANTS
 from mpc_local_planner.sim.reality import POSE_ERROR, Reality, reality_preset
 from mpc_local_planner.worlds.map_files import OccupancyMap, rasterize_world
@@ -400,6 +407,8 @@ class SensingResult:
     contacts: int
     min_clearance: float
     note: str = ''
+    active_contacts: int = 0
+    passive_contacts: int = 0
 
 
 def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool = True,
@@ -440,7 +449,8 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
             this reality, whose latency and odometry noise it adds).
 
     Raises:
-        ValueError: for a plant that is not one of sim/physics PLANTS.
+        ValueError: for a plant that is not one of sim/physics PLANTS, or the mujoco plant
+            in a world with moving obstacles (its bodies do not move).
         RuntimeError: for the mujoco plant when MuJoCo is not installed.
 
     """
@@ -448,6 +458,10 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
         reality = reality_preset(reality)
     if plant not in PLANTS:
         msg = f'unknown plant {plant!r}; choose one of {", ".join(PLANTS)}'
+        raise ValueError(msg)
+    if plant == 'mujoco' and world.moving_obstacles:
+        msg = (f'{world.name}: the mujoco plant does not move obstacles; run a world with '
+               f'moving_obstacles on the kinematic plant')
         raise ValueError(msg)
     physics = plant == 'mujoco'
     real = not reality.ideal or physics
@@ -467,7 +481,10 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
             if real else None
     period = 1.0 / CONTROL_FREQUENCY if real else h
     settings = NavigationSettings(sense=sensing, scan_period=SCAN_PERIOD if real else None)
-    navigator = Navigator(local.controller, TrueGeometry(world.physical_shapes()), grid,
+    clock = WorldClock.from_world(world) if world.moving_obstacles else None
+    navigator = Navigator(local.controller,
+                          clock if clock is not None else TrueGeometry(world.physical_shapes()),
+                          grid,
                           planner, world.goal, reach=local.reach, h=period,
                           known_map=known if world.obstacles else None,
                           settings=settings, footprint=robot.footprint, base=base)
@@ -485,12 +502,22 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
     # nodes (its poses seeded per run, as the base's)
     drifts = real and not reality.ideal_base
     localizer = Localizer(seed=seed) if drifts and localized is not False else None
+    clearance_at = None
+    if clock is not None:
+        def clearance_at(pose: np.ndarray, t: float) -> float:
+            return float(footprint_distances(clock.at(t), robot.footprint, pose[None, :3])[0])
     run = rollout(navigator, base if base is not None else model, world.start, world.goal,
-                  h=period, rule=rule, clearance=clearance, localizer=localizer)
-    closest = float(np.min(clearance(run.rows[:, 1:4])))
-    return SensingResult(run=run, navigator=navigator,
-                         contacts=int(run.outcome is Outcome.COLLISION or closest <= 0.0),
-                         min_clearance=closest)
+                  h=period, rule=rule, clearance=clearance, localizer=localizer,
+                  clearance_at=clearance_at)
+    if clearance_at is None:
+        closest = float(np.min(clearance(run.rows[:, 1:4])))
+    else:
+        closest = min(clearance_at(row[1:4], float(row[0])) for row in run.rows)
+    contacts = int(run.outcome is Outcome.COLLISION or closest <= 0.0)
+    passive = int(run.contact is ContactKind.PASSIVE)
+    return SensingResult(run=run, navigator=navigator, contacts=contacts,
+                         min_clearance=closest, active_contacts=contacts - passive,
+                         passive_contacts=passive)
 
 
 def result_fields(result: SensingResult) -> dict[str, Any]:
@@ -500,6 +527,8 @@ def result_fields(result: SensingResult) -> dict[str, Any]:
     plans = np.asarray(log.plan_seconds if log else [], dtype=float)
     return {
         'contacts': result.contacts,
+        'active_contacts': result.active_contacts,
+        'passive_contacts': result.passive_contacts,
         'replans': log.replans if log else 0,
         'replan_failures': log.replan_failures if log else 0,
         'step_ms_median': float(np.median(control)) if len(control) else math.nan,

@@ -10,6 +10,9 @@ remaining disk is paired only with the beams whose angles fall inside the cone i
 from the laser. The exact intersection (analytic for disks, Cyrus-Beck style for polygon
 edges) is then one NumPy expression over those (beam, obstacle) pairs, and each beam keeps its
 nearest hit. Beams that hit nothing are ``inf`` (REP 117), not range_max.
+
+Given a `WorldClock` (sim/moving.py), the laser casts against the world as it is at the scan's
+stamp: moving obstacles are seen where they are at that time.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import numpy as np
 
 from mpc_local_planner.perception.raycast import TrueGeometry
 from mpc_local_planner.perception.scans import Scan
+from mpc_local_planner.sim.moving import WorldClock
 
 if TYPE_CHECKING:
     from mpc_local_planner.worlds.world import Shape
@@ -114,7 +118,8 @@ class SimulatedLaser(BeamLayout):
     """A planar laser scanner that sees the true world (`BeamLayout`'s conventions).
 
     Args:
-        geometry: The world's exact obstacles, or the shapes to build them from.
+        geometry: The world's exact obstacles, or the shapes to build them from, or a
+            `WorldClock` (the world at each scan's stamp: moving obstacles where they are).
         fov: Field of view, radians (default the Jackal's 270 degrees).
         beams: Number of beams (>= 2).
         range_min: Closest valid reading, metres.
@@ -125,11 +130,24 @@ class SimulatedLaser(BeamLayout):
 
     """
 
-    def __init__(self, geometry: TrueGeometry | Sequence[Shape], *, fov: float = JACKAL_FOV,
-                 beams: int = 720, range_min: float = 0.05, range_max: float = 10.0) -> None:
+    def __init__(self, geometry: TrueGeometry | WorldClock | Sequence[Shape], *,
+                 fov: float = JACKAL_FOV, beams: int = 720, range_min: float = 0.05,
+                 range_max: float = 10.0) -> None:
         super().__init__(fov=fov, beams=beams, range_min=range_min, range_max=range_max)
+        self.clock = geometry if isinstance(geometry, WorldClock) else None
+        if isinstance(geometry, WorldClock):
+            geometry = geometry.static
         self.geometry = geometry if isinstance(geometry, TrueGeometry) else TrueGeometry(
             geometry)
+
+    def scan(self, pose: Sequence[float], *, stamp: float = 0.0) -> Scan:
+        """Cast every beam from the laser's pose at time stamp (see `BeamLayout.scan`).
+
+        With a `WorldClock` the world is the one at stamp (moving obstacles where they are).
+        """
+        if self.clock is not None:
+            self.geometry = self.clock.at(float(stamp))
+        return super().scan(pose, stamp=stamp)
 
     def _cast(self, x: float, y: float, yaw: float) -> np.ndarray:
         """Cast against the exact geometry (see the module docstring)."""
