@@ -47,7 +47,16 @@ beam hits nothing, per REP 117). Each tick it checks the robot's TRUE footprint 
 (x, y, theta) against the true world and counts contact EPISODES (entering contact counts one;
 staying in contact does not): ``simulator/contacts`` (std_msgs/UInt32, latched) carries the
 count, published at start with 0 and again at every new contact, and the first contact is
-logged as an ERROR.
+logged as an ERROR. Each episode is also counted as active (the robot's TRUE motion above
+sim/moving.py's ACTIVE_SPEED or ACTIVE_TURN_RATE as it began: it drove into something) or
+passive (it stood still and a moving obstacle ran into it), on ``simulator/active_contacts``
+and ``simulator/passive_contacts`` (latched likewise; their sum is the total).
+
+The world's ``moving_obstacles`` move in simulated time (the ticks' sim_time, closed form in
+t: worlds/motion.py): the laser sees them, and the contact check touches them, where they are
+at the tick's time; at every scan period they go out on ``simulator/moving_obstacles``
+(visualization_msgs/MarkerArray in ``localizer.global_frame``: disks as cylinders, polygons as
+outlines) for RViz. No node of the robot's is told of them.
 
 The footprint, first that applies (Nav2's names; a polygon wins over a radius, as in Nav2):
 
@@ -74,7 +83,8 @@ odometry of the same instant).
 With ``plant: mujoco`` (the [physics] extra; refused with the reason without it) the robot
 is sim/physics/'s rigid body (``physics.robot``): the same calls, but wheels, slip and
 the base controller's limits between cmd_vel and the motion, odometry from the wheels, and
-the laser cast by the engine.
+the laser cast by the engine. Its bodies do not move: a world with moving obstacles is
+refused on it (the node exits with the reason).
 """
 
 from __future__ import annotations
@@ -96,13 +106,15 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import LaserScan
-from std_msgs.msg import UInt32
+from std_msgs.msg import ColorRGBA, UInt32
+from visualization_msgs.msg import Marker, MarkerArray
 
 from mpc_local_planner.core.footprint import Footprint, parse_footprint, resolve
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.perception.raycast import TrueGeometry
+from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.perception.scans import Scan
 from mpc_local_planner.ros.conversions import (
+    polygon_marker,
     seconds_to_stamp,
     state_to_odometry,
     u_from_twist,
@@ -120,11 +132,14 @@ from mpc_local_planner.ros.qos import (
 )
 from mpc_local_planner.ros.throttle import ProblemThrottle
 from mpc_local_planner.ros.unicycle_simulator_parameters import (
+    ACTIVE_CONTACTS_TOPIC,
     CONTACTS_TOPIC,
     GROUND_TRUTH_TOPIC,
     LOCALIZER_TOPIC,
     LOCKSTEP_STALLS_TOPIC,
+    MOVING_OBSTACLES_TOPIC,
     PARAMETERS,
+    PASSIVE_CONTACTS_TOPIC,
     reality_from_parameters,
     REALITY_PARAMETERS,
     SCAN_RANGE_MIN,
@@ -134,6 +149,7 @@ from mpc_local_planner.ros.unicycle_simulator_parameters import (
 from mpc_local_planner.sim.base import Base
 from mpc_local_planner.sim.contact import contact
 from mpc_local_planner.sim.laser import SimulatedLaser
+from mpc_local_planner.sim.moving import ContactCounter, ContactKind, WorldClock
 from mpc_local_planner.sim.physics import make_physics_base
 from mpc_local_planner.sim.reality import Reality
 from mpc_local_planner.sim.scan_channel import ScanChannel
@@ -169,6 +185,9 @@ SCAN_PUBLISHER_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE
 _TICK_EPS = 1e-9
 _SCAN_PARAMETERS = frozenset({'scan.fov', 'scan.beams', 'scan.range_max'})
 _FOOTPRINT_PARAMETERS = frozenset({'footprint', 'robot_radius'})
+# The moving obstacles' markers: colour, and the cylinders' height (m).
+_MOVING_RGBA = (0.9, 0.4, 0.1, 0.8)
+_MOVING_HEIGHT = 0.5
 
 SUMMARY = ('Simulate a robot base driven by cmd_vel (Twist, or TwistStamped with '
            'enable_stamped_cmd_vel) with saturation, and as real as the reality parameter '
@@ -235,10 +254,14 @@ class UnicycleSimulatorNode(Node):
         self._last_tick: float | None = None
         self._problems = ProblemThrottle(2.0)
         self._world = _load_true_world(str(self.get_parameter('world_file').value))
-        self._geometry = TrueGeometry.from_world(self._world) if self._world else TrueGeometry(
-            [])
+        # the true world at each tick's time (moving obstacles where they are then)
+        self._world_clock = WorldClock.from_world(self._world)
         self._footprint = self._read_footprint()
         if self.get_parameter('plant').value == 'mujoco':  # validated: MuJoCo is installed
+            if self._world_clock.moving:
+                msg = (f'plant mujoco: the world {self._world.name!r} has moving_obstacles, '
+                       f'which its bodies cannot follow; use plant kinematic')
+                raise ValueError(msg)
             self._base = make_physics_base(
                 self._model, reality, pose, robot=str(self.get_parameter('physics.robot').value),
                 footprint=self._footprint,
@@ -250,8 +273,7 @@ class UnicycleSimulatorNode(Node):
         self._localizer_phase = 0.0
         self._localizer_rng = np.random.default_rng(
             int(self.get_parameter('localizer.seed').value))
-        self._in_contact = False
-        self._contacts = 0
+        self._contact_counter = ContactCounter()
         self._laser = self._make_laser()
         self._odom_pub = self.create_publisher(Odometry, 'odom', ODOM_QOS)
         self._scan_pub = self.create_publisher(LaserScan, SCAN_TOPIC, SCAN_PUBLISHER_QOS)
@@ -259,7 +281,13 @@ class UnicycleSimulatorNode(Node):
         self._truth_pub = self.create_publisher(Odometry, GROUND_TRUTH_TOPIC, ODOM_QOS)
         self._localizer_pub = self.create_publisher(PoseWithCovarianceStamped, LOCALIZER_TOPIC,
                                                     LOCALIZER_QOS)
-        self._contacts_pub.publish(UInt32(data=0))
+        self._active_pub = self.create_publisher(UInt32, ACTIVE_CONTACTS_TOPIC, CONTACTS_QOS)
+        self._passive_pub = self.create_publisher(UInt32, PASSIVE_CONTACTS_TOPIC, CONTACTS_QOS)
+        self._moving_pub = self.create_publisher(MarkerArray, MOVING_OBSTACLES_TOPIC,
+                                                 SCAN_PUBLISHER_QOS) \
+            if self._world_clock.moving else None
+        for publisher in (self._contacts_pub, self._active_pub, self._passive_pub):
+            publisher.publish(UInt32(data=0))
         self._clock_pub = self.create_publisher(ClockMsg, 'clock', CLOCK_QOS)
         cmd_type = TwistStamped if self.get_parameter('enable_stamped_cmd_vel').value else Twist
         self._cmd_sub = self.create_subscription(cmd_type, 'cmd_vel', self.cmd_vel_callback,
@@ -353,7 +381,7 @@ class UnicycleSimulatorNode(Node):
                                     beams=int(self.get_parameter('scan.beams').value),
                                     range_min=SCAN_RANGE_MIN,
                                     range_max=float(self.get_parameter('scan.range_max').value))
-        return SimulatedLaser(self._geometry, fov=float(self.get_parameter('scan.fov').value),
+        return SimulatedLaser(self._world_clock, fov=float(self.get_parameter('scan.fov').value),
                               beams=int(self.get_parameter('scan.beams').value),
                               range_min=SCAN_RANGE_MIN,
                               range_max=float(self.get_parameter('scan.range_max').value))
@@ -424,8 +452,22 @@ class UnicycleSimulatorNode(Node):
 
     @property
     def contacts(self) -> int:
-        """Contact episodes with the true world so far."""
-        return self._contacts
+        """Contact episodes with the true world so far (active + passive)."""
+        return self._contact_counter.total
+
+    @property
+    def active_contacts(self) -> int:
+        """Contact episodes that began with the robot moving."""
+        return self._contact_counter.active
+
+    @property
+    def passive_contacts(self) -> int:
+        """Contact episodes that began with the robot standing still (it was run into)."""
+        return self._contact_counter.passive
+
+    def moving_obstacles_at(self, t: float) -> tuple[Any, ...]:
+        """Return the world's moving obstacles' shapes at simulated time t."""
+        return self._world_clock.shapes_at(t)
 
     @property
     def robot_radius(self) -> float:
@@ -600,22 +642,27 @@ class UnicycleSimulatorNode(Node):
     def _check_contact(self) -> None:
         """Count a contact episode when the robot's footprint starts touching the true world."""
         x, y, theta = (float(v) for v in self._base.pose[:3])
-        touching = contact(self._geometry, x, y, self._footprint, theta)
-        if touching and not self._in_contact:
-            self._contacts += 1
-            self._contacts_pub.publish(UInt32(data=self._contacts))
+        touching = contact(self._world_clock.at(self._sim_time), x, y, self._footprint, theta)
+        v, omega = (float(c) for c in self._base.velocity[:2])
+        counter = self._contact_counter
+        kind = counter.update(touching, v, omega)
+        if kind is not None:
+            self._contacts_pub.publish(UInt32(data=counter.total))
+            if kind is ContactKind.ACTIVE:
+                self._active_pub.publish(UInt32(data=counter.active))
+            else:
+                self._passive_pub.publish(UInt32(data=counter.passive))
             where = f'({x:.3f}, {y:.3f}, heading {theta:.3f} rad)'
-            if self._contacts == 1:
+            if counter.total == 1:
                 robot = (f'radius {self._footprint.radius:g} m' if self._footprint.is_circle
                          else f'footprint {self._footprint.vertices.tolist()}')
                 self.get_logger().error(
-                    f'contact: the robot ({robot}) touches an obstacle at '
+                    f'contact ({kind.value}): the robot ({robot}) touches an obstacle at '
                     f'{where}, {self._sim_time:.2f} s simulated')
             else:
                 self.get_logger().warning(
-                    f'contact episode {self._contacts} at {where}, '
+                    f'contact episode {counter.total} ({kind.value}) at {where}, '
                     f'{self._sim_time:.2f} s simulated')
-        self._in_contact = touching
 
     def _publish_scan(self, stamp: Any) -> None:
         """Cast and publish a scan if a scan period ended during this tick.
@@ -626,12 +673,40 @@ class UnicycleSimulatorNode(Node):
         if self._scan_phase < 1.0 - _TICK_EPS:
             return
         self._scan_phase = max(0.0, self._scan_phase - math.floor(self._scan_phase + _TICK_EPS))
+        self._publish_moving_obstacles(stamp)
         if self._scan_channel.lost():
             return
-        scan = self._laser.scan(self._base.pose)
+        scan = self._laser.scan(self._base.pose, stamp=self._sim_time)
         scan = scan._replace(ranges=self._scan_channel.corrupt(scan.ranges, scan.range_max))
         self._scan_pub.publish(laser_scan_msg(
             scan, frame_id=str(self.get_parameter('robot_base_frame').value), stamp=stamp))
+
+    def _publish_moving_obstacles(self, stamp: Any) -> None:
+        """Publish the moving obstacles where they are now (disks as cylinders)."""
+        if self._moving_pub is None:
+            return
+        frame = str(self.get_parameter('localizer.global_frame').value)
+        markers = []
+        for index, shape in enumerate(self._world_clock.shapes_at(self._sim_time)):
+            if isinstance(shape, ConvexPolygon):
+                markers.append(polygon_marker(shape.vertices, ns='moving', marker_id=index,
+                                              frame_id=frame, stamp=stamp,
+                                              rgba=_MOVING_RGBA, width=0.05))
+                continue
+            marker = Marker()
+            marker.header.frame_id = frame
+            marker.header.stamp = stamp
+            marker.ns, marker.id = 'moving', index
+            marker.type, marker.action = Marker.CYLINDER, Marker.ADD
+            marker.pose.position.x, marker.pose.position.y = float(shape.x), float(shape.y)
+            marker.pose.position.z = 0.5 * _MOVING_HEIGHT
+            marker.pose.orientation.w = 1.0
+            marker.scale.x = marker.scale.y = 2.0 * float(shape.radius)
+            marker.scale.z = _MOVING_HEIGHT
+            marker.color = ColorRGBA(r=_MOVING_RGBA[0], g=_MOVING_RGBA[1], b=_MOVING_RGBA[2],
+                                     a=_MOVING_RGBA[3])
+            markers.append(marker)
+        self._moving_pub.publish(MarkerArray(markers=markers))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -19,7 +19,8 @@ from mpc_local_planner.sim.localizer import LOCALIZER_NOISE
 from mpc_local_planner.sim.physics import mujoco_missing, ODOMETRY_SOURCES, PHYSICS_ROBOTS, PLANTS
 from mpc_local_planner.sim.reality import Reality, reality_preset, REALITY_PRESETS
 
-__all__ = ['CONTACTS_TOPIC', 'FROM_PRESET', 'GROUND_TRUTH_TOPIC', 'LOCALIZER_TOPIC',
+__all__ = ['ACTIVE_CONTACTS_TOPIC', 'CONTACTS_TOPIC', 'MOVING_OBSTACLES_TOPIC',
+           'PASSIVE_CONTACTS_TOPIC', 'FROM_PRESET', 'GROUND_TRUTH_TOPIC', 'LOCALIZER_TOPIC',
            'LOCKSTEP_STALLS_TOPIC', 'MAX_SCAN_BEAMS', 'PARAMETERS',
            'REALITY_PARAMETERS', 'SCAN_RANGE_MIN', 'SCAN_TOPIC', 'reality_from_parameters',
            'validate_simulator_parameters']
@@ -30,6 +31,12 @@ _MODEL = Unicycle()  # the single source of the saturation defaults
 # localizer stand-in's, as AMCL's.
 SCAN_TOPIC = 'scan'
 CONTACTS_TOPIC = 'simulator/contacts'
+# Of those, the ones that began with the robot moving and with it standing still (an obstacle
+# ran into it), latched like the total.
+ACTIVE_CONTACTS_TOPIC = 'simulator/active_contacts'
+PASSIVE_CONTACTS_TOPIC = 'simulator/passive_contacts'
+# Where the world's moving obstacles are (visualization_msgs/MarkerArray at the scan rate).
+MOVING_OBSTACLES_TOPIC = 'simulator/moving_obstacles'
 # The TRUE pose and velocity (a referee's view, as Gazebo's p3d plugin gives it), in the
 # localizer's global frame: no node of the robot's may read it.
 GROUND_TRUTH_TOPIC = 'simulator/ground_truth'
