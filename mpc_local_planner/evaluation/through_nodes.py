@@ -70,7 +70,11 @@ def claimed_domain() -> Iterator[int]:
 
 
 def world_yaml(world: World, path: Path) -> Path:
-    """Write world as a world file (its obstacles as they are: circles stay circles)."""
+    """Write world as a world file (its obstacles as they are: circles stay circles).
+
+    Moving obstacles are written as the file gave them (their shape in its own frame and
+    their trajectory), so the simulator moves them as the rollout does.
+    """
     def shape(item: Any) -> dict[str, Any]:
         if isinstance(item, Circle):
             return {'circle': [float(item.x), float(item.y), float(item.radius)]}
@@ -86,6 +90,10 @@ def world_yaml(world: World, path: Path) -> Path:
         'start': [float(v) for v in world.start],
         'goal': [float(v) for v in world.goal],
     }
+    if world.moving_obstacles:
+        data['moving_obstacles'] = [dict([next(iter(shape(m.shape).items())),
+                                          m.trajectory.spec()])
+                                    for m in world.moving_obstacles]
     if world.footprint.is_circle:
         data['robot_radius'] = float(world.robot_radius)
     else:

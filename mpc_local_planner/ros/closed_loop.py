@@ -24,7 +24,8 @@ simulator stops the robot after ``cmd_timeout``, then the new controller gets ``
 started again, and at most MAX_RESPAWNS restarts happen per run.
 
 The simulator always holds the TRUE world (the world file's known and unknown obstacles) and
-counts contact episodes on ``simulator/contacts``; ``metrics.json`` reports ``contacts`` and a
+counts contact episodes on ``simulator/contacts``; ``metrics.json`` reports ``contacts`` (and of
+them ``active_contacts``, the robot moving, and ``passive_contacts``, run into standing) and a
 run with a contact fails (exit code 1). With ``--sensing`` no node but the simulator reads the
 world's obstacles: a ``map_server`` serves a map of the KNOWN obstacles (rasterised at
 MAP_RESOLUTION into ``--out``/map/), the planner plans on that map and the scans
@@ -319,7 +320,8 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
     run_info = {'stop_reason': stop_reason, 'wall_time': wall_time, 'sim_time': sim_time,
                 'separate_processes': options.separate_processes, 'rtf': options.rtf,
                 'respawns': respawns, 'sensing': options.sensing,
-                'contacts': monitor.contacts, 'replans': monitor.replans,
+                'contacts': monitor.contacts, 'active_contacts': monitor.active_contacts,
+                'passive_contacts': monitor.passive_contacts, 'replans': monitor.replans,
                 'path_source': options.path, 'world': str(source_file),
                 'world_file': str(world_file), 'footprint_source': robot_source,
                 'drift': options.drift, 'reality': options.reality, 'plant': options.plant,

@@ -44,9 +44,11 @@ from mpc_local_planner.ros.qos import (
     PLANNER_DIAGNOSTICS_QOS,
 )
 from mpc_local_planner.ros.unicycle_simulator_parameters import (
+    ACTIVE_CONTACTS_TOPIC,
     CONTACTS_TOPIC,
     GROUND_TRUTH_TOPIC,
     LOCKSTEP_STALLS_TOPIC,
+    PASSIVE_CONTACTS_TOPIC,
     SCAN_TOPIC,
 )
 
@@ -70,13 +72,14 @@ def recorder_topics(*, sensing: bool) -> dict[str, list[str]]:
     The simulator's ground truth too: the one-step prediction error is measured against it
     (evaluation/prediction_error.py --bag).
     """
-    topics = [*DEFAULT_TOPICS, CONTACTS_TOPIC, GROUND_TRUTH_TOPIC]
-    types = [*DEFAULT_TYPES, 'std_msgs/msg/UInt32', 'nav_msgs/msg/Odometry']
+    counts = [CONTACTS_TOPIC, ACTIVE_CONTACTS_TOPIC, PASSIVE_CONTACTS_TOPIC]
+    topics = [*DEFAULT_TOPICS, *counts, GROUND_TRUTH_TOPIC]
+    types = [*DEFAULT_TYPES, *['std_msgs/msg/UInt32'] * len(counts), 'nav_msgs/msg/Odometry']
     if sensing:
         topics.append(SCAN_TOPIC)
         types.append('sensor_msgs/msg/LaserScan')
     return {'topics': topics, 'types': types,
-            'transient_local_topics': [*DEFAULT_LATCHED, CONTACTS_TOPIC]}
+            'transient_local_topics': [*DEFAULT_LATCHED, *counts]}
 
 
 def _raw_polygons(msg: MarkerArray) -> list[np.ndarray]:
@@ -124,6 +127,9 @@ class LoopMonitor(Node):
         self.goal_reached = False
         self.replans = 0  # the planner's count of re-plans, as it last reported it
         self.contacts: int | None = None  # the simulator's count, once heard
+        # of those, the ones it began moving and standing still (run into), once heard
+        self.active_contacts: int | None = None
+        self.passive_contacts: int | None = None
         # (simulated time, raw obstacle outlines) every SNAPSHOT_PERIOD at most
         self.sensed: list[tuple[float, list[np.ndarray]]] = []
         self.messages = 0  # diagnostics messages of the controller received
@@ -136,6 +142,12 @@ class LoopMonitor(Node):
             PLANNER_DIAGNOSTICS_QOS)
         self._contacts_sub = self.create_subscription(UInt32, CONTACTS_TOPIC,
                                                       self.contacts_callback, CONTACTS_QOS)
+        self._active_sub = self.create_subscription(
+            UInt32, ACTIVE_CONTACTS_TOPIC,
+            lambda msg: self._keep_count('active_contacts', msg), CONTACTS_QOS)
+        self._passive_sub = self.create_subscription(
+            UInt32, PASSIVE_CONTACTS_TOPIC,
+            lambda msg: self._keep_count('passive_contacts', msg), CONTACTS_QOS)
         self._obstacles_sub = None
         if sensing:
             self._obstacles_sub = self.create_subscription(
@@ -159,6 +171,10 @@ class LoopMonitor(Node):
     def contacts_callback(self, msg: UInt32) -> None:
         """Keep the simulator's contact count (it only grows)."""
         self.contacts = max(int(msg.data), self.contacts or 0)
+
+    def _keep_count(self, name: str, msg: UInt32) -> None:
+        """Keep one of the simulator's contact counts (they only grow)."""
+        setattr(self, name, max(int(msg.data), getattr(self, name) or 0))
 
     def obstacles_callback(self, msg: MarkerArray | bytes) -> None:
         """Keep what the controller avoids, once per SNAPSHOT_PERIOD of simulated time.

@@ -71,6 +71,7 @@ class ConstantVelocity:
         velocity: (2,) its velocity until the first reflection, m/s.
         low: (2,) the smallest x and y the origin reaches.
         high: (2,) the largest.
+        box: (xmin, xmax, ymin, ymax) the shape bounces in, as the world file gave it.
 
     """
 
@@ -78,6 +79,13 @@ class ConstantVelocity:
     velocity: np.ndarray
     low: np.ndarray
     high: np.ndarray
+    box: tuple[float, float, float, float]
+
+    def spec(self) -> tuple[str, dict[str, Any]]:
+        """Return the world file's key and mapping that describe this trajectory."""
+        return 'constant_velocity', {'start': self.start.tolist(),
+                                     'velocity': self.velocity.tolist(),
+                                     'bounds': [float(v) for v in self.box]}
 
     def state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Return the origin's position and velocity at time t."""
@@ -111,6 +119,11 @@ class Waypoints:
     points: np.ndarray
     speeds: np.ndarray
     mode: str
+
+    def spec(self) -> tuple[str, dict[str, Any]]:
+        """Return the world file's key and mapping that describe this trajectory."""
+        return 'waypoints', {'points': self.points.tolist(), 'speed': self.speeds.tolist(),
+                             'mode': self.mode}
 
     def _lap(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return the lap's segment starts, ends and cumulative start times."""
@@ -151,6 +164,12 @@ class Sinusoid:
     amplitude: np.ndarray
     period: float
     phase: float
+
+    def spec(self) -> tuple[str, dict[str, Any]]:
+        """Return the world file's key and mapping that describe this trajectory."""
+        return 'sinusoid', {'centre': self.centre.tolist(),
+                            'amplitude': self.amplitude.tolist(),
+                            'period': float(self.period), 'phase': float(self.phase)}
 
     def state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Return the origin's position and velocity at time t."""
@@ -279,7 +298,8 @@ def _constant_velocity(spec: dict[str, Any], shape: Shape,
         msg = (f'the shape at start {start.tolist()} must lie inside the box it bounces in, '
                f'[xmin, xmax, ymin, ymax] = {[xmin, xmax, ymin, ymax]}')
         raise ValueError(msg)
-    return ConstantVelocity(start=start, velocity=velocity, low=low, high=high)
+    return ConstantVelocity(start=start, velocity=velocity, low=low, high=high,
+                            box=(xmin, xmax, ymin, ymax))
 
 
 def _waypoints(spec: dict[str, Any], shape: Shape,

@@ -11,7 +11,7 @@ from mpc_local_planner.evaluation import sensing_suites as suites
 from mpc_local_planner.evaluation.through_nodes import claimed_domain, node_command, world_yaml
 from mpc_local_planner.ros.closed_loop_parameters import file_parameters
 from mpc_local_planner.worlds.data_files import BARN_DIR
-from mpc_local_planner.worlds.world import Circle, load_world
+from mpc_local_planner.worlds.world import Circle, load_world, world_from_dict
 
 
 def test_a_barn_world_written_for_the_nodes_reads_back_as_the_suites_world(tmp_path) -> None:
@@ -26,6 +26,25 @@ def test_a_barn_world_written_for_the_nodes_reads_back_as_the_suites_world(tmp_p
     np.testing.assert_array_equal(back.start, world.start)
     np.testing.assert_array_equal(back.goal, world.goal)
     assert back.bounds == world.bounds
+
+
+def test_moving_obstacles_written_for_the_nodes_move_as_in_the_suites(tmp_path) -> None:
+    world = load_world(Path(__file__).resolve().parents[2] / 'config' / 'worlds'
+                       / 'moving_crossing.yaml')
+    polygon = world_from_dict({
+        'bounds': [0.0, 10.0, 0.0, 4.0], 'start': [0.5, 2.0, 0.0], 'goal': [9.0, 2.0, 0.0],
+        'moving_obstacles': [{'polygon': [[-0.5, -0.5], [0.5, -0.5], [0.0, 0.5]],
+                              'constant_velocity': {'start': [5.0, 2.0],
+                                                    'velocity': [1.0, 0.5]}}]}, name='p')
+    for original in (world, polygon):
+        back = load_world(world_yaml(original, tmp_path / f'{original.name}.yaml'))
+        assert len(back.moving_obstacles) == len(original.moving_obstacles)
+        for t in (0.0, 1.3, 7.7, 31.0):
+            for a, b in zip(original.shapes_at(t), back.shapes_at(t), strict=True):
+                if isinstance(a, Circle):
+                    assert a == b
+                else:
+                    assert np.array_equal(a.vertices, b.vertices)
 
 
 def test_the_run_is_the_users_files_as_shipped_with_only_the_runs_wiring_added() -> None:
