@@ -283,9 +283,9 @@ class UnicycleSimulatorNode(Node):
                                                     LOCALIZER_QOS)
         self._active_pub = self.create_publisher(UInt32, ACTIVE_CONTACTS_TOPIC, CONTACTS_QOS)
         self._passive_pub = self.create_publisher(UInt32, PASSIVE_CONTACTS_TOPIC, CONTACTS_QOS)
+        # always there (RViz's display finds its publisher); silent when nothing moves
         self._moving_pub = self.create_publisher(MarkerArray, MOVING_OBSTACLES_TOPIC,
-                                                 SCAN_PUBLISHER_QOS) \
-            if self._world_clock.moving else None
+                                                 SCAN_PUBLISHER_QOS)
         for publisher in (self._contacts_pub, self._active_pub, self._passive_pub):
             publisher.publish(UInt32(data=0))
         self._clock_pub = self.create_publisher(ClockMsg, 'clock', CLOCK_QOS)
@@ -683,7 +683,7 @@ class UnicycleSimulatorNode(Node):
 
     def _publish_moving_obstacles(self, stamp: Any) -> None:
         """Publish the moving obstacles where they are now (disks as cylinders)."""
-        if self._moving_pub is None:
+        if not self._world_clock.moving:
             return
         frame = str(self.get_parameter('localizer.global_frame').value)
         markers = []
