@@ -180,6 +180,9 @@ def run_through_nodes(task: Any, robot: Any, world: World) -> RunRow:
     row.success = reached and contacts == 0 and code == 0
     row.collision = contacts > 0
     row.contacts = int(contacts > 0)
+    # the split as the rollout's rows give it: 1 when such a contact happened
+    row.active_contacts = int((metrics.get('active_contacts') or 0) > 0)
+    row.passive_contacts = int((metrics.get('passive_contacts') or 0) > 0)
     row.time = float(metrics['referee_time'] if reached else metrics['sim_time'])
     row.path_length = metrics.get('path_length')
     row.min_clearance = metrics.get('min_clearance')
