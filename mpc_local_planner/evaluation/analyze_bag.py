@@ -20,7 +20,7 @@ shapes (known and unknown obstacles, circles as circles) against the robot's TRU
 at each pose (its polygon turned with the heading, or its circle): the world's ``footprint``
 or ``robot_radius``, or ``--footprint`` (Nav2's "[[x, y], ...]"), which takes precedence.
 ``metrics.json`` says which footprint was used (``footprint``), and the figure draws it at a
-few poses of the run.
+few poses of the run. The world's moving obstacles count where they are at each row's time.
 
 Usage: ``analyze_bag BAG --out DIR [--world WORLD] [--footprint "[[x, y], ...]"]``.
 """
@@ -49,6 +49,9 @@ from mpc_local_planner.core.diagnostics import (
 )
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
 from mpc_local_planner.core.mpc import LyapunovCase, PlanSource
+from mpc_local_planner.evaluation.trajectory import TRAJECTORY_INDEX
+from mpc_local_planner.sim.contact import footprint_distances
+from mpc_local_planner.sim.moving import WorldClock
 from mpc_local_planner.worlds.world import load_world, World
 
 __all__ = ['BagRun', 'GROUND_TRUTH', 'analyze', 'describe_footprint', 'main', 'read_run',
@@ -265,6 +268,22 @@ def describe_footprint(footprint: Footprint) -> dict[str, Any]:
             'radius': float(footprint.radius)}
 
 
+def _with_moving(metrics: dict[str, Any], rows: np.ndarray, world: World,
+                 robot: Footprint) -> dict[str, Any]:
+    """Return min_clearance and collision with the moving obstacles where they were.
+
+    Each row's pose against the moving obstacles at the row's time; the static part of the
+    clearance is compute_metrics' own.
+    """
+    clock = WorldClock((), world.moving_obstacles)
+    columns = [TRAJECTORY_INDEX[name] for name in ('x', 'y', 'theta')]
+    moving = min(float(footprint_distances(clock.at(float(row[TRAJECTORY_INDEX['t']])), robot,
+                                           row[None, columns])[0]) for row in rows)
+    static = metrics.get('min_clearance')
+    closest = moving if static is None else min(static, moving)
+    return {'min_clearance': closest, 'collision': bool(metrics.get('collision')) or moving < 0}
+
+
 def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None = None,
             footprint: Footprint | None = None, title: str = '',
             extra: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -336,6 +355,8 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
         solver_failures=run.solver_failures, lyapunov_ok=run.lyapunov_ok,
         lyapunov_cases=run.lyapunov_cases, arrived=arrived,
         odometry_speed=run.odometry_speed if np.any(run.odometry_speed[:, 1]) else None)
+    if world.moving_obstacles and len(run.rows):
+        metrics.update(_with_moving(metrics, run.rows, world, robot))
     metrics['arrival'] = arrival
     metrics['controller_goal_reached'] = run.goal_reached
     metrics['messages'] = run.counts

@@ -129,6 +129,23 @@ def test_the_world_recorded_in_the_bag_gives_the_true_clearance(tmp_path: Path) 
     assert paper['min_clearance'] > metrics['min_clearance'] + 0.1
 
 
+def test_a_moving_obstacle_counts_where_it_was_at_each_rows_time(tmp_path: Path) -> None:
+    # the steps run along y = 1.65 from x = 0, 0.1 m per 0.2 s: at x = 1 at t = 2, when the
+    # walker crossing x = 1 at 1 m/s is on that line too
+    world_file = tmp_path / 'walker.yaml'
+    world_file.write_text('bounds: [-1.0, 3.0, -1.0, 4.0]\n'
+                          'start: [0.0, 1.65, 0.0]\ngoal: [2.5, 1.65, 0.0]\n'
+                          'robot_radius: 0.2\n'
+                          'moving_obstacles:\n'
+                          '  - circle: [0.0, 0.0, 0.25]\n'
+                          '    waypoints: {points: [[1.0, -0.35], [1.0, 3.65]], speed: 1.0}\n')
+    bag = tmp_path / 'bag'
+    write_bag(bag, steps(20, arrive=True), world_file=world_file)
+    metrics = analyze(bag, tmp_path / 'out')
+    assert metrics['collision'] is True
+    assert metrics['min_clearance'] == pytest.approx(-0.45)
+
+
 def test_a_bag_without_its_world_is_refused_in_one_line_unless_given_one(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bag = tmp_path / 'bag'
