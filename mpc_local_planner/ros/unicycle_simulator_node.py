@@ -465,10 +465,6 @@ class UnicycleSimulatorNode(Node):
         """Contact episodes that began with the robot standing still (it was run into)."""
         return self._contact_counter.passive
 
-    def moving_obstacles_at(self, t: float) -> tuple[Any, ...]:
-        """Return the world's moving obstacles' shapes at simulated time t."""
-        return self._world_clock.shapes_at(t)
-
     @property
     def robot_radius(self) -> float:
         """The radius of the disk checked for contacts (m); a polygon's covering radius."""
@@ -687,7 +683,7 @@ class UnicycleSimulatorNode(Node):
             return
         frame = str(self.get_parameter('localizer.global_frame').value)
         markers = []
-        for index, shape in enumerate(self._world_clock.shapes_at(self._sim_time)):
+        for index, shape in enumerate(self._world_clock.moving_at(self._sim_time)):
             if isinstance(shape, ConvexPolygon):
                 markers.append(polygon_marker(shape.vertices, ns='moving', marker_id=index,
                                               frame_id=frame, stamp=stamp,

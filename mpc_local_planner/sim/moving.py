@@ -121,8 +121,8 @@ class WorldClock:
             return cls(())
         return cls(world.physical_shapes(), world.moving_obstacles)
 
-    def shapes_at(self, t: float) -> tuple[Shape, ...]:
-        """Return the moving obstacles' shapes at time t (seconds)."""
+    def moving_at(self, t: float) -> tuple[Shape, ...]:
+        """Return the moving obstacles' shapes at time t (seconds), without the static ones."""
         return tuple(m.shape_at(t) for m in self.moving)
 
     def at(self, t: float) -> TrueGeometry:
@@ -134,6 +134,6 @@ class WorldClock:
         if not self.moving:
             return self.static
         if t != self._time:
-            self._current = TrueGeometry(self._shapes + self.shapes_at(t))
+            self._current = TrueGeometry(self._shapes + self.moving_at(t))
             self._time = t
         return self._current

@@ -127,3 +127,10 @@ def test_a_robot_driving_into_an_obstacle_counts_an_active_contact(ros, tmp_path
     probe.cmd_pub.publish(twist_from_u([0.0, 0.0]))
     assert ros.spin_until(lambda: total[-1:] == [1] and passive == [0], timeout=TIMEOUT)
     assert (sim.contacts, sim.active_contacts, sim.passive_contacts) == (1, 1, 0)
+
+
+def test_the_mujoco_plant_refuses_a_world_whose_obstacles_move(ros, tmp_path) -> None:
+    world = walker_world(tmp_path, 'sinusoid: {centre: [-2.0, -2.0], amplitude: [0.5, 0.0], '
+                                   'period: 4.0}')
+    with pytest.raises(ValueError, match='plant mujoco: .* has moving_obstacles'):
+        simulator(ros, world, plant='mujoco')
