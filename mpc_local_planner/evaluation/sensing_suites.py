@@ -449,8 +449,7 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
             this reality, whose latency and odometry noise it adds).
 
     Raises:
-        ValueError: for a plant that is not one of sim/physics PLANTS, or the mujoco plant
-            in a world with moving obstacles (its bodies do not move).
+        ValueError: for a plant that is not one of sim/physics PLANTS.
         RuntimeError: for the mujoco plant when MuJoCo is not installed.
 
     """
@@ -458,10 +457,6 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
         reality = reality_preset(reality)
     if plant not in PLANTS:
         msg = f'unknown plant {plant!r}; choose one of {", ".join(PLANTS)}'
-        raise ValueError(msg)
-    if plant == 'mujoco' and world.moving_obstacles:
-        msg = (f'{world.name}: the mujoco plant does not move obstacles; run a world with '
-               f'moving_obstacles on the kinematic plant')
         raise ValueError(msg)
     physics = plant == 'mujoco'
     real = not reality.ideal or physics
@@ -475,7 +470,8 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
         base: Any = make_physics_base(model, reality.with_seed(seed), world.start,
                                       robot=PHYSICS_ROBOT[robot.name],
                                       footprint=robot.footprint,
-                                      shapes=world.physical_shapes(), dt=REALITY_SUBSTEP)
+                                      shapes=world.physical_shapes(), dt=REALITY_SUBSTEP,
+                                      moving=world.moving_obstacles)
     else:
         base = Base(model, reality.with_seed(seed), world.start, dt=REALITY_SUBSTEP) \
             if real else None

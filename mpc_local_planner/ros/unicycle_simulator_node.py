@@ -83,8 +83,8 @@ odometry of the same instant).
 With ``plant: mujoco`` (the [physics] extra; refused with the reason without it) the robot
 is sim/physics/'s rigid body (``physics.robot``): the same calls, but wheels, slip and
 the base controller's limits between cmd_vel and the motion, odometry from the wheels, and
-the laser cast by the engine. Its bodies do not move: a world with moving obstacles is
-refused on it (the node exits with the reason).
+the laser cast by the engine; moving obstacles are mocap bodies it moves on the same
+simulated time (sim/physics/plant.py).
 """
 
 from __future__ import annotations
@@ -258,15 +258,12 @@ class UnicycleSimulatorNode(Node):
         self._world_clock = WorldClock.from_world(self._world)
         self._footprint = self._read_footprint()
         if self.get_parameter('plant').value == 'mujoco':  # validated: MuJoCo is installed
-            if self._world_clock.moving:
-                msg = (f'plant mujoco: the world {self._world.name!r} has moving_obstacles, '
-                       f'which its bodies cannot follow; use plant kinematic')
-                raise ValueError(msg)
             self._base = make_physics_base(
                 self._model, reality, pose, robot=str(self.get_parameter('physics.robot').value),
                 footprint=self._footprint,
                 shapes=self._world.physical_shapes() if self._world else (), dt=self._base.dt,
-                odometry=str(self.get_parameter('physics.odometry').value))
+                odometry=str(self.get_parameter('physics.odometry').value),
+                moving=self._world_clock.moving)
         # scan periods elapsed since the last scan, advanced by scan.rate / rate per tick:
         # scans follow the simulation's steps, not the wall clock
         self._scan_phase = 0.0

@@ -53,7 +53,13 @@ def test_a_moving_world_runs_the_same_twice() -> None:
     assert np.array_equal(first.run.rows[:, :-1], again.run.rows[:, :-1], equal_nan=True)
 
 
-def test_the_mujoco_plant_refuses_a_world_whose_obstacles_move() -> None:
-    with pytest.raises(ValueError, match='mujoco plant does not move obstacles'):
-        suites.run_navigation(head_on_world(), 'pure_pursuit', CIRCLE, prepare=False,
-                              plant='mujoco')
+def test_the_physics_robot_meets_the_walker_the_engine_moves() -> None:
+    pytest.importorskip('mujoco', reason='the [physics] extra is not installed')
+    world = head_on_world()
+    result = suites.run_navigation(world, 'pure_pursuit', CIRCLE, prepare=False,
+                                   plant='mujoco')
+    run = result.run
+    assert run.outcome is Outcome.COLLISION and run.contact is ContactKind.ACTIVE
+    t, robot = run.rows[-1, 0], run.rows[-1, 1:3]
+    walker = world.moving_obstacles[0].position(t)
+    assert np.hypot(*(robot - walker)) <= CIRCLE.footprint.radius + 0.25 + 1e-9

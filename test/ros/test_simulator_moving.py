@@ -129,8 +129,21 @@ def test_a_robot_driving_into_an_obstacle_counts_an_active_contact(ros, tmp_path
     assert (sim.contacts, sim.active_contacts, sim.passive_contacts) == (1, 1, 0)
 
 
-def test_the_mujoco_plant_refuses_a_world_whose_obstacles_move(ros, tmp_path) -> None:
-    world = walker_world(tmp_path, 'sinusoid: {centre: [-2.0, -2.0], amplitude: [0.5, 0.0], '
-                                   'period: 4.0}')
-    with pytest.raises(ValueError, match='plant mujoco: .* has moving_obstacles'):
-        simulator(ros, world, plant='mujoco')
+def test_on_the_mujoco_plant_the_engines_laser_sees_the_walker_where_it_is(ros,
+                                                                          tmp_path) -> None:
+    pytest.importorskip('mujoco', reason='the [physics] extra is not installed')
+    world = walker_world(tmp_path, 'waypoints: {points: [[2.0, 0.0], [4.0, 0.0]], speed: 1.0, '
+                                   'mode: back_and_forth}')
+    walker = load_world(world).moving_obstacles[0]
+    beams = 361
+    simulator(ros, world, plant='mujoco', **{'scan.fov': np.pi, 'scan.beams': beams,
+                                             'scan.rate': 10.0})
+    probe = ros.probe()
+    scans: list[LaserScan] = []
+    probe.create_subscription(LaserScan, SCAN_TOPIC, scans.append, RELIABLE)
+    assert ros.spin_until(lambda: len(scans) >= 15, timeout=TIMEOUT)
+    for scan in scans:
+        t = stamp_to_seconds(scan.header.stamp)
+        # the robot's body settles on its wheels (mm): the walker's range to 1 cm
+        assert scan.ranges[beams // 2] == pytest.approx(walker.position(t)[0] - RADIUS,
+                                                        abs=0.01), t

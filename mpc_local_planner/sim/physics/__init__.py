@@ -19,6 +19,7 @@ if TYPE_CHECKING:
     from mpc_local_planner.core.footprint import Footprint
     from mpc_local_planner.core.models import Unicycle
     from mpc_local_planner.sim.reality import Reality
+    from mpc_local_planner.worlds.motion import MovingObstacle
     from mpc_local_planner.worlds.world import Shape
 
 __all__ = ['ODOMETRY_SOURCES', 'PHYSICS_ROBOTS', 'PLANTS', 'make_physics_base', 'mujoco_missing',
@@ -42,7 +43,8 @@ def mujoco_missing() -> str | None:
 def make_physics_base(model: Unicycle, reality: Reality, pose: Sequence[float], *,
                       robot: str = 'jackal', footprint: Footprint | None = None,
                       shapes: Sequence[Shape] = (), dt: float = 0.01,
-                      odometry: str = 'fused') -> Any:
+                      odometry: str = 'fused',
+                      moving: Sequence[MovingObstacle] = ()) -> Any:
     """Return a `plant.PhysicsBase` (arguments as its own).
 
     Raises:
@@ -56,4 +58,4 @@ def make_physics_base(model: Unicycle, reality: Reality, pose: Sequence[float], 
     from mpc_local_planner.sim.physics.plant import PhysicsBase
 
     return PhysicsBase(model, reality, pose, robot=robot, footprint=footprint,
-                       shapes=shapes, dt=dt, odometry=odometry)
+                       shapes=shapes, dt=dt, odometry=odometry, moving=moving)

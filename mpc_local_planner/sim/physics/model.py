@@ -7,7 +7,10 @@ group 2; the robot's geoms are in group 1, so a ray cast over group 0 sees obsta
 Contacts are filtered by bits: the wheels touch only the floor, the robot's bumper (its
 footprint as a prism, 0.03-0.35 m above the ground) touches only the obstacles. So the
 engine's contacts are those of the footprint the suites judge, and a wheel's sphere never
-catches on a cylinder outside it. Each wheel is a sphere on a hinge with a velocity servo
+catches on a cylinder outside it. A moving obstacle is a mocap body (its shape in its own
+frame, in the same group and with the same contact bits), which the plant places where its
+trajectory is at each engine step: the laser sees it and the bumper meets it, and it pushes
+the robot, never the other way round. Each wheel is a sphere on a hinge with a velocity servo
 whose force is limited to the robot's torque; casters are frictionless spheres.
 """
 
@@ -24,10 +27,11 @@ from mpc_local_planner.sim.physics.robots import WheeledRobot
 from mpc_local_planner.worlds.world import Circle
 
 if TYPE_CHECKING:
+    from mpc_local_planner.worlds.motion import MovingObstacle
     from mpc_local_planner.worlds.world import Shape
 
-__all__ = ['BUMPER', 'LASER_HEIGHT', 'OBSTACLE_GROUP', 'OBSTACLE_HEIGHT', 'TIMESTEP',
-           'WHEEL_JOINTS', 'robot_mjcf']
+__all__ = ['BUMPER', 'LASER_HEIGHT', 'MOVING_BODY', 'OBSTACLE_GROUP', 'OBSTACLE_HEIGHT',
+           'TIMESTEP', 'WHEEL_JOINTS', 'robot_mjcf']
 
 #: The engine's time step (s): the wheel contacts stay stable and a 100 s run takes ~1 s.
 TIMESTEP = 0.002
@@ -40,6 +44,8 @@ OBSTACLE_GROUP = 0
 BUMPER = (0.03, 0.35)
 #: The wheels' joint names: (side, index) -> name; side 0 left, 1 right.
 WHEEL_JOINTS = 'wheel_{side}_{index}'
+#: The mocap bodies of the moving obstacles, by index.
+MOVING_BODY = 'moving_{index}'
 # Contact bits: wheels and floor share bit 1, bumper and obstacles bit 2.
 _FLOOR_BIT, _BUMPER_BIT = 1, 2
 
@@ -54,8 +60,8 @@ def _prism(vertices: np.ndarray, bottom: float, top: float) -> str:
     return _numbers([c for point in points for c in point])
 
 
-def _obstacles(shapes: Sequence[Shape]) -> tuple[list[str], list[str]]:
-    """Return the assets and the geoms of the world's obstacles."""
+def _obstacles(shapes: Sequence[Shape], name: str = 'obstacle') -> tuple[list[str], list[str]]:
+    """Return the assets and the geoms of obstacles (named name_i), in their frame."""
     assets: list[str] = []
     geoms: list[str] = []
     half = 0.5 * OBSTACLE_HEIGHT
@@ -63,13 +69,13 @@ def _obstacles(shapes: Sequence[Shape]) -> tuple[list[str], list[str]]:
               f'conaffinity="{_BUMPER_BIT}" rgba="0.5 0.5 0.5 1"')
     for i, shape in enumerate(shapes):
         if isinstance(shape, Circle):
-            geoms.append(f'<geom name="obstacle_{i}" type="cylinder" '
+            geoms.append(f'<geom name="{name}_{i}" type="cylinder" '
                          f'size="{_numbers([shape.radius, half])}" '
                          f'pos="{_numbers([shape.x, shape.y, half])}" {common}/>')
         else:
-            assets.append(f'<mesh name="obstacle_{i}" '
+            assets.append(f'<mesh name="{name}_{i}" '
                           f'vertex="{_prism(shape.vertices, 0.0, OBSTACLE_HEIGHT)}"/>')
-            geoms.append(f'<geom name="obstacle_{i}" type="mesh" mesh="obstacle_{i}" '
+            geoms.append(f'<geom name="{name}_{i}" type="mesh" mesh="{name}_{i}" '
                          f'{common}/>')
     return assets, geoms
 
@@ -90,7 +96,7 @@ def _bumper(footprint: Footprint, robot: WheeledRobot) -> tuple[list[str], str]:
 
 
 def robot_mjcf(robot: WheeledRobot, footprint: Footprint, shapes: Sequence[Shape],
-               pose: Sequence[float]) -> str:
+               pose: Sequence[float], moving: Sequence[MovingObstacle] = ()) -> str:
     """Return the MJCF of robot (its bumper the footprint) at pose among the shapes.
 
     Args:
@@ -98,10 +104,18 @@ def robot_mjcf(robot: WheeledRobot, footprint: Footprint, shapes: Sequence[Shape
         footprint: Its shape in the plane (the bumper that touches obstacles).
         shapes: The world's obstacles (static).
         pose: The start pose (x, y, theta).
+        moving: The world's moving obstacles: mocap bodies MOVING_BODY, where they are at
+            t = 0.
 
     """
     x, y, theta = (float(v) for v in pose[:3])
     assets, geoms = _obstacles(shapes)
+    moving_assets, moving_geoms = _obstacles([m.shape for m in moving], 'moving')
+    assets += moving_assets
+    for index, (obstacle, geom) in enumerate(zip(moving, moving_geoms, strict=True)):
+        where = _numbers([*obstacle.position(0.0), 0.0])
+        geoms.append(f'<body name="{MOVING_BODY.format(index=index)}" mocap="true" '
+                     f'pos="{where}">{geom}</body>')
     bumper_assets, bumper = _bumper(footprint, robot)
     assets += bumper_assets
     wheels: list[str] = []

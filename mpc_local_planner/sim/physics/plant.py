@@ -11,7 +11,10 @@ wheels' joint angles (`WheelOdometry`), so it drifts from the TRUE pose (the bod
 the wheels slip. With ``odometry='fused'`` (the default, as the robots ship: drive.py) the
 heading comes from a gyro instead: the body's yaw rate with a constant bias drawn from the
 reality's seed (the robot's ``gyro_bias``), so the distance still slips with the wheels.
-A `Reality`'s command latency and odometry noise still apply on top; its lag, acceleration
+The world's moving obstacles are mocap bodies placed where their trajectories are at every
+engine step (one step at a time then), and at the base's time when `advance` returns, so the
+engine's laser sees them where they are. A `Reality`'s command latency and odometry noise
+still apply on top; its lag, acceleration
 limits and odometry drift are the engine's and the base controller's own here, and are not
 added.
 """
@@ -30,11 +33,12 @@ from mpc_local_planner.sim.commands import CommandQueue
 from mpc_local_planner.sim.physics import ODOMETRY_SOURCES
 from mpc_local_planner.sim.physics.drive import DiffDrive, WheelOdometry
 from mpc_local_planner.sim.physics.laser import PhysicsLaser
-from mpc_local_planner.sim.physics.model import robot_mjcf, TIMESTEP, WHEEL_JOINTS
+from mpc_local_planner.sim.physics.model import MOVING_BODY, robot_mjcf, TIMESTEP, WHEEL_JOINTS
 from mpc_local_planner.sim.physics.robots import physics_robot, WheeledRobot
 from mpc_local_planner.sim.reality import Reality
 
 if TYPE_CHECKING:
+    from mpc_local_planner.worlds.motion import MovingObstacle
     from mpc_local_planner.worlds.world import Shape
 
 __all__ = ['PhysicsBase']
@@ -59,6 +63,7 @@ class PhysicsBase:
         dt: Kept for `Base`'s interface (the node sets it to its tick); the engine's step
             and the base controller's rate are the robot's.
         odometry: One of ODOMETRY_SOURCES.
+        moving: The world's moving obstacles (worlds/motion.py), moved on the caller's time.
 
     Raises:
         ValueError: for a non-finite pose, an unknown robot name or odometry source.
@@ -68,7 +73,7 @@ class PhysicsBase:
     def __init__(self, model: Unicycle, reality: Reality, pose: Sequence[float], *,
                  robot: WheeledRobot | str = 'jackal', footprint: Footprint | None = None,
                  shapes: Sequence[Shape] = (), dt: float = 0.01,
-                 odometry: str = 'fused') -> None:
+                 odometry: str = 'fused', moving: Sequence[MovingObstacle] = ()) -> None:
         start = np.asarray(pose, dtype=float).reshape(-1)[:3]
         if len(start) != 3 or not np.all(np.isfinite(start)):
             msg = f'the start pose must be 3 finite numbers, got {pose!r}'
@@ -83,8 +88,11 @@ class PhysicsBase:
         self.time = 0.0
         self.footprint = footprint or Footprint.circle(0.0)
         self.engine = mujoco.MjModel.from_xml_string(
-            robot_mjcf(self.robot, self.footprint, tuple(shapes), start))
+            robot_mjcf(self.robot, self.footprint, tuple(shapes), start, tuple(moving)))
         self.data = mujoco.MjData(self.engine)
+        self._moving = tuple(moving)
+        self._mocap = [int(self.engine.body(MOVING_BODY.format(index=i)).mocapid[0])
+                       for i in range(len(self._moving))]
         mujoco.mj_forward(self.engine, self.data)
         self.drive = DiffDrive(self.robot.drive)
         self.wheel_odometry = WheelOdometry(self.robot.drive, start)
@@ -159,10 +167,16 @@ class PhysicsBase:
             event = self._next_update if arrival is None else min(self._next_update, arrival)
             ahead = min(int(math.ceil((event - now) / TIMESTEP - _EPS)), last - self._steps)
             ahead = max(ahead, 1)
+            if self._moving:  # each step with the obstacles where they are then
+                ahead = 1
+                self._place_moving(now)
             mujoco.mj_step(self.engine, self.data, nstep=ahead)
             self._steps += ahead
             self._unwrap()
         self.time = until
+        if self._moving:  # the laser casts against geoms placed at the base's time
+            self._place_moving(until)
+            mujoco.mj_kinematics(self.engine, self.data)
 
     def odometry(self) -> tuple[np.ndarray, np.ndarray]:
         """Return what odometry reports now: (the wheels' pose with noise, their twist)."""
@@ -202,6 +216,11 @@ class PhysicsBase:
         left, right = self.drive.update(now, self._period)
         self.data.ctrl[self._actuators[0]] = left
         self.data.ctrl[self._actuators[1]] = right
+
+    def _place_moving(self, t: float) -> None:
+        """Put the moving obstacles' mocap bodies where their trajectories are at t."""
+        for mocap, obstacle in zip(self._mocap, self._moving, strict=True):
+            self.data.mocap_pos[mocap, :2] = obstacle.position(t)
 
     def _unwrap(self) -> None:
         """Follow the body's yaw without wrapping (as the kinematic base's theta)."""
