@@ -623,3 +623,23 @@ def test_a_cut_solve_goes_on_after_a_step_that_stopped_the_robot() -> None:
     stopped = mpc.solve(x)
     assert stopped.source is PlanSource.STOP and stopped.timed_out
     assert mpc.solve(x).tries[0] == Try(Start.CONTINUATION, stopped.tries[-1].solver)
+
+
+def test_a_cut_solve_goes_on_when_the_laser_fits_the_same_obstacles_again() -> None:
+    # a laser's pieces are fitted again at every scan: a standing robot sees the same
+    # obstacles a few micrometres apart. The cut solve must go on (on the physics plant, BARN
+    # 23 through the nodes stood still for good, every step's solve started over and cut);
+    # an obstacle that moved is a new problem
+    def first_try_after(shift: float) -> Try:
+        config = MpcConfig(solving=SolverSettings(compile=False, activation_distance=5.0,
+                                                  budget='iterations', max_solve_iterations=7))
+        mpc = PathReferenceMPC(Unicycle(), config, obstacles=THREE_BOXES,
+                               path=paper_sinusoid())
+        x = mpc.path.start.copy()
+        assert mpc.solve(x).timed_out  # cut: the robot stands on the candidate
+        mpc.set_obstacles([ConvexPolygon.from_vertices(box.vertices + shift)
+                           for box in THREE_BOXES])
+        return mpc.solve(x).tries[0]
+
+    assert first_try_after(3e-6).start is Start.CONTINUATION
+    assert first_try_after(0.01).start is not Start.CONTINUATION

@@ -3,7 +3,9 @@
 
 A cut solve (Unfinished) goes on at the next step from its last iterate only while the robot
 stands where it was (the state within CONTINUE_TOLERANCE: it stood still on the candidate
-meanwhile), with the same NLP holding the same obstacles, until it has made
+meanwhile), with the same NLP holding the same obstacles (each vertex within
+CONTINUE_TOLERANCE: a laser's pieces are fitted again at every scan, and a standing robot's
+odometry and scans jitter in their last digits), until it has made
 MAX_CONTINUED_ITERATIONS iterations in all. The next step then also starts its constraint
 generation with the round that was cut (resumed_round), not with the rounds before it.
 """
@@ -19,10 +21,13 @@ from mpc_local_planner.core.mpc.tries import Solver, Start, Try
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
 
 __all__ = ['CONTINUE_TOLERANCE', 'MAX_CONTINUED_ITERATIONS', 'SpotMemory', 'Unfinished',
-           'resumed_round', 'same_polygons', 'stood_still']
+           'near_polygons', 'resumed_round', 'same_polygons', 'stood_still']
 
 # A solve the budget cut goes on at the next step from where it stopped if the state moved
-# less than this (each component): the robot stood still on the candidate meanwhile.
+# less than this (each component): the robot stood still on the candidate meanwhile; and if
+# each obstacle its NLP held is still there, each vertex moved less than this (metres). The
+# iterate is only where the solver starts: what it returns is verified against the
+# obstacles as they are now.
 CONTINUE_TOLERANCE = 1e-3
 # A cut solve goes on until it has made this many iterations in all (its first step's and each
 # continuation's), then counts as failed here: enough for the slowest converging solve seen
@@ -71,7 +76,7 @@ class SpotMemory:
         unfinished, continuation = self.unfinished, None
         if unfinished is not None and unfinished.nlp is nlp:
             self.unfinished = None  # continued once, or moved away from
-            if stood_still(unfinished.x0, x0) and same_polygons(unfinished.held, held):
+            if stood_still(unfinished.x0, x0) and near_polygons(unfinished.held, held):
                 continuation = unfinished
         if not stood_still(self._x0, x0):
             self._failed = set()
@@ -134,12 +139,24 @@ def same_polygons(a: Sequence[ConvexPolygon], b: Sequence[ConvexPolygon]) -> boo
         for p, q in zip(a, b, strict=True))
 
 
+def near_polygons(a: Sequence[ConvexPolygon], b: Sequence[ConvexPolygon],
+                  tolerance: float = CONTINUE_TOLERANCE) -> bool:
+    """Say whether two obstacle lists are the same obstacles, seen again.
+
+    The same polygons in the same order, each vertex within tolerance (metres) of its twin.
+    """
+    return len(a) == len(b) and all(
+        p.vertices.shape == q.vertices.shape
+        and float(np.max(np.abs(p.vertices - q.vertices), initial=0.0)) <= tolerance
+        for p, q in zip(a, b, strict=True))
+
+
 def resumed_round(unfinished: Unfinished | None, x0: np.ndarray, reachable: ObstacleSet
                   ) -> list[ConvexPolygon] | None:
     """Return the obstacles of the round the budget cut last step, to take it up again.
 
     Only when the robot has not moved since (the state within CONTINUE_TOLERANCE) and
-    every obstacle that round held is still there, unchanged: then this step starts with
+    every obstacle that round held is still there (near_polygons): then this step starts with
     that round, and its cut try goes on first, rather than solving the rounds before it
     again. Without this a step whose rounds need more iterations together than one step has
     would spend its budget on the same first round at every step, and the cut round would
@@ -154,7 +171,7 @@ def resumed_round(unfinished: Unfinished | None, x0: np.ndarray, reachable: Obst
         return None
     resumed = []
     for old in unfinished.held:
-        match = next((o for o in reachable.obstacles if same_polygons((o,), (old,))), None)
+        match = next((o for o in reachable.obstacles if near_polygons((o,), (old,))), None)
         if match is None:
             return None
         resumed.append(match)
