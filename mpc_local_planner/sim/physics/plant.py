@@ -14,9 +14,8 @@ reality's seed (the robot's ``gyro_bias``), so the distance still slips with the
 The world's moving obstacles are mocap bodies placed where their trajectories are at every
 engine step (one step at a time then), and at the base's time when `advance` returns, so the
 engine's laser sees them where they are. A `Reality`'s command latency and odometry noise
-still apply on top; its lag, acceleration
-limits and odometry drift are the engine's and the base controller's own here, and are not
-added.
+still apply on top; its lag, acceleration limits and odometry drift are the engine's and the
+base controller's own here, and are not added.
 """
 
 from __future__ import annotations
