@@ -366,6 +366,30 @@ def polygon_marker(vertices: np.ndarray | Sequence[Sequence[float]], *, ns: str,
     return marker
 
 
+def cylinder_marker(x: float, y: float, radius: float, *, ns: str, marker_id: int,
+                    frame_id: str, stamp: Time, rgba: Sequence[float],
+                    height: float) -> Marker:
+    """Return a CYLINDER Marker of a disk of radius at (x, y), height tall, standing on z = 0.
+
+    Args as polygon_marker's; height is the cylinder's (m).
+    """
+    marker = Marker()
+    marker.header.frame_id = frame_id
+    marker.header.stamp = stamp
+    marker.ns = ns
+    marker.id = int(marker_id)
+    marker.type = Marker.CYLINDER
+    marker.action = Marker.ADD
+    marker.pose.position.x, marker.pose.position.y = float(x), float(y)
+    marker.pose.position.z = 0.5 * float(height)
+    marker.pose.orientation.w = 1.0
+    marker.scale.x = marker.scale.y = 2.0 * float(radius)
+    marker.scale.z = float(height)
+    marker.color = ColorRGBA(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]),
+                             a=float(rgba[3]))
+    return marker
+
+
 def delete_all_marker(*, frame_id: str, stamp: Time) -> Marker:
     """Return the Marker that deletes every marker of its publisher (DELETEALL)."""
     marker = Marker()

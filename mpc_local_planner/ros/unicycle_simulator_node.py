@@ -106,14 +106,15 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import LaserScan
-from std_msgs.msg import ColorRGBA, UInt32
-from visualization_msgs.msg import Marker, MarkerArray
+from std_msgs.msg import UInt32
+from visualization_msgs.msg import MarkerArray
 
 from mpc_local_planner.core.footprint import Footprint, parse_footprint, resolve
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.perception.scans import Scan
 from mpc_local_planner.ros.conversions import (
+    cylinder_marker,
     polygon_marker,
     seconds_to_stamp,
     state_to_odometry,
@@ -685,20 +686,10 @@ class UnicycleSimulatorNode(Node):
                 markers.append(polygon_marker(shape.vertices, ns='moving', marker_id=index,
                                               frame_id=frame, stamp=stamp,
                                               rgba=_MOVING_RGBA, width=0.05))
-                continue
-            marker = Marker()
-            marker.header.frame_id = frame
-            marker.header.stamp = stamp
-            marker.ns, marker.id = 'moving', index
-            marker.type, marker.action = Marker.CYLINDER, Marker.ADD
-            marker.pose.position.x, marker.pose.position.y = float(shape.x), float(shape.y)
-            marker.pose.position.z = 0.5 * _MOVING_HEIGHT
-            marker.pose.orientation.w = 1.0
-            marker.scale.x = marker.scale.y = 2.0 * float(shape.radius)
-            marker.scale.z = _MOVING_HEIGHT
-            marker.color = ColorRGBA(r=_MOVING_RGBA[0], g=_MOVING_RGBA[1], b=_MOVING_RGBA[2],
-                                     a=_MOVING_RGBA[3])
-            markers.append(marker)
+            else:
+                markers.append(cylinder_marker(shape.x, shape.y, shape.radius, ns='moving',
+                                               marker_id=index, frame_id=frame, stamp=stamp,
+                                               rgba=_MOVING_RGBA, height=_MOVING_HEIGHT))
         self._moving_pub.publish(MarkerArray(markers=markers))
 
 
