@@ -50,7 +50,6 @@ from mpc_local_planner.core.diagnostics import (
 from mpc_local_planner.core.footprint import Footprint, parse_footprint
 from mpc_local_planner.core.mpc import LyapunovCase, PlanSource
 from mpc_local_planner.evaluation.trajectory import TRAJECTORY_INDEX
-from mpc_local_planner.sim.contact import footprint_distances
 from mpc_local_planner.sim.moving import WorldClock
 from mpc_local_planner.worlds.world import load_world, World
 
@@ -277,8 +276,8 @@ def _with_moving(metrics: dict[str, Any], rows: np.ndarray, world: World,
     """
     clock = WorldClock((), world.moving_obstacles)
     columns = [TRAJECTORY_INDEX[name] for name in ('x', 'y', 'theta')]
-    moving = min(float(footprint_distances(clock.at(float(row[TRAJECTORY_INDEX['t']])), robot,
-                                           row[None, columns])[0]) for row in rows)
+    moving = min(clock.clearance(robot, row[columns], row[TRAJECTORY_INDEX['t']])
+                 for row in rows)
     static = metrics.get('min_clearance')
     closest = moving if static is None else min(static, moving)
     return {'min_clearance': closest, 'collision': bool(metrics.get('collision')) or moving < 0}

@@ -65,7 +65,6 @@ from mpc_local_planner.evaluation.rollout import (
 from mpc_local_planner.perception.grids import PlanningGrid
 from mpc_local_planner.perception.raycast import TrueGeometry
 from mpc_local_planner.sim.base import Base
-from mpc_local_planner.sim.contact import footprint_distances
 from mpc_local_planner.sim.localizer import Localizer
 from mpc_local_planner.sim.moving import ContactKind, WorldClock
 from mpc_local_planner.sim.physics import make_physics_base, PLANTS
@@ -501,7 +500,7 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
     clearance_at = None
     if clock is not None:
         def clearance_at(pose: np.ndarray, t: float) -> float:
-            return float(footprint_distances(clock.at(t), robot.footprint, pose[None, :3])[0])
+            return clock.clearance(robot.footprint, pose, t)
     run = rollout(navigator, base if base is not None else model, world.start, world.goal,
                   h=period, rule=rule, clearance=clearance, localizer=localizer,
                   clearance_at=clearance_at)

@@ -18,9 +18,13 @@ import enum
 import math
 from typing import Sequence, TYPE_CHECKING
 
+import numpy as np
+
 from mpc_local_planner.perception.raycast import TrueGeometry
+from mpc_local_planner.sim.contact import footprint_distances
 
 if TYPE_CHECKING:
+    from mpc_local_planner.core.footprint import Footprint
     from mpc_local_planner.worlds.motion import MovingObstacle
     from mpc_local_planner.worlds.world import Shape, World
 
@@ -137,3 +141,11 @@ class WorldClock:
             self._current = TrueGeometry(self._shapes + self.moving_at(t))
             self._time = t
         return self._current
+
+    def clearance(self, footprint: Footprint, pose: np.ndarray, t: float) -> float:
+        """Return the signed distance of footprint at pose (x, y, theta) from the world at t.
+
+        sim/contact.py's footprint_distances: negative is a penetration.
+        """
+        poses = np.asarray(pose, dtype=float).reshape(1, -1)[:, :3]
+        return float(footprint_distances(self.at(float(t)), footprint, poses)[0])
