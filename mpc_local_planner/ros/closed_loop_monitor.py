@@ -140,14 +140,14 @@ class LoopMonitor(Node):
         self._planner_sub = self.create_subscription(
             DiagnosticArray, PLANNER_DIAGNOSTICS_TOPIC, self.planner_callback,
             PLANNER_DIAGNOSTICS_QOS)
-        self._contacts_sub = self.create_subscription(UInt32, CONTACTS_TOPIC,
-                                                      self.contacts_callback, CONTACTS_QOS)
-        self._active_sub = self.create_subscription(
-            UInt32, ACTIVE_CONTACTS_TOPIC,
-            lambda msg: self._keep_count('active_contacts', msg), CONTACTS_QOS)
-        self._passive_sub = self.create_subscription(
-            UInt32, PASSIVE_CONTACTS_TOPIC,
-            lambda msg: self._keep_count('passive_contacts', msg), CONTACTS_QOS)
+        # the simulator's contact counts: all, and those it began moving or standing still
+        self._count_subs = [
+            self.create_subscription(UInt32, topic,
+                                     lambda msg, name=name: self._keep_count(name, msg),
+                                     CONTACTS_QOS)
+            for topic, name in ((CONTACTS_TOPIC, 'contacts'),
+                                (ACTIVE_CONTACTS_TOPIC, 'active_contacts'),
+                                (PASSIVE_CONTACTS_TOPIC, 'passive_contacts'))]
         self._obstacles_sub = None
         if sensing:
             self._obstacles_sub = self.create_subscription(
@@ -167,10 +167,6 @@ class LoopMonitor(Node):
             if moving or self._still_since is None:
                 self._still_since = now
             self.stalled = now - self._still_since >= self._stall_seconds
-
-    def contacts_callback(self, msg: UInt32) -> None:
-        """Keep the simulator's contact count (it only grows)."""
-        self.contacts = max(int(msg.data), self.contacts or 0)
 
     def _keep_count(self, name: str, msg: UInt32) -> None:
         """Keep one of the simulator's contact counts (they only grow)."""
