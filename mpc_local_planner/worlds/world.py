@@ -504,6 +504,24 @@ def _footprint(value: Any, where: str) -> Footprint | None:
     _fail(where, f'footprint: {problem}')
 
 
+def _circle_or_polygon(kind: str, spec: Any, label: str, where: str
+                       ) -> tuple[ConvexPolygon, Shape]:
+    """Return a circle's or a polygon's planning polygon and exact shape.
+
+    The polygon a circle is planned with is circumscribed; a polygon is its own shape. label
+    names the item in messages (``obstacles[3]``, ``moving_obstacles[0].polygon``). A
+    ConvexPolygon's own refusal (a ValueError) is the caller's to place.
+    """
+    if kind == 'circle':
+        x, y, r = _vector(spec, 3, label, where)
+        return ConvexPolygon.from_circle(x, y, r), Circle(float(x), float(y), float(r))
+    if not isinstance(spec, list) or len(spec) < 3:
+        _fail(where, f'{label}: a polygon needs a list of >= 3 [x, y], got {spec!r}')
+    polygon = ConvexPolygon.from_vertices(
+        [_vector(v, 2, f'{label}[{i}]', where) for i, v in enumerate(spec)])
+    return polygon, polygon
+
+
 def _obstacles(
     value: Any, where: str, *, key: str = 'obstacles'
 ) -> tuple[tuple[ConvexPolygon, ...], tuple[Shape, ...]]:
@@ -524,16 +542,10 @@ def _obstacles(
             if kind == 'box':
                 obstacles.append(ConvexPolygon.from_box(*_vector(spec, 4, what, where)))
                 shapes.append(obstacles[-1])
-            elif kind == 'circle':
-                x, y, r = _vector(spec, 3, what, where)
-                obstacles.append(ConvexPolygon.from_circle(x, y, r))
-                shapes.append(Circle(float(x), float(y), float(r)))
-            elif kind == 'polygon':
-                if not isinstance(spec, list) or len(spec) < 3:
-                    _fail(where, f'{what}: a polygon needs a list of >= 3 [x, y], got {spec!r}')
-                vertices = [_vector(v, 2, f'{what}[{i}]', where) for i, v in enumerate(spec)]
-                obstacles.append(ConvexPolygon.from_vertices(vertices))
-                shapes.append(obstacles[-1])
+            elif kind in ('circle', 'polygon'):
+                polygon, shape = _circle_or_polygon(kind, spec, what, where)
+                obstacles.append(polygon)
+                shapes.append(shape)
             else:
                 _fail(where, f'{what}: unknown obstacle kind {kind!r} (box, polygon or circle)')
         except WorldError:
@@ -571,16 +583,9 @@ def _moving_obstacles(value: Any, bounds: tuple[float, float, float, float],
             _fail(where, f'{what} needs exactly one trajectory '
                          f'({", ".join(TRAJECTORY_KINDS)}), got {kinds}')
         try:
-            if shapes[0] == 'circle':
-                x, y, r = _vector(item['circle'], 3, f'{what}.circle', where)
-                ConvexPolygon.from_circle(x, y, r)  # the same checks as a static circle's
-                shape: Shape = Circle(float(x), float(y), float(r))
-            else:
-                spec = item['polygon']
-                if not isinstance(spec, list) or len(spec) < 3:
-                    _fail(where, f'{what}.polygon needs a list of >= 3 [x, y], got {spec!r}')
-                shape = ConvexPolygon.from_vertices(
-                    [_vector(v, 2, f'{what}.polygon[{i}]', where) for i, v in enumerate(spec)])
+            # a static obstacle's checks; the circle's planning polygon is not kept
+            _, shape = _circle_or_polygon(shapes[0], item[shapes[0]], f'{what}.{shapes[0]}',
+                                          where)
         except ValueError as err:
             if isinstance(err, WorldError):
                 raise
