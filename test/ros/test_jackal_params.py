@@ -40,6 +40,9 @@ def test_the_jackal_file_bounds_input_rates_as_the_suites_do_on_the_real_base() 
     assert config.robot_footprint.vertices.tolist() == JACKAL.vertices.tolist()
     assert model.u_min[0] == 0.0 and not jackal.reverses
     assert (model.u_max[0], model.u_max[1]) == (2.0, 4.0)  # the suites' BARN runs
+    # a solve holds as many obstacles as the suites prepare (BARN 276 and 296 stood still
+    # through the nodes on the physics plant with the default 4, and reached with these)
+    assert config.solving.obstacle_slots == sensing_suites.PREPARED_SLOTS
 
 
 def test_the_jackal_file_plans_as_the_suites_plan_for_the_jackal() -> None:
