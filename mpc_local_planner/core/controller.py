@@ -20,6 +20,9 @@ Safety rules kept here (see the README's "Safety behaviours"):
 - a speed limit (set_speed_limit) caps the MPC's v bounds, so every plan keeps within it;
 - the proof's shifted candidate is applied for at most N consecutive solver failures: its
   inputs run out after N shifts, and then the robot stops;
+- a robot the solver stopped, standing within twice its collision margin of an obstacle,
+  solves among the obstacles as sensed until it is that far away again (`MarginRelief`:
+  a base that slipped into its margin cannot plan out of the grown obstacles);
 - a step's solving is bounded by the MPC's budget (SolverSettings.max_solve_time): past it the
   shifted candidate is applied (a failure as above), and `timeouts` counts those steps;
 - every command is finite and within the model's bounds, else it is zero;
@@ -42,6 +45,7 @@ from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reaso
 from mpc_local_planner.core.control_state import ControlState, Event, Mode
 from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.goal_checker import GoalChecker
+from mpc_local_planner.core.margin_relief import footprint_clearance_at, MarginRelief, standing
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import MpcSolution, PathReferenceMPC, PlanSource
 from mpc_local_planner.core.mpc.backends import run_solver, SolverRunner
@@ -120,6 +124,8 @@ class MpcController:
         # the latest command and measured twist (the MPC's rate bounds start from them)
         self._last_u = np.zeros(2)
         self._velocity: np.ndarray | None = None
+        # the MPC solves with the collision margin, or (MarginRelief) without it
+        self._relief = MarginRelief()
 
     # ------------------------------------------------------------------ configuration
     @property
@@ -219,6 +225,7 @@ class MpcController:
     def update_config(self, config: MpcConfig) -> None:
         """Use new MPC settings from the next solve on (a shape change rebuilds there)."""
         self._config = config
+        self._relief = MarginRelief()
         self._mpc.update_config(config)
         self._state.on(Event.DROP)
 
@@ -250,6 +257,7 @@ class MpcController:
 
     def _use_model(self, model: Unicycle) -> None:
         self._model = model
+        self._relief = MarginRelief()
         self._mpc = PathReferenceMPC(model, self._config, obstacles=self._obstacles,
                                      path=self._path, runner=self._mpc.runner)
         self._state.on(Event.DROP)
@@ -520,6 +528,7 @@ class MpcController:
                 return self._idle(Reason.STOP, stopped.detail, now=now,
                                   solution=stopped.solution,
                                   keep_warm_start=True)._replace(fresh=False)
+            self._relieve_margin(x)
             if self._config.max_accel is None:
                 solution = self._mpc.solve(x)
             else:
@@ -550,10 +559,29 @@ class MpcController:
                               solution=solution)
         u = np.clip(u, self._model.u_min, self._model.u_max)
         reason = Reason.TRACKING if solution.success else Reason.CANDIDATE
-        output = ControlOutput(u, solution, reason)
+        detail = 'collision margin relieved: standing within it' if self._relief.active else ''
+        output = ControlOutput(u, solution, reason, detail)
         self._state.on(Event.SOLVED, now=now, output=output)
         self._brake.stop()
         return output
+
+    def _relieve_margin(self, x: np.ndarray) -> None:
+        """Give the MPC the obstacles as sensed, or grown by the margin, as MarginRelief says.
+
+        Only a step after the solver's stop can start the relief, and only a relieved step
+        can end it, so the clearance is computed on those steps alone.
+        """
+        margin = self._config.collision_margin or 0.0
+        stopped = self._state.mode is Mode.STOP
+        if margin <= 0 or not (stopped or self._relief.active):
+            return
+        was = self._relief.active
+        twist = self._velocity if self._velocity is not None else self._last_u
+        clearance = footprint_clearance_at(self._config.robot_footprint, x, self._obstacles)
+        if self._relief.update(margin=margin, clearance=clearance, solver_stopped=stopped,
+                               is_standing=standing(twist)) != was:
+            self._mpc.update_config(replace(self._config, collision_margin=0.0)
+                                    if self._relief.active else self._config)
 
     def _planned_input(self, solution: MpcSolution | None, elapsed: float) -> np.ndarray:
         """Return the command elapsed seconds after the solve of solution.
