@@ -32,6 +32,8 @@ import sys
 from typing import Any, Callable, Iterable, Iterator, Sequence, TypeVar
 import uuid
 
+from mpc_local_planner.process_ties import tie_to_parent
+
 __all__ = [
     'CLUSTER_INSTALL_HINT',
     'EXECUTORS',
@@ -98,7 +100,9 @@ def open_executor(executor: str = 'local', *, jobs: int = 1,
         yield lambda fn, tasks: ((index, fn(task)) for index, task in enumerate(tasks))
     else:
         context = multiprocessing.get_context('spawn')
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+        # a worker ends with this process, even one killed outright (process_ties)
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=context,
+                                 initializer=tie_to_parent) as pool:
             yield lambda fn, tasks: _outcomes(
                 {pool.submit(fn, task): i for i, task in enumerate(tasks)}, as_completed)
 

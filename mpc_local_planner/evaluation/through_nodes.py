@@ -35,6 +35,7 @@ import yaml
 
 from mpc_local_planner.core.controllers import controller_name, ControllerName
 from mpc_local_planner.evaluation.run_row import RunRow
+from mpc_local_planner.process_ties import tied_environment
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import Circle, World
 
@@ -164,8 +165,9 @@ def run_through_nodes(task: Any, robot: Any, world: World) -> RunRow:
                  name=world.name, robot=task.robot, sensing=True, v_max=robot.v_max,
                  reality=task.reality)
     with claimed_domain() as domain:
-        env = {**os.environ, 'ROS_DOMAIN_ID': str(domain),
-               'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
+        # closed_loop (and its nodes) end with this worker, even one killed outright
+        env = tied_environment({**os.environ, 'ROS_DOMAIN_ID': str(domain),
+                                'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'})
         with open(folder / 'closed_loop.log', 'w', encoding='utf-8') as log:
             code = subprocess.run(command, stdout=log, stderr=subprocess.STDOUT, env=env,
                                   check=False).returncode

@@ -120,6 +120,7 @@ from mpc_local_planner.core.planner import RrtStarPlanner
 from mpc_local_planner.core.planner_config import PlannerConfig
 from mpc_local_planner.evaluation.analyze_bag import analyze, read_run, summary
 from mpc_local_planner.evaluation.plotting import plot_runs
+from mpc_local_planner.process_ties import tie_if_asked
 from mpc_local_planner.ros.bag_recorder_node import (
     BagRecorderNode,
 )
@@ -434,6 +435,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     # through the finally blocks, which stop the node processes (else they outlive it)
     if threading.current_thread() is not threading.main_thread():
         return _main(argv)
+    tie_if_asked()  # started by a sweep: end with it (process_ties)
     previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         return _main(argv)

@@ -8,7 +8,6 @@ MAX_RESPAWNS times per run, and never one that refused its parameters.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 import signal
 import subprocess
@@ -18,6 +17,7 @@ from typing import Any
 
 import yaml
 
+from mpc_local_planner.process_ties import tied_environment
 from mpc_local_planner.ros.closed_loop_parameters import LoopOptions, MODULES
 from mpc_local_planner.ros.node_main import EXIT_INVALID_PARAMETERS
 
@@ -72,7 +72,7 @@ def spawn_node(name: str, parameters: dict[str, Any], log: Path, *,
             stream.flush()
         # the child holds its own descriptor once started
         return subprocess.Popen(node_command(name, parameters), stdout=stream,
-                                stderr=subprocess.STDOUT, env=dict(os.environ))
+                                stderr=subprocess.STDOUT, env=tied_environment())
 
 
 def spawn_all(params: dict[str, dict[str, Any]], logs: Path) -> dict[str, subprocess.Popen]:

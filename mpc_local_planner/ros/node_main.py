@@ -47,6 +47,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
+from mpc_local_planner.process_ties import tie_if_asked
 from mpc_local_planner.ros.parameters import (
     format_help,
     ParameterSpec,
@@ -236,6 +237,7 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
     if wants_help(args):
         print(format_help(name, summary, parameters), end='')
         return 0
+    tie_if_asked()  # started by closed_loop: end with it (process_ties)
     argv = list(sys.argv if args is None else args)
     problem = next(filter(None, map(params_file_problem, params_files(argv))), None)
     # rclpy's handlers would shut the context down at once (no zero cmd_vel after that)
