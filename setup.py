@@ -67,6 +67,7 @@ setup(
             'closed_loop = mpc_local_planner.ros.closed_loop:main',
             'analyze_bag = mpc_local_planner.evaluation.analyze_bag:main',
             'identify_base = mpc_local_planner.evaluation.identify_base:main',
+            'replay_step = mpc_local_planner.ros.replay_step:main',
             'mpc_bench = mpc_local_planner.evaluation.bench:main',
             'mpc_bench_dds = mpc_local_planner.ros.latency_bench:main',
             'step_response = mpc_local_planner.sim.step_response:main',

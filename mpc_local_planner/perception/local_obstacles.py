@@ -21,7 +21,12 @@ from mpc_local_planner.perception.grids import grid_rectangles
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
 from mpc_local_planner.worlds.map_files import OccupancyMap
 
-__all__ = ['LocalObstacles']
+__all__ = ['LocalObstacles', 'SENSING_MARGIN']
+
+# Metres beyond the horizon's reach (MpcConfig.reach: v_max N h, the inflation and a
+# polygon's circumscribed radius) within which map cells and remembered scan obstacles are
+# handed to the MPC (the controller node's, and a replay of its steps: ros/replay_step.py).
+SENSING_MARGIN = 0.5
 
 
 class LocalObstacles:

@@ -50,7 +50,7 @@ from sensor_msgs.msg import LaserScan
 from mpc_local_planner.core.config import ObstacleSource
 from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.obstacles import ConvexPolygon
-from mpc_local_planner.perception.local_obstacles import LocalObstacles
+from mpc_local_planner.perception.local_obstacles import LocalObstacles, SENSING_MARGIN
 from mpc_local_planner.perception.pose_history import MAX_EXTRAPOLATION_S
 from mpc_local_planner.perception.scan_intake import (
     Discarded,
@@ -74,10 +74,6 @@ from mpc_local_planner.worlds.map_files import OccupancyMap
 
 __all__ = ['ControllerSensing', 'MAX_SCAN_BYTES', 'SENSING_MARGIN']
 
-# Metres beyond the horizon's reach (MpcConfig.reach: v_max N h, the inflation and a
-# polygon's circumscribed radius) within which map cells and remembered scan obstacles are
-# handed to the MPC.
-SENSING_MARGIN = 0.5
 # A serialised scan larger than this (both arrays at MAX_BEAMS float32, plus a header with
 # a long frame id) is refused before it is decoded.
 MAX_SCAN_BYTES = 2 * 4 * MAX_BEAMS + 4096
