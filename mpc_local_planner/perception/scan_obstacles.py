@@ -341,6 +341,7 @@ class ObstacleMemory:
         self.config = config or ScanObstacleConfig()
         self._entries: list[_Entry] = []
         self._stamp = -math.inf
+        self._last_usable = False
 
     def __len__(self) -> int:
         return len(self._entries)
@@ -350,10 +351,20 @@ class ObstacleMemory:
         """The stamp of the newest scan taken (-inf before the first, or after clear())."""
         return self._stamp
 
+    @property
+    def last_scan_usable(self) -> bool:
+        """The last scan taken had a beam that is not ignored (`classify_beams`' usable).
+
+        The node's scan freshness asks this of every scan; the memory classified its beams
+        already, so they are not classified twice.
+        """
+        return self._last_usable
+
     def clear(self) -> None:
         """Forget everything (e.g. when the map frame jumps)."""
         self._entries = []
         self._stamp = -math.inf
+        self._last_usable = False
 
     def update(self, scan: Scan, robot_pose: Sequence[float], *,
                laser_pose: Sequence[float] = (0.0, 0.0, 0.0),
@@ -380,6 +391,7 @@ class ObstacleMemory:
             raise ScanError(msg)
         self._stamp = float(scan.stamp)
         readings = classify_beams(scan, body=body, laser_pose=laser_pose)
+        self._last_usable = bool(readings.usable.any())
         current, anchors = _pieces(scan, robot_pose, laser_pose, readings, self.config)
         kept = [e for e in self._entries if scan.stamp - e.seen <= self.ttl]
         if kept:

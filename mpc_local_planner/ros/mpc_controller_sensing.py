@@ -60,7 +60,7 @@ from mpc_local_planner.perception.scan_intake import (
     ScanOrder,
 )
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
-from mpc_local_planner.perception.scans import classify_beams, MAX_BEAMS, Scan
+from mpc_local_planner.perception.scans import MAX_BEAMS, Scan
 from mpc_local_planner.ros.conversions import (
     frame_problem,
     grid_from_message,
@@ -206,7 +206,7 @@ class ControllerSensing:
         self.local.scan_updated()
         if self._problems.resolve('scan'):
             self._logger.info('scans are valid again')
-        usable = bool(classify_beams(scan, body=body, laser_pose=laser).usable.any())
+        usable = memory.last_scan_usable  # the memory classified its beams
         self._intake.taken(scan.stamp, placed.receipt, usable=usable)
         if not usable:
             self._logger.warning(

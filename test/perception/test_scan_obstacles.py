@@ -263,6 +263,17 @@ def test_a_scan_of_nothing_but_nan_is_valid_and_carries_no_information() -> None
     assert scan_to_obstacles(scan, (0.0, 0.0, 0.0)) == []
 
 
+def test_the_memory_says_whether_the_last_scan_had_a_usable_beam() -> None:
+    # the node's scan freshness reads it instead of classifying every scan's beams again
+    memory = ObstacleMemory(5.0)
+    assert not memory.last_scan_usable
+    seen = Scan(-1.0, 0.01, 0.05, 10.0, np.full(201, 2.0), stamp=1.0, angle_max=1.0)
+    memory.update(seen, (0.0, 0.0, 0.0))
+    assert memory.last_scan_usable
+    memory.update(seen._replace(ranges=np.full(201, np.nan), stamp=2.0), (0.0, 0.0, 0.0))
+    assert not memory.last_scan_usable
+
+
 # ------------------------------------------------------------------ the robot's own body
 # (the distance from the robot's origin to its front face, for each footprint)
 BODIES = [pytest.param(Footprint.circle(0.2), 0.2, id='circle'),
