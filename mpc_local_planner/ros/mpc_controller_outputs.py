@@ -4,8 +4,8 @@
 cmd_vel (Twist, or TwistStamped in ``robot_base_frame``), ``local_plan`` (the prediction),
 ``mpc/diagnostics`` (core/diagnostics.py's keys), ``mpc/obstacles`` (MarkerArray: the
 obstacles raw, grown and active, sent when that changes and every OBSTACLE_REFRESH_STEPS
-control steps) and ``mpc/footprint``, all in ``global_frame``; a log line when the reason
-changes (`log_line`). ControllerOutputs is a component MpcControllerNode
+control steps, and only while subscribed) and ``mpc/footprint``, all in ``global_frame``;
+a log line when the reason changes (`log_line`). ControllerOutputs is a component MpcControllerNode
 (ros/mpc_controller_node.py) builds at configure: it owns these publishers and what it last
 sent, and the node hands it each control step's output.
 """
@@ -184,8 +184,13 @@ class ControllerOutputs:
         """Publish the obstacles raw, grown and active when that changes (or now and then).
 
         Each publication starts with DELETEALL, so markers of obstacles gone (or no longer
-        active) disappear; ids are the obstacles' indices within their namespace.
+        active) disappear; ids are the obstacles' indices within their namespace. Nothing is
+        built while nobody subscribes (building them took about half the node's own time
+        among BARN's pieces: issue 34); a subscriber that comes gets them at the next step.
         """
+        if self._obstacles_pub.get_subscription_count() == 0:
+            self._markers_shown = None
+            return
         controller = self._controller
         grown = controller.grown_obstacles
         # active only if this step solved: a stop without a solve holds nothing

@@ -1,0 +1,64 @@
+# SPDX-License-Identifier: Apache-2.0
+"""ControllerOutputs: the obstacle markers are built only while someone subscribes."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from mpc_local_planner.core.control_output import ControlOutput, Reason
+from mpc_local_planner.core.controller import MpcController
+from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.ros.mpc_controller_outputs import ControllerOutputs, OBSTACLES_TOPIC
+
+
+class FakePublisher:
+    """Records what is published; says how many subscribe (the test sets it)."""
+
+    def __init__(self, topic: str) -> None:
+        self.topic = topic
+        self.subscribers = 0
+        self.published: list[Any] = []
+
+    def get_subscription_count(self) -> int:
+        return self.subscribers
+
+    def publish(self, msg: Any) -> None:
+        self.published.append(msg)
+
+
+class FakeNode:
+    """What ControllerOutputs asks of its lifecycle node."""
+
+    def __init__(self) -> None:
+        self.publishers: dict[str, FakePublisher] = {}
+
+    def create_lifecycle_publisher(self, kind: Any, topic: str, qos: Any) -> FakePublisher:
+        return self.publishers.setdefault(topic, FakePublisher(topic))
+
+    def get_logger(self) -> Any:
+        return None
+
+    def get_name(self) -> str:
+        return 'mpc_controller'
+
+    def get_fully_qualified_name(self) -> str:
+        return '/mpc_controller'
+
+
+def test_obstacle_markers_are_built_only_while_someone_subscribes() -> None:
+    node = FakeNode()
+    controller = MpcController(obstacles=[ConvexPolygon.from_box(1.0, -0.5, 1.5, 0.5)])
+    outputs = ControllerOutputs(node, controller, stamped=False,  # type: ignore[arg-type]
+                                parameter=lambda name: 'map')
+    markers = node.publishers[OBSTACLES_TOPIC]
+    stop = ControlOutput(np.zeros(2), None, Reason.STOP)
+    for _ in range(3):
+        outputs._publish_obstacles(stop, 'map', None)
+    assert markers.published == []
+    markers.subscribers = 1  # RViz opens: the next step sends them, with the obstacle
+    outputs._publish_obstacles(stop, 'map', None)
+    assert len(markers.published) == 1
+    namespaces = {m.ns for m in markers.published[0].markers}
+    assert {'raw', 'grown'} <= namespaces
