@@ -326,7 +326,7 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
             msg = (f'{bag}: the bag does not record its world (bag_recorder without '
                    'world_file): give the world with --world')
             raise ValueError(msg)
-    run = read_run(bag)
+    run = read_run(bag, ground_truth_topic='/' + GROUND_TRUTH)
     if not len(run.rows):
         msg = f'{bag}: no control step with the MPC and no odometry: nothing to analyse'
         raise ValueError(msg)
@@ -354,6 +354,7 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
         solver_failures=run.solver_failures, lyapunov_ok=run.lyapunov_ok,
         lyapunov_cases=run.lyapunov_cases, arrived=arrived,
         odometry_speed=run.odometry_speed if np.any(run.odometry_speed[:, 1]) else None)
+    metrics.update(_true_clearance(metrics, run, world, robot))
     if world.moving_obstacles and len(run.rows):
         metrics.update(_with_moving(metrics, run.rows, world, robot))
     metrics['arrival'] = arrival
@@ -370,6 +371,26 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
               runs=[('mpc_controller', run.rows)], predictions=run.predictions[::step],
               title=title or f'{Path(bag).name}', footprint=robot)
     return metrics
+
+
+def _true_clearance(metrics: dict[str, Any], run: BagRun, world: World,
+                    robot: Footprint) -> dict[str, Any]:
+    """Return min_clearance and collision from the simulator's true poses, when recorded.
+
+    The rows are the poses the controller had (odometry, or the localizer's estimate): on a
+    plant whose odometry drifts (the MuJoCo Jackal's wheels slip) they can pass through a
+    cylinder the robot never touched, or past one it did. Where the bag holds the ground
+    truth, the clearance is the truth's, as the simulator's contact count is; the estimate's
+    stays as min_clearance_estimate.
+    """
+    from mpc_local_planner.evaluation.metrics import footprint_clearance
+
+    shapes = list(world.physical_shapes())
+    if not len(run.ground_truth) or not shapes:
+        return {}
+    true = float(np.min(footprint_clearance(shapes, robot)(run.ground_truth[:, 1:4])))
+    return {'min_clearance_estimate': metrics.get('min_clearance'), 'min_clearance': true,
+            'collision': bool(true < 0)}
 
 
 def _json_default(value: Any) -> Any:
