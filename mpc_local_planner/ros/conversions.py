@@ -350,17 +350,9 @@ def polygon_marker(vertices: np.ndarray | Sequence[Sequence[float]], *, ns: str,
 
     """
     ring = _closed_ring(vertices)
-    marker = Marker()
-    marker.header.frame_id = frame_id
-    marker.header.stamp = stamp
-    marker.ns = ns
-    marker.id = int(marker_id)
-    marker.type = Marker.LINE_STRIP
-    marker.action = Marker.ADD
-    marker.pose.orientation.w = 1.0
+    marker = _added_marker(Marker.LINE_STRIP, ns=ns, marker_id=marker_id, frame_id=frame_id,
+                           stamp=stamp, rgba=rgba)
     marker.scale.x = float(width)
-    marker.color = ColorRGBA(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]),
-                             a=float(rgba[3]))
     marker.points = [Point(x=float(x), y=float(y), z=0.0)
                      for x, y in np.vstack([ring, ring[:1]])]
     return marker
@@ -373,18 +365,26 @@ def cylinder_marker(x: float, y: float, radius: float, *, ns: str, marker_id: in
 
     Args as polygon_marker's; height is the cylinder's (m).
     """
+    marker = _added_marker(Marker.CYLINDER, ns=ns, marker_id=marker_id, frame_id=frame_id,
+                           stamp=stamp, rgba=rgba)
+    marker.pose.position.x, marker.pose.position.y = float(x), float(y)
+    marker.pose.position.z = 0.5 * float(height)
+    marker.scale.x = marker.scale.y = 2.0 * float(radius)
+    marker.scale.z = float(height)
+    return marker
+
+
+def _added_marker(kind: int, *, ns: str, marker_id: int, frame_id: str, stamp: Time,
+                  rgba: Sequence[float]) -> Marker:
+    """Return an ADD Marker of kind with its header, ns, id, identity orientation and colour."""
     marker = Marker()
     marker.header.frame_id = frame_id
     marker.header.stamp = stamp
     marker.ns = ns
     marker.id = int(marker_id)
-    marker.type = Marker.CYLINDER
+    marker.type = kind
     marker.action = Marker.ADD
-    marker.pose.position.x, marker.pose.position.y = float(x), float(y)
-    marker.pose.position.z = 0.5 * float(height)
     marker.pose.orientation.w = 1.0
-    marker.scale.x = marker.scale.y = 2.0 * float(radius)
-    marker.scale.z = float(height)
     marker.color = ColorRGBA(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]),
                              a=float(rgba[3]))
     return marker
