@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import replace
-import math
 from pathlib import Path
 import sys
 from typing import Any, NamedTuple, Sequence
@@ -47,6 +46,13 @@ from mpc_local_planner.perception.local_obstacles import LocalObstacles, SENSING
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
 from mpc_local_planner.perception.scans import Scan
 from mpc_local_planner.ros.closed_loop_parameters import file_parameters
+from mpc_local_planner.ros.conversions import (
+    odometry_to_state,
+    odometry_twist,
+    path_to_poses,
+    scan_from_message,
+    stamp_to_seconds,
+)
 from mpc_local_planner.ros.mpc_controller_parameters import build_settings, DEFAULTS
 
 __all__ = ['main', 'Recording', 'read_recording', 'replay']
@@ -63,22 +69,18 @@ class Recording(NamedTuple):
     steps: list[tuple[str, dict[str, str]]]  # the diagnostics: (message, values)
 
 
-def _seconds(header: Any) -> float:
-    return header.stamp.sec + header.stamp.nanosec * 1e-9
-
-
-def _yaw(q: Any) -> float:
-    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
-
-
 def read_recording(bag: str | Path, *, scan_topic: str = '/scan', odom_topic: str = '/odom',
                    plan_topic: str = '/plan',
                    diagnostics_topic: str = '/mpc/diagnostics') -> Recording:
     """Read the scans, odometry, plans and controller diagnostics of a bag.
 
+    Each message is read with the nodes' own conversions (ros/conversions.py), so a pose the
+    controller would refuse is refused here too.
+
     Raises:
         FileNotFoundError: if the bag does not exist.
-        ValueError: if it has no controller diagnostics or no odometry.
+        ValueError: if it has no controller diagnostics or no odometry, or a pose has no
+            orientation or a non-finite position.
 
     """
     bag = Path(bag)
@@ -92,20 +94,12 @@ def read_recording(bag: str | Path, *, scan_topic: str = '/scan', odom_topic: st
         for connection, stamp, raw in reader.messages(connections=wanted):
             msg = reader.deserialize(raw, connection.msgtype)
             if connection.topic == scan_topic:
-                scans.append(Scan(
-                    angle_min=float(msg.angle_min), angle_increment=float(msg.angle_increment),
-                    range_min=float(msg.range_min), range_max=float(msg.range_max),
-                    ranges=np.asarray(msg.ranges, dtype=np.float32),
-                    intensities=np.asarray(msg.intensities, dtype=np.float32),
-                    stamp=_seconds(msg.header), angle_max=float(msg.angle_max)))
+                scans.append(scan_from_message(msg))
             elif connection.topic == odom_topic:
-                pose, twist = msg.pose.pose, msg.twist.twist
-                odometry.append((_seconds(msg.header), pose.position.x, pose.position.y,
-                                 _yaw(pose.orientation), twist.linear.x, twist.angular.z))
+                odometry.append((stamp_to_seconds(msg.header.stamp), *odometry_to_state(msg),
+                                 *odometry_twist(msg)))
             elif connection.topic == plan_topic:
-                plans.append((stamp * 1e-9, np.array(
-                    [[p.pose.position.x, p.pose.position.y, _yaw(p.pose.orientation)]
-                     for p in msg.poses], dtype=float).reshape(-1, 3)))
+                plans.append((stamp * 1e-9, path_to_poses(msg)))
             else:
                 steps += [(s.message, {v.key: v.value for v in s.values}) for s in msg.status]
     if not steps:
