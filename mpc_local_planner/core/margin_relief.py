@@ -56,11 +56,7 @@ def footprint_clearance_at(footprint: Footprint, pose: np.ndarray,
     pose = np.asarray(pose, dtype=float).reshape(-1)
     if footprint.is_circle:
         return float(min_clearance(list(obstacles), pose[None, :2])) - footprint.radius
-    cos, sin = np.cos(pose[2]), np.sin(pose[2])
-    local = footprint.body.vertices
-    corners = np.stack([cos * local[:, 0] - sin * local[:, 1] + pose[0],
-                        sin * local[:, 0] + cos * local[:, 1] + pose[1]], axis=-1)
-    signed, _ = polygon_separation(corners, ObstacleSet(list(obstacles)))
+    signed, _ = polygon_separation(footprint.at_poses(pose), ObstacleSet(list(obstacles)))
     return float(np.min(signed))
 
 
