@@ -23,7 +23,8 @@ __all__ = ['Blockage', 'ControlOutput', 'Reason']
 class Reason(Enum):
     """Why the controller commands what it commands (the value is the diagnostics' word).
 
-    Only TRACKING and CANDIDATE apply an MPC input, and ROTATE_TO_HEADING an in-place turn;
+    Only TRACKING and CANDIDATE apply an MPC input, ROTATE_TO_HEADING an in-place turn and
+    RECOVERY a recovery's motion (or its wait, a zero command);
     every other reason stops the robot: a zero command, or, for a moving robot with
     ControllerSettings.max_decel, the braking command along the last verified plan. Free
     text about the case (what was wrong with a plan, an exception's message) travels
@@ -56,6 +57,9 @@ class Reason(Enum):
     # Odometry is there but no pose in the plan's frame: a localizer is expected and none
     # (usable) came, or tf2 has no transform from the plan's frame to the robot's.
     NO_LOCALIZATION = 'no_localization'
+    # The robot made no progress and a recovery runs (core/recoveries.py): it backs out along
+    # its own trail, spins in place or waits for a new plan; ControlOutput.detail says which.
+    RECOVERY = 'recovery'
 
     @property
     def text(self) -> str:
@@ -65,7 +69,8 @@ class Reason(Enum):
     @property
     def applies_input(self) -> bool:
         """Whether the command is an input (the MPC's, or the turn to the goal heading)."""
-        return self in (Reason.TRACKING, Reason.CANDIDATE, Reason.ROTATE_TO_HEADING)
+        return self in (Reason.TRACKING, Reason.CANDIDATE, Reason.ROTATE_TO_HEADING,
+                        Reason.RECOVERY)
 
 
 _REASON_TEXT = {
@@ -84,6 +89,7 @@ _REASON_TEXT = {
     Reason.NO_SCAN: 'no scan yet',
     Reason.NO_MAP: 'no valid map yet',
     Reason.NO_LOCALIZATION: "no pose in the plan's frame",
+    Reason.RECOVERY: 'no progress, recovering',
 }
 
 
