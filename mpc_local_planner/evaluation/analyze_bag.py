@@ -40,6 +40,7 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_typestore, Stores
 import yaml
 
+from mpc_local_planner.core.control_output import Reason
 from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.diagnostics import (
     BagKey,
@@ -355,6 +356,8 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
         lyapunov_cases=run.lyapunov_cases, arrived=arrived,
         odometry_speed=run.odometry_speed if np.any(run.odometry_speed[:, 1]) else None)
     metrics.update(_true_clearance(metrics, run, world, robot))
+    if run.steps is not None:
+        metrics.update(_recoveries(run))
     if world.moving_obstacles and len(run.rows):
         metrics.update(_with_moving(metrics, run.rows, world, robot))
     metrics['arrival'] = arrival
@@ -371,6 +374,25 @@ def analyze(bag: str | Path, out: str | Path, *, world_file: str | Path | None =
               runs=[('mpc_controller', run.rows)], predictions=run.predictions[::step],
               title=title or f'{Path(bag).name}', footprint=robot)
     return metrics
+
+
+def _recoveries(run: BagRun) -> dict[str, Any]:
+    """Return how many recoveries the controller started and their seconds, in all.
+
+    A recovery is a stretch of steps whose reason is Reason.RECOVERY (core/recoveries.py);
+    its seconds run from its first step to the first step after it.
+    """
+    assert run.steps is not None
+    times = run.rows[:, 0]
+    started, seconds = 0, 0.0
+    for i, step in enumerate(run.steps):
+        if step.reason is not Reason.RECOVERY:
+            continue
+        if i == 0 or run.steps[i - 1].reason is not Reason.RECOVERY:
+            started += 1
+        if i + 1 < len(times):
+            seconds += float(times[i + 1] - times[i])
+    return {'recoveries': started, 'recovery_s': seconds}
 
 
 def _true_clearance(metrics: dict[str, Any], run: BagRun, world: World,

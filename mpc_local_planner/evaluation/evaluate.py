@@ -175,6 +175,8 @@ def summarize(rows: list[RunRow], *, suite: str, title: str = '') -> str:
             cells.append(_fmt(float(np.mean(scores)) if len(scores) else None, 4))
         lines.append('| ' + ' | '.join(cells) + ' |')
     lines.append('')
+    if any(r.recoveries is not None for r in rows):
+        lines += [_recovery_line(rows, order), '']
     reasons: dict[ControllerName, dict[str, int]] = {}
     for r in rows:
         key = r.stop_reason.split(':')[0]
@@ -189,6 +191,22 @@ def summarize(rows: list[RunRow], *, suite: str, title: str = '') -> str:
         lines.append('')
         lines.append('Proposed MPC failed in worlds: ' + ', '.join(map(str, failed)))
     return '\n'.join(lines) + '\n'
+
+
+def _recovery_line(rows: list[RunRow], order: list[ControllerName]) -> str:
+    """Say, per controller, how many runs needed a recovery, how many, how long, how they ended."""
+    parts = []
+    for name in order:
+        needed = [r for r in rows if r.controller is name and r.recoveries]
+        if not needed:
+            parts.append(f'{name}: none')
+            continue
+        seconds = [float(r.recovery_s or 0.0) for r in needed]
+        started = sum(r.recoveries or 0 for r in needed)
+        parts.append(f'{name}: {len(needed)} runs needed one ({started} in all, median '
+                     f'{np.median(seconds):.1f} s per run), '
+                     f'{sum(bool(r.success) for r in needed)} of them reached')
+    return 'Recoveries (back out, spin, wait): ' + '; '.join(parts) + '.'
 
 
 def _panel(out: Path, suite: str, world: int, barn_dir: Path,
@@ -292,7 +310,8 @@ def plot_navigation_suite(out: Path, template: Task, worlds: Sequence[int],
         out / f'{template.suite}_sensing_runs.png', panels, template.controller, robot,
         seed=template.seed, setup=suites.MpcSetup(budget=template.budget,
                                                   compile=template.compile),
-        reality=template.reality, localized=template.suite != 'barn')
+        reality=template.reality, localized=template.suite != 'barn', plant=template.plant,
+        recoveries=template.recoveries)
 
 
 def _read_rows(path: Path) -> list[RunRow]:
@@ -359,6 +378,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--plant', choices=PLANTS, default='kinematic',
                         help="the robot's plant: kinematic (the default) or mujoco (rigid "
                              'body, wheels, slip: the [physics] extra); navigation suites only')
+    parser.add_argument('--recoveries', action='store_true',
+                        help='run the recovery behaviours around every controller (back out '
+                             "along the robot's trail, spin, wait for a re-plan; "
+                             'core/recoveries.py), as the controller node does by default; '
+                             'navigation suites only')
     parser.add_argument('--save-trajectories', action='store_true',
                         help='write each run as trajectory CSV under OUT/trajectories')
     parser.add_argument('--merge', action='store_true',
@@ -403,6 +427,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.plant != 'kinematic' and not navigation:
         parser.error('--plant needs the navigation stack (--suite unknown, --suite worlds or '
                      '--sensing)')
+    if args.recoveries and not navigation:
+        parser.error('--recoveries needs the navigation stack (--suite unknown, --suite worlds '
+                     'or --sensing)')
     if args.plant == 'mujoco' and mujoco_missing() is not None:
         parser.error(f'--plant mujoco: {mujoco_missing()}')
     allowed = CONTROLLERS if navigation else KNOWN_MAP_CONTROLLERS
@@ -441,7 +468,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         template = Task(args.suite, 0, controllers[0], args.seed, args.v_max, args.omega_max,
                         str(args.barn_dir.resolve()), '', args.merge, sensing=args.sensing,
                         robot=args.robot, budget=args.budget, compile=args.compile,
-                        reality=args.reality, plant=args.plant)
+                        reality=args.reality, plant=args.plant, recoveries=args.recoveries)
         print(plot_navigation_suite(args.out, template, drawn, world_files))
         return 0
     args.out.mkdir(parents=True, exist_ok=True)
@@ -451,7 +478,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     template = Task(args.suite, 0, '', args.seed, args.v_max, args.omega_max, barn_dir,
                     trajectories, args.merge, sensing=args.sensing, robot=args.robot,
                     budget=args.budget, compile=args.compile, reality=args.reality,
-                    plant=args.plant)
+                    plant=args.plant, recoveries=args.recoveries)
     nodes = str((args.out / 'nodes').resolve()) if args.through_nodes else ''
     tasks = [replace(template, world=w, controller=c,
                      world_file=world_files[w] if world_files else '',
@@ -468,6 +495,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                  + (', no prior map' if args.suite == 'barn' else '')
                  + f', {args.budget} budget, reality {args.reality}'
                  + (f', {args.plant} plant' if args.plant != 'kinematic' else '')
+                 + (', recoveries' if args.recoveries else '')
                  + (", the paper's MPC through the nodes" if args.through_nodes else '') + ')')
     else:
         title = (f'{args.suite}, known map (seed {args.seed}, v_max {args.v_max:g} m/s, '

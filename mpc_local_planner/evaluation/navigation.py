@@ -21,7 +21,9 @@ rollout's controller):
    every ``replan_period``, if set), with a first turn those obstacles allow where it can;
    the first plan is made at the first step, on the map alone (before the first scan), as
    the node plans a goal that comes before the laser has shown anything;
-5. the local controller gets those obstacles and answers.
+5. the local controller gets those obstacles and answers; with `Recoveries`
+   (core/recoveries.py, as the controller node runs them), a robot that makes no progress
+   backs out along its trail, spins and waits for a re-plan instead.
 
 The local controller is any `LocalController` (core/local_controller.py), built by name
 (core/controllers.py): the paper's MPC (the `MpcController` the node runs), the tracking MPC
@@ -46,6 +48,7 @@ from mpc_local_planner.core.mpc.compilation import compile_wait_seconds
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import waypoints_to_poses
 from mpc_local_planner.core.planner import RrtStarPlanner
+from mpc_local_planner.core.recoveries import Recoveries
 from mpc_local_planner.core.replanning import (
     PROGRESS_ANGLE,
     PROGRESS_RADIUS,
@@ -181,6 +184,8 @@ class Navigator:
             laser scans from the pose step() is given (an ideal robot, whose odometry is
             its pose). With a base it scans from the base's true pose through the
             reality's ScanChannel, and step() gets what odometry says.
+        recoveries: The recovery behaviours around the local controller (the node's), or
+            None: the controller's answer always stands.
 
     """
 
@@ -192,8 +197,10 @@ class Navigator:
                  settings: NavigationSettings | None = None,
                  snapshot_period: float = 2.0,
                  footprint: Footprint | None = None,
-                 base: Base | None = None) -> None:
+                 base: Base | None = None,
+                 recoveries: Recoveries | None = None) -> None:
         self.local = local
+        self.recoveries = recoveries
         self.reach = float(reach)
         self.base = base
         self._channel = ScanChannel(base.reality) if base is not None else None
@@ -246,7 +253,14 @@ class Navigator:
         self.local.set_obstacles(nearby)
         # a real base reports its twist (an ideal robot's odometry has none)
         twist = self.base.twist() if self.base is not None else None
-        answer = control_step(self.local.compute(np.asarray(x, dtype=float), twist, t))
+        pose = np.asarray(x, dtype=float)
+        if self.recoveries is None:
+            output = self.local.compute(pose, twist, t)
+        else:
+            self.recoveries.set_obstacles(nearby)
+            output = self.recoveries.step(pose, twist, t,
+                                          lambda: self.local.compute(pose, twist, t))
+        answer = control_step(output)
         self.log.control_seconds.append(time.perf_counter() - started
                                         - (compile_wait_seconds() - waited))
         if not self.log.sensed or t >= self.log.sensed[-1][0] + self._snapshot_period:
@@ -291,5 +305,7 @@ class Navigator:
             return
         assert decision.waypoints is not None and decision.trigger is not None
         self.log.plans.append((t, decision.waypoints, decision.trigger.value))
-        self.local.set_plan(waypoints_to_poses(decision.waypoints, float(x[2]),
-                                               float(self.goal[2])))
+        poses = waypoints_to_poses(decision.waypoints, float(x[2]), float(self.goal[2]))
+        self.local.set_plan(poses)
+        if self.recoveries is not None:
+            self.recoveries.plan_changed(poses)

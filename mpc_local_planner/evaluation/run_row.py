@@ -53,6 +53,8 @@ class RunRow:
         reality: How real the robot was (sim/reality.py preset; navigation runs).
         active_contacts: Of contacts, 1 if the robot was moving into it (navigation runs).
         passive_contacts: Of contacts, 1 if it stood still and an obstacle ran into it.
+        recoveries: Recoveries started (core/recoveries.py; navigation runs with them).
+        recovery_s: Seconds the recoveries took, in all (back-out, spin and wait).
 
     """
 
@@ -86,6 +88,8 @@ class RunRow:
     reality: str = ''
     active_contacts: int | None = None
     passive_contacts: int | None = None
+    recoveries: int | None = None
+    recovery_s: float | None = None
 
     @property
     def key(self) -> tuple[int, ControllerName]:
@@ -100,13 +104,16 @@ class RunRow:
     def from_csv(cls, cells: dict[str, str]) -> RunRow:
         """Return the row of runs.csv's cells (as csv.DictReader reads them).
 
+        A row shorter than the header (a table an earlier version wrote, before a column was
+        added) reads its missing cells as empty.
+
         Raises:
             ValueError: for a cell that is not its column's type.
 
         """
         values: dict[str, Any] = {}
         for column, parse in _PARSERS.items():
-            text = cells.get(column, '')
+            text = cells.get(column) or ''
             values[column] = text if parse is str else None if text == '' else parse(text)
         return cls(**values)
 

@@ -51,6 +51,7 @@ from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.planner import RrtStarPlanner
 from mpc_local_planner.core.planner_config import PlannerConfig
+from mpc_local_planner.core.recoveries import Recoveries, RecoverySettings
 from mpc_local_planner.evaluation.known_map_worlds import RANDOM_BOUNDS, RANDOM_GOAL, RANDOM_START
 from mpc_local_planner.evaluation.metrics import footprint_clearance
 from mpc_local_planner.evaluation.mpc_cache import MPC_CACHE, MpcKey
@@ -413,7 +414,8 @@ class SensingResult:
 def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool = True,
                    seed: int = 0, h: float = 0.2, prepare: bool = True,
                    setup: MpcSetup = MpcSetup(), reality: str | Reality = 'ideal',
-                   localized: bool | None = None, plant: str = 'kinematic') -> SensingResult:
+                   localized: bool | None = None, plant: str = 'kinematic',
+                   recoveries: bool = False) -> SensingResult:
     """Drive robot through world with the named controller, perception and re-planning.
 
     Args:
@@ -446,6 +448,9 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
             odometry from its wheels and its laser cast by the engine; it is run as a real
             robot (commanded at CONTROL_FREQUENCY, controllers set up as for a real base of
             this reality, whose latency and odometry noise it adds).
+        recoveries: Run the recovery behaviours around the controller (`recovery_setup`:
+            back out along the trail, spin, wait), as the controller node runs them; off,
+            the controller's answer always stands.
 
     Raises:
         ValueError: for a plant that is not one of sim/physics PLANTS.
@@ -482,7 +487,8 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
                           grid,
                           planner, world.goal, reach=local.reach, h=period,
                           known_map=known if world.obstacles else None,
-                          settings=settings, footprint=robot.footprint, base=base)
+                          settings=settings, footprint=robot.footprint, base=base,
+                          recoveries=recovery_setup(robot) if recoveries else None)
     if physics:  # the engine casts the beams, with the laser's settings
         laser = navigator.laser
         navigator.laser = base.laser(fov=laser.fov, beams=laser.beams,
@@ -515,9 +521,19 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
                          passive_contacts=passive)
 
 
+def recovery_setup(robot: Robot) -> Recoveries:
+    """Return the recovery behaviours for robot, as the controller node sets them up.
+
+    A robot that may reverse does not back out (its MPC plans backwards itself).
+    """
+    return Recoveries(robot.footprint, v_max=robot.v_max, omega_max=robot.omega_max,
+                      settings=RecoverySettings(back_out=not robot.reverses))
+
+
 def result_fields(result: SensingResult) -> dict[str, Any]:
     """Return the runs.csv fields a navigation run adds."""
     log = result.navigator.log if result.navigator is not None else None
+    recoveries = result.navigator.recoveries if result.navigator is not None else None
     control = np.asarray(log.control_seconds if log else [], dtype=float) * 1e3
     plans = np.asarray(log.plan_seconds if log else [], dtype=float)
     return {
@@ -529,13 +545,17 @@ def result_fields(result: SensingResult) -> dict[str, Any]:
         'step_ms_median': float(np.median(control)) if len(control) else math.nan,
         'step_ms_max': float(np.max(control)) if len(control) else math.nan,
         'plan_s_max': float(np.max(plans)) if len(plans) else math.nan,
+        'recoveries': recoveries.started if recoveries is not None else None,
+        'recovery_s': (sum(r.end - r.start for r in recoveries.log)
+                       if recoveries is not None else None),
     }
 
 
 def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controller: str,
                          robot: Robot, *, seed: int = 0, prepare: bool = True,
                          setup: MpcSetup = MpcSetup(), reality: str = 'ideal',
-                         localized: bool | None = None, plant: str = 'kinematic') -> Path:
+                         localized: bool | None = None, plant: str = 'kinematic',
+                         recoveries: bool = False) -> Path:
     """Draw laser-only runs: the true obstacles, what was sensed, every plan, the footprint.
 
     Each world is run again (the runs are deterministic) with the navigator's log at hand:
@@ -554,6 +574,7 @@ def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controll
         reality: How real the robot is (see run_navigation), as the suite ran it.
         localized: Whether a real robot has a localizer (see run_navigation).
         plant: The robot's plant (see run_navigation).
+        recoveries: Run the recovery behaviours (see run_navigation).
 
     Returns:
         target.
@@ -577,7 +598,7 @@ def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controll
     for ax, (title, world) in zip(axes[0], worlds, strict=True):
         result = run_navigation(world, controller, robot, seed=seed, prepare=prepare,
                                 setup=setup, reality=reality, localized=localized,
-                                plant=plant)
+                                plant=plant, recoveries=recoveries)
         for shape in world.physical_shapes():
             if isinstance(shape, Circle):
                 ax.add_patch(CirclePatch((shape.x, shape.y), shape.radius, color='0.6'))

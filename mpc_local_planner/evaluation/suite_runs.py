@@ -109,6 +109,7 @@ class Task:
     # '' runs it in process
     through_nodes: str = ''
     plant: str = 'kinematic'  # sim/physics PLANTS: the kinematic Base or MuJoCo's robot
+    recoveries: bool = False  # core/recoveries.py around every controller (navigation runs)
 
     @property
     def navigation(self) -> bool:
@@ -285,7 +286,8 @@ def run_navigation_task(task: Task) -> RunRow:
                                                              compile=task.compile),
                                        reality=task.reality,
                                        # BARN's robot has odometry and a laser, no localizer
-                                       localized=task.suite != 'barn', plant=task.plant)
+                                       localized=task.suite != 'barn', plant=task.plant,
+                                       recoveries=task.recoveries)
     except PlanningError as err:
         row.success, row.collision, row.stop_reason = False, False, f'no plan: {err}'
         row.barn_score = 0.0 if barn_length is not None else None

@@ -112,11 +112,13 @@ def world_yaml(world: World, path: Path) -> Path:
 
 def node_command(world_file: Path, out: Path, *, robot: str, v_max: float, omega_max: float,
                  time_limit: float, goal_tolerance: float, stall_seconds: float, seed: int,
-                 reality: str, budget: str, plant: str = 'kinematic') -> list[str]:
+                 reality: str, budget: str, plant: str = 'kinematic',
+                 recoveries: bool = False) -> list[str]:
     """Return the closed_loop command of one run (the user's parameter files as shipped).
 
     plant is the simulator's (closed_loop --plant: kinematic, or the MuJoCo robot of the
-    world's footprint).
+    world's footprint). recoveries is the controller's (on by default in the node, off in
+    the suites unless asked: the flag is passed either way, so both paths run the same).
     """
     files = [resolve_data_file('mpc_controller.yaml')]
     if robot == 'jackal':
@@ -135,6 +137,7 @@ def node_command(world_file: Path, out: Path, *, robot: str, v_max: float, omega
                 '--param', f'unicycle_simulator.omega_max:={float(omega_max)!r}']
     if budget == 'iterations':
         command += ['--param', 'mpc_controller.budget:=iterations']
+    command += ['--param', f'mpc_controller.recoveries:={str(bool(recoveries)).lower()}']
     return command
 
 
@@ -160,7 +163,8 @@ def run_through_nodes(task: Any, robot: Any, world: World) -> RunRow:
                            omega_max=robot.omega_max, time_limit=time_limit,
                            goal_tolerance=float(world.goal_tolerance or suites.GOAL_TOLERANCE),
                            stall_seconds=suites.STALL_SECONDS, seed=task.seed,
-                           reality=task.reality, budget=task.budget, plant=task.plant)
+                           reality=task.reality, budget=task.budget, plant=task.plant,
+                           recoveries=task.recoveries)
     row = RunRow(controller=controller_name(task.controller), world=task.world,
                  name=world.name, robot=task.robot, sensing=True, v_max=robot.v_max,
                  reality=task.reality)
@@ -194,6 +198,8 @@ def run_through_nodes(task: Any, robot: Any, world: World) -> RunRow:
     row.steps = metrics.get('steps')
     row.solver_failures = metrics.get('solver_failures')
     row.replans = metrics.get('replans')
+    row.recoveries = metrics.get('recoveries')
+    row.recovery_s = metrics.get('recovery_s')
     stalls = metrics.get('lockstep_stalls') or 0
     row.stop_reason = str(metrics.get('stop_reason')) + (
         f' ({stalls} lockstep stalls)' if stalls else '')

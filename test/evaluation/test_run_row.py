@@ -14,17 +14,18 @@ from mpc_local_planner.evaluation.run_row import RUN_COLUMNS, RunRow
 from mpc_local_planner.evaluation.suite_runs import CSV_COLUMNS
 
 # rows as a sweep before the typed row wrote them (a known-map run, a navigation run, a run
-# with no plan and an error), header included; the contact split's cells empty
+# with no plan and an error), header included; the contact split's and the recoveries'
+# cells empty
 EARLIER = (
     ','.join(CSV_COLUMNS) + '\r\n'
     'tracking,0,False,False,80.60000000000001,4.304317101148031,0.12,3.1,9.5,,True,,'
-    '1.5,404,time limit,0.081,335,0.31,circle,False,0,0,,0.5,2.25,,random 0,,,\r\n'
+    '1.5,404,time limit,0.081,335,0.31,circle,False,0,0,,0.5,2.25,,random 0,,,,,\r\n'
     'dwa,1,True,False,11.600000000000001,9.247130494217885,0.05,0.4,1.2,0.5,,,0.98,59,'
-    'reached,,0,2.0,jackal,True,0,3,1,nan,inf,0.07,BARN 1,real,,\r\n'
+    'reached,,0,2.0,jackal,True,0,3,1,nan,inf,0.07,BARN 1,real,,,,\r\n'
     'regulated_pure_pursuit,2,False,False,,,,,,0.0,,,,,no plan: blocked,,,2.0,jackal,'
-    'True,,,,,,,BARN 2,ideal,,\r\n'
+    'True,,,,,,,BARN 2,ideal,,,,\r\n'
     'proposed,3,False,False,,,,,,,,,,,error: KilledWorker: gone,,,0.31,circle,False,,,,,,,,'
-    ',,\r\n'
+    ',,,,\r\n'
 )
 
 

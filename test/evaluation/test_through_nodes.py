@@ -51,14 +51,15 @@ def test_the_run_is_the_users_files_as_shipped_with_only_the_runs_wiring_added()
     command = node_command(Path('w.yaml'), Path('out'), robot='jackal', v_max=2.0,
                            omega_max=4.0, time_limit=100.0, goal_tolerance=1.0,
                            stall_seconds=20.0, seed=3, reality='real', budget='iterations',
-                           plant='mujoco')
+                           plant='mujoco', recoveries=True)
     assert command[command.index('--plant') + 1] == 'mujoco'  # the suite's plant, not a default
     files = [command[i + 1] for i, arg in enumerate(command) if arg == '--params-file']
     assert [Path(f).name for f in files] == ['mpc_controller.yaml', 'jackal.yaml']
     params = [command[i + 1] for i, arg in enumerate(command) if arg == '--param']
-    # the controller's tuning is the files'; the run only sets the motors and the budget
+    # the controller's tuning is the files'; the run only sets the motors, the budget and
+    # whether the suite runs recoveries (the node's default is on, the suites' off)
     assert params == ['unicycle_simulator.v_max:=2.0', 'unicycle_simulator.omega_max:=4.0',
-                      'mpc_controller.budget:=iterations']
+                      'mpc_controller.budget:=iterations', 'mpc_controller.recoveries:=true']
     for flag in ('--lockstep', '--separate-processes', '--sensing', '--no-localizer'):
         assert flag in command
     circle = node_command(Path('w.yaml'), Path('out'), robot='circle', v_max=0.31,
@@ -66,6 +67,7 @@ def test_the_run_is_the_users_files_as_shipped_with_only_the_runs_wiring_added()
                           stall_seconds=20.0, seed=0, reality='ideal', budget='wall')
     assert 'jackal.yaml' not in ' '.join(circle) and 'budget:=' not in ' '.join(circle)
     assert circle[circle.index('--plant') + 1] == 'kinematic'
+    assert 'mpc_controller.recoveries:=false' in circle
 
 
 def test_each_run_holds_a_dds_domain_no_other_run_holds() -> None:
