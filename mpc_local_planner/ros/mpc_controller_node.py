@@ -87,6 +87,7 @@ from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.input_freshness import InputFreshness
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import analytic_path
+from mpc_local_planner.core.recoveries import Recoveries
 from mpc_local_planner.ros.conversions import (
     frame_problem,
     measured_time,
@@ -99,12 +100,14 @@ from mpc_local_planner.ros.conversions import (
 from mpc_local_planner.ros.lifecycle import ManagedNode
 from mpc_local_planner.ros.mpc_controller_outputs import ControllerOutputs, FOOTPRINT_TOPIC
 from mpc_local_planner.ros.mpc_controller_parameters import (
+    build_recoveries,
     build_settings,
     check_obstacles,
     check_sensing,
     DEFAULTS,
     load_robot,
     PARAMETERS,
+    RECOVERY_PARAMETERS,
 )
 from mpc_local_planner.ros.mpc_controller_sensing import ControllerSensing
 from mpc_local_planner.ros.node_main import destroy_on_failure, EXIT_INVALID_PARAMETERS, run_node
@@ -172,6 +175,7 @@ class MpcControllerNode(ManagedNode):
         super().__init__('mpc_controller', **kwargs)
         self._world_cache: dict[str, tuple[list[ConvexPolygon], Footprint]] = {}
         self.controller: MpcController | None = None
+        self.recoveries: Recoveries | None = None  # around the MPC (core/recoveries.py)
         self._sensing: ControllerSensing | None = None
         self._outputs: ControllerOutputs | None = None
         self._odom_sub = None
@@ -239,12 +243,14 @@ class MpcControllerNode(ManagedNode):
                 values, world_radius=world_footprint.radius, world_footprint=world_footprint)
             check_obstacles(obstacles, config)
             controller = MpcController(model, config, obstacles=obstacles, settings=settings)
+            recoveries = build_recoveries(values, config, model)
             if values['analytic_path']:
                 controller.set_path(analytic_path(values['analytic_path']))
         except Exception as err:  # a bad world file mostly; refuse with a reason
             self.get_logger().error(f'configure failed: {err}')
             return TransitionCallbackReturn.FAILURE
         self.controller = controller
+        self.recoveries = recoveries
         self._sources = sources
         self._world_obstacles = list(obstacles)
         self._pose_source = self._make_robot_pose(values)
@@ -365,6 +371,7 @@ class MpcControllerNode(ManagedNode):
             self._tf_listener = None
         self._outputs = self._sensing = None
         self.controller = None  # the MPC and its NLPs go with it
+        self.recoveries = None
         self._forget_inputs()
 
     # ------------------------------------------------------------------ parameters
@@ -425,6 +432,9 @@ class MpcControllerNode(ManagedNode):
             if model != self.controller.model:
                 self.controller.set_model(model)
             self.controller.settings = settings
+            if names & (RECOVERY_PARAMETERS | {'allow_reversing', 'v_max', 'omega_max',
+                                               'footprint', 'robot_radius'}):
+                self.recoveries = build_recoveries(values, config, model)
             if 'analytic_path' in names and values['analytic_path']:
                 self.controller.set_path(analytic_path(values['analytic_path']))
                 self._plan_problem = None  # the plan topic is ignored from now on
@@ -595,6 +605,8 @@ class MpcControllerNode(ManagedNode):
             plan = self._read_plan(msg)
             poses = path_to_poses(plan)
             path = self.controller.set_plan(poses)
+            if self.recoveries is not None:
+                self.recoveries.plan_changed(poses)
             self._prepare()
         except Exception as err:  # ValueError mostly; never leave a callback
             problem = str(err) or type(err).__name__
@@ -660,8 +672,8 @@ class MpcControllerNode(ManagedNode):
                 output = self.controller.stop(Reason.NO_LOCALIZATION, self._pose_problem,
                                               now=now)
             else:
-                self.controller.set_obstacles(self._world_obstacles
-                                              + self._sensing.near(self._state))
+                held = self._world_obstacles + self._sensing.near(self._state)
+                self.controller.set_obstacles(held)
                 refused = None if self._state is None else InputFreshness.of(
                     self.controller.settings).check(
                     now, pose_time=self._state_time,
@@ -669,7 +681,7 @@ class MpcControllerNode(ManagedNode):
                     scan_time=self._sensing.scan_time,
                     map_missing=ObstacleSource.MAP in self._sources and self._sensing.grid is None)
                 if refused is None:
-                    output = self.controller.compute(self._state, self._odom_twist, now)
+                    output = self._compute(held, now)
                 else:
                     output = self.controller.refuse_inputs(refused, now)
         except Exception as err:  # compute never raises; belt and braces
@@ -682,6 +694,35 @@ class MpcControllerNode(ManagedNode):
         self.goal_reached = output.reason is Reason.GOAL_REACHED
         self._outputs.publish(output, now, state=self._state, state_time=self._state_time,
                               blockage=self.blockage)
+
+    def _compute(self, held: list[ConvexPolygon], now: float) -> ControlOutput:
+        """Return the MPC's answer, or a recovery's where the robot makes no progress."""
+        assert self.controller is not None
+
+        def compute() -> ControlOutput:
+            return self.controller.compute(self._state, self._odom_twist, now)
+
+        if self.recoveries is None:
+            return compute()
+        self.recoveries.set_obstacles(held)
+        started, logged = self.recoveries.started, len(self.recoveries.log)
+        exhausted = self.recoveries.exhausted
+        output = self.recoveries.step(self._state, self._odom_twist, now, compute)
+        if self.recoveries.started > started:
+            self.get_logger().warning(
+                f'no progress for {self.recoveries.settings.stuck_timeout:g} s: recovery '
+                f'{self.recoveries.tries} of {self.recoveries.settings.max_tries}')
+        if len(self.recoveries.log) > logged:
+            for record in self.recoveries.log[logged:]:
+                self.get_logger().info(
+                    f'recovery {record.kind}: {record.end - record.start:.1f} s'
+                    + (f', {record.distance:.2f} m' if record.distance else '')
+                    + f', ended: {record.ended}')
+        if self.recoveries.exhausted and not exhausted:
+            self.get_logger().error(
+                f'no progress, and the {self.recoveries.settings.max_tries} recoveries for '
+                'this goal are spent: the MPC answers alone until a new goal')
+        return output
 
 
 def main(args: list[str] | None = None) -> int:

@@ -31,14 +31,15 @@ from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.footprint import Footprint, FROM_WORLD, radius_in_force, resolve
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.recoveries import Recoveries, RecoverySettings
 from mpc_local_planner.ros.lockstep import LOCKSTEP_PARAMETER
 from mpc_local_planner.ros.parameters import ParameterSpec
 from mpc_local_planner.ros.robot_pose import pose_parameters
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.world import load_world
 
-__all__ = ['BASE_FRAME', 'DEFAULTS', 'PARAMETERS', 'RATE_LIMIT_OFF',
-           'build_settings', 'check_obstacles', 'check_sensing',
+__all__ = ['BASE_FRAME', 'DEFAULTS', 'PARAMETERS', 'RATE_LIMIT_OFF', 'RECOVERY_PARAMETERS',
+           'build_recoveries', 'build_settings', 'check_obstacles', 'check_sensing',
            'load_robot', 'rate_limit', 'robot_footprint']
 
 # The frame of a TwistStamped cmd_vel.
@@ -63,6 +64,7 @@ RATE_LIMIT_OFF = (0.0, 0.0)
 _RATE_LIMIT = (0.01, 1000.0)
 # The defaults come from the dataclasses (the paper's values), the single source.
 _CONFIG, _MODEL, _SETTINGS = MpcConfig(), Unicycle(), ControllerSettings()
+_RECOVERY = RecoverySettings()
 _SHAPE = 'changes the NLP shape: rebuilt before the next solve'
 _WEIGHT = (0.0, 1e6)
 
@@ -198,6 +200,25 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('robot_base_frame', BASE_FRAME,
                   'the robot frame: scans must be in it (laser_pose says where the laser '
                   'sits), and a TwistStamped cmd_vel is in it'),
+    ParameterSpec('recoveries', True,
+                  'a robot that makes no progress for recovery_stuck_timeout backs out along '
+                  'its own trail (forward-only robots: allow_reversing false), spins to clear '
+                  'the view and waits for a re-plan (core/recoveries.py; Nav2 BackUp, Spin, '
+                  "Wait); false: cmd_vel is always the MPC's; next step"),
+    ParameterSpec('recovery_stuck_timeout', float(_RECOVERY.stuck_timeout),
+                  's without progress (recovery_progress_radius moved or 0.5 rad turned) '
+                  "before a recovery; longer than the planner's progress_timeout, so its "
+                  'no-progress re-plan comes first; next step', float_range=(0.1, 3600.0)),
+    ParameterSpec('recovery_progress_radius', float(_RECOVERY.progress_radius),
+                  'metres that count as progress; next step', float_range=(0.01, 10.0)),
+    ParameterSpec('recovery_back_out_distance', float(_RECOVERY.back_out_max),
+                  'metres a back-out along the trail may go at most (it stops sooner where '
+                  'a turn in place is possible); next step', float_range=(0.01, 10.0)),
+    ParameterSpec('recovery_back_out_speed', float(_RECOVERY.back_out_speed),
+                  'reverse speed of a back-out, m/s (capped by v_max); next step',
+                  float_range=(0.01, 10.0)),
+    ParameterSpec('recovery_max_tries', int(_RECOVERY.max_tries),
+                  'recoveries per goal at most; next step', int_range=(0, 1000)),
     ParameterSpec('enable_stamped_cmd_vel', False,
                   'publish cmd_vel as geometry_msgs/TwistStamped (frame base_link) instead of '
                   "Twist (Nav2's name); read at configure"),
@@ -208,6 +229,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   '(or ros2 lifecycle set)', read_only=True),
 )
 
+# The recovery behaviours' parameters (a change rebuilds them; the trail starts again).
+RECOVERY_PARAMETERS = frozenset(spec.name for spec in PARAMETERS
+                                if spec.name.startswith('recover'))
 # Parameter defaults by name.
 DEFAULTS: dict[str, Any] = {spec.name: spec.default for spec in PARAMETERS}
 
@@ -311,6 +335,26 @@ def build_settings(values: dict[str, Any], *, world_radius: float = 0.0,
                                   max_plan_poses=int(values['max_plan_poses']),
                                   max_decel=(math.inf, math.inf) if decel is None else decel)
     return config, model, settings
+
+
+def build_recoveries(values: dict[str, Any], config: MpcConfig,
+                     model: Unicycle) -> Recoveries:
+    """Return the recovery behaviours the values set up for this robot's shape and limits.
+
+    A robot that may reverse (allow_reversing) does not back out: its MPC plans backwards.
+    """
+    footprint = (Footprint.polygon(config.footprint) if config.footprint
+                 else Footprint.circle(config.robot_radius))
+    settings = RecoverySettings(
+        enabled=bool(values['recoveries']),
+        stuck_timeout=float(values['recovery_stuck_timeout']),
+        progress_radius=float(values['recovery_progress_radius']),
+        back_out=not bool(values['allow_reversing']),
+        back_out_max=float(values['recovery_back_out_distance']),
+        back_out_speed=float(values['recovery_back_out_speed']),
+        max_tries=int(values['recovery_max_tries']))
+    return Recoveries(footprint, v_max=model.v_max, omega_max=model.omega_max,
+                      settings=settings)
 
 
 def check_obstacles(obstacles: list[ConvexPolygon], config: MpcConfig) -> None:
