@@ -98,6 +98,16 @@ class ConvexPolygon:
         if not np.all(np.isfinite(hull)):
             msg = 'polygon vertices must be finite'
             raise ValueError(msg)
+        return cls._from_hull(hull)
+
+    @classmethod
+    def _from_hull(cls, hull: np.ndarray) -> ConvexPolygon:
+        """Build the polygon from hull vertices as convex_hull returns them (CCW, smallest first).
+
+        The shapes whose hull is known (a box, a regular polygon) come here without Qhull,
+        which costs far more than the rest (every remembered rectangle and octagon is built
+        again at every step of the suites and the node).
+        """
         edges = np.roll(hull, -1, axis=0) - hull
         normals = np.column_stack([edges[:, 1], -edges[:, 0]])  # outward for CCW order
         normals /= np.linalg.norm(normals, axis=1, keepdims=True)
@@ -110,7 +120,11 @@ class ConvexPolygon:
         if not (xmax > xmin and ymax > ymin):
             msg = f'box needs xmin < xmax and ymin < ymax, got {(xmin, ymin, xmax, ymax)}'
             raise ValueError(msg)
-        return cls.from_vertices([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])
+        corners = np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]], dtype=float)
+        if not np.all(np.isfinite(corners)):
+            msg = 'polygon vertices must be finite'
+            raise ValueError(msg)
+        return cls._from_hull(corners)  # counter-clockwise from the smallest corner already
 
     @classmethod
     def from_circle(
@@ -128,7 +142,13 @@ class ConvexPolygon:
         outer = radius / math.cos(math.pi / sides)
         angles = np.arange(sides) * 2.0 * math.pi / sides + math.pi / sides
         pts = np.column_stack([cx + outer * np.cos(angles), cy + outer * np.sin(angles)])
-        return cls.from_vertices(pts)
+        if not np.all(np.isfinite(pts)):
+            msg = 'polygon vertices must be finite'
+            raise ValueError(msg)
+        # counter-clockwise by construction; start at the lexicographically smallest vertex,
+        # as convex_hull does
+        first = int(np.lexsort((pts[:, 1], pts[:, 0]))[0])
+        return cls._from_hull(np.roll(pts, -first, axis=0))
 
     @property
     def num_faces(self) -> int:

@@ -43,6 +43,28 @@ def test_circumscribed_polygon_contains_the_whole_circle() -> None:
     assert np.all(polygon.contains(rim, margin=1e-12))
 
 
+def test_boxes_and_circles_built_without_qhull_are_the_hulls_to_the_last_digit() -> None:
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        x0, y0 = rng.normal(size=2) * 10.0
+        w, h = rng.uniform(1e-3, 5.0, size=2)
+        box = ConvexPolygon.from_box(x0, y0, x0 + w, y0 + h)
+        hull = ConvexPolygon.from_vertices([[x0 + w, y0 + h], [x0, y0], [x0, y0 + h],
+                                            [x0 + w, y0]])
+        cx, cy = rng.normal(size=2) * 10.0
+        radius, sides = rng.uniform(1e-3, 3.0), int(rng.integers(3, 17))
+        circle = ConvexPolygon.from_circle(cx, cy, radius, sides=sides)
+        outer = radius / np.cos(np.pi / sides)
+        angles = np.arange(sides) * 2.0 * np.pi / sides + np.pi / sides
+        around = ConvexPolygon.from_vertices(np.column_stack(
+            [cx + outer * np.cos(angles), cy + outer * np.sin(angles)])[::-1])
+        for fast, qhull in ((box, hull), (circle, around)):
+            for field in ('A', 'b', 'vertices'):
+                np.testing.assert_array_equal(getattr(fast, field), getattr(qhull, field))
+    with pytest.raises(ValueError, match='finite'):
+        ConvexPolygon.from_box(0.0, 0.0, np.inf, 1.0)
+
+
 def test_vertices_in_any_order_give_the_convex_hull() -> None:
     polygon = ConvexPolygon.from_vertices([[1, 1], [0, 0], [1, 0], [0, 1], [0.5, 0.5]])
     assert polygon.num_faces == 4
