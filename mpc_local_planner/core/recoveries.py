@@ -77,6 +77,16 @@ _ARC_STEP = 0.1
 _PASSED = 0.08
 # Metres of trail ahead (behind the robot) that the reverse pursuit aims at.
 _LOOKAHEAD = 0.3
+# Radians of turn in place between two recorded trail poses, and within which the robot's
+# heading is aligned with a trail pose (else a back-out first turns back to it: reversing at
+# another heading than the body had there would sweep where the body never was).
+_TURN_SPACING = 0.05
+_ALIGNED = 0.1
+# Trail poses kept per spacing of path at most (a robot turning in place for long adds poses
+# without path).
+_TURNS_PER_SPACING = 4
+# 1/s: a turn back to a trail pose slows as it comes near its heading (rad/s per rad).
+_RETRACE_GAIN = 2.0
 # Metres deeper into an obstacle that a back-out from contact still counts as no deeper
 # (rounding of the separation, not a tolerance of the check).
 _DEEPER = 1e-6
@@ -189,21 +199,35 @@ class Trail:
         self._poses.clear()
 
     def record(self, pose: np.ndarray) -> None:
-        """Add pose when it is `spacing` from the newest one; keep `length` metres."""
+        """Add pose when it is `spacing` from the newest one or turned _TURN_SPACING from it.
+
+        Turns in place are kept too: the body swept them, so turning back is retracing them.
+        At most `length` metres of path, and _TURNS_PER_SPACING poses per spacing of it.
+        """
         pose = np.asarray(pose, dtype=float)[:3].copy()
-        if self._poses and math.hypot(*(pose[:2] - self._poses[-1][:2])) < self.spacing:
-            return
+        if self._poses:
+            newest = self._poses[-1]
+            moved = math.hypot(*(pose[:2] - newest[:2])) >= self.spacing
+            turned = abs(math.remainder(float(pose[2] - newest[2]), math.tau)) >= _TURN_SPACING
+            if not (moved or turned):
+                return
         self._poses.append(pose)
         xy = self.poses[:, :2]
         steps = np.hypot(*np.diff(xy, axis=0).T)
         beyond = np.cumsum(steps[::-1])[::-1] > self.length  # path from pose i to the newest
-        drop = int(np.count_nonzero(beyond))
+        drop = max(int(np.count_nonzero(beyond)),
+                   len(self._poses) - int(_TURNS_PER_SPACING * self.length / self.spacing))
         del self._poses[:drop]
 
-    def pop_passed(self, position: np.ndarray) -> None:
-        """Drop the newest poses within _PASSED of position (a back-out has passed them)."""
-        while self._poses and math.hypot(*(self._poses[-1][:2] - position[:2])) < _PASSED:
+    def pop_passed(self, pose: np.ndarray) -> None:
+        """Drop the newest poses a back-out has reached (within _PASSED and _ALIGNED of pose)."""
+        while self._poses and self._reached(self._poses[-1], pose):
             self._poses.pop()
+
+    @staticmethod
+    def _reached(trail_pose: np.ndarray, pose: np.ndarray) -> bool:
+        near = math.hypot(*(trail_pose[:2] - pose[:2])) < _PASSED
+        return near and abs(math.remainder(float(trail_pose[2] - pose[2]), math.tau)) < _ALIGNED
 
     def behind(self, position: np.ndarray, distance: float) -> np.ndarray:
         """Return the newest poses back along the trail for `distance` metres, newest first."""
@@ -386,7 +410,9 @@ class Recoveries:
             ended = 'the trail ends'
         if ended is None:
             speed = min(settings.back_out_speed, self.v_max)
-            u = self._reverse_pursuit(pose, speed)
+            u = self._retrace_turn(pose)
+            if u is None:
+                u = self._reverse_pursuit(pose, speed)
             blocked = self._blocked(pose, u, speed)
             if blocked is None:
                 # one wording per behaviour: the node logs a reason's message when it changes
@@ -395,6 +421,21 @@ class Recoveries:
             ended = blocked
         self._finish(pose, now, ended)
         return None
+
+    def _retrace_turn(self, pose: np.ndarray) -> np.ndarray | None:
+        """Return (0, omega) back to the newest trail pose's heading where the robot stands.
+
+        None unless the robot stands at that pose's position at another heading (it turned in
+        place there).
+        """
+        newest = self.trail.poses[-1]
+        if math.hypot(*(newest[:2] - pose[:2])) >= _PASSED:
+            return None
+        error = math.remainder(float(newest[2] - pose[2]), math.tau)
+        # trail poses are _TURN_SPACING apart: the short way back is the way the body came
+        omega = math.copysign(min(self.settings.spin_speed, self.omega_max,
+                                  _RETRACE_GAIN * abs(error)), error)
+        return np.array([0.0, omega])
 
     def _reverse_pursuit(self, pose: np.ndarray, speed: float) -> np.ndarray:
         """Return (v < 0, omega) along the arc through the trail point _LOOKAHEAD behind."""

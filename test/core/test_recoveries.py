@@ -87,7 +87,7 @@ def test_trail_keeps_its_length_and_spacing() -> None:
     assert np.all(np.diff(xs) >= 0.1 - 1e-9)
     assert xs[-1] - xs[0] <= 1.0 + 1e-9
     assert xs[-1] > 2.8
-    trail.pop_passed(np.array([xs[-1], 0.0]))
+    trail.pop_passed(np.array([xs[-1], 0.0, 0.0]))
     assert trail.poses[-1, 0] < xs[-1]
 
 
@@ -134,6 +134,38 @@ def test_a_trail_crossed_by_an_obstacle_seen_since_is_not_taken() -> None:
     assert recoveries.log[0].kind is RecoveryKind.BACK_OUT
     assert 'blocked by an obstacle seen since' in recoveries.log[0].ended
     assert recoveries.log[0].distance == 0.0
+
+
+class DriveThenTurn:
+    """Drives to x = 1 along +x, turns in place to 1 rad there, then answers STOP."""
+
+    def compute(self, pose: np.ndarray) -> ControlOutput:
+        if pose[0] < 1.0:
+            return ControlOutput(np.array([0.5, 0.0]), None, Reason.TRACKING)
+        if pose[2] < 1.0:
+            return ControlOutput(np.array([0.0, 0.5]), None, Reason.TRACKING)
+        return ControlOutput(np.zeros(2), None, Reason.STOP, 'no feasible candidate')
+
+
+def test_a_robot_that_turned_in_place_turns_back_before_it_reverses() -> None:
+    # reversing at the turned heading would sweep the body where it never was (behind it,
+    # where the laser does not see): the back-out retraces the turn first
+    recoveries = new_recoveries()
+    # a post ahead of the turned robot, beyond its corners' sweep (0.333 m) and within the
+    # disc a turn in place needs (0.385 m): it cannot turn there
+    post = np.array([1.0, 0.0]) + 0.385 * np.array([math.cos(1.0), math.sin(1.0)])
+    ahead = [ConvexPolygon.from_box(*(post - 0.02), *(post + 0.02))]
+    _, answers, poses = drive(recoveries, DriveThenTurn(), 25.0, obstacles=ahead)
+    recovering = [(a, p) for a, p in zip(answers, poses, strict=False)
+                  if a.reason is Reason.RECOVERY and 'backing out' in a.detail]
+    assert recovering
+    turning = [(a, p) for a, p in recovering if a.u[0] == 0.0]
+    assert turning and all(a.u[1] < 0.0 for a, _ in turning)
+    for answer, pose in recovering:
+        if answer.u[0] < 0.0:
+            assert abs(pose[2]) < 0.1 + 1e-9  # reverses only once aligned with the trail
+    assert recoveries.log[0].ended == 'a turn in place is possible'
+    assert recoveries._clearance(np.array(poses)) > 0.0
 
 
 def test_a_robot_that_may_reverse_does_not_back_out() -> None:
