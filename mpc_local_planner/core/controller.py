@@ -21,8 +21,9 @@ Safety rules kept here (see the README's "Safety behaviours"):
 - the proof's shifted candidate is applied for at most N consecutive solver failures: its
   inputs run out after N shifts, and then the robot stops;
 - a robot the solver stopped, standing within twice its collision margin of an obstacle,
-  solves among the obstacles as sensed until it is that far away again (`MarginRelief`:
-  a base that slipped into its margin cannot plan out of the grown obstacles);
+  solves with half the clearance it stands at as its margin until it is that far away again
+  (`MarginRelief`: a base that slipped into its margin cannot plan out of the grown
+  obstacles);
 - a step's solving is bounded by the MPC's budget (SolverSettings.max_solve_time): past it the
   shifted candidate is applied (a failure as above), and `timeouts` counts those steps;
 - every command is finite and within the model's bounds, else it is zero;
@@ -566,7 +567,7 @@ class MpcController:
         return output
 
     def _relieve_margin(self, x: np.ndarray) -> None:
-        """Give the MPC the obstacles as sensed, or grown by the margin, as MarginRelief says.
+        """Give the MPC the obstacles grown by the margin, or by the relieved one (MarginRelief).
 
         Only a step after the solver's stop can start the relief, and only a relieved step
         can end it, so the clearance is computed on those steps alone.
@@ -580,7 +581,7 @@ class MpcController:
         clearance = footprint_clearance_at(self._config.robot_footprint, x, self._obstacles)
         if self._relief.update(margin=margin, clearance=clearance, solver_stopped=stopped,
                                is_standing=standing(twist)) != was:
-            self._mpc.update_config(replace(self._config, collision_margin=0.0)
+            self._mpc.update_config(replace(self._config, collision_margin=self._relief.margin)
                                     if self._relief.active else self._config)
 
     def _planned_input(self, solution: MpcSolution | None, elapsed: float) -> np.ndarray:
