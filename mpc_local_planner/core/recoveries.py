@@ -2,8 +2,8 @@
 """Recoveries for a robot that makes no progress: back out along its own trail, spin, wait.
 
 The paper's guarantee holds for a path the robot can follow; it does not cover a
-forward-only robot that the laser let into a pocket it cannot turn in (BARN 227, 283 and
-295 end so: standing, facing the pocket's closed end, no verified forward plan from there,
+forward-only robot that the laser let into a pocket it cannot turn in (through the nodes on
+the MuJoCo Jackal, BARN 227 and 283 ended so: standing, no verified forward plan from there,
 every no-progress re-plan the same). Nav2 answers this with recovery behaviours that its
 behaviour tree runs for every controller (BackUp, Spin, Wait); so does this module, for
 every `LocalController`, in core, so that the controller node and the suites run one rule.
@@ -24,9 +24,15 @@ so a no-progress re-plan gets its chance first).
    disc ``turn_clearance`` clear of every obstacle held), or it has backed ``back_out_max``
    metres, or the trail ends. Before every command the footprint is checked, at the trail's
    poses ahead and along the commanded arc, against every obstacle the controller holds:
-   a trail crossed by an obstacle seen since is not taken.
+   a trail crossed by an obstacle seen since is not taken. Where the robot turned in place,
+   the back-out turns back first (the trail keeps the turns): reversing at another heading
+   than the body had there would sweep where it never was.
 2. *Spin* to clear the view: where a turn in place is possible, by ``spin_angle`` towards the
-   plan's end, so that the laser sees what the pocket hid and the re-plan knows it.
+   plan's end, so that the laser sees what the pocket hid and the re-plan knows it. "Possible"
+   is judged against the obstacles held, as the MPC's own turns are: behind the robot the
+   laser sees nothing, and what it saw there is forgotten after the memory's time-to-live;
+   after a back-out the trail covers the disc behind the robot but for slivers at the rear
+   corners, so a spin is as safe as the MPC's turns in place, not more.
 3. *Wait* standing for a new plan (the re-planner's no-progress rule re-plans from where the
    robot now stands), at most ``wait_timeout`` seconds; then the controller drives again.
 
@@ -311,7 +317,8 @@ class Recoveries:
 
         Args:
             pose: The robot's pose [x, y, theta] (None: no pose; the controller answers).
-            twist: Its measured [v, omega] (None: unknown; a wait then ends on time alone).
+            twist: Its measured [v, omega] (None: unknown, taken as standing: a wait ends
+                when a new plan comes, as on a base that reports no twist).
             now: The caller's time, seconds.
             compute: The controller's answer for this step.
 
