@@ -52,19 +52,19 @@ RELIEVED_SHARE = 0.5
 STANDING_TWIST = (0.02, 0.05)
 
 
-def footprint_clearance_at(footprint: Footprint, pose: np.ndarray,
+def footprint_clearance_at(footprint: Footprint, poses: np.ndarray,
                            obstacles: Sequence[ConvexPolygon]) -> float:
-    """Return the footprint's signed distance from the nearest obstacle at pose (inf: none).
+    """Return the footprint's least signed distance from an obstacle at poses (inf: none).
 
-    A polygon: the exact distance (minus the penetration depth when overlapping); a circle:
-    the centre's distance less the radius.
+    poses: one pose (3,) or several (M, >= 3). A polygon: the exact distance (minus the
+    penetration depth when overlapping); a circle: the centre's distance less the radius.
     """
     if not obstacles:
         return float('inf')
-    pose = np.asarray(pose, dtype=float).reshape(-1)
+    poses = np.atleast_2d(np.asarray(poses, dtype=float))
     if footprint.is_circle:
-        return float(min_clearance(list(obstacles), pose[None, :2])) - footprint.radius
-    signed, _ = polygon_separation(footprint.at_poses(pose), ObstacleSet(list(obstacles)))
+        return float(min_clearance(list(obstacles), poses[:, :2])) - footprint.radius
+    signed, _ = polygon_separation(footprint.at_poses(poses), ObstacleSet(list(obstacles)))
     return float(np.min(signed))
 
 

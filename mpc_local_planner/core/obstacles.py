@@ -94,11 +94,7 @@ class ConvexPolygon:
     @classmethod
     def from_vertices(cls, vertices: Sequence[Sequence[float]] | np.ndarray) -> ConvexPolygon:
         """Build the polygon from its vertices (any order; the convex hull is taken)."""
-        hull = convex_hull(np.asarray(vertices, dtype=float))
-        if not np.all(np.isfinite(hull)):
-            msg = 'polygon vertices must be finite'
-            raise ValueError(msg)
-        return cls._from_hull(hull)
+        return cls._from_hull(convex_hull(np.asarray(vertices, dtype=float)))
 
     @classmethod
     def _from_hull(cls, hull: np.ndarray) -> ConvexPolygon:
@@ -107,7 +103,14 @@ class ConvexPolygon:
         The shapes whose hull is known (a box, a regular polygon) come here without Qhull,
         which costs far more than the rest (every remembered rectangle and octagon is built
         again at every step of the suites and the node).
+
+        Raises:
+            ValueError: if a vertex is not finite.
+
         """
+        if not np.all(np.isfinite(hull)):
+            msg = 'polygon vertices must be finite'
+            raise ValueError(msg)
         edges = np.roll(hull, -1, axis=0) - hull
         normals = np.column_stack([edges[:, 1], -edges[:, 0]])  # outward for CCW order
         normals /= np.linalg.norm(normals, axis=1, keepdims=True)
@@ -121,9 +124,6 @@ class ConvexPolygon:
             msg = f'box needs xmin < xmax and ymin < ymax, got {(xmin, ymin, xmax, ymax)}'
             raise ValueError(msg)
         corners = np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]], dtype=float)
-        if not np.all(np.isfinite(corners)):
-            msg = 'polygon vertices must be finite'
-            raise ValueError(msg)
         return cls._from_hull(corners)  # counter-clockwise from the smallest corner already
 
     @classmethod
@@ -142,9 +142,6 @@ class ConvexPolygon:
         outer = radius / math.cos(math.pi / sides)
         angles = np.arange(sides) * 2.0 * math.pi / sides + math.pi / sides
         pts = np.column_stack([cx + outer * np.cos(angles), cy + outer * np.sin(angles)])
-        if not np.all(np.isfinite(pts)):
-            msg = 'polygon vertices must be finite'
-            raise ValueError(msg)
         # counter-clockwise by construction; start at the lexicographically smallest vertex,
         # as convex_hull does
         first = int(np.lexsort((pts[:, 1], pts[:, 0]))[0])

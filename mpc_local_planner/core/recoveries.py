@@ -56,13 +56,8 @@ import numpy as np
 
 from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.footprint import Footprint
-from mpc_local_planner.core.margin_relief import standing
-from mpc_local_planner.core.obstacles import (
-    ConvexPolygon,
-    min_clearance,
-    ObstacleSet,
-    polygon_separation,
-)
+from mpc_local_planner.core.margin_relief import footprint_clearance_at, standing
+from mpc_local_planner.core.obstacles import ConvexPolygon, min_clearance
 from mpc_local_planner.core.replanning import PROGRESS_ANGLE, PROGRESS_RADIUS, PROGRESS_TIMEOUT
 
 __all__ = [
@@ -479,11 +474,7 @@ class Recoveries:
         return None
 
     def _clearance(self, poses: np.ndarray) -> float:
-        if self.footprint.is_circle:
-            return min_clearance(self._obstacles, poses[:, :2]) - self.footprint.radius
-        signed, _ = polygon_separation(self.footprint.at_poses(poses),
-                                       ObstacleSet(self._obstacles))
-        return float(np.min(signed))
+        return footprint_clearance_at(self.footprint, poses, self._obstacles)
 
     def _spin(self, pose: np.ndarray, now: float) -> ControlOutput | None:
         settings = self.settings

@@ -343,8 +343,6 @@ def build_recoveries(values: dict[str, Any], config: MpcConfig,
 
     A robot that may reverse (allow_reversing) does not back out: its MPC plans backwards.
     """
-    footprint = (Footprint.polygon(config.footprint) if config.footprint
-                 else Footprint.circle(config.robot_radius))
     settings = RecoverySettings(
         enabled=bool(values['recoveries']),
         stuck_timeout=float(values['recovery_stuck_timeout']),
@@ -353,7 +351,7 @@ def build_recoveries(values: dict[str, Any], config: MpcConfig,
         back_out_max=float(values['recovery_back_out_distance']),
         back_out_speed=float(values['recovery_back_out_speed']),
         max_tries=int(values['recovery_max_tries']))
-    return Recoveries(footprint, v_max=model.v_max, omega_max=model.omega_max,
+    return Recoveries(config.robot_footprint, v_max=model.v_max, omega_max=model.omega_max,
                       settings=settings)
 
 
