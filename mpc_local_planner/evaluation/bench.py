@@ -26,6 +26,11 @@ plant): the MPC solves once per step, so three calls in four apply the held plan
 safety checks; their times are reported apart from the solving calls' and together
 (median, p99, max), which is what a 20 Hz control timer has to fit into its 50 ms period.
 
+Hard BARN states (section 'barn', `bench_barn`): the paper's MPC recorded in process on hard
+BARN worlds (laser only, the Jackal at 2 m/s), then the node's step (perception, the
+controller, and within it the solver and the rest) replayed on the same states for the MPC,
+the DWA and Nav2's regulated pure pursuit; median, p99 and max per part.
+
 Usage: ``python -m mpc_local_planner.evaluation.bench [--quick] [--out FILE] [--sections ...]``.
 
 This module is the command (its options, the tables, the JSON); the measurements themselves
@@ -49,6 +54,7 @@ from mpc_local_planner.core.config import SOLVERS
 from mpc_local_planner.core.footprint import Footprint, JACKAL
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.core.paths import paper_sinusoid
+from mpc_local_planner.evaluation.bench_barn import barn_lines, BARN_WORLDS, bench_barn
 from mpc_local_planner.evaluation.bench_runs import (
     bench_cold_start,
     bench_control_rate,
@@ -84,7 +90,10 @@ from mpc_local_planner.evaluation.opti_peer import OptiMpc
 __all__ = ['main']
 
 # What main() can run, in this order.
-SECTIONS = ('horizons', 'obstacles', 'rrt', 'perception', 'footprint', 'rate', 'cold_start')
+SECTIONS = ('horizons', 'obstacles', 'rrt', 'perception', 'footprint', 'rate', 'cold_start',
+            'barn')
+# --quick's barn rows: one world, its first steps.
+QUICK_BARN_STEPS = 80
 # The closed loops on the paper's scenario end at the goal (72-76 steps at h = 0.2 s), or
 # after this many steps, in both modes: a row that did not reach the goal says why.
 CLOSED_LOOP_STEPS = 250
@@ -298,7 +307,9 @@ def main(argv: Sequence[str] | None = None, *, footprint_compile: bool = True,
     parser.add_argument('--quick', action='store_true',
                         help='N = 10 and 40 only, 3 RRT* seeds, 50 scans, 60 control steps '
                              'per perception and footprint row and 240 calls at the control '
-                             'rate (those stop short of their goals: "cap")')
+                             'rate (those stop short of their goals: "cap"), and the barn rows '
+                             f'on world {BARN_WORLDS[0]} only, its first {QUICK_BARN_STEPS} '
+                             'steps')
     parser.add_argument('--out', default='bench.json', help='JSON output file')
     parser.add_argument('--backends', nargs='*', default=list(SOLVERS),
                         help='backends to time (default: all)')
@@ -390,6 +401,15 @@ def main(argv: Sequence[str] | None = None, *, footprint_compile: bool = True,
         cold = bench_cold_start(1 if args.quick else 3, controllers=cold_start_controllers)
         results['cold_start'] = cold
         for line in _cold_start_lines(cold):
+            print(line, flush=True)
+
+    if 'barn' in sections:
+        print("\nhard BARN states: the control step replayed on the paper's MPC's recorded "
+              'runs, ms (median, p99, max)', flush=True)
+        barn = bench_barn(BARN_WORLDS[:1] if args.quick else BARN_WORLDS,
+                          max_steps=QUICK_BARN_STEPS if args.quick else None)
+        results['barn'] = barn
+        for line in barn_lines(barn):
             print(line, flush=True)
 
     results['machine']['load_average_after'] = list(os.getloadavg())

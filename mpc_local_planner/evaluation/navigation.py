@@ -37,6 +37,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -74,6 +75,7 @@ __all__ = [
     'NavigationLog',
     'NavigationSettings',
     'Navigator',
+    'RecordedStep',
 ]
 
 
@@ -132,6 +134,27 @@ class NavigationSettings:
             progress_angle=self.progress_angle)
 
 
+class RecordedStep(NamedTuple):
+    """What one control step gave the local controller, to replay it (mpc_bench's barn rows).
+
+    Attributes:
+        t: The step's time, seconds.
+        x: The pose the controller was given.
+        twist: The measured twist, or None (an ideal robot).
+        scan: The scan taken at this step, or None (not due, lost, or no laser).
+        plan: The poses of a plan adopted at this step, or None (the plan in force stayed).
+        u: The command the step answered (v, omega).
+
+    """
+
+    t: float
+    x: np.ndarray
+    twist: np.ndarray | None
+    scan: Scan | None
+    plan: np.ndarray | None
+    u: np.ndarray
+
+
 @dataclass
 class NavigationLog:
     """What the navigator did, for metrics and figures.
@@ -186,6 +209,8 @@ class Navigator:
             reality's ScanChannel, and step() gets what odometry says.
         recoveries: The recovery behaviours around the local controller (the node's), or
             None: the controller's answer always stands.
+        record: Keep every step's inputs in `recorded` (scans included: memory grows with
+            the run), so that the same states can be replayed through other controllers.
 
     """
 
@@ -198,8 +223,11 @@ class Navigator:
                  snapshot_period: float = 2.0,
                  footprint: Footprint | None = None,
                  base: Base | None = None,
-                 recoveries: Recoveries | None = None) -> None:
+                 recoveries: Recoveries | None = None,
+                 record: bool = False) -> None:
         self.local = local
+        self.recorded: list[RecordedStep] | None = [] if record else None
+        self._adopted: np.ndarray | None = None
         self.recoveries = recoveries
         self.reach = float(reach)
         self.base = base
@@ -265,6 +293,10 @@ class Navigator:
                                         - (compile_wait_seconds() - waited))
         if not self.log.sensed or t >= self.log.sensed[-1][0] + self._snapshot_period:
             self.log.sensed.append((t, list(nearby)))
+        if self.recorded is not None:
+            self.recorded.append(RecordedStep(t, pose.copy(), twist, scan, self._adopted,
+                                              np.array(answer.u, dtype=float)))
+        self._adopted = None
         return answer
 
     def _scan(self, x: np.ndarray, t: float) -> Scan | None:
@@ -307,5 +339,6 @@ class Navigator:
         self.log.plans.append((t, decision.waypoints, decision.trigger.value))
         poses = waypoints_to_poses(decision.waypoints, float(x[2]), float(self.goal[2]))
         self.local.set_plan(poses)
+        self._adopted = poses
         if self.recoveries is not None:
             self.recoveries.plan_changed(poses)

@@ -79,6 +79,7 @@ __all__ = [
     'Robot',
     'ROBOTS',
     'SensingResult',
+    'local_controller',
     'run_navigation',
     'unknown_world',
 ]
@@ -379,7 +380,7 @@ def _prepare(mpc: Any, budget: str = EVALUATION_BUDGET) -> None:
         mpc.wait_compiled()
 
 
-def _local_controller(name: ControllerName | str, robot: Robot, world: World, *,
+def local_controller(name: ControllerName | str, robot: Robot, world: World, *,
                       prepare: bool = True, setup: MpcSetup = MpcSetup(),
                       reality: Reality | None = None) -> Built:
     """Return the named local controller for the robot (tuned to a real base's limits).
@@ -415,7 +416,7 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
                    seed: int = 0, h: float = 0.2, prepare: bool = True,
                    setup: MpcSetup = MpcSetup(), reality: str | Reality = 'ideal',
                    localized: bool | None = None, plant: str = 'kinematic',
-                   recoveries: bool = False) -> SensingResult:
+                   recoveries: bool = False, record: bool = False) -> SensingResult:
     """Drive robot through world with the named controller, perception and re-planning.
 
     Args:
@@ -451,6 +452,8 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
         recoveries: Run the recovery behaviours around the controller (`recovery_setup`:
             back out along the trail, spin, wait), as the controller node runs them; off,
             the controller's answer always stands.
+        record: Keep every step's inputs in the navigator's `recorded` (Navigator), for
+            a replay of the same states through other controllers.
 
     Raises:
         ValueError: for a plant that is not one of sim/physics PLANTS.
@@ -467,7 +470,7 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
     known = rasterize_world(world, MAP_RESOLUTION) if world.obstacles else \
         _empty_map(world.bounds)
     grid, planner = _grid_planner(known, robot, world.bounds, seed)
-    local = _local_controller(controller, robot, world, prepare=prepare, setup=setup,
+    local = local_controller(controller, robot, world, prepare=prepare, setup=setup,
                               reality=reality if real else None)
     model = Unicycle(v_max=robot.v_max, omega_max=robot.omega_max)
     if physics:
@@ -488,7 +491,8 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
                           planner, world.goal, reach=local.reach, h=period,
                           known_map=known if world.obstacles else None,
                           settings=settings, footprint=robot.footprint, base=base,
-                          recoveries=recovery_setup(robot) if recoveries else None)
+                          recoveries=recovery_setup(robot) if recoveries else None,
+                          record=record)
     if physics:  # the engine casts the beams, with the laser's settings
         laser = navigator.laser
         navigator.laser = base.laser(fov=laser.fov, beams=laser.beams,

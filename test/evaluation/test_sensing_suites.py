@@ -122,7 +122,7 @@ def test_every_controller_arrives_where_a_localized_truth_still_succeeds() -> No
     mpc = suites.controller_setup(ControllerName.PROPOSED, robot, world)
     arrivals = [mpc.settings.xy_goal_tolerance]
     for name in ('pure_pursuit', 'dwa', 'regulated_pure_pursuit'):
-        local = suites._local_controller(name, robot, world, prepare=False).controller
+        local = suites.local_controller(name, robot, world, prepare=False).controller
         config = getattr(local, 'config', None)
         arrivals.append(getattr(config, 'goal_tolerance', None) or config.xy_goal_tolerance)
     assert all(true_goal_tolerance(a) <= tolerance + 1e-12 for a in arrivals)
@@ -134,7 +134,7 @@ def test_regulated_pure_pursuit_checks_its_arc_against_the_sensed_obstacles() ->
 
     world = suites.unknown_world(0, 0)
     robot = dataclasses.replace(suites.ROBOTS['jackal'], v_max=2.0, omega_max=4.0)
-    local, reach = suites._local_controller('regulated_pure_pursuit', robot, world,
+    local, reach = suites.local_controller('regulated_pure_pursuit', robot, world,
                                             prepare=False, reality=reality_preset('real'))
     local.set_plan(np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0]]))
     x, moving = np.zeros(3), np.array([2.0, 0.0])
