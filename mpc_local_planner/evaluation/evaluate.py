@@ -1,10 +1,11 @@
 # SPDX-License-Identifier: Apache-2.0
 """Evidence at scale: the paper's MPC beside baselines on random worlds and BARN worlds.
 
-``python -m mpc_local_planner.evaluation.evaluate --suite {random,barn,unknown,worlds}
+``python -m mpc_local_planner.evaluation.evaluate --suite {random,barn,unknown,worlds,dynamic}
 --out DIR --jobs K``
 
-With sensing (``--suite unknown``, ``--suite worlds --sensing``, ``--suite barn --sensing``)
+With sensing (``--suite unknown``, ``--suite worlds --sensing``, ``--suite barn --sensing``,
+``--suite dynamic``: DynaBARN-like worlds whose cylinders move, `dynamic_worlds`)
 every run is the navigation stack of `sensing_suites` (laser, obstacle memory, re-planning
 planner, local controller; ``--robot circle|jackal``); see that module for the suites. The
 suites below are the easier "known map" setting: every obstacle known, the reference path
@@ -72,6 +73,7 @@ import numpy as np
 
 from mpc_local_planner.core.config import BUDGETS
 from mpc_local_planner.core.controllers import ControllerName
+from mpc_local_planner.evaluation.dynamic_worlds import DYNAMIC_WORLDS
 from mpc_local_planner.evaluation.plotting import plot_world_panels, WorldPanel
 from mpc_local_planner.evaluation.rollout import EVALUATION_BUDGET
 from mpc_local_planner.evaluation.run_row import RunRow
@@ -81,6 +83,7 @@ from mpc_local_planner.evaluation.suite_runs import (
     DEFAULT_BARN_DIR,
     empty_row,
     KNOWN_MAP_CONTROLLERS,
+    NAVIGATION_SUITES,
     navigation_world,
     parse_worlds,
     run_task,
@@ -177,6 +180,8 @@ def summarize(rows: list[RunRow], *, suite: str, title: str = '') -> str:
     lines.append('')
     if any(r.recoveries is not None for r in rows):
         lines += [_recovery_line(rows, order), '']
+    if suite == 'dynamic':
+        lines += [_contact_kinds_line(rows, order), '']
     reasons: dict[ControllerName, dict[str, int]] = {}
     for r in rows:
         key = r.stop_reason.split(':')[0]
@@ -191,6 +196,15 @@ def summarize(rows: list[RunRow], *, suite: str, title: str = '') -> str:
         lines.append('')
         lines.append('Proposed MPC failed in worlds: ' + ', '.join(map(str, failed)))
     return '\n'.join(lines) + '\n'
+
+
+def _contact_kinds_line(rows: list[RunRow], order: list[ControllerName]) -> str:
+    """Say, per controller, its runs with an active and with a passive contact (DynaBARN's)."""
+    parts = [f'{name}: {sum(bool(r.active_contacts) for r in rows if r.controller is name)} '
+             f'active, {sum(bool(r.passive_contacts) for r in rows if r.controller is name)} '
+             'passive' for name in order]
+    return ('Contacts (runs; active: the robot was moving into it, passive: it stood and '
+            'was run into): ' + '; '.join(parts) + '.')
 
 
 def _recovery_line(rows: list[RunRow], order: list[ControllerName]) -> str:
@@ -324,7 +338,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog='python -m mpc_local_planner.evaluation.evaluate',
                                      description=__doc__.split('\n\n')[0])
     parser.add_argument('--suite', choices=SUITES, required=True)
-    parser.add_argument('--count', type=int, default=200, help='random or unknown worlds')
+    parser.add_argument('--count', type=int, default=None,
+                        help='random or unknown worlds (default 200), dynamic worlds '
+                             f"(default {DYNAMIC_WORLDS}, DynaBARN's number)")
     parser.add_argument('--sensing', action='store_true',
                         help='barn, worlds: laser only for what the map lacks (barn: no prior '
                         'map), with the re-planning planner (unknown: always)')
@@ -394,7 +410,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         'runs them again (the runs are deterministic) into '
                         'OUT/<suite>_sensing_runs.png')
     args = parser.parse_args(argv)
-    navigation = args.sensing or args.suite in ('unknown', 'worlds')
+    navigation = args.sensing or args.suite in NAVIGATION_SUITES
     if args.plot and not navigation:
         try:
             target = plot_suite_runs(args.out, args.suite, parse_worlds(args.plot),
@@ -439,7 +455,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if unknown:
         parser.error(f'unknown controllers {unknown} for this suite; choose from {allowed}')
     world_files: list[str] = []
-    if args.suite in ('random', 'unknown'):
+    if args.count is None:
+        args.count = DYNAMIC_WORLDS if args.suite == 'dynamic' else 200
+    if args.suite in ('random', 'unknown', 'dynamic'):
         worlds = list(range(args.count))
         barn_dir = ''
     elif args.suite == 'worlds':

@@ -80,7 +80,10 @@ CONTROLLERS = tuple(ControllerName)
 # The known-map suites run the first three (DWA and Nav2's regulated pure pursuit run with
 # sensing, on re-planned paths: they take the sensed obstacles).
 KNOWN_MAP_CONTROLLERS = CONTROLLERS[:3]
-SUITES = ('random', 'barn', 'unknown', 'worlds')
+SUITES = ('random', 'barn', 'unknown', 'worlds', 'dynamic')
+# The suites that always run the navigation stack (laser, re-planning): the others need
+# --sensing for it.
+NAVIGATION_SUITES = ('unknown', 'worlds', 'dynamic')
 CSV_COLUMNS = RUN_COLUMNS
 DEFAULT_BARN_DIR = BARN_DIR
 PATH_CAPACITY = 128
@@ -114,7 +117,7 @@ class Task:
     @property
     def navigation(self) -> bool:
         """Run through the navigation stack (laser, re-planning) rather than a fixed path."""
-        return self.sensing or self.suite in ('unknown', 'worlds')
+        return self.sensing or self.suite in NAVIGATION_SUITES
 
 
 def parse_worlds(text: str) -> list[int]:
@@ -253,8 +256,8 @@ def navigation_world(task: Task) -> tuple[Robot, World, float | None]:
     """Return the robot, the world and the BARN path length (else None) of a navigation task.
 
     The robot is the task's (its footprint, its speed limits); the world is the suite's:
-    the unknown suite's generated one, a world file with the robot's footprint, or a BARN
-    world with its obstacles unknown.
+    the unknown or dynamic suite's generated one, a world file with the robot's footprint,
+    or a BARN world with its obstacles unknown.
     """
     from mpc_local_planner.evaluation import sensing_suites as suites
     from mpc_local_planner.worlds.world import load_world
@@ -262,6 +265,10 @@ def navigation_world(task: Task) -> tuple[Robot, World, float | None]:
     robot = replace(suites.ROBOTS[task.robot], v_max=task.v_max, omega_max=task.omega_max)
     if task.suite == 'unknown':
         return robot, suites.unknown_world(task.world, task.seed, robot=robot), None
+    if task.suite == 'dynamic':
+        from mpc_local_planner.evaluation.dynamic_worlds import dynamic_world
+
+        return robot, dynamic_world(task.world, task.seed, footprint=robot.footprint), None
     if task.suite == 'worlds':
         world = load_world(task.world_file)
         return robot, replace(world, footprint=robot.footprint, robot_radius=0.0), None
@@ -277,7 +284,8 @@ def run_navigation_task(task: Task) -> RunRow:
     robot, world, barn_length = navigation_world(task)
     row = RunRow(controller=controller_name(task.controller), world=task.world,
                  name=world.name, robot=task.robot,
-                 sensing=task.sensing or task.suite == 'unknown', v_max=robot.v_max,
+                 sensing=task.sensing or task.suite in ('unknown', 'dynamic'),
+                 v_max=robot.v_max,
                  reality=task.reality)
     try:
         result = suites.run_navigation(world, task.controller, robot,
