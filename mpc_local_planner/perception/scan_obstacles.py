@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
-from typing import NamedTuple, Sequence
+from typing import NamedTuple, Sequence, TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
@@ -34,6 +34,7 @@ from scipy.spatial import ConvexHull, QhullError
 from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.perception.raycast import TrueGeometry
+
 from mpc_local_planner.perception.scans import (
     Beams,
     classify_beams,
@@ -43,6 +44,9 @@ from mpc_local_planner.perception.scans import (
     ScanError,
     validate_scan,
 )
+
+if TYPE_CHECKING:
+    from mpc_local_planner.perception.tracking import TrackLabels
 
 __all__ = [
     'ObstacleMemory',
@@ -260,15 +264,17 @@ def scan_to_obstacles(scan: Scan, robot_pose: Sequence[float], *,
 
 def _pieces(scan: Scan, robot_pose: Sequence[float], laser_pose: Sequence[float],
             readings: Beams,
-            config: ScanObstacleConfig) -> tuple[list[ConvexPolygon], np.ndarray]:
-    """Return the obstacles of a valid scan and, per obstacle, three returns it was built from.
+            config: ScanObstacleConfig) -> tuple[list[ConvexPolygon], np.ndarray, np.ndarray]:
+    """Return a valid scan's obstacles, their anchor returns and their first returns.
 
-    The returns (first, middle, last) lie on surfaces the laser saw; the memory asks whether
-    a later scan sees them again.
+    Per obstacle: three returns it was built from, and the index of its first return (in
+    `scan_points`' order, for the memory's ``moving`` flags). The three returns (first,
+    middle, last) lie on surfaces the laser saw; the memory asks whether a later scan sees
+    them again.
     """
     points, _ = scan_points(scan, robot_pose, laser_pose=laser_pose, readings=readings)
     if not len(points):
-        return [], np.zeros((0, 3, 2))
+        return [], np.zeros((0, 3, 2)), np.zeros(0, dtype=np.int64)
     origin = compose_pose(robot_pose, laser_pose)[:2]
     first, last = cluster_bounds(points, config.gap)
     index, owner, offsets = _expand(first, last)
@@ -292,15 +298,19 @@ def _pieces(scan: Scan, robot_pose: Sequence[float], laser_pose: Sequence[float]
     starts = np.concatenate([first[small], piece_first])
     ends = np.concatenate([last[small], piece_last])
     anchors = np.stack([points[starts], points[(starts + ends) // 2], points[ends]], axis=1)
-    return obstacles, anchors
+    return obstacles, anchors, starts
 
 
 class _Entry(NamedTuple):
-    """A remembered obstacle, when it was seen, and three returns it was built from."""
+    """A remembered obstacle: when seen, three returns it was built from, and its track.
+
+    track: the id of the track its returns belonged to (perception/tracking.py), -1 for none.
+    """
 
     polygon: ConvexPolygon
     seen: float
     anchors: np.ndarray
+    track: int = -1
 
 
 class ObstacleMemory:
@@ -315,7 +325,11 @@ class ObstacleMemory:
       the field of view, within range and not behind the surface the beams now return
       from): the current scan sees that surface, so what it sees now replaces the old piece
       (otherwise each scan would add a copy);
-    - anything else (behind the robot, occluded, out of range) is kept.
+    - anything else (behind the robot, occluded, out of range) is kept;
+    - built from returns of a track that now moves (`update`'s ``tracks``,
+      perception/tracking.py): forgotten, those of this scan included at the next one.
+      What moves is where the newest scan sees it, not where it was: a walker leaves no
+      trail of remembered pieces behind it, not even of the scans before it was told moving.
 
     Args:
         ttl: Time to live of an obstacle, seconds (the ``obstacle_memory`` parameter).
@@ -368,7 +382,8 @@ class ObstacleMemory:
 
     def update(self, scan: Scan, robot_pose: Sequence[float], *,
                laser_pose: Sequence[float] = (0.0, 0.0, 0.0),
-               body: Footprint | None = None) -> list[ConvexPolygon]:
+               body: Footprint | None = None,
+               tracks: TrackLabels | None = None) -> list[ConvexPolygon]:
         """Add a scan's obstacles, forget what it proves gone or sees anew, and expire.
 
         Args:
@@ -377,6 +392,10 @@ class ObstacleMemory:
             laser_pose: (x, y, yaw) of the laser in the robot frame.
             body: The robot's footprint: returns inside it are the robot, neither obstacles
                 nor a view of one (see `classify_beams`); None: every return counts.
+            tracks: The scan's returns labelled with their tracks (`scan_points`' order, with
+                the same body and laser pose) and the ids of the moving tracks
+                (`ScanTracker.labels`): what was built from a moving track is forgotten.
+                None: nothing moves.
 
         Returns:
             The obstacles built from this scan alone.
@@ -392,14 +411,25 @@ class ObstacleMemory:
         self._stamp = float(scan.stamp)
         readings = classify_beams(scan, body=body, laser_pose=laser_pose)
         self._last_usable = bool(readings.usable.any())
-        current, anchors = _pieces(scan, robot_pose, laser_pose, readings, self.config)
-        kept = [e for e in self._entries if scan.stamp - e.seen <= self.ttl]
+        current, anchors, starts = _pieces(scan, robot_pose, laser_pose, readings, self.config)
+        owners = np.full(len(current), -1, dtype=np.int64)
+        moving: frozenset[int] = frozenset()
+        if tracks is not None:
+            labels = np.asarray(tracks.per_return)
+            if labels.shape != (int(np.count_nonzero(readings.hit)),):
+                msg = (f'tracks label {labels.shape} returns, the scan has '
+                       f'{int(np.count_nonzero(readings.hit))}')
+                raise ScanError(msg)
+            owners = labels[starts] if len(current) else owners
+            moving = tracks.moving
+        kept = [e for e in self._entries
+                if e.track not in moving and scan.stamp - e.seen <= self.ttl]
         if kept:
             drop = self._superseded(kept, scan, readings,
                                     compose_pose(robot_pose, laser_pose))
             kept = [e for e, gone in zip(kept, drop, strict=True) if not gone]
-        self._entries = kept + [_Entry(p, float(scan.stamp), a)
-                                for p, a in zip(current, anchors, strict=True)]
+        self._entries = kept + [_Entry(p, float(scan.stamp), a, int(o))
+                                for p, a, o in zip(current, anchors, owners, strict=True)]
         return current
 
     def _superseded(self, entries: list[_Entry], scan: Scan, readings: Beams,

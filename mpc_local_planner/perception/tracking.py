@@ -39,7 +39,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -52,6 +52,7 @@ from mpc_local_planner.perception.scans import classify_beams, compose_pose, Sca
 __all__ = [
     'ScanTracker',
     'Track',
+    'TrackLabels',
     'Tracker',
     'TrackerConfig',
 ]
@@ -200,6 +201,8 @@ class Tracker:
         self._tracks: list[Track] = []
         self._next_id = 0
         self._stamp = -math.inf
+        # per cluster of the last update: the id of the track it went to (None: too large)
+        self.matches: list[int | None] = []
 
     @property
     def tracks(self) -> list[Track]:
@@ -221,6 +224,7 @@ class Tracker:
 
         in_free_space: per cluster, whether it stands where a scan saw free space
             (`ScanTracker` says); None: none does, and no track can be told moving.
+        Afterwards `matches` holds, per cluster, the id of its track (None: too large).
 
         Raises:
             ValueError: for a stamp older than the last one, or a non-finite point.
@@ -230,31 +234,30 @@ class Tracker:
             msg = (f'tracker stamp {stamp!r} is not finite or older than the last one '
                    f'({self._stamp})')
             raise ValueError(msg)
-        self._stamp = float(stamp)
-        config = self.config
-        centres, sizes, free = [], [], []
         flags = list(in_free_space) if in_free_space is not None else [False] * len(clusters)
         if len(flags) != len(clusters):
             msg = f'{len(flags)} free-space flags for {len(clusters)} clusters'
             raise ValueError(msg)
-        for cluster, flag in zip(clusters, flags, strict=True):
+        config = self.config
+        # the clusters small enough to track: their index, centre, size and evidence
+        index, centres, sizes, free = [], [], [], []
+        for k, (cluster, flag) in enumerate(zip(clusters, flags, strict=True)):
             points = np.asarray(cluster, dtype=float).reshape(-1, 2)
-            if not len(points) or not np.all(np.isfinite(points)):
-                if len(points):
-                    msg = 'a cluster has a non-finite point'
-                    raise ValueError(msg)
-                continue
-            span = points.max(axis=0) - points.min(axis=0)
-            if float(np.hypot(*span)) > config.max_size:
+            if not np.all(np.isfinite(points)):
+                msg = 'a cluster has a non-finite point'
+                raise ValueError(msg)
+            if not len(points) or float(np.hypot(*np.ptp(points, axis=0))) > config.max_size:
                 continue
             centre = points.mean(axis=0)
+            index.append(k)
             centres.append(centre)
             sizes.append(float(np.max(np.hypot(*(points - centre).T))))
             free.append(bool(flag))
+        self._stamp = float(stamp)
         for track in self._tracks:
             self._predict(track, stamp)
-        matched_tracks: set[int] = set()
-        matched_clusters: set[int] = set()
+        owner: dict[int, Track] = {}
+        matched: set[int] = set()
         if self._tracks and centres:
             predicted = np.array([t.state[:2] for t in self._tracks])
             offsets = predicted[:, None, :] - np.array(centres)[None, :, :]
@@ -262,15 +265,19 @@ class Tracker:
             rows, cols = linear_sum_assignment(cost)
             for row, col in zip(rows, cols, strict=True):
                 if cost[row, col] <= config.gate:
-                    self._correct(self._tracks[row], centres[col], sizes[col], stamp,
-                                  free[col])
-                    matched_tracks.add(int(row))
-                    matched_clusters.add(int(col))
+                    track = self._tracks[row]
+                    self._correct(track, centres[col], sizes[col], stamp, free[col])
+                    owner[int(col)] = track
+                    matched.add(int(row))
         self._tracks = [t for i, t in enumerate(self._tracks)
-                        if i in matched_tracks or stamp - t.seen <= config.lost_after]
+                        if i in matched or stamp - t.seen <= config.lost_after]
         for col, centre in enumerate(centres):
-            if col not in matched_clusters:
-                self._tracks.append(self._new_track(centre, sizes[col], stamp, free[col]))
+            if col not in owner:
+                owner[col] = self._new_track(centre, sizes[col], stamp, free[col])
+                self._tracks.append(owner[col])
+        self.matches = [None] * len(clusters)
+        for col, k in enumerate(index):
+            self.matches[k] = owner[col].id
         return self.tracks
 
     def _new_track(self, centre: np.ndarray, size: float, stamp: float, free: bool) -> Track:
@@ -317,6 +324,20 @@ class Tracker:
                             > config.moving_speed)
 
 
+class TrackLabels(NamedTuple):
+    """A scan's returns labelled with their tracks, and which tracks move.
+
+    Attributes:
+        per_return: (N,) per return (`scan_points`' order) the id of its track, -1 for none
+            (a cluster too large to track).
+        moving: The ids of the tracks told moving at this scan.
+
+    """
+
+    per_return: np.ndarray
+    moving: frozenset[int]
+
+
 class _Reference:
     """A kept scan: its stamp, its beams' free space, the laser's pose, and its returns."""
 
@@ -354,6 +375,8 @@ class ScanTracker:
         self.tracker = Tracker(config)
         self.gap = float(gap)
         self._history: list[_Reference] = []
+        # the last scan's returns labelled with their tracks (ObstacleMemory.update's tracks)
+        self.labels = TrackLabels(np.zeros(0, dtype=np.int64), frozenset())
 
     @property
     def config(self) -> TrackerConfig:
@@ -364,11 +387,16 @@ class ScanTracker:
         """Forget the tracks and the scans kept."""
         self.tracker.clear()
         self._history = []
+        self.labels = TrackLabels(np.zeros(0, dtype=np.int64), frozenset())
 
     def update(self, scan: Scan, robot_pose: Sequence[float], *,
                laser_pose: Sequence[float] = (0.0, 0.0, 0.0),
                body: Footprint | None = None) -> list[Track]:
-        """Take a valid scan placed at robot_pose (map frame); return the live tracks."""
+        """Take a valid scan placed at robot_pose (map frame); return the live tracks.
+
+        Afterwards `labels` holds this scan's returns labelled with their tracks and the
+        moving tracks' ids: what `ObstacleMemory.update` takes as ``tracks``.
+        """
         readings = classify_beams(scan, body=body, laser_pose=laser_pose)
         points, _ = scan_points(scan, robot_pose, laser_pose=laser_pose, readings=readings)
         first, last = cluster_bounds(points, self.gap)
@@ -379,6 +407,11 @@ class ScanTracker:
         flags = [self._in_free_space(c, reference) for c in clusters] \
             if reference is not None else None
         tracks = self.tracker.update(clusters, stamp, in_free_space=flags)
+        per_return = np.full(len(points), -1, dtype=np.int64)
+        for a, b, owner in zip(first, last, self.tracker.matches, strict=True):
+            if owner is not None:
+                per_return[a:b + 1] = owner
+        self.labels = TrackLabels(per_return, frozenset(t.id for t in tracks if t.moving))
         self._history.append(_Reference(stamp, readings.free, laser, scan, points))
         cutoff = stamp - self.config.reference_age
         # keep the newest scan at least reference_age old, and all the newer ones

@@ -10,7 +10,15 @@ import pytest
 
 from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.evaluation.metrics import footprint_clearance
-from mpc_local_planner.perception.tracking import ScanTracker, Track, Tracker, TrackerConfig
+from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
+from mpc_local_planner.perception.scans import ScanError
+from mpc_local_planner.perception.tracking import (
+    ScanTracker,
+    Track,
+    Tracker,
+    TrackerConfig,
+    TrackLabels,
+)
 from mpc_local_planner.sim.laser import SimulatedLaser
 from mpc_local_planner.sim.moving import WorldClock
 from mpc_local_planner.sim.reality import reality_preset
@@ -134,3 +142,67 @@ def test_bad_input_is_refused() -> None:
         TrackerConfig(gate=0.0)
     with pytest.raises(ValueError, match='confirm'):
         TrackerConfig(confirm=0)
+
+
+def passing_walker() -> WorldClock:
+    """A person (0.25 m) walking at 1 m/s along y = -1.5, past a robot at the origin."""
+    world = world_from_dict({
+        'bounds': [-6.0, 6.0, -4.0, 4.0], 'obstacles': [], 'start': [0.0, 0.0, 0.0],
+        'goal': [5.0, 0.0, 0.0],
+        'moving_obstacles': [
+            {'circle': [0.0, 0.0, 0.25],
+             'waypoints': {'points': [[1.5, -1.5], [-5.0, -1.5]], 'speed': 1.0,
+                           'mode': 'back_and_forth'}}]}, name='passing')
+    return WorldClock.from_world(world)
+
+
+def walker_trail(track: bool) -> tuple[int, int]:
+    """Run the memory (with or without the tracker) as the walker passes; count what it held.
+
+    The robot turns left in place at 1 rad/s while the walker passes its right side: the
+    right edge of the laser's view turns away from where the walker was before any beam
+    crosses that place again. Returns the most pieces held at once, after the first second,
+    that lie more than 0.15 m from the walker where it is (its trail), and the pieces held on
+    the walker at t = 1 s.
+    """
+    clock = passing_walker()
+    walker = clock.moving[0]
+    laser = SimulatedLaser(clock)
+    memory = ObstacleMemory(5.0)
+    tracker = ScanTracker()
+    trail, on_walker = 0, 0
+    for k in range(41):
+        t = round(k * SCAN_PERIOD, 9)
+        pose = (0.0, 0.0, t)
+        scan = laser.scan(pose, stamp=t)
+        labels = None
+        if track:
+            tracker.update(scan, pose)
+            labels = tracker.labels
+        memory.update(scan, pose, tracks=labels)
+        gaps = [float(o.distance(walker.position(t))[0]) for o in memory.obstacles()]
+        if t >= 1.0:
+            trail = max(trail, sum(g > 0.25 + 0.15 for g in gaps))
+        if t == 1.0:
+            on_walker = sum(g <= 0.25 + 0.15 for g in gaps)
+    return trail, on_walker
+
+
+def test_a_walker_leaves_no_trail_in_the_memory() -> None:
+    """Without the tracker the memory keeps pieces where the walker was, out of view.
+
+    With the tracker, what was built from a moving track is forgotten at the next scan: the
+    walker is held where it is, and nowhere else.
+    """
+    assert walker_trail(track=False)[0] >= 1  # the trail
+    trail, on_walker = walker_trail(track=True)
+    assert on_walker > 0
+    assert trail == 0
+
+
+def test_the_memory_refuses_moving_flags_that_do_not_fit_the_scan() -> None:
+    laser = SimulatedLaser(passing_walker())
+    scan = laser.scan((0.0, 0.0, 0.0), stamp=0.0)
+    labels = TrackLabels(np.zeros(3, dtype=np.int64), frozenset({0}))
+    with pytest.raises(ScanError, match='returns'):
+        ObstacleMemory(5.0).update(scan, (0.0, 0.0, 0.0), tracks=labels)
