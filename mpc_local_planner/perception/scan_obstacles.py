@@ -34,7 +34,6 @@ from scipy.spatial import ConvexHull, QhullError
 from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.perception.raycast import TrueGeometry
-
 from mpc_local_planner.perception.scans import (
     Beams,
     classify_beams,
