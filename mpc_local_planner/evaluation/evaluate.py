@@ -325,7 +325,7 @@ def plot_navigation_suite(out: Path, template: Task, worlds: Sequence[int],
         seed=template.seed, setup=suites.MpcSetup(budget=template.budget,
                                                   compile=template.compile),
         reality=template.reality, localized=template.suite != 'barn', plant=template.plant,
-        recoveries=template.recoveries)
+        recoveries=template.recoveries, track_moving=template.track_moving)
 
 
 def _read_rows(path: Path) -> list[RunRow]:
@@ -399,6 +399,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                              "along the robot's trail, spin, wait for a re-plan; "
                              'core/recoveries.py), as the controller node does by default; '
                              'navigation suites only')
+    parser.add_argument('--track-moving', action='store_true',
+                        help="the controller's obstacle memory tracks the scans' small "
+                             'clusters and forgets what moving ones built, so that a walker '
+                             'leaves no trail (perception/tracking.py); in process only; '
+                             'navigation suites only')
     parser.add_argument('--save-trajectories', action='store_true',
                         help='write each run as trajectory CSV under OUT/trajectories')
     parser.add_argument('--merge', action='store_true',
@@ -443,6 +448,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.plant != 'kinematic' and not navigation:
         parser.error('--plant needs the navigation stack (--suite unknown, --suite worlds or '
                      '--sensing)')
+    if args.track_moving and not navigation:
+        parser.error('--track-moving needs the navigation stack (--suite unknown, --suite '
+                     'worlds, --suite dynamic or --sensing)')
+    if args.track_moving and args.through_nodes:
+        parser.error('--track-moving runs in process only: the nodes do not track yet')
     if args.recoveries and not navigation:
         parser.error('--recoveries needs the navigation stack (--suite unknown, --suite worlds '
                      'or --sensing)')
@@ -486,7 +496,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         template = Task(args.suite, 0, controllers[0], args.seed, args.v_max, args.omega_max,
                         str(args.barn_dir.resolve()), '', args.merge, sensing=args.sensing,
                         robot=args.robot, budget=args.budget, compile=args.compile,
-                        reality=args.reality, plant=args.plant, recoveries=args.recoveries)
+                        reality=args.reality, plant=args.plant, recoveries=args.recoveries,
+                        track_moving=args.track_moving)
         print(plot_navigation_suite(args.out, template, drawn, world_files))
         return 0
     args.out.mkdir(parents=True, exist_ok=True)
@@ -496,7 +507,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     template = Task(args.suite, 0, '', args.seed, args.v_max, args.omega_max, barn_dir,
                     trajectories, args.merge, sensing=args.sensing, robot=args.robot,
                     budget=args.budget, compile=args.compile, reality=args.reality,
-                    plant=args.plant, recoveries=args.recoveries)
+                    plant=args.plant, recoveries=args.recoveries,
+                    track_moving=args.track_moving)
     nodes = str((args.out / 'nodes').resolve()) if args.through_nodes else ''
     tasks = [replace(template, world=w, controller=c,
                      world_file=world_files[w] if world_files else '',
@@ -514,6 +526,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                  + f', {args.budget} budget, reality {args.reality}'
                  + (f', {args.plant} plant' if args.plant != 'kinematic' else '')
                  + (', recoveries' if args.recoveries else '')
+                 + (', moving clusters tracked' if args.track_moving else '')
                  + (", the paper's MPC through the nodes" if args.through_nodes else '') + ')')
     else:
         title = (f'{args.suite}, known map (seed {args.seed}, v_max {args.v_max:g} m/s, '

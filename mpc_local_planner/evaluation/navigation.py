@@ -65,6 +65,7 @@ from mpc_local_planner.perception.local_obstacles import LocalObstacles
 from mpc_local_planner.perception.raycast import TrueGeometry
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
 from mpc_local_planner.perception.scans import Scan
+from mpc_local_planner.perception.tracking import ScanTracker
 from mpc_local_planner.sim.base import Base
 from mpc_local_planner.sim.laser import JACKAL_FOV, SimulatedLaser
 from mpc_local_planner.sim.moving import WorldClock
@@ -104,6 +105,9 @@ class NavigationSettings:
             progress_radius in this many seconds (the node's progress_timeout); 0 = never.
         progress_radius: Metres that count as progress (the node's progress_radius).
         progress_angle: Radians of turn that count as progress (the node's progress_angle).
+        track_moving: The memory follows the scans' small clusters and forgets what moving
+            ones built (perception/tracking.py): a walker leaves no trail. Off: the world
+            is taken as static, as every suite before the dynamic one.
 
     """
 
@@ -120,6 +124,7 @@ class NavigationSettings:
     progress_timeout: float = PROGRESS_TIMEOUT
     progress_radius: float = PROGRESS_RADIUS
     progress_angle: float = PROGRESS_ANGLE
+    track_moving: bool = False
 
     def replan_settings(self) -> ReplanSettings:
         """Return the re-planner's settings (without sensing the grid never changes: no checks).
@@ -241,7 +246,9 @@ class Navigator:
         self.h = float(h)
         self.laser = SimulatedLaser(geometry, fov=self.settings.fov, beams=self.settings.beams,
                                     range_max=self.settings.range_max)
-        self.memory = ObstacleMemory(self.settings.memory_ttl)
+        self.memory = ObstacleMemory(
+            self.settings.memory_ttl,
+            tracker=ScanTracker() if self.settings.track_moving else None)
         self.obstacles = LocalObstacles(faces, occupancy=known_map, memory=self.memory)
         self.log = NavigationLog()
         self.replanner = Replanner(self.settings.replan_settings())

@@ -416,7 +416,8 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
                    seed: int = 0, h: float = 0.2, prepare: bool = True,
                    setup: MpcSetup = MpcSetup(), reality: str | Reality = 'ideal',
                    localized: bool | None = None, plant: str = 'kinematic',
-                   recoveries: bool = False, record: bool = False) -> SensingResult:
+                   recoveries: bool = False, record: bool = False,
+                   track_moving: bool = False) -> SensingResult:
     """Drive robot through world with the named controller, perception and re-planning.
 
     Args:
@@ -454,6 +455,9 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
             the controller's answer always stands.
         record: Keep every step's inputs in the navigator's `recorded` (Navigator), for
             a replay of the same states through other controllers.
+        track_moving: The controller's memory tracks the scans' small clusters and forgets
+            what moving ones built (NavigationSettings.track_moving); off, the world is
+            taken as static.
 
     Raises:
         ValueError: for a plant that is not one of sim/physics PLANTS.
@@ -483,7 +487,8 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
         base = Base(model, reality.with_seed(seed), world.start, dt=REALITY_SUBSTEP) \
             if real else None
     period = 1.0 / CONTROL_FREQUENCY if real else h
-    settings = NavigationSettings(sense=sensing, scan_period=SCAN_PERIOD if real else None)
+    settings = NavigationSettings(sense=sensing, scan_period=SCAN_PERIOD if real else None,
+                                  track_moving=track_moving)
     clock = WorldClock.from_world(world) if world.moving_obstacles else None
     navigator = Navigator(local.controller,
                           clock if clock is not None else TrueGeometry(world.physical_shapes()),
@@ -559,7 +564,7 @@ def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controll
                          robot: Robot, *, seed: int = 0, prepare: bool = True,
                          setup: MpcSetup = MpcSetup(), reality: str = 'ideal',
                          localized: bool | None = None, plant: str = 'kinematic',
-                         recoveries: bool = False) -> Path:
+                         recoveries: bool = False, track_moving: bool = False) -> Path:
     """Draw laser-only runs: the true obstacles, what was sensed, every plan, the footprint.
 
     Each world is run again (the runs are deterministic) with the navigator's log at hand:
@@ -579,6 +584,7 @@ def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controll
         localized: Whether a real robot has a localizer (see run_navigation).
         plant: The robot's plant (see run_navigation).
         recoveries: Run the recovery behaviours (see run_navigation).
+        track_moving: Track moving clusters in the memory (see run_navigation).
 
     Returns:
         target.
@@ -602,7 +608,8 @@ def plot_navigation_runs(target: Path, worlds: list[tuple[str, World]], controll
     for ax, (title, world) in zip(axes[0], worlds, strict=True):
         result = run_navigation(world, controller, robot, seed=seed, prepare=prepare,
                                 setup=setup, reality=reality, localized=localized,
-                                plant=plant, recoveries=recoveries)
+                                plant=plant, recoveries=recoveries,
+                                track_moving=track_moving)
         for shape in world.physical_shapes():
             if isinstance(shape, Circle):
                 ax.add_patch(CirclePatch((shape.x, shape.y), shape.radius, color='0.6'))

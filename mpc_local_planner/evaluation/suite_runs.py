@@ -113,6 +113,8 @@ class Task:
     through_nodes: str = ''
     plant: str = 'kinematic'  # sim/physics PLANTS: the kinematic Base or MuJoCo's robot
     recoveries: bool = False  # core/recoveries.py around every controller (navigation runs)
+    # the memory tracks the scans' clusters and forgets what moving ones built (navigation)
+    track_moving: bool = False
 
     @property
     def navigation(self) -> bool:
@@ -295,7 +297,8 @@ def run_navigation_task(task: Task) -> RunRow:
                                        reality=task.reality,
                                        # BARN's robot has odometry and a laser, no localizer
                                        localized=task.suite != 'barn', plant=task.plant,
-                                       recoveries=task.recoveries)
+                                       recoveries=task.recoveries,
+                                       track_moving=task.track_moving)
     except PlanningError as err:
         row.success, row.collision, row.stop_reason = False, False, f'no plan: {err}'
         row.barn_score = 0.0 if barn_length is not None else None

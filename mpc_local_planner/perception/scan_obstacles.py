@@ -45,7 +45,7 @@ from mpc_local_planner.perception.scans import (
 )
 
 if TYPE_CHECKING:
-    from mpc_local_planner.perception.tracking import TrackLabels
+    from mpc_local_planner.perception.tracking import ScanTracker, TrackLabels
 
 __all__ = [
     'ObstacleMemory',
@@ -335,6 +335,9 @@ class ObstacleMemory:
         clear_margin: A beam clears only up to this short of its return (metres), so that the
             surface it hit (and the thin pieces built on it) is not cleared by it.
         config: How scans become obstacles.
+        tracker: Follows the scans' small clusters and tells moving ones
+            (perception/tracking.py `ScanTracker`); what a moving track built is forgotten
+            at the next scan. None: the world is taken as static (every piece is kept).
 
     Raises:
         ValueError: If ttl or clear_margin is not finite and > 0 (>= 0 for the margin).
@@ -342,7 +345,8 @@ class ObstacleMemory:
     """
 
     def __init__(self, ttl: float, *, clear_margin: float = 0.15,
-                 config: ScanObstacleConfig | None = None) -> None:
+                 config: ScanObstacleConfig | None = None,
+                 tracker: ScanTracker | None = None) -> None:
         if not (math.isfinite(ttl) and ttl > 0.0):
             msg = f'obstacle memory ttl must be > 0 seconds, got {ttl!r}'
             raise ValueError(msg)
@@ -355,6 +359,7 @@ class ObstacleMemory:
         self._entries: list[_Entry] = []
         self._stamp = -math.inf
         self._last_usable = False
+        self.tracker = tracker
 
     def __len__(self) -> int:
         return len(self._entries)
@@ -378,6 +383,8 @@ class ObstacleMemory:
         self._entries = []
         self._stamp = -math.inf
         self._last_usable = False
+        if self.tracker is not None:
+            self.tracker.clear()
 
     def update(self, scan: Scan, robot_pose: Sequence[float], *,
                laser_pose: Sequence[float] = (0.0, 0.0, 0.0),
@@ -394,7 +401,8 @@ class ObstacleMemory:
             tracks: The scan's returns labelled with their tracks (`scan_points`' order, with
                 the same body and laser pose) and the ids of the moving tracks
                 (`ScanTracker.labels`): what was built from a moving track is forgotten.
-                None: nothing moves.
+                None: the memory's own tracker labels them, if it has one (else nothing
+                moves).
 
         Returns:
             The obstacles built from this scan alone.
@@ -410,6 +418,10 @@ class ObstacleMemory:
         self._stamp = float(scan.stamp)
         readings = classify_beams(scan, body=body, laser_pose=laser_pose)
         self._last_usable = bool(readings.usable.any())
+        if tracks is None and self.tracker is not None:
+            self.tracker.update(scan, robot_pose, laser_pose=laser_pose, body=body,
+                                readings=readings)
+            tracks = self.tracker.labels
         current, anchors, starts = _pieces(scan, robot_pose, laser_pose, readings, self.config)
         owners = np.full(len(current), -1, dtype=np.int64)
         moving: frozenset[int] = frozenset()

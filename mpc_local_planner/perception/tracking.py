@@ -26,10 +26,11 @@ than ``max_size``; walls and long runs are structure and never tracked) from sca
    ``reference_age`` earlier saw in their direction (the nearest of three neighbouring
    beams, so that a beam grazing a silhouette's edge proves nothing) and more than
    ``free_margin`` from every return of that scan (`ScanTracker`). A track is
-   moving once it has been matched ``confirm`` times, a cluster of it stood in free space
-   within the last ``evidence_age`` seconds, and its filtered speed exceeds ``moving_speed``
-   by more than ``sigmas`` standard deviations; it stays moving until its speed falls below
-   half of that. A test drives past BARN cylinders at 2 m/s and none is told moving.
+   moving once it has been matched ``confirm`` times, its clusters stood in free space
+   ``evidence_needed`` times within the last ``evidence_age`` seconds, and its filtered speed
+   exceeds ``moving_speed`` (by more than ``sigmas`` standard deviations, if set); it stays
+   moving until its speed falls below half of that. A test drives past BARN cylinders at
+   2 m/s with the `real` preset's laser and none is told moving.
 
 The filter is written out (4 states, a few lines of numpy): the libraries that package one
 (filterpy, pykalman) are unmaintained, and the matrices here are the textbook's.
@@ -37,7 +38,7 @@ The filter is written out (4 states, a few lines of numpy): the libraries that p
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 from typing import NamedTuple, Sequence
 
@@ -47,7 +48,13 @@ from scipy.spatial import cKDTree
 
 from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.perception.scan_obstacles import cluster_bounds, ScanObstacleConfig
-from mpc_local_planner.perception.scans import classify_beams, compose_pose, Scan, scan_points
+from mpc_local_planner.perception.scans import (
+    Beams,
+    classify_beams,
+    compose_pose,
+    Scan,
+    scan_points,
+)
 
 __all__ = [
     'ScanTracker',
@@ -73,10 +80,11 @@ class TrackerConfig:
             deviation over one second).
         measurement: Standard deviation of a cluster centre's position (m).
         initial_speed: Standard deviation of a new track's velocity (m/s).
-        evidence_age: A track is moving only if one of its clusters stood in free space
-            this recently (s).
+        evidence_age: A track is moving only if its clusters stood in free space
+            evidence_needed times this recently (s).
+        evidence_needed: ... that many times (one noisy return can make one).
         reference_age: The scan whose free space a cluster is checked against is the
-            newest at least this old (s): a walker at 0.2 m/s moves 6 cm in 0.3 s.
+            newest at least this old (s): a walker at 0.2 m/s moves 10 cm in 0.5 s.
         free_margin: A return counts as in free space this far short of what the
             reference beams saw (m): more than the laser's noise.
         free_share: The share of a cluster's returns in free space that makes it so.
@@ -86,15 +94,16 @@ class TrackerConfig:
 
     gate: float = 0.8
     max_size: float = 1.2
-    moving_speed: float = 0.3
-    sigmas: float = 2.0
+    moving_speed: float = 0.15
+    sigmas: float = 0.0
     confirm: int = 4
     lost_after: float = 1.0
     acceleration: float = 0.5
     measurement: float = 0.05
     initial_speed: float = 1.5
     evidence_age: float = 1.0
-    reference_age: float = 0.3
+    evidence_needed: int = 2
+    reference_age: float = 0.5
     free_margin: float = 0.05
     free_share: float = 0.3
     free_points: int = 3
@@ -110,7 +119,7 @@ class TrackerConfig:
         if not (math.isfinite(self.sigmas) and self.sigmas >= 0.0):
             msg = f'TrackerConfig.sigmas must be finite and >= 0, got {self.sigmas!r}'
             raise ValueError(msg)
-        for name in ('confirm', 'free_points'):
+        for name in ('confirm', 'free_points', 'evidence_needed'):
             if getattr(self, name) < 1:
                 msg = f'TrackerConfig.{name} must be >= 1, got {getattr(self, name)!r}'
                 raise ValueError(msg)
@@ -129,7 +138,7 @@ class Track:
         hits: How many clusters it has been matched to.
         size: The radius of its last cluster about its centre (m).
         moving: Whether it is told moving (see the module docstring).
-        evidence: When a cluster of it last stood in free space (-inf: never).
+        evidence: When its clusters stood in free space, the last evidence_age seconds.
 
     """
 
@@ -141,7 +150,7 @@ class Track:
     hits: int = 1
     size: float = 0.0
     moving: bool = False
-    evidence: float = -math.inf
+    evidence: list[float] = field(default_factory=list)
 
     @property
     def position(self) -> np.ndarray:
@@ -284,7 +293,7 @@ class Tracker:
         covariance = np.diag([self.config.measurement ** 2] * 2
                              + [self.config.initial_speed ** 2] * 2)
         track = Track(self._next_id, np.array([centre[0], centre[1], 0.0, 0.0]), covariance,
-                      stamp, stamp, size=size, evidence=stamp if free else -math.inf)
+                      stamp, stamp, size=size, evidence=[stamp] if free else [])
         self._next_id += 1
         return track
 
@@ -311,15 +320,16 @@ class Tracker:
         track.seen = stamp
         track.hits += 1
         track.size = size
-        if free:
-            track.evidence = stamp
         config = self.config
+        track.evidence = [t for t in track.evidence if stamp - t <= config.evidence_age]
+        if free:
+            track.evidence.append(stamp)
         speed = float(np.hypot(*track.state[2:]))
         if track.moving:
             track.moving = speed >= 0.5 * config.moving_speed
         else:
             track.moving = (track.hits >= config.confirm
-                            and stamp - track.evidence <= config.evidence_age
+                            and len(track.evidence) >= config.evidence_needed
                             and speed - config.sigmas * track.speed_sigma()
                             > config.moving_speed)
 
@@ -391,13 +401,16 @@ class ScanTracker:
 
     def update(self, scan: Scan, robot_pose: Sequence[float], *,
                laser_pose: Sequence[float] = (0.0, 0.0, 0.0),
-               body: Footprint | None = None) -> list[Track]:
+               body: Footprint | None = None, readings: Beams | None = None) -> list[Track]:
         """Take a valid scan placed at robot_pose (map frame); return the live tracks.
 
+        readings: the scan's beams as `classify_beams` reads them with this body and laser
+        pose, when the caller has them (the memory does): None reads them here.
         Afterwards `labels` holds this scan's returns labelled with their tracks and the
         moving tracks' ids: what `ObstacleMemory.update` takes as ``tracks``.
         """
-        readings = classify_beams(scan, body=body, laser_pose=laser_pose)
+        if readings is None:
+            readings = classify_beams(scan, body=body, laser_pose=laser_pose)
         points, _ = scan_points(scan, robot_pose, laser_pose=laser_pose, readings=readings)
         first, last = cluster_bounds(points, self.gap)
         clusters = [points[a:b + 1] for a, b in zip(first, last, strict=True)]

@@ -63,3 +63,25 @@ def test_the_physics_robot_meets_the_walker_the_engine_moves() -> None:
     t, robot = run.rows[-1, 0], run.rows[-1, 1:3]
     walker = world.moving_obstacles[0].position(t)
     assert np.hypot(*(robot - walker)) <= CIRCLE.footprint.radius + 0.25 + 1e-9
+
+
+def test_with_tracking_the_walker_is_a_moving_track_and_the_walls_are_not() -> None:
+    """track_moving: the controller's memory follows the walker as a moving track.
+
+    The corridor's walls are long clusters (structure, never tracked), so nothing but the
+    walker is told moving; the run meets the walker as before (a path follower ignores
+    obstacles), the same run, since the follower's command never depends on them.
+    """
+    plain = suites.run_navigation(head_on_world(), 'pure_pursuit', CIRCLE, prepare=False)
+    tracked = suites.run_navigation(head_on_world(), 'pure_pursuit', CIRCLE, prepare=False,
+                                    track_moving=True)
+    assert np.array_equal(plain.run.rows[:, :-1], tracked.run.rows[:, :-1], equal_nan=True)
+    tracker = tracked.navigator.memory.tracker
+    assert tracker is not None and plain.navigator.memory.tracker is None
+    moving = [t for t in tracker.tracker.tracks if t.moving]
+    t = tracked.run.rows[-1, 0]
+    walker = head_on_world().moving_obstacles[0]
+    assert len(moving) == 1
+    assert np.hypot(*(moving[0].position - walker.position(t))) < 0.4
+    # coming towards the robot (at the contact the robot hides part of it: only the sign)
+    assert moving[0].velocity[0] < -0.1

@@ -82,14 +82,14 @@ def test_two_walkers_keep_their_ids_through_a_crossing() -> None:
         assert np.allclose(track.velocity, walker.velocity(3.5), atol=0.25)
 
 
-def test_a_walker_is_told_moving_within_half_a_second_and_its_velocity_is_known() -> None:
+def test_a_walker_is_told_moving_within_a_second_and_its_velocity_is_known() -> None:
     clock = crossing_walkers()
     walker_a = clock.moving[0]
     seen = track_scans(clock, 1.2)
     first = min(t for t, tracks in seen.items()
                 if any(tr.moving and np.hypot(*(tr.position - walker_a.position(t))) < 0.4
                        for tr in tracks))
-    assert first <= 0.5
+    assert first <= 1.0
     track = nearest(seen[1.2], walker_a.position(1.2))
     assert np.allclose(track.velocity, [0.0, 1.0], atol=0.2)
     position, covariance = track.predicted(2.2)
@@ -168,18 +168,13 @@ def walker_trail(track: bool) -> tuple[int, int]:
     clock = passing_walker()
     walker = clock.moving[0]
     laser = SimulatedLaser(clock)
-    memory = ObstacleMemory(5.0)
-    tracker = ScanTracker()
+    memory = ObstacleMemory(5.0, tracker=ScanTracker() if track else None)
     trail, on_walker = 0, 0
     for k in range(41):
         t = round(k * SCAN_PERIOD, 9)
         pose = (0.0, 0.0, t)
         scan = laser.scan(pose, stamp=t)
-        labels = None
-        if track:
-            tracker.update(scan, pose)
-            labels = tracker.labels
-        memory.update(scan, pose, tracks=labels)
+        memory.update(scan, pose)
         gaps = [float(o.distance(walker.position(t))[0]) for o in memory.obstacles()]
         if t >= 1.0:
             trail = max(trail, sum(g > 0.25 + 0.15 for g in gaps))
