@@ -37,6 +37,8 @@ from mpc_local_planner.perception.raycast import TrueGeometry
 from mpc_local_planner.perception.scans import (
     Beams,
     classify_beams,
+    cluster_bounds,
+    CLUSTER_GAP,
     compose_pose,
     Scan,
     scan_points,
@@ -73,7 +75,7 @@ class ScanObstacleConfig:
 
     """
 
-    gap: float = 0.3
+    gap: float = CLUSTER_GAP
     split_tolerance: float = 0.08
     thickness: float = 0.04
     small_size: float = 0.3
@@ -85,25 +87,6 @@ class ScanObstacleConfig:
                 msg = f'{name} must be a finite number > 0, got {value!r}'
                 raise ValueError(msg)
 
-
-
-def cluster_bounds(points: np.ndarray, gap: float) -> tuple[np.ndarray, np.ndarray]:
-    """Split points (in beam order) where consecutive ones are farther apart than gap.
-
-    Args:
-        points: (N, 2) points in beam order.
-        gap: Largest distance between neighbours of one cluster, metres.
-
-    Returns:
-        (first, last): index of each cluster's first and last point (inclusive).
-
-    """
-    n = len(points)
-    if n == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    step = np.hypot(*np.diff(points, axis=0).T) if n > 1 else np.zeros(0)
-    breaks = np.flatnonzero(step > gap)
-    return np.concatenate([[0], breaks + 1]), np.concatenate([breaks, [n - 1]])
 
 
 def _expand(first: np.ndarray, last: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -29,6 +29,8 @@ import numpy as np
 from mpc_local_planner.core.footprint import Footprint
 
 __all__ = [
+    'CLUSTER_GAP',
+    'cluster_bounds',
     'BODY_MARGIN',
     'Beams',
     'MAX_BEAMS',
@@ -42,6 +44,11 @@ __all__ = [
     'scan_points',
     'validate_scan',
 ]
+
+# Consecutive returns farther apart than this (m) belong to different objects: below the
+# robot's diameter, so that no passage is closed by joining two objects (the memory's and the
+# tracker's clusters).
+CLUSTER_GAP = 0.3
 
 #: More beams than this is refused: no planar laser has them, and a corrupt message might.
 MAX_BEAMS = 10_000
@@ -277,6 +284,25 @@ def check_scan_stamp(stamp: float, now: float, *,
         msg = (f'scan stamped {stamp - now:.3f} s in the future (stamp {stamp:.3f} s, now '
                f'{now:.3f} s; at most {tolerance:g} s is accepted): are the clocks in sync?')
         raise ScanError(msg)
+
+
+def cluster_bounds(points: np.ndarray, gap: float) -> tuple[np.ndarray, np.ndarray]:
+    """Split points (in beam order) where consecutive ones are farther apart than gap.
+
+    Args:
+        points: (N, 2) points in beam order.
+        gap: Largest distance between neighbours of one cluster, metres.
+
+    Returns:
+        (first, last): index of each cluster's first and last point (inclusive).
+
+    """
+    n = len(points)
+    if n == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    step = np.hypot(*np.diff(points, axis=0).T) if n > 1 else np.zeros(0)
+    breaks = np.flatnonzero(step > gap)
+    return np.concatenate([[0], breaks + 1]), np.concatenate([breaks, [n - 1]])
 
 
 def compose_pose(robot_pose: Sequence[float],

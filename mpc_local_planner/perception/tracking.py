@@ -47,10 +47,11 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from mpc_local_planner.core.footprint import Footprint
-from mpc_local_planner.perception.scan_obstacles import cluster_bounds, ScanObstacleConfig
 from mpc_local_planner.perception.scans import (
     Beams,
     classify_beams,
+    cluster_bounds,
+    CLUSTER_GAP,
     compose_pose,
     Scan,
     scan_points,
@@ -376,12 +377,12 @@ class ScanTracker:
 
     Args:
         config: The tracking settings.
-        gap: The clustering gap (the memory's, `ScanObstacleConfig.gap`).
+        gap: The clustering gap (the memory's default, CLUSTER_GAP).
 
     """
 
     def __init__(self, config: TrackerConfig | None = None, *,
-                 gap: float = ScanObstacleConfig().gap) -> None:
+                 gap: float = CLUSTER_GAP) -> None:
         self.tracker = Tracker(config)
         self.gap = float(gap)
         self._history: list[_Reference] = []
