@@ -89,9 +89,10 @@ def replay_steps(name: str, robot: Robot, world: World, steps: Sequence[Recorded
     """
     built = local_controller(name, robot, world)
     controller: Any = built.controller
-    memory = ObstacleMemory(NavigationSettings().memory_ttl)
+    settings = NavigationSettings()  # the navigator's, as the recorded run had them
+    memory = ObstacleMemory(settings.memory_ttl)
     obstacles = LocalObstacles(FACES, memory=memory)
-    radius = built.reach + NavigationSettings().sensing_margin
+    radius = built.reach + settings.sensing_margin
     times: dict[str, list[float]] = {part: [] for part in PARTS}
     iterations: list[float] = []
     differ = 0

@@ -239,25 +239,23 @@ def scan_to_obstacles(scan: Scan, robot_pose: Sequence[float], *,
     """
     if validate:
         validate_scan(scan)
-    return _pieces(scan, robot_pose, laser_pose,
-                   classify_beams(scan, body=body, laser_pose=laser_pose),
+    readings = classify_beams(scan, body=body, laser_pose=laser_pose)
+    points, _ = scan_points(scan, robot_pose, laser_pose=laser_pose, readings=readings)
+    return _pieces(scan, points, compose_pose(robot_pose, laser_pose)[:2],
                    config or ScanObstacleConfig())[0]
 
 
-def _pieces(scan: Scan, robot_pose: Sequence[float], laser_pose: Sequence[float],
-            readings: Beams,
+def _pieces(scan: Scan, points: np.ndarray, origin: np.ndarray,
             config: ScanObstacleConfig) -> tuple[list[ConvexPolygon], np.ndarray, np.ndarray]:
     """Return a valid scan's obstacles, their anchor returns and their first returns.
 
-    Per obstacle: three returns it was built from, and the index of its first return (in
-    `scan_points`' order, for the memory's ``moving`` flags). The three returns (first,
-    middle, last) lie on surfaces the laser saw; the memory asks whether a later scan sees
-    them again.
+    points are the scan's returns in the map frame (`scan_points`), origin the laser's
+    position. Per obstacle: three returns it was built from, and the index of its first
+    return in points (for the memory's track labels). The three returns (first, middle,
+    last) lie on surfaces the laser saw; the memory asks whether a later scan sees them again.
     """
-    points, _ = scan_points(scan, robot_pose, laser_pose=laser_pose, readings=readings)
     if not len(points):
         return [], np.zeros((0, 3, 2)), np.zeros(0, dtype=np.int64)
-    origin = compose_pose(robot_pose, laser_pose)[:2]
     first, last = cluster_bounds(points, config.gap)
     index, owner, offsets = _expand(first, last)
     span = (np.maximum.reduceat(points[index], offsets) -
@@ -401,11 +399,14 @@ class ObstacleMemory:
         self._stamp = float(scan.stamp)
         readings = classify_beams(scan, body=body, laser_pose=laser_pose)
         self._last_usable = bool(readings.usable.any())
+        points, _ = scan_points(scan, robot_pose, laser_pose=laser_pose, readings=readings)
         if tracks is None and self.tracker is not None:
             self.tracker.update(scan, robot_pose, laser_pose=laser_pose, body=body,
-                                readings=readings)
+                                readings=readings, points=points)
             tracks = self.tracker.labels
-        current, anchors, starts = _pieces(scan, robot_pose, laser_pose, readings, self.config)
+        current, anchors, starts = _pieces(scan, points,
+                                           compose_pose(robot_pose, laser_pose)[:2],
+                                           self.config)
         owners = np.full(len(current), -1, dtype=np.int64)
         moving: frozenset[int] = frozenset()
         if tracks is not None:

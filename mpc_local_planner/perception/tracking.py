@@ -219,10 +219,6 @@ class Tracker:
         """Every live track."""
         return list(self._tracks)
 
-    def moving(self) -> list[Track]:
-        """The tracks told moving."""
-        return [t for t in self._tracks if t.moving]
-
     def clear(self) -> None:
         """Forget every track (e.g. when the map frame jumps); ids go on counting."""
         self._tracks = []
@@ -402,17 +398,22 @@ class ScanTracker:
 
     def update(self, scan: Scan, robot_pose: Sequence[float], *,
                laser_pose: Sequence[float] = (0.0, 0.0, 0.0),
-               body: Footprint | None = None, readings: Beams | None = None) -> list[Track]:
+               body: Footprint | None = None, readings: Beams | None = None,
+               points: np.ndarray | None = None) -> list[Track]:
         """Take a valid scan placed at robot_pose (map frame); return the live tracks.
 
         readings: the scan's beams as `classify_beams` reads them with this body and laser
         pose, when the caller has them (the memory does): None reads them here.
+        points: its returns in the map frame as `scan_points` gives them from readings, when
+        the caller has them (the memory does; only with readings): None computes them.
         Afterwards `labels` holds this scan's returns labelled with their tracks and the
         moving tracks' ids: what `ObstacleMemory.update` takes as ``tracks``.
         """
         if readings is None:
             readings = classify_beams(scan, body=body, laser_pose=laser_pose)
-        points, _ = scan_points(scan, robot_pose, laser_pose=laser_pose, readings=readings)
+            points = None
+        if points is None:
+            points, _ = scan_points(scan, robot_pose, laser_pose=laser_pose, readings=readings)
         first, last = cluster_bounds(points, self.gap)
         clusters = [points[a:b + 1] for a, b in zip(first, last, strict=True)]
         laser = compose_pose(robot_pose, laser_pose)
