@@ -400,28 +400,25 @@ class ObstacleMemory:
         readings = classify_beams(scan, body=body, laser_pose=laser_pose)
         self._last_usable = bool(readings.usable.any())
         points, _ = scan_points(scan, robot_pose, laser_pose=laser_pose, readings=readings)
+        laser = compose_pose(robot_pose, laser_pose)
         if tracks is None and self.tracker is not None:
             self.tracker.update(scan, robot_pose, laser_pose=laser_pose, body=body,
                                 readings=readings, points=points)
             tracks = self.tracker.labels
-        current, anchors, starts = _pieces(scan, points,
-                                           compose_pose(robot_pose, laser_pose)[:2],
-                                           self.config)
+        current, anchors, starts = _pieces(scan, points, laser[:2], self.config)
         owners = np.full(len(current), -1, dtype=np.int64)
         moving: frozenset[int] = frozenset()
         if tracks is not None:
             labels = np.asarray(tracks.per_return)
-            if labels.shape != (int(np.count_nonzero(readings.hit)),):
-                msg = (f'tracks label {labels.shape} returns, the scan has '
-                       f'{int(np.count_nonzero(readings.hit))}')
+            if labels.shape != (len(points),):
+                msg = f'tracks label {labels.shape} returns, the scan has {len(points)}'
                 raise ScanError(msg)
             owners = labels[starts] if len(current) else owners
             moving = tracks.moving
         kept = [e for e in self._entries
                 if e.track not in moving and scan.stamp - e.seen <= self.ttl]
         if kept:
-            drop = self._superseded(kept, scan, readings,
-                                    compose_pose(robot_pose, laser_pose))
+            drop = self._superseded(kept, scan, readings, laser)
             kept = [e for e, gone in zip(kept, drop, strict=True) if not gone]
         self._entries = kept + [_Entry(p, float(scan.stamp), a, int(o))
                                 for p, a, o in zip(current, anchors, owners, strict=True)]
