@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from mpc_local_planner.core.errors import PlanningError
+from mpc_local_planner.core.footprint import Footprint
 from mpc_local_planner.core.planner import RrtStarPlanner
 from mpc_local_planner.core.planner_config import PlannerConfig
 from mpc_local_planner.worlds.world import World, world_from_dict
@@ -125,7 +126,7 @@ def _moving_cylinder(profile: str, rng: np.random.Generator, top: float) -> dict
     return entry
 
 
-def dynamic_world(index: int, seed: int, *, footprint: Any = None) -> World:
+def dynamic_world(index: int, seed: int, *, footprint: Footprint | None = None) -> World:
     """Return world index of the dynamic suite seeded by seed (reproducible).
 
     footprint: the robot's `Footprint` (the world's, for the planner's check and the runs);
