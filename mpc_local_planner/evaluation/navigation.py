@@ -260,6 +260,43 @@ class Navigator:
         """The plan in force, (M, 2) waypoints."""
         return self.replanner.plan
 
+    def lead_in(self, stamped_poses: np.ndarray) -> None:
+        """Take the robot as having driven over stamped poses before the run starts (t = 0).
+
+        A run resumed from a recorded state needs what the robot had when it got there: what
+        its laser saw on the way (the planner's grid and the controller's memory, which
+        forgets it after ``memory_ttl`` as in the run) and, with recoveries, its trail. Each
+        pose is scanned at its time (the ideal laser, from that pose); the run's first step
+        is then taken from where the rollout starts (normally the last pose's neighbourhood).
+
+        Args:
+            stamped_poses: (K, 4) rows [t, x, y, theta], oldest first, t < 0 (seconds
+                before the run's start).
+
+        Raises:
+            ValueError: for rows that are not (K, 4), finite, with times increasing and
+                negative, or after the first step.
+
+        """
+        rows = np.asarray(stamped_poses, dtype=float)
+        if rows.ndim != 2 or rows.shape[1] != 4 or not np.all(np.isfinite(rows)):
+            msg = f'lead-in rows must be finite [t, x, y, theta], got shape {rows.shape}'
+            raise ValueError(msg)
+        if len(rows) and (np.any(np.diff(rows[:, 0]) <= 0.0) or rows[-1, 0] >= 0.0):
+            msg = 'lead-in times must increase and stay before the start (t < 0)'
+            raise ValueError(msg)
+        if self._k:
+            msg = 'a lead-in comes before the first step'
+            raise ValueError(msg)
+        for t, *pose in rows:
+            if self.settings.sense:
+                scan = self.laser.scan(pose, stamp=t)
+                self.grid.add_scan(scan, pose, body=self.footprint)
+                self.memory.update(scan, pose, body=self.footprint)
+            if self.recoveries is not None:
+                self.recoveries.trail.record(np.array(pose))
+        self.obstacles.scan_updated()
+
     def step(self, x: np.ndarray) -> ControlStep:
         """Sense, re-plan if needed, and answer for the state x (the rollout's call).
 

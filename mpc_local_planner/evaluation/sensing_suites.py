@@ -417,7 +417,8 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
                    setup: MpcSetup = MpcSetup(), reality: str | Reality = 'ideal',
                    localized: bool | None = None, plant: str = 'kinematic',
                    recoveries: bool = False, record: bool = False,
-                   track_moving: bool = False) -> SensingResult:
+                   track_moving: bool = False,
+                   lead_in: np.ndarray | None = None) -> SensingResult:
     """Drive robot through world with the named controller, perception and re-planning.
 
     Args:
@@ -458,9 +459,13 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
         track_moving: The controller's memory tracks the scans' small clusters and forgets
             what moving ones built (NavigationSettings.track_moving); off, the world is
             taken as static.
+        lead_in: (K, 4) rows [t, x, y, theta] of the poses the robot drove over before
+            world.start, oldest first, t < 0 (`Navigator.lead_in`: its laser's view from
+            them and its trail), to resume a run from a recorded state; None: the run starts
+            afresh.
 
     Raises:
-        ValueError: for a plant that is not one of sim/physics PLANTS.
+        ValueError: for a plant that is not one of sim/physics PLANTS, or a malformed lead_in.
         RuntimeError: for the mujoco plant when MuJoCo is not installed.
 
     """
@@ -498,6 +503,8 @@ def run_navigation(world: World, controller: str, robot: Robot, *, sensing: bool
                           settings=settings, footprint=robot.footprint, base=base,
                           recoveries=recovery_setup(robot) if recoveries else None,
                           record=record)
+    if lead_in is not None:  # before the engine's laser: the lead-in's poses are not the base's
+        navigator.lead_in(lead_in)
     if physics:  # the engine casts the beams, with the laser's settings
         laser = navigator.laser
         navigator.laser = base.laser(fov=laser.fov, beams=laser.beams,
