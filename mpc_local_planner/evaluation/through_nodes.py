@@ -113,12 +113,14 @@ def world_yaml(world: World, path: Path) -> Path:
 def node_command(world_file: Path, out: Path, *, robot: str, v_max: float, omega_max: float,
                  time_limit: float, goal_tolerance: float, stall_seconds: float, seed: int,
                  reality: str, budget: str, plant: str = 'kinematic',
-                 recoveries: bool = False) -> list[str]:
+                 recoveries: bool = False, track_moving: bool = False) -> list[str]:
     """Return the closed_loop command of one run (the user's parameter files as shipped).
 
     plant is the simulator's (closed_loop --plant: kinematic, or the MuJoCo robot of the
     world's footprint). recoveries is the controller's (on by default in the node, off in
     the suites unless asked: the flag is passed either way, so both paths run the same).
+    track_moving is both nodes' (the controller's memory and the planner's grid track the
+    scans' clusters; off by default in both).
     """
     files = [resolve_data_file('mpc_controller.yaml')]
     if robot == 'jackal':
@@ -138,6 +140,9 @@ def node_command(world_file: Path, out: Path, *, robot: str, v_max: float, omega
     if budget == 'iterations':
         command += ['--param', 'mpc_controller.budget:=iterations']
     command += ['--param', f'mpc_controller.recoveries:={str(bool(recoveries)).lower()}']
+    tracking = str(bool(track_moving)).lower()
+    command += ['--param', f'mpc_controller.track_moving:={tracking}',
+                '--param', f'global_planner.track_moving:={tracking}']
     return command
 
 
@@ -164,7 +169,7 @@ def run_through_nodes(task: Any, robot: Any, world: World) -> RunRow:
                            goal_tolerance=float(world.goal_tolerance or suites.GOAL_TOLERANCE),
                            stall_seconds=suites.STALL_SECONDS, seed=task.seed,
                            reality=task.reality, budget=task.budget, plant=task.plant,
-                           recoveries=task.recoveries)
+                           recoveries=task.recoveries, track_moving=task.track_moving)
     row = RunRow(controller=controller_name(task.controller), world=task.world,
                  name=world.name, robot=task.robot, sensing=True, v_max=robot.v_max,
                  reality=task.reality)

@@ -34,6 +34,8 @@ from mpc_local_planner.perception.scans import Scan
 from mpc_local_planner.worlds.map_files import OccupancyMap
 
 __all__ = [
+    'arrow_marker',
+    'cylinder_marker',
     'delete_all_marker',
     'diagnostic_array',
     'frame_problem',
@@ -371,6 +373,28 @@ def cylinder_marker(x: float, y: float, radius: float, *, ns: str, marker_id: in
     marker.pose.position.z = 0.5 * float(height)
     marker.scale.x = marker.scale.y = 2.0 * float(radius)
     marker.scale.z = float(height)
+    return marker
+
+
+def arrow_marker(start: Sequence[float], end: Sequence[float], *, ns: str, marker_id: int,
+                 frame_id: str, stamp: Time, rgba: Sequence[float],
+                 width: float) -> Marker:
+    """Return an ARROW Marker from start (x, y) to end (x, y), at z = 0.
+
+    Args as polygon_marker's; width is the shaft's diameter (m; the head is twice as wide).
+
+    Raises:
+        ValueError: if a point is not finite.
+
+    """
+    points = np.array([start, end], dtype=float).reshape(2, 2)
+    if not np.all(np.isfinite(points)):
+        msg = f'an arrow needs finite ends, got {points.tolist()}'
+        raise ValueError(msg)
+    marker = _added_marker(Marker.ARROW, ns=ns, marker_id=marker_id, frame_id=frame_id,
+                           stamp=stamp, rgba=rgba)
+    marker.scale.x, marker.scale.y, marker.scale.z = float(width), 2.0 * float(width), 0.0
+    marker.points = [Point(x=float(x), y=float(y), z=0.0) for x, y in points]
     return marker
 
 

@@ -278,12 +278,13 @@ class GlobalPlannerNode(ManagedNode):
         """
         self._use_map = bool(self.get_parameter('use_map').value)
         self._use_scan = bool(self.get_parameter('use_scan').value)
-        self._scans.reset(float(self.get_parameter('obstacle_memory').value)
-                          if self._use_scan else None)
         try:
             if self._use_scan and not self._use_map:
                 problem = 'use_scan needs use_map (scans mark the cells of the map)'
                 raise ValueError(problem)
+            self._scans.reset(float(self.get_parameter('obstacle_memory').value)
+                              if self._use_scan else None,
+                              track_moving=bool(self.get_parameter('track_moving').value))
             if self.get_parameter('world_file').value:
                 self._world = self._read_world()
             self._planner = self._make_planner()
@@ -395,7 +396,7 @@ class GlobalPlannerNode(ManagedNode):
         return SetParametersResult(successful=True)
 
     def _check_modes(self, parameters: list[Parameter]) -> list[str]:
-        """Refuse use_scan without use_map (as the values would be after the set).
+        """Refuse use_scan without use_map, track_moving without use_scan (values after the set).
 
         A parameter not declared yet (during the declarations) is not judged; configure
         judges the combination again.
@@ -407,10 +408,12 @@ class GlobalPlannerNode(ManagedNode):
                 return given[name]
             return self.get_parameter(name).value if self.has_parameter(name) else None
 
-        if not {'use_map', 'use_scan'} & given.keys():
+        if not {'use_map', 'use_scan', 'track_moving'} & given.keys():
             return []
         if value('use_scan') and value('use_map') is False:
             return ['use_scan needs use_map (scans mark the cells of the map)']
+        if value('track_moving') and value('use_scan') is False:
+            return ['track_moving needs use_scan (it tracks what the scans see)']
         return []
 
     def post_parameters_callback(self, parameters: list[Parameter]) -> None:

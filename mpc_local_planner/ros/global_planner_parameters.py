@@ -89,6 +89,11 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'with use_scan, seconds a convex piece seen by the laser is remembered for '
                   "start_clearance (the controller's obstacle_memory); read at configure",
                   float_range=(0.01, 3600.0)),
+    ParameterSpec('track_moving', False,
+                  "with use_scan, follow the scan's small clusters over time and let a moving "
+                  'one mark no cell and build no piece, so that a walker leaves no trail in '
+                  "the grid (the controller's track_moving; perception/tracking.py); read at "
+                  'configure'),
     ParameterSpec('analytic_path', '',
                   "publish this analytic path (e.g. 'paper_sinusoid') instead of planning; '' "
                   '= plan with RRT*'),

@@ -3,7 +3,8 @@
 
 PlannerScans is a component GlobalPlannerNode (ros/global_planner_node.py) owns: the scan
 intake (perception/scan_intake.py: waiting for a pose, the out-of-order and clock-jump rules,
-the controller's too) and the obstacle memory re-plans keep clear of. The node hands it each
+the controller's too) and the obstacle memory re-plans keep clear of (with ``track_moving``
+it tracks the scans' clusters, and a moving one's returns mark no cell). The node hands it each
 scan with what it owns: the grid, the pose source and the planner's footprint.
 """
 
@@ -27,6 +28,7 @@ from mpc_local_planner.perception.scan_intake import (
     ScanOrder,
 )
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
+from mpc_local_planner.perception.tracking import ScanTracker, TrackLabels
 from mpc_local_planner.ros.conversions import (
     frame_problem,
     scan_from_message,
@@ -86,10 +88,19 @@ class PlannerScans:
         """Valid scans waiting for odometry that covers their stamps."""
         return self._intake.pending
 
-    def reset(self, memory_ttl: float | None = None) -> None:
-        """Start anew: no scan waiting or taken; a memory of memory_ttl s (None: none)."""
+    def reset(self, memory_ttl: float | None = None, *, track_moving: bool = False) -> None:
+        """Start anew: no scan waiting or taken; a memory of memory_ttl s (None: none).
+
+        track_moving: the memory tracks the scans' clusters (perception/tracking.py), and a
+        moving one's returns mark no cell of the grid (needs a memory).
+        """
+        if track_moving and memory_ttl is None:
+            msg = 'track_moving needs the scans (use_scan)'
+            raise ValueError(msg)
         self._intake = ScanIntake(capacity=PENDING_SCANS, span=ODOM_HISTORY_S)
-        self._memory = ObstacleMemory(memory_ttl) if memory_ttl is not None else None
+        tracker = ScanTracker() if track_moving else None
+        self._memory = (ObstacleMemory(memory_ttl, tracker=tracker)
+                        if memory_ttl is not None else None)
 
     def take(self, msg: LaserScan, grid: PlanningGrid | None, pose_source: RobotPose) -> None:
         """Mark and clear the grid with a scan, placed with the pose at its stamp.
@@ -153,25 +164,34 @@ class PlannerScans:
         try:
             body = self._body()
             laser_pose = list(self._parameter('laser_pose'))
-            grid.add_scan(placed.scan, placed.pose, laser_pose=laser_pose, body=body)
+            tracks = None
             if self._memory is not None:  # the controller's convex pieces, for re-plans
-                self._remember(placed, laser_pose, body)
+                tracks = self._remember(placed, laser_pose, body)
+            grid.add_scan(placed.scan, placed.pose, laser_pose=laser_pose, body=body,
+                          tracks=tracks)
         except Exception as err:  # ScanError (a ValueError); nothing may escape
             self._refuse_scan(err)
             return
         self._problems.resolve('scan')
         self.count += 1
 
-    def _remember(self, placed: Placed, laser_pose: list[float], body: Any) -> None:
-        """Add a placed scan to the obstacle memory, as the controller does (ScanOrder)."""
+    def _remember(self, placed: Placed, laser_pose: list[float], body: Any
+                  ) -> TrackLabels | None:
+        """Add a placed scan to the obstacle memory, as the controller does (ScanOrder).
+
+        Returns the scan's returns labelled with their tracks when the memory tracks and took
+        the scan (None: it does not track, or the scan came late and was not tracked).
+        """
         scan = placed.scan
         order = self._intake.order(scan.stamp)
         if order is ScanOrder.LATE:
-            return
+            return None
         if order is ScanOrder.CLOCK_JUMP:
             self._memory.clear()
         self._memory.update(scan, placed.pose, laser_pose=laser_pose, body=body)
         self._intake.taken(scan.stamp, placed.receipt)
+        tracker = self._memory.tracker
+        return tracker.labels if tracker is not None else None
 
     def _refuse_scan(self, err: Exception) -> None:
         """Say (throttled) that a scan was dropped."""

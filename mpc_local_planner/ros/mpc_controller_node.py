@@ -36,9 +36,10 @@ Subscribes ``odom`` and ``plan`` (reliable, transient_local), ``scan`` (sensor_m
 best effort) when ``obstacle_sources`` lists 'scan' and ``map`` (nav_msgs/OccupancyGrid,
 transient_local) when it lists 'map'; publishes ``cmd_vel`` (Twist, or
 TwistStamped with ``enable_stamped_cmd_vel``), ``local_plan`` (the prediction),
-``mpc/diagnostics``, ``mpc/obstacles`` (what it avoids, as MarkerArray) and ``mpc/footprint``.
-All decisions live in `MpcController`; this node converts messages, keeps the latest inputs
-and publishes.
+``mpc/diagnostics``, ``mpc/obstacles`` (what it avoids, as MarkerArray), ``mpc/footprint``
+and, with ``track_moving``, ``mpc/tracks`` (the laser's tracks, as MarkerArray). All
+decisions live in `MpcController`; this node converts messages, keeps the latest inputs and
+publishes.
 
 What the controller avoids (the world's obstacles, the map's, what the laser saw) and how
 scans are placed: ros/mpc_controller_sensing.py. A plan through an obstacle is followed: the
@@ -145,8 +146,9 @@ transient_local; or an analytic path), and control_frequency times a second it p
 cmd_vel (geometry_msgs/Twist, or TwistStamped with enable_stamped_cmd_vel: the last verified
 plan's input between solves), local_plan (the prediction), mpc/diagnostics,
 mpc/obstacles (visualization_msgs/MarkerArray: the obstacles raw, grown, and those active in
-the NLP) and mpc/footprint (geometry_msgs/PolygonStamped: the footprint parameter's polygon,
-else the world's, else the circle of robot_radius). Obstacles come from the world file,
+the NLP), mpc/footprint (geometry_msgs/PolygonStamped: the footprint parameter's polygon,
+else the world's, else the circle of robot_radius) and, with track_moving, mpc/tracks (the
+laser's tracks: static, moving, and where a mover goes in 1 s). Obstacles come from the world file,
 scan (sensor_msgs/LaserScan) and map (nav_msgs/OccupancyGrid), as obstacle_sources says.
 Invalid input, and a stale scan when the laser is a source, stops the robot (zero cmd_vel)
 until valid input comes (braking along the last verified plan within max_decel, if set).
@@ -257,6 +259,7 @@ class MpcControllerNode(ManagedNode):
         self._forget_inputs()
         self._sensing = ControllerSensing(
             controller, sources=sources, memory_ttl=float(values['obstacle_memory']),
+            track_moving=bool(values['track_moving']),
             logger=self.get_logger(), now=self._now, parameter=self._parameter,
             pose_at=self.pose_at)
         if values['analytic_path']:
@@ -693,7 +696,8 @@ class MpcControllerNode(ManagedNode):
         self.last_output = output
         self.goal_reached = output.reason is Reason.GOAL_REACHED
         self._outputs.publish(output, now, state=self._state, state_time=self._state_time,
-                              blockage=self.blockage)
+                              blockage=self.blockage,
+                              tracks=self._sensing.tracks if self._sensing is not None else None)
 
     def _compute(self, held: list[ConvexPolygon], now: float) -> ControlOutput:
         """Return the MPC's answer, or a recovery's where the robot makes no progress."""

@@ -4,7 +4,9 @@
 cmd_vel (Twist, or TwistStamped in ``robot_base_frame``), ``local_plan`` (the prediction),
 ``mpc/diagnostics`` (core/diagnostics.py's keys), ``mpc/obstacles`` (MarkerArray: the
 obstacles raw, grown and active, sent when that changes and every OBSTACLE_REFRESH_STEPS
-control steps, and only while subscribed) and ``mpc/footprint``, all in ``global_frame``;
+control steps, and only while subscribed), ``mpc/footprint`` and, with ``track_moving``,
+``mpc/tracks`` (MarkerArray: each track of the laser's clusters, `track_markers`), all in
+``global_frame``;
 a log line when the reason changes (`log_line`). ControllerOutputs is a component MpcControllerNode
 (ros/mpc_controller_node.py) builds at configure: it owns these publishers and what it last
 sent, and the node hands it each control step's output.
@@ -29,7 +31,10 @@ from mpc_local_planner.core.diagnostics import (
     ControllerDiagnostics,
     Level,
 )
+from mpc_local_planner.perception.tracking import Track
 from mpc_local_planner.ros.conversions import (
+    arrow_marker,
+    cylinder_marker,
     delete_all_marker,
     diagnostic_array,
     polygon_marker,
@@ -43,7 +48,8 @@ from mpc_local_planner.ros.qos import CMD_VEL_QOS, DIAGNOSTICS_QOS, LOCAL_PLAN_Q
 from mpc_local_planner.ros.throttle import ERROR_THROTTLE_S, ProblemThrottle
 
 __all__ = ['ControllerOutputs', 'FOOTPRINT_TOPIC', 'MARKER_STYLE', 'MARKERS_QOS',
-           'OBSTACLE_REFRESH_STEPS', 'OBSTACLES_TOPIC', 'log_line']
+           'OBSTACLE_REFRESH_STEPS', 'OBSTACLES_TOPIC', 'log_line', 'track_markers',
+           'TRACKS_TOPIC']
 
 # What the controller avoids, as markers (closed_loop's monitor reads it too).
 OBSTACLES_TOPIC = 'mpc/obstacles'
@@ -61,6 +67,45 @@ MARKER_STYLE = {
     'grown': ((1.0, 0.6, 0.0, 0.8), 0.015),  # inflated by robot radius + collision margin
     'active': ((0.9, 0.0, 0.0, 1.0), 0.04),  # held in the NLP at the last solve
 }
+
+# The tracks of the laser's clusters (with track_moving), as markers.
+TRACKS_TOPIC = 'mpc/tracks'
+# Their namespaces' colours (r, g, b, a); a track's disc is its cluster's radius grown by
+# TRACK_SIGMAS standard deviations of its position; a moving track's arrow shows where its
+# velocity takes it in TRACK_ARROW_S seconds.
+TRACK_STYLE = {
+    'static': (0.5, 0.5, 0.5, 0.5),
+    'moving': (0.8, 0.0, 0.8, 0.7),
+    'velocity': (0.8, 0.0, 0.8, 1.0),
+}
+TRACK_SIGMAS = 2.0
+TRACK_ARROW_S = 1.0
+TRACK_HEIGHT = 0.3
+TRACK_ARROW_WIDTH = 0.04
+
+
+def track_markers(tracks: list[Track], *, frame_id: str, stamp: Any) -> MarkerArray:
+    """Return mpc/tracks' markers: DELETEALL, then a disc per track and an arrow per mover.
+
+    A track's marker id is its track id, so RViz follows one object from scan to scan; a
+    disc is the cluster's radius plus TRACK_SIGMAS standard deviations of the position
+    (the larger axis of its covariance), in 'moving' or 'static'.
+    """
+    markers = [delete_all_marker(frame_id=frame_id, stamp=stamp)]
+    for track in tracks:
+        x, y = (float(v) for v in track.position)
+        spread = float(np.sqrt(max(np.linalg.eigvalsh(track.covariance[:2, :2])[-1], 0.0)))
+        ns = 'moving' if track.moving else 'static'
+        markers.append(cylinder_marker(x, y, track.size + TRACK_SIGMAS * spread, ns=ns,
+                                       marker_id=track.id, frame_id=frame_id, stamp=stamp,
+                                       rgba=TRACK_STYLE[ns], height=TRACK_HEIGHT))
+        if track.moving:
+            end = track.position + TRACK_ARROW_S * track.velocity
+            markers.append(arrow_marker((x, y), end, ns='velocity', marker_id=track.id,
+                                        frame_id=frame_id, stamp=stamp,
+                                        rgba=TRACK_STYLE['velocity'],
+                                        width=TRACK_ARROW_WIDTH))
+    return MarkerArray(markers=markers)
 
 
 def _same(a: tuple, b: tuple) -> bool:
@@ -127,16 +172,19 @@ class ControllerOutputs:
                                                               MARKERS_QOS)
         self._footprint_pub = node.create_lifecycle_publisher(PolygonStamped, FOOTPRINT_TOPIC,
                                                               MARKERS_QOS)
+        self._tracks_pub = node.create_lifecycle_publisher(MarkerArray, TRACKS_TOPIC,
+                                                           MARKERS_QOS)
 
     @property
     def publishers(self) -> tuple[Any, ...]:
         """The publishers, for the node to destroy."""
         return (self._cmd_pub, self._local_plan_pub, self._diag_pub, self._obstacles_pub,
-                self._footprint_pub)
+                self._footprint_pub, self._tracks_pub)
 
     def publish(self, output: ControlOutput, now: float, *, state: np.ndarray | None,
-                state_time: float | None, blockage: Blockage) -> None:
-        """Publish cmd_vel, then local_plan, diagnostics, obstacles and footprint; log.
+                state_time: float | None, blockage: Blockage,
+                tracks: list[Track] | None = None) -> None:
+        """Publish cmd_vel, then local_plan, diagnostics, obstacles, footprint, tracks; log.
 
         Args:
             output: the control step's output.
@@ -144,6 +192,8 @@ class ControllerOutputs:
             state: the pose in the plan's frame it was computed for (None: none).
             state_time: when that pose was measured.
             blockage: where the plan is blocked (path_blockage), for the diagnostics.
+            tracks: the laser's tracks (None: the node does not track; nothing is sent);
+                sent only while mpc/tracks has a subscriber.
 
         """
         self._cmd_pub.publish(self._cmd_message(output.u, now))
@@ -156,6 +206,8 @@ class ControllerOutputs:
             self._diag_pub.publish(self._diagnostics(output, now, state, state_time,
                                                      blockage))
             self._publish_obstacles(output, frame, stamp)
+            if tracks is not None and self._tracks_pub.get_subscription_count():
+                self._tracks_pub.publish(track_markers(tracks, frame_id=frame, stamp=stamp))
             if state is not None:
                 # the shape the MPC keeps clear: the polygon, or the circle as a 16-gon
                 self._footprint_pub.publish(polygon_stamped(

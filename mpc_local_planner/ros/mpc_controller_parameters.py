@@ -194,6 +194,12 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('obstacle_memory', 5.0,
                   'seconds an obstacle seen by the laser is remembered (unless a later beam '
                   'passes through it); next scan', float_range=(0.01, 3600.0)),
+    ParameterSpec('track_moving', False,
+                  "with 'scan' a source, follow the scan's small clusters over time (a "
+                  'Kalman filter per track) and forget the pieces a moving one built, so '
+                  'that a walker leaves no trail; mpc/tracks shows the tracks '
+                  '(perception/tracking.py); false: the world is taken as static; read at '
+                  'configure'),
     ParameterSpec('scan_timeout', float(_SETTINGS.scan_timeout),
                   "with 'scan' a source, a scan older than this (s) is stale: cmd_vel is zero "
                   '(and before the first scan)', float_range=(0.001, 3600.0)),
@@ -372,7 +378,8 @@ def check_sensing(values: dict[str, Any]) -> None:
     """Raise ValueError if obstacle_sources or laser_pose is not usable.
 
     obstacle_sources must list only OBSTACLE_SOURCES (each at most once); laser_pose must be
-    three finite numbers.
+    three finite numbers; track_moving needs 'scan' among the sources (else it would track
+    nothing, silently).
     """
     sources = list(values['obstacle_sources'])
     unknown = [s for s in sources if s not in OBSTACLE_SOURCES]
@@ -386,4 +393,7 @@ def check_sensing(values: dict[str, Any]) -> None:
     if len(pose) != 3 or not all(isinstance(v, (int, float)) and math.isfinite(v)
                                  for v in pose):
         msg = f'laser_pose must be three finite numbers [x, y, yaw], got {pose}'
+        raise ValueError(msg)
+    if values.get('track_moving') and 'scan' not in sources:
+        msg = f"track_moving needs 'scan' in obstacle_sources, got {sources}"
         raise ValueError(msg)

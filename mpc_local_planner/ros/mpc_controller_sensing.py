@@ -61,6 +61,7 @@ from mpc_local_planner.perception.scan_intake import (
 )
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
 from mpc_local_planner.perception.scans import MAX_BEAMS, Scan
+from mpc_local_planner.perception.tracking import ScanTracker, Track
 from mpc_local_planner.ros.conversions import (
     frame_problem,
     grid_from_message,
@@ -86,6 +87,8 @@ class ControllerSensing:
         controller: the node's MpcController (its footprint, reach and faces).
         sources: the obstacle sources ('scan' and 'map' are taken in here).
         memory_ttl: obstacle_memory, seconds.
+        track_moving: the memory tracks the scans' clusters and forgets what moving ones
+            built (perception/tracking.py), and `tracks` says where they are.
         logger: the node's logger.
         now: the node's clock, seconds.
         parameter: the current value of a node parameter (frames, laser_pose,
@@ -96,6 +99,7 @@ class ControllerSensing:
 
     def __init__(self, controller: MpcController, *, sources: frozenset[ObstacleSource],
                  memory_ttl: float, logger: RcutilsLogger, now: Callable[[], float],
+                 track_moving: bool = False,
                  parameter: Callable[[str], Any],
                  pose_at: Callable[[float], np.ndarray | None]) -> None:
         self._controller = controller
@@ -106,9 +110,11 @@ class ControllerSensing:
         self._problems = ProblemThrottle(ERROR_THROTTLE_S)
         self._take_map = ObstacleSource.MAP in sources
         # the map's and the laser's obstacles (the scan memory inside), the latest valid map
+        tracker = ScanTracker() if track_moving else None
         self.local = LocalObstacles(
             controller.config.solving.faces_per_obstacle,
-            memory=ObstacleMemory(memory_ttl) if ObstacleSource.SCAN in sources else None)
+            memory=(ObstacleMemory(memory_ttl, tracker=tracker)
+                    if ObstacleSource.SCAN in sources else None))
         self.grid: OccupancyMap | None = None
         self._intake = (ScanIntake(capacity=PENDING_SCANS, span=ODOM_HISTORY_S)
                         if ObstacleSource.SCAN in sources else None)
@@ -130,6 +136,14 @@ class ControllerSensing:
     def pending_scans(self) -> int:
         """How many valid scans wait for odometry that covers their stamps."""
         return self._intake.pending if self._intake is not None else 0
+
+    @property
+    def tracks(self) -> list[Track] | None:
+        """The live tracks of the scans' clusters (None: the node does not track)."""
+        memory = self.local.memory
+        if memory is None or memory.tracker is None:
+            return None
+        return memory.tracker.tracker.tracks
 
     def set_memory_ttl(self, ttl: float) -> None:
         """Apply a new obstacle_memory (seconds) to the scan memory, if there is one."""

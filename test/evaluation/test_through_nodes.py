@@ -56,18 +56,23 @@ def test_the_run_is_the_users_files_as_shipped_with_only_the_runs_wiring_added()
     files = [command[i + 1] for i, arg in enumerate(command) if arg == '--params-file']
     assert [Path(f).name for f in files] == ['mpc_controller.yaml', 'jackal.yaml']
     params = [command[i + 1] for i, arg in enumerate(command) if arg == '--param']
-    # the controller's tuning is the files'; the run only sets the motors, the budget and
-    # whether the suite runs recoveries (the node's default is on, the suites' off)
+    # the controller's tuning is the files'; the run only sets the motors, the budget,
+    # whether the suite runs recoveries (the node's default is on, the suites' off) and
+    # whether both nodes track moving clusters (off in both unless asked)
     assert params == ['unicycle_simulator.v_max:=2.0', 'unicycle_simulator.omega_max:=4.0',
-                      'mpc_controller.budget:=iterations', 'mpc_controller.recoveries:=true']
+                      'mpc_controller.budget:=iterations', 'mpc_controller.recoveries:=true',
+                      'mpc_controller.track_moving:=false', 'global_planner.track_moving:=false']
     for flag in ('--lockstep', '--separate-processes', '--sensing', '--no-localizer'):
         assert flag in command
     circle = node_command(Path('w.yaml'), Path('out'), robot='circle', v_max=0.31,
                           omega_max=1.9, time_limit=100.0, goal_tolerance=0.1,
-                          stall_seconds=20.0, seed=0, reality='ideal', budget='wall')
+                          stall_seconds=20.0, seed=0, reality='ideal', budget='wall',
+                          track_moving=True)
     assert 'jackal.yaml' not in ' '.join(circle) and 'budget:=' not in ' '.join(circle)
     assert circle[circle.index('--plant') + 1] == 'kinematic'
     assert 'mpc_controller.recoveries:=false' in circle
+    assert {'mpc_controller.track_moving:=true', 'global_planner.track_moving:=true'} <= set(
+        circle)
 
 
 def test_each_run_holds_a_dds_domain_no_other_run_holds() -> None:

@@ -236,6 +236,40 @@ def test_minus_inf_readings_inside_the_robot_mark_nothing_and_outside_it_an_obst
     assert near.any() and not planner.grid.is_free(pose[:2] + [ROBOT_RADIUS + 0.05, 0.0])[0]
 
 
+@pytest.mark.parametrize('track', [False, True])
+def test_with_track_moving_a_walker_marks_no_cell_and_a_post_still_does(ros, track: bool
+                                                                          ) -> None:
+    """A walker crossing 2 m ahead at 1 m/s, a post beside its path, the robot standing.
+
+    Untracked, each scan marks the walker's cells where it is (later beams clear where it
+    was), so a re-plan goes round a walker as round a wall; tracked, once it is told moving
+    (within a second) its returns mark nothing, while the post's still do.
+    """
+    planner, probe = start(ros, use_scan=True, track_moving=track)
+    probe.map_pub.publish(grid_message(np.zeros((120, 200), dtype=np.int8)))
+    assert ros.spin_until(lambda: planner.grid is not None, timeout=TIMEOUT)
+    pose = np.array([1.0, 3.0, 0.0])
+    post = ConvexPolygon.from_box(3.4, 4.0, 3.5, 4.1)
+    first = probe.now()
+    locate(ros, planner, probe, pose, first)
+    period = 0.1
+    for k in range(31):  # 3 s: the walker from y = 1.5 to y = 4.5 (past the post)
+        stamp = first + k * period
+        y = 1.5 + k * period
+        walker = ConvexPolygon.from_box(2.85, y - 0.15, 3.15, y + 0.15)
+        probe.publish_odom(pose, stamp)
+        scan = scan_message([post, walker], pose, stamp)
+        assert ros.spin_until(lambda k=k, scan=scan: probe.scan_pub.publish(scan)
+                              or planner.scan_count > k, timeout=TIMEOUT)
+    walked = np.array([[3.0, y] for y in np.arange(1.5, 4.55, 0.1)])
+    marked = ~planner.grid.is_free(walked)
+    assert not planner.grid.is_free(np.array([3.45, 4.05]))[0]  # the post, either way
+    if track:
+        assert not marked.any(), walked[marked]
+    else:
+        assert marked[-1]  # where the walker is now
+
+
 def test_a_malformed_map_is_refused_with_an_error_and_the_grid_in_force_stays(ros) -> None:
     planner, probe = start(ros)
     errors = lambda: probe.log_lines('global_planner', Log.ERROR)  # noqa: E731
@@ -265,6 +299,7 @@ def test_a_malformed_map_is_refused_with_an_error_and_the_grid_in_force_stays(ro
     ('overrides', 'match'),
     [
         ({'use_scan': True}, 'use_scan needs use_map'),
+        ({'use_map': True, 'track_moving': True}, 'track_moving needs use_scan'),
         ({'use_map': True, 'laser_pose': [0.0, float('nan'), 0.0]}, 'laser_pose must be'),
     ],
 )

@@ -17,6 +17,7 @@ from nav_msgs.msg import OccupancyGrid
 import numpy as np
 import pytest
 from rcl_interfaces.msg import Log
+from rclpy.exceptions import InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -34,7 +35,7 @@ from mpc_local_planner.ros.conversions import (
     yaw_to_quaternion,
 )
 from mpc_local_planner.ros.mpc_controller_node import MpcControllerNode
-from mpc_local_planner.ros.mpc_controller_outputs import OBSTACLES_TOPIC
+from mpc_local_planner.ros.mpc_controller_outputs import OBSTACLES_TOPIC, TRACKS_TOPIC
 from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.ros.qos import LOCAL_PLAN_QOS, MAP_QOS
 from mpc_local_planner.sim.laser import SimulatedLaser
@@ -568,3 +569,66 @@ def test_scans_without_a_usable_reading_renew_nothing_and_only_blind_scans_go_st
     assert world.run_until(lambda: any(s.reason is Reason.TRACKING and s.v > 0.01
                                        for s in world.steps(resume)))
     check_commands(world.probe)
+
+
+# ----------------------------------------------------------------------------- track_moving
+class Walking(World):
+    """The test's world with a walker crossing in front of the robot and a post standing by."""
+
+    POST = ConvexPolygon.from_box(1.6, 1.0, 1.7, 1.1)
+    WALKER_X = 1.5
+    WALKER_SPEED = 0.8  # m/s, along +y
+    WALKER_HALF = 0.15
+
+    def walker_y(self, t: float) -> float:
+        return -1.5 + self.WALKER_SPEED * (t - 1.0)
+
+    def publish(self) -> None:
+        y, half = self.walker_y(self.t), self.WALKER_HALF
+        walker = ConvexPolygon.from_box(self.WALKER_X - half, y - half, self.WALKER_X + half,
+                                        y + half)
+        self.laser = SimulatedLaser([self.POST, walker], fov=FOV, beams=self.beams,
+                                    range_max=5.0)
+        super().publish()
+
+
+def test_with_track_moving_the_node_shows_a_walker_as_a_moving_track_on_mpc_tracks(
+        ros) -> None:
+    world = Walking(ros, [], obstacle_sources=['scan'], track_moving=True)
+    world.drive = False
+    shown: list[MarkerArray] = []
+    world.io.create_subscription(MarkerArray, TRACKS_TOPIC, shown.append, LOCAL_PLAN_QOS)
+    world.probe.plan_pub.publish(poses_to_path(PLAN))
+
+    def markers(ns: str) -> list[Marker]:
+        return [m for m in shown[-1].markers if m.ns == ns and m.action == Marker.ADD] \
+            if shown else []
+
+    # told moving within a second or so of being tracked (free-space evidence, 4 hits)
+    assert world.run_until(lambda: len(markers('moving')) == 1, timeout=30.0)
+    assert world.t - 1.0 < 2.5
+    world.run_for(0.5)
+    (walker,) = markers('moving')
+    y = world.walker_y(world.t)
+    assert abs(walker.pose.position.x - world.WALKER_X) < 0.3
+    assert abs(walker.pose.position.y - y) < 0.3
+    (arrow,) = markers('velocity')
+    assert arrow.id == walker.id
+    heading = np.array([arrow.points[1].x - arrow.points[0].x,
+                        arrow.points[1].y - arrow.points[0].y])
+    assert heading[1] > 0.5 * world.WALKER_SPEED and abs(heading[0]) < 0.3  # along +y, 1 s
+    # the post is tracked too, and static
+    assert any(abs(m.pose.position.x - 1.65) < 0.15 and abs(m.pose.position.y - 1.05) < 0.15
+               for m in markers('static'))
+
+
+def test_track_moving_without_the_scan_is_refused_not_silently_ignored(ros) -> None:
+    with pytest.raises(InvalidParameterValueException, match="track_moving needs 'scan'"):
+        MpcControllerNode(context=ros.context, parameter_overrides=[
+            Parameter('world_file', value=''), Parameter('track_moving', value=True)])
+    node = ros.add(MpcControllerNode(context=ros.context, parameter_overrides=[
+        Parameter('world_file', value=''), Parameter('obstacle_sources', value=['scan'])]))
+    result = node.set_parameters([Parameter('track_moving', value=True)])[0]
+    assert result.successful
+    refused = node.set_parameters([Parameter('obstacle_sources', value=['world'])])[0]
+    assert not refused.successful and "track_moving needs 'scan'" in refused.reason
