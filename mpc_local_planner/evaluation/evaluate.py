@@ -44,7 +44,9 @@ and controller at the end), ``summary.md`` (one table row per controller) and
 ``settings.json`` (what decides the rows). With ``--save-trajectories``, the runs go to
 ``OUT/trajectories`` and ``--plot 0,1,2`` later draws those worlds in ``OUT/<suite>_runs.png``;
 for the navigation suites ``--plot`` runs the worlds again (the runs are deterministic) and
-draws them in ``OUT/<suite>_sensing_runs.png`` (`plot_navigation_suite`).
+draws them in ``OUT/<suite>_sensing_runs.png`` (`plot_navigation_suite`); for the dynamic
+suite, a strip of frames per world and a row per controller in
+``OUT/dynamic_strip_<world>.png`` (`plot_dynamic_suite`).
 
 Where the runs run (`sweep`): ``--jobs K`` local processes, or ``--executor dask`` on a Dask
 cluster (``--scheduler tcp://HOST:8786``; without it a LocalCluster of K processes); the rows
@@ -81,6 +83,7 @@ from mpc_local_planner.evaluation.suite_runs import (
     CONTROLLERS,
     CSV_COLUMNS,
     DEFAULT_BARN_DIR,
+    drive_task,
     empty_row,
     KNOWN_MAP_CONTROLLERS,
     NAVIGATION_SUITES,
@@ -295,6 +298,29 @@ def plot_suite_runs(out: Path, suite: str, worlds: Sequence[int], *,
     return target
 
 
+def plot_dynamic_suite(out: Path, template: Task, worlds: Sequence[int],
+                       controllers: Sequence[str]) -> list[Path]:
+    """Run some dynamic worlds again with each controller; draw each as a strip of frames.
+
+    The runs are the sweep's (deterministic, `drive_task`). Writes
+    OUT/dynamic_strip_<world>.png per world (dynamic_strip.py): one row per controller.
+    """
+    from mpc_local_planner.evaluation.dynamic_strip import plot_dynamic_strip
+
+    written = []
+    for w in worlds:
+        runs, robot, world = [], None, None
+        for controller in controllers:
+            task = replace(template, world=w, controller=controller)
+            robot, world, _ = navigation_world(task)
+            runs.append((controller, drive_task(task, robot, world).run))
+        assert robot is not None and world is not None, 'no controller to run'
+        written.append(plot_dynamic_strip(
+            out / f'dynamic_strip_{w:03d}.png', world, runs, footprint=robot.footprint,
+            title=f'dynamic world {w}: {len(world.moving_obstacles)} moving obstacles'))
+    return written
+
+
 def plot_navigation_suite(out: Path, template: Task, worlds: Sequence[int],
                           world_files: Sequence[str] = ()) -> Path:
     """Run some worlds of a navigation suite again and draw them (sensing_suites' figure).
@@ -497,6 +523,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                         robot=args.robot, budget=args.budget, compile=args.compile,
                         reality=args.reality, plant=args.plant, recoveries=args.recoveries,
                         track_moving=args.track_moving)
+        if args.suite == 'dynamic':  # obstacles that move: a strip of frames per world
+            for target in plot_dynamic_suite(args.out, template, drawn, controllers):
+                print(target)
+            return 0
         print(plot_navigation_suite(args.out, template, drawn, world_files))
         return 0
     args.out.mkdir(parents=True, exist_ok=True)

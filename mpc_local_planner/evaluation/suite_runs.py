@@ -55,7 +55,7 @@ from mpc_local_planner.evaluation.trajectory import write_trajectory_csv
 from mpc_local_planner.worlds.data_files import BARN_DIR
 
 if TYPE_CHECKING:  # the navigation suites' module is imported where it is used
-    from mpc_local_planner.evaluation.sensing_suites import Robot
+    from mpc_local_planner.evaluation.sensing_suites import Robot, SensingResult
     from mpc_local_planner.worlds.world import World
 
 __all__ = [
@@ -279,6 +279,25 @@ def navigation_world(task: Task) -> tuple[Robot, World, float | None]:
     return robot, suites.barn_sensing_world(path, robot), barn_length
 
 
+def drive_task(task: Task, robot: Robot, world: World) -> SensingResult:
+    """Drive one navigation task in process, as its sweep does (the run behind a row).
+
+    Raises:
+        PlanningError: if no first plan can be made.
+
+    """
+    from mpc_local_planner.evaluation import sensing_suites as suites
+
+    return suites.run_navigation(world, task.controller, robot,
+                                 sensing=task.sensing or task.suite in ('unknown', 'dynamic'),
+                                 seed=task.seed,
+                                 setup=suites.MpcSetup(budget=task.budget, compile=task.compile),
+                                 reality=task.reality,
+                                 # BARN's robot has odometry and a laser, no localizer
+                                 localized=task.suite != 'barn', plant=task.plant,
+                                 recoveries=task.recoveries, track_moving=task.track_moving)
+
+
 def run_navigation_task(task: Task) -> RunRow:
     """Run one world x controller through the navigation stack; return its runs.csv row."""
     from mpc_local_planner.evaluation import sensing_suites as suites
@@ -290,15 +309,7 @@ def run_navigation_task(task: Task) -> RunRow:
                  v_max=robot.v_max,
                  reality=task.reality)
     try:
-        result = suites.run_navigation(world, task.controller, robot,
-                                       sensing=bool(row.sensing), seed=task.seed,
-                                       setup=suites.MpcSetup(budget=task.budget,
-                                                             compile=task.compile),
-                                       reality=task.reality,
-                                       # BARN's robot has odometry and a laser, no localizer
-                                       localized=task.suite != 'barn', plant=task.plant,
-                                       recoveries=task.recoveries,
-                                       track_moving=task.track_moving)
+        result = drive_task(task, robot, world)
     except PlanningError as err:
         row.success, row.collision, row.stop_reason = False, False, f'no plan: {err}'
         row.barn_score = 0.0 if barn_length is not None else None
