@@ -426,11 +426,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                              'core/recoveries.py), as the controller node does by default; '
                              'navigation suites only')
     parser.add_argument('--track-moving', action='store_true',
-                        help="the controller's obstacle memory and the planner's grid "
-                             "track the scans' small clusters and forget what moving ones "
-                             'built, so that a walker leaves no trail (perception/tracking.py; '
-                             "through the nodes: both nodes' track_moving); navigation suites "
-                             'only')
+                        help="the controller's obstacle memory tracks the scans' small "
+                             'clusters and forgets what moving ones built, so that a walker '
+                             'leaves no trail (perception/tracking.py; through the nodes: '
+                             "both nodes' track_moving); navigation suites only")
     parser.add_argument('--save-trajectories', action='store_true',
                         help='write each run as trajectory CSV under OUT/trajectories')
     parser.add_argument('--merge', action='store_true',

@@ -9,11 +9,11 @@ rollout's controller):
    pose (every ``scan_period``; with a real robot's `Base`, through its reality's
    `ScanChannel`: noise, NaN and -inf beams, lost scans), and the scan is placed with the
    pose the controller is given (odometry, which may be noisy and drift);
-2. the scan goes into the controller's obstacle memory (`ObstacleMemory`) and into the
-   planner's grid (map plus scans, `PlanningGrid`), both told the robot's footprint, as the
+2. the scan goes into the planner's grid (map plus scans, `PlanningGrid`) and into the
+   controller's obstacle memory (`ObstacleMemory`), both told the robot's footprint, as the
    nodes are (returns inside it are the robot itself); with ``track_moving`` the memory's
-   tracker labels the returns, and a moving track's neither stay in the memory nor mark the
-   grid, as in both nodes;
+   tracker follows the scans' clusters and what a moving one built is forgotten, while the
+   grid marks every return where it is now (later beams clear where a walker was);
 3. the controller's obstacle memory takes the scan, and the map's and the memory's
    obstacles near the robot are assembled (`LocalObstacles`, as the controller node
    assembles them);
@@ -67,7 +67,7 @@ from mpc_local_planner.perception.local_obstacles import LocalObstacles
 from mpc_local_planner.perception.raycast import TrueGeometry
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
 from mpc_local_planner.perception.scans import Scan
-from mpc_local_planner.perception.tracking import ScanTracker, TrackLabels
+from mpc_local_planner.perception.tracking import ScanTracker
 from mpc_local_planner.sim.base import Base
 from mpc_local_planner.sim.laser import JACKAL_FOV, SimulatedLaser
 from mpc_local_planner.sim.moving import WorldClock
@@ -108,9 +108,8 @@ class NavigationSettings:
         progress_radius: Metres that count as progress (the node's progress_radius).
         progress_angle: Radians of turn that count as progress (the node's progress_angle).
         track_moving: The memory follows the scans' small clusters and forgets what moving
-            ones built, and their returns mark no cell of the planner's grid
-            (perception/tracking.py): a walker leaves no trail. Off: the world is taken as
-            static, as every suite before the dynamic one.
+            ones built (perception/tracking.py): a walker leaves no trail. Off: the world
+            is taken as static, as every suite before the dynamic one.
 
     """
 
@@ -294,8 +293,8 @@ class Navigator:
         for t, *pose in rows:
             if self.settings.sense:
                 scan = self.laser.scan(pose, stamp=t)
+                self.grid.add_scan(scan, pose, body=self.footprint)
                 self.memory.update(scan, pose, body=self.footprint)
-                self.grid.add_scan(scan, pose, body=self.footprint, tracks=self._tracks())
             if self.recoveries is not None:
                 self.recoveries.trail.record(np.array(pose))
         self.obstacles.scan_updated()
@@ -312,14 +311,14 @@ class Navigator:
         if self.replanner.plan is None:  # the goal comes first, planned on the map alone
             self._adopt(self.replanner.plan_goal(self.planner, x, self.goal, now=t), x, t)
         scan = self._scan(x, t)
+        if scan is not None:
+            self.grid.add_scan(scan, x, body=self.footprint)
         started = time.perf_counter()
         if scan is not None:
             self.memory.update(scan, x, body=self.footprint)
             self.obstacles.scan_updated()
         nearby = self.obstacles.near(x[:2], self.reach + self.settings.sensing_margin)
         perceived = time.perf_counter() - started
-        if scan is not None:  # a walker the memory's tracker follows marks no cell
-            self.grid.add_scan(scan, x, body=self.footprint, tracks=self._tracks())
         # a re-plan's first turn is one the controller's obstacles allow (Replanner.check)
         self._adopt(self.replanner.check(self.planner, x, now=t, grid=self.grid,
                                          local_obstacles=nearby), x, t)
@@ -345,11 +344,6 @@ class Navigator:
                                               np.array(answer.u, dtype=float)))
         self._adopted = None
         return answer
-
-    def _tracks(self) -> TrackLabels | None:
-        """The last scan's returns labelled with their tracks (None: nothing is tracked)."""
-        tracker = self.memory.tracker
-        return tracker.labels if tracker is not None else None
 
     def _scan(self, x: np.ndarray, t: float) -> Scan | None:
         """Return the scan due at t (None: the laser is off, not due, or the scan was lost)."""

@@ -119,8 +119,8 @@ def node_command(world_file: Path, out: Path, *, robot: str, v_max: float, omega
     plant is the simulator's (closed_loop --plant: kinematic, or the MuJoCo robot of the
     world's footprint). recoveries is the controller's (on by default in the node, off in
     the suites unless asked: the flag is passed either way, so both paths run the same).
-    track_moving is both nodes' (the controller's memory and the planner's grid track the
-    scans' clusters; off by default in both).
+    track_moving is both nodes' (their memories track the scans' clusters; off by default
+    in both).
     """
     files = [resolve_data_file('mpc_controller.yaml')]
     if robot == 'jackal':

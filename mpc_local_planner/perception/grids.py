@@ -26,10 +26,8 @@ from mpc_local_planner.perception.scans import (
     compose_pose,
     Scan,
     scan_points,
-    ScanError,
     validate_scan,
 )
-from mpc_local_planner.perception.tracking import TrackLabels
 from mpc_local_planner.worlds.map_files import OccupancyMap, OCCUPIED
 
 __all__ = [
@@ -240,8 +238,7 @@ class PlanningGrid:
 
     def add_scan(self, scan: Scan, robot_pose: Sequence[float], *,
                  laser_pose: Sequence[float] = (0.0, 0.0, 0.0),
-                 body: Footprint | None = None,
-                 tracks: TrackLabels | None = None) -> None:
+                 body: Footprint | None = None) -> None:
         """Clear the cells the beams pass through, then mark the cells of the returns.
 
         The beams are read as `classify_beams` says: a -inf beam marks the cell at range_min
@@ -254,15 +251,9 @@ class PlanningGrid:
             robot_pose: (x, y, yaw) of the robot in the map frame at the scan's stamp.
             laser_pose: (x, y, yaw) of the laser in the robot frame.
             body: The robot's footprint; None: every return marks its cell.
-            tracks: The scan's returns labelled with their tracks (`ScanTracker.labels`,
-                with the same body and laser pose): a return of a moving track marks
-                nothing (a walker would leave a wall of cells behind it, which later beams
-                clear only where they reach), though its beam still clears up to it. None:
-                every return marks.
 
         Raises:
-            ScanError: If the scan or a pose is malformed, or tracks label another number
-                of returns.
+            ScanError: If the scan or a pose is malformed.
 
         """
         validate_scan(scan)
@@ -286,13 +277,6 @@ class PlanningGrid:
             inside = self.map.contains_cell(rows, cols)
             self._scan[rows[inside], cols[inside]] = False
         hits, _ = scan_points(scan, robot_pose, laser_pose=laser_pose, readings=readings)
-        if tracks is not None:
-            labels = np.asarray(tracks.per_return)
-            if labels.shape != (len(hits),):
-                msg = f'tracks label {labels.shape} returns, the scan has {len(hits)}'
-                raise ScanError(msg)
-            if tracks.moving:
-                hits = hits[~np.isin(labels, list(tracks.moving))]
         rows, cols = self.map.world_to_cell(hits)
         inside = self.map.contains_cell(rows, cols)
         self._scan[rows[inside], cols[inside]] = True

@@ -100,6 +100,7 @@ from mpc_local_planner.core.replanning import (
     ReplanSettings,
 )
 from mpc_local_planner.perception.grids import PlanningGrid
+from mpc_local_planner.perception.tracking import Track
 from mpc_local_planner.ros.conversions import (
     diagnostic_array,
     frame_problem,
@@ -235,6 +236,11 @@ class GlobalPlannerNode(ManagedNode):
     def held_obstacles(self) -> tuple[ConvexPolygon, ...]:
         """The convex pieces the scans made (obstacle_memory): re-plans keep clear of them."""
         return self._scans.held_obstacles
+
+    @property
+    def tracks(self) -> list[Track] | None:
+        """The tracks of the scans' clusters (track_moving; None: the planner does not track)."""
+        return self._scans.tracks
 
     @property
     def pending_scan_count(self) -> int:

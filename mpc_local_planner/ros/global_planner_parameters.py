@@ -90,10 +90,10 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "start_clearance (the controller's obstacle_memory); read at configure",
                   float_range=(0.01, 3600.0)),
     ParameterSpec('track_moving', False,
-                  "with use_scan, follow the scan's small clusters over time and let a moving "
-                  'one mark no cell and build no piece, so that a walker leaves no trail in '
-                  "the grid (the controller's track_moving; perception/tracking.py); read at "
-                  'configure'),
+                  "with use_scan, follow the scan's small clusters over time and forget the "
+                  'convex pieces a moving one built (start_clearance), as the controller with '
+                  'its track_moving does (perception/tracking.py); the grid still marks every '
+                  'return where it is now; read at configure'),
     ParameterSpec('analytic_path', '',
                   "publish this analytic path (e.g. 'paper_sinusoid') instead of planning; '' "
                   '= plan with RRT*'),

@@ -4,7 +4,7 @@
 PlannerScans is a component GlobalPlannerNode (ros/global_planner_node.py) owns: the scan
 intake (perception/scan_intake.py: waiting for a pose, the out-of-order and clock-jump rules,
 the controller's too) and the obstacle memory re-plans keep clear of (with ``track_moving``
-it tracks the scans' clusters, and a moving one's returns mark no cell). The node hands it each
+it tracks the scans' clusters and forgets what a moving one built). The node hands it each
 scan with what it owns: the grid, the pose source and the planner's footprint.
 """
 
@@ -28,7 +28,7 @@ from mpc_local_planner.perception.scan_intake import (
     ScanOrder,
 )
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
-from mpc_local_planner.perception.tracking import ScanTracker, TrackLabels
+from mpc_local_planner.perception.tracking import ScanTracker, Track
 from mpc_local_planner.ros.conversions import (
     frame_problem,
     scan_from_message,
@@ -84,6 +84,13 @@ class PlannerScans:
         return tuple(self._memory.obstacles()) if self._memory is not None else ()
 
     @property
+    def tracks(self) -> list[Track] | None:
+        """The live tracks of the scans' clusters (None: it does not track)."""
+        if self._memory is None or self._memory.tracker is None:
+            return None
+        return self._memory.tracker.tracker.tracks
+
+    @property
     def pending(self) -> int:
         """Valid scans waiting for odometry that covers their stamps."""
         return self._intake.pending
@@ -91,8 +98,9 @@ class PlannerScans:
     def reset(self, memory_ttl: float | None = None, *, track_moving: bool = False) -> None:
         """Start anew: no scan waiting or taken; a memory of memory_ttl s (None: none).
 
-        track_moving: the memory tracks the scans' clusters (perception/tracking.py), and a
-        moving one's returns mark no cell of the grid (needs a memory).
+        track_moving: the memory tracks the scans' clusters and forgets what a moving one
+        built, as the controller's does (perception/tracking.py; needs a memory). The grid
+        still marks every return where it is now.
         """
         if track_moving and memory_ttl is None:
             msg = 'track_moving needs the scans (use_scan)'
@@ -164,34 +172,25 @@ class PlannerScans:
         try:
             body = self._body()
             laser_pose = list(self._parameter('laser_pose'))
-            tracks = None
+            grid.add_scan(placed.scan, placed.pose, laser_pose=laser_pose, body=body)
             if self._memory is not None:  # the controller's convex pieces, for re-plans
-                tracks = self._remember(placed, laser_pose, body)
-            grid.add_scan(placed.scan, placed.pose, laser_pose=laser_pose, body=body,
-                          tracks=tracks)
+                self._remember(placed, laser_pose, body)
         except Exception as err:  # ScanError (a ValueError); nothing may escape
             self._refuse_scan(err)
             return
         self._problems.resolve('scan')
         self.count += 1
 
-    def _remember(self, placed: Placed, laser_pose: list[float], body: Any
-                  ) -> TrackLabels | None:
-        """Add a placed scan to the obstacle memory, as the controller does (ScanOrder).
-
-        Returns the scan's returns labelled with their tracks when the memory tracks and took
-        the scan (None: it does not track, or the scan came late and was not tracked).
-        """
+    def _remember(self, placed: Placed, laser_pose: list[float], body: Any) -> None:
+        """Add a placed scan to the obstacle memory, as the controller does (ScanOrder)."""
         scan = placed.scan
         order = self._intake.order(scan.stamp)
         if order is ScanOrder.LATE:
-            return None
+            return
         if order is ScanOrder.CLOCK_JUMP:
             self._memory.clear()
         self._memory.update(scan, placed.pose, laser_pose=laser_pose, body=body)
         self._intake.taken(scan.stamp, placed.receipt)
-        tracker = self._memory.tracker
-        return tracker.labels if tracker is not None else None
 
     def _refuse_scan(self, err: Exception) -> None:
         """Say (throttled) that a scan was dropped."""

@@ -17,8 +17,7 @@ from mpc_local_planner.perception.grids import (
     GridError,
     PlanningGrid,
 )
-from mpc_local_planner.perception.scans import Scan, scan_points, ScanError
-from mpc_local_planner.perception.tracking import TrackLabels
+from mpc_local_planner.perception.scans import Scan
 from mpc_local_planner.sim.laser import SimulatedLaser
 from mpc_local_planner.worlds.map_files import OccupancyMap
 
@@ -114,25 +113,6 @@ def test_planning_grid_marks_scan_returns_and_clears_along_the_beams() -> None:
     grid.add_scan(laser.scan((0.0, 0.0, 0.0)), (0.0, 0.0, 0.0))
     grid.clear_scans()
     assert grid.segment_is_free((0.0, 0.0), (1.5, 0.0))
-
-
-def test_returns_of_a_moving_track_mark_no_cell_and_the_others_still_do() -> None:
-    """A walker the tracker follows leaves no wall of cells; a static return still marks."""
-    walker = ConvexPolygon.from_box(1.0, -0.2, 1.3, 0.2)
-    wall = ConvexPolygon.from_box(1.0, 0.8, 1.3, 1.2)
-    scan = SimulatedLaser([walker, wall], fov=math.pi, beams=181).scan((0.0, 0.0, 0.0))
-    points, _ = scan_points(scan, (0.0, 0.0, 0.0))
-    on_walker = points[:, 1] < 0.5
-    labels = np.where(on_walker, 7, 3)  # track 7 the walker, track 3 the wall
-    grid = PlanningGrid(empty_map(), inflation=0.0)
-    grid.add_scan(scan, (0.0, 0.0, 0.0), tracks=TrackLabels(labels, frozenset({7})))
-    assert grid.segment_is_free((0.0, 0.0), (1.5, 0.0))  # where the walker is
-    assert not grid.segment_is_free((0.0, 1.0), (1.5, 1.0))  # the wall
-    # the same scan with no track told moving marks the walker too, as without tracks
-    grid.add_scan(scan, (0.0, 0.0, 0.0), tracks=TrackLabels(labels, frozenset()))
-    assert not grid.segment_is_free((0.0, 0.0), (1.5, 0.0))
-    with pytest.raises(ScanError, match='tracks label'):
-        grid.add_scan(scan, (0.0, 0.0, 0.0), tracks=TrackLabels(labels[:-1], frozenset()))
 
 
 def test_planning_grid_reads_each_beam_as_rep_117_says() -> None:
