@@ -327,7 +327,7 @@ CLOSED_LOOP_MODULES = frozenset({
     'test_controller_real_base.py', 'test_mpc_barn_stalls.py', 'test_rollout.py',
     'test_sensing_suites.py', 'test_evaluate.py', 'test_sweep.py', 'test_experiments.py',
     'test_bench_footprint.py', 'test_bench_rate.py', 'test_bench_cold_start.py',
-    'test_bench_peer.py', 'test_mpc_footprint.py',
+    'test_bench_peer.py', 'test_mpc_footprint.py', 'test_recovery_barn.py',
 })
 
 
