@@ -309,12 +309,11 @@ def plot_dynamic_suite(out: Path, template: Task, worlds: Sequence[int],
 
     written = []
     for w in worlds:
-        runs, robot, world = [], None, None
-        for controller in controllers:
-            task = replace(template, world=w, controller=controller)
-            robot, world, _ = navigation_world(task)
-            runs.append((controller, drive_task(task, robot, world).run))
-        assert robot is not None and world is not None, 'no controller to run'
+        # the world and the robot are the task's, whichever controller drives it
+        robot, world, _ = navigation_world(replace(template, world=w))
+        runs = [(controller, drive_task(replace(template, world=w, controller=controller),
+                                        robot, world).run)
+                for controller in controllers]
         written.append(plot_dynamic_strip(
             out / f'dynamic_strip_{w:03d}.png', world, runs, footprint=robot.footprint,
             title=f'dynamic world {w}: {len(world.moving_obstacles)} moving obstacles'))

@@ -47,7 +47,7 @@ from mpc_local_planner.perception.scans import (
 )
 
 if TYPE_CHECKING:
-    from mpc_local_planner.perception.tracking import ScanTracker, TrackLabels
+    from mpc_local_planner.perception.tracking import ScanTracker, Track, TrackLabels
 
 __all__ = [
     'ObstacleMemory',
@@ -358,6 +358,11 @@ class ObstacleMemory:
         already, so they are not classified twice.
         """
         return self._last_usable
+
+    @property
+    def tracks(self) -> list[Track] | None:
+        """The tracker's live tracks (None: the memory does not track)."""
+        return self.tracker.tracker.tracks if self.tracker is not None else None
 
     def clear(self) -> None:
         """Forget everything (e.g. when the map frame jumps)."""

@@ -86,9 +86,7 @@ class PlannerScans:
     @property
     def tracks(self) -> list[Track] | None:
         """The live tracks of the scans' clusters (None: it does not track)."""
-        if self._memory is None or self._memory.tracker is None:
-            return None
-        return self._memory.tracker.tracker.tracks
+        return self._memory.tracks if self._memory is not None else None
 
     @property
     def pending(self) -> int:

@@ -141,9 +141,7 @@ class ControllerSensing:
     def tracks(self) -> list[Track] | None:
         """The live tracks of the scans' clusters (None: the node does not track)."""
         memory = self.local.memory
-        if memory is None or memory.tracker is None:
-            return None
-        return memory.tracker.tracker.tracks
+        return memory.tracks if memory is not None else None
 
     def set_memory_ttl(self, ttl: float) -> None:
         """Apply a new obstacle_memory (seconds) to the scan memory, if there is one."""
