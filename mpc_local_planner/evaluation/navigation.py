@@ -317,7 +317,7 @@ class Navigator:
         if scan is not None:
             self.memory.update(scan, x, body=self.footprint)
             self.obstacles.scan_updated()
-        nearby = self.obstacles.near(x[:2], self.reach + self.settings.sensing_margin)
+        nearby = self.obstacles.near(x[:2], self.reach + self.settings.sensing_margin, now=t)
         perceived = time.perf_counter() - started
         # a re-plan's first turn is one the controller's obstacles allow (Replanner.check)
         self._adopt(self.replanner.check(self.planner, x, now=t, grid=self.grid,

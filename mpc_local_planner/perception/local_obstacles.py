@@ -6,7 +6,9 @@ the occupied cells of the map within a radius of the robot, merged into rectangl
 (`grid_rectangles`, recomputed only when the robot enters another cell), plus the obstacles
 the scan memory holds within that radius; every polygon fitted to the NLP's faces and rid of
 needle corners (`within_faces`). The radius is what the horizon can reach plus the inflation
-and a margin: nothing farther can matter to the next solve.
+and a margin: nothing farther can matter to the next solve. A memory that tracks
+(perception/tracking.py) hands its moving tracks over as moving polygons, with their
+velocity, instead of the pieces they built: the MPC predicts them over its horizon.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import numpy as np
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, within_faces
 from mpc_local_planner.perception.grids import grid_rectangles
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
+from mpc_local_planner.perception.tracking import moving_polygon, Track
 from mpc_local_planner.worlds.map_files import OccupancyMap
 
 __all__ = ['LocalObstacles', 'SENSING_MARGIN']
@@ -47,6 +50,7 @@ class LocalObstacles:
         self._window: tuple | None = None
         self._map_obstacles: list[ConvexPolygon] = []
         self._scan_obstacles = ObstacleSet([])
+        self._movers: list[Track] = []
 
     @property
     def occupancy(self) -> OccupancyMap | None:
@@ -59,16 +63,28 @@ class LocalObstacles:
         self._window = None
 
     def scan_updated(self) -> None:
-        """Take the memory's obstacles in after it changed (fitted once per scan)."""
-        polygons = self.memory.obstacles() if self.memory is not None else []
-        self._scan_obstacles = ObstacleSet(within_faces(polygons, self.faces))
+        """Take the memory's obstacles in after it changed (fitted once per scan).
 
-    def near(self, position: Sequence[float], radius: float) -> list[ConvexPolygon]:
+        A memory that tracks hands over its static pieces here, and its moving tracks
+        (`near` predicts them to its time).
+        """
+        memory = self.memory
+        polygons = memory.obstacles(static=True) if memory is not None else []
+        self._scan_obstacles = ObstacleSet(within_faces(polygons, self.faces))
+        self._movers = memory.moving_tracks if memory is not None else []
+
+    def near(self, position: Sequence[float], radius: float, now: float | None = None
+             ) -> list[ConvexPolygon]:
         """Return the map's rectangles and the remembered obstacles within radius of position.
+
+        Then every moving track, as a MovingPolygon where it is at now (its last scan's
+        stamp if None) with its velocity (perception/tracking.py `moving_polygon`): the
+        MPC predicts it over its horizon, and it may come from beyond radius.
 
         Args:
             position: (x, y) of the robot, map frame.
             radius: Distance of interest, metres.
+            now: The time the obstacles are wanted for (the control step's), seconds.
 
         """
         centre = np.asarray(position, dtype=float).reshape(-1)[:2]
@@ -84,4 +100,6 @@ class LocalObstacles:
         if len(self._scan_obstacles):
             chosen, _ = self._scan_obstacles.near(centre[None, :], radius)
             found += [self._scan_obstacles.obstacles[i] for i in sorted(chosen)]
+        found += [moving_polygon(t, t.stamp if now is None else max(now, t.stamp))
+                  for t in self._movers]
         return found

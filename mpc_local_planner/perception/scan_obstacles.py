@@ -338,6 +338,8 @@ class ObstacleMemory:
         self.clear_margin = float(clear_margin)
         self.config = config or ScanObstacleConfig()
         self._entries: list[_Entry] = []
+        # the ids of the tracks told moving at the last scan
+        self._moving: frozenset[int] = frozenset()
         self._stamp = -math.inf
         self._last_usable = False
         self.tracker = tracker
@@ -364,9 +366,17 @@ class ObstacleMemory:
         """The tracker's live tracks (None: the memory does not track)."""
         return self.tracker.tracker.tracks if self.tracker is not None else None
 
+    @property
+    def moving_tracks(self) -> list[Track]:
+        """The tracks told moving at the last scan (none: the memory does not track)."""
+        if self.tracker is None:
+            return []
+        return [t for t in self.tracker.tracker.tracks if t.id in self._moving]
+
     def clear(self) -> None:
         """Forget everything (e.g. when the map frame jumps)."""
         self._entries = []
+        self._moving = frozenset()
         self._stamp = -math.inf
         self._last_usable = False
         if self.tracker is not None:
@@ -420,6 +430,7 @@ class ObstacleMemory:
                 raise ScanError(msg)
             owners = labels[starts] if len(current) else owners
             moving = tracks.moving
+        self._moving = moving
         kept = [e for e in self._entries
                 if e.track not in moving and scan.stamp - e.seen <= self.ttl]
         if kept:
@@ -465,19 +476,24 @@ class ObstacleMemory:
         return crossed | (hidden == 0)
 
     def obstacles(self, centre: Sequence[float] | None = None,
-                  radius: float = math.inf) -> list[ConvexPolygon]:
+                  radius: float = math.inf, *, static: bool = False) -> list[ConvexPolygon]:
         """Return the remembered obstacles that come within radius of centre.
 
         Args:
             centre: (x, y) of the robot; None returns everything.
             radius: Distance of interest (the MPC's reach), metres.
+            static: Leave out the pieces the last scan built of a moving track (those of
+                the scans before are forgotten already): what moves is handed over as its
+                track instead (`moving_tracks`).
 
         Returns:
             The polygons, most recently seen last.
 
         """
+        entries = ([e for e in self._entries if e.track not in self._moving] if static
+                   else self._entries)
         if centre is None or not math.isfinite(radius):
-            return [e.polygon for e in self._entries]
+            return [e.polygon for e in entries]
         c = np.asarray(centre, dtype=float)[:2]
-        return [e.polygon for e in self._entries
+        return [e.polygon for e in entries
                 if float(e.polygon.distance(c)[0]) <= radius]

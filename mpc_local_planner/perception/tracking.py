@@ -47,6 +47,8 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from mpc_local_planner.core.footprint import Footprint
+from mpc_local_planner.core.moving_obstacles import MovingPolygon
+from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.perception.scans import (
     Beams,
     classify_beams,
@@ -58,12 +60,24 @@ from mpc_local_planner.perception.scans import (
 )
 
 __all__ = [
+    'COVER_FACTOR',
+    'PREDICTION_SIGMAS',
     'ScanTracker',
     'Track',
     'TrackLabels',
     'Tracker',
     'TrackerConfig',
+    'moving_polygon',
 ]
+
+# A cluster's returns see one side of an object: for a cylinder of radius R seen from
+# outside, about half its arc, whose centre lies 2R/pi in front of the cylinder's and whose
+# farthest return lies 1.19 R from it; so a disc of 1.4 times the cluster's radius about the
+# returns' centre holds the cylinder (1.64 R). A walker's legs are two such clusters in one.
+COVER_FACTOR = 1.4
+# Standard deviations of a moving track's position (now) and velocity (over the horizon)
+# that the MPC keeps out of: its predicted disc grows by this many of each.
+PREDICTION_SIGMAS = 2.0
 
 
 @dataclass(frozen=True)
@@ -179,6 +193,29 @@ class Track:
         transition = _transition(dt)
         return ((transition @ self.state)[:2],
                 (transition @ self.covariance @ transition.T)[:2, :2])
+
+
+def moving_polygon(track: Track, now: float, *, sigmas: float = PREDICTION_SIGMAS,
+                   sides: int = 8) -> MovingPolygon:
+    """Return a track as the MPC predicts it: a polygon where it is at now, and its motion.
+
+    The polygon is circumscribed about the disc of COVER_FACTOR times the cluster's radius
+    plus sigmas standard deviations of the position at now (the larger axis of its
+    covariance); it moves at the track's velocity, and the prediction's uncertainty grows at
+    sigmas standard deviations of the velocity (core/moving_obstacles.py).
+    """
+    centre, covariance = track.predicted(now)
+    position_sigma = math.sqrt(max(float(np.max(np.linalg.eigvalsh(covariance))), 0.0))
+    velocity_sigma = math.sqrt(max(float(np.max(np.linalg.eigvalsh(
+        track.covariance[2:, 2:]))), 0.0))
+    radius = COVER_FACTOR * track.size + sigmas * position_sigma
+    disc = ConvexPolygon.from_circle(float(centre[0]), float(centre[1]),
+                                     max(radius, MIN_RADIUS), sides=sides)
+    return MovingPolygon.moving(disc, track.velocity, sigmas * velocity_sigma)
+
+
+# The smallest disc a track is predicted as (m): a cluster of one return has no radius.
+MIN_RADIUS = 0.05
 
 
 def _transition(dt: float) -> np.ndarray:

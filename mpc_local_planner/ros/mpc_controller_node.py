@@ -675,7 +675,7 @@ class MpcControllerNode(ManagedNode):
                 output = self.controller.stop(Reason.NO_LOCALIZATION, self._pose_problem,
                                               now=now)
             else:
-                held = self._world_obstacles + self._sensing.near(self._state)
+                held = self._world_obstacles + self._sensing.near(self._state, now)
                 self.controller.set_obstacles(held)
                 refused = None if self._state is None else InputFreshness.of(
                     self.controller.settings).check(

@@ -276,14 +276,17 @@ class ControllerSensing:
         self._logger.info(f'new map: {grid.width} x {grid.height} cells of '
                           f'{grid.resolution:g} m')
 
-    def near(self, state: np.ndarray | None) -> list[ConvexPolygon]:
+    def near(self, state: np.ndarray | None, now: float | None = None) -> list[ConvexPolygon]:
         """Return the sensed obstacles within reach of the robot at state (none without one).
 
         Reach: MpcConfig.reach (the horizon's travel, the inflation and, for a polygon, the
         circumscribed radius: a polygon's obstacles are not grown by the body, so the
         inflation alone would leave out those its corners can hit) plus SENSING_MARGIN.
+        With track_moving, the moving tracks too, where they are at now (the control step's
+        time), with their velocity: the MPC predicts them.
         """
         if state is None:
             return []
         config, model = self._controller.config, self._controller.model
-        return self.local.near(state[:2], config.reach(float(model.u_max[0])) + SENSING_MARGIN)
+        return self.local.near(state[:2], config.reach(float(model.u_max[0])) + SENSING_MARGIN,
+                               now)

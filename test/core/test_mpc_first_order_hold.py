@@ -15,11 +15,12 @@ import numpy as np
 import pytest
 
 from mpc_local_planner.core.braking import Brake
-from mpc_local_planner.core.config import MpcConfig, SolverSettings
+from mpc_local_planner.core.config import CostWeights, MpcConfig, SolverSettings
 from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.controller_settings import ControllerSettings
 from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.moving_obstacles import MOTION_SIZE
 from mpc_local_planner.core.mpc import PathReferenceMPC, PlanSource
 from mpc_local_planner.core.mpc.formulation import formulate, path_terminal
 from mpc_local_planner.core.mpc.tries import Start
@@ -197,6 +198,16 @@ ZERO_HOLD_FINGERPRINTS = {
 }
 
 
+def _with_static_motion(p: np.ndarray, nx: int, *, slots: int, faces: int) -> np.ndarray:
+    """Insert a static motion (zeros) after each obstacle slot of a parameter vector."""
+    start = nx + len(CostWeights._fields)
+    parts = [p[:start]]
+    for j in range(slots):
+        parts += [p[start + 3 * faces * j:start + 3 * faces * (j + 1)], np.zeros(MOTION_SIZE)]
+    parts.append(p[start + 3 * faces * slots:])
+    return np.concatenate(parts)
+
+
 def test_the_zero_hold_formulation_is_the_one_built_before() -> None:
     model = Unicycle(v_max=2.0, omega_max=4.0)
     footprint = ((0.254, 0.215), (-0.254, 0.215), (-0.254, -0.215), (0.254, -0.215))
@@ -213,7 +224,11 @@ def test_the_zero_hold_formulation_is_the_one_built_before() -> None:
         probes = []
         for _ in range(3):
             w = rng.uniform(-1.0, 1.0, form.problem['x'].shape[0])
-            p = rng.uniform(0.1, 1.0, form.problem['p'].shape[0])
+            # the parameters as they were laid out before obstacles could move: each slot's
+            # motion (zeros: static) is put in after its half-planes
+            p = _with_static_motion(rng.uniform(
+                0.1, 1.0, form.problem['p'].shape[0] - 2 * MOTION_SIZE), model.nx, slots=2,
+                faces=4)
             g = np.asarray(form.g_fn(w, p)).ravel()
             probes += [float(g @ rng.uniform(-1.0, 1.0, g.size)), float(form.cost_fn(w, p))]
         values, bounds = ZERO_HOLD_FINGERPRINTS[name]

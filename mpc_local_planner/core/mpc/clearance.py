@@ -23,6 +23,7 @@ import numpy as np
 
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import RobotModel
+from mpc_local_planner.core.moving_obstacles import moving, stage_lower_bound, stage_polygons
 from mpc_local_planner.core.mpc.formulation import Formulation, ramp_sweep_rate, sweep_rate
 from mpc_local_planner.core.mpc.nlp_values import dual_multipliers, feasible_multipliers
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
@@ -92,9 +93,17 @@ class Clearance:
             local = body.vertices
             corners = np.stack([cos * local[:, 0] - sin * local[:, 1] + x[:, :1],
                                 sin * local[:, 0] + cos * local[:, 1] + x[:, 1:2]], axis=-1)
-            signed, direction = polygon_separation(corners, ObstacleSet(missing))
-            for j, o in enumerate(missing):
+            still = [o for o in missing if not moving(o)]
+            signed, direction = polygon_separation(corners, ObstacleSet(still))
+            for j, o in enumerate(still):
                 entry[id(o)] = (o, signed[:, j], direction[:, j])
+            stages = np.arange(len(x))
+            for o in missing:
+                if moving(o):
+                    # pose k against the obstacle at stage k's time: the diagonal
+                    signed, direction = polygon_separation(
+                        corners, ObstacleSet(stage_polygons(o, len(x), self._config.step)))
+                    entry[id(o)] = (o, signed[stages, stages], direction[stages, stages])
         if not obstacles:
             return np.zeros((len(x), 0)), np.zeros((len(x), 0, 2))
         columns = [entry[id(o)] for o in obstacles]
@@ -172,15 +181,16 @@ class Clearance:
         pose x_l exceeds what the motion needs there by at most distance (exact distances,
         after a cheap bound has left out those further than r_c + distance + that).
         """
-        if self.body is None:
-            chosen, _ = reachable.near(x[:, :2], distance)
-            return [reachable.obstacles[i] for i in chosen]
         if not len(reachable):
             return []
+        if self.body is None:
+            bound = np.min(self.lower_bounds(x, reachable), axis=0)
+            chosen = np.flatnonzero(bound <= distance)
+            order = np.argsort(bound[chosen], kind='stable')
+            return [reachable.obstacles[i] for i in chosen[order]]
         # x_0 is not constrained: only its Farkas margin, as for a circle
         required = np.concatenate([[self._config.farkas_margin], self.required(x, u)])
-        bound = (reachable.signed_distance_lower_bound(x[:, :2]) - self.body_radius
-                 - required[:, None])
+        bound = self.lower_bounds(x, reachable) - self.body_radius - required[:, None]
         near = [reachable.obstacles[i]
                 for i in np.flatnonzero(np.min(bound, axis=0) <= distance)]
         signed, _ = self.separation(x, near)
@@ -197,20 +207,33 @@ class Clearance:
         motion needs (required()); the exact distances are computed only for the obstacles
         a cheap bound (r_c around the positions) cannot clear.
         """
-        if self.body is None:
-            depth = (self._config.farkas_margin
-                     - obstacles.signed_distance_lower_bound(x[1:, :2]))
-            return float(np.max(depth, initial=0.0))
         if not len(obstacles):
             return 0.0
+        if self.body is None:
+            depth = self._config.farkas_margin - self.lower_bounds(x[1:], obstacles, first=1)
+            return float(np.max(depth, initial=0.0))
         required = self.required(x, u)[:, None]
-        bound = obstacles.signed_distance_lower_bound(x[1:, :2]) - self.body_radius
+        bound = self.lower_bounds(x[1:], obstacles, first=1) - self.body_radius
         unclear = [obstacles.obstacles[i]
                    for i in np.flatnonzero(np.any(bound < required, axis=0))]
         if not unclear:
             return 0.0
         depth = required - self.separation(x, unclear)[0][1:]
         return float(np.max(depth, initial=0.0))
+
+    def lower_bounds(self, x: np.ndarray, obstacles: ObstacleSet, *, first: int = 0
+                     ) -> np.ndarray:
+        """Return (len(x), K): each position's signed-distance lower bound to each obstacle.
+
+        Row k of x is stage first + k of a plan: a moving obstacle is taken where it is at
+        that stage's time (core/moving_obstacles.py), a static one where it is.
+        """
+        x = np.asarray(x, dtype=float)
+        bounds = obstacles.signed_distance_lower_bound(x[:, :2])
+        for j, o in enumerate(obstacles.obstacles):
+            if moving(o):
+                bounds[:, j] = stage_lower_bound(o, x[:, :2], self._config.step, first=first)
+        return bounds
 
     def multipliers(self, x: np.ndarray, selected: list[ConvexPolygon],
                     form: Formulation) -> np.ndarray:
@@ -219,4 +242,4 @@ class Clearance:
             _, directions = self.separation(x, selected[:form.slots])
             return dual_multipliers(x, self.body, selected, form.slots, form.faces,
                                     self._model.angle_index, directions[1:])
-        return feasible_multipliers(x, selected, form.slots, form.faces)
+        return feasible_multipliers(x, selected, form.slots, form.faces, self._config.step)

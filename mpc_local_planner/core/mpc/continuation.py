@@ -16,6 +16,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
+from mpc_local_planner.core.moving_obstacles import motion_of
 from mpc_local_planner.core.mpc.backends import Nlp
 from mpc_local_planner.core.mpc.tries import Solver, Start, Try
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet
@@ -136,6 +137,7 @@ def same_polygons(a: Sequence[ConvexPolygon], b: Sequence[ConvexPolygon]) -> boo
     """Say whether two obstacle lists are the same polygons in the same order."""
     return len(a) == len(b) and all(
         p.vertices.shape == q.vertices.shape and np.array_equal(p.vertices, q.vertices)
+        and np.array_equal(motion_of(p), motion_of(q))
         for p, q in zip(a, b, strict=True))
 
 

@@ -52,13 +52,14 @@ import numpy as np
 
 from mpc_local_planner.core.config import CostWeights, MpcConfig
 from mpc_local_planner.core.models import RobotModel
+from mpc_local_planner.core.moving_obstacles import MOTION_SIZE
 from mpc_local_planner.core.paths import ReferencePath
 
 __all__ = [
     'Formulation', 'Layout', 'Row', 'SWEEP_SMOOTHING', 'TerminalCondition',
     'disc_collision_rows', 'formulate', 'gap_closing_rows', 'initial_state_rows',
     'obstacle_halfplanes', 'path_terminal', 'polygon_collision_rows', 'ramp_sweep_rate',
-    'rate_rows', 'stage_cost', 'sweep_rate', 'symbolic_weights', 'terminal_rows',
+    'rate_rows', 'stage_cost', 'stage_offsets', 'sweep_rate', 'symbolic_weights', 'terminal_rows',
     'variable_bounds',
 ]
 
@@ -385,10 +386,10 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
     x_k = ca.SX.sym('x0', nx)
     w_weights = ca.SX.sym('w', len(CostWeights._fields))
     weights = symbolic_weights(w_weights)
-    obs = ca.SX.sym('obs', 3 * faces * slots)
+    obs = ca.SX.sym('obs', (3 * faces + MOTION_SIZE) * slots)
     p_path = ca.SX.sym('path', terminal.num_params)
     u_prev = ca.SX.sym('u_prev', npv)
-    A_list, b_list = obstacle_halfplanes(obs, slots, faces)
+    A_list, b_list, motion_list = obstacle_halfplanes(obs, slots, faces)
 
     # ---- decision variables, stage by stage, in the order _blocks writes once
     blocks = _blocks(n, nx, nr, nz, nu, nm, nc, npv)
@@ -429,6 +430,9 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
                                                else []) + ([U[k]] if npv else [])
             add(gap_closing_rows(Z[k + 1], f(x_l, *step_inputs), r_l, carried))
         rows = 0
+        # the obstacles at this stage's time (moving ones moved and grown; static as given)
+        b_stage = [stage_offsets(A, b, motion, k * config.step, half_step)
+                   for A, b, motion in zip(A_list, b_list, motion_list, strict=True)]
         if npv:
             rows += add(rate_rows(k, n, Q[k], U[k] if k < n else None, u_prev, rate,
                                   first_order))
@@ -436,13 +440,13 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
             rows += add(initial_state_rows(x_l, x_k))
         elif polygon:
             rows += add(polygon_collision_rows(
-                x_l, model.angle_index, MU[k], A_list, b_list, faces, G, g_body,
+                x_l, model.angle_index, MU[k], A_list, b_stage, faces, G, g_body,
                 config.farkas_margin,
                 # the step before x_l, and the one after it (u_N = 0: none)
                 [half_step * Z[k][nz]]
                 + ([half_step * sweep(x_l, *step_inputs)] if k < n else [])))
         else:
-            rows += add(disc_collision_rows(x_l[0:2], MU[k], A_list, b_list, faces,
+            rows += add(disc_collision_rows(x_l[0:2], MU[k], A_list, b_stage, faces,
                                             config.farkas_margin))
         if k == n:
             end_rows, offset_cost = terminal_rows(terminal, x_l, x_s, r_l, p_path,
@@ -472,18 +476,33 @@ def formulate(model: RobotModel, config: MpcConfig, terminal: TerminalCondition,
 
 
 def obstacle_halfplanes(obs: ca.SX, slots: int, faces: int
-                        ) -> tuple[list[ca.SX], list[ca.SX]]:
-    """Return (A_j, b_j) of each slot of the obstacle parameter (obstacle j: A_j p <= b_j).
+                        ) -> tuple[list[ca.SX], list[ca.SX], list[ca.SX]]:
+    """Return (A_j, b_j, motion_j) of each slot of the obstacle parameter.
 
-    Slot j holds its A column by column (2 faces values), then its b (faces values), as
-    nlp_values.obstacle_parameters packs them.
+    Obstacle j is A_j p <= b_j now; motion_j is its (vx, vy, growth, |v|), zeros for a static one
+    (core/moving_obstacles.py). Slot j holds its A column by column (2 faces values), its b
+    (faces values), then its motion, as nlp_values.obstacle_parameters packs them.
     """
-    A_list, b_list = [], []
+    A_list, b_list, motion_list = [], [], []
+    size = 3 * faces + MOTION_SIZE
     for j in range(slots):
-        base = 3 * faces * j
+        base = size * j
         A_list.append(ca.reshape(obs[base:base + 2 * faces], faces, 2))
         b_list.append(obs[base + 2 * faces:base + 3 * faces])
-    return A_list, b_list
+        motion_list.append(obs[base + 3 * faces:base + size])
+    return A_list, b_list, motion_list
+
+
+def stage_offsets(A: ca.SX, b: ca.SX, motion: ca.SX, t: float, half_step: float) -> ca.SX:
+    """Return the faces' offsets of an obstacle at time t ahead: b + t A v + d(t).
+
+    d(t) = t growth + h/2 (|v| + growth) (core/moving_obstacles.py): the obstacle moved at
+    its velocity v, grown with its uncertainty and by where it may be within half a step of
+    the sample. A static obstacle's motion is zero, and then this is b to the bit.
+    """
+    velocity, growth, speed = motion[0:2], motion[2], motion[3]
+    pad = t * growth + half_step * (speed + growth)
+    return b + t * ca.mtimes(A, velocity) + pad
 
 
 class Row(NamedTuple):

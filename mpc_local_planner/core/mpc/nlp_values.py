@@ -13,6 +13,7 @@ from typing import Sequence
 import numpy as np
 
 from mpc_local_planner.core.config import CostWeights
+from mpc_local_planner.core.moving_obstacles import motion_of, MOTION_SIZE, offsets_by_stage
 from mpc_local_planner.core.obstacles import (
     ConvexPolygon,
     face_weights,
@@ -74,7 +75,11 @@ def parameter_vector(x0: np.ndarray, weights: CostWeights, obstacles: np.ndarray
 
 def obstacle_parameters(selected: Sequence[ConvexPolygon], slots: int,
                         faces: int) -> np.ndarray:
-    """Return the (A, b) of each obstacle slot, padded to the NLP's slots and faces."""
+    """Return the (A, b, motion) of each obstacle slot, padded to the NLP's slots and faces.
+
+    motion is (vx, vy, growth, |v|) of a moving obstacle (core/moving_obstacles.py), zeros for a
+    static one and an empty slot.
+    """
     values = []
     for j in range(slots):
         if j < len(selected):
@@ -84,15 +89,17 @@ def obstacle_parameters(selected: Sequence[ConvexPolygon], slots: int,
             o = selected[j]
             rows = np.minimum(np.arange(faces), o.num_faces - 1)
             A, b = o.A[rows], o.b[rows]
+            motion = motion_of(o)
         else:
             A = np.zeros((faces, 2))
             b = np.full(faces, -1.0)  # an empty slot: (0 p + 1)^T mu = 1 >= margin
-        values.append(np.concatenate([A.reshape(-1, order='F'), b]))
+            motion = np.zeros(MOTION_SIZE)
+        values.append(np.concatenate([A.reshape(-1, order='F'), b, motion]))
     return np.concatenate(values) if values else np.zeros(0)
 
 
 def feasible_multipliers(x: np.ndarray, selected: Sequence[ConvexPolygon], slots: int,
-                         faces: int) -> np.ndarray:
+                         faces: int, step: float = 0.0) -> np.ndarray:
     """Put each multiplier on the most separating face: a feasible mu for clear points.
 
     Args:
@@ -100,6 +107,8 @@ def feasible_multipliers(x: np.ndarray, selected: Sequence[ConvexPolygon], slots
         selected: the obstacles of the slots (the rest are empty).
         slots: obstacle slots of the NLP.
         faces: half-planes per slot.
+        step: the stage length h: a moving obstacle is taken where it is at each stage's
+            time (core/moving_obstacles.py); a static one does not need it.
 
     Returns:
         The flat multipliers in the order of Layout.mu.
@@ -111,8 +120,9 @@ def feasible_multipliers(x: np.ndarray, selected: Sequence[ConvexPolygon], slots
         if j < len(selected):
             # the padded rows repeat the last face (see obstacle_parameters)
             faces_j = min(selected[j].num_faces, faces)
-            face = np.argmax(x[1:, :2] @ selected[j].A[:faces_j].T - selected[j].b[:faces_j],
-                             axis=1)
+            A = selected[j].A[:faces_j]
+            b = offsets_by_stage(selected[j], n + 1, step)[1:, :faces_j]
+            face = np.argmax(x[1:, :2] @ A.T - b, axis=1)
         else:
             face = np.zeros(n, dtype=int)
         mu[np.arange(n), j, face] = 1.0

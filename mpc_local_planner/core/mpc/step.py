@@ -43,6 +43,7 @@ import numpy as np
 
 from mpc_local_planner.core.config import BudgetKind, MpcConfig
 from mpc_local_planner.core.models import RobotModel
+from mpc_local_planner.core.moving_obstacles import moving, stage_pad
 from mpc_local_planner.core.mpc.backends import Nlp, run_solver, SolverRunner
 from mpc_local_planner.core.mpc.budget import Budget, build_time, solver_of
 from mpc_local_planner.core.mpc.built_nlps import shared_nlp
@@ -198,6 +199,8 @@ class MpcBase(ABC):
             self._problem_version = (self._problem_version[0] + 1, self._problem_version[1])
         self._inflated = inflated
         self._obstacle_set = ObstacleSet(self._inflated)
+        # some obstacle moves (core/moving_obstacles.py): it is predicted over the horizon
+        self._moving = any(moving(o) for o in inflated)
         self._last_active = ()
 
     @property
@@ -399,8 +402,16 @@ class MpcBase(ABC):
         """
         c = self._config
         reach = self._speed_bound() * c.step * c.horizon + self._clearance.body_radius + 1e-3
-        chosen, _ = self._obstacle_set.near(x0[None, :2], reach)
-        return self._obstacle_set.subset(chosen)
+        if not self._moving:
+            chosen, _ = self._obstacle_set.near(x0[None, :2], reach)
+            return self._obstacle_set.subset(chosen)
+        # a moving obstacle comes towards the robot too: as far as it can go in the horizon
+        # (its speed and growth over N h, and the half step around the last sample) further
+        extra = np.array([(o.speed + o.growth) * c.step * c.horizon + stage_pad(o, c.step)
+                          if moving(o) else 0.0 for o in self._inflated])
+        bound = self._obstacle_set.signed_distance_lower_bound(x0[None, :2])[0]
+        chosen = np.flatnonzero(bound <= reach + extra)
+        return self._obstacle_set.subset(chosen[np.argsort(bound[chosen], kind='stable')])
 
     # ----------------------------------------------------------------- the candidate
     def _unwrap(self, x: np.ndarray) -> np.ndarray:
