@@ -196,10 +196,11 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'passes through it); next scan', float_range=(0.01, 3600.0)),
     ParameterSpec('track_moving', False,
                   "with 'scan' a source, follow the scan's small clusters over time (a "
-                  'Kalman filter per track) and forget the pieces a moving one built, so '
-                  'that a walker leaves no trail; mpc/tracks shows the tracks '
-                  '(perception/tracking.py); false: the world is taken as static; read at '
-                  'configure'),
+                  'Kalman filter per track); a moving one reaches the MPC as a disc with '
+                  'its velocity, predicted over the horizon, instead of the pieces it built, '
+                  'so that a walker leaves no trail; mpc/tracks shows the tracks '
+                  '(perception/tracking.py, docs/real_robot.md); false: the world is taken '
+                  'as static; read at configure'),
     ParameterSpec('scan_timeout', float(_SETTINGS.scan_timeout),
                   "with 'scan' a source, a scan older than this (s) is stale: cmd_vel is zero "
                   '(and before the first scan)', float_range=(0.001, 3600.0)),

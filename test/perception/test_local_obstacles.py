@@ -6,11 +6,15 @@ from __future__ import annotations
 from conftest import point_in_any
 import numpy as np
 
+from mpc_local_planner.core.moving_obstacles import MovingPolygon
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.perception.local_obstacles import LocalObstacles
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
+from mpc_local_planner.perception.tracking import ScanTracker
 from mpc_local_planner.sim.laser import SimulatedLaser
+from mpc_local_planner.sim.moving import WorldClock
 from mpc_local_planner.worlds.map_files import OccupancyMap
+from mpc_local_planner.worlds.world import world_from_dict
 
 
 def wall_map() -> OccupancyMap:
@@ -41,3 +45,43 @@ def test_remembered_obstacles_come_in_after_scan_updated_and_only_near() -> None
     near = local.near((0.0, 0.0), 5.0)
     assert near and np.all(point_in_any(near, np.array([[2.0, 0.0], [2.0, 0.25]]), margin=1e-6))
     assert local.near((-10.0, 0.0), 5.0) == []
+
+
+def test_a_tracked_walker_is_handed_over_moving_and_its_pieces_are_not() -> None:
+    """A walker (0.25 m, 1 m/s along y = -1.5) told moving reaches the MPC as one polygon.
+
+    That polygon holds the walker's disc where the walker is at the time asked for (now, or
+    0.5 s later: it moves with the track's velocity); the scan's pieces of the walker are left
+    out, and a static box is handed over as before.
+    """
+    box = ConvexPolygon.from_box(2.0, 0.5, 2.4, 1.1)
+    world = world_from_dict({
+        'bounds': [-6.0, 6.0, -4.0, 4.0], 'obstacles': [{'polygon': box.vertices.tolist()}],
+        'start': [0.0, 0.0, 0.0], 'goal': [5.0, 0.0, 0.0],
+        'moving_obstacles': [
+            {'circle': [0.0, 0.0, 0.25],
+             'waypoints': {'points': [[3.0, -1.5], [-5.0, -1.5]], 'speed': 1.0,
+                           'mode': 'back_and_forth'}}]}, name='passing')
+    clock = WorldClock.from_world(world)
+    walker = clock.moving[0]
+    laser = SimulatedLaser(clock)
+    memory = ObstacleMemory(5.0, tracker=ScanTracker())
+    local = LocalObstacles(8, memory=memory)
+    pose = (0.0, 0.0, -0.5)  # facing the walker's way in
+    for k in range(16):
+        t = round(k * 0.1, 9)
+        memory.update(laser.scan(pose, stamp=t), pose)
+        local.scan_updated()
+    for ahead in (0.0, 0.5):
+        now = t + ahead
+        handed = local.near((0.0, 0.0), 10.0, now=now)
+        movers = [o for o in handed if isinstance(o, MovingPolygon)]
+        assert len(movers) == 1
+        np.testing.assert_allclose(movers[0].velocity, [-1.0, 0.0], atol=0.2)
+        angles = np.linspace(0.0, 2.0 * np.pi, 24, endpoint=False)
+        rim = walker.position(now) + 0.25 * np.column_stack([np.cos(angles), np.sin(angles)])
+        assert np.all(movers[0].contains(rim))
+        static = [o for o in handed if not isinstance(o, MovingPolygon)]
+        assert static and not any(o.contains(walker.position(now), margin=0.3)[0]
+                                  for o in static)
+        assert any(float(np.min(box.distance(o.vertices))) < 0.05 for o in static)  # the box
