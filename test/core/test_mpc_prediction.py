@@ -48,7 +48,10 @@ def drive(start: tuple[float, float], velocity: tuple[float, float], *, predict:
     controller.set_plan(np.array([[0.0, 0.0, 0.0], [GOAL[0], GOAL[1], 0.0]]))
     h = config.step
     x = np.zeros(3)
-    walker_at = (lambda t: np.asarray(start) + t * np.asarray(velocity))
+
+    def walker_at(t: float) -> np.ndarray:
+        return np.asarray(start) + t * np.asarray(velocity)
+
     min_clearance, active, poses = np.inf, 0, []
     for k in range(int(round(seconds / h))):
         t = k * h
