@@ -94,6 +94,9 @@ class MpcController:
 
     """
 
+    # a MovingPolygon among the obstacles is predicted over the horizon (moving_obstacles.py)
+    predicts_motion = True
+
     def __init__(self, model: Unicycle | None = None, config: MpcConfig | None = None, *,
                  obstacles: Sequence[ConvexPolygon] = (),
                  settings: ControllerSettings | None = None,

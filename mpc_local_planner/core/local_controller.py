@@ -34,7 +34,12 @@ class LocalController(Protocol):
         """
 
     def set_obstacles(self, obstacles: Sequence[ConvexPolygon]) -> None:
-        """Avoid these obstacles (as sensed; the controller grows them by its footprint)."""
+        """Avoid these obstacles (as sensed; the controller grows them by its footprint).
+
+        A controller whose class says ``predicts_motion = True`` (the MPC) may be given
+        moving ones too (core/moving_obstacles.py `MovingPolygon`); the others are given
+        what the laser shows of them.
+        """
 
     def compute(self, pose: np.ndarray | None, twist: np.ndarray | None,
                 now: float) -> ControlOutput:

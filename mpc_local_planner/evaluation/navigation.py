@@ -251,7 +251,11 @@ class Navigator:
         self.memory = ObstacleMemory(
             self.settings.memory_ttl,
             tracker=ScanTracker() if self.settings.track_moving else None)
-        self.obstacles = LocalObstacles(faces, occupancy=known_map, memory=self.memory)
+        # the moving tracks as moving polygons for a controller that predicts them (the
+        # MPC); the others get what the laser shows of them, as before tracking
+        self.obstacles = LocalObstacles(faces, occupancy=known_map, memory=self.memory,
+                                        predict_moving=bool(getattr(local, 'predicts_motion',
+                                                                    False)))
         self.log = NavigationLog()
         self.replanner = Replanner(self.settings.replan_settings())
         self._snapshot_period = float(snapshot_period)

@@ -39,13 +39,17 @@ class LocalObstacles:
         faces: Largest number of faces of an obstacle (the NLP's faces_per_obstacle).
         occupancy: The static map, or None.
         memory: The scan memory, or None (the laser is not a source).
+        predict_moving: A memory that tracks hands its moving tracks over as moving
+            polygons (for a controller that predicts them: the MPC); False: as the pieces
+            the last scan built of them, where they are (for one that does not).
 
     """
 
     def __init__(self, faces: int, *, occupancy: OccupancyMap | None = None,
-                 memory: ObstacleMemory | None = None) -> None:
+                 memory: ObstacleMemory | None = None, predict_moving: bool = True) -> None:
         self.faces = int(faces)
         self.memory = memory
+        self.predict_moving = predict_moving
         self._occupancy = occupancy
         self._window: tuple | None = None
         self._map_obstacles: list[ConvexPolygon] = []
@@ -69,9 +73,10 @@ class LocalObstacles:
         (`near` predicts them to its time).
         """
         memory = self.memory
-        polygons = memory.obstacles(static=True) if memory is not None else []
+        predict = self.predict_moving
+        polygons = memory.obstacles(static=predict) if memory is not None else []
         self._scan_obstacles = ObstacleSet(within_faces(polygons, self.faces))
-        self._movers = memory.moving_tracks if memory is not None else []
+        self._movers = memory.moving_tracks if memory is not None and predict else []
 
     def near(self, position: Sequence[float], radius: float, now: float | None = None
              ) -> list[ConvexPolygon]:

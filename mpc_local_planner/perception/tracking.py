@@ -61,6 +61,7 @@ from mpc_local_planner.perception.scans import (
 
 __all__ = [
     'COVER_FACTOR',
+    'GROWTH_SIGMAS',
     'PREDICTION_SIGMAS',
     'ScanTracker',
     'Track',
@@ -75,9 +76,12 @@ __all__ = [
 # farthest return lies 1.19 R from it; so a disc of 1.4 times the cluster's radius about the
 # returns' centre holds the cylinder (1.64 R). A walker's legs are two such clusters in one.
 COVER_FACTOR = 1.4
-# Standard deviations of a moving track's position (now) and velocity (over the horizon)
-# that the MPC keeps out of: its predicted disc grows by this many of each.
+# Standard deviations of a moving track's position that the MPC keeps out of now, and of its
+# velocity by which the predicted disc grows per second over the horizon (docs/results.md,
+# "Moving obstacles": 2 of the velocity's left the MPC boxed in among the dynamic suite's
+# cylinders, whose speeds the filter knows to about 0.24 m/s).
 PREDICTION_SIGMAS = 2.0
+GROWTH_SIGMAS = 1.0
 
 
 @dataclass(frozen=True)
@@ -195,15 +199,18 @@ class Track:
                 (transition @ self.covariance @ transition.T)[:2, :2])
 
 
-def moving_polygon(track: Track, now: float, *, sigmas: float = PREDICTION_SIGMAS,
-                   sides: int = 8) -> MovingPolygon:
+def moving_polygon(track: Track, now: float, *, sigmas: float | None = None,
+                   growth_sigmas: float | None = None, sides: int = 8) -> MovingPolygon:
     """Return a track as the MPC predicts it: a polygon where it is at now, and its motion.
 
     The polygon is circumscribed about the disc of COVER_FACTOR times the cluster's radius
-    plus sigmas standard deviations of the position at now (the larger axis of its
-    covariance); it moves at the track's velocity, and the prediction's uncertainty grows at
-    sigmas standard deviations of the velocity (core/moving_obstacles.py).
+    plus sigmas (PREDICTION_SIGMAS) standard deviations of the position at now (the larger
+    axis of its covariance); it moves at the track's velocity, and the prediction's
+    uncertainty grows at growth_sigmas (GROWTH_SIGMAS) standard deviations of the velocity
+    per second (core/moving_obstacles.py).
     """
+    sigmas = PREDICTION_SIGMAS if sigmas is None else sigmas
+    growth_sigmas = GROWTH_SIGMAS if growth_sigmas is None else growth_sigmas
     centre, covariance = track.predicted(now)
     position_sigma = math.sqrt(max(float(np.max(np.linalg.eigvalsh(covariance))), 0.0))
     velocity_sigma = math.sqrt(max(float(np.max(np.linalg.eigvalsh(
@@ -211,7 +218,7 @@ def moving_polygon(track: Track, now: float, *, sigmas: float = PREDICTION_SIGMA
     radius = COVER_FACTOR * track.size + sigmas * position_sigma
     disc = ConvexPolygon.from_circle(float(centre[0]), float(centre[1]),
                                      max(radius, MIN_RADIUS), sides=sides)
-    return MovingPolygon.moving(disc, track.velocity, sigmas * velocity_sigma)
+    return MovingPolygon.moving(disc, track.velocity, growth_sigmas * velocity_sigma)
 
 
 # The smallest disc a track is predicted as (m): a cluster of one return has no radius.
