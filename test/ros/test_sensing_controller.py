@@ -26,6 +26,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from mpc_local_planner.core.control_output import Reason
 from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.moving_obstacles import MovingPolygon
 from mpc_local_planner.core.obstacles import ConvexPolygon
 from mpc_local_planner.ros.conversions import (
     poses_to_path,
@@ -620,6 +621,11 @@ def test_with_track_moving_the_node_shows_a_walker_as_a_moving_track_on_mpc_trac
     # the post is tracked too, and static
     assert any(abs(m.pose.position.x - 1.65) < 0.15 and abs(m.pose.position.y - 1.05) < 0.15
                for m in markers('static'))
+    # the MPC is given the walker as one moving polygon, with its velocity, where it is now
+    (moving,) = [o for o in world.node.controller.obstacles if isinstance(o, MovingPolygon)]
+    assert moving.velocity[1] > 0.5 * world.WALKER_SPEED and abs(moving.velocity[0]) < 0.3
+    assert moving.contains(np.array([[world.WALKER_X, world.walker_y(world.t)]]),
+                           margin=0.1)[0]
 
 
 def test_track_moving_without_the_scan_is_refused_not_silently_ignored(ros) -> None:
