@@ -18,7 +18,7 @@ and growth = 0, and then O_k is the polygon itself, to the bit, at every stage.
 
 Growing shifts every face (ConvexPolygon.inflate): the grown polygon contains the rounded
 Minkowski sum, so it is conservative as the NLP's other inflations are. The NLP writes these
-offsets with CasADi symbols (formulation.py); `at_stage` here builds the same polygon in
+offsets with CasADi symbols (formulation.py); `stage_polygons` here builds the same polygons in
 numbers, for the geometric checks that do not trust the solver.
 """
 
