@@ -412,10 +412,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                              'acceleration limits, odometry noise and drift, laser noise and '
                              'dropouts; navigation suites only')
     parser.add_argument('--through-nodes', action='store_true',
-                        help="BARN or unknown with sensing: the paper's MPC runs through the "
-                             'real node processes over DDS (closed_loop, lockstep clock, the '
-                             "package's parameter files as shipped; runs in OUT/nodes/), the "
-                             'other controllers in process beside it')
+                        help="BARN, unknown or dynamic with sensing: the paper's MPC runs "
+                             'through the real node processes over DDS (closed_loop, lockstep '
+                             "clock, the package's parameter files as shipped; runs in "
+                             'OUT/nodes/), the other controllers in process beside it')
     parser.add_argument('--plant', choices=PLANTS, default='kinematic',
                         help="the robot's plant: kinematic (the default) or mujoco (rigid "
                              'body, wheels, slip: the [physics] extra); navigation suites only')
@@ -461,8 +461,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         args.v_max = 0.31 if args.v_max is None else args.v_max
         args.omega_max = 1.9 if args.omega_max is None else args.omega_max
-    if args.through_nodes and not (navigation and args.suite in ('barn', 'unknown')):
-        parser.error('--through-nodes needs --suite barn --sensing or --suite unknown')
+    if args.through_nodes and not (navigation and args.suite in ('barn', 'unknown', 'dynamic')):
+        parser.error('--through-nodes needs --suite barn --sensing, --suite unknown or '
+                     '--suite dynamic')
     if args.sensing and args.suite == 'random':
         parser.error('--sensing: use --suite unknown for random worlds with unknown obstacles')
     if args.robot != 'circle' and not navigation:
