@@ -37,6 +37,7 @@ __all__ = [
     'first_blocked_segment',
     'GRAZE_TOLERANCE',
     'min_clearance',
+    'nearest_within',
     'polygon_separation',
     'segment_collides',
     'SHARP_CORNER',
@@ -240,17 +241,17 @@ class ObstacleSet:
             return np.zeros((len(pts), 0))
         return np.max(np.einsum('mfk,pk->pmf', self._A, pts) - self._b[None], axis=2)
 
-    def near(self, points: np.ndarray, distance: float) -> tuple[np.ndarray, np.ndarray]:
+    def near(self, points: np.ndarray, distance: float | np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray]:
         """Return (indices, bounds) of the obstacles some point may be within distance of.
 
         Conservative: the signed-distance lower bound never exceeds the Euclidean distance,
         so no obstacle within distance is left out (a few beyond it, near corners, may be in).
-        Sorted by the bound, nearest first.
+        Sorted by the bound, nearest first. distance: one for all, or (K,) one per obstacle.
         """
         bound = np.min(self.signed_distance_lower_bound(points), axis=0, initial=np.inf)
-        chosen = np.flatnonzero(bound <= distance)
-        order = np.argsort(bound[chosen], kind='stable')
-        return chosen[order], bound[chosen[order]]
+        chosen = nearest_within(bound, distance)
+        return chosen, bound[chosen]
 
     def first_containing(self, point: np.ndarray) -> int | None:
         """Return the index of the first obstacle containing point (boundary included)."""
@@ -291,6 +292,12 @@ class ObstacleSet:
         t_enter = np.maximum(np.max(enter, axis=2, initial=-np.inf), 0.0)
         t_leave = np.minimum(np.min(leave, axis=2, initial=np.inf), 1.0)
         return t_enter <= t_leave
+
+
+def nearest_within(bound: np.ndarray, distance: float | np.ndarray) -> np.ndarray:
+    """Return the indices whose bound is at most distance, smallest bound first (stable)."""
+    chosen = np.flatnonzero(bound <= distance)
+    return chosen[np.argsort(bound[chosen], kind='stable')]
 
 
 def segment_collides(obstacles: Sequence[ConvexPolygon] | ObstacleSet, a: Sequence[float],

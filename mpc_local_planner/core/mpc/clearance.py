@@ -26,7 +26,12 @@ from mpc_local_planner.core.models import RobotModel
 from mpc_local_planner.core.moving_obstacles import moving, stage_lower_bound, stage_polygons
 from mpc_local_planner.core.mpc.formulation import Formulation, ramp_sweep_rate, sweep_rate
 from mpc_local_planner.core.mpc.nlp_values import dual_multipliers, feasible_multipliers
-from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
+from mpc_local_planner.core.obstacles import (
+    ConvexPolygon,
+    nearest_within,
+    ObstacleSet,
+    polygon_separation,
+)
 
 __all__ = ['Clearance', 'MAX_CACHED_PLANS']
 
@@ -185,9 +190,7 @@ class Clearance:
             return []
         if self.body is None:
             bound = np.min(self.lower_bounds(x, reachable), axis=0)
-            chosen = np.flatnonzero(bound <= distance)
-            order = np.argsort(bound[chosen], kind='stable')
-            return [reachable.obstacles[i] for i in chosen[order]]
+            return [reachable.obstacles[i] for i in nearest_within(bound, distance)]
         # x_0 is not constrained: only its Farkas margin, as for a circle
         required = np.concatenate([[self._config.farkas_margin], self.required(x, u)])
         bound = self.lower_bounds(x, reachable) - self.body_radius - required[:, None]
@@ -195,9 +198,7 @@ class Clearance:
                 for i in np.flatnonzero(np.min(bound, axis=0) <= distance)]
         signed, _ = self.separation(x, near)
         slack = np.min(signed - required[:, None], axis=0, initial=np.inf)
-        chosen = np.flatnonzero(slack <= distance)
-        order = np.argsort(slack[chosen], kind='stable')
-        return [near[i] for i in chosen[order]]
+        return [near[i] for i in nearest_within(slack, distance)]
 
     def penetration(self, x: np.ndarray, u: np.ndarray, obstacles: ObstacleSet) -> float:
         """Return how far the plan's poses x_1..x_N fall short of their clearance (0: clear).

@@ -402,16 +402,15 @@ class MpcBase(ABC):
         """
         c = self._config
         reach = self._speed_bound() * c.step * c.horizon + self._clearance.body_radius + 1e-3
-        if not self._moving:
-            chosen, _ = self._obstacle_set.near(x0[None, :2], reach)
-            return self._obstacle_set.subset(chosen)
-        # a moving obstacle comes towards the robot too: as far as it can go in the horizon
-        # (its speed and growth over N h, and the half step around the last sample) further
-        extra = np.array([(o.speed + o.growth) * c.step * c.horizon + stage_pad(o, c.step)
-                          if moving(o) else 0.0 for o in self._inflated])
-        bound = self._obstacle_set.signed_distance_lower_bound(x0[None, :2])[0]
-        chosen = np.flatnonzero(bound <= reach + extra)
-        return self._obstacle_set.subset(chosen[np.argsort(bound[chosen], kind='stable')])
+        if self._moving:
+            # a moving obstacle comes towards the robot too: as far as it can go in the
+            # horizon (its speed and growth over N h, and the half step around the last
+            # sample) further
+            reach = reach + np.array([
+                (o.speed + o.growth) * c.step * c.horizon + stage_pad(o, c.step)
+                if moving(o) else 0.0 for o in self._inflated])
+        chosen, _ = self._obstacle_set.near(x0[None, :2], reach)
+        return self._obstacle_set.subset(chosen)
 
     # ----------------------------------------------------------------- the candidate
     def _unwrap(self, x: np.ndarray) -> np.ndarray:
