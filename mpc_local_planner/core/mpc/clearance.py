@@ -203,24 +203,38 @@ class Clearance:
     def penetration(self, x: np.ndarray, u: np.ndarray, obstacles: ObstacleSet) -> float:
         """Return how far the plan's poses x_1..x_N fall short of their clearance (0: clear).
 
-        A circle: the positions against the inflated obstacles, by the Farkas margin. A
-        polygon: the exact distance of the polygon at each pose against the clearance its
-        motion needs (required()); the exact distances are computed only for the obstacles
-        a cheap bound (r_c around the positions) cannot clear.
+        The largest of shortfall(): the worst stage against the worst obstacle.
         """
+        return float(np.max(self.shortfall(x, u, obstacles), initial=0.0))
+
+    def shortfall(self, x: np.ndarray, u: np.ndarray, obstacles: ObstacleSet) -> np.ndarray:
+        """Return (N,): how far each pose x_1..x_N falls short of its clearance (0: clear)."""
+        return np.maximum(-self.margins(x, u, obstacles), 0.0)
+
+    def margins(self, x: np.ndarray, u: np.ndarray, obstacles: ObstacleSet) -> np.ndarray:
+        """Return (N,): each pose x_1..x_N's clearance beyond what it needs (< 0: short).
+
+        A circle: the positions against the inflated obstacles, less the Farkas margin. A
+        polygon: the exact distance of the polygon at each pose less the clearance its
+        motion needs (required()); the exact distances are computed only for the obstacles
+        a cheap bound (r_c around the positions) cannot clear, and the others count with
+        that bound (a margin never above the true one, and never below 0). A moving obstacle
+        is taken where it is at each stage's time, so the stage of a first negative margin
+        says when a plan would meet it (core/evasion.py).
+        """
+        stages = len(x) - 1
         if not len(obstacles):
-            return 0.0
+            return np.full(stages, np.inf)
         if self.body is None:
-            depth = self._config.farkas_margin - self.lower_bounds(x[1:], obstacles, first=1)
-            return float(np.max(depth, initial=0.0))
+            return np.min(self.lower_bounds(x[1:], obstacles, first=1)
+                          - self._config.farkas_margin, axis=1)
         required = self.required(x, u)[:, None]
-        bound = self.lower_bounds(x[1:], obstacles, first=1) - self.body_radius
-        unclear = [obstacles.obstacles[i]
-                   for i in np.flatnonzero(np.any(bound < required, axis=0))]
-        if not unclear:
-            return 0.0
-        depth = required - self.separation(x, unclear)[0][1:]
-        return float(np.max(depth, initial=0.0))
+        margin = self.lower_bounds(x[1:], obstacles, first=1) - self.body_radius - required
+        unclear = np.flatnonzero(np.any(margin < 0.0, axis=0))
+        if len(unclear):
+            margin[:, unclear] = (self.separation(x, [obstacles.obstacles[i] for i in unclear])
+                                  [0][1:] - required)
+        return np.min(margin, axis=1)
 
     def lower_bounds(self, x: np.ndarray, obstacles: ObstacleSet, *, first: int = 0
                      ) -> np.ndarray:
