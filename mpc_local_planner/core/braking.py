@@ -18,13 +18,17 @@ follows the braking commands late, as it followed the plan's).
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
 
-from mpc_local_planner.core.models import held_input
+from mpc_local_planner.core.models import held_input, RobotModel
 
-__all__ = ['Brake']
+__all__ = ['Brake', 'PREVIEW_SUBSTEPS']
+
+# Integration steps per MPC step of a braking preview (the states a stop passes through).
+PREVIEW_SUBSTEPS = 4
 
 
 class Brake:
@@ -92,3 +96,21 @@ class Brake:
         # the plan's input (a first-order hold: its ramp through first, u_0, ..., u_{N-1})
         u = held_input(self._inputs, self._tau / self._h, self._first)
         return np.zeros(2) if u is None else self._scale * u
+
+    def preview(self, x: np.ndarray, model: RobotModel, step: float, stages: int,
+                substeps: int = PREVIEW_SUBSTEPS) -> np.ndarray:
+        """Return (stages+1, nx): the states at t = 0, step, ... of braking from x, as commanded.
+
+        The commands this brake would give from now on (a copy of it is run: this one is
+        left as it is), integrated by the model in substeps per step. Not braking: standing.
+        """
+        x = np.asarray(x, dtype=float).reshape(-1)
+        if not self.active:
+            return np.tile(x, (stages + 1, 1))
+        brake, dt = copy.deepcopy(self), step / substeps
+        states = [x]
+        for _ in range(stages):
+            for _ in range(substeps):
+                x = model.step(x, brake.command(dt), dt)
+            states.append(x)
+        return np.array(states)

@@ -23,8 +23,9 @@ __all__ = ['Blockage', 'ControlOutput', 'Reason']
 class Reason(Enum):
     """Why the controller commands what it commands (the value is the diagnostics' word).
 
-    Only TRACKING and CANDIDATE apply an MPC input, ROTATE_TO_HEADING an in-place turn and
-    RECOVERY a recovery's motion (or its wait, a zero command);
+    Only TRACKING and CANDIDATE apply an MPC input, ROTATE_TO_HEADING an in-place turn,
+    RECOVERY a recovery's motion (or its wait, a zero command) and EVADE a move out of a
+    predicted moving obstacle's way;
     every other reason stops the robot: a zero command, or, for a moving robot with
     ControllerSettings.max_decel, the braking command along the last verified plan. Free
     text about the case (what was wrong with a plan, an exception's message) travels
@@ -60,6 +61,9 @@ class Reason(Enum):
     # The robot made no progress and a recovery runs (core/recoveries.py): it backs out along
     # its own trail, spins in place or waits for a new plan; ControlOutput.detail says which.
     RECOVERY = 'recovery'
+    # The MPC found no verified plan and a moving obstacle is predicted to reach the robot
+    # where it would stop: it moves out of the way along a checked move (core/evasion.py).
+    EVADE = 'evade'
 
     @property
     def text(self) -> str:
@@ -70,7 +74,7 @@ class Reason(Enum):
     def applies_input(self) -> bool:
         """Whether the command is an input (the MPC's, or the turn to the goal heading)."""
         return self in (Reason.TRACKING, Reason.CANDIDATE, Reason.ROTATE_TO_HEADING,
-                        Reason.RECOVERY)
+                        Reason.RECOVERY, Reason.EVADE)
 
 
 _REASON_TEXT = {
@@ -90,6 +94,7 @@ _REASON_TEXT = {
     Reason.NO_MAP: 'no valid map yet',
     Reason.NO_LOCALIZATION: "no pose in the plan's frame",
     Reason.RECOVERY: 'no progress, recovering',
+    Reason.EVADE: 'no feasible input, moving out of the way of a moving obstacle',
 }
 
 

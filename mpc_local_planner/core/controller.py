@@ -34,6 +34,7 @@ Safety rules kept here (see the README's "Safety behaviours"):
 
 from __future__ import annotations
 
+import copy
 from dataclasses import replace
 import math
 from typing import Sequence
@@ -45,9 +46,11 @@ from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reason
 from mpc_local_planner.core.control_state import ControlState, Event, Mode
 from mpc_local_planner.core.controller_settings import ControllerSettings
+from mpc_local_planner.core.evasion import Evasion
 from mpc_local_planner.core.goal_checker import GoalChecker
 from mpc_local_planner.core.margin_relief import footprint_clearance_at, MarginRelief, standing
 from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.moving_obstacles import moving
 from mpc_local_planner.core.mpc import MpcSolution, PathReferenceMPC, PlanSource
 from mpc_local_planner.core.mpc.backends import run_solver, SolverRunner
 from mpc_local_planner.core.obstacles import (
@@ -130,6 +133,8 @@ class MpcController:
         self._velocity: np.ndarray | None = None
         # the MPC solves with the collision margin, or (MarginRelief) without it
         self._relief = MarginRelief()
+        # moves out of a predicted moving obstacle's way (built for the MPC in force)
+        self._evasion: Evasion | None = None
 
     # ------------------------------------------------------------------ configuration
     @property
@@ -547,6 +552,9 @@ class MpcController:
             self._timeouts += 1
         source = PlanSource(solution.source)
         if source is PlanSource.STOP:
+            evasive = self._evade(x, now, solution)
+            if evasive is not None:
+                return evasive
             # no verified input: the MPC keeps its own state (failure count, the plan it
             # carries) for the next step, as it decides what to try from there
             output = self._idle(Reason.STOP, now=now, solution=solution, keep_warm_start=True)
@@ -568,6 +576,48 @@ class MpcController:
         self._state.on(Event.SOLVED, now=now, output=output)
         self._brake.stop()
         return output
+
+    def _evade(self, x: np.ndarray, now: float, solution: MpcSolution) -> ControlOutput | None:
+        """Return a move out of a moving obstacle's way instead of the solver's stop, or None.
+
+        Only when the MPC holds a moving obstacle and the stop (braking along the last plan,
+        or standing) is predicted to meet one within the horizon (core/evasion.py). The MPC
+        starts over at the next step, as after any step without its plan.
+        """
+        mpc = self._mpc
+        if not any(moving(o) for o in mpc.inflated_obstacles):
+            return None
+        evasion = self._evasion
+        if evasion is None or evasion.clearance is not mpc.clearance \
+                or evasion.config != mpc.config or evasion.model != mpc.model:
+            evasion = self._evasion = Evasion(mpc.model, mpc.config, mpc.clearance)
+        brake = copy.deepcopy(self._brake)
+        self._start_braking(brake, now)
+        stopping = brake.preview(x, self._model, self._config.step, self._config.horizon)
+        before = self._input_before() if self._config.max_accel is not None else None
+        move = evasion.choose(x, stopping, ObstacleSet(mpc.reachable_obstacles(x)),
+                              self._path_ahead(x), before)
+        if move is None:
+            return None
+        plan = solution._replace(
+            u0=move.u[0], x_pred=move.x, u_pred=move.u, source=PlanSource.EVASION,
+            u_before=before if self._config.first_order_hold else None,
+            status=f'{solution.status}; evading a moving obstacle')
+        self._drop_warm_start()
+        u = np.clip(self._planned_input(plan, 0.0), self._model.u_min, self._model.u_max)
+        detail = (f'stopping would meet a moving obstacle in '
+                  f'{move.stop_conflict * self._config.step:.1f} s')
+        output = ControlOutput(u, plan, Reason.EVADE, detail)
+        self._state.on(Event.SOLVED, now=now, output=output)
+        self._brake.stop()
+        return output
+
+    def _path_ahead(self, x: np.ndarray) -> np.ndarray:
+        """Return the path's position a horizon's travel at full speed beyond x's projection."""
+        assert self._path is not None
+        ahead = float(self._model.u_max[0]) * self._config.step * self._config.horizon
+        s = self._path.project(x) + ahead / max(self._path.length(), 1e-9)
+        return np.asarray(self._path.pose(min(s, 1.0)), dtype=float)[:2]
 
     def _relieve_margin(self, x: np.ndarray) -> None:
         """Give the MPC the obstacles grown by the margin, or by the relieved one (MarginRelief).
@@ -648,12 +698,7 @@ class MpcController:
         if now is None or reason in (Reason.NO_PLAN, Reason.GOAL_REACHED):
             self._brake.stop()
         else:
-            held = self._state.plan()
-            if not self._brake.active and held is not None and held.solution is not None:
-                plan = held.solution
-                lead = 0.0 if plan.u_before is None else self.settings.actuation_delay
-                self._brake.start(plan.u_pred, self._config.step,
-                                  now - self._state.since + lead, plan.u_before)
+            self._start_braking(self._brake, now)
             last = self._last_call if self._last_call is not None else now
             u = np.clip(self._brake.command(now - last), self._model.u_min, self._model.u_max)
         if keep_warm_start:
@@ -661,6 +706,15 @@ class MpcController:
         else:
             self._drop_warm_start()
         return ControlOutput(u, solution, reason, detail)
+
+    def _start_braking(self, brake: Brake, now: float) -> None:
+        """Start brake along the plan in force at now, unless it brakes already (or none is)."""
+        held = self._state.plan()
+        if not brake.active and held is not None and held.solution is not None:
+            plan = held.solution
+            lead = 0.0 if plan.u_before is None else self.settings.actuation_delay
+            brake.start(plan.u_pred, self._config.step, now - self._state.since + lead,
+                        plan.u_before)
 
     def _drop_warm_start(self) -> None:
         # The shifted warm start assumes its first input was applied: after a step without

@@ -32,8 +32,8 @@ import numpy as np
 
 from mpc_local_planner.core.obstacles import ConvexPolygon
 
-__all__ = ['MOTION_SIZE', 'MovingPolygon', 'motion_of', 'moving', 'offsets_by_stage',
-           'stage_lower_bound', 'stage_pad', 'stage_polygons']
+__all__ = ['heading_anywhere', 'MOTION_SIZE', 'MovingPolygon', 'motion_of', 'moving',
+           'offsets_by_stage', 'stage_lower_bound', 'stage_pad', 'stage_polygons']
 
 # Numbers per obstacle slot that say how it moves: vx, vy, growth and speed |v| (m/s). The
 # speed is given, not computed in the NLP: the derivative of a norm at a static obstacle's
@@ -90,6 +90,15 @@ class MovingPolygon(ConvexPolygon):
         moved = ConvexPolygon(A=self.A, b=self.b + self.A @ shift,
                               vertices=self.vertices + shift)
         return moved.inflate(t * self.growth + pad)
+
+
+def heading_anywhere(obstacle: MovingPolygon) -> MovingPolygon:
+    """Return the obstacle if it may turn any way at its speed: standing, growing at |v| + growth.
+
+    What a walker who turns can reach: the constant-velocity prediction is one of its paths.
+    """
+    polygon = ConvexPolygon(A=obstacle.A, b=obstacle.b, vertices=obstacle.vertices)
+    return MovingPolygon.moving(polygon, (0.0, 0.0), obstacle.speed + obstacle.growth)
 
 
 def motion_of(obstacle: ConvexPolygon) -> np.ndarray:

@@ -128,6 +128,10 @@ def log_line(output: ControlOutput, *, failures: int,
         v, omega = output.u
         return Level.WARN, (f'{message}: applying its input v = {v:.3f} m/s, omega = '
                             f'{omega:.3f} rad/s (solver failures so far: {failures})')
+    if reason is Reason.EVADE:
+        v, omega = output.u
+        return Level.WARN, (f'{message}: v = {v:.3f} m/s, omega = {omega:.3f} rad/s '
+                            f'(solver failures so far: {failures})')
     if reason in (Reason.STALE_ODOM, Reason.STOP, Reason.STALE_SCAN, Reason.NO_SCAN,
                   Reason.NO_MAP):
         return Level.WARN, f'{message}: cmd_vel is zero (solver failures so far: {failures})'

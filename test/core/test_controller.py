@@ -112,11 +112,11 @@ def test_an_exception_in_the_solve_gives_zero_with_the_error_reason_and_its_mess
     np.testing.assert_array_equal(out.u, [0.0, 0.0])
 
 
-def test_only_the_mpc_the_turn_and_a_recovery_apply_an_input_and_every_reason_has_words(
+def test_only_the_mpc_the_turn_a_recovery_and_an_evasion_apply_an_input_and_every_reason_has_words(
         ) -> None:
     assert {r for r in Reason if r.applies_input} == {Reason.TRACKING, Reason.CANDIDATE,
                                                       Reason.ROTATE_TO_HEADING,
-                                                      Reason.RECOVERY}
+                                                      Reason.RECOVERY, Reason.EVADE}
     assert all(r.text and ': ' not in r.text for r in Reason)
     assert len({r.value for r in Reason}) == len(Reason)
     plain = ControlOutput(np.zeros(2), None, Reason.NO_PLAN)

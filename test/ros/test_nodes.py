@@ -352,6 +352,12 @@ def test_the_candidate_log_line_says_its_input_is_applied() -> None:
         level, line = log_line(ControlOutput(np.zeros(2), None, reason), failures=4,
                                goal_error=(1.0, 0.1))
         assert level is Level.WARN and 'cmd_vel is zero' in line
+    evading = ControlOutput(np.array([-1.5, 0.0]), None, Reason.EVADE,
+                            'stopping would meet a moving obstacle in 0.4 s')
+    level, line = log_line(evading, failures=4, goal_error=(1.0, 0.1))
+    assert level is Level.WARN and 'cmd_vel is zero' not in line
+    assert line.startswith(f'{Reason.EVADE.text}: stopping would meet')
+    assert 'v = -1.500 m/s, omega = 0.000 rad/s' in line
 
 
 def test_planner_refuses_a_malformed_goal(ros) -> None:

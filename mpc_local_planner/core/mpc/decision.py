@@ -41,6 +41,9 @@ class PlanSource(str, Enum):
     SOLVER = 'solver'  # the NLP solver's verified solution
     CANDIDATE = 'candidate'  # the proof's shifted solution of the previous step
     STOP = 'stop'  # no verified plan: the steady-state input, the robot stands still
+    # no verified plan, and stopping would be run into: a move out of a moving obstacle's
+    # way, checked against every obstacle (core/evasion.py; the controller's, not the MPC's)
+    EVASION = 'evasion'
 
     def __str__(self) -> str:
         return self.value

@@ -1,0 +1,180 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Step out of a walker's way when the MPC has no verified plan and stopping would be run into.
+
+The paper's answer to "no verified plan" is to stop: among static obstacles a robot at rest
+is safe, and the next step starts over from where it stands. Among obstacles that move it is
+not. A walker coming at a standing robot runs into it (a *passive* contact, DynaBARN's word),
+and the MPC, whose every plan must end at rest on the path within the horizon, often has no
+plan exactly then: the predicted walkers close the path ahead.
+
+`Evasion` gives the robot a move for that case, verified the way the MPC verifies its plans:
+
+1. The stop is checked first: the states of the robot braking along its last plan (or
+   standing), against every moving obstacle where its prediction puts it at each stage's time
+   (core/moving_obstacles.py). When they stay clear over the horizon, the robot stops as
+   before: nothing changes where no walker is predicted to reach it.
+2. Otherwise a lattice of constant-input moves (each input from its lower to its upper
+   bound, reached within max_accel) is rolled out with the MPC's model and hold over the
+   MPC's horizon. A move is admissible only if it clears every static obstacle at every
+   stage by the clearance its motion needs (`Clearance.shortfall`, the MPC's own check), so
+   an evasion never risks a static contact; braking along it later stays on that checked
+   curve (core/braking.py).
+3. Of the admissible moves, those that meet no predicted walker over the whole horizon
+   come first; among them the one that ends nearest to where the path leads (the path point
+   a horizon's travel beyond the robot's projection). The move is taken only if it meets the
+   walkers later than the stop does; with admit_late_conflicts off (the default), only if
+   it meets none at all: a move that is predicted to meet a walker might be hit while it
+   still moves (an active contact), which is worse than standing.
+
+Nothing of the paper's guarantee is claimed for these steps: the MPC starts over (its warm
+start and Lyapunov record dropped) at the next step, as after any step without its plan.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import itertools
+from typing import NamedTuple
+
+import numpy as np
+
+from mpc_local_planner.core.config import MpcConfig
+from mpc_local_planner.core.models import RobotModel
+from mpc_local_planner.core.moving_obstacles import heading_anywhere, moving
+from mpc_local_planner.core.mpc.candidate import Rollout
+from mpc_local_planner.core.mpc.clearance import Clearance
+from mpc_local_planner.core.obstacles import ObstacleSet
+
+__all__ = ['EVASION_GAIN', 'EVASION_LEVELS', 'EvasiveMove', 'Evasion', 'first_conflict']
+
+# Values per input in the lattice of moves, from its lower to its upper bound (odd: 0 is one).
+EVASION_LEVELS = 9
+# How much less shortfall (m, summed over the stages) than the stop a move that meets the
+# walkers as soon as the stop does must have to be taken: a few millimetres are no reason.
+EVASION_GAIN = 0.05
+
+
+class EvasiveMove(NamedTuple):
+    """A move out of a predicted walker's way.
+
+    Attributes:
+        x: (N+1, nx) its states, x_0 the robot's.
+        u: (N, nu) its inputs (knots of a first-order hold when the MPC's hold is one).
+        conflict: the first stage that meets a predicted walker (N+1: none within the horizon).
+        shortfall: how far it falls short of its clearance from where the walkers could be
+            if they turned any way (`heading_anywhere`), summed over the stages (m); 0 for
+            a move that meets no prediction.
+        stop_conflict: the same as conflict for stopping instead.
+
+    """
+
+    x: np.ndarray
+    u: np.ndarray
+    conflict: int
+    shortfall: float
+    stop_conflict: int
+
+
+def _summed_shortfall(margins: np.ndarray) -> float:
+    """Return the sum over the stages of how far each falls short of its clearance (m)."""
+    return float(np.sum(np.maximum(-np.asarray(margins), 0.0)))
+
+
+def first_conflict(margins: np.ndarray) -> int:
+    """Return the first stage (1..N) whose margin is negative, N+1 when none is."""
+    hits = np.flatnonzero(np.asarray(margins) < 0.0)
+    return int(hits[0]) + 1 if len(hits) else len(margins) + 1
+
+
+@dataclass
+class Evasion:
+    """Choose a verified move out of the predicted walkers' way (see the module docstring).
+
+    Args:
+        model: the MPC's robot model (its input bounds, its dynamics).
+        config: the MPC's settings (horizon, step, max_accel, input hold).
+        clearance: the MPC's clearance checks (its footprint, its margins).
+
+    """
+
+    model: RobotModel
+    config: MpcConfig
+    clearance: Clearance
+
+    def __post_init__(self) -> None:
+        self._rollout = Rollout(self.model)
+
+    def choose(self, x0: np.ndarray, stopping: np.ndarray, obstacles: ObstacleSet,
+               toward: np.ndarray, before: np.ndarray | None = None) -> EvasiveMove | None:
+        """Return the move to make instead of stopping, or None to stop.
+
+        Args:
+            x0: the robot's state.
+            stopping: (N+1, nx) the states of the robot stopping (braking, or standing).
+            obstacles: the obstacles the MPC holds (inflated as it inflates them).
+            toward: (2,) where the path leads: of the moves that meet no walker, the one
+                that ends nearest it is taken.
+            before: the input in force (what a first-order hold and max_accel start from);
+                None: zero.
+
+        """
+        walkers = ObstacleSet([o for o in obstacles.obstacles if moving(o)])
+        if not len(walkers):
+            return None
+        n = self.config.horizon
+        stop_margins = self.clearance.margins(stopping, np.zeros((n, self.model.nu)), walkers)
+        stop_conflict = first_conflict(stop_margins)
+        if stop_conflict > n:
+            return None
+        statics = ObstacleSet([o for o in obstacles.obstacles if not moving(o)])
+        # where the walkers could be if they turned any way: what a move that cannot keep
+        # clear of their predictions should get away from
+        anywhere = ObstacleSet([heading_anywhere(o) for o in walkers.obstacles])
+        stop_spread = _summed_shortfall(
+            self.clearance.margins(stopping, np.zeros((n, self.model.nu)), anywhere))
+        start = np.zeros(self.model.nu) if before is None else np.asarray(before, dtype=float)
+        best: tuple[tuple[int, float], EvasiveMove] | None = None
+        for target in self._targets():
+            u = self._inputs(start, target)
+            x = self._rollout(np.asarray(x0, dtype=float), u, self.config.step,
+                              start if self.config.first_order_hold else None)
+            if not np.all(np.isfinite(x)) or self.clearance.penetration(x, u, statics) > 0.0:
+                continue
+            conflict = first_conflict(self.clearance.margins(x, u, walkers))
+            if conflict > n:
+                # clear of every prediction: the one that ends nearest where the path leads
+                move = EvasiveMove(x, u, conflict, 0.0, stop_conflict)
+                rank = (-conflict, float(np.hypot(*(x[-1, :2] - toward))))
+            else:
+                # the latest conflict, then the least time and depth within where the
+                # walkers could be (the move that gets away from them soonest and furthest)
+                spread = _summed_shortfall(self.clearance.margins(x, u, anywhere))
+                move = EvasiveMove(x, u, conflict, spread, stop_conflict)
+                rank = (-conflict, spread)
+            if best is None or rank < best[0]:
+                best = (rank, move)
+        if best is None:
+            return None
+        move = best[1]
+        if move.conflict > stop_conflict or (
+                move.conflict == stop_conflict and move.shortfall < stop_spread - EVASION_GAIN):
+            return move
+        return None
+
+    def _targets(self) -> list[np.ndarray]:
+        """Return the lattice of constant inputs, every input from its lower to upper bound."""
+        axes = [np.linspace(lo, hi, EVASION_LEVELS)
+                for lo, hi in zip(self.model.u_min, self.model.u_max, strict=True)]
+        return [np.array(values) for values in itertools.product(*axes)]
+
+    def _inputs(self, start: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """Return the N inputs that go from start to target within max_accel, then hold it."""
+        n = self.config.horizon
+        if self.config.max_accel is None:
+            return np.tile(target, (n, 1))
+        limit = np.asarray(self.config.max_accel, dtype=float) * self.config.step
+        u, current = np.empty((n, len(target))), start.copy()
+        for k in range(n):
+            current = current + np.clip(target - current, -limit, limit)
+            u[k] = current
+        return u

@@ -1,0 +1,132 @@
+# SPDX-License-Identifier: Apache-2.0
+"""A robot whose MPC has no plan steps out of a walker's way instead of standing to be hit.
+
+The solver is replaced by one that never succeeds, so every step ends in the MPC's stop (the
+proof's candidate, standing still, is refused once the walker is predicted to reach it). Before
+core/evasion.py the controller then stood, and the walker ran into it. The Jackal drives the
+unicycle, integrated in sub-steps; the walker is a disc moving at a constant velocity, given to
+the controller each step as a MovingPolygon where it is then; clearances are exact distances of
+the footprint from the walker where it truly is, and from the walls.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple, Sequence
+
+import numpy as np
+
+from mpc_local_planner.core.config import BudgetKind, MpcConfig, SolverSettings
+from mpc_local_planner.core.control_output import Reason
+from mpc_local_planner.core.controller import MpcController
+from mpc_local_planner.core.evasion import Evasion, first_conflict
+from mpc_local_planner.core.footprint import JACKAL
+from mpc_local_planner.core.models import Unicycle
+from mpc_local_planner.core.moving_obstacles import MovingPolygon
+from mpc_local_planner.core.mpc.backends import SolverRun
+from mpc_local_planner.core.mpc.clearance import Clearance
+from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
+
+WALKER_RADIUS = 0.3
+SUBSTEPS = 10
+MODEL = Unicycle(v_max=2.0, omega_max=4.0)
+CONFIG = MpcConfig(footprint=tuple((float(x), float(y)) for x, y in JACKAL.vertices),
+                   solving=SolverSettings(compile=False, max_solve_time=None,
+                                          budget=BudgetKind.ITERATIONS))
+# a corridor 1.1 m wide along the x axis, from x = -4 to 6: the Jackal (0.43 m wide) cannot
+# pass a walker in it
+WALLS = [ConvexPolygon.from_box(-4.0, 0.55, 6.0, 1.5),
+         ConvexPolygon.from_box(-4.0, -1.5, 6.0, -0.55)]
+
+
+def no_solution(nlp: object, w0: np.ndarray, params: np.ndarray, solver: object = None, *,
+                time_limit: float = math.inf, iteration_limit: float = math.inf) -> SolverRun:
+    """A solver that never finds a plan: every step is the MPC's stop (or its candidate)."""
+    return SolverRun(w=np.asarray(w0, dtype=float).reshape(-1), value=math.inf, success=False,
+                     status='test: no solution', iterations=0, seconds=0.0)
+
+
+def walker(start: Sequence[float], velocity: Sequence[float], t: float) -> ConvexPolygon:
+    """The walker's disc at time t."""
+    return ConvexPolygon.from_circle(*(np.asarray(start) + t * np.asarray(velocity)),
+                                     WALKER_RADIUS)
+
+
+class Run(NamedTuple):
+    """What a run did: its least clearance from the walker and from the walls, its reasons."""
+
+    walker_clearance: float
+    wall_clearance: float
+    reasons: list[Reason]
+    final: np.ndarray
+
+
+def gap(x: np.ndarray, obstacles: list[ConvexPolygon]) -> float:
+    """Return the exact distance of the footprint at pose x from the nearest obstacle."""
+    if not obstacles:
+        return math.inf
+    return float(np.min(polygon_separation(JACKAL.at_poses(x[None]), ObstacleSet(obstacles))[0]))
+
+
+def drive(start: Sequence[float], velocity: Sequence[float], *, walls: list[ConvexPolygon],
+          seconds: float = 4.0) -> Run:
+    """Run the controller whose solver finds nothing, the walker coming, for seconds."""
+    controller = MpcController(MODEL, CONFIG, runner=no_solution)
+    controller.set_plan(np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0]]))
+    h = CONFIG.step
+    x = np.zeros(3)
+    walker_clearance = wall_clearance = math.inf
+    reasons = []
+    for k in range(int(round(seconds / h))):
+        t = k * h
+        controller.set_obstacles([*walls, MovingPolygon.moving(walker(start, velocity, t),
+                                                               velocity)])
+        output = controller.compute(x, None, t)
+        reasons.append(output.reason)
+        u = np.asarray(output.u, dtype=float)
+        for j in range(SUBSTEPS):
+            walker_clearance = min(walker_clearance,
+                                   gap(x, [walker(start, velocity, t + j * h / SUBSTEPS)]))
+            wall_clearance = min(wall_clearance, gap(x, walls))
+            x = x + h / SUBSTEPS * np.array([u[0] * np.cos(x[2]), u[0] * np.sin(x[2]), u[1]])
+    return Run(walker_clearance, wall_clearance, reasons, x)
+
+
+def test_a_standing_robot_steps_out_of_the_way_of_a_walker_coming_at_it() -> None:
+    """A walker at 1 m/s head-on: standing, the robot is run into at 1.9 s; it moves aside."""
+    start, velocity = (2.5, 0.0), (-1.0, 0.0)
+    standing = min(gap(np.zeros(3), [walker(start, velocity, t)])
+                   for t in np.arange(0.0, 4.0, 0.02))
+    assert standing < 0.0  # what the stop did before evasion: the walker runs into it
+    run = drive(start, velocity, walls=[])
+    assert Reason.EVADE in run.reasons
+    assert run.walker_clearance > 0.05
+
+
+def test_in_a_corridor_the_robot_backs_out_before_the_walker_and_never_touches_a_wall() -> None:
+    """In a corridor too narrow to pass, every move that clears the walls goes back."""
+    run = drive((2.5, 0.0), (-1.0, 0.0), walls=WALLS)
+    assert Reason.EVADE in run.reasons
+    assert run.walker_clearance > 0.05
+    assert run.wall_clearance > 0.0
+    assert run.final[0] < -0.5  # backed out along the corridor
+
+
+def test_no_move_is_chosen_when_stopping_stays_clear_of_every_walker() -> None:
+    """A walker walking away, or none at all: the stop is kept (the static behaviour)."""
+    clearance = Clearance(MODEL, CONFIG)
+    clearance.clear()
+    evasion = Evasion(MODEL, CONFIG, clearance)
+    x0 = np.zeros(3)
+    standing = np.tile(x0, (CONFIG.horizon + 1, 1))
+    away = MovingPolygon.moving(ConvexPolygon.from_circle(1.5, 0.0, WALKER_RADIUS), (1.0, 0.0))
+    toward = np.array([4.0, 0.0])
+    assert evasion.choose(x0, standing, ObstacleSet([away, *WALLS]), toward) is None
+    assert evasion.choose(x0, standing, ObstacleSet(WALLS), toward) is None
+    coming = MovingPolygon.moving(ConvexPolygon.from_circle(1.5, 0.0, WALKER_RADIUS),
+                                  (-1.0, 0.0))
+    move = evasion.choose(x0, standing, ObstacleSet([coming, *WALLS]), toward)
+    assert move is not None and move.conflict > CONFIG.horizon >= move.stop_conflict
+    margins = clearance.margins(move.x, move.u, ObstacleSet([coming]))
+    assert first_conflict(margins) == move.conflict and np.all(margins >= 0.0)
+    assert clearance.penetration(move.x, move.u, ObstacleSet(WALLS)) == 0.0
