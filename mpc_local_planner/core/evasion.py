@@ -133,29 +133,33 @@ class Evasion:
         stop_spread = _summed_shortfall(
             self.clearance.margins(stopping, np.zeros((n, self.model.nu)), anywhere))
         start = np.zeros(self.model.nu) if before is None else np.asarray(before, dtype=float)
-        best: tuple[tuple[int, float], EvasiveMove] | None = None
-        for target in self._targets():
-            u = self._inputs(start, target)
-            x = self._rollout(np.asarray(x0, dtype=float), u, self.config.step,
-                              start if self.config.first_order_hold else None)
-            if not np.all(np.isfinite(x)) or self.clearance.penetration(x, u, statics) > 0.0:
-                continue
-            conflict = first_conflict(self.clearance.margins(x, u, walkers))
-            if conflict > n:
-                # clear of every prediction: the one that ends nearest where the path leads
-                move = EvasiveMove(x, u, conflict, 0.0, stop_conflict)
-                rank = (-conflict, float(np.hypot(*(x[-1, :2] - toward))))
-            else:
-                # the latest conflict, then the least time and depth within where the
-                # walkers could be (the move that gets away from them soonest and furthest)
-                spread = _summed_shortfall(self.clearance.margins(x, u, anywhere))
-                move = EvasiveMove(x, u, conflict, spread, stop_conflict)
-                rank = (-conflict, spread)
-            if best is None or rank < best[0]:
-                best = (rank, move)
-        if best is None:
+        first = start if self.config.first_order_hold else None
+        inputs = np.array([self._inputs(start, target) for target in self._targets()])
+        states = np.array([self._rollout(np.asarray(x0, dtype=float), u, self.config.step, first)
+                           for u in inputs])
+        finite = np.all(np.isfinite(states), axis=(1, 2))
+        states, inputs = states[finite], inputs[finite]
+        # a move must clear every static obstacle at every stage, as a plan must
+        clear = np.all(self.clearance.margins_of_many(states, inputs, statics) >= 0.0, axis=1)
+        states, inputs = states[clear], inputs[clear]
+        if not len(states):
             return None
-        move = best[1]
+        conflicts = np.array([first_conflict(m) for m in
+                              self.clearance.margins_of_many(states, inputs, walkers)])
+        free = conflicts > n
+        if np.any(free):
+            # clear of every prediction: the one that ends nearest where the path leads
+            ends = np.hypot(*(states[free, -1, :2] - np.asarray(toward)).T)
+            i = int(np.flatnonzero(free)[np.argmin(ends)])
+            return EvasiveMove(states[i], inputs[i], int(conflicts[i]), 0.0, stop_conflict)
+        # the latest conflict, then the least time and depth within where the walkers could
+        # be (the move that gets away from them soonest and furthest)
+        latest = np.flatnonzero(conflicts == np.max(conflicts))
+        spread = np.array([_summed_shortfall(m) for m in self.clearance.margins_of_many(
+            states[latest], inputs[latest], anywhere)])
+        i = int(latest[np.argmin(spread)])
+        move = EvasiveMove(states[i], inputs[i], int(conflicts[i]), float(np.min(spread)),
+                           stop_conflict)
         if move.conflict > stop_conflict or (
                 move.conflict == stop_conflict and move.shortfall < stop_spread - EVASION_GAIN):
             return move

@@ -24,6 +24,7 @@ from mpc_local_planner.core.footprint import JACKAL
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.moving_obstacles import MovingPolygon
 from mpc_local_planner.core.mpc.backends import SolverRun
+from mpc_local_planner.core.mpc.candidate import Rollout
 from mpc_local_planner.core.mpc.clearance import Clearance
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, polygon_separation
 
@@ -130,3 +131,27 @@ def test_no_move_is_chosen_when_stopping_stays_clear_of_every_walker() -> None:
     margins = clearance.margins(move.x, move.u, ObstacleSet([coming]))
     assert first_conflict(margins) == move.conflict and np.all(margins >= 0.0)
     assert clearance.penetration(move.x, move.u, ObstacleSet(WALLS)) == 0.0
+
+
+def test_the_margins_of_many_plans_at_once_are_those_of_each_plan() -> None:
+    """The evasion's batched check finds each move short where, and by as much as, the MPC's.
+
+    Where a pose clears an obstacle both give a margin >= 0 (a cheap bound may stand for the
+    exact distance there, in either); where it falls short both give the exact shortfall.
+    """
+    clearance = Clearance(MODEL, CONFIG)
+    clearance.clear()
+    rng = np.random.default_rng(3)
+    coming = MovingPolygon.moving(ConvexPolygon.from_circle(1.2, 0.2, WALKER_RADIUS),
+                                  (-1.0, 0.3), 0.2)
+    obstacles = ObstacleSet([coming, *WALLS])
+    inputs = rng.uniform(MODEL.u_min, MODEL.u_max, size=(12, CONFIG.horizon, 2))
+    rollout = Rollout(MODEL)
+    states = np.array([rollout(np.zeros(3), u, CONFIG.step) for u in inputs])
+    many = clearance.margins_of_many(states, inputs, obstacles)
+    each = np.array([clearance.margins(x, u, obstacles)
+                     for x, u in zip(states, inputs, strict=True)])
+    assert np.any(each < 0.0) and np.any(each > 0.0)  # plans that meet them, plans that do not
+    np.testing.assert_array_equal(many < 0.0, each < 0.0)
+    np.testing.assert_allclose(np.minimum(many, 0.0), np.minimum(each, 0.0), rtol=0,
+                               atol=1e-12)

@@ -23,7 +23,12 @@ import numpy as np
 
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import RobotModel
-from mpc_local_planner.core.moving_obstacles import moving, stage_lower_bound, stage_polygons
+from mpc_local_planner.core.moving_obstacles import (
+    moving,
+    offsets_by_stage,
+    stage_lower_bound,
+    stage_polygons,
+)
 from mpc_local_planner.core.mpc.formulation import Formulation, ramp_sweep_rate, sweep_rate
 from mpc_local_planner.core.mpc.nlp_values import dual_multipliers, feasible_multipliers
 from mpc_local_planner.core.obstacles import (
@@ -64,6 +69,8 @@ class Clearance:
         self._before = np.zeros(model.nu)
         self._geometry: dict[bytes, dict[int, tuple[ConvexPolygon, np.ndarray, np.ndarray]]] = {}
         self._clearance_memo: dict[bytes, np.ndarray] = {}
+        # a moving obstacle's polygons at the stages (stage_polygons), per obstacle and count
+        self._stages: dict[tuple[int, int], tuple[ConvexPolygon, ObstacleSet]] = {}
 
     def clear(self, before: np.ndarray | None = None) -> None:
         """Forget the memoised plans (a step starts: they hold that step's plans only).
@@ -73,6 +80,7 @@ class Clearance:
         """
         self._geometry.clear()
         self._clearance_memo.clear()
+        self._stages.clear()
         if before is not None:
             self._before = np.asarray(before, dtype=float).reshape(-1).copy()
 
@@ -106,14 +114,28 @@ class Clearance:
             for o in missing:
                 if moving(o):
                     # pose k against the obstacle at stage k's time: the diagonal
-                    signed, direction = polygon_separation(
-                        corners, ObstacleSet(stage_polygons(o, len(x), self._config.step)))
+                    signed, direction = polygon_separation(corners,
+                                                           self._stage_set(o, len(x)))
                     entry[id(o)] = (o, signed[stages, stages], direction[stages, stages])
         if not obstacles:
             return np.zeros((len(x), 0)), np.zeros((len(x), 0, 2))
         columns = [entry[id(o)] for o in obstacles]
         return (np.stack([c[1] for c in columns], axis=1),
                 np.stack([c[2] for c in columns], axis=1))
+
+    def _stage_set(self, obstacle: ConvexPolygon, stages: int) -> ObstacleSet:
+        """Return the moving obstacle at stages 0..stages-1, built once per step.
+
+        Every plan a step checks (the candidate, the solutions, an evasion's moves) meets the
+        obstacle at the same stage times; an entry holds its obstacle, so that no other object
+        can take over its id() meanwhile.
+        """
+        key = (id(obstacle), stages)
+        entry = self._stages.get(key)
+        if entry is None:
+            entry = self._stages[key] = (obstacle, ObstacleSet(
+                stage_polygons(obstacle, stages, self._config.step)))
+        return entry[1]
 
     def required(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Return the clearance x_1..x_N need: farkas_margin + h/2 of the faster adjacent step.
@@ -235,6 +257,57 @@ class Clearance:
             margin[:, unclear] = (self.separation(x, [obstacles.obstacles[i] for i in unclear])
                                   [0][1:] - required)
         return np.min(margin, axis=1)
+
+    def margins_of_many(self, xs: np.ndarray, us: np.ndarray, obstacles: ObstacleSet
+                        ) -> np.ndarray:
+        """Return (P, N): margins() of P plans at once (states (P, N+1, nx), inputs (P, N, nu)).
+
+        The same shortfalls as margins() plan by plan, in one pass per obstacle: exact
+        distances only for the poses a cheap bound cannot clear, each against the obstacle
+        where it is at that pose's stage (a clear pose's margin may be the bound here where
+        margins() has the exact one: both >= 0). For the many short plans of an evasion
+        (core/evasion.py), where plan by plan would cost a call per plan and obstacle.
+        """
+        xs, us = np.asarray(xs, dtype=float), np.asarray(us, dtype=float)
+        count, stages = xs.shape[0], xs.shape[1] - 1
+        if not len(obstacles) or count == 0:
+            return np.full((count, stages), np.inf)
+        bounds = np.stack([self._bounds_at_stage(xs[:, k + 1, :2], obstacles, k + 1)
+                           for k in range(stages)], axis=1)  # (P, N, K)
+        if self.body is None:
+            return np.min(bounds - self._config.farkas_margin, axis=2)
+        required = np.stack([self.required(x, u) for x, u in zip(xs, us, strict=True)])
+        margin = bounds - self.body_radius - required[..., None]
+        body = self.body.vertices
+        for j in np.flatnonzero(np.any(margin < 0.0, axis=(0, 1))):
+            plan, stage = np.nonzero(margin[:, :, j] < 0.0)
+            pose = xs[plan, stage + 1]
+            angle = pose[:, self._model.angle_index]
+            cos, sin = np.cos(angle)[:, None], np.sin(angle)[:, None]
+            corners = np.stack([cos * body[:, 0] - sin * body[:, 1] + pose[:, :1],
+                                sin * body[:, 0] + cos * body[:, 1] + pose[:, 1:2]], axis=-1)
+            obstacle = obstacles.obstacles[j]
+            if moving(obstacle):
+                polygons = self._stage_set(obstacle, stages + 1).obstacles
+                signed = np.empty(len(stage))
+                for k in np.unique(stage):
+                    at = stage == k
+                    signed[at] = polygon_separation(corners[at],
+                                                    ObstacleSet([polygons[k + 1]]))[0][:, 0]
+            else:
+                signed = polygon_separation(corners, ObstacleSet([obstacle]))[0][:, 0]
+            margin[plan, stage, j] = signed - required[plan, stage]
+        return np.min(margin, axis=2)
+
+    def _bounds_at_stage(self, points: np.ndarray, obstacles: ObstacleSet, stage: int
+                         ) -> np.ndarray:
+        """Return (M, K): lower_bounds() of M positions that are all at one stage."""
+        bounds = obstacles.signed_distance_lower_bound(points)
+        for j, o in enumerate(obstacles.obstacles):
+            if moving(o):
+                offsets = offsets_by_stage(o, stage + 1, self._config.step)[stage]
+                bounds[:, j] = np.max(points @ o.A.T - offsets, axis=1)
+        return bounds
 
     def lower_bounds(self, x: np.ndarray, obstacles: ObstacleSet, *, first: int = 0
                      ) -> np.ndarray:
