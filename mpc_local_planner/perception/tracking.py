@@ -63,6 +63,7 @@ __all__ = [
     'COVER_FACTOR',
     'GROWTH_SIGMAS',
     'PREDICTION_SIGMAS',
+    'WALKER_BERTH',
     'ScanTracker',
     'Track',
     'TrackLabels',
@@ -82,6 +83,10 @@ COVER_FACTOR = 1.4
 # cylinders, whose speeds the filter knows to about 0.24 m/s).
 PREDICTION_SIGMAS = 2.0
 GROWTH_SIGMAS = 1.0
+# The berth (m) the MPC keeps from a moving track beyond the disc that holds it: a walker
+# first told moving close by, or one that turns, is not where its prediction says, and a plan
+# that passes it by the least clearance leaves the robot no room to get out of its way.
+WALKER_BERTH = 0.15
 
 
 @dataclass(frozen=True)
@@ -205,7 +210,7 @@ def moving_polygon(track: Track, now: float, *, sigmas: float | None = None,
 
     The polygon is circumscribed about the disc of COVER_FACTOR times the cluster's radius
     plus sigmas (PREDICTION_SIGMAS) standard deviations of the position at now (the larger
-    axis of its covariance); it moves at the track's velocity, and the prediction's
+    axis of its covariance) plus WALKER_BERTH; it moves at the track's velocity, and the prediction's
     uncertainty grows at growth_sigmas (GROWTH_SIGMAS) standard deviations of the velocity
     per second (core/moving_obstacles.py).
     """
@@ -215,7 +220,7 @@ def moving_polygon(track: Track, now: float, *, sigmas: float | None = None,
     position_sigma = math.sqrt(max(float(np.max(np.linalg.eigvalsh(covariance))), 0.0))
     velocity_sigma = math.sqrt(max(float(np.max(np.linalg.eigvalsh(
         track.covariance[2:, 2:]))), 0.0))
-    radius = COVER_FACTOR * track.size + sigmas * position_sigma
+    radius = COVER_FACTOR * track.size + sigmas * position_sigma + WALKER_BERTH
     disc = ConvexPolygon.from_circle(float(centre[0]), float(centre[1]),
                                      max(radius, MIN_RADIUS), sides=sides)
     return MovingPolygon.moving(disc, track.velocity, growth_sigmas * velocity_sigma)
