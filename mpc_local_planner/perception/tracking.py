@@ -210,9 +210,9 @@ def moving_polygon(track: Track, now: float, *, sigmas: float | None = None,
 
     The polygon is circumscribed about the disc of COVER_FACTOR times the cluster's radius
     plus sigmas (PREDICTION_SIGMAS) standard deviations of the position at now (the larger
-    axis of its covariance) plus WALKER_BERTH; it moves at the track's velocity, and the prediction's
-    uncertainty grows at growth_sigmas (GROWTH_SIGMAS) standard deviations of the velocity
-    per second (core/moving_obstacles.py).
+    axis of its covariance) plus WALKER_BERTH; it moves at the track's velocity, and the
+    prediction's uncertainty grows at growth_sigmas (GROWTH_SIGMAS) standard deviations of the
+    velocity per second (core/moving_obstacles.py).
     """
     sigmas = PREDICTION_SIGMAS if sigmas is None else sigmas
     growth_sigmas = GROWTH_SIGMAS if growth_sigmas is None else growth_sigmas
