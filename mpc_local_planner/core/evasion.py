@@ -16,15 +16,17 @@ plan exactly then: the predicted walkers close the path ahead.
 2. Otherwise a lattice of constant-input moves (each input from its lower to its upper
    bound, reached within max_accel) is rolled out with the MPC's model and hold over the
    MPC's horizon. A move is admissible only if it clears every static obstacle at every
-   stage by the clearance its motion needs (`Clearance.shortfall`, the MPC's own check), so
-   an evasion never risks a static contact; braking along it later stays on that checked
-   curve (core/braking.py).
-3. Of the admissible moves, those that meet no predicted walker over the whole horizon
-   come first; among them the one that ends nearest to where the path leads (the path point
-   a horizon's travel beyond the robot's projection). The move is taken only if it meets the
-   walkers later than the stop does; with admit_late_conflicts off (the default), only if
-   it meets none at all: a move that is predicted to meet a walker might be hit while it
-   still moves (an active contact), which is worse than standing.
+   stage by the clearance its motion needs (`Clearance.margins_of_many`, the MPC's own
+   check), so an evasion never risks a static contact; braking along it later stays on that
+   checked curve (core/braking.py).
+3. Of the admissible moves, one that meets no predicted walker over the whole horizon is
+   taken if there is one: the one that ends nearest to where the path leads (the path point
+   a horizon's travel beyond the robot's projection). Otherwise the ones that meet the
+   predictions latest, and of them the one least deep, for the least time, in where the
+   walkers could be if they turned any way (`heading_anywhere`: the move that gets away from
+   them soonest and furthest); it is taken only if it meets the predictions later than the
+   stop, or as late but with EVASION_GAIN less of that shortfall. Such a move can still be
+   hit while it moves (an active contact): it is made because standing would be hit sooner.
 
 Nothing of the paper's guarantee is claimed for these steps: the MPC starts over (its warm
 start and Lyapunov record dropped) at the next step, as after any step without its plan.
