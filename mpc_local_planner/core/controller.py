@@ -50,7 +50,6 @@ from mpc_local_planner.core.evasion import Evasion
 from mpc_local_planner.core.goal_checker import GoalChecker
 from mpc_local_planner.core.margin_relief import footprint_clearance_at, MarginRelief, standing
 from mpc_local_planner.core.models import Unicycle
-from mpc_local_planner.core.moving_obstacles import moving
 from mpc_local_planner.core.mpc import MpcSolution, PathReferenceMPC, PlanSource
 from mpc_local_planner.core.mpc.backends import run_solver, SolverRunner
 from mpc_local_planner.core.obstacles import (
@@ -585,7 +584,7 @@ class MpcController:
         starts over at the next step, as after any step without its plan.
         """
         mpc = self._mpc
-        if not any(moving(o) for o in mpc.inflated_obstacles):
+        if not mpc.holds_moving_obstacles:
             return None
         evasion = self._evasion
         if evasion is None or evasion.clearance is not mpc.clearance \

@@ -141,12 +141,14 @@ def offsets_by_stage(obstacle: ConvexPolygon, stages: int, step: float) -> np.nd
 
 
 def stage_lower_bound(obstacle: ConvexPolygon, points: np.ndarray, step: float, *,
-                      first: int = 0) -> np.ndarray:
+                      first: int = 0, stages: np.ndarray | None = None) -> np.ndarray:
     """Return max_i (a_i p - b_i(t_k)) of each point against the obstacle at its stage's time.
 
     The signed-distance lower bound of ConvexPolygon.signed_distance_lower_bound, row k of
-    points (stage first + k of a plan) taken against O_{first + k}.
+    points taken against O_{stages[k]}: by default stage first + k (the rows are a plan's
+    poses); given stages, any stage per row (the poses of many plans at once).
     """
     pts = np.atleast_2d(np.asarray(points, dtype=float))
-    offsets = offsets_by_stage(obstacle, first + len(pts), step)[first:]
+    stages = first + np.arange(len(pts)) if stages is None else np.asarray(stages, dtype=int)
+    offsets = offsets_by_stage(obstacle, int(np.max(stages, initial=-1)) + 1, step)[stages]
     return np.max(pts @ obstacle.A.T - offsets, axis=1)

@@ -23,12 +23,7 @@ import numpy as np
 
 from mpc_local_planner.core.config import MpcConfig
 from mpc_local_planner.core.models import RobotModel
-from mpc_local_planner.core.moving_obstacles import (
-    moving,
-    offsets_by_stage,
-    stage_lower_bound,
-    stage_polygons,
-)
+from mpc_local_planner.core.moving_obstacles import moving, stage_lower_bound, stage_polygons
 from mpc_local_planner.core.mpc.formulation import Formulation, ramp_sweep_rate, sweep_rate
 from mpc_local_planner.core.mpc.nlp_values import dual_multipliers, feasible_multipliers
 from mpc_local_planner.core.obstacles import (
@@ -101,11 +96,7 @@ class Clearance:
         entry = self._geometry.setdefault(key, {})
         missing = list({id(o): o for o in obstacles if id(o) not in entry}.values())
         if missing:
-            angle = x[:, self._model.angle_index]
-            cos, sin = np.cos(angle)[:, None], np.sin(angle)[:, None]
-            local = body.vertices
-            corners = np.stack([cos * local[:, 0] - sin * local[:, 1] + x[:, :1],
-                                sin * local[:, 0] + cos * local[:, 1] + x[:, 1:2]], axis=-1)
+            corners = self._corners(x)
             still = [o for o in missing if not moving(o)]
             signed, direction = polygon_separation(corners, ObstacleSet(still))
             for j, o in enumerate(still):
@@ -122,6 +113,16 @@ class Clearance:
         columns = [entry[id(o)] for o in obstacles]
         return (np.stack([c[1] for c in columns], axis=1),
                 np.stack([c[2] for c in columns], axis=1))
+
+    def _corners(self, x: np.ndarray) -> np.ndarray:
+        """Return (len(x), V, 2): the polygonal footprint's vertices at the poses of x."""
+        body = self.body
+        assert body is not None  # only called for a polygonal footprint
+        angle = x[:, self._model.angle_index]
+        cos, sin = np.cos(angle)[:, None], np.sin(angle)[:, None]
+        local = body.vertices
+        return np.stack([cos * local[:, 0] - sin * local[:, 1] + x[:, :1],
+                         sin * local[:, 0] + cos * local[:, 1] + x[:, 1:2]], axis=-1)
 
     def _stage_set(self, obstacle: ConvexPolygon, stages: int) -> ObstacleSet:
         """Return the moving obstacle at stages 0..stages-1, built once per step.
@@ -225,13 +226,9 @@ class Clearance:
     def penetration(self, x: np.ndarray, u: np.ndarray, obstacles: ObstacleSet) -> float:
         """Return how far the plan's poses x_1..x_N fall short of their clearance (0: clear).
 
-        The largest of shortfall(): the worst stage against the worst obstacle.
+        The worst stage against the worst obstacle of margins(), as a depth.
         """
-        return float(np.max(self.shortfall(x, u, obstacles), initial=0.0))
-
-    def shortfall(self, x: np.ndarray, u: np.ndarray, obstacles: ObstacleSet) -> np.ndarray:
-        """Return (N,): how far each pose x_1..x_N falls short of its clearance (0: clear)."""
-        return np.maximum(-self.margins(x, u, obstacles), 0.0)
+        return float(np.max(-self.margins(x, u, obstacles), initial=0.0))
 
     def margins(self, x: np.ndarray, u: np.ndarray, obstacles: ObstacleSet) -> np.ndarray:
         """Return (N,): each pose x_1..x_N's clearance beyond what it needs (< 0: short).
@@ -272,20 +269,16 @@ class Clearance:
         count, stages = xs.shape[0], xs.shape[1] - 1
         if not len(obstacles) or count == 0:
             return np.full((count, stages), np.inf)
-        bounds = np.stack([self._bounds_at_stage(xs[:, k + 1, :2], obstacles, k + 1)
-                           for k in range(stages)], axis=1)  # (P, N, K)
+        stage_of_row = np.tile(np.arange(1, stages + 1), count)
+        bounds = self.lower_bounds(xs[:, 1:].reshape(count * stages, -1), obstacles,
+                                   stages=stage_of_row).reshape(count, stages, -1)
         if self.body is None:
             return np.min(bounds - self._config.farkas_margin, axis=2)
         required = np.stack([self.required(x, u) for x, u in zip(xs, us, strict=True)])
         margin = bounds - self.body_radius - required[..., None]
-        body = self.body.vertices
         for j in np.flatnonzero(np.any(margin < 0.0, axis=(0, 1))):
             plan, stage = np.nonzero(margin[:, :, j] < 0.0)
-            pose = xs[plan, stage + 1]
-            angle = pose[:, self._model.angle_index]
-            cos, sin = np.cos(angle)[:, None], np.sin(angle)[:, None]
-            corners = np.stack([cos * body[:, 0] - sin * body[:, 1] + pose[:, :1],
-                                sin * body[:, 0] + cos * body[:, 1] + pose[:, 1:2]], axis=-1)
+            corners = self._corners(xs[plan, stage + 1])
             obstacle = obstacles.obstacles[j]
             if moving(obstacle):
                 polygons = self._stage_set(obstacle, stages + 1).obstacles
@@ -299,28 +292,20 @@ class Clearance:
             margin[plan, stage, j] = signed - required[plan, stage]
         return np.min(margin, axis=2)
 
-    def _bounds_at_stage(self, points: np.ndarray, obstacles: ObstacleSet, stage: int
-                         ) -> np.ndarray:
-        """Return (M, K): lower_bounds() of M positions that are all at one stage."""
-        bounds = obstacles.signed_distance_lower_bound(points)
-        for j, o in enumerate(obstacles.obstacles):
-            if moving(o):
-                offsets = offsets_by_stage(o, stage + 1, self._config.step)[stage]
-                bounds[:, j] = np.max(points @ o.A.T - offsets, axis=1)
-        return bounds
-
-    def lower_bounds(self, x: np.ndarray, obstacles: ObstacleSet, *, first: int = 0
-                     ) -> np.ndarray:
+    def lower_bounds(self, x: np.ndarray, obstacles: ObstacleSet, *, first: int = 0,
+                     stages: np.ndarray | None = None) -> np.ndarray:
         """Return (len(x), K): each position's signed-distance lower bound to each obstacle.
 
-        Row k of x is stage first + k of a plan: a moving obstacle is taken where it is at
-        that stage's time (core/moving_obstacles.py), a static one where it is.
+        Row k of x is stage first + k of a plan (or stage stages[k], for the poses of many
+        plans): a moving obstacle is taken where it is at that stage's time
+        (core/moving_obstacles.py), a static one where it is.
         """
         x = np.asarray(x, dtype=float)
         bounds = obstacles.signed_distance_lower_bound(x[:, :2])
         for j, o in enumerate(obstacles.obstacles):
             if moving(o):
-                bounds[:, j] = stage_lower_bound(o, x[:, :2], self._config.step, first=first)
+                bounds[:, j] = stage_lower_bound(o, x[:, :2], self._config.step, first=first,
+                                                 stages=stages)
         return bounds
 
     def multipliers(self, x: np.ndarray, selected: list[ConvexPolygon],

@@ -156,6 +156,11 @@ class MpcBase(ABC):
         return tuple(self._inflated)
 
     @property
+    def holds_moving_obstacles(self) -> bool:
+        """Whether some obstacle in force moves (it is predicted over the horizon)."""
+        return self._moving
+
+    @property
     def last_active_obstacles(self) -> tuple[ConvexPolygon, ...]:
         """The inflated obstacles the last solve held as Farkas constraints (its NLP's)."""
         return self._last_active
