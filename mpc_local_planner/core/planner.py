@@ -494,7 +494,9 @@ class RrtStarPlanner:
         seen may stand within the clearance, where no plan can start; with a grid, the plan
         then starts from the nearest clear cell the robot can drive straight to (within
         escape_distance, never closer to an obstacle than inscribed_radius or than the robot
-        already is) and begins with that short segment.
+        already is) and begins with that short segment. A robot outside the bounds with no
+        such escape is planned for from `way_in` (the nearest pose within them), the plan
+        beginning with the segment back.
 
         With local_obstacles (the local controller's convex pieces), a plan that does not
         keep config.start_clearance from them too (`held_problem`: a turn the grid allows
@@ -514,13 +516,19 @@ class RrtStarPlanner:
         try:
             waypoints = planner.plan(start, goal)
         except PlanningError:
-            if grid is None:
+            escape = None if grid is None else grid.escape_point(
+                start, within=escape_distance, margin=self.config.inscribed_radius)
+            if escape is not None:
+                return np.vstack([np.asarray(start, dtype=float)[:2],
+                                  planner.plan(escape, goal)])
+            way_in = self.way_in(start)
+            if way_in is None:
                 raise
-            escape = grid.escape_point(start, within=escape_distance,
-                                       margin=self.config.inscribed_radius)
-            if escape is None:
-                raise
-            return np.vstack([np.asarray(start, dtype=float)[:2], planner.plan(escape, goal)])
+            # off the plane the planner samples, beyond any escape: plan from its edge
+            return np.vstack([np.asarray(start, dtype=float)[:2],
+                              self.replan(way_in, goal, failures=failures, grid=grid,
+                                          escape_distance=escape_distance,
+                                          local_obstacles=local_obstacles)])
         if (not len(local_obstacles)
                 or planner.held_problem(waypoints, start, goal, local_obstacles) is None):
             return waypoints
@@ -528,6 +536,28 @@ class RrtStarPlanner:
             return planner.plan(start, goal, local_obstacles=local_obstacles)
         except PlanningError:
             return waypoints
+
+    def way_in(self, start: np.ndarray) -> np.ndarray | None:
+        """Return the pose a re-plan starts from for a robot outside the bounds, else None.
+
+        A robot may leave the plane the planner samples (stepping out of a walker's way,
+        pushed, or localized anew), where no plan can start, and would stand there for good.
+        Its way back is the straight segment to the nearest point of the bounds that its
+        footprint's circumscribed disc (plus the clearance) fits within, heading along that
+        segment; the local controller avoids what it sees on the way, as on any plan. None
+        for a start within the bounds (or not finite: `plan` says why).
+        """
+        values = np.asarray(start, dtype=float).reshape(-1)
+        xy = values[:2]
+        xmin, xmax, ymin, ymax = self.bounds
+        if len(xy) != 2 or not np.all(np.isfinite(xy)) or (
+                xmin <= xy[0] <= xmax and ymin <= xy[1] <= ymax):
+            return None
+        inset = min(self.config.inflation, 0.5 * (xmax - xmin), 0.5 * (ymax - ymin))
+        inside = np.array([min(max(xy[0], xmin + inset), xmax - inset),
+                           min(max(xy[1], ymin + inset), ymax - inset)])
+        offset = inside - xy
+        return np.array([inside[0], inside[1], math.atan2(offset[1], offset[0])])
 
     def held_problem(self, waypoints: np.ndarray, start: np.ndarray, goal: np.ndarray,
                      local_obstacles: Sequence[ConvexPolygon]) -> str | None:

@@ -31,7 +31,8 @@
   this rule restarts at each attempt, so a robot that cannot be helped is re-planned once
   per ``progress_timeout``.
 - **Re-plans** go through ``RrtStarPlanner.replan``: from the robot's pose, or from the
-  nearest clear point within ``escape_distance`` when the robot stands within the clearance.
+  nearest clear point within ``escape_distance`` when the robot stands within the clearance,
+  or from the nearest point within the planner's bounds when it stands outside them.
   The caller may pass the obstacles its local controller holds (the MPC's convex pieces):
   a re-plan then starts with a turn in place those pieces allow, where there is such a
   plan (a robot wedged among them, which the planner's grid would turn where the controller

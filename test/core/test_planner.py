@@ -154,6 +154,31 @@ def test_planner_raises_for_poses_outside_the_bounds_or_not_finite(
         planner_for(world).plan(np.array(start), np.array(goal))
 
 
+def test_a_replan_from_outside_the_bounds_starts_with_the_way_back_in() -> None:
+    # a robot that left the plane the planner samples (stepping out of a walker's way) would
+    # stand there for good if no plan could start from it
+    world = paper_world()
+    planner = RrtStarPlanner(world.obstacles, world.bounds,
+                             config=PlannerConfig(robot_radius=0.1, iterations=500))
+    outside = np.array([0.3, -2.7, -1.0])
+    with pytest.raises(PlanningError, match='outside the bounds'):
+        planner.plan(outside, world.goal)
+
+    waypoints = planner.replan(outside, world.goal)
+
+    np.testing.assert_array_equal(waypoints[0], outside[:2])
+    inset = planner.config.inflation
+    np.testing.assert_allclose(waypoints[1], [0.3, world.bounds[2] + inset], atol=1e-12)
+    np.testing.assert_array_equal(waypoints[-1], world.goal[:2])
+    rest = waypoints[1:]
+    xmin, xmax, ymin, ymax = world.bounds
+    assert np.all((rest[:, 0] >= xmin) & (rest[:, 0] <= xmax))
+    assert np.all((rest[:, 1] >= ymin) & (rest[:, 1] <= ymax))
+    for a, b in zip(rest[:-1], rest[1:], strict=True):
+        assert not segment_collides(planner.inflated_obstacles, a, b)
+    assert planner.way_in(world.start) is None
+
+
 def test_planner_raises_when_the_goal_is_walled_off() -> None:
     walls = [
         ConvexPolygon.from_box(1.0, -1.0, 1.2, 1.0),  # a wall across the whole space
