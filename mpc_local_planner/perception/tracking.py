@@ -98,7 +98,10 @@ class TrackerConfig:
         max_size: Clusters wider than this (their returns' extent, m) are structure.
         moving_speed: A track faster than this (m/s, filtered) may be moving.
         sigmas: ... by more than this many standard deviations of its speed.
-        confirm: Matches before a track may be called moving.
+        confirm: Matches before a track may be called moving (3: a velocity from three
+            centres; the free-space evidence, not this count, keeps static objects
+            static, and a fourth match cost a walker first seen near the robot 0.2 s
+            at 5 scans a second: docs/results.md, "Moving obstacles").
         lost_after: A track not matched for this long ends (s).
         acceleration: White-noise acceleration of the motion model (m/s^2, its standard
             deviation over one second).
@@ -120,7 +123,7 @@ class TrackerConfig:
     max_size: float = 1.2
     moving_speed: float = 0.15
     sigmas: float = 0.0
-    confirm: int = 4
+    confirm: int = 3
     lost_after: float = 1.0
     acceleration: float = 0.5
     measurement: float = 0.05
