@@ -15,10 +15,13 @@ plan exactly then: the predicted walkers close the path ahead.
    before: nothing changes where no walker is predicted to reach it.
 2. Otherwise a lattice of constant-input moves (each input from its lower to its upper
    bound, reached within max_accel) is rolled out with the MPC's model and hold over the
-   MPC's horizon. A move is admissible only if it clears every static obstacle at every
-   stage by the clearance its motion needs (`Clearance.margins_of_many`, the MPC's own
-   check), so an evasion never risks a static contact; braking along it later stays on that
-   checked curve (core/braking.py).
+   MPC's horizon, with pivot-first moves beside them: a turn in place at the full turn rate
+   for one to three stages, then straight ahead at one of the lattice's forward speeds. A
+   constant input only gives arcs, and a robot facing a walker head-on (a forward-only one
+   above all) steps aside by turning first and then driving off. A move is admissible only
+   if it clears every static obstacle at every stage by the clearance its motion needs
+   (`Clearance.margins_of_many`, the MPC's own check), so an evasion never risks a static
+   contact; braking along it later stays on that checked curve (core/braking.py).
 3. Of the admissible moves, one that meets no predicted walker over the whole horizon is
    taken if there is one: the one that ends nearest to where the path leads (the path point
    a horizon's travel beyond the robot's projection). Otherwise the ones that meet the
@@ -47,10 +50,14 @@ from mpc_local_planner.core.mpc.candidate import Rollout
 from mpc_local_planner.core.mpc.clearance import Clearance
 from mpc_local_planner.core.obstacles import ObstacleSet
 
-__all__ = ['EVASION_GAIN', 'EVASION_LEVELS', 'EvasiveMove', 'Evasion', 'first_conflict']
+__all__ = ['EVASION_GAIN', 'EVASION_LEVELS', 'EvasiveMove', 'Evasion', 'first_conflict',
+           'PIVOT_STAGES']
 
 # Values per input in the lattice of moves, from its lower to its upper bound (odd: 0 is one).
 EVASION_LEVELS = 9
+# Stages a pivot-first move turns in place before it drives off straight (0.8 rad a stage for
+# the Jackal at 4 rad/s and h = 0.2 s: up to a half turn).
+PIVOT_STAGES = (1, 2, 3)
 # How much less shortfall (m, summed over the stages) than the stop a move that meets the
 # walkers as soon as the stop does must have to be taken: a few millimetres are no reason.
 EVASION_GAIN = 0.05
@@ -136,7 +143,7 @@ class Evasion:
             self.clearance.margins(stopping, np.zeros((n, self.model.nu)), anywhere))
         start = np.zeros(self.model.nu) if before is None else np.asarray(before, dtype=float)
         first = start if self.config.first_order_hold else None
-        inputs = np.array([self._inputs(start, target) for target in self._targets()])
+        inputs = np.array([self._inputs(start, targets) for targets in self._moves()])
         states = np.array([self._rollout(np.asarray(x0, dtype=float), u, self.config.step, first)
                            for u in inputs])
         finite = np.all(np.isfinite(states), axis=(1, 2))
@@ -173,14 +180,38 @@ class Evasion:
                 for lo, hi in zip(self.model.u_min, self.model.u_max, strict=True)]
         return [np.array(values) for values in itertools.product(*axes)]
 
-    def _inputs(self, start: np.ndarray, target: np.ndarray) -> np.ndarray:
-        """Return the N inputs that go from start to target within max_accel, then hold it."""
+    def _moves(self) -> list[np.ndarray]:
+        """Return every move's (N, nu) target inputs: the lattice's, then the pivot-first ones.
+
+        A pivot-first move turns in place (speed 0, the turn rate at a bound; inputs are
+        (speed, turn rate), as the controller takes them) for PIVOT_STAGES stages, then
+        drives straight at one of the lattice's forward speeds.
+        """
+        n, nu = self.config.horizon, self.model.nu
+        moves = [np.tile(target, (n, 1)) for target in self._targets()]
+        if nu != 2:
+            return moves
+        speeds = [v for v in np.linspace(self.model.u_min[0], self.model.u_max[0],
+                                         EVASION_LEVELS) if v > 0.0]
+        for turn in (self.model.u_min[1], self.model.u_max[1]):
+            for stages in PIVOT_STAGES:
+                if stages >= n:
+                    continue
+                for speed in speeds:
+                    targets = np.zeros((n, nu))
+                    targets[:stages, 1] = turn
+                    targets[stages:, 0] = speed
+                    moves.append(targets)
+        return moves
+
+    def _inputs(self, start: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """Return the N inputs that go from start towards each stage's target within max_accel."""
         n = self.config.horizon
         if self.config.max_accel is None:
-            return np.tile(target, (n, 1))
+            return np.array(targets, dtype=float)
         limit = np.asarray(self.config.max_accel, dtype=float) * self.config.step
-        u, current = np.empty((n, len(target))), start.copy()
+        u, current = np.empty((n, targets.shape[1])), start.copy()
         for k in range(n):
-            current = current + np.clip(target - current, -limit, limit)
+            current = current + np.clip(targets[k] - current, -limit, limit)
             u[k] = current
         return u

@@ -155,3 +155,39 @@ def test_the_margins_of_many_plans_at_once_are_those_of_each_plan() -> None:
     np.testing.assert_array_equal(many < 0.0, each < 0.0)
     np.testing.assert_allclose(np.minimum(many, 0.0), np.minimum(each, 0.0), rtol=0,
                                atol=1e-12)
+
+
+def test_a_forward_only_robot_facing_a_walker_pivots_into_a_side_passage() -> None:
+    """Head-on in a corridor with a side passage beside it: no arc clears the walker, a pivot does.
+
+    A forward-only robot cannot back away, and a constant input gives it arcs only, which
+    the corridor's walls cut short: it must turn in place first, then drive off.
+    """
+    model = Unicycle(v_max=2.0, omega_max=4.0, v_min=0.0)
+    clearance = Clearance(model, CONFIG)
+    clearance.clear()
+    evasion = Evasion(model, CONFIG, clearance)
+    # the corridor of WALLS, with the upper wall open over -0.5 < x < 0.5 into a passage
+    walls = [WALLS[1], ConvexPolygon.from_box(-4.0, 0.55, -0.5, 1.5),
+             ConvexPolygon.from_box(0.5, 0.55, 6.0, 1.5),
+             ConvexPolygon.from_box(-1.5, 1.5, -0.5, 4.0),
+             ConvexPolygon.from_box(0.5, 1.5, 1.5, 4.0)]
+    coming = MovingPolygon.moving(ConvexPolygon.from_circle(2.0, 0.0, WALKER_RADIUS),
+                                  (-1.0, 0.0))
+    x0 = np.zeros(3)
+    standing = np.tile(x0, (CONFIG.horizon + 1, 1))
+
+    move = evasion.choose(x0, standing, ObstacleSet([coming, *walls]), np.array([4.0, 0.0]))
+
+    assert move is not None and move.conflict > CONFIG.horizon >= move.stop_conflict
+    assert move.u[0, 0] == 0.0 and move.u[0, 1] > 0.0  # it turns in place, to the left
+    assert move.x[-1, 1] > 0.55  # and ends in the passage
+    assert clearance.penetration(move.x, move.u, ObstacleSet(walls)) == 0.0
+    # no arc keeps clear of the walker without touching a wall
+    rollout = Rollout(model)
+    for target in evasion._targets():
+        u = evasion._inputs(np.zeros(2), np.tile(target, (CONFIG.horizon, 1)))
+        x = rollout(x0, u, CONFIG.step)
+        assert (clearance.penetration(x, u, ObstacleSet(walls)) > 0.0
+                or first_conflict(clearance.margins(x, u, ObstacleSet([coming])))
+                <= CONFIG.horizon)
