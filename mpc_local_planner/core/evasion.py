@@ -112,6 +112,8 @@ class Evasion:
 
     def __post_init__(self) -> None:
         self._rollout = Rollout(self.model)
+        # (M, N, nu): every move's target inputs, fixed by the model and the settings
+        self._move_targets = np.array(self._moves())
 
     def choose(self, x0: np.ndarray, stopping: np.ndarray, obstacles: ObstacleSet,
                toward: np.ndarray, before: np.ndarray | None = None) -> EvasiveMove | None:
@@ -143,7 +145,7 @@ class Evasion:
             self.clearance.margins(stopping, np.zeros((n, self.model.nu)), anywhere))
         start = np.zeros(self.model.nu) if before is None else np.asarray(before, dtype=float)
         first = start if self.config.first_order_hold else None
-        inputs = np.array([self._inputs(start, targets) for targets in self._moves()])
+        inputs = self._inputs(start, self._move_targets)
         states = np.array([self._rollout(np.asarray(x0, dtype=float), u, self.config.step, first)
                            for u in inputs])
         finite = np.all(np.isfinite(states), axis=(1, 2))
@@ -205,13 +207,17 @@ class Evasion:
         return moves
 
     def _inputs(self, start: np.ndarray, targets: np.ndarray) -> np.ndarray:
-        """Return the N inputs that go from start towards each stage's target within max_accel."""
-        n = self.config.horizon
+        """Return the inputs that go from start towards each stage's target within max_accel.
+
+        targets: (..., N, nu), one move's or many moves' at once; the inputs have its shape.
+        """
+        targets = np.asarray(targets, dtype=float)
         if self.config.max_accel is None:
-            return np.array(targets, dtype=float)
+            return targets.copy()
         limit = np.asarray(self.config.max_accel, dtype=float) * self.config.step
-        u, current = np.empty((n, targets.shape[1])), start.copy()
-        for k in range(n):
-            current = current + np.clip(targets[k] - current, -limit, limit)
-            u[k] = current
+        u = np.empty_like(targets)
+        current = np.broadcast_to(start, targets[..., 0, :].shape).astype(float)
+        for k in range(targets.shape[-2]):
+            current = current + np.clip(targets[..., k, :] - current, -limit, limit)
+            u[..., k, :] = current
         return u
