@@ -13,6 +13,7 @@ situation calls for is the table of test_mpc_tries.py. Nothing here asserts how 
 from __future__ import annotations
 
 import math
+import threading
 from typing import Any
 
 import numpy as np
@@ -24,6 +25,7 @@ from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.diagnostics import ControllerDiagnostics
 from mpc_local_planner.core.models import Unicycle
 from mpc_local_planner.core.mpc import (
+    backends,
     built_nlps,
     continuation,
     Decision,
@@ -410,6 +412,36 @@ def test_ipopt_is_stopped_at_its_time_limit() -> None:
     assert run_solver(nlp, w0, params, iteration_limit=0).status.startswith('not started')
     again = run_solver(nlp, w0, params)
     assert again.success and again.iterations == untimed.iterations  # the limit was cleared
+
+
+def test_a_solver_call_that_never_returns_is_abandoned_and_the_solver_built_again(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fatrop's inertia correction has no bound: a call was seen never to return.
+
+    A stand-in that blocks until the test lets it go plays that call. The step must get an
+    answer (a cut run: no success, the initial guess) and not wait for ever, and the NLP
+    must not call that solver again: its next call is a fresh one's, and succeeds.
+    """
+    mpc = paper_mpc(horizon=3)  # fatrop
+    nlp, params, w0 = mpc.solver_problem(mpc.path.start)
+    entered, release = threading.Event(), threading.Event()
+
+    def stuck(**_: Any) -> None:
+        entered.set()
+        release.wait()
+
+    nlp.solver = stuck
+    monkeypatch.setattr(backends, 'HANG_SECONDS', 0.05)  # the stand-in never returns anyway
+    try:
+        run = run_solver(nlp, w0, params)
+    finally:
+        release.set()
+    assert entered.is_set()
+    assert run.cut and not run.success and run.status.startswith('abandoned')
+    np.testing.assert_array_equal(run.w, w0)
+    assert nlp.solver is not stuck
+    again = run_solver(nlp, w0, params)
+    assert again.success and not again.cut
 
 
 def test_the_ipopt_fallback_is_stopped_at_its_time_limit() -> None:

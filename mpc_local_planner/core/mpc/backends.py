@@ -40,9 +40,10 @@ import numpy as np
 from mpc_local_planner.core.config import NlpSolver, SolverSettings
 from mpc_local_planner.core.mpc import compilation
 from mpc_local_planner.core.mpc.formulation import Formulation
+from mpc_local_planner.core.mpc.hang_guard import call_guarded, SolverHang
 
-__all__ = ['Nlp', 'SolverRun', 'SolverRunner', 'backend_options', 'build_nlp', 'compile_flags',
-           'iteration_levels', 'run_solver', 'stage_size']
+__all__ = ['HANG_SECONDS', 'Nlp', 'SolverRun', 'SolverRunner', 'backend_options', 'build_nlp',
+           'compile_flags', 'hang_after', 'iteration_levels', 'run_solver', 'stage_size']
 
 _LOG = logging.getLogger(__name__)
 
@@ -341,6 +342,20 @@ class Nlp:
                 f'mpc_{limit}', self.plugin, source, _with_iteration_limit(self.options, limit))
         return solver, limit
 
+    def abandon(self, solver: ca.Function) -> None:
+        """Stop using a solver whose call never returned (a thread is still inside it).
+
+        Its memory and its stats are the stuck call's: the primary solver is built again
+        (from the compiled library, a few ms, else from the problem), a limited copy is
+        dropped (rebuilt when next needed); an IPOPT (the fallback, the cold start) is
+        kept (IPOPT's own perturbation limit and deadline bound its calls; not met).
+        """
+        if solver is self.solver:
+            source: Any = str(self.library) if self.library is not None \
+                else self.formulation.problem
+            self.solver = ca.nlpsol('mpc', self.plugin, source, self.options)
+        self.limited = {k: v for k, v in self.limited.items() if v is not solver}
+
     def record_iterations(self, seconds: float, iterations: int) -> None:
         """Update the time per iteration from a call of the primary solver (or its copies)."""
         if iterations <= 0 or not math.isfinite(seconds):
@@ -432,6 +447,22 @@ def build_nlp(formulation: Formulation, settings: SolverSettings) -> Nlp:
     return nlp
 
 
+# A solver call that has not returned after this long is abandoned (hang_guard.py): fatrop's
+# inertia correction has no bound. Under a wall budget, HANG_FACTOR times the call's time
+# limit (at least HANG_FLOOR); under an iteration budget (no time limit), HANG_SECONDS: ten
+# times the slowest call seen in the suites on a loaded machine.
+HANG_SECONDS = 5.0
+HANG_FLOOR = 1.0
+HANG_FACTOR = 10.0
+
+
+def hang_after(time_limit: float) -> float:
+    """Return the seconds after which a call with this time limit is given up."""
+    if not math.isfinite(time_limit):
+        return HANG_SECONDS
+    return min(HANG_SECONDS, max(HANG_FLOOR, HANG_FACTOR * time_limit))
+
+
 class SolverRun(NamedTuple):
     """What one call of an NLP solver returned (not yet verified)."""
 
@@ -451,6 +482,18 @@ class SolverRunner(Protocol):
                  solver: ca.Function | None = None, *, time_limit: float = math.inf,
                  iteration_limit: float = math.inf) -> SolverRun:
         """Solve nlp from w0 within the limits (see run_solver)."""
+
+
+def _limited_call(solver: ca.Function, deadline: _Deadline | None, at: float,
+                  iteration_limit: float, arguments: dict[str, Any]) -> dict[str, Any]:
+    """Call solver with the deadline armed on this thread (IPOPT calls back on it)."""
+    if deadline is not None:
+        deadline.arm(at, iteration_limit)
+    try:
+        return solver(**arguments)
+    finally:
+        if deadline is not None:
+            deadline.arm()
 
 
 def run_solver(nlp: Nlp, w0: np.ndarray, params: np.ndarray,
@@ -484,15 +527,19 @@ def run_solver(nlp: Nlp, w0: np.ndarray, params: np.ndarray,
     if solver is None:
         # may build a limited copy: timed too
         solver, limit = nlp.solver_within(time_limit, iteration_limit)
-    if nlp.deadline is not None:
-        nlp.deadline.arm(start + time_limit, iteration_limit)
     called = time.perf_counter()
     try:
-        result = solver(x0=w0, p=params, lbx=form.lbw, ubx=form.ubw, lbg=form.lbg,
-                        ubg=form.ubg)
-    finally:
-        if nlp.deadline is not None:
-            nlp.deadline.arm()
+        result = call_guarded(_limited_call, hang_after(time_limit), solver=solver,
+                              deadline=nlp.deadline, at=start + time_limit,
+                              iteration_limit=iteration_limit,
+                              arguments={'x0': w0, 'p': params, 'lbx': form.lbw,
+                                         'ubx': form.ubw, 'lbg': form.lbg, 'ubg': form.ubg})
+    except SolverHang as err:
+        nlp.abandon(solver)
+        _LOG.error('%s (%s); it is rebuilt and the step goes on without it', err, nlp.plugin)
+        return SolverRun(w=np.asarray(w0, dtype=float).reshape(-1), value=math.inf,
+                         success=False, status=f'abandoned: {err}', iterations=0,
+                         seconds=time.perf_counter() - start, cut=True)
     end = time.perf_counter()
     stats = solver.stats()
     w_opt = np.asarray(result['x']).reshape(-1)
