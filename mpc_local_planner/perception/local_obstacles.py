@@ -76,7 +76,10 @@ class LocalObstacles:
         predict = self.predict_moving
         polygons = memory.obstacles(static=predict) if memory is not None else []
         self._scan_obstacles = ObstacleSet(within_faces(polygons, self.faces))
-        self._movers = memory.moving_tracks if memory is not None and predict else []
+        # a suspect (perception/tracking.py `Track.suspect`) is predicted as a mover while
+        # its pieces stay among the static ones: until the tracker knows, both hold
+        self._movers = memory.moving_tracks + memory.suspect_tracks \
+            if memory is not None and predict else []
 
     def near(self, position: Sequence[float], radius: float, now: float | None = None
              ) -> list[ConvexPolygon]:

@@ -373,6 +373,17 @@ class ObstacleMemory:
             return []
         return [t for t in self.tracker.tracker.tracks if t.id in self._moving]
 
+    @property
+    def suspect_tracks(self) -> list[Track]:
+        """The tracks not told moving at the last scan that may be (`Track.suspect`).
+
+        Their pieces stay in the memory: until the tracker knows, a user plans for both.
+        """
+        if self.tracker is None:
+            return []
+        return [t for t in self.tracker.tracker.tracks
+                if t.suspect and t.id not in self._moving]
+
     def clear(self) -> None:
         """Forget everything (e.g. when the map frame jumps)."""
         self._entries = []

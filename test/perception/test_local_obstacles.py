@@ -85,3 +85,44 @@ def test_a_tracked_walker_is_handed_over_moving_and_its_pieces_are_not() -> None
         assert static and not any(o.contains(walker.position(now), margin=0.3)[0]
                                   for o in static)
         assert any(float(np.min(box.distance(o.vertices))) < 0.05 for o in static)  # the box
+
+
+def test_a_walker_seen_in_free_space_is_predicted_before_it_is_told_moving() -> None:
+    """A walker (0.25 m, 1 m/s) stepping out from behind a box is predicted at once.
+
+    Its track has stood in free space once and has a velocity, but not yet the sightings
+    that tell it moving: the MPC gets it as a mover already (where it will be, not where
+    it stood), and its pieces stay among the static obstacles until the tracker knows.
+    """
+    box = ConvexPolygon.from_box(2.0, -1.0, 2.4, -0.2)
+    world = world_from_dict({
+        'bounds': [-6.0, 6.0, -4.0, 4.0], 'obstacles': [{'polygon': box.vertices.tolist()}],
+        'start': [0.0, 0.0, 0.0], 'goal': [5.0, 0.0, 0.0],
+        'moving_obstacles': [
+            {'circle': [0.0, 0.0, 0.25],
+             'waypoints': {'points': [[3.0, -0.6], [3.0, 3.0]], 'speed': 1.0,
+                           'mode': 'back_and_forth'}}]}, name='stepping out')
+    clock = WorldClock.from_world(world)
+    walker = clock.moving[0]
+    laser = SimulatedLaser(clock)
+    memory = ObstacleMemory(5.0, tracker=ScanTracker())
+    local = LocalObstacles(8, memory=memory)
+    pose = (0.0, 0.0, 0.0)
+    early = []
+    for k in range(16):
+        t = round(k * 0.1, 9)
+        memory.update(laser.scan(pose, stamp=t), pose)
+        local.scan_updated()
+        if memory.moving_tracks:
+            break
+        handed = local.near((0.0, 0.0), 10.0, now=t + 0.5)
+        movers = [o for o in handed if isinstance(o, MovingPolygon)]
+        if movers:
+            static = [o for o in handed if not isinstance(o, MovingPolygon)]
+            early.append((t, movers, static))
+    assert memory.moving_tracks and early  # predicted at a scan before it was told moving
+    for t, movers, static in early:
+        assert len(movers) == 1
+        assert movers[0].contains(walker.position(t + 0.5))[0]  # where it will be
+        # its pieces on the near side, 0.25 m from its centre, stay
+        assert any(float(o.distance(walker.position(t))[0]) < 0.3 for o in static)
