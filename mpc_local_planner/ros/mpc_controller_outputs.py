@@ -71,10 +71,11 @@ MARKER_STYLE = {
 # The tracks of the laser's clusters (with track_moving), as markers.
 TRACKS_TOPIC = 'mpc/tracks'
 # Their namespaces' colours (r, g, b, a); a track's disc is its cluster's radius grown by
-# TRACK_SIGMAS standard deviations of its position; a moving track's arrow shows where its
-# velocity takes it in TRACK_ARROW_S seconds.
+# TRACK_SIGMAS standard deviations of its position; a moving (or suspect) track's arrow shows
+# where its velocity takes it in TRACK_ARROW_S seconds.
 TRACK_STYLE = {
     'static': (0.5, 0.5, 0.5, 0.5),
+    'suspect': (1.0, 0.55, 0.0, 0.7),
     'moving': (0.8, 0.0, 0.8, 0.7),
     'velocity': (0.8, 0.0, 0.8, 1.0),
 }
@@ -89,17 +90,18 @@ def track_markers(tracks: list[Track], *, frame_id: str, stamp: Any) -> MarkerAr
 
     A track's marker id is its track id, so RViz follows one object from scan to scan; a
     disc is the cluster's radius plus TRACK_SIGMAS standard deviations of the position
-    (the larger axis of its covariance), in 'moving' or 'static'.
+    (the larger axis of its covariance), in 'moving', 'suspect' (predicted as a mover, not
+    yet told moving: `Track.suspect`) or 'static'.
     """
     markers = [delete_all_marker(frame_id=frame_id, stamp=stamp)]
     for track in tracks:
         x, y = (float(v) for v in track.position)
         spread = float(np.sqrt(max(np.linalg.eigvalsh(track.covariance[:2, :2])[-1], 0.0)))
-        ns = 'moving' if track.moving else 'static'
+        ns = 'moving' if track.moving else 'suspect' if track.suspect else 'static'
         markers.append(cylinder_marker(x, y, track.size + TRACK_SIGMAS * spread, ns=ns,
                                        marker_id=track.id, frame_id=frame_id, stamp=stamp,
                                        rgba=TRACK_STYLE[ns], height=TRACK_HEIGHT))
-        if track.moving:
+        if track.moving or track.suspect:
             end = track.position + TRACK_ARROW_S * track.velocity
             markers.append(arrow_marker((x, y), end, ns='velocity', marker_id=track.id,
                                         frame_id=frame_id, stamp=stamp,

@@ -6,11 +6,18 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from rclpy.time import Time
+from visualization_msgs.msg import Marker
 
 from mpc_local_planner.core.control_output import ControlOutput, Reason
 from mpc_local_planner.core.controller import MpcController
 from mpc_local_planner.core.obstacles import ConvexPolygon
-from mpc_local_planner.ros.mpc_controller_outputs import ControllerOutputs, OBSTACLES_TOPIC
+from mpc_local_planner.perception.tracking import Track
+from mpc_local_planner.ros.mpc_controller_outputs import (
+    ControllerOutputs,
+    OBSTACLES_TOPIC,
+    track_markers,
+)
 
 
 class FakePublisher:
@@ -62,3 +69,18 @@ def test_obstacle_markers_are_built_only_while_someone_subscribes() -> None:
     assert len(markers.published) == 1
     namespaces = {m.ns for m in markers.published[0].markers}
     assert {'raw', 'grown'} <= namespaces
+
+
+def test_track_markers_tell_static_suspect_and_moving_tracks_apart() -> None:
+    """A suspect is drawn in its own colour, with the arrow of its velocity, as a mover is."""
+    def track(track_id: int, *, moving: bool = False, suspect: bool = False) -> Track:
+        return Track(track_id, np.array([float(track_id), 0.0, 0.5, 0.0]), np.eye(4) * 0.01,
+                     0.0, 0.0, hits=3, size=0.2, moving=moving, suspect=suspect)
+
+    markers = track_markers([track(1), track(2, suspect=True), track(3, moving=True)],
+                            frame_id='map', stamp=Time().to_msg()).markers
+    discs = {m.id: m.ns for m in markers if m.type == Marker.CYLINDER}
+    arrows = sorted(m.id for m in markers
+                    if m.type == Marker.ARROW and m.action == Marker.ADD)
+    assert discs == {1: 'static', 2: 'suspect', 3: 'moving'}
+    assert arrows == [2, 3]
