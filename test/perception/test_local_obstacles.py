@@ -24,6 +24,17 @@ def wall_map() -> OccupancyMap:
     return OccupancyMap(data, 0.1, (0.0, 0.0, 0.0))
 
 
+def box_and_walker(box: ConvexPolygon, way: list[list[float]], name: str) -> WorldClock:
+    """A static box, and a walker (0.25 m) at 1 m/s back and forth along way."""
+    return WorldClock.from_world(world_from_dict({
+        'bounds': [-6.0, 6.0, -4.0, 4.0], 'obstacles': [{'polygon': box.vertices.tolist()}],
+        'start': [0.0, 0.0, 0.0], 'goal': [5.0, 0.0, 0.0],
+        'moving_obstacles': [
+            {'circle': [0.0, 0.0, 0.25],
+             'waypoints': {'points': way, 'speed': 1.0, 'mode': 'back_and_forth'}}]},
+        name=name))
+
+
 def test_map_rectangles_near_the_robot_cover_its_cells_and_nothing_far() -> None:
     local = LocalObstacles(8, occupancy=wall_map())
     near = local.near((1.0, 2.0), 1.5)
@@ -55,14 +66,7 @@ def test_a_tracked_walker_is_handed_over_moving_and_its_pieces_are_not() -> None
     out, and a static box is handed over as before.
     """
     box = ConvexPolygon.from_box(2.0, 0.5, 2.4, 1.1)
-    world = world_from_dict({
-        'bounds': [-6.0, 6.0, -4.0, 4.0], 'obstacles': [{'polygon': box.vertices.tolist()}],
-        'start': [0.0, 0.0, 0.0], 'goal': [5.0, 0.0, 0.0],
-        'moving_obstacles': [
-            {'circle': [0.0, 0.0, 0.25],
-             'waypoints': {'points': [[3.0, -1.5], [-5.0, -1.5]], 'speed': 1.0,
-                           'mode': 'back_and_forth'}}]}, name='passing')
-    clock = WorldClock.from_world(world)
+    clock = box_and_walker(box, [[3.0, -1.5], [-5.0, -1.5]], 'passing')
     walker = clock.moving[0]
     laser = SimulatedLaser(clock)
     memory = ObstacleMemory(5.0, tracker=ScanTracker())
@@ -95,14 +99,7 @@ def test_a_walker_seen_in_free_space_is_predicted_before_it_is_told_moving() -> 
     it stood), and its pieces stay among the static obstacles until the tracker knows.
     """
     box = ConvexPolygon.from_box(2.0, -1.0, 2.4, -0.2)
-    world = world_from_dict({
-        'bounds': [-6.0, 6.0, -4.0, 4.0], 'obstacles': [{'polygon': box.vertices.tolist()}],
-        'start': [0.0, 0.0, 0.0], 'goal': [5.0, 0.0, 0.0],
-        'moving_obstacles': [
-            {'circle': [0.0, 0.0, 0.25],
-             'waypoints': {'points': [[3.0, -0.6], [3.0, 3.0]], 'speed': 1.0,
-                           'mode': 'back_and_forth'}}]}, name='stepping out')
-    clock = WorldClock.from_world(world)
+    clock = box_and_walker(box, [[3.0, -0.6], [3.0, 3.0]], 'stepping out')
     walker = clock.moving[0]
     laser = SimulatedLaser(clock)
     memory = ObstacleMemory(5.0, tracker=ScanTracker())
