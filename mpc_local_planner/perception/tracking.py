@@ -13,7 +13,9 @@ than ``max_size``; walls and long runs are structure and never tracked) from sca
    `scipy.optimize.linear_sum_assignment`), pairs farther apart than ``gate`` refused. A
    cluster nobody claims starts a track; a track not matched for ``lost_after`` seconds ends.
    Two walkers that cross merge into one cluster for a while: one track takes it, the other
-   coasts on its prediction and is matched again when they part, so both keep their ids.
+   coasts on its prediction and is matched again when they part, so both keep their ids. A
+   track whose cluster grew by a merge (MERGE_GROWTH) is not corrected with its centre: it
+   coasts too, so a walker passing a cylinder keeps its velocity.
 3. **A constant-velocity Kalman filter per track** (state x, y, vx, vy; white-noise
    acceleration; the measurement is the cluster's centre). It gives the position, the
    velocity and their covariance.
@@ -94,6 +96,18 @@ GROWTH_SIGMAS = 1.0
 # first told moving close by, or one that turns, is not where its prediction says, and a plan
 # that passes it by the least clearance leaves the robot no room to get out of its way.
 WALKER_BERTH = 0.15
+
+
+# A cluster this much larger than its track's last (times, plus metres) is the object merged
+# with a neighbour (a walker passing a cylinder, two walkers crossing): the centre of the
+# merged returns lies between the two, and correcting the track with it gives the walker a
+# velocity it does not have (seen through the nodes: a walker beside a cylinder predicted
+# walking away from the robot, into which it walked). Such a track coasts instead.
+# (The track's size counts as at least MERGE_FLOOR: a cylinder first seen as a sliver grows
+# as more of it comes into view.)
+MERGE_GROWTH = 1.5
+MERGE_SLACK = 0.1
+MERGE_FLOOR = 0.2
 
 
 @dataclass(frozen=True)
@@ -336,6 +350,12 @@ class Tracker:
             for row, col in zip(rows, cols, strict=True):
                 if cost[row, col] <= config.gate:
                     track = self._tracks[row]
+                    if sizes[col] > MERGE_GROWTH * max(track.size, MERGE_FLOOR) + MERGE_SLACK:
+                        # merged with a neighbour: its centre moved by the merge, not by the
+                        # object. The track coasts on its prediction, unseen (a merge that
+                        # lasts lost_after ends it), and the cluster is not its: it starts
+                        # a track of its own, not moving, so the memory keeps its pieces
+                        continue
                     self._correct(track, centres[col], sizes[col], stamp, free[col])
                     owner[int(col)] = track
                     matched.add(int(row))
