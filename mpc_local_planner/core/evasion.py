@@ -178,9 +178,12 @@ class Evasion:
 
     def _targets(self) -> list[np.ndarray]:
         """Return the lattice of constant inputs, every input from its lower to upper bound."""
-        axes = [np.linspace(lo, hi, EVASION_LEVELS)
+        return [np.array(values) for values in itertools.product(*self._levels())]
+
+    def _levels(self) -> list[np.ndarray]:
+        """Return each input's EVASION_LEVELS values, from its lower to its upper bound."""
+        return [np.linspace(lo, hi, EVASION_LEVELS)
                 for lo, hi in zip(self.model.u_min, self.model.u_max, strict=True)]
-        return [np.array(values) for values in itertools.product(*axes)]
 
     def _moves(self) -> list[np.ndarray]:
         """Return every move's (N, nu) target inputs: the lattice's, then the pivot-first ones.
@@ -193,8 +196,7 @@ class Evasion:
         moves = [np.tile(target, (n, 1)) for target in self._targets()]
         if nu != 2:
             return moves
-        speeds = [v for v in np.linspace(self.model.u_min[0], self.model.u_max[0],
-                                         EVASION_LEVELS) if v > 0.0]
+        speeds = [v for v in self._levels()[0] if v > 0.0]
         for turn in (self.model.u_min[1], self.model.u_max[1]):
             for stages in PIVOT_STAGES:
                 if stages >= n:

@@ -111,8 +111,9 @@ def test_a_walker_passing_close_by_a_cylinder_keeps_its_velocity() -> None:
             {'circle': [0.0, 0.0, 0.2],
              'waypoints': {'points': [[2.6, -2.0], [2.6, 3.5]], 'speed': 1.0,
                            'mode': 'back_and_forth'}}]}, name='passing a cylinder')
-    walker = WorldClock.from_world(world).moving[0]
-    seen = track_scans(WorldClock.from_world(world), 4.0)
+    clock = WorldClock.from_world(world)
+    walker = clock.moving[0]
+    seen = track_scans(clock, 4.0)
     for t, tracks in seen.items():
         if t < 1.0:
             continue
