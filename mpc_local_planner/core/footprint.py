@@ -11,6 +11,7 @@ silently replaced by its hull.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 import math
 from typing import Sequence
 
@@ -94,11 +95,12 @@ class Footprint:
         """A round robot (the fast special case: exact with a single inflation)."""
         return self.vertices is None
 
-    @property
+    @cached_property
     def body(self) -> ConvexPolygon:
         """The polygon in the robot frame as {y : G y <= g} with unit rows (G = A, g = b).
 
         The MPC's exact separation of robot and obstacle is written with these half-planes.
+        Built once (Qhull): every scan asks for it, to tell the robot's own returns apart.
 
         Raises:
             ValueError: for a circle (it has no faces; obstacles are inflated instead).

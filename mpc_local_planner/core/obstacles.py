@@ -210,17 +210,24 @@ class ObstacleSet:
 
     def __init__(self, obstacles: Sequence[ConvexPolygon]) -> None:
         self.obstacles: list[ConvexPolygon] = list(obstacles)
-        faces = max((o.num_faces for o in self.obstacles), default=1)
         count = len(self.obstacles)
-        self._A = np.zeros((count, faces, 2))
-        self._b = np.full((count, faces), -np.inf)
+        if not count:
+            self._A, self._b = np.zeros((0, 1, 2)), np.full((0, 1), -np.inf)
+            self._V = np.zeros((0, 1, 2))
+            self._E = np.zeros((0, 1, 2))
+            return
+        # one gather for all polygons (a loop of small copies per polygon cost more than the
+        # queries: the memory's pieces are set again at every scan)
+        counts = np.fromiter((o.A.shape[0] for o in self.obstacles), dtype=np.intp, count=count)
+        faces = int(counts.max())
+        first = np.cumsum(counts) - counts
         # vertices padded by repeating the last one: the extra edges have zero length and the
         # last padded vertex closes the polygon to vertex 0, so every real edge is kept
-        self._V = np.zeros((count, faces, 2))
-        for i, o in enumerate(self.obstacles):
-            rows = np.minimum(np.arange(faces), o.num_faces - 1)
-            self._A[i], self._b[i] = o.A[rows], o.b[rows]
-            self._V[i] = o.vertices[rows]
+        rows = first[:, None] + np.minimum(np.arange(faces)[None, :], counts[:, None] - 1)
+        self._A = np.concatenate([o.A for o in self.obstacles]).astype(float, copy=False)[rows]
+        self._b = np.concatenate([o.b for o in self.obstacles]).astype(float, copy=False)[rows]
+        self._V = np.concatenate([o.vertices for o in self.obstacles]
+                                 ).astype(float, copy=False)[rows]
         self._E = self._V[:, (np.arange(faces) + 1) % faces] - self._V  # edge f: f to f + 1
 
     def __len__(self) -> int:

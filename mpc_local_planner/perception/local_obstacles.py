@@ -55,6 +55,10 @@ class LocalObstacles:
         self._map_obstacles: list[ConvexPolygon] = []
         self._scan_obstacles = ObstacleSet([])
         self._movers: list[Track] = []
+        # the memory's pieces fitted to the faces, by the piece's identity (the memory keeps
+        # a piece's object as long as it remembers it): a piece is fitted once, when it
+        # enters, not at every scan; the piece is kept beside its fit so its id is not reused
+        self._fitted: dict[int, tuple[ConvexPolygon, int, ConvexPolygon]] = {}
 
     @property
     def occupancy(self) -> OccupancyMap | None:
@@ -75,11 +79,22 @@ class LocalObstacles:
         memory = self.memory
         predict = self.predict_moving
         polygons = memory.obstacles(static=predict) if memory is not None else []
-        self._scan_obstacles = ObstacleSet(within_faces(polygons, self.faces))
+        self._scan_obstacles = ObstacleSet(self._fit(polygons))
         # a suspect (perception/tracking.py `Track.suspect`) is predicted as a mover while
         # its pieces stay among the static ones: until the tracker knows, both hold
         self._movers = memory.moving_tracks + memory.suspect_tracks \
             if memory is not None and predict else []
+
+    def _fit(self, polygons: Sequence[ConvexPolygon]) -> list[ConvexPolygon]:
+        """Return the polygons fitted to the faces (`within_faces`), each fitted only once."""
+        known, fitted = self._fitted, {}
+        for polygon in polygons:
+            entry = known.get(id(polygon))
+            if entry is None or entry[0] is not polygon or entry[1] != self.faces:
+                entry = (polygon, self.faces, within_faces([polygon], self.faces)[0])
+            fitted[id(polygon)] = entry
+        self._fitted = fitted
+        return [fitted[id(polygon)][2] for polygon in polygons]
 
     def near(self, position: Sequence[float], radius: float, now: float | None = None
              ) -> list[ConvexPolygon]:

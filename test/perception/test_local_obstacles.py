@@ -7,7 +7,7 @@ from conftest import point_in_any
 import numpy as np
 
 from mpc_local_planner.core.moving_obstacles import MovingPolygon
-from mpc_local_planner.core.obstacles import ConvexPolygon
+from mpc_local_planner.core.obstacles import ConvexPolygon, within_faces
 from mpc_local_planner.perception.local_obstacles import LocalObstacles
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
 from mpc_local_planner.perception.tracking import ScanTracker
@@ -56,6 +56,40 @@ def test_remembered_obstacles_come_in_after_scan_updated_and_only_near() -> None
     near = local.near((0.0, 0.0), 5.0)
     assert near and np.all(point_in_any(near, np.array([[2.0, 0.0], [2.0, 0.25]]), margin=1e-6))
     assert local.near((-10.0, 0.0), 5.0) == []
+
+
+def test_a_remembered_piece_is_fitted_once_when_it_enters_not_at_every_scan(monkeypatch) -> None:
+    import mpc_local_planner.perception.local_obstacles as local_obstacles
+    fitted: list[ConvexPolygon] = []
+
+    def counting(polygons, faces):
+        fitted.extend(polygons)
+        return within_faces(polygons, faces)
+
+    monkeypatch.setattr(local_obstacles, 'within_faces', counting)
+    memory = ObstacleMemory(5.0)
+    local = LocalObstacles(4, memory=memory)
+    ahead, behind = ConvexPolygon.from_box(2.0, -0.3, 2.4, 0.3), ConvexPolygon.from_box(
+        -2.4, -0.3, -2.0, 0.3)
+    laser = SimulatedLaser([ahead, behind])  # 270 degrees: one box in view at a time
+    memory.update(laser.scan((0.0, 0.0, 0.0), stamp=0.0), (0.0, 0.0, 0.0))
+    local.scan_updated()
+    first = memory.obstacles()
+    assert fitted and len(fitted) == len(first)
+    # turned round: the box ahead is out of view and kept; only the new pieces are fitted
+    memory.update(laser.scan((0.0, 0.0, np.pi), stamp=0.1), (0.0, 0.0, np.pi))
+    local.scan_updated()
+    now = memory.obstacles()
+    assert all(any(p is q for q in now) for p in first)  # the first pieces are remembered
+    assert [id(p) for p in fitted[len(first):]] == [id(p) for p in now if
+                                                    not any(p is q for q in first)]
+    near = local.near((0.0, 0.0), 10.0)
+    assert np.all(point_in_any(near, np.array([[2.0, 0.0], [-2.0, 0.0]]), margin=1e-6))
+    # another face count: every piece is fitted again, to it
+    local.faces = 8
+    count = len(fitted)
+    local.scan_updated()
+    assert len(fitted) - count == len(now)
 
 
 def test_a_tracked_walker_is_handed_over_moving_and_its_pieces_are_not() -> None:
