@@ -139,7 +139,14 @@ from mpc_local_planner.ros.closed_loop_parameters import (
     parse_parameter,
     run_world,
 )
-from mpc_local_planner.ros.closed_loop_processes import respawn, spawn_all, stop_children
+from mpc_local_planner.ros.closed_loop_processes import (
+    node_usage,
+    process_sample,
+    ProcessSample,
+    respawn,
+    spawn_all,
+    stop_children,
+)
 from mpc_local_planner.ros.node_main import autostart
 from mpc_local_planner.sim.physics import mujoco_missing, PLANTS
 from mpc_local_planner.sim.reality import REALITY_PRESETS, true_goal_tolerance
@@ -156,6 +163,10 @@ EXIT_NO_PLAN = 2
 DEFAULT_TIME_LIMIT = 60.0
 # Cell side (m) of the map of the known obstacles that --sensing serves.
 MAP_RESOLUTION = 0.05
+# With --separate-processes, each node's CPU and memory (metrics.json "node_usage") are
+# measured from when the robot is this far (m) from its start to the end of the run: the
+# nodes' start (imports, the NLPs built at the first plan) is over, the robot drives.
+USAGE_FROM_METRES = 0.1
 
 
 @dataclass
@@ -276,9 +287,13 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
         for node in nodes:
             executor.add_node(node)
         deadline = start + options.timeout
+        usage_from: dict[str, tuple[float, ProcessSample]] = {}
         while True:
             executor.spin_once(timeout_sec=0.05)
             sim_time = monitor.sim_time()
+            if children and not usage_from and monitor.true_pose is not None and np.hypot(
+                    *(monitor.true_pose[:2] - world.start[:2])) >= USAGE_FROM_METRES:
+                usage_from = _samples(children, sim_time)
             if monitor.goal_reached:
                 stop_reason = 'goal reached'
                 break
@@ -304,6 +319,7 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
                 name = dead[0]
                 stop_reason = f'{name} exited (code {children[name].returncode})'
                 break
+        usage = node_usage(usage_from, _samples(children, sim_time))
         flush_recording(executor, recorder, monitor)
         from mpc_local_planner.ros.unicycle_simulator_node import UnicycleSimulatorNode
         truth = [n.state for n in nodes if isinstance(n, UnicycleSimulatorNode)]
@@ -326,7 +342,7 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
                 'path_source': options.path, 'world': str(source_file),
                 'world_file': str(world_file), 'footprint_source': robot_source,
                 'drift': options.drift, 'reality': options.reality, 'plant': options.plant,
-                'reality_values': _run_reality(params)}
+                'reality_values': _run_reality(params), 'node_usage': usage}
     if not truth and monitor.true_pose is not None:  # the simulator's ground truth topic
         truth = [monitor.true_pose]
     if truth:  # the simulator's true pose, whatever odometry said
@@ -357,6 +373,17 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
         success = success and run_info['true_goal_error'] <= true_goal_tolerance(xy)
     return LoopResult(metrics=metrics, stop_reason=stop_reason, wall_time=wall_time,
                       sim_time=sim_time, out=out, success=success)
+
+
+def _samples(children: dict[str, subprocess.Popen], sim_time: float
+             ) -> dict[str, tuple[float, ProcessSample]]:
+    """Return each running node process's CPU time and memory now, with the simulated time."""
+    samples = {}
+    for name, child in children.items():
+        sample = process_sample(child.pid) if child.poll() is None else None
+        if sample is not None:
+            samples[name] = (sim_time, sample)
+    return samples
 
 
 def _run_reality(params: dict[str, dict[str, Any]]) -> dict[str, Any]:

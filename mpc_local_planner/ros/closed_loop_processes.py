@@ -8,12 +8,14 @@ MAX_RESPAWNS times per run, and never one that refused its parameters.
 
 from __future__ import annotations
 
+import math
+import os
 from pathlib import Path
 import signal
 import subprocess
 import sys
 import time
-from typing import Any
+from typing import Any, NamedTuple
 
 import yaml
 
@@ -21,8 +23,8 @@ from mpc_local_planner.process_ties import tied_environment
 from mpc_local_planner.ros.closed_loop_parameters import LoopOptions, MODULES
 from mpc_local_planner.ros.node_main import EXIT_INVALID_PARAMETERS
 
-__all__ = ['CHILD_EXIT_TIMEOUT', 'MAX_RESPAWNS', 'node_command', 'respawn', 'spawn_all',
-           'spawn_node', 'stop_children']
+__all__ = ['CHILD_EXIT_TIMEOUT', 'MAX_RESPAWNS', 'node_command', 'node_usage', 'ProcessSample',
+           'process_sample', 'respawn', 'spawn_all', 'spawn_node', 'stop_children']
 
 # Wall seconds a child process gets to exit after SIGINT before it is killed.
 CHILD_EXIT_TIMEOUT = 5.0
@@ -110,3 +112,54 @@ def stop_children(children: list[subprocess.Popen]) -> None:
         except subprocess.TimeoutExpired:
             child.kill()
             child.wait()
+
+
+class ProcessSample(NamedTuple):
+    """What a node process had used at one moment (Linux's /proc)."""
+
+    pid: int
+    cpu_seconds: float  # user + system time of the process so far
+    rss_mb: float  # resident memory now
+    peak_rss_mb: float  # the most resident memory it has had
+
+
+def process_sample(pid: int) -> ProcessSample | None:
+    """Return the process's CPU time and memory from /proc, or None (gone, or not Linux)."""
+    try:
+        with open(f'/proc/{pid}/stat', encoding='ascii') as f:
+            # the fields after the command's parenthesis: utime and stime are 14th and 15th
+            fields = f.read().rsplit(')', 1)[1].split()
+        with open(f'/proc/{pid}/status', encoding='ascii') as f:
+            status = dict(line.split(':', 1) for line in f if ':' in line)
+    except (OSError, IndexError, ValueError):
+        return None
+    ticks = os.sysconf('SC_CLK_TCK')
+
+    def megabytes(key: str) -> float:
+        value = status.get(key, '').split()
+        return float(value[0]) / 1024.0 if value else math.nan  # kB
+
+    return ProcessSample(pid=pid, cpu_seconds=(int(fields[11]) + int(fields[12])) / ticks,
+                         rss_mb=megabytes('VmRSS'), peak_rss_mb=megabytes('VmHWM'))
+
+
+def node_usage(first: dict[str, tuple[float, ProcessSample]],
+               last: dict[str, tuple[float, ProcessSample]]) -> dict[str, dict[str, float]]:
+    """Return per node its share of a core while the robot drove, and its memory.
+
+    first and last map a node to (simulated time, sample) at the start and the end of the
+    measured span. The share is CPU seconds per simulated second: in lockstep the simulator
+    waits for the nodes, so this is the part of a core the node would take in real time. A
+    node started again in between (another pid) is left out.
+    """
+    usage = {}
+    for name, (t0, a) in first.items():
+        if name not in last:
+            continue
+        t1, b = last[name]
+        if a.pid != b.pid or not t1 > t0:
+            continue
+        usage[name] = {'cpu_share': (b.cpu_seconds - a.cpu_seconds) / (t1 - t0),
+                       'rss_mb': b.rss_mb, 'peak_rss_mb': b.peak_rss_mb,
+                       'sim_seconds': t1 - t0}
+    return usage

@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 from dataclasses import replace
 import json
+import os
 from pathlib import Path
 import signal
 import subprocess
@@ -51,7 +52,12 @@ from mpc_local_planner.ros.closed_loop_parameters import (
     POLYGON_CLEARANCE,
     run_world,
 )
-from mpc_local_planner.ros.closed_loop_processes import node_command
+from mpc_local_planner.ros.closed_loop_processes import (
+    node_command,
+    node_usage,
+    process_sample,
+    ProcessSample,
+)
 from mpc_local_planner.ros.qos import DIAGNOSTICS_QOS
 from mpc_local_planner.worlds.data_files import resolve_data_file
 from mpc_local_planner.worlds.map_files import load_map
@@ -117,9 +123,26 @@ def test_closed_loop_as_separate_processes_reaches_the_target(tmp_path) -> None:
     code = main(['--out', str(tmp_path), '--path', 'rrt', '--timeout', '90',
                  '--separate-processes', '--lockstep'])
     assert code == 0
-    check_run(tmp_path, json.loads((tmp_path / 'metrics.json').read_text()))
+    metrics = json.loads((tmp_path / 'metrics.json').read_text())
+    check_run(tmp_path, metrics)
     assert {p.name for p in (tmp_path / 'logs').iterdir()} == {
         'global_planner.log', 'mpc_controller.log', 'unicycle_simulator.log'}
+    usage = metrics['node_usage']  # each process's CPU and memory while the robot drove
+    assert set(usage) == {'global_planner', 'mpc_controller', 'unicycle_simulator'}
+    assert all(u['cpu_share'] >= 0.0 and 0.0 < u['rss_mb'] <= u['peak_rss_mb']
+               and u['sim_seconds'] > 1.0 for u in usage.values())
+    assert usage['mpc_controller']['cpu_share'] > 0.0
+
+
+def test_node_usage_is_cpu_seconds_per_simulated_second_and_skips_a_restarted_node() -> None:
+    first = {'a': (1.0, ProcessSample(7, 2.0, 100.0, 110.0)),
+             'b': (1.0, ProcessSample(8, 5.0, 90.0, 90.0))}
+    last = {'a': (5.0, ProcessSample(7, 3.0, 120.0, 130.0)),
+            'b': (5.0, ProcessSample(9, 0.5, 80.0, 80.0))}  # b started again: another pid
+    assert node_usage(first, last) == {'a': {'cpu_share': 0.25, 'rss_mb': 120.0,
+                                             'peak_rss_mb': 130.0, 'sim_seconds': 4.0}}
+    me = process_sample(os.getpid())
+    assert me is not None and me.cpu_seconds > 0.0 and 0.0 < me.rss_mb <= me.peak_rss_mb
 
 
 @pytest.mark.dds
