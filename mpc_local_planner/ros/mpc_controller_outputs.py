@@ -14,6 +14,7 @@ sent, and the node hands it each control step's output.
 
 from __future__ import annotations
 
+import math
 from typing import Any, Callable
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -61,6 +62,13 @@ MARKERS_QOS = LOCAL_PLAN_QOS
 # mpc/obstacles goes out when what it shows changes, and at least every this many control
 # steps (for an RViz that subscribes late: the topic is volatile).
 OBSTACLE_REFRESH_STEPS = 10
+# ...but a change goes out at most this often (s of ROS time): the laser's memory changes at
+# every scan, and building the markers of its pieces at every one took a fifth of the
+# controller node's time on BARN (issue 34); 5 Hz is the MPC's solve rate at h = 0.2 s.
+OBSTACLE_MARKER_PERIOD = 0.2
+# A timer's ticks land on the period's end to the last digit (20 Hz: 4 ticks = 0.2 s): a tick
+# this close (s) counts as past it, whichever way the sum rounded.
+_PERIOD_SLACK = 1e-3
 # Marker namespaces, colours (r, g, b, a) and line widths (m).
 MARKER_STYLE = {
     'raw': ((0.2, 0.2, 0.2, 1.0), 0.02),  # as described in the world
@@ -168,6 +176,7 @@ class ControllerOutputs:
         self._last_message = ''
         self._markers_shown: tuple[tuple, tuple] | None = None  # (grown, active) last sent
         self._steps_since_markers = 0
+        self._markers_time = -math.inf  # ROS time of the last mpc/obstacles sent
         self._cmd_pub = node.create_lifecycle_publisher(
             TwistStamped if stamped else Twist, 'cmd_vel', CMD_VEL_QOS)
         self._local_plan_pub = node.create_lifecycle_publisher(Path, 'local_plan',
@@ -211,7 +220,7 @@ class ControllerOutputs:
                     output.solution.x_pred[:, :3], frame_id=frame, stamp=stamp))
             self._diag_pub.publish(self._diagnostics(output, now, state, state_time,
                                                      blockage))
-            self._publish_obstacles(output, frame, stamp)
+            self._publish_obstacles(output, frame, stamp, now)
             if tracks is not None and self._tracks_pub.get_subscription_count():
                 self._tracks_pub.publish(track_markers(tracks, frame_id=frame, stamp=stamp))
             if state is not None:
@@ -238,13 +247,16 @@ class ControllerOutputs:
         return twist_stamped_from_u(u, stamp=seconds_to_stamp(max(now, 0.0)),
                                     frame_id=str(self._parameter('robot_base_frame')))
 
-    def _publish_obstacles(self, output: ControlOutput, frame: str, stamp: Any) -> None:
+    def _publish_obstacles(self, output: ControlOutput, frame: str, stamp: Any,
+                           now: float | None = None) -> None:
         """Publish the obstacles raw, grown and active when that changes (or now and then).
 
         Each publication starts with DELETEALL, so markers of obstacles gone (or no longer
         active) disappear; ids are the obstacles' indices within their namespace. Nothing is
         built while nobody subscribes (building them took about half the node's own time
         among BARN's pieces: issue 34); a subscriber that comes gets them at the next step.
+        A change goes out at most every OBSTACLE_MARKER_PERIOD of ROS time now (None: at
+        once); one held back goes out at the first step after it.
         """
         if self._obstacles_pub.get_subscription_count() == 0:
             self._markers_shown = None
@@ -258,6 +270,9 @@ class ControllerOutputs:
         if (shown is not None and _same(shown[0], grown) and _same(shown[1], active)
                 and self._steps_since_markers < OBSTACLE_REFRESH_STEPS):
             return
+        if (shown is not None and now is not None
+                and 0.0 <= now - self._markers_time < OBSTACLE_MARKER_PERIOD - _PERIOD_SLACK):
+            return  # a change, too soon after the last (a clock that went back: at once)
         markers = [delete_all_marker(frame_id=frame, stamp=stamp)]
         for ns, polygons in (('raw', controller.obstacles), ('grown', grown),
                              ('active', active)):
@@ -268,6 +283,7 @@ class ControllerOutputs:
         self._obstacles_pub.publish(MarkerArray(markers=markers))
         self._markers_shown = (grown, active)
         self._steps_since_markers = 0
+        self._markers_time = -math.inf if now is None else now
 
     def _log(self, output: ControlOutput, state: np.ndarray | None) -> None:
         """Log a change of reason (refused input is logged, throttled, where refused)."""

@@ -230,3 +230,27 @@ def test_a_cold_start_among_obstacles_tries_the_cold_ipopt_first_and_is_solved()
     assert solution.u0[0] > 0.5
     # no failing fatrop run of 200 iterations came first
     assert solution.iterations < config.solving.max_iterations
+
+
+def test_an_obstacle_set_again_is_not_grown_again(monkeypatch) -> None:
+    """The laser's pieces come at every control step: each is grown once, while it stays."""
+    grown: list[ConvexPolygon] = []
+    inflate = ConvexPolygon.inflate
+
+    def counting(self: ConvexPolygon, distance: float) -> ConvexPolygon:
+        grown.append(self)
+        return inflate(self, distance)
+
+    monkeypatch.setattr(ConvexPolygon, 'inflate', counting)
+    mpc = PathReferenceMPC(Unicycle(), MpcConfig(), path=paper_sinusoid())
+    first, second = ConvexPolygon.from_box(1.0, 0.0, 1.5, 0.5), ConvexPolygon.from_box(
+        3.0, 0.0, 3.5, 0.5)
+    mpc.set_obstacles([first])
+    before = mpc.inflated_obstacles
+    mpc.set_obstacles([first, second])  # a new piece comes; the first stays
+    assert [id(p) for p in grown] == [id(first), id(second)]
+    assert mpc.inflated_obstacles[0] is before[0]
+    # another inflation (the settings changed) grows every obstacle again
+    mpc.update_config(MpcConfig(collision_margin=0.3))
+    assert [id(p) for p in grown[2:]] == [id(first), id(second)]
+    assert np.all(mpc.inflated_obstacles[0].b > before[0].b)

@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pytest
 from rclpy.time import Time
 from visualization_msgs.msg import Marker
 
@@ -69,6 +70,32 @@ def test_obstacle_markers_are_built_only_while_someone_subscribes() -> None:
     assert len(markers.published) == 1
     namespaces = {m.ns for m in markers.published[0].markers}
     assert {'raw', 'grown'} <= namespaces
+
+
+def test_obstacle_markers_follow_a_changing_memory_at_most_every_period() -> None:
+    """The laser changes the obstacles at every scan: a change goes out at most at 5 Hz."""
+    node = FakeNode()
+    controller = MpcController()
+    outputs = ControllerOutputs(node, controller, stamped=False,  # type: ignore[arg-type]
+                                parameter=lambda name: 'map')
+    markers = node.publishers[OBSTACLES_TOPIC]
+    markers.subscribers = 1
+    stop = ControlOutput(np.zeros(2), None, Reason.STOP)
+    sent_at = []
+    for k in range(12):  # 20 Hz, a new obstacle at every step
+        now = 10.0 + k / 20
+        controller.set_obstacles([ConvexPolygon.from_box(1.0 + 0.01 * k, -0.5, 1.5, 0.5)])
+        before = len(markers.published)
+        outputs._publish_obstacles(stop, 'map', None, now)
+        if len(markers.published) > before:
+            sent_at.append(round(now, 2))
+    assert sent_at == [10.0, 10.2, 10.4]
+    raw = [m for m in markers.published[-1].markers if m.ns == 'raw']
+    assert raw[0].points[0].x == pytest.approx(1.08)  # the obstacle of the step it went out
+    # a clock that went back (a simulation started again) gets them at once
+    controller.set_obstacles([ConvexPolygon.from_box(2.0, -0.5, 2.5, 0.5)])
+    outputs._publish_obstacles(stop, 'map', None, 0.0)
+    assert len(markers.published) == 4
 
 
 def test_track_markers_tell_static_suspect_and_moving_tracks_apart() -> None:

@@ -118,6 +118,10 @@ class MpcBase(ABC):
         self._use_footprint()
         self._raw_obstacles: list[ConvexPolygon] = []
         self._inflated: list[ConvexPolygon] = []
+        # each obstacle grown, by its identity (obstacle, inflation, grown): the laser's
+        # pieces come again at every step, and growing them all again took a twentieth of
+        # the controller node's time on BARN (issue 34)
+        self._grown: dict[int, tuple[ConvexPolygon, float, ConvexPolygon]] = {}
         self._shapes = NlpShapes(self._structure, self._build)
         self._last_nlp: Nlp | None = None
         self._last_active: tuple[ConvexPolygon, ...] = ()
@@ -199,7 +203,7 @@ class MpcBase(ABC):
                 raise ValueError(msg)
         self._raw_obstacles = list(obstacles)
         inflation = self._config.inflation(float(self._model.u_max[0]))
-        inflated = [o.inflate(inflation) for o in self._raw_obstacles]
+        inflated = self._grow(self._raw_obstacles, inflation)
         if not same_polygons(self._inflated, inflated):
             self._problem_version = (self._problem_version[0] + 1, self._problem_version[1])
         self._inflated = inflated
@@ -207,6 +211,17 @@ class MpcBase(ABC):
         # some obstacle moves (core/moving_obstacles.py): it is predicted over the horizon
         self._moving = any(moving(o) for o in inflated)
         self._last_active = ()
+
+    def _grow(self, obstacles: list[ConvexPolygon], inflation: float) -> list[ConvexPolygon]:
+        """Return the obstacles grown by inflation, each grown once while it stays."""
+        known, grown = self._grown, {}
+        for obstacle in obstacles:
+            entry = known.get(id(obstacle))
+            if entry is None or entry[0] is not obstacle or entry[1] != inflation:
+                entry = (obstacle, inflation, obstacle.inflate(inflation))
+            grown[id(obstacle)] = entry
+        self._grown = grown
+        return [grown[id(obstacle)][2] for obstacle in obstacles]
 
     @property
     def clearance(self) -> Clearance:
