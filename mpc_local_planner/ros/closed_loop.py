@@ -287,7 +287,7 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
         for node in nodes:
             executor.add_node(node)
         deadline = start + options.timeout
-        usage_from: dict[str, tuple[float, ProcessSample]] = {}
+        usage_from: dict[str, tuple[float, float, ProcessSample]] = {}
         while True:
             executor.spin_once(timeout_sec=0.05)
             sim_time = monitor.sim_time()
@@ -376,13 +376,13 @@ def run_closed_loop(options: LoopOptions, *, ros_args: Sequence[str] = ()) -> Lo
 
 
 def _samples(children: dict[str, subprocess.Popen], sim_time: float
-             ) -> dict[str, tuple[float, ProcessSample]]:
-    """Return each running node process's CPU time and memory now, with the simulated time."""
+             ) -> dict[str, tuple[float, float, ProcessSample]]:
+    """Return each running node process's CPU time and memory now, with sim and wall time."""
     samples = {}
     for name, child in children.items():
         sample = process_sample(child.pid) if child.poll() is None else None
         if sample is not None:
-            samples[name] = (sim_time, sample)
+            samples[name] = (sim_time, time.monotonic(), sample)
     return samples
 
 

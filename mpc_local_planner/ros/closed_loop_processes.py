@@ -143,23 +143,28 @@ def process_sample(pid: int) -> ProcessSample | None:
                          rss_mb=megabytes('VmRSS'), peak_rss_mb=megabytes('VmHWM'))
 
 
-def node_usage(first: dict[str, tuple[float, ProcessSample]],
-               last: dict[str, tuple[float, ProcessSample]]) -> dict[str, dict[str, float]]:
+def node_usage(first: dict[str, tuple[float, float, ProcessSample]],
+               last: dict[str, tuple[float, float, ProcessSample]]
+               ) -> dict[str, dict[str, float]]:
     """Return per node its share of a core while the robot drove, and its memory.
 
-    first and last map a node to (simulated time, sample) at the start and the end of the
-    measured span. The share is CPU seconds per simulated second: in lockstep the simulator
-    waits for the nodes, so this is the part of a core the node would take in real time. A
-    node started again in between (another pid) is left out.
+    first and last map a node to (simulated time, wall time, sample) at the start and the
+    end of the measured span. cpu_share is CPU seconds per simulated second: in lockstep the
+    simulator waits for the nodes, so this is the part of a core the node's work per second
+    of robot time takes (what waits on the wall clock, DDS and polling, is counted per
+    simulated second too: more than in real time when the run is slower than real time).
+    cpu_per_wall_second is the same CPU per wall second. A node started again in between
+    (another pid) is left out.
     """
     usage = {}
-    for name, (t0, a) in first.items():
+    for name, (t0, wall0, a) in first.items():
         if name not in last:
             continue
-        t1, b = last[name]
-        if a.pid != b.pid or not t1 > t0:
+        t1, wall1, b = last[name]
+        if a.pid != b.pid or not t1 > t0 or not wall1 > wall0:
             continue
-        usage[name] = {'cpu_share': (b.cpu_seconds - a.cpu_seconds) / (t1 - t0),
+        cpu = b.cpu_seconds - a.cpu_seconds
+        usage[name] = {'cpu_share': cpu / (t1 - t0), 'cpu_per_wall_second': cpu / (wall1 - wall0),
                        'rss_mb': b.rss_mb, 'peak_rss_mb': b.peak_rss_mb,
-                       'sim_seconds': t1 - t0}
+                       'sim_seconds': t1 - t0, 'wall_seconds': wall1 - wall0}
     return usage

@@ -23,7 +23,7 @@ from nav_msgs.msg import Path
 import numpy as np
 from rclpy.duration import Duration
 from rclpy.lifecycle import LifecycleNode
-from visualization_msgs.msg import MarkerArray
+from visualization_msgs.msg import Marker, MarkerArray
 
 from mpc_local_planner.core.control_output import Blockage, ControlOutput, Reason
 from mpc_local_planner.core.controller import MpcController
@@ -177,6 +177,8 @@ class ControllerOutputs:
         self._markers_shown: tuple[tuple, tuple] | None = None  # (grown, active) last sent
         self._steps_since_markers = 0
         self._markers_time = -math.inf  # ROS time of the last mpc/obstacles sent
+        # the markers of the polygons last sent, by (namespace, polygon's identity)
+        self._polygon_markers: dict[tuple[str, int], tuple[Any, Marker]] = {}
         self._cmd_pub = node.create_lifecycle_publisher(
             TwistStamped if stamped else Twist, 'cmd_vel', CMD_VEL_QOS)
         self._local_plan_pub = node.create_lifecycle_publisher(Path, 'local_plan',
@@ -274,12 +276,26 @@ class ControllerOutputs:
                 and 0.0 <= now - self._markers_time < OBSTACLE_MARKER_PERIOD - _PERIOD_SLACK):
             return  # a change, too soon after the last (a clock that went back: at once)
         markers = [delete_all_marker(frame_id=frame, stamp=stamp)]
+        kept, built = self._polygon_markers, {}
         for ns, polygons in (('raw', controller.obstacles), ('grown', grown),
                              ('active', active)):
             rgba, width = MARKER_STYLE[ns]
-            markers += [polygon_marker(p.vertices, ns=ns, marker_id=i, frame_id=frame,
-                                       stamp=stamp, rgba=rgba, width=width)
-                        for i, p in enumerate(polygons)]
+            for i, polygon in enumerate(polygons):
+                # a polygon shown before keeps its marker (the memory's pieces stay the same
+                # objects from scan to scan): only its id and stamp are set again
+                key = (ns, id(polygon))
+                entry = kept.get(key)
+                if (entry is None or entry[0] is not polygon or key in built
+                        or entry[1].header.frame_id != frame):
+                    entry = (polygon, polygon_marker(polygon.vertices, ns=ns, marker_id=i,
+                                                     frame_id=frame, stamp=stamp, rgba=rgba,
+                                                     width=width))
+                else:
+                    entry[1].id = i
+                    entry[1].header.stamp = stamp
+                built.setdefault(key, entry)
+                markers.append(entry[1])
+        self._polygon_markers = built
         self._obstacles_pub.publish(MarkerArray(markers=markers))
         self._markers_shown = (grown, active)
         self._steps_since_markers = 0

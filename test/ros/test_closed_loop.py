@@ -135,12 +135,13 @@ def test_closed_loop_as_separate_processes_reaches_the_target(tmp_path) -> None:
 
 
 def test_node_usage_is_cpu_seconds_per_simulated_second_and_skips_a_restarted_node() -> None:
-    first = {'a': (1.0, ProcessSample(7, 2.0, 100.0, 110.0)),
-             'b': (1.0, ProcessSample(8, 5.0, 90.0, 90.0))}
-    last = {'a': (5.0, ProcessSample(7, 3.0, 120.0, 130.0)),
-            'b': (5.0, ProcessSample(9, 0.5, 80.0, 80.0))}  # b started again: another pid
-    assert node_usage(first, last) == {'a': {'cpu_share': 0.25, 'rss_mb': 120.0,
-                                             'peak_rss_mb': 130.0, 'sim_seconds': 4.0}}
+    first = {'a': (1.0, 100.0, ProcessSample(7, 2.0, 100.0, 110.0)),
+             'b': (1.0, 100.0, ProcessSample(8, 5.0, 90.0, 90.0))}
+    last = {'a': (5.0, 108.0, ProcessSample(7, 3.0, 120.0, 130.0)),
+            'b': (5.0, 108.0, ProcessSample(9, 0.5, 80.0, 80.0))}  # b started again
+    assert node_usage(first, last) == {'a': {
+        'cpu_share': 0.25, 'cpu_per_wall_second': 0.125, 'rss_mb': 120.0, 'peak_rss_mb': 130.0,
+        'sim_seconds': 4.0, 'wall_seconds': 8.0}}
     me = process_sample(os.getpid())
     assert me is not None and me.cpu_seconds > 0.0 and 0.0 < me.rss_mb <= me.peak_rss_mb
 

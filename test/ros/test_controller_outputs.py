@@ -92,10 +92,19 @@ def test_obstacle_markers_follow_a_changing_memory_at_most_every_period() -> Non
     assert sent_at == [10.0, 10.2, 10.4]
     raw = [m for m in markers.published[-1].markers if m.ns == 'raw']
     assert raw[0].points[0].x == pytest.approx(1.08)  # the obstacle of the step it went out
+    # what stays keeps its marker, renumbered; what is new gets one
+    outputs._publish_obstacles(stop, 'map', None, 10.8)  # the last step's obstacle
+    raw = [m for m in markers.published[-1].markers if m.ns == 'raw']
+    stay = controller.obstacles[0]
+    controller.set_obstacles([ConvexPolygon.from_box(5.0, 0.0, 5.5, 0.5), stay])
+    outputs._publish_obstacles(stop, 'map', None, 11.0)
+    raw_now = [m for m in markers.published[-1].markers if m.ns == 'raw']
+    assert raw_now[1] is raw[0] and raw_now[1].id == 1
+    assert raw_now[0].id == 0 and raw_now[0].points[0].x == pytest.approx(5.0)
     # a clock that went back (a simulation started again) gets them at once
     controller.set_obstacles([ConvexPolygon.from_box(2.0, -0.5, 2.5, 0.5)])
     outputs._publish_obstacles(stop, 'map', None, 0.0)
-    assert len(markers.published) == 4
+    assert len(markers.published) == 6
 
 
 def test_track_markers_tell_static_suspect_and_moving_tracks_apart() -> None:
