@@ -540,7 +540,7 @@ class MpcController:
             if self._config.max_accel is None:
                 solution = self._mpc.solve(x)
             else:
-                solution = self._mpc.solve(x, previous_input=self._input_before())
+                solution = self._mpc.solve(x, previous_input=self._input_before(now))
         except Exception as err:  # a controller must not die: stop instead
             self._solver_failures += 1
             return self._idle(Reason.ERROR, f'{type(err).__name__}: {err}', now=now)
@@ -593,7 +593,7 @@ class MpcController:
         brake = copy.deepcopy(self._brake)
         self._start_braking(brake, now)
         stopping = brake.preview(x, self._model, self._config.step, self._config.horizon)
-        before = self._input_before() if self._config.max_accel is not None else None
+        before = self._input_before(now) if self._config.max_accel is not None else None
         move = evasion.choose(x, stopping, ObstacleSet(mpc.reachable_obstacles(x)),
                               self._path_ahead(x), before)
         if move is None:
@@ -649,15 +649,24 @@ class MpcController:
         u = solution.velocity_at(elapsed + self.settings.actuation_delay, self._config.step)
         return np.clip(u, self._model.u_min, self._model.u_max)
 
-    def _input_before(self) -> np.ndarray | None:
+    def _input_before(self, now: float) -> np.ndarray | None:
         """Return what the MPC's rate bounds start from (MpcConfig.max_accel).
 
-        The input commanded since the last solve, when that was a plan's input (the proof's
-        candidate follows it); after a stop or a turn, the measured twist if there is one
-        (the base may still be moving), else what was commanded.
+        The input of the plan in force now (the proof's candidate follows it): a zero hold's
+        first input, held over the step; a first-order hold's velocity ramp where it is
+        now, not where it began (an evasion, after which the MPC has no plan of its own to
+        start from, began each next one from its ramp's start: the robot fell back to rest
+        at every step and a walker behind it caught up). After a stop or a turn, the
+        measured twist if there is one (the base may still be moving), else what was
+        commanded.
         """
         held = self._state.plan()
         if held is not None:
+            solution = held.solution
+            if solution is not None and solution.u_before is not None:
+                elapsed = max(now - self._state.since, 0.0)
+                return np.clip(solution.velocity_at(elapsed, self._config.step),
+                               self._model.u_min, self._model.u_max)
             return held.u
         if self._velocity is not None:
             return np.asarray(self._velocity, dtype=float)

@@ -191,3 +191,41 @@ def test_a_forward_only_robot_facing_a_walker_pivots_into_a_side_passage() -> No
         assert (clearance.penetration(x, u, ObstacleSet(walls)) > 0.0
                 or first_conflict(clearance.margins(x, u, ObstacleSet([coming])))
                 <= CONFIG.horizon)
+
+
+def test_with_a_first_order_hold_each_evasive_step_goes_on_from_the_speed_reached() -> None:
+    """A walker catching up from behind: the robot drives off and keeps its speed.
+
+    Commanded at 20 Hz, each step's move ramps from the velocity the last one's ramp had
+    reached. It began at the last ramp's start instead (the input commanded when that step
+    was solved): the robot fell back to rest at every step and the walker caught up
+    (through the nodes, dynamic world 24).
+    """
+    config = CONFIG.with_changes(max_accel=(20.0, 60.0), input_hold='first_order')
+    controller = MpcController(MODEL, config, runner=no_solution)
+    controller.set_plan(np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0]]))
+    start, velocity = (-1.6, 0.0), (1.2, 0.0)
+    period = 0.05
+    x = np.zeros(3)
+    speeds, reasons, clearance = [], [], math.inf
+    for k in range(int(round(3.0 / period))):
+        t = k * period
+        controller.set_obstacles([MovingPolygon.moving(walker(start, velocity, t), velocity)])
+        output = controller.compute(x, None, t)
+        u = np.asarray(output.u, dtype=float)
+        speeds.append(float(u[0]))
+        reasons.append(output.reason)
+        for j in range(SUBSTEPS):
+            clearance = min(clearance,
+                            gap(x, [walker(start, velocity, t + j * period / SUBSTEPS)]))
+            x = x + period / SUBSTEPS * np.array([u[0] * np.cos(x[2]), u[0] * np.sin(x[2]),
+                                                   u[1]])
+    evading = [k for k, reason in enumerate(reasons) if reason is Reason.EVADE]
+    assert evading, 'the walker never made the robot move'
+    first = evading[0]
+    last = next((k for k in range(first, len(reasons)) if reasons[k] is not Reason.EVADE),
+                len(reasons))
+    assert last - first > 8  # several evasive steps in a row (4 ticks each)
+    # after the first evasive step, the robot never falls back towards rest while it evades
+    assert min(speeds[first + 4:last]) > 0.5 * max(speeds[first:first + 4])
+    assert clearance > 0.0
