@@ -18,6 +18,7 @@ from typing import Sequence
 
 import numpy as np
 
+from mpc_local_planner.core.identity_memo import IdentityMemo
 from mpc_local_planner.core.obstacles import ConvexPolygon, ObstacleSet, within_faces
 from mpc_local_planner.perception.grids import grid_rectangles
 from mpc_local_planner.perception.scan_obstacles import ObstacleMemory
@@ -55,10 +56,9 @@ class LocalObstacles:
         self._map_obstacles: list[ConvexPolygon] = []
         self._scan_obstacles = ObstacleSet([])
         self._movers: list[Track] = []
-        # the memory's pieces fitted to the faces, by the piece's identity (the memory keeps
-        # a piece's object as long as it remembers it): a piece is fitted once, when it
-        # enters, not at every scan; the piece is kept beside its fit so its id is not reused
-        self._fitted: dict[int, tuple[ConvexPolygon, int, ConvexPolygon]] = {}
+        # the memory's pieces fitted to the faces: each once, when it enters the memory (the
+        # memory keeps a piece's object as long as it remembers it), not at every scan
+        self._fitted: IdentityMemo[ConvexPolygon, ConvexPolygon] = IdentityMemo()
 
     @property
     def occupancy(self) -> OccupancyMap | None:
@@ -87,14 +87,8 @@ class LocalObstacles:
 
     def _fit(self, polygons: Sequence[ConvexPolygon]) -> list[ConvexPolygon]:
         """Return the polygons fitted to the faces (`within_faces`), each fitted only once."""
-        known, fitted = self._fitted, {}
-        for polygon in polygons:
-            entry = known.get(id(polygon))
-            if entry is None or entry[0] is not polygon or entry[1] != self.faces:
-                entry = (polygon, self.faces, within_faces([polygon], self.faces)[0])
-            fitted[id(polygon)] = entry
-        self._fitted = fitted
-        return [fitted[id(polygon)][2] for polygon in polygons]
+        return self._fitted.map(polygons, self.faces,
+                                lambda polygon: within_faces([polygon], self.faces)[0])
 
     def near(self, position: Sequence[float], radius: float, now: float | None = None
              ) -> list[ConvexPolygon]:

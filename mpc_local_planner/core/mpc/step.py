@@ -42,6 +42,7 @@ import casadi as ca
 import numpy as np
 
 from mpc_local_planner.core.config import BudgetKind, MpcConfig
+from mpc_local_planner.core.identity_memo import IdentityMemo
 from mpc_local_planner.core.models import RobotModel
 from mpc_local_planner.core.moving_obstacles import moving, stage_pad
 from mpc_local_planner.core.mpc.backends import Nlp, run_solver, SolverRunner
@@ -118,10 +119,10 @@ class MpcBase(ABC):
         self._use_footprint()
         self._raw_obstacles: list[ConvexPolygon] = []
         self._inflated: list[ConvexPolygon] = []
-        # each obstacle grown, by its identity (obstacle, inflation, grown): the laser's
-        # pieces come again at every step, and growing them all again took a twentieth of
-        # the controller node's time on BARN (issue 34)
-        self._grown: dict[int, tuple[ConvexPolygon, float, ConvexPolygon]] = {}
+        # each obstacle grown once while it stays: the laser's pieces come again at every
+        # step, and growing them all again took a twentieth of the controller node's time
+        # on BARN (issue 34)
+        self._grown: IdentityMemo[ConvexPolygon, ConvexPolygon] = IdentityMemo()
         self._shapes = NlpShapes(self._structure, self._build)
         self._last_nlp: Nlp | None = None
         self._last_active: tuple[ConvexPolygon, ...] = ()
@@ -214,14 +215,8 @@ class MpcBase(ABC):
 
     def _grow(self, obstacles: list[ConvexPolygon], inflation: float) -> list[ConvexPolygon]:
         """Return the obstacles grown by inflation, each grown once while it stays."""
-        known, grown = self._grown, {}
-        for obstacle in obstacles:
-            entry = known.get(id(obstacle))
-            if entry is None or entry[0] is not obstacle or entry[1] != inflation:
-                entry = (obstacle, inflation, obstacle.inflate(inflation))
-            grown[id(obstacle)] = entry
-        self._grown = grown
-        return [grown[id(obstacle)][2] for obstacle in obstacles]
+        return self._grown.map(obstacles, inflation,
+                               lambda obstacle: obstacle.inflate(inflation))
 
     @property
     def clearance(self) -> Clearance:
